@@ -1,0 +1,728 @@
+//! `ingest convert`: one streaming pass from the inputs to a finished OME-Zarr pyramid with
+//! region metadata.
+//!
+//! Level 0 is read in slabs one chunk (or shard) deep. Each slab is written, folded into the
+//! min/max cells and brick histograms, and summed into the next level's accumulator, which
+//! holds exact sums and counts of level-0 voxels. When an accumulator has a full slab, its
+//! means are rounded once and the same happens one level up. Memory is a few slabs per level
+//! and never depends on the depth of the stack.
+
+use std::path::PathBuf;
+use std::sync::Mutex;
+use std::sync::mpsc::sync_channel;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use rayon::prelude::*;
+use residency_schemas::REGIONS_KEY;
+use zarrs::array::Array;
+
+use crate::ome::{image_attributes, multiscale, omero};
+use crate::pyramid::{LevelPlan, plan_levels};
+use crate::region_writer::{LevelRegions, write_region_metadata};
+use crate::regions::{CellGrid, ChannelAccumulator, FineHistogram, LevelHistograms};
+use crate::sample_format::{FINE_KEYS, Sample, SampleFormat};
+use crate::source::{RawOptions, SourceInfo, VolumeSource, open_input};
+use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreWriter, directory_bytes};
+use crate::with_sample_type;
+
+/// Everything `ingest convert` needs to know.
+#[derive(Clone, Debug)]
+pub struct ConvertOptions {
+    /// Input files, folders or globs; their channels are concatenated in order.
+    pub inputs: Vec<String>,
+    /// Output store path.
+    pub output: PathBuf,
+    /// Layout of raw inputs.
+    pub raw: RawOptions,
+    /// Voxel size `z, y, x` overriding the inputs' metadata.
+    pub voxel_size: Option<[f64; 3]>,
+    /// Physical unit overriding the inputs' metadata.
+    pub unit: Option<String>,
+    /// Brick (chunk, or inner chunk when sharded) shape `z, y, x`.
+    pub brick: [u64; 3],
+    /// Shard shape `z, y, x` (Zarr v3 sharding), a multiple of the brick.
+    pub shard: Option<[u64; 3]>,
+    /// OME-Zarr version.
+    pub version: OmeZarrVersion,
+    /// Number of levels (default: until a level fits in one brick).
+    pub levels: Option<usize>,
+    /// Replace an existing output.
+    pub overwrite: bool,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+    /// Channel labels overriding the inputs' metadata.
+    pub channel_names: Vec<String>,
+}
+
+impl ConvertOptions {
+    /// Options with defaults for everything but inputs and output.
+    pub fn new(inputs: Vec<String>, output: PathBuf) -> Self {
+        Self {
+            inputs,
+            output,
+            raw: RawOptions::default(),
+            voxel_size: None,
+            unit: None,
+            brick: [64; 3],
+            shard: None,
+            version: OmeZarrVersion::V05,
+            levels: None,
+            overwrite: false,
+            progress: false,
+            channel_names: Vec::new(),
+        }
+    }
+}
+
+/// What one level of a finished conversion holds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelSummary {
+    /// Shape `c, z, y, x`.
+    pub shape: [u64; 4],
+    /// Bricks written (all channels).
+    pub bricks_written: u64,
+    /// Bricks equal to the fill value everywhere, not written.
+    pub bricks_empty: u64,
+}
+
+/// The end-of-run report of a conversion.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ConvertSummary {
+    /// Path of the finished store.
+    pub output: PathBuf,
+    /// Sample format of the store.
+    pub format: SampleFormat,
+    /// Per-level results, finest first.
+    pub levels: Vec<LevelSummary>,
+    /// Bytes of level-0 voxels (uncompressed).
+    pub input_bytes: u64,
+    /// Bytes of the whole store on disk.
+    pub stored_bytes: u64,
+    /// Bytes of the level-0 image array on disk.
+    pub level0_stored_bytes: u64,
+    /// Bytes of the region metadata (arrays and attributes) on disk.
+    pub metadata_bytes: u64,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+impl ConvertSummary {
+    /// Human-readable report printed by the command line.
+    pub fn report(&self) -> String {
+        let mut s = format!("wrote {} ({})\n", self.output.display(), self.format);
+        for (i, l) in self.levels.iter().enumerate() {
+            s += &format!(
+                "  level {i}: shape c,z,y,x = {:?}, bricks written {}, empty (not written) {}\n",
+                l.shape, l.bricks_written, l.bricks_empty
+            );
+        }
+        let mb = self.input_bytes as f64 / 1e6;
+        s += &format!(
+            "  input {:.1} MB, stored {:.1} MB, level-0 compression ratio {:.2}, region metadata {:.3} MB ({:.2}% of the store)\n",
+            mb,
+            self.stored_bytes as f64 / 1e6,
+            self.input_bytes as f64 / self.level0_stored_bytes.max(1) as f64,
+            self.metadata_bytes as f64 / 1e6,
+            100.0 * self.metadata_bytes as f64 / self.stored_bytes.max(1) as f64
+        );
+        s += &format!(
+            "  {:.2} s, {:.1} MB/s\n",
+            self.seconds,
+            mb / self.seconds.max(1e-9)
+        );
+        s
+    }
+}
+
+/// The inputs, opened and checked against each other.
+struct Inputs {
+    sources: Vec<Box<dyn VolumeSource>>,
+    shape: [u64; 3],
+    format: SampleFormat,
+    channels: usize,
+    voxel_size: Option<[f64; 3]>,
+    unit: Option<String>,
+    labels: Vec<String>,
+}
+
+fn open_inputs(options: &ConvertOptions) -> Result<Inputs> {
+    if options.inputs.is_empty() {
+        bail!("no input given");
+    }
+    let sources: Vec<Box<dyn VolumeSource>> = options
+        .inputs
+        .iter()
+        .map(|i| open_input(i, &options.raw))
+        .collect::<Result<_>>()?;
+    let first: &SourceInfo = sources[0].info();
+    let mut format = first.format;
+    for s in &sources[1..] {
+        let info = s.info();
+        if info.shape != first.shape {
+            bail!(
+                "channels of different shapes: {} is {:?} (z,y,x) but {} is {:?}",
+                first.path.display(),
+                first.shape,
+                info.path.display(),
+                info.shape
+            );
+        }
+        format = SampleFormat::promote(format, info.format).with_context(|| {
+            format!(
+                "{}: {} samples cannot be stored exactly beside {} samples of {}",
+                info.path.display(),
+                info.format,
+                format,
+                first.path.display()
+            )
+        })?;
+    }
+    if first.shape.contains(&0) {
+        bail!(
+            "{}: volume is empty ({:?})",
+            first.path.display(),
+            first.shape
+        );
+    }
+    let channels: usize = sources.iter().map(|s| s.info().channels).sum();
+    let mut labels: Vec<String> = Vec::new();
+    for s in &sources {
+        let info = s.info();
+        let stem = info
+            .path
+            .file_name()
+            .map(|n| {
+                n.to_string_lossy()
+                    .split('.')
+                    .next()
+                    .unwrap_or("")
+                    .to_string()
+            })
+            .unwrap_or_default();
+        for c in 0..info.channels {
+            labels.push(info.channel_names.get(c).cloned().unwrap_or_else(|| {
+                if info.channels == 1 {
+                    stem.clone()
+                } else {
+                    format!("{stem} {c}")
+                }
+            }));
+        }
+    }
+    for (i, l) in options.channel_names.iter().enumerate().take(channels) {
+        labels[i] = l.clone();
+    }
+    let voxel_size = options
+        .voxel_size
+        .or_else(|| sources.iter().find_map(|s| s.info().voxel_size));
+    let unit = options
+        .unit
+        .clone()
+        .or_else(|| sources.iter().find_map(|s| s.info().unit.clone()));
+    Ok(Inputs {
+        shape: first.shape,
+        format,
+        channels,
+        voxel_size,
+        unit,
+        labels,
+        sources,
+    })
+}
+
+/// Converts the inputs to an OME-Zarr store, as `ingest convert` does.
+pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary> {
+    let inputs = open_inputs(options)?;
+    with_sample_type!(inputs.format, T => convert_typed::<T>(options, inputs))
+}
+
+/// Per-level state during the pass.
+struct Level<T: Sample> {
+    plan: LevelPlan,
+    array: Array<Store>,
+    /// Zarr chunk (shard) shape `z, y, x`.
+    outer: [u64; 3],
+    /// First z of the slab the accumulator is filling (levels ≥ 1).
+    acc_z0: u64,
+    /// Exact sums `[c][outer_z][y][x]` of level-0 voxels (levels ≥ 1).
+    sum: Vec<T::Sum>,
+    /// Non-NaN level-0 voxel counts matching `sum`.
+    count: Vec<u32>,
+    cells: CellGrid<T>,
+    histograms: LevelHistograms,
+    written: u64,
+    empty: u64,
+}
+
+/// Reusable per-level context for the slab processing that is common to `convert` and
+/// `index`: histograms, cells, global statistics and (optionally) the image write.
+pub(crate) struct SlabSink<'a> {
+    pub channels: usize,
+    pub shape: [u64; 3],
+    pub brick: [u64; 3],
+    pub outer: [u64; 3],
+    pub array: Option<&'a Array<Store>>,
+    pub histograms: &'a LevelHistograms,
+    pub stats: Option<&'a [Mutex<ChannelAccumulator>]>,
+}
+
+impl SlabSink<'_> {
+    /// Writes (when an array is given) the chunks of a slab `[c][nz][Y][X]` starting at `z0`,
+    /// and records brick histograms and statistics. Returns (bricks written, bricks empty).
+    pub fn process<T: Sample>(&self, slab: &[T], z0: u64, nz: u64) -> Result<(u64, u64)> {
+        let [_, ny, nx] = self.shape;
+        let [oz, oy, ox] = self.outer;
+        let tasks: Vec<(usize, u64, u64)> = (0..self.channels)
+            .flat_map(|c| {
+                (0..ny.div_ceil(oy))
+                    .flat_map(move |cy| (0..nx.div_ceil(ox)).map(move |cx| (c, cy, cx)))
+            })
+            .collect();
+        let counts = tasks
+            .into_par_iter()
+            .map_init(
+                || (Box::new([0u32; FINE_KEYS]), ChannelAccumulator::default()),
+                |(scratch, _), (c, cy, cx)| -> Result<(u64, u64)> {
+                    // Gather the outer chunk, padded with the fill value (0).
+                    let chunk_len = (oz * oy * ox) as usize;
+                    let mut chunk = vec![T::default(); chunk_len];
+                    let (y0, x0) = (cy * oy, cx * ox);
+                    let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
+                    let plane = (ny * nx) as usize;
+                    for dz in 0..nz {
+                        for dy in 0..vy {
+                            let src = (c as u64 * nz + dz) as usize * plane
+                                + ((y0 + dy) * nx + x0) as usize;
+                            let dst = ((dz * oy + dy) * ox) as usize;
+                            chunk[dst..dst + vx as usize]
+                                .copy_from_slice(&slab[src..src + vx as usize]);
+                        }
+                    }
+                    let (mut written, mut empty) = (0u64, 0u64);
+                    let [bz, by, bx] = self.brick;
+                    let mut brick_values: Vec<T> = Vec::with_capacity((bz * by * bx) as usize);
+                    let mut any_data = false;
+                    for iz in 0..nz.div_ceil(bz) {
+                        for iy in 0..vy.div_ceil(by) {
+                            for ix in 0..vx.div_ceil(bx) {
+                                brick_values.clear();
+                                let (zs, ys, xs) = (iz * bz, iy * by, ix * bx);
+                                let (ze, ye, xe) =
+                                    ((zs + bz).min(nz), (ys + by).min(vy), (xs + bx).min(vx));
+                                for z in zs..ze {
+                                    for y in ys..ye {
+                                        let row = ((z * oy + y) * ox) as usize;
+                                        brick_values.extend_from_slice(
+                                            &chunk[row + xs as usize..row + xe as usize],
+                                        );
+                                    }
+                                }
+                                let is_empty = brick_values.iter().all(|v| v.is_fill());
+                                if is_empty {
+                                    empty += 1;
+                                } else {
+                                    written += 1;
+                                    any_data = true;
+                                }
+                                let fine = FineHistogram::of(brick_values.iter().copied(), scratch);
+                                let b = [(z0 + zs) / bz, (y0 + ys) / by, (x0 + xs) / bx];
+                                if let Some(stats) = self.stats {
+                                    stats[c].lock().expect("stats").add(&brick_values, &fine);
+                                }
+                                let index = self.histograms.index(c, b);
+                                self.histograms.fine.lock().expect("histograms")[index] = fine;
+                            }
+                        }
+                    }
+                    if let Some(array) = self.array
+                        && any_data
+                    {
+                        array
+                            .store_chunk(&[c as u64, z0 / oz, cy, cx], chunk.as_slice())
+                            .with_context(|| {
+                                format!("cannot write chunk {c}/{}/{cy}/{cx}", z0 / oz)
+                            })?;
+                    }
+                    Ok((written, empty))
+                },
+            )
+            .collect::<Result<Vec<_>>>()?;
+        Ok(counts
+            .into_iter()
+            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))
+    }
+}
+
+/// Adds a slab of level `l` (values or sums, through `get`) into the accumulator of the next
+/// level. `src_z0..src_z0 + nz` is the slab's z range in level-`l` coordinates.
+#[allow(clippy::too_many_arguments)]
+fn accumulate<T: Sample>(
+    next: &mut Level<T>,
+    channels: usize,
+    src_shape: [u64; 3],
+    src_z0: u64,
+    nz: u64,
+    get: impl Fn(usize) -> (T::Sum, u32) + Sync,
+) {
+    let step = next.plan.step;
+    let [_, ny, nx] = next.plan.shape;
+    let [_, sy, sx] = src_shape;
+    let oz = next.outer[0];
+    let a0 = next.acc_z0;
+    let src_plane = (sy * sx) as usize;
+    next.sum
+        .par_chunks_mut(nx as usize)
+        .zip(next.count.par_chunks_mut(nx as usize))
+        .enumerate()
+        .for_each(|(row, (sum, count))| {
+            let row = row as u64;
+            let y = row % ny;
+            let zi = (row / ny) % oz;
+            let c = (row / ny / oz) as usize;
+            if c >= channels {
+                return;
+            }
+            let z = a0 + zi;
+            for dz in 0..step[0] {
+                let szz = z * step[0] + dz;
+                if szz < src_z0 || szz >= src_z0 + nz {
+                    continue;
+                }
+                for dy in 0..step[1] {
+                    let syy = y * step[1] + dy;
+                    if syy >= sy {
+                        continue;
+                    }
+                    let base =
+                        (c as u64 * nz + (szz - src_z0)) as usize * src_plane + (syy * sx) as usize;
+                    if step[2] == 1 {
+                        for x in 0..nx as usize {
+                            let (s, n) = get(base + x);
+                            sum[x] += s;
+                            count[x] += n;
+                        }
+                    } else {
+                        for x in 0..nx as usize {
+                            for dx in 0..2 {
+                                let sxx = 2 * x + dx;
+                                if (sxx as u64) < sx {
+                                    let (s, n) = get(base + sxx);
+                                    sum[x] += s;
+                                    count[x] += n;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        });
+}
+
+fn convert_typed<T: Sample>(
+    options: &ConvertOptions,
+    mut inputs: Inputs,
+) -> Result<ConvertSummary> {
+    let started = Instant::now();
+    let shown = options.output.display().to_string();
+    let brick = options.brick;
+    if brick.contains(&0) {
+        bail!("--chunk must be positive");
+    }
+    let outer = match options.shard {
+        Some(s) => {
+            if (0..3).any(|i| s[i] == 0 || s[i] % brick[i] != 0) {
+                bail!("--shard {s:?} must be a positive multiple of --chunk {brick:?}");
+            }
+            if options.version == OmeZarrVersion::V04 {
+                bail!("--shard needs Zarr v3: use --ome-zarr-version 0.5");
+            }
+            s
+        }
+        None => brick,
+    };
+    let voxel_size = inputs.voxel_size.unwrap_or([1.0; 3]);
+    if voxel_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+        bail!("voxel size {voxel_size:?} must be positive and finite");
+    }
+    let plans = plan_levels(inputs.shape, voxel_size, brick, options.levels);
+    let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
+    let channels = inputs.channels;
+
+    let mut levels: Vec<Level<T>> = Vec::new();
+    for (i, plan) in plans.iter().enumerate() {
+        let [z, y, x] = plan.shape;
+        let layout = ArrayLayout {
+            shape: vec![channels as u64, z, y, x],
+            chunk: vec![1, outer[0], outer[1], outer[2]],
+            inner_chunk: options.shard.map(|_| vec![1, brick[0], brick[1], brick[2]]),
+            format: T::FORMAT,
+            dimension_names: Some(vec!["c", "z", "y", "x"]),
+        };
+        let array = writer.create_array(&format!("/{i}"), &layout)?;
+        let acc_len = if i == 0 {
+            0
+        } else {
+            channels * (outer[0] * y * x) as usize
+        };
+        levels.push(Level {
+            plan: plan.clone(),
+            array,
+            outer,
+            acc_z0: 0,
+            sum: vec![T::Sum::default(); acc_len],
+            count: vec![0; acc_len],
+            cells: CellGrid::for_shape(channels, plan.shape),
+            histograms: LevelHistograms::new(
+                channels,
+                std::array::from_fn(|a| plan.shape[a].div_ceil(brick[a])),
+            ),
+            written: 0,
+            empty: 0,
+        });
+    }
+    let stats: Vec<Mutex<ChannelAccumulator>> = (0..channels)
+        .map(|_| Mutex::new(ChannelAccumulator::default()))
+        .collect();
+
+    let [depth, ny, nx] = inputs.shape;
+    let plane = (ny * nx) as usize;
+    let input_bytes = depth * ny * nx * channels as u64 * T::FORMAT.bytes() as u64;
+    let bar = if options.progress {
+        ProgressBar::with_draw_target(Some(input_bytes), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] [{wide_bar}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}",
+        )
+        .expect("template"),
+    );
+
+    // Reader thread: decodes slab k+1 while slab k is processed.
+    let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>)>>(1);
+    let oz = outer[0];
+    let mut sources = std::mem::take(&mut inputs.sources);
+    let reader = std::thread::spawn(move || {
+        let mut z0 = 0;
+        while z0 < depth {
+            let nz = oz.min(depth - z0);
+            let mut slab = vec![T::default(); channels * nz as usize * plane];
+            let mut rest: &mut [T] = &mut slab;
+            let mut parts = Vec::new();
+            for s in sources.iter_mut() {
+                let len = s.info().channels * nz as usize * plane;
+                let (part, tail) = rest.split_at_mut(len);
+                parts.push((s, part));
+                rest = tail;
+            }
+            let result: Result<()> = parts.into_par_iter().try_for_each(|(s, part)| {
+                for c in 0..s.info().channels {
+                    for dz in 0..nz {
+                        let p = s.read_plane(c, z0 + dz)?;
+                        let start = (c * nz as usize + dz as usize) * plane;
+                        p.copy_into(&mut part[start..start + plane]);
+                    }
+                }
+                Ok(())
+            });
+            let failed = result.is_err();
+            if tx.send(result.map(|_| (z0, nz, slab))).is_err() || failed {
+                return;
+            }
+            z0 += nz;
+        }
+    });
+
+    let result = (|| -> Result<()> {
+        for message in rx.iter() {
+            let (z0, nz, slab) = message?;
+            process_level0(&mut levels, &stats, channels, brick, &slab, z0, nz)
+                .with_context(|| format!("{shown}: writing level 0"))?;
+            bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
+        }
+        Ok(())
+    })();
+    drop(rx);
+    reader
+        .join()
+        .map_err(|_| anyhow::anyhow!("reader thread panicked"))?;
+    result?;
+    bar.finish_and_clear();
+
+    let stats: Vec<ChannelAccumulator> = stats
+        .into_iter()
+        .map(|m| m.into_inner().expect("stats"))
+        .collect();
+    let region_levels: Vec<LevelRegions<'_, T>> = levels
+        .iter()
+        .enumerate()
+        .map(|(i, l)| LevelRegions {
+            image: i.to_string(),
+            shape: l.plan.shape,
+            factor: l.plan.factor,
+            cells: &l.cells,
+            histograms: &l.histograms,
+            written: l.written,
+            empty: l.empty,
+        })
+        .collect();
+    let (regions, displays) =
+        write_region_metadata(&writer, &region_levels, &stats, &inputs.labels, brick)?;
+    let name = options
+        .output
+        .file_name()
+        .map(|n| {
+            n.to_string_lossy()
+                .trim_end_matches(".ome.zarr")
+                .trim_end_matches(".zarr")
+                .to_string()
+        })
+        .unwrap_or_default();
+    let attributes = image_attributes(
+        options.version,
+        multiscale(options.version, &name, &plans, inputs.unit.as_deref()),
+        omero(&displays, depth),
+        vec![(REGIONS_KEY, serde_json::to_value(&regions)?)],
+    );
+    // The root group metadata is the last write of the store.
+    writer.write_group("", attributes)?;
+    let partial = writer.partial.clone();
+    let stored_bytes = directory_bytes(&partial);
+    let level0_stored_bytes = directory_bytes(&partial.join("0"));
+    let metadata_bytes = directory_bytes(&partial.join("residency"))
+        + serde_json::to_vec_pretty(&regions)?.len() as u64;
+    let output = writer.commit()?;
+    Ok(ConvertSummary {
+        output,
+        format: T::FORMAT,
+        levels: levels
+            .iter()
+            .map(|l| LevelSummary {
+                shape: [
+                    channels as u64,
+                    l.plan.shape[0],
+                    l.plan.shape[1],
+                    l.plan.shape[2],
+                ],
+                bricks_written: l.written,
+                bricks_empty: l.empty,
+            })
+            .collect(),
+        input_bytes,
+        stored_bytes,
+        level0_stored_bytes,
+        metadata_bytes,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Writes a level-0 slab and propagates it up the pyramid.
+fn process_level0<T: Sample>(
+    levels: &mut [Level<T>],
+    stats: &[Mutex<ChannelAccumulator>],
+    channels: usize,
+    brick: [u64; 3],
+    slab: &[T],
+    z0: u64,
+    nz: u64,
+) -> Result<()> {
+    let (written, empty) = {
+        let l = &levels[0];
+        SlabSink {
+            channels,
+            shape: l.plan.shape,
+            brick,
+            outer: l.outer,
+            array: Some(&l.array),
+            histograms: &l.histograms,
+            stats: Some(stats),
+        }
+        .process(slab, z0, nz)?
+    };
+    let shape = levels[0].plan.shape;
+    levels[0].written += written;
+    levels[0].empty += empty;
+    levels[0].cells.add_slab(slab, z0, nz, shape);
+    if levels.len() > 1 {
+        accumulate(&mut levels[1], channels, shape, z0, nz, |i| {
+            let v = slab[i];
+            (v.to_sum(), v.counts() as u32)
+        });
+        flush_if_full(levels, 1, channels, brick, z0 + nz)?;
+    }
+    Ok(())
+}
+
+/// Flushes level `l`'s accumulator when the level below has delivered everything it covers
+/// (`below_end` is the end, in level `l-1` z, of what has been delivered).
+fn flush_if_full<T: Sample>(
+    levels: &mut [Level<T>],
+    l: usize,
+    channels: usize,
+    brick: [u64; 3],
+    below_end: u64,
+) -> Result<()> {
+    let below_depth = levels[l - 1].plan.shape[0];
+    let level = &levels[l];
+    let [depth, ny, nx] = level.plan.shape;
+    let oz = level.outer[0];
+    let nz = oz.min(depth - level.acc_z0);
+    let needed = ((level.acc_z0 + nz) * level.plan.step[0]).min(below_depth);
+    if below_end < needed {
+        return Ok(());
+    }
+    let z0 = level.acc_z0;
+    let plane = (ny * nx) as usize;
+    // Means of the slab: rounded once, from exact sums.
+    let values: Vec<T> = (0..channels)
+        .into_par_iter()
+        .flat_map_iter(|c| {
+            let start = c * oz as usize * plane;
+            let sum = &level.sum[start..start + nz as usize * plane];
+            let count = &level.count[start..start + nz as usize * plane];
+            sum.iter()
+                .zip(count)
+                .map(|(&s, &n)| T::from_mean(s, n))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let (written, empty) = SlabSink {
+        channels,
+        shape: level.plan.shape,
+        brick,
+        outer: level.outer,
+        array: Some(&level.array),
+        histograms: &level.histograms,
+        stats: None,
+    }
+    .process(&values, z0, nz)?;
+    let shape = level.plan.shape;
+    {
+        let level = &mut levels[l];
+        level.written += written;
+        level.empty += empty;
+        level.cells.add_slab(&values, z0, nz, shape);
+    }
+    if l + 1 < levels.len() {
+        let (lower, upper) = levels.split_at_mut(l + 1);
+        let this = &lower[l];
+        // Re-pack the sums of this slab densely as [c][nz][y][x] for the next level.
+        let (sum, count) = (&this.sum, &this.count);
+        let oz_plane = oz as usize * plane;
+        let nz_plane = nz as usize * plane;
+        accumulate(&mut upper[0], channels, shape, z0, nz, |i| {
+            let (c, r) = (i / nz_plane, i % nz_plane);
+            let j = c * oz_plane + r;
+            (sum[j], count[j])
+        });
+        flush_if_full(levels, l + 1, channels, brick, z0 + nz)?;
+    }
+    let level = &mut levels[l];
+    level.sum.fill(T::Sum::default());
+    level.count.fill(0);
+    level.acc_z0 += nz;
+    Ok(())
+}

@@ -1,0 +1,27 @@
+//! `residency-ingest`: converts raw and TIFF stacks into LZ4-compressed OME-Zarr multiscale
+//! pyramids, and writes min/max and histogram region metadata in the same streaming pass.
+//!
+//! The modules, in the order data flows through them:
+//! - [`source`]: reading inputs plane by plane (TIFF, OME-TIFF, ImageJ, slice folders, raw);
+//! - [`sample_format`]: the voxel types and their exact arithmetic;
+//! - [`pyramid`]: the anisotropy-aware level plan;
+//! - [`regions`]: min/max cells, brick histograms, channel statistics;
+//! - [`convert`]: the streaming pass itself; [`index`] runs the same analysis on an
+//!   existing store;
+//! - [`store`] and [`ome`]: Zarr and OME-Zarr metadata, and atomic writes;
+//! - [`synthetic`]: the built-in sample dataset;
+//! - [`inspect`]: the `ingest inspect` report.
+
+pub mod convert;
+pub mod index;
+pub mod inspect;
+pub mod ome;
+pub mod pyramid;
+pub mod region_writer;
+pub mod regions;
+pub mod sample_format;
+pub mod source;
+pub mod store;
+pub mod synthetic;
+
+pub use convert::{ConvertOptions, ConvertSummary, convert};

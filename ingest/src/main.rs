@@ -1,0 +1,260 @@
+//! The `ingest` command line.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand, ValueEnum};
+use residency_ingest::convert::{ConvertOptions, convert};
+use residency_ingest::sample_format::SampleFormat;
+use residency_ingest::source::RawOptions;
+use residency_ingest::store::OmeZarrVersion;
+use residency_ingest::synthetic::write_sample;
+
+#[derive(Parser)]
+#[command(
+    name = "ingest",
+    version,
+    about = "Convert raw and TIFF stacks into LZ4-compressed OME-Zarr pyramids with region metadata"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Version {
+    #[value(name = "0.5")]
+    V05,
+    #[value(name = "0.4")]
+    V04,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Endian {
+    Little,
+    Big,
+}
+
+#[derive(Subcommand)]
+#[allow(clippy::large_enum_variant)]
+enum Command {
+    /// Convert one or more inputs (each becomes one or more channels, in order) to OME-Zarr.
+    Convert {
+        /// TIFF / OME-TIFF / ImageJ files, folders or globs of TIFF slices, or raw files.
+        #[arg(required = true)]
+        inputs: Vec<String>,
+        /// Output store, e.g. `out.ome.zarr`.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Raw inputs: extent X,Y,Z in voxels (not needed for name_XxYxZ_dtype.raw).
+        #[arg(long, value_parser = parse_triple_u64)]
+        dims: Option<[u64; 3]>,
+        /// Raw inputs: sample type (uint8, uint16, int16, uint32, int32, float32).
+        #[arg(long)]
+        dtype: Option<String>,
+        /// Raw inputs: byte order.
+        #[arg(long, value_enum, default_value = "little")]
+        endian: Endian,
+        /// Raw inputs: bytes to skip at the start of the file.
+        #[arg(long, default_value_t = 0)]
+        header_bytes: u64,
+        /// Physical voxel size Z,Y,X, overriding the input metadata.
+        #[arg(long, value_parser = parse_triple_f64)]
+        voxel_size: Option<[f64; 3]>,
+        /// Physical unit of the voxel size (e.g. micrometer, nanometer).
+        #[arg(long)]
+        unit: Option<String>,
+        /// Brick (chunk) edge in voxels: one number, or Z,Y,X.
+        #[arg(long, default_value = "64", value_parser = parse_edge)]
+        chunk: [u64; 3],
+        /// Zarr v3 shard edge in voxels (one number or Z,Y,X; a multiple of --chunk).
+        #[arg(long, value_parser = parse_edge)]
+        shard: Option<[u64; 3]>,
+        /// OME-Zarr version: 0.5 (Zarr v3) or 0.4 (Zarr v2).
+        #[arg(long, value_enum, default_value = "0.5")]
+        ome_zarr_version: Version,
+        /// Number of pyramid levels (default: until a level fits in one brick).
+        #[arg(long)]
+        levels: Option<usize>,
+        /// Channel labels, comma-separated, overriding the input metadata.
+        #[arg(long, value_delimiter = ',')]
+        channel_names: Vec<String>,
+        /// Replace an existing output.
+        #[arg(long)]
+        overwrite: bool,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Hide the progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Write the built-in synthetic fluorescence sample (one OME-TIFF per channel).
+    Sample {
+        /// Output folder.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Extent Z,Y,X in voxels.
+        #[arg(long, default_value = "96,256,256", value_parser = parse_triple_u64)]
+        size: [u64; 3],
+        /// Random seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Hide the progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Add region metadata to an OME-Zarr image written by another tool, without rewriting its data.
+    Index {
+        /// The OME-Zarr image group.
+        store: PathBuf,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Print levels, shapes, chunking, codecs, voxel sizes, channel statistics and metadata coverage.
+    Inspect {
+        /// The OME-Zarr image group.
+        store: PathBuf,
+    },
+}
+
+fn parse_list<T: std::str::FromStr>(s: &str) -> Result<Vec<T>, String> {
+    s.split(',')
+        .map(|p| {
+            p.trim()
+                .parse::<T>()
+                .map_err(|_| format!("'{p}' is not a valid number"))
+        })
+        .collect()
+}
+
+fn parse_triple_u64(s: &str) -> Result<[u64; 3], String> {
+    parse_list::<u64>(s)?
+        .try_into()
+        .map_err(|_| format!("expected three comma-separated numbers, got '{s}'"))
+}
+
+fn parse_triple_f64(s: &str) -> Result<[f64; 3], String> {
+    parse_list::<f64>(s)?
+        .try_into()
+        .map_err(|_| format!("expected three comma-separated numbers, got '{s}'"))
+}
+
+fn parse_edge(s: &str) -> Result<[u64; 3], String> {
+    match parse_list::<u64>(s)?[..] {
+        [e] => Ok([e; 3]),
+        [z, y, x] => Ok([z, y, x]),
+        _ => Err(format!("expected one number or Z,Y,X, got '{s}'")),
+    }
+}
+
+fn set_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .context("cannot set up the thread pool")?;
+    }
+    Ok(())
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Convert {
+            inputs,
+            output,
+            dims,
+            dtype,
+            endian,
+            header_bytes,
+            voxel_size,
+            unit,
+            chunk,
+            shard,
+            ome_zarr_version,
+            levels,
+            channel_names,
+            overwrite,
+            threads,
+            quiet,
+        } => {
+            set_threads(threads)?;
+            if levels == Some(0) {
+                bail!("--levels must be at least 1");
+            }
+            let mut options = ConvertOptions::new(inputs, output);
+            options.raw = RawOptions {
+                dims,
+                format: dtype.as_deref().map(SampleFormat::parse).transpose()?,
+                big_endian: matches!(endian, Endian::Big),
+                header_bytes,
+            };
+            options.voxel_size = voxel_size;
+            options.unit = unit;
+            options.brick = chunk;
+            options.shard = shard;
+            options.version = match ome_zarr_version {
+                Version::V05 => OmeZarrVersion::V05,
+                Version::V04 => OmeZarrVersion::V04,
+            };
+            options.levels = levels;
+            options.overwrite = overwrite;
+            options.progress = !quiet;
+            options.channel_names = channel_names;
+            let summary = convert(&options)?;
+            print!("{}", summary.report());
+        }
+        Command::Sample {
+            output,
+            size,
+            seed,
+            threads,
+            quiet,
+        } => {
+            set_threads(threads)?;
+            let files = write_sample(&output, size, seed, !quiet)?;
+            println!(
+                "wrote the sample stack ({} x {} x {} voxels, z,y,x):",
+                size[0], size[1], size[2]
+            );
+            for f in &files {
+                println!("  {}", f.display());
+            }
+            let list: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+            println!(
+                "convert it with: ingest convert {} -o sample.ome.zarr",
+                list.join(" ")
+            );
+        }
+        Command::Index { store, threads } => {
+            set_threads(threads)?;
+            let report = residency_ingest::index::index(&store)?;
+            print!("{report}");
+        }
+        Command::Inspect { store } => {
+            print!("{}", residency_ingest::inspect::inspect(&store)?);
+        }
+    }
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "warn".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,495 @@
+//! Region metadata computed during the pass: conservative min/max cell grids, per-brick
+//! histograms and whole-channel statistics.
+//!
+//! **Min/max cells.** Cell `(k, j, i)` of a level covers voxels `[8k, 8k+8) × [8j, 8j+8) ×
+//! [8i, 8i+8)` and its range is taken over those voxels plus a one-voxel halo on every side
+//! (clipped to the volume). A trilinear sample at any position inside the cell, whichever
+//! voxel-centre convention the renderer uses, interpolates only voxels within the halo, so
+//! the interpolated value lies within `[min, max]`.
+//!
+//! **Histograms.** Each sample has a fine key (see [`Sample::key`]). Bricks count keys while
+//! streaming; at the end of the pass, the keys spanned by the channel's global range are
+//! grouped into at most [`HISTOGRAM_BINS`] equal runs, whose lower edges become the bin edges.
+//! Counts are exact: every voxel falls in exactly one bin.
+
+use std::sync::Mutex;
+
+use residency_schemas::{HISTOGRAM_BINS, Percentile};
+
+use crate::sample_format::{FINE_KEYS, Sample};
+
+/// Edge of a min/max cell in voxels of its level.
+pub const CELL: u64 = 8;
+/// Halo, in voxels, added around every cell.
+pub const HALO: u64 = 1;
+
+/// The cells (along one axis of extent `cells`) whose haloed range contains voxel `v`.
+#[inline]
+fn cells_of(v: u64, cells: u64) -> std::ops::RangeInclusive<u64> {
+    let lo = (v + 1).saturating_sub(CELL + HALO).div_ceil(CELL);
+    let hi = ((v + HALO) / CELL).min(cells - 1);
+    lo..=hi
+}
+
+/// A min/max grid for all channels of one level: `[c][gz][gy][gx]`.
+#[derive(Clone, Debug)]
+pub struct CellGrid<T: Sample> {
+    /// Number of cells `z, y, x`.
+    pub grid: [u64; 3],
+    /// Channels.
+    pub channels: usize,
+    /// Minimum per cell (`T::HIGHEST` where nothing was seen).
+    pub min: Vec<T>,
+    /// Maximum per cell (`T::LOWEST` where nothing was seen).
+    pub max: Vec<T>,
+}
+
+impl<T: Sample> CellGrid<T> {
+    /// An empty grid of `grid` cells per channel.
+    pub fn new(channels: usize, grid: [u64; 3]) -> Self {
+        let n = channels * (grid[0] * grid[1] * grid[2]) as usize;
+        Self {
+            grid,
+            channels,
+            min: vec![T::HIGHEST; n],
+            max: vec![T::LOWEST; n],
+        }
+    }
+
+    /// The grid of cells covering a level of `shape`.
+    pub fn for_shape(channels: usize, shape: [u64; 3]) -> Self {
+        Self::new(channels, shape.map(|s| s.div_ceil(CELL)))
+    }
+
+    fn index(&self, c: usize, z: u64, y: u64, x: u64) -> usize {
+        let [_, gy, gx] = self.grid;
+        ((c as u64 * self.grid[0] + z) * gy * gx + y * gx + x) as usize
+    }
+
+    /// Folds one slab of voxels (`[c][nz][Y][X]`, starting at depth `z0` of a level of
+    /// `shape`) into the cells. Slabs may arrive in any order.
+    pub fn add_slab(&mut self, slab: &[T], z0: u64, nz: u64, shape: [u64; 3]) {
+        use rayon::prelude::*;
+        let [_, ny, nx] = shape;
+        let plane = (ny * nx) as usize;
+        let [_, gy, gx] = self.grid;
+        let slices: Vec<(usize, u64, Vec<T>, Vec<T>)> = (0..self.channels)
+            .flat_map(|c| (0..nz).map(move |dz| (c, dz)))
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|(c, dz)| {
+                let start = (c as u64 * nz + dz) as usize * plane;
+                let (mn, mx) = slice_cells(&slab[start..start + plane], ny, nx, gy, gx);
+                (c, z0 + dz, mn, mx)
+            })
+            .collect();
+        for (c, z, mn, mx) in slices {
+            for cz in cells_of(z, self.grid[0]) {
+                let base = self.index(c, cz, 0, 0);
+                for i in 0..mn.len() {
+                    if mn[i] < self.min[base + i] {
+                        self.min[base + i] = mn[i];
+                    }
+                    if mx[i] > self.max[base + i] {
+                        self.max[base + i] = mx[i];
+                    }
+                }
+            }
+        }
+    }
+
+    /// The next coarser grid: each cell is the min of mins and max of maxes of 2×2×2 cells.
+    pub fn coarsen(&self) -> Self {
+        let g = self.grid.map(|s| s.div_ceil(2));
+        let mut out = Self::new(self.channels, g);
+        for c in 0..self.channels {
+            for z in 0..self.grid[0] {
+                for y in 0..self.grid[1] {
+                    for x in 0..self.grid[2] {
+                        let i = self.index(c, z, y, x);
+                        let o = out.index(c, z / 2, y / 2, x / 2);
+                        if self.min[i] < out.min[o] {
+                            out.min[o] = self.min[i];
+                        }
+                        if self.max[i] > out.max[o] {
+                            out.max[o] = self.max[i];
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    /// The grid as `[c][2][gz][gy][gx]`, with cells that saw no value (all NaN) as NaN.
+    pub fn to_min_max_array(&self) -> Vec<T> {
+        let n = (self.grid[0] * self.grid[1] * self.grid[2]) as usize;
+        let nan = T::from_f64(f64::NAN);
+        let mut out = Vec::with_capacity(2 * self.min.len());
+        for c in 0..self.channels {
+            let (mn, mx) = (&self.min[c * n..(c + 1) * n], &self.max[c * n..(c + 1) * n]);
+            let empty = |i: usize| mn[i] > mx[i];
+            out.extend((0..n).map(|i| if empty(i) { nan } else { mn[i] }));
+            out.extend((0..n).map(|i| if empty(i) { nan } else { mx[i] }));
+        }
+        out
+    }
+}
+
+/// Haloed min/max cells of one `ny × nx` slice, as `gy × gx` row-major vectors.
+fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> (Vec<T>, Vec<T>) {
+    let mut row_min = vec![T::HIGHEST; gx as usize];
+    let mut row_max = vec![T::LOWEST; gx as usize];
+    let mut min = vec![T::HIGHEST; (gy * gx) as usize];
+    let mut max = vec![T::LOWEST; (gy * gx) as usize];
+    for y in 0..ny {
+        row_min.fill(T::HIGHEST);
+        row_max.fill(T::LOWEST);
+        let row = &slice[(y * nx) as usize..((y + 1) * nx) as usize];
+        for (cx, cell) in row.chunks(CELL as usize).enumerate() {
+            let (mut mn, mut mx) = (row_min[cx], row_max[cx]);
+            for &v in cell {
+                if v < mn {
+                    mn = v;
+                }
+                if v > mx {
+                    mx = v;
+                }
+            }
+            row_min[cx] = mn;
+            row_max[cx] = mx;
+        }
+        // Halo in x: the voxel just left of and just right of each cell.
+        for cx in 0..gx {
+            for x in [(cx * CELL).wrapping_sub(1), (cx + 1) * CELL] {
+                if x < nx {
+                    let v = row[x as usize];
+                    let i = cx as usize;
+                    if v < row_min[i] {
+                        row_min[i] = v;
+                    }
+                    if v > row_max[i] {
+                        row_max[i] = v;
+                    }
+                }
+            }
+        }
+        for cy in cells_of(y, gy) {
+            let base = (cy * gx) as usize;
+            for i in 0..gx as usize {
+                if row_min[i] < min[base + i] {
+                    min[base + i] = row_min[i];
+                }
+                if row_max[i] > max[base + i] {
+                    max[base + i] = row_max[i];
+                }
+            }
+        }
+    }
+    (min, max)
+}
+
+/// Fine-key counts of one brick and channel, stored from the first to the last non-zero key.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FineHistogram {
+    /// Key of `counts[0]`.
+    pub first_key: u32,
+    /// Counts of keys `first_key..first_key + counts.len()`.
+    pub counts: Vec<u32>,
+}
+
+impl FineHistogram {
+    /// Counts the keys of `values`, skipping NaN.
+    pub fn of<T: Sample>(values: impl Iterator<Item = T>, scratch: &mut [u32; FINE_KEYS]) -> Self {
+        scratch.fill(0);
+        for v in values {
+            if v.counts() {
+                scratch[v.key()] += 1;
+            }
+        }
+        let Some(first) = scratch.iter().position(|&c| c > 0) else {
+            return Self::default();
+        };
+        let last = scratch.iter().rposition(|&c| c > 0).expect("non-empty");
+        Self {
+            first_key: first as u32,
+            counts: scratch[first..=last].to_vec(),
+        }
+    }
+
+    /// Total count.
+    pub fn total(&self) -> u64 {
+        self.counts.iter().map(|&c| c as u64).sum()
+    }
+}
+
+/// How a channel's fine keys group into histogram bins.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Binning {
+    /// First key of bin 0.
+    pub first_key: usize,
+    /// Keys per bin.
+    pub keys_per_bin: usize,
+    /// Number of bins in use (at most [`HISTOGRAM_BINS`]).
+    pub bins: usize,
+}
+
+impl Binning {
+    /// The binning spanning keys `kmin..=kmax`.
+    pub fn spanning(kmin: usize, kmax: usize) -> Self {
+        let span = kmax - kmin + 1;
+        let keys_per_bin = span.div_ceil(HISTOGRAM_BINS);
+        Self {
+            first_key: kmin,
+            keys_per_bin,
+            bins: span.div_ceil(keys_per_bin),
+        }
+    }
+
+    /// Bin edges as values of `T` (`bins + 1` ascending values).
+    pub fn edges<T: Sample>(&self) -> Vec<f64> {
+        (0..=self.bins)
+            .map(|b| T::key_lower_edge(self.first_key + b * self.keys_per_bin))
+            .collect()
+    }
+
+    /// Adds a fine histogram into `HISTOGRAM_BINS` bins.
+    pub fn bin_into(&self, fine: &FineHistogram, out: &mut [u32]) {
+        for (i, &n) in fine.counts.iter().enumerate() {
+            if n > 0 {
+                let key = fine.first_key as usize + i;
+                out[(key - self.first_key) / self.keys_per_bin] += n;
+            }
+        }
+    }
+}
+
+/// Whole-channel statistics accumulated over level 0.
+#[derive(Clone, Debug)]
+pub struct ChannelAccumulator {
+    /// Sum of non-NaN values.
+    pub sum: f64,
+    /// Number of non-NaN values.
+    pub count: u64,
+    /// Number of NaN values.
+    pub nan: u64,
+    /// Smallest value.
+    pub min: f64,
+    /// Largest value.
+    pub max: f64,
+    /// Fine-key counts of every voxel.
+    pub keys: Vec<u64>,
+    /// Exact value counts, for formats of at most 16 bits (empty otherwise).
+    pub exact: Vec<u64>,
+}
+
+impl Default for ChannelAccumulator {
+    fn default() -> Self {
+        Self {
+            sum: 0.0,
+            count: 0,
+            nan: 0,
+            min: f64::INFINITY,
+            max: f64::NEG_INFINITY,
+            keys: vec![0; FINE_KEYS],
+            exact: Vec::new(),
+        }
+    }
+}
+
+impl ChannelAccumulator {
+    /// Adds a brick's values and its fine histogram.
+    pub fn add<T: Sample>(&mut self, values: &[T], fine: &FineHistogram) {
+        let (mut sum, mut count) = (T::Sum::default(), 0u64);
+        let (mut mn, mut mx) = (T::HIGHEST, T::LOWEST);
+        if T::HIGHEST.exact_index().is_some() {
+            self.exact.resize(1 << 16, 0);
+            for &v in values {
+                self.exact[v.exact_index().unwrap_or(0)] += 1;
+            }
+        }
+        for &v in values {
+            if v.counts() {
+                sum += v.to_sum();
+                count += 1;
+                if v < mn {
+                    mn = v;
+                }
+                if v > mx {
+                    mx = v;
+                }
+            }
+        }
+        self.sum += T::sum_to_f64(sum);
+        self.count += count;
+        self.nan += values.len() as u64 - count;
+        if count > 0 {
+            self.min = self.min.min(mn.to_f64());
+            self.max = self.max.max(mx.to_f64());
+        }
+        for (i, &n) in fine.counts.iter().enumerate() {
+            self.keys[fine.first_key as usize + i] += n as u64;
+        }
+    }
+
+    /// Merges another accumulator into this one.
+    pub fn merge(&mut self, other: &Self) {
+        self.sum += other.sum;
+        self.count += other.count;
+        self.nan += other.nan;
+        self.min = self.min.min(other.min);
+        self.max = self.max.max(other.max);
+        for (a, b) in self.keys.iter_mut().zip(&other.keys) {
+            *a += b;
+        }
+        self.exact
+            .resize(self.exact.len().max(other.exact.len()), 0);
+        for (a, b) in self.exact.iter_mut().zip(&other.exact) {
+            *a += b;
+        }
+    }
+
+    /// Percentiles: for data of at most 16 bits, the smallest value with at least that
+    /// fraction of voxels at or below it (exact); for 32-bit data, interpolated linearly
+    /// inside the fine key that holds it and clamped to `[min, max]`.
+    pub fn percentiles<T: Sample>(&self, percents: &[f64]) -> Vec<Percentile> {
+        if self.count == 0 {
+            return Vec::new();
+        }
+        if !self.exact.is_empty() {
+            return percents
+                .iter()
+                .map(|&percent| {
+                    let target = (percent / 100.0 * self.count as f64).max(1.0);
+                    let mut below = 0u64;
+                    let mut value = self.max;
+                    for (i, &n) in self.exact.iter().enumerate() {
+                        below += n;
+                        if below as f64 >= target {
+                            value = T::exact_value(i);
+                            break;
+                        }
+                    }
+                    Percentile { percent, value }
+                })
+                .collect();
+        }
+        percents
+            .iter()
+            .map(|&percent| {
+                let target = percent / 100.0 * self.count as f64;
+                let mut below = 0u64;
+                let mut value = self.max;
+                for (k, &n) in self.keys.iter().enumerate() {
+                    if n > 0 && (below + n) as f64 >= target {
+                        let lo = T::key_lower_edge(k).max(self.min);
+                        let hi = T::key_lower_edge(k + 1).min(self.max);
+                        let frac = ((target - below as f64) / n as f64).clamp(0.0, 1.0);
+                        value = if T::FORMAT.is_float() {
+                            lo + (hi - lo) * frac
+                        } else {
+                            (lo + (hi - lo) * frac).round()
+                        };
+                        break;
+                    }
+                    below += n;
+                }
+                Percentile {
+                    percent,
+                    value: value.clamp(self.min, self.max),
+                }
+            })
+            .collect()
+    }
+
+    /// The binning for this channel's range.
+    pub fn binning<T: Sample>(&self) -> Binning {
+        if self.count == 0 {
+            return Binning::spanning(0, 0);
+        }
+        Binning::spanning(T::from_f64(self.min).key(), T::from_f64(self.max).key())
+    }
+}
+
+/// Fine histograms of every brick of one level, filled concurrently.
+#[derive(Debug)]
+pub struct LevelHistograms {
+    /// Bricks per channel `z, y, x`.
+    pub bricks: [u64; 3],
+    /// `[c][bz][by][bx]` fine histograms.
+    pub fine: Mutex<Vec<FineHistogram>>,
+}
+
+impl LevelHistograms {
+    /// Room for `channels` channels of `bricks` bricks.
+    pub fn new(channels: usize, bricks: [u64; 3]) -> Self {
+        let n = channels * (bricks[0] * bricks[1] * bricks[2]) as usize;
+        Self {
+            bricks,
+            fine: Mutex::new(vec![FineHistogram::default(); n]),
+        }
+    }
+
+    /// Linear index of a brick.
+    pub fn index(&self, c: usize, b: [u64; 3]) -> usize {
+        let [bz, by, bx] = self.bricks;
+        ((c as u64 * bz + b[0]) * by * bx + b[1] * bx + b[2]) as usize
+    }
+
+    /// The binned histograms `[c][bz][by][bx][HISTOGRAM_BINS]`.
+    pub fn binned(&self, binnings: &[Binning]) -> Vec<u32> {
+        let fine = self.fine.lock().expect("histograms");
+        let per_channel = fine.len() / binnings.len().max(1);
+        let mut out = vec![0u32; fine.len() * HISTOGRAM_BINS];
+        for (i, f) in fine.iter().enumerate() {
+            binnings[i / per_channel]
+                .bin_into(f, &mut out[i * HISTOGRAM_BINS..(i + 1) * HISTOGRAM_BINS]);
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn haloed_cells_include_neighbours() {
+        assert_eq!(cells_of(0, 4), 0..=0);
+        assert_eq!(cells_of(7, 4), 0..=1);
+        assert_eq!(cells_of(8, 4), 0..=1);
+        assert_eq!(cells_of(9, 4), 1..=1);
+        assert_eq!(cells_of(31, 4), 3..=3);
+    }
+
+    #[test]
+    fn cell_ranges_cover_the_halo() {
+        // 1 × 1 × 20 volume: value = x.
+        let slab: Vec<u16> = (0..20).collect();
+        let mut g = CellGrid::<u16>::for_shape(1, [1, 1, 20]);
+        g.add_slab(&slab, 0, 1, [1, 1, 20]);
+        assert_eq!(g.grid, [1, 1, 3]);
+        assert_eq!(g.min, [0, 7, 15]);
+        assert_eq!(g.max, [8, 16, 19]);
+        let c = g.coarsen();
+        assert_eq!((c.min.clone(), c.max.clone()), (vec![0, 15], vec![16, 19]));
+    }
+
+    #[test]
+    fn binning_is_exact_and_edges_bound_values() {
+        let vals: Vec<u16> = vec![100, 101, 4000, 65535, 37];
+        let mut scratch = [0u32; FINE_KEYS];
+        let fine = FineHistogram::of(vals.iter().copied(), &mut scratch);
+        let mut acc = ChannelAccumulator::default();
+        acc.add(&vals, &fine);
+        let b = acc.binning::<u16>();
+        let edges = b.edges::<u16>();
+        let mut bins = vec![0u32; HISTOGRAM_BINS];
+        b.bin_into(&fine, &mut bins);
+        assert_eq!(bins.iter().sum::<u32>(), 5);
+        for v in vals {
+            let bin = (v.key() - b.first_key) / b.keys_per_bin;
+            assert!(edges[bin] <= v as f64 && (v as f64) < edges[bin + 1]);
+        }
+    }
+}

@@ -1,0 +1,459 @@
+//! Voxel sample formats (data types) and the arithmetic the pyramid needs on each.
+
+use std::fmt;
+
+use anyhow::{Result, bail};
+
+/// The sample formats ingest reads and writes. Output keeps the source format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum SampleFormat {
+    /// Unsigned 8-bit integer.
+    U8,
+    /// Unsigned 16-bit integer.
+    U16,
+    /// Signed 16-bit integer.
+    I16,
+    /// Unsigned 32-bit integer.
+    U32,
+    /// Signed 32-bit integer.
+    I32,
+    /// IEEE 754 32-bit float.
+    F32,
+}
+
+impl SampleFormat {
+    /// Bytes per sample.
+    pub fn bytes(self) -> usize {
+        match self {
+            Self::U8 => 1,
+            Self::U16 | Self::I16 => 2,
+            Self::U32 | Self::I32 | Self::F32 => 4,
+        }
+    }
+
+    /// Zarr v3 / NumPy data type name (`uint16`, `float32`, ...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::U8 => "uint8",
+            Self::U16 => "uint16",
+            Self::I16 => "int16",
+            Self::U32 => "uint32",
+            Self::I32 => "int32",
+            Self::F32 => "float32",
+        }
+    }
+
+    /// Zarr v2 `dtype` string (little-endian NumPy type string).
+    pub fn zarr_v2_dtype(self) -> &'static str {
+        match self {
+            Self::U8 => "|u1",
+            Self::U16 => "<u2",
+            Self::I16 => "<i2",
+            Self::U32 => "<u4",
+            Self::I32 => "<i4",
+            Self::F32 => "<f4",
+        }
+    }
+
+    /// Whether this is a floating-point format.
+    pub fn is_float(self) -> bool {
+        self == Self::F32
+    }
+
+    /// Parses a data type name as used by `--dtype` and raw file names
+    /// (`uint8`, `u8`, `uint16`, `u16`, `int16`, `i16`, `uint32`, `u32`, `int32`, `i32`,
+    /// `float32`, `f32`, `float`).
+    pub fn parse(name: &str) -> Result<Self> {
+        Ok(match name.to_ascii_lowercase().as_str() {
+            "uint8" | "u8" | "ubyte" => Self::U8,
+            "uint16" | "u16" | "ushort" => Self::U16,
+            "int16" | "i16" | "short" => Self::I16,
+            "uint32" | "u32" | "uint" => Self::U32,
+            "int32" | "i32" | "int" => Self::I32,
+            "float32" | "f32" | "float" => Self::F32,
+            other => bail!(
+                "unsupported data type '{other}': expected one of uint8, uint16, int16, uint32, int32, float32"
+            ),
+        })
+    }
+
+    /// The narrowest format that holds every value of both formats exactly, if any.
+    pub fn promote(a: Self, b: Self) -> Option<Self> {
+        use SampleFormat::*;
+        if a == b {
+            return Some(a);
+        }
+        let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+        Some(match (lo, hi) {
+            (U8, x) => x,
+            (U16, I16) => I32,
+            (U16 | I16, U32) if lo == U16 => U32,
+            (U16 | I16, I32) => I32,
+            (U16 | I16, F32) => F32,
+            _ => return None,
+        })
+    }
+}
+
+impl fmt::Display for SampleFormat {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Number of fine histogram keys. Every sample maps to a key in `0..FINE_KEYS`, monotone in
+/// its value; brick histograms are counted on keys and grouped into bins at the end of the pass.
+pub const FINE_KEYS: usize = 4096;
+
+/// A voxel sample type, with the exact arithmetic the pyramid and statistics need.
+pub trait Sample:
+    Copy
+    + Send
+    + Sync
+    + PartialOrd
+    + PartialEq
+    + Default
+    + fmt::Debug
+    + zarrs::array::Element
+    + zarrs::array::ElementOwned
+    + 'static
+{
+    /// The format tag of this type.
+    const FORMAT: SampleFormat;
+    /// Smallest representable value (minus infinity for floats): the identity of `max`.
+    const LOWEST: Self;
+    /// Largest representable value (infinity for floats): the identity of `min`.
+    const HIGHEST: Self;
+    /// Exact accumulator for sums of many samples.
+    type Sum: Copy + Send + Sync + Default + std::ops::AddAssign + fmt::Debug;
+
+    /// This sample as a sum term (0 for NaN).
+    fn to_sum(self) -> Self::Sum;
+    /// Whether the sample counts towards means and statistics (false only for NaN).
+    fn counts(self) -> bool;
+    /// The mean `sum / count`, rounded to nearest once (halves away from zero) for integers.
+    /// A zero count gives NaN for floats and 0 for integers.
+    fn from_mean(sum: Self::Sum, count: u32) -> Self;
+    /// The sum as f64 (for statistics).
+    fn sum_to_f64(sum: Self::Sum) -> f64;
+    /// The value as f64.
+    fn to_f64(self) -> f64;
+    /// Converts a value of a narrower format exactly (see [`SampleFormat::promote`]).
+    fn from_f64(v: f64) -> Self;
+    /// The fine histogram key of this value, in `0..FINE_KEYS`.
+    fn key(self) -> usize;
+    /// The smallest value whose key is `key` (`key == FINE_KEYS` gives the exclusive upper
+    /// bound of the last key, which may be infinite).
+    fn key_lower_edge(key: usize) -> f64;
+    /// Decodes one sample from bytes in the given byte order.
+    fn from_bytes(bytes: &[u8], big_endian: bool) -> Self;
+    /// Whether the sample is bit-for-bit the fill value 0 (so `-0.0` is not).
+    fn is_fill(self) -> bool;
+    /// For formats of at most 16 bits, the value's index in an exact 65536-entry histogram.
+    fn exact_index(self) -> Option<usize>;
+    /// The value of an exact-histogram index (inverse of [`Sample::exact_index`]).
+    fn exact_value(index: usize) -> f64;
+}
+
+fn round_mean(sum: i64, count: u32) -> i64 {
+    if count == 0 {
+        return 0;
+    }
+    let (s, c) = (sum as i128, count as i128);
+    let r = if s >= 0 {
+        (2 * s + c) / (2 * c)
+    } else {
+        -((-2 * s + c) / (2 * c))
+    };
+    r as i64
+}
+
+macro_rules! int_sample {
+    ($t:ty, $fmt:ident, $key:expr, $edge:expr, $exact:expr, $exact_value:expr) => {
+        impl Sample for $t {
+            #[inline]
+            fn exact_index(self) -> Option<usize> {
+                let f: fn($t) -> Option<usize> = $exact;
+                f(self)
+            }
+            fn exact_value(index: usize) -> f64 {
+                let f: fn(usize) -> f64 = $exact_value;
+                f(index)
+            }
+            const FORMAT: SampleFormat = SampleFormat::$fmt;
+            const LOWEST: Self = <$t>::MIN;
+            const HIGHEST: Self = <$t>::MAX;
+            type Sum = i64;
+            #[inline]
+            fn to_sum(self) -> i64 {
+                self as i64
+            }
+            #[inline]
+            fn counts(self) -> bool {
+                true
+            }
+            #[inline]
+            fn from_mean(sum: i64, count: u32) -> Self {
+                round_mean(sum, count) as $t
+            }
+            fn sum_to_f64(sum: i64) -> f64 {
+                sum as f64
+            }
+            #[inline]
+            fn to_f64(self) -> f64 {
+                self as f64
+            }
+            fn from_f64(v: f64) -> Self {
+                v as $t
+            }
+            #[inline]
+            fn key(self) -> usize {
+                let f: fn($t) -> usize = $key;
+                f(self)
+            }
+            fn key_lower_edge(key: usize) -> f64 {
+                let f: fn(usize) -> f64 = $edge;
+                f(key)
+            }
+            #[inline]
+            fn is_fill(self) -> bool {
+                self == 0
+            }
+            #[inline]
+            fn from_bytes(b: &[u8], big_endian: bool) -> Self {
+                let a = b.try_into().expect("sample width");
+                if big_endian {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }
+            }
+        }
+    };
+}
+
+int_sample!(
+    u8,
+    U8,
+    |v| v as usize * 16,
+    |k| k.div_ceil(16) as f64,
+    |v| Some(v as usize),
+    |i| i as f64
+);
+int_sample!(
+    u16,
+    U16,
+    |v| (v >> 4) as usize,
+    |k| (k * 16) as f64,
+    |v| Some(v as usize),
+    |i| i as f64
+);
+int_sample!(
+    i16,
+    I16,
+    |v| ((v as i32 + 32768) >> 4) as usize,
+    |k| (k as f64) * 16.0 - 32768.0,
+    |v| Some((v as i32 + 32768) as usize),
+    |i| i as f64 - 32768.0
+);
+int_sample!(
+    u32,
+    U32,
+    |v| (v >> 20) as usize,
+    |k| (k as f64) * 1048576.0,
+    |_| None,
+    |i| i as f64
+);
+int_sample!(
+    i32,
+    I32,
+    |v| ((v as i64 + 2147483648) >> 20) as usize,
+    |k| (k as f64) * 1048576.0 - 2147483648.0,
+    |_| None,
+    |i| i as f64
+);
+
+/// Order-preserving map of f32 bits to u32.
+fn f32_order_key(v: f32) -> u32 {
+    let b = v.to_bits();
+    if b & 0x8000_0000 != 0 {
+        !b
+    } else {
+        b | 0x8000_0000
+    }
+}
+
+impl Sample for f32 {
+    const FORMAT: SampleFormat = SampleFormat::F32;
+    const LOWEST: Self = f32::NEG_INFINITY;
+    const HIGHEST: Self = f32::INFINITY;
+    type Sum = f64;
+    #[inline]
+    fn to_sum(self) -> f64 {
+        if self.is_nan() { 0.0 } else { self as f64 }
+    }
+    #[inline]
+    fn counts(self) -> bool {
+        !self.is_nan()
+    }
+    #[inline]
+    fn from_mean(sum: f64, count: u32) -> Self {
+        if count == 0 {
+            f32::NAN
+        } else {
+            (sum / count as f64) as f32
+        }
+    }
+    fn sum_to_f64(sum: f64) -> f64 {
+        sum
+    }
+    #[inline]
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+    #[inline]
+    fn key(self) -> usize {
+        (f32_order_key(self) >> 20) as usize
+    }
+    fn key_lower_edge(key: usize) -> f64 {
+        if key >= FINE_KEYS {
+            return f64::INFINITY;
+        }
+        let k = (key as u32) << 20;
+        let bits = if k & 0x8000_0000 != 0 {
+            k & 0x7fff_ffff
+        } else {
+            !k
+        };
+        let v = f32::from_bits(bits);
+        if v.is_nan() {
+            if key < FINE_KEYS / 2 {
+                f64::NEG_INFINITY
+            } else {
+                f64::INFINITY
+            }
+        } else {
+            v as f64
+        }
+    }
+    #[inline]
+    fn is_fill(self) -> bool {
+        self.to_bits() == 0
+    }
+    fn exact_index(self) -> Option<usize> {
+        None
+    }
+    fn exact_value(index: usize) -> f64 {
+        index as f64
+    }
+    #[inline]
+    fn from_bytes(b: &[u8], big_endian: bool) -> Self {
+        let a = b.try_into().expect("sample width");
+        if big_endian {
+            f32::from_be_bytes(a)
+        } else {
+            f32::from_le_bytes(a)
+        }
+    }
+}
+
+/// Calls `$body` with the type alias `$T` bound to the Rust type of `$format`.
+#[macro_export]
+macro_rules! with_sample_type {
+    ($format:expr, $T:ident => $body:expr) => {
+        match $format {
+            $crate::sample_format::SampleFormat::U8 => {
+                type $T = u8;
+                $body
+            }
+            $crate::sample_format::SampleFormat::U16 => {
+                type $T = u16;
+                $body
+            }
+            $crate::sample_format::SampleFormat::I16 => {
+                type $T = i16;
+                $body
+            }
+            $crate::sample_format::SampleFormat::U32 => {
+                type $T = u32;
+                $body
+            }
+            $crate::sample_format::SampleFormat::I32 => {
+                type $T = i32;
+                $body
+            }
+            $crate::sample_format::SampleFormat::F32 => {
+                type $T = f32;
+                $body
+            }
+        }
+    };
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integer_means_round_half_away_from_zero() {
+        assert_eq!(u16::from_mean(5, 2), 3);
+        assert_eq!(u16::from_mean(4, 3), 1);
+        assert_eq!(u16::from_mean(5, 3), 2);
+        assert_eq!(i16::from_mean(-5, 2), -3);
+        assert_eq!(i16::from_mean(-4, 3), -1);
+        assert_eq!(u32::from_mean(u32::MAX as i64 * 8, 8), u32::MAX);
+    }
+
+    #[test]
+    fn keys_are_monotone_and_edges_bound_them() {
+        let vals = [
+            f32::NEG_INFINITY,
+            -1e30,
+            -1.5,
+            -1e-40,
+            0.0,
+            1e-40,
+            1.0,
+            3.5,
+            1e30,
+            f32::INFINITY,
+        ];
+        for w in vals.windows(2) {
+            assert!(w[0].key() <= w[1].key(), "{:?}", w);
+        }
+        for v in vals {
+            let k = v.key();
+            assert!(f32::key_lower_edge(k) <= v as f64, "{v}");
+            // +inf sits in the last key, whose upper edge is +inf itself (closed there).
+            assert!(
+                (v as f64) < f32::key_lower_edge(k + 1) || v == f32::INFINITY,
+                "{v}"
+            );
+        }
+        for v in [0u16, 15, 16, 65535] {
+            let k = v.key();
+            assert!(u16::key_lower_edge(k) <= v as f64 && (v as f64) < u16::key_lower_edge(k + 1));
+        }
+        for v in [i16::MIN, -1, 0, i16::MAX] {
+            let k = v.key();
+            assert!(i16::key_lower_edge(k) <= v as f64 && (v as f64) < i16::key_lower_edge(k + 1));
+        }
+        for v in [0u8, 1, 255] {
+            let k = v.key();
+            assert_eq!(u8::key_lower_edge(k), v as f64);
+        }
+    }
+
+    #[test]
+    fn promotion_is_exact() {
+        use SampleFormat::*;
+        assert_eq!(SampleFormat::promote(U8, U16), Some(U16));
+        assert_eq!(SampleFormat::promote(U16, I16), Some(I32));
+        assert_eq!(SampleFormat::promote(U16, F32), Some(F32));
+        assert_eq!(SampleFormat::promote(U32, F32), None);
+        assert_eq!(SampleFormat::promote(I16, U32), None);
+    }
+}

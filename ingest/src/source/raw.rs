@@ -1,0 +1,151 @@
+//! Raw volumes: headerless (or fixed-header) binary stacks, `x` fastest, then `y`, then `z`.
+
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+
+use super::{Plane, SourceInfo, VolumeSource};
+use crate::sample_format::{Sample, SampleFormat};
+
+/// Layout options for raw inputs (`--dims`, `--dtype`, `--endian`, `--header-bytes`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct RawOptions {
+    /// Extent `x, y, z` in voxels.
+    pub dims: Option<[u64; 3]>,
+    /// Sample format.
+    pub format: Option<SampleFormat>,
+    /// Whether samples are big-endian (default little-endian).
+    pub big_endian: bool,
+    /// Bytes to skip at the start of the file.
+    pub header_bytes: u64,
+}
+
+impl RawOptions {
+    /// Whether any raw layout option was given on the command line.
+    pub fn is_given(&self) -> bool {
+        self.dims.is_some() || self.format.is_some()
+    }
+}
+
+/// Recognises the common `name_XxYxZ_dtype.raw` naming convention
+/// (e.g. `kingsnake_1024x1024x795_uint8.raw`) and returns `([x, y, z], format)`.
+pub fn parse_raw_name(path: &Path) -> Option<([u64; 3], SampleFormat)> {
+    let stem = path.file_stem()?.to_str()?;
+    let mut parts = stem.rsplit('_');
+    let format = SampleFormat::parse(parts.next()?).ok()?;
+    let dims: Vec<u64> = parts
+        .next()?
+        .split('x')
+        .map(|d| d.parse().ok())
+        .collect::<Option<_>>()?;
+    match dims[..] {
+        [x, y, z] if x > 0 && y > 0 && z > 0 => Some(([x, y, z], format)),
+        _ => None,
+    }
+}
+
+/// A raw volume file with one channel.
+pub struct RawSource {
+    info: SourceInfo,
+    file: File,
+    big_endian: bool,
+    header_bytes: u64,
+    buffer: Vec<u8>,
+}
+
+impl RawSource {
+    /// Opens a raw file, taking its layout from `options` or, failing that, its name,
+    /// and checks that the file size matches the layout exactly.
+    pub fn open(path: &Path, options: &RawOptions) -> Result<Self> {
+        let shown = path.display();
+        let from_name = parse_raw_name(path);
+        let dims = options.dims.or(from_name.map(|n| n.0)).with_context(|| {
+            format!("{shown}: raw input needs --dims X,Y,Z (or a name like name_XxYxZ_uint8.raw)")
+        })?;
+        let format = options.format.or(from_name.map(|n| n.1)).with_context(|| {
+            format!("{shown}: raw input needs --dtype (or a name like name_XxYxZ_uint8.raw)")
+        })?;
+        let file = File::open(path).with_context(|| format!("{shown}: cannot open"))?;
+        let actual = file
+            .metadata()
+            .with_context(|| format!("{shown}: cannot stat"))?
+            .len();
+        let [x, y, z] = dims;
+        let expected = options.header_bytes + x * y * z * format.bytes() as u64;
+        if actual != expected {
+            bail!(
+                "{shown}: raw file is {actual} bytes, but --dims {x},{y},{z} of {format} with a {}-byte header need {expected} bytes",
+                options.header_bytes
+            );
+        }
+        Ok(Self {
+            info: SourceInfo {
+                path: path.to_path_buf(),
+                shape: [z, y, x],
+                channels: 1,
+                format,
+                voxel_size: None,
+                unit: None,
+                channel_names: Vec::new(),
+            },
+            file,
+            big_endian: options.big_endian,
+            header_bytes: options.header_bytes,
+            buffer: Vec::new(),
+        })
+    }
+
+    fn decode<T: Sample>(&self) -> Vec<T> {
+        let w = T::FORMAT.bytes();
+        self.buffer
+            .chunks_exact(w)
+            .map(|b| T::from_bytes(b, self.big_endian))
+            .collect()
+    }
+}
+
+impl VolumeSource for RawSource {
+    fn info(&self) -> &SourceInfo {
+        &self.info
+    }
+
+    fn read_plane(&mut self, _channel: usize, z: u64) -> Result<Plane> {
+        let [_, y, x] = self.info.shape;
+        let plane_bytes = y * x * self.info.format.bytes() as u64;
+        self.buffer.resize(plane_bytes as usize, 0);
+        let shown = self.info.path.display();
+        self.file
+            .seek(SeekFrom::Start(self.header_bytes + z * plane_bytes))
+            .and_then(|_| self.file.read_exact(&mut self.buffer))
+            .with_context(|| format!("{shown}: cannot read plane z={z}"))?;
+        Ok(match self.info.format {
+            SampleFormat::U8 => Plane::U8(std::mem::take(&mut self.buffer)),
+            SampleFormat::U16 => Plane::U16(self.decode()),
+            SampleFormat::I16 => Plane::I16(self.decode()),
+            SampleFormat::U32 => Plane::U32(self.decode()),
+            SampleFormat::I32 => Plane::I32(self.decode()),
+            SampleFormat::F32 => Plane::F32(self.decode()),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recognises_the_naming_convention() {
+        assert_eq!(
+            parse_raw_name(Path::new("/d/kingsnake_1024x1024x795_uint8.raw")),
+            Some(([1024, 1024, 795], SampleFormat::U8))
+        );
+        assert_eq!(
+            parse_raw_name(Path::new("rayleigh_taylor_256x256x256_float32.raw")),
+            Some(([256, 256, 256], SampleFormat::F32))
+        );
+        assert_eq!(parse_raw_name(Path::new("scan.raw")), None);
+        assert_eq!(parse_raw_name(Path::new("a_10x10_uint8.raw")), None);
+    }
+}

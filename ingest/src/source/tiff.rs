@@ -1,0 +1,266 @@
+//! TIFF stacks: multi-page, BigTIFF, striped or tiled, any compression the `tiff` crate
+//! decodes (none, LZW, Deflate, PackBits), with ImageJ hyperstack and OME-TIFF metadata.
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::tags::Tag;
+
+use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
+use super::{Plane, SourceInfo, VolumeSource};
+use crate::sample_format::SampleFormat;
+
+/// A TIFF file holding a z-stack of one or more channels.
+pub struct TiffSource {
+    info: SourceInfo,
+    decoder: Decoder<BufReader<File>>,
+    layout: StackLayout,
+    samples_per_pixel: usize,
+    cached: Option<(u64, DecodingResult)>,
+}
+
+/// Opens a TIFF decoder with no size limits.
+pub(super) fn open_decoder(path: &Path) -> Result<Decoder<BufReader<File>>> {
+    let file = File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    Ok(Decoder::new(BufReader::new(file))
+        .with_context(|| format!("{}: not a readable TIFF file", path.display()))?
+        .with_limits(Limits::unlimited()))
+}
+
+/// The sample format of the current page, or an error naming what is unsupported.
+pub(super) fn page_format(
+    decoder: &mut Decoder<BufReader<File>>,
+    path: &Path,
+) -> Result<(SampleFormat, usize)> {
+    let color = decoder
+        .colortype()
+        .with_context(|| format!("{}: cannot read the pixel layout", path.display()))?;
+    let (bits, samples) = match color {
+        tiff::ColorType::Gray(b) => (b, 1),
+        tiff::ColorType::GrayA(b) => (b, 2),
+        tiff::ColorType::RGB(b) => (b, 3),
+        tiff::ColorType::RGBA(b) => (b, 4),
+        tiff::ColorType::Multiband {
+            bit_depth,
+            num_samples,
+        } => (bit_depth, num_samples as usize),
+        other => bail!(
+            "{}: unsupported sample format: colour type {other:?}",
+            path.display()
+        ),
+    };
+    let kind = decoder
+        .find_tag_unsigned::<u16>(Tag::SampleFormat)
+        .ok()
+        .flatten()
+        .unwrap_or(1);
+    let format = match (kind, bits) {
+        (1, 8) => SampleFormat::U8,
+        (1, 16) => SampleFormat::U16,
+        (2, 16) => SampleFormat::I16,
+        (1, 32) => SampleFormat::U32,
+        (2, 32) => SampleFormat::I32,
+        (3, 32) => SampleFormat::F32,
+        (k, b) => {
+            let kind = match k {
+                1 => "unsigned integer",
+                2 => "signed integer",
+                3 => "floating point",
+                _ => "unknown",
+            };
+            bail!(
+                "{}: unsupported sample format: {b}-bit {kind} (supported: 8/16/32-bit unsigned, 16/32-bit signed, 32-bit float)",
+                path.display()
+            )
+        }
+    };
+    Ok((format, samples))
+}
+
+/// Converts one decoded page into a plane of the given sample of each pixel.
+pub(super) fn decoded_to_plane(
+    data: &DecodingResult,
+    sample: usize,
+    samples: usize,
+    path: &Path,
+) -> Result<Plane> {
+    fn pick<T: Copy>(v: &[T], sample: usize, samples: usize) -> Vec<T> {
+        if samples == 1 {
+            v.to_vec()
+        } else {
+            v.iter().skip(sample).step_by(samples).copied().collect()
+        }
+    }
+    Ok(match data {
+        DecodingResult::U8(v) => Plane::U8(pick(v, sample, samples)),
+        DecodingResult::U16(v) => Plane::U16(pick(v, sample, samples)),
+        DecodingResult::I16(v) => Plane::I16(pick(v, sample, samples)),
+        DecodingResult::U32(v) => Plane::U32(pick(v, sample, samples)),
+        DecodingResult::I32(v) => Plane::I32(pick(v, sample, samples)),
+        DecodingResult::F32(v) => Plane::F32(pick(v, sample, samples)),
+        _ => bail!("{}: unsupported sample format", path.display()),
+    })
+}
+
+fn rational(value: tiff::decoder::ifd::Value) -> Option<f64> {
+    use tiff::decoder::ifd::Value;
+    match value {
+        Value::Rational(n, d) if n > 0 && d > 0 => Some(d as f64 / n as f64),
+        Value::RationalBig(n, d) if n > 0 && d > 0 => Some(d as f64 / n as f64),
+        _ => None,
+    }
+}
+
+impl TiffSource {
+    /// Opens a TIFF file and works out its channel and z layout from its metadata.
+    pub fn open(path: &Path) -> Result<Self> {
+        let shown = path.display().to_string();
+        let mut decoder = open_decoder(path)?;
+        let (width, height) = decoder
+            .dimensions()
+            .with_context(|| format!("{shown}: cannot read the image size"))?;
+        let (format, samples_per_pixel) = page_format(&mut decoder, path)?;
+        let planar = decoder
+            .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
+            .ok()
+            .flatten()
+            .unwrap_or(1);
+        if planar == 2 && samples_per_pixel > 1 {
+            bail!(
+                "{shown}: unsupported sample format: planar-separate pages with {samples_per_pixel} samples per pixel"
+            );
+        }
+        let description = decoder
+            .get_tag_ascii_string(Tag::ImageDescription)
+            .unwrap_or_default();
+        let x_size = decoder
+            .find_tag(Tag::XResolution)
+            .ok()
+            .flatten()
+            .and_then(rational);
+        let y_size = decoder
+            .find_tag(Tag::YResolution)
+            .ok()
+            .flatten()
+            .and_then(rational);
+        let mut pages = 1u64;
+        while decoder.more_images() {
+            decoder.next_image().with_context(|| {
+                format!(
+                    "{shown}: cannot read the directory of page {pages} (truncated or corrupt TIFF)"
+                )
+            })?;
+            pages += 1;
+        }
+
+        let (layout, xy_from_resolution) = if description.contains("<OME") {
+            let layout =
+                parse_ome_xml(&description).with_context(|| format!("{shown}: OME-TIFF"))?;
+            (layout, false)
+        } else if let Some(layout) = parse_imagej(&description) {
+            (layout, true)
+        } else {
+            let layout = StackLayout {
+                channel_planes: 1,
+                depth: pages,
+                channel_stride: 0,
+                z_stride: 1,
+                time_points: 1,
+                voxel_size: [None; 3],
+                unit: None,
+                channel_names: Vec::new(),
+            };
+            (layout, false)
+        };
+        if layout.time_points > 1 {
+            bail!(
+                "{shown}: has {} time points; ingest converts one time point per store (split the series first)",
+                layout.time_points
+            );
+        }
+        let needed = layout.channel_planes as u64 * layout.depth;
+        if pages < needed {
+            bail!(
+                "{shown}: metadata describes {needed} pages ({} channels x {} z) but the file has only {pages} (truncated?)",
+                layout.channel_planes,
+                layout.depth
+            );
+        }
+        let mut voxel_size = layout.voxel_size;
+        if xy_from_resolution {
+            voxel_size[1] = voxel_size[1].or(y_size);
+            voxel_size[2] = voxel_size[2].or(x_size);
+        }
+        let known = voxel_size.iter().any(Option::is_some);
+        let voxel_size = known.then(|| voxel_size.map(|v| v.unwrap_or(1.0)));
+        let channels = layout.channel_planes * samples_per_pixel;
+        let channel_names = if layout.channel_names.len() == channels {
+            layout.channel_names.clone()
+        } else {
+            Vec::new()
+        };
+        Ok(Self {
+            info: SourceInfo {
+                path: path.to_path_buf(),
+                shape: [layout.depth, height as u64, width as u64],
+                channels,
+                format,
+                voxel_size,
+                unit: if known {
+                    layout.unit.clone().or_else(|| normalise_unit("pixel"))
+                } else {
+                    None
+                },
+                channel_names,
+            },
+            decoder,
+            layout,
+            samples_per_pixel,
+            cached: None,
+        })
+    }
+}
+
+impl VolumeSource for TiffSource {
+    fn info(&self) -> &SourceInfo {
+        &self.info
+    }
+
+    fn read_plane(&mut self, channel: usize, z: u64) -> Result<Plane> {
+        let spp = self.samples_per_pixel;
+        let page = (channel / spp) as u64 * self.layout.channel_stride + z * self.layout.z_stride;
+        let path = self.info.path.clone();
+        if self.cached.as_ref().map(|c| c.0) != Some(page) {
+            let shown = path.display();
+            self.decoder.seek_to_image(page as usize).with_context(|| {
+                format!("{shown}: cannot find page {page} (truncated or corrupt TIFF)")
+            })?;
+            let (w, h) = self.decoder.dimensions()?;
+            let [_, ey, ex] = self.info.shape;
+            if (h as u64, w as u64) != (ey, ex) {
+                bail!("{shown}: page {page} is {w}x{h} pixels but page 0 is {ex}x{ey}");
+            }
+            let (format, _) = page_format(&mut self.decoder, &path)?;
+            if format != self.info.format {
+                bail!(
+                    "{shown}: page {page} holds {format} samples but page 0 holds {}",
+                    self.info.format
+                );
+            }
+            let data = self.decoder.read_image().with_context(|| {
+                format!("{shown}: cannot decode page {page} (truncated or corrupt TIFF)")
+            })?;
+            self.cached = Some((page, data));
+        }
+        let data = &self.cached.as_ref().expect("cached page").1;
+        let plane = decoded_to_plane(data, channel % spp, spp, &path)?;
+        let [_, y, x] = self.info.shape;
+        if plane.len() as u64 != y * x {
+            bail!("{}: page {page} decoded to the wrong size", path.display());
+        }
+        Ok(plane)
+    }
+}

@@ -1,0 +1,379 @@
+"""`ingest` against code nobody here wrote: tifffile writes the inputs microscopes produce,
+zarr-python reads the output, ome-zarr-models validates it, NumPy is the reference."""
+
+import json
+import os
+import pathlib
+import signal
+import subprocess
+import time
+
+import jsonschema
+import numpy as np
+import pytest
+import tifffile
+import zarr
+from ome_zarr_models import open_ome_zarr
+
+from conftest import (
+    BIN,
+    ROOT,
+    assert_pyramid_exact,
+    assert_region_metadata,
+    assert_same_bits,
+    multiscale,
+    root_attributes,
+    run_ingest,
+)
+
+RNG = np.random.default_rng(7)
+
+
+def sparse_volume(shape, dtype):
+    """Mostly empty, with blobs and noise, in `dtype` (odd shapes welcome)."""
+    z, y, x = np.indices(shape)
+    v = np.zeros(shape, np.float64)
+    for _ in range(4):
+        c = [RNG.uniform(0, s) for s in shape]
+        r = RNG.uniform(3, 8)
+        v += np.exp(-((z - c[0]) ** 2 + (y - c[1]) ** 2 + (x - c[2]) ** 2) / r**2)
+    v[v < 0.05] = 0
+    if np.issubdtype(dtype, np.integer):
+        info = np.iinfo(dtype)
+        top = min(info.max, 60000)
+        v = v / v.max() * top * 0.9 + (v > 0) * RNG.integers(0, 50, shape)
+        if info.min < 0:
+            v = v - (v > 0) * top * 0.45
+        return np.clip(np.round(v), info.min, info.max).astype(dtype)
+    return (v * 1000 - 3).astype(dtype)
+
+
+def check_store(out: pathlib.Path, level0: np.ndarray, version="0.5"):
+    """Level 0 is bit-identical, every level is exact, the metadata validates and is right."""
+    g = zarr.open_group(str(out), mode="r")
+    assert_same_bits(g["0"][...], level0)
+    assert_pyramid_exact(out, level0)
+    model = open_ome_zarr(g)
+    assert type(model).__module__.startswith(f"ome_zarr_models.v0{version[-1]}"), type(model)
+    schema = json.loads((ROOT / "schemas/json/region-metadata.schema.json").read_text())
+    jsonschema.validate(root_attributes(out)["residency"], schema)
+    assert_region_metadata(out)
+    return g
+
+
+CASES = {
+    # name: (dtype, tifffile.imwrite keyword arguments)
+    "u16-multipage": (np.uint16, {}),
+    "u8-bigtiff": (np.uint8, {"bigtiff": True}),
+    "u16-tiled": (np.uint16, {"tile": (16, 16)}),
+    "u16-lzw": (np.uint16, {"compression": "lzw"}),
+    "u16-deflate": (np.uint16, {"compression": "zlib"}),
+    "u8-packbits": (np.uint8, {"compression": "packbits"}),
+    "i16-multipage": (np.int16, {}),
+    "u32-multipage": (np.uint32, {}),
+    "i32-multipage": (np.int32, {}),
+    "f32-multipage": (np.float32, {}),
+    "f32-tiled-deflate": (np.float32, {"tile": (16, 32), "compression": "zlib"}),
+}
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_tiff_variants_round_trip_exactly(tmp_path, name):
+    dtype, kwargs = CASES[name]
+    vol = sparse_volume((19, 37, 45), dtype)
+    src = tmp_path / f"{name}.tif"
+    tifffile.imwrite(src, vol, photometric="minisblack", **kwargs)
+    out = tmp_path / "out.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, vol[np.newaxis])
+
+
+def test_float_nan_is_excluded_from_means_and_statistics(tmp_path):
+    vol = sparse_volume((10, 20, 21), np.float32)
+    vol[2:4, 0:8, 0:8] = np.nan  # a window of NaN only, and partial NaN windows
+    vol[5, 3, 7] = np.nan
+    src = tmp_path / "nan.tif"
+    tifffile.imwrite(src, vol, photometric="minisblack")
+    out = tmp_path / "nan.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "4", "--quiet")
+    g = check_store(out, vol[np.newaxis])
+    assert np.isnan(g["1"][0, 1, 0, 0])
+    stats = root_attributes(out)["residency"]["channels"][0]
+    assert stats["nan_voxels"] == int(np.isnan(vol).sum())
+    assert stats["min"] == float(np.nanmin(vol)) and stats["max"] == float(np.nanmax(vol))
+    assert stats["mean"] == pytest.approx(float(np.nanmean(vol.astype(np.float64))), rel=1e-12)
+
+
+def test_imagej_hyperstack_channels_order_and_voxel_size(tmp_path):
+    vol = np.stack([sparse_volume((9, 24, 30), np.uint16) for _ in range(3)], axis=1)  # Z C Y X
+    src = tmp_path / "hyper.tif"
+    tifffile.imwrite(
+        src, vol, imagej=True, resolution=(1 / 0.25, 1 / 0.25), metadata={"axes": "ZCYX", "spacing": 1.5, "unit": "um"}
+    )
+    out = tmp_path / "hyper.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, np.ascontiguousarray(vol.transpose(1, 0, 2, 3)))
+    ms = multiscale(out)
+    assert ms["datasets"][0]["coordinateTransformations"][0]["scale"] == pytest.approx([1, 1.5, 0.25, 0.25])
+    assert [a.get("unit") for a in ms["axes"]] == [None, "micrometer", "micrometer", "micrometer"]
+
+
+@pytest.mark.parametrize("axes", ["CZYX", "ZCYX"])
+def test_ome_tiff_channel_names_order_and_physical_size(tmp_path, axes):
+    czyx = np.stack([sparse_volume((7, 20, 26), np.uint16) for _ in range(2)])
+    data = czyx if axes == "CZYX" else czyx.transpose(1, 0, 2, 3)
+    src = tmp_path / "image.ome.tif"
+    tifffile.imwrite(
+        src,
+        data,
+        ome=True,
+        photometric="minisblack",
+        metadata={
+            "axes": axes,
+            "PhysicalSizeX": 0.3,
+            "PhysicalSizeY": 0.3,
+            "PhysicalSizeZ": 2.0,
+            "Channel": {"Name": ["DAPI", "GFP"]},
+        },
+    )
+    out = tmp_path / "image.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, czyx)
+    attrs = root_attributes(out)["ome"]
+    assert [c["label"] for c in attrs["omero"]["channels"]] == ["DAPI", "GFP"]
+    assert attrs["multiscales"][0]["datasets"][0]["coordinateTransformations"][0]["scale"] == pytest.approx([1, 2.0, 0.3, 0.3])
+
+
+def test_rgb_pages_become_three_channels(tmp_path):
+    rgb = RNG.integers(0, 255, (5, 16, 18, 3), dtype=np.uint8)
+    src = tmp_path / "rgb.tif"
+    tifffile.imwrite(src, rgb, photometric="rgb")
+    out = tmp_path / "rgb.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, np.ascontiguousarray(rgb.transpose(3, 0, 1, 2)))
+
+
+def test_folder_and_glob_of_slices_in_natural_order(tmp_path):
+    vol = sparse_volume((12, 17, 23), np.uint16)
+    folder = tmp_path / "slices"
+    folder.mkdir()
+    for z in range(vol.shape[0]):
+        tifffile.imwrite(folder / f"slice_z{z}.tif", vol[z])  # z10 sorts after z9 naturally
+    out = tmp_path / "dir.ome.zarr"
+    run_ingest("convert", folder, "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, vol[np.newaxis])
+    out2 = tmp_path / "glob.ome.zarr"
+    run_ingest("convert", str(folder / "slice_z*.tif"), "-o", out2, "--chunk", "8", "--quiet")
+    assert_same_bits(zarr.open_group(str(out2), mode="r")["0"][...], vol[np.newaxis])
+
+
+def test_raw_by_name_convention_and_by_flags(tmp_path):
+    vol = sparse_volume((11, 13, 29), np.uint16)
+    named = tmp_path / "kingsnake_29x13x11_uint16.raw"
+    vol.astype("<u2").tofile(named)
+    out = tmp_path / "named.ome.zarr"
+    run_ingest("convert", named, "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, vol[np.newaxis])
+
+    flagged = tmp_path / "scan.bin"
+    header = b"HEADER!!" * 4
+    flagged.write_bytes(header + vol.astype(">i4").tobytes())
+    out2 = tmp_path / "flagged.ome.zarr"
+    run_ingest(
+        "convert", flagged, "-o", out2, "--dims", "29,13,11", "--dtype", "int32", "--endian", "big",
+        "--header-bytes", len(header), "--chunk", "8", "--quiet",
+    )
+    check_store(out2, vol.astype(np.int32)[np.newaxis])
+
+
+def test_channels_of_different_types_are_promoted_exactly(tmp_path):
+    a = sparse_volume((6, 14, 15), np.uint8)
+    b = sparse_volume((6, 14, 15), np.uint16)
+    tifffile.imwrite(tmp_path / "a.tif", a)
+    tifffile.imwrite(tmp_path / "b.tif", b)
+    out = tmp_path / "mixed.ome.zarr"
+    run_ingest("convert", tmp_path / "a.tif", tmp_path / "b.tif", "-o", out, "--chunk", "8", "--quiet")
+    check_store(out, np.stack([a.astype(np.uint16), b]))
+
+
+def test_ome_zarr_04_and_sharded_05(tmp_path):
+    vol = sparse_volume((20, 33, 40), np.uint16)
+    src = tmp_path / "v.tif"
+    tifffile.imwrite(src, vol)
+    out4 = tmp_path / "v04.ome.zarr"
+    run_ingest("convert", src, "-o", out4, "--chunk", "8", "--ome-zarr-version", "0.4", "--quiet")
+    assert (out4 / ".zgroup").exists() and (out4 / "0" / ".zarray").exists()
+    zarray = json.loads((out4 / "0" / ".zarray").read_text())
+    assert zarray["compressor"] == {"id": "blosc", "cname": "lz4", "clevel": 5, "shuffle": 1, "blocksize": 0}
+    assert zarray["dimension_separator"] == "/"
+    check_store(out4, vol[np.newaxis], version="0.4")
+
+    out5 = tmp_path / "sharded.ome.zarr"
+    run_ingest("convert", src, "-o", out5, "--chunk", "8", "--shard", "16", "--quiet")
+    meta = json.loads((out5 / "0" / "zarr.json").read_text())
+    assert meta["codecs"][0]["name"] == "sharding_indexed"
+    assert meta["codecs"][0]["configuration"]["chunk_shape"] == [1, 8, 8, 8]
+    check_store(out5, vol[np.newaxis])
+
+
+def test_empty_bricks_are_not_written_and_are_counted(tmp_path):
+    vol = np.zeros((16, 32, 32), np.uint16)
+    vol[0:8, 0:8, 0:8] = 7
+    src = tmp_path / "sparse.tif"
+    tifffile.imwrite(src, vol)
+    out = tmp_path / "sparse.ome.zarr"
+    p = run_ingest("convert", src, "-o", out, "--chunk", "8", "--quiet")
+    chunk_files = [f for f in (out / "0" / "c").rglob("*") if f.is_file()]
+    assert len(chunk_files) == 1
+    assert "level 0: shape c,z,y,x = [1, 16, 32, 32], bricks written 1, empty (not written) 31" in p.stdout
+    lvl0 = root_attributes(out)["residency"]["levels"][0]
+    assert (lvl0["bricks_written"], lvl0["bricks_empty"]) == (1, 31)
+    check_store(out, vol[np.newaxis])
+
+
+def test_anisotropic_pyramid_halves_xy_first(tmp_path):
+    vol = sparse_volume((16, 64, 64), np.uint8)
+    src = tmp_path / "aniso.tif"
+    tifffile.imwrite(src, vol)
+    out = tmp_path / "aniso.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "8", "--voxel-size", "4,1,1", "--unit", "micrometer", "--quiet")
+    shapes = [zarr.open_group(str(out), mode="r")[d["path"]].shape for d in multiscale(out)["datasets"]]
+    assert shapes[:4] == [(1, 16, 64, 64), (1, 16, 32, 32), (1, 16, 16, 16), (1, 8, 8, 8)]
+    check_store(out, vol[np.newaxis])
+
+
+def test_index_adds_metadata_to_a_foreign_store(tmp_path):
+    vol = sparse_volume((12, 20, 24), np.uint16)[np.newaxis]
+    store = tmp_path / "foreign.ome.zarr"
+    root = zarr.open_group(str(store), mode="w", zarr_format=3)
+    root.create_array("0", data=vol, chunks=(1, 8, 8, 8), dimension_names=("c", "z", "y", "x"))
+    root.create_array("1", data=vol[:, :, ::2, ::2].copy(), chunks=(1, 8, 8, 8), dimension_names=("c", "z", "y", "x"))
+    datasets = [
+        {"path": str(i), "coordinateTransformations": [{"type": "scale", "scale": [1.0, 1.0, 2.0**i, 2.0**i]}]}
+        for i in range(2)
+    ]
+    root.attrs["ome"] = {
+        "version": "0.5",
+        "multiscales": [{"axes": [{"name": "c", "type": "channel"}] + [{"name": a, "type": "space"} for a in "zyx"], "datasets": datasets}],
+    }
+    chunk_bytes = {p: p.read_bytes() for p in (store / "0").rglob("c/**/*") if p.is_file()}
+    p = run_ingest("index", store)
+    assert "indexed" in p.stdout
+    assert {q: q.read_bytes() for q in chunk_bytes} == chunk_bytes  # data untouched
+    assert_region_metadata(store)
+    open_ome_zarr(zarr.open_group(str(store), mode="r"))
+    assert "region metadata: 2 levels" in run_ingest("inspect", store).stdout
+
+
+def test_inspect_reports_levels_codecs_and_statistics(tmp_path):
+    vol = sparse_volume((9, 20, 20), np.uint16)
+    src = tmp_path / "i.tif"
+    tifffile.imwrite(src, vol)
+    out = tmp_path / "i.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "8", "--voxel-size", "2,0.5,0.5", "--unit", "micrometer", "--quiet")
+    text = run_ingest("inspect", out).stdout
+    assert "OME-Zarr 0.5" in text
+    assert "axes: c, z (micrometer), y (micrometer), x (micrometer)" in text
+    assert "level 0: shape [1, 9, 20, 20] uint16" in text and "blosc(lz4" in text
+    assert f"min {int(vol.min())} max {int(vol.max())}" in text
+    assert "region metadata: " in text
+
+
+# --- bad input and faults -------------------------------------------------------------
+
+
+def expect_failure(args, *needles):
+    p = run_ingest(*args, check=False)
+    assert p.returncode != 0, p.stdout
+    for n in needles:
+        assert str(n) in p.stderr, p.stderr
+    return p
+
+
+def test_truncated_tiff_names_the_file(tmp_path):
+    src = tmp_path / "cut.tif"
+    tifffile.imwrite(src, sparse_volume((8, 64, 64), np.uint16))
+    data = src.read_bytes()
+    src.write_bytes(data[: len(data) // 2])
+    out = tmp_path / "cut.ome.zarr"
+    expect_failure(["convert", src, "-o", out, "--quiet"], src, "truncated or corrupt TIFF")
+    assert not out.exists()
+
+
+def test_raw_size_mismatch(tmp_path):
+    raw = tmp_path / "vol_10x10x10_uint16.raw"
+    raw.write_bytes(b"\0" * 1999)
+    expect_failure(["convert", raw, "-o", tmp_path / "o.ome.zarr"], raw, "1999 bytes", "2000 bytes")
+
+
+def test_channels_of_different_shapes(tmp_path):
+    tifffile.imwrite(tmp_path / "a.tif", np.zeros((4, 8, 8), np.uint8), photometric="minisblack")
+    tifffile.imwrite(tmp_path / "b.tif", np.zeros((4, 8, 9), np.uint8), photometric="minisblack")
+    expect_failure(
+        ["convert", tmp_path / "a.tif", tmp_path / "b.tif", "-o", tmp_path / "o.ome.zarr"],
+        "channels of different shapes", tmp_path / "b.tif",
+    )
+
+
+def test_unsupported_sample_format(tmp_path):
+    src = tmp_path / "f64.tif"
+    tifffile.imwrite(src, np.zeros((3, 8, 8), np.float64), photometric="minisblack")
+    expect_failure(["convert", src, "-o", tmp_path / "o.ome.zarr"], src, "unsupported sample format", "64-bit floating point")
+
+
+def test_unwritable_output(tmp_path):
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8))
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("x")
+    out = blocker / "o.ome.zarr"
+    expect_failure(["convert", src, "-o", out], out, "cannot create output")
+
+
+def test_existing_output_needs_overwrite(tmp_path):
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8))
+    out = tmp_path / "o.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--quiet")
+    before = (out / "zarr.json").read_bytes()
+    expect_failure(["convert", src, "-o", out], out, "already exists", "--overwrite")
+    assert (out / "zarr.json").read_bytes() == before
+    tifffile.imwrite(src, np.full((2, 8, 8), 3, np.uint8))
+    run_ingest("convert", src, "-o", out, "--overwrite", "--quiet")
+    assert zarr.open_group(str(out), mode="r")["0"][0, 0, 0, 0] == 3
+
+
+def tree_bytes(root: pathlib.Path):
+    return {p.relative_to(root): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_killed_run_leaves_no_complete_looking_store_and_rerun_is_identical(tmp_path):
+    vol = RNG.integers(0, 1000, (192, 160, 160), dtype=np.uint16)  # every brick is written
+    src = tmp_path / "big_160x160x192_uint16.raw"
+    vol.astype("<u2").tofile(src)
+    out = tmp_path / "k.ome.zarr"
+    partial = tmp_path / ".k.ome.zarr.partial"
+    args = [str(BIN / "ingest"), "convert", str(src), "-o", str(out), "--chunk", "16", "--threads", "1", "--quiet"]
+    proc = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    deadline = time.time() + 60
+    while time.time() < deadline and not (partial / "0" / "c" / "0" / "2").exists():
+        time.sleep(0.002)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    assert partial.exists(), "the run finished before it could be killed"
+    assert not out.exists(), "a killed run must not leave a store at the output path"
+    assert not (partial / "zarr.json").exists(), "the root metadata is the last write"
+
+    run_ingest("convert", src, "-o", out, "--chunk", "16", "--quiet")
+    assert not partial.exists()
+    clean = tmp_path / "clean.ome.zarr"
+    run_ingest("convert", src, "-o", clean, "--chunk", "16", "--quiet")
+    a, b = tree_bytes(out), tree_bytes(clean)
+    assert a.keys() == b.keys()
+    for k in a:
+        if k.name == "zarr.json" and k.parent == pathlib.Path("."):
+            # The multiscale name is the store's name.
+            assert a[k].replace(b'"k"', b'"clean"') == b[k]
+        else:
+            assert a[k] == b[k], k
