@@ -21,8 +21,8 @@ use zarrs::array::Array;
 use crate::ome::{image_attributes, multiscale, omero};
 use crate::pyramid::{LevelPlan, plan_levels};
 use crate::region_writer::{LevelRegions, write_region_metadata};
-use crate::regions::{CellGrid, ChannelAccumulator, FineHistogram, LevelHistograms};
-use crate::sample_format::{FINE_KEYS, Sample, SampleFormat};
+use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
+use crate::sample_format::{Sample, SampleFormat};
 use crate::source::{RawOptions, SourceInfo, VolumeSource, open_input};
 use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreWriter, directory_bytes};
 use crate::with_sample_type;
@@ -250,6 +250,8 @@ struct Level<T: Sample> {
     sum: Vec<T::Sum>,
     /// Non-NaN level-0 voxel counts matching `sum`.
     count: Vec<u32>,
+    /// The rounded means of the slab being flushed (reused between flushes).
+    values: Vec<T>,
     cells: CellGrid<T>,
     histograms: LevelHistograms,
     written: u64,
@@ -280,14 +282,15 @@ impl SlabSink<'_> {
                     .flat_map(move |cy| (0..nx.div_ceil(ox)).map(move |cx| (c, cy, cx)))
             })
             .collect();
+        let chunk_len = (oz * oy * ox) as usize;
         let counts = tasks
             .into_par_iter()
             .map_init(
-                || (Box::new([0u32; FINE_KEYS]), ChannelAccumulator::default()),
-                |(scratch, _), (c, cy, cx)| -> Result<(u64, u64)> {
+                || (StatsScratch::default(), Vec::<T>::new()),
+                |(scratch, chunk), (c, cy, cx)| -> Result<(u64, u64)> {
                     // Gather the outer chunk, padded with the fill value (0).
-                    let chunk_len = (oz * oy * ox) as usize;
-                    let mut chunk = vec![T::default(); chunk_len];
+                    chunk.clear();
+                    chunk.resize(chunk_len, T::default());
                     let (y0, x0) = (cy * oy, cx * ox);
                     let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
                     let plane = (ny * nx) as usize;
@@ -302,37 +305,35 @@ impl SlabSink<'_> {
                     }
                     let (mut written, mut empty) = (0u64, 0u64);
                     let [bz, by, bx] = self.brick;
-                    let mut brick_values: Vec<T> = Vec::with_capacity((bz * by * bx) as usize);
                     let mut any_data = false;
                     for iz in 0..nz.div_ceil(bz) {
                         for iy in 0..vy.div_ceil(by) {
                             for ix in 0..vx.div_ceil(bx) {
-                                brick_values.clear();
                                 let (zs, ys, xs) = (iz * bz, iy * by, ix * bx);
                                 let (ze, ye, xe) =
                                     ((zs + bz).min(nz), (ys + by).min(vy), (xs + bx).min(vx));
-                                for z in zs..ze {
-                                    for y in ys..ye {
+                                let chunk: &[T] = chunk;
+                                let rows = (zs..ze).flat_map(|z| {
+                                    (ys..ye).map(move |y| {
                                         let row = ((z * oy + y) * ox) as usize;
-                                        brick_values.extend_from_slice(
-                                            &chunk[row + xs as usize..row + xe as usize],
-                                        );
-                                    }
-                                }
-                                let is_empty = brick_values.iter().all(|v| v.is_fill());
-                                if is_empty {
+                                        &chunk[row + xs as usize..row + xe as usize]
+                                    })
+                                });
+                                let stats =
+                                    BrickStats::of_rows(rows, scratch, self.stats.is_some());
+                                if stats.all_fill {
                                     empty += 1;
                                 } else {
                                     written += 1;
                                     any_data = true;
                                 }
-                                let fine = FineHistogram::of(brick_values.iter().copied(), scratch);
                                 let b = [(z0 + zs) / bz, (y0 + ys) / by, (x0 + xs) / bx];
-                                if let Some(stats) = self.stats {
-                                    stats[c].lock().expect("stats").add(&brick_values, &fine);
+                                if let Some(all) = self.stats {
+                                    all[c].lock().expect("stats").add(&stats);
                                 }
                                 let index = self.histograms.index(c, b);
-                                self.histograms.fine.lock().expect("histograms")[index] = fine;
+                                self.histograms.fine.lock().expect("histograms")[index] =
+                                    stats.fine;
                             }
                         }
                     }
@@ -355,16 +356,79 @@ impl SlabSink<'_> {
     }
 }
 
-/// Adds a slab of level `l` (values or sums, through `get`) into the accumulator of the next
-/// level. `src_z0..src_z0 + nz` is the slab's z range in level-`l` coordinates.
-#[allow(clippy::too_many_arguments)]
+/// A slab of one level, as the next level's accumulator reads it: rows of `x` values.
+trait SlabRows<T: Sample>: Sync {
+    /// Adds the source row starting at `base` (length `sx`) into `sum`/`count`, summing
+    /// `step_x` (1 or 2) neighbours per destination voxel.
+    fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]);
+}
+
+/// Level-0 voxel values, `[c][nz][y][x]`.
+struct Values<'a, T>(&'a [T]);
+
+impl<T: Sample> SlabRows<T> for Values<'_, T> {
+    fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
+        let row = &self.0[base..base + sx];
+        if step_x == 1 {
+            for ((s, n), &v) in sum.iter_mut().zip(count.iter_mut()).zip(row) {
+                *s += v.to_sum();
+                *n += v.counts() as u32;
+            }
+        } else {
+            let pairs = row.chunks_exact(2);
+            let tail = pairs.remainder();
+            for ((s, n), p) in sum.iter_mut().zip(count.iter_mut()).zip(pairs) {
+                *s += p[0].to_sum();
+                *s += p[1].to_sum();
+                *n += p[0].counts() as u32 + p[1].counts() as u32;
+            }
+            if let [v] = tail {
+                let last = sx / 2;
+                sum[last] += v.to_sum();
+                count[last] += v.counts() as u32;
+            }
+        }
+    }
+}
+
+/// Exact sums and counts of a level ≥ 1 accumulator, laid out `[c][oz][y][x]` while the
+/// slab holds `nz ≤ oz` planes.
+struct Sums<'a, T: Sample> {
+    sum: &'a [T::Sum],
+    count: &'a [u32],
+    nz_plane: usize,
+    oz_plane: usize,
+}
+
+impl<T: Sample> SlabRows<T> for Sums<'_, T> {
+    fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
+        let j = base / self.nz_plane * self.oz_plane + base % self.nz_plane;
+        let (src_sum, src_count) = (&self.sum[j..j + sx], &self.count[j..j + sx]);
+        if step_x == 1 {
+            for (d, &v) in sum.iter_mut().zip(src_sum) {
+                *d += v;
+            }
+            for (d, &v) in count.iter_mut().zip(src_count) {
+                *d += v;
+            }
+        } else {
+            for (x, (&v, &n)) in src_sum.iter().zip(src_count).enumerate() {
+                sum[x / 2] += v;
+                count[x / 2] += n;
+            }
+        }
+    }
+}
+
+/// Adds a slab of one level into the accumulator of the next level.
+/// `src_z0..src_z0 + nz` is the slab's z range in the source level's coordinates.
 fn accumulate<T: Sample>(
     next: &mut Level<T>,
     channels: usize,
     src_shape: [u64; 3],
     src_z0: u64,
     nz: u64,
-    get: impl Fn(usize) -> (T::Sum, u32) + Sync,
+    src: &impl SlabRows<T>,
 ) {
     let step = next.plan.step;
     let [_, ny, nx] = next.plan.shape;
@@ -397,24 +461,7 @@ fn accumulate<T: Sample>(
                     }
                     let base =
                         (c as u64 * nz + (szz - src_z0)) as usize * src_plane + (syy * sx) as usize;
-                    if step[2] == 1 {
-                        for x in 0..nx as usize {
-                            let (s, n) = get(base + x);
-                            sum[x] += s;
-                            count[x] += n;
-                        }
-                    } else {
-                        for x in 0..nx as usize {
-                            for dx in 0..2 {
-                                let sxx = 2 * x + dx;
-                                if (sxx as u64) < sx {
-                                    let (s, n) = get(base + sxx);
-                                    sum[x] += s;
-                                    count[x] += n;
-                                }
-                            }
-                        }
-                    }
+                    src.add_row(base, sx as usize, step[2], sum, count);
                 }
             }
         });
@@ -473,6 +520,7 @@ fn convert_typed<T: Sample>(
             acc_z0: 0,
             sum: vec![T::Sum::default(); acc_len],
             count: vec![0; acc_len],
+            values: Vec::new(),
             cells: CellGrid::for_shape(channels, plan.shape),
             histograms: LevelHistograms::new(
                 channels,
@@ -502,14 +550,17 @@ fn convert_typed<T: Sample>(
     );
 
     // Reader thread: decodes slab k+1 while slab k is processed.
-    let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>)>>(1);
+    let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>)>>(0);
+    // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
+    let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
     let oz = outer[0];
     let mut sources = std::mem::take(&mut inputs.sources);
     let reader = std::thread::spawn(move || {
         let mut z0 = 0;
         while z0 < depth {
             let nz = oz.min(depth - z0);
-            let mut slab = vec![T::default(); channels * nz as usize * plane];
+            let mut slab = recycle_rx.try_recv().unwrap_or_default();
+            slab.resize(channels * nz as usize * plane, T::default());
             let mut rest: &mut [T] = &mut slab;
             let mut parts = Vec::new();
             for s in sources.iter_mut() {
@@ -521,9 +572,8 @@ fn convert_typed<T: Sample>(
             let result: Result<()> = parts.into_par_iter().try_for_each(|(s, part)| {
                 for c in 0..s.info().channels {
                     for dz in 0..nz {
-                        let p = s.read_plane(c, z0 + dz)?;
                         let start = (c * nz as usize + dz as usize) * plane;
-                        p.copy_into(&mut part[start..start + plane]);
+                        s.read_plane(c, z0 + dz, T::plane_out(&mut part[start..start + plane]))?;
                     }
                 }
                 Ok(())
@@ -542,6 +592,7 @@ fn convert_typed<T: Sample>(
             process_level0(&mut levels, &stats, channels, brick, &slab, z0, nz)
                 .with_context(|| format!("{shown}: writing level 0"))?;
             bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
+            let _ = recycle_tx.send(slab);
         }
         Ok(())
     })();
@@ -647,10 +698,7 @@ fn process_level0<T: Sample>(
     levels[0].empty += empty;
     levels[0].cells.add_slab(slab, z0, nz, shape);
     if levels.len() > 1 {
-        accumulate(&mut levels[1], channels, shape, z0, nz, |i| {
-            let v = slab[i];
-            (v.to_sum(), v.counts() as u32)
-        });
+        accumulate(&mut levels[1], channels, shape, z0, nz, &Values(slab));
         flush_if_full(levels, 1, channels, brick, z0 + nz)?;
     }
     Ok(())
@@ -677,18 +725,24 @@ fn flush_if_full<T: Sample>(
     let z0 = level.acc_z0;
     let plane = (ny * nx) as usize;
     // Means of the slab: rounded once, from exact sums.
-    let values: Vec<T> = (0..channels)
-        .into_par_iter()
-        .flat_map_iter(|c| {
-            let start = c * oz as usize * plane;
-            let sum = &level.sum[start..start + nz as usize * plane];
-            let count = &level.count[start..start + nz as usize * plane];
-            sum.iter()
-                .zip(count)
-                .map(|(&s, &n)| T::from_mean(s, n))
-                .collect::<Vec<_>>()
-        })
-        .collect();
+    let slab_len = nz as usize * plane;
+    let mut values = std::mem::take(&mut levels[l].values);
+    values.resize(channels * slab_len, T::default());
+    {
+        let level = &levels[l];
+        values
+            .par_chunks_mut(slab_len)
+            .enumerate()
+            .for_each(|(c, out)| {
+                let start = c * oz as usize * plane;
+                let sum = &level.sum[start..start + slab_len];
+                let count = &level.count[start..start + slab_len];
+                for ((o, &s), &n) in out.iter_mut().zip(sum).zip(count) {
+                    *o = T::from_mean(s, n);
+                }
+            });
+    }
+    let level = &levels[l];
     let (written, empty) = SlabSink {
         channels,
         shape: level.plan.shape,
@@ -705,19 +759,18 @@ fn flush_if_full<T: Sample>(
         level.written += written;
         level.empty += empty;
         level.cells.add_slab(&values, z0, nz, shape);
+        level.values = values;
     }
     if l + 1 < levels.len() {
         let (lower, upper) = levels.split_at_mut(l + 1);
         let this = &lower[l];
-        // Re-pack the sums of this slab densely as [c][nz][y][x] for the next level.
-        let (sum, count) = (&this.sum, &this.count);
-        let oz_plane = oz as usize * plane;
-        let nz_plane = nz as usize * plane;
-        accumulate(&mut upper[0], channels, shape, z0, nz, |i| {
-            let (c, r) = (i / nz_plane, i % nz_plane);
-            let j = c * oz_plane + r;
-            (sum[j], count[j])
-        });
+        let sums = Sums::<T> {
+            sum: &this.sum,
+            count: &this.count,
+            nz_plane: nz as usize * plane,
+            oz_plane: oz as usize * plane,
+        };
+        accumulate(&mut upper[0], channels, shape, z0, nz, &sums);
         flush_if_full(levels, l + 1, channels, brick, z0 + nz)?;
     }
     let level = &mut levels[l];

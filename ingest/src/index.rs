@@ -12,7 +12,6 @@ use anyhow::{Context, Result, bail};
 use residency_schemas::REGIONS_KEY;
 use serde_json::Value;
 use zarrs::array::{Array, ArraySubset};
-use zarrs::filesystem::FilesystemStore;
 
 use crate::convert::SlabSink;
 use crate::inspect::read_image_attributes;
@@ -89,8 +88,7 @@ pub fn index(path: &Path) -> Result<String> {
     if n < 3 || axes[n - 3..] != ["z", "y", "x"] {
         bail!("{shown}: axes {axes:?} do not end in z, y, x");
     }
-    let store =
-        Arc::new(FilesystemStore::new(path).with_context(|| format!("{shown}: cannot open"))?);
+    let store = Arc::new(crate::store::StagingStore::new(path)?);
     let mut levels = Vec::new();
     let mut format = None;
     let mut brick = None;

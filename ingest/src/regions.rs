@@ -199,27 +199,152 @@ pub struct FineHistogram {
 }
 
 impl FineHistogram {
-    /// Counts the keys of `values`, skipping NaN.
-    pub fn of<T: Sample>(values: impl Iterator<Item = T>, scratch: &mut [u32; FINE_KEYS]) -> Self {
-        scratch.fill(0);
-        for v in values {
-            if v.counts() {
-                scratch[v.key()] += 1;
-            }
-        }
-        let Some(first) = scratch.iter().position(|&c| c > 0) else {
-            return Self::default();
-        };
-        let last = scratch.iter().rposition(|&c| c > 0).expect("non-empty");
-        Self {
-            first_key: first as u32,
-            counts: scratch[first..=last].to_vec(),
-        }
-    }
-
     /// Total count.
     pub fn total(&self) -> u64 {
         self.counts.iter().map(|&c| c as u64).sum()
+    }
+
+    fn from_keys(keys: &mut [u32; FINE_KEYS]) -> Self {
+        let Some(first) = keys.iter().position(|&c| c > 0) else {
+            return Self::default();
+        };
+        let last = keys.iter().rposition(|&c| c > 0).expect("non-empty");
+        let out = Self {
+            first_key: first as u32,
+            counts: keys[first..=last].to_vec(),
+        };
+        keys[first..=last].fill(0);
+        out
+    }
+}
+
+/// Reusable per-thread counting tables for [`BrickStats::of_rows`].
+pub struct StatsScratch {
+    keys: Box<[u32; FINE_KEYS]>,
+    exact: Vec<u32>,
+}
+
+impl Default for StatsScratch {
+    fn default() -> Self {
+        Self {
+            keys: Box::new([0; FINE_KEYS]),
+            exact: vec![0; 1 << 16],
+        }
+    }
+}
+
+/// Everything ingest records about one brick of one channel, gathered in one pass.
+#[derive(Clone, Debug, Default)]
+pub struct BrickStats {
+    /// Fine-key counts (NaN excluded).
+    pub fine: FineHistogram,
+    /// Exact value counts `(first index, counts)` for formats of at most 16 bits.
+    pub exact: Option<(usize, Vec<u32>)>,
+    /// Sum of non-NaN values.
+    pub sum: f64,
+    /// Non-NaN voxels.
+    pub count: u64,
+    /// NaN voxels.
+    pub nan: u64,
+    /// Smallest non-NaN value.
+    pub min: f64,
+    /// Largest non-NaN value.
+    pub max: f64,
+    /// Whether every voxel is bit-for-bit the fill value.
+    pub all_fill: bool,
+}
+
+impl BrickStats {
+    /// Statistics of the voxels in `rows` (any number of row slices).
+    pub fn of_rows<'a, T: Sample>(
+        rows: impl Iterator<Item = &'a [T]>,
+        scratch: &mut StatsScratch,
+        keep_exact: bool,
+    ) -> Self {
+        let (mut mn, mut mx) = (T::HIGHEST, T::LOWEST);
+        if T::HIGHEST.exact_index().is_some() {
+            // Count exact values only; everything else follows from the counts.
+            let exact = &mut scratch.exact;
+            let mut total = 0u64;
+            for row in rows {
+                total += row.len() as u64;
+                for &v in row {
+                    exact[v.exact_index().unwrap_or(0)] += 1;
+                    if v < mn {
+                        mn = v;
+                    }
+                    if v > mx {
+                        mx = v;
+                    }
+                }
+            }
+            if total == 0 {
+                return Self {
+                    all_fill: true,
+                    ..Self::default()
+                };
+            }
+            let (lo, hi) = (mn.exact_index().unwrap_or(0), mx.exact_index().unwrap_or(0));
+            let mut sum = 0f64;
+            for (i, &n) in exact.iter().enumerate().take(hi + 1).skip(lo) {
+                if n > 0 {
+                    scratch.keys[T::from_f64(T::exact_value(i)).key()] += n;
+                    sum += T::exact_value(i) * n as f64;
+                }
+            }
+            let zero = T::default().exact_index().unwrap_or(0);
+            let all_fill = exact[zero] as u64 == total;
+            let exact_counts = keep_exact.then(|| (lo, exact[lo..=hi].to_vec()));
+            exact[lo..=hi].fill(0);
+            Self {
+                fine: FineHistogram::from_keys(&mut scratch.keys),
+                exact: exact_counts,
+                sum,
+                count: total,
+                nan: 0,
+                min: mn.to_f64(),
+                max: mx.to_f64(),
+                all_fill,
+            }
+        } else {
+            let (mut sum, mut count, mut nan, mut fill) = (T::Sum::default(), 0u64, 0u64, 0u64);
+            for row in rows {
+                for &v in row {
+                    fill += v.is_fill() as u64;
+                    if v.counts() {
+                        scratch.keys[v.key()] += 1;
+                        sum += v.to_sum();
+                        count += 1;
+                        if v < mn {
+                            mn = v;
+                        }
+                        if v > mx {
+                            mx = v;
+                        }
+                    } else {
+                        nan += 1;
+                    }
+                }
+            }
+            Self {
+                fine: FineHistogram::from_keys(&mut scratch.keys),
+                exact: None,
+                sum: T::sum_to_f64(sum),
+                count,
+                nan,
+                min: if count > 0 {
+                    mn.to_f64()
+                } else {
+                    f64::INFINITY
+                },
+                max: if count > 0 {
+                    mx.to_f64()
+                } else {
+                    f64::NEG_INFINITY
+                },
+                all_fill: fill == count + nan,
+            }
+        }
     }
 }
 
@@ -298,37 +423,21 @@ impl Default for ChannelAccumulator {
 }
 
 impl ChannelAccumulator {
-    /// Adds a brick's values and its fine histogram.
-    pub fn add<T: Sample>(&mut self, values: &[T], fine: &FineHistogram) {
-        let (mut sum, mut count) = (T::Sum::default(), 0u64);
-        let (mut mn, mut mx) = (T::HIGHEST, T::LOWEST);
-        if T::HIGHEST.exact_index().is_some() {
+    /// Adds a brick's statistics.
+    pub fn add(&mut self, brick: &BrickStats) {
+        self.sum += brick.sum;
+        self.count += brick.count;
+        self.nan += brick.nan;
+        self.min = self.min.min(brick.min);
+        self.max = self.max.max(brick.max);
+        for (i, &n) in brick.fine.counts.iter().enumerate() {
+            self.keys[brick.fine.first_key as usize + i] += n as u64;
+        }
+        if let Some((first, counts)) = &brick.exact {
             self.exact.resize(1 << 16, 0);
-            for &v in values {
-                self.exact[v.exact_index().unwrap_or(0)] += 1;
+            for (i, &n) in counts.iter().enumerate() {
+                self.exact[first + i] += n as u64;
             }
-        }
-        for &v in values {
-            if v.counts() {
-                sum += v.to_sum();
-                count += 1;
-                if v < mn {
-                    mn = v;
-                }
-                if v > mx {
-                    mx = v;
-                }
-            }
-        }
-        self.sum += T::sum_to_f64(sum);
-        self.count += count;
-        self.nan += values.len() as u64 - count;
-        if count > 0 {
-            self.min = self.min.min(mn.to_f64());
-            self.max = self.max.max(mx.to_f64());
-        }
-        for (i, &n) in fine.counts.iter().enumerate() {
-            self.keys[fine.first_key as usize + i] += n as u64;
         }
     }
 
@@ -478,14 +587,31 @@ mod tests {
     #[test]
     fn binning_is_exact_and_edges_bound_values() {
         let vals: Vec<u16> = vec![100, 101, 4000, 65535, 37];
-        let mut scratch = [0u32; FINE_KEYS];
-        let fine = FineHistogram::of(vals.iter().copied(), &mut scratch);
+        let mut scratch = StatsScratch::default();
+        let brick = BrickStats::of_rows([vals.as_slice()].into_iter(), &mut scratch, true);
+        assert_eq!(
+            (brick.min, brick.max, brick.count, brick.sum),
+            (37.0, 65535.0, 5, 69773.0)
+        );
+        assert!(!brick.all_fill);
+        let fine = brick.fine.clone();
         let mut acc = ChannelAccumulator::default();
-        acc.add(&vals, &fine);
+        acc.add(&brick);
+        assert_eq!(acc.percentiles::<u16>(&[50.0])[0].value, 101.0);
         let b = acc.binning::<u16>();
         let edges = b.edges::<u16>();
         let mut bins = vec![0u32; HISTOGRAM_BINS];
         b.bin_into(&fine, &mut bins);
+        let floats = [1.5f32, f32::NAN, -2.0, 0.0];
+        let f = BrickStats::of_rows([&floats[..]].into_iter(), &mut scratch, true);
+        assert_eq!(
+            (f.count, f.nan, f.min, f.max, f.sum),
+            (3, 1, -2.0, 1.5, -0.5)
+        );
+        assert_eq!(f.fine.total(), 3);
+        assert!(!f.all_fill);
+        let zeros = [0.0f32; 4];
+        assert!(BrickStats::of_rows([&zeros[..]].into_iter(), &mut scratch, false).all_fill);
         assert_eq!(bins.iter().sum::<u32>(), 5);
         for v in vals {
             let bin = (v.key() - b.first_key) / b.keys_per_bin;

@@ -153,11 +153,22 @@ pub trait Sample:
     fn exact_index(self) -> Option<usize>;
     /// The value of an exact-histogram index (inverse of [`Sample::exact_index`]).
     fn exact_value(index: usize) -> f64;
+    /// Wraps a slice of this type as a source's plane destination.
+    fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_>;
 }
 
 fn round_mean(sum: i64, count: u32) -> i64 {
     if count == 0 {
         return 0;
+    }
+    const SAFE: i64 = 1 << 61;
+    if sum.abs() < SAFE {
+        let c = count as i64;
+        return if sum >= 0 {
+            (2 * sum + c) / (2 * c)
+        } else {
+            -((-2 * sum + c) / (2 * c))
+        };
     }
     let (s, c) = (sum as i128, count as i128);
     let r = if s >= 0 {
@@ -171,6 +182,9 @@ fn round_mean(sum: i64, count: u32) -> i64 {
 macro_rules! int_sample {
     ($t:ty, $fmt:ident, $key:expr, $edge:expr, $exact:expr, $exact_value:expr) => {
         impl Sample for $t {
+            fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_> {
+                crate::source::PlaneOut::$fmt(out)
+            }
             #[inline]
             fn exact_index(self) -> Option<usize> {
                 let f: fn($t) -> Option<usize> = $exact;
@@ -285,6 +299,9 @@ fn f32_order_key(v: f32) -> u32 {
 
 impl Sample for f32 {
     const FORMAT: SampleFormat = SampleFormat::F32;
+    fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_> {
+        crate::source::PlaneOut::F32(out)
+    }
     const LOWEST: Self = f32::NEG_INFINITY;
     const HIGHEST: Self = f32::INFINITY;
     type Sum = f64;

@@ -9,6 +9,11 @@ use anyhow::{Context, Result, bail};
 use serde_json::{Value, json};
 use zarrs::array::{Array, ArrayMetadata};
 use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::byte_range::ByteRangeIterator;
+use zarrs::storage::{
+    Bytes, MaybeBytesIterator, OffsetBytesIterator, ReadableStorageTraits, StorageError, StoreKey,
+    StorePrefix, WritableStorageTraits,
+};
 
 use crate::sample_format::SampleFormat;
 
@@ -50,7 +55,90 @@ pub struct ArrayLayout {
 }
 
 /// The zarrs store type used throughout.
-pub type Store = FilesystemStore;
+pub type Store = StagingStore;
+
+/// A filesystem store for a store under construction. Whole values are written with a plain
+/// write, without the per-file `fsync` of zarrs' [`FilesystemStore`]: the store is private
+/// until [`StoreWriter::commit`] syncs the file system once and renames it into place.
+/// Everything else is delegated to [`FilesystemStore`].
+#[derive(Debug)]
+pub struct StagingStore {
+    root: PathBuf,
+    inner: FilesystemStore,
+}
+
+impl StagingStore {
+    /// A staging store rooted at `root`.
+    pub fn new(root: &Path) -> Result<Self> {
+        Ok(Self {
+            root: root.to_path_buf(),
+            inner: FilesystemStore::new(root)
+                .with_context(|| format!("{}: cannot open as a Zarr store", root.display()))?,
+        })
+    }
+}
+
+impl ReadableStorageTraits for StagingStore {
+    fn get_partial_many<'a>(
+        &'a self,
+        key: &StoreKey,
+        byte_ranges: ByteRangeIterator<'a>,
+    ) -> Result<MaybeBytesIterator<'a>, StorageError> {
+        self.inner.get_partial_many(key, byte_ranges)
+    }
+
+    fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        self.inner.size_key(key)
+    }
+
+    fn supports_get_partial(&self) -> bool {
+        self.inner.supports_get_partial()
+    }
+}
+
+impl WritableStorageTraits for StagingStore {
+    fn set(&self, key: &StoreKey, value: Bytes) -> Result<(), StorageError> {
+        let path = self.root.join(key.as_str());
+        let io = |e: std::io::Error| StorageError::from(Arc::new(e));
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(io)?;
+        }
+        std::fs::write(&path, &value).map_err(io)
+    }
+
+    fn set_partial_many(
+        &self,
+        key: &StoreKey,
+        offset_values: OffsetBytesIterator<'_>,
+    ) -> Result<(), StorageError> {
+        self.inner.set_partial_many(key, offset_values)
+    }
+
+    fn erase(&self, key: &StoreKey) -> Result<(), StorageError> {
+        self.inner.erase(key)
+    }
+
+    fn erase_prefix(&self, prefix: &StorePrefix) -> Result<(), StorageError> {
+        self.inner.erase_prefix(prefix)
+    }
+
+    fn supports_set_partial(&self) -> bool {
+        self.inner.supports_set_partial()
+    }
+}
+
+/// Flushes every file system holding `path` to disk (`syncfs`).
+fn sync_file_system(path: &Path) -> Result<()> {
+    use std::os::fd::AsRawFd;
+    let dir = std::fs::File::open(path)
+        .with_context(|| format!("{}: cannot open to sync", path.display()))?;
+    // SAFETY: `dir` is an open file descriptor for the duration of the call.
+    if unsafe { libc::syncfs(dir.as_raw_fd()) } != 0 {
+        return Err(std::io::Error::last_os_error())
+            .with_context(|| format!("{}: cannot sync to disk", path.display()));
+    }
+    Ok(())
+}
 
 /// Builds the Zarr metadata document for an array.
 pub fn array_metadata(version: OmeZarrVersion, layout: &ArrayLayout) -> Result<Value> {
@@ -155,9 +243,7 @@ impl StoreWriter {
                 partial.display()
             )
         })?;
-        let store = Arc::new(FilesystemStore::new(&partial).with_context(|| {
-            format!("{shown}: cannot open {} as a Zarr store", partial.display())
-        })?);
+        let store = Arc::new(StagingStore::new(&partial)?);
         Ok(Self {
             output: output.to_path_buf(),
             partial,
@@ -169,10 +255,7 @@ impl StoreWriter {
     /// Writes into an existing store in place (used by `ingest index`, which only adds new
     /// arrays and then replaces the root attributes atomically); never committed.
     pub fn in_place(path: &Path, version: OmeZarrVersion) -> Result<Self> {
-        let store = Arc::new(
-            FilesystemStore::new(path)
-                .with_context(|| format!("{}: cannot open as a Zarr store", path.display()))?,
-        );
+        let store = Arc::new(StagingStore::new(path)?);
         Ok(Self {
             output: path.to_path_buf(),
             partial: path.to_path_buf(),
@@ -242,6 +325,7 @@ impl StoreWriter {
     /// Moves the finished store to its final path, replacing any previous output.
     pub fn commit(self) -> Result<PathBuf> {
         let shown = self.output.display();
+        sync_file_system(&self.partial)?;
         if self.output.exists() {
             let old = self.output.with_file_name(format!(
                 ".{}.old",

@@ -8,7 +8,6 @@ mod slices;
 mod tiff;
 mod tiff_metadata;
 
-use std::any::Any;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -18,6 +17,7 @@ pub use self::slices::SliceFolderSource;
 pub use self::tiff::TiffSource;
 
 use crate::sample_format::{Sample, SampleFormat};
+use crate::with_sample_type;
 
 /// What a source holds, known before any plane is read.
 #[derive(Clone, Debug, PartialEq)]
@@ -38,62 +38,86 @@ pub struct SourceInfo {
     pub channel_names: Vec<String>,
 }
 
-/// One decoded z-plane of one channel, `y, x` in C order.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Plane {
-    /// 8-bit unsigned samples.
-    U8(Vec<u8>),
-    /// 16-bit unsigned samples.
-    U16(Vec<u16>),
-    /// 16-bit signed samples.
-    I16(Vec<i16>),
-    /// 32-bit unsigned samples.
-    U32(Vec<u32>),
-    /// 32-bit signed samples.
-    I32(Vec<i32>),
-    /// 32-bit float samples.
-    F32(Vec<f32>),
+/// Where a source writes one z-plane of one channel (`y, x` in C order): a slice of the
+/// converter's sample type, which the source fills converting exactly from its own format.
+pub enum PlaneOut<'a> {
+    /// 8-bit unsigned destination.
+    U8(&'a mut [u8]),
+    /// 16-bit unsigned destination.
+    U16(&'a mut [u16]),
+    /// 16-bit signed destination.
+    I16(&'a mut [i16]),
+    /// 32-bit unsigned destination.
+    U32(&'a mut [u32]),
+    /// 32-bit signed destination.
+    I32(&'a mut [i32]),
+    /// 32-bit float destination.
+    F32(&'a mut [f32]),
 }
 
-impl Plane {
-    /// Number of samples.
+impl PlaneOut<'_> {
+    /// Number of samples to write.
     pub fn len(&self) -> usize {
         match self {
-            Plane::U8(v) => v.len(),
-            Plane::U16(v) => v.len(),
-            Plane::I16(v) => v.len(),
-            Plane::U32(v) => v.len(),
-            Plane::I32(v) => v.len(),
-            Plane::F32(v) => v.len(),
+            PlaneOut::U8(v) => v.len(),
+            PlaneOut::U16(v) => v.len(),
+            PlaneOut::I16(v) => v.len(),
+            PlaneOut::U32(v) => v.len(),
+            PlaneOut::I32(v) => v.len(),
+            PlaneOut::F32(v) => v.len(),
         }
     }
 
-    /// Whether the plane has no samples.
+    /// Whether there is nothing to write.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
 
-    /// Copies the plane into `out`, converting exactly to `T` when the formats differ
-    /// (the converter only asks for promotions that [`SampleFormat::promote`] allows).
-    pub fn copy_into<T: Sample>(&self, out: &mut [T]) {
-        assert_eq!(out.len(), self.len(), "plane size");
-        #[allow(clippy::ptr_arg)]
-        fn copy<S: Copy + Into<f64> + 'static, T: Sample>(src: &Vec<S>, out: &mut [T]) {
-            if let Some(same) = (src as &dyn Any).downcast_ref::<Vec<T>>() {
-                out.copy_from_slice(same);
-                return;
-            }
-            for (o, s) in out.iter_mut().zip(src) {
-                *o = T::from_f64((*s).into());
+    /// Fills the destination from packed samples of `format` in `bytes`: sample `sample` of
+    /// every pixel of `samples` interleaved samples. Values are converted exactly (the
+    /// converter only asks for promotions that [`SampleFormat::promote`] allows).
+    pub fn fill_from_bytes(
+        &mut self,
+        bytes: &[u8],
+        format: SampleFormat,
+        big_endian: bool,
+        samples: usize,
+        sample: usize,
+    ) {
+        fn fill<S: Sample, T: Sample>(
+            bytes: &[u8],
+            big_endian: bool,
+            samples: usize,
+            sample: usize,
+            out: &mut [T],
+        ) {
+            let w = S::FORMAT.bytes();
+            let stride = w * samples;
+            let pixels = bytes.chunks_exact(stride);
+            if S::FORMAT == T::FORMAT {
+                // Same format: decode the bytes as the destination type, bit for bit.
+                for (o, px) in out.iter_mut().zip(pixels) {
+                    *o = T::from_bytes(&px[sample * w..(sample + 1) * w], big_endian);
+                }
+            } else {
+                for (o, px) in out.iter_mut().zip(pixels) {
+                    let s = S::from_bytes(&px[sample * w..(sample + 1) * w], big_endian);
+                    *o = T::from_f64(s.to_f64());
+                }
             }
         }
+        macro_rules! dispatch {
+            ($out:expr) => {
+                with_sample_type!(format, S => fill::<S, _>(bytes, big_endian, samples, sample, $out))
+            };
+        }
         match self {
-            Plane::U8(v) => copy(v, out),
-            Plane::U16(v) => copy(v, out),
-            Plane::I16(v) => copy(v, out),
-            Plane::U32(v) => copy(v, out),
-            Plane::I32(v) => copy(v, out),
-            Plane::F32(v) => copy(v, out),
+            PlaneOut::U8(v) => dispatch!(v),
+            PlaneOut::U16(v) => dispatch!(v),
+            PlaneOut::I16(v) => dispatch!(v),
+            PlaneOut::U32(v) => dispatch!(v),
+            PlaneOut::I32(v) => dispatch!(v),
+            PlaneOut::F32(v) => dispatch!(v),
         }
     }
 }
@@ -102,8 +126,8 @@ impl Plane {
 pub trait VolumeSource: Send {
     /// Shape, format and metadata of the source.
     fn info(&self) -> &SourceInfo;
-    /// Reads the plane at depth `z` of channel `channel`.
-    fn read_plane(&mut self, channel: usize, z: u64) -> Result<Plane>;
+    /// Reads the plane at depth `z` of channel `channel` into `out`.
+    fn read_plane(&mut self, channel: usize, z: u64, out: PlaneOut<'_>) -> Result<()>;
 }
 
 /// How to interpret an `INPUT` argument of `ingest convert`.

@@ -6,8 +6,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 
-use super::{Plane, SourceInfo, VolumeSource};
-use crate::sample_format::{Sample, SampleFormat};
+use super::{PlaneOut, SourceInfo, VolumeSource};
+use crate::sample_format::SampleFormat;
 
 /// Layout options for raw inputs (`--dims`, `--dtype`, `--endian`, `--header-bytes`).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -96,14 +96,6 @@ impl RawSource {
             buffer: Vec::new(),
         })
     }
-
-    fn decode<T: Sample>(&self) -> Vec<T> {
-        let w = T::FORMAT.bytes();
-        self.buffer
-            .chunks_exact(w)
-            .map(|b| T::from_bytes(b, self.big_endian))
-            .collect()
-    }
 }
 
 impl VolumeSource for RawSource {
@@ -111,7 +103,7 @@ impl VolumeSource for RawSource {
         &self.info
     }
 
-    fn read_plane(&mut self, _channel: usize, z: u64) -> Result<Plane> {
+    fn read_plane(&mut self, _channel: usize, z: u64, mut out: PlaneOut<'_>) -> Result<()> {
         let [_, y, x] = self.info.shape;
         let plane_bytes = y * x * self.info.format.bytes() as u64;
         self.buffer.resize(plane_bytes as usize, 0);
@@ -120,14 +112,8 @@ impl VolumeSource for RawSource {
             .seek(SeekFrom::Start(self.header_bytes + z * plane_bytes))
             .and_then(|_| self.file.read_exact(&mut self.buffer))
             .with_context(|| format!("{shown}: cannot read plane z={z}"))?;
-        Ok(match self.info.format {
-            SampleFormat::U8 => Plane::U8(std::mem::take(&mut self.buffer)),
-            SampleFormat::U16 => Plane::U16(self.decode()),
-            SampleFormat::I16 => Plane::I16(self.decode()),
-            SampleFormat::U32 => Plane::U32(self.decode()),
-            SampleFormat::I32 => Plane::I32(self.decode()),
-            SampleFormat::F32 => Plane::F32(self.decode()),
-        })
+        out.fill_from_bytes(&self.buffer, self.info.format, self.big_endian, 1, 0);
+        Ok(())
     }
 }
 

@@ -3,17 +3,18 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use tiff::decoder::DecodingResult;
 
-use super::tiff::{decoded_to_plane, open_decoder, page_format};
-use super::{Plane, SourceInfo, VolumeSource};
+use super::tiff::{NATIVE_BIG_ENDIAN, decode_page, open_decoder, page_format};
+use super::{PlaneOut, SourceInfo, VolumeSource};
 
 /// A folder or glob of single-slice TIFF files.
 pub struct SliceFolderSource {
     info: SourceInfo,
     files: Vec<PathBuf>,
     samples_per_pixel: usize,
-    cached: Option<(u64, DecodingResult)>,
+    /// Slice decoded in `page`.
+    cached: Option<u64>,
+    page: Vec<u8>,
 }
 
 fn is_tiff(path: &Path) -> bool {
@@ -66,6 +67,7 @@ impl SliceFolderSource {
             files,
             samples_per_pixel,
             cached: None,
+            page: Vec::new(),
         })
     }
 
@@ -80,9 +82,10 @@ impl VolumeSource for SliceFolderSource {
         &self.info
     }
 
-    fn read_plane(&mut self, channel: usize, z: u64) -> Result<Plane> {
+    fn read_plane(&mut self, channel: usize, z: u64, mut out: PlaneOut<'_>) -> Result<()> {
         let file = &self.files[z as usize];
-        if self.cached.as_ref().map(|c| c.0) != Some(z) {
+        if self.cached != Some(z) {
+            self.cached = None;
             let mut decoder = open_decoder(file)?;
             let (w, h) = decoder.dimensions()?;
             let [_, ey, ex] = self.info.shape;
@@ -103,15 +106,21 @@ impl VolumeSource for SliceFolderSource {
                     self.info.format
                 );
             }
-            let data = decoder.read_image().with_context(|| {
+            decode_page(&mut decoder, format, spp, &mut self.page).with_context(|| {
                 format!(
                     "{}: cannot decode (truncated or corrupt TIFF)",
                     file.display()
                 )
             })?;
-            self.cached = Some((z, data));
+            self.cached = Some(z);
         }
-        let data = &self.cached.as_ref().expect("cached slice").1;
-        decoded_to_plane(data, channel, self.samples_per_pixel, file)
+        out.fill_from_bytes(
+            &self.page,
+            self.info.format,
+            NATIVE_BIG_ENDIAN,
+            self.samples_per_pixel,
+            channel,
+        );
+        Ok(())
     }
 }

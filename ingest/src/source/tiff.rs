@@ -6,11 +6,11 @@ use std::io::BufReader;
 use std::path::Path;
 
 use anyhow::{Context, Result, bail};
-use tiff::decoder::{Decoder, DecodingResult, Limits};
+use tiff::decoder::{Decoder, Limits};
 use tiff::tags::Tag;
 
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
-use super::{Plane, SourceInfo, VolumeSource};
+use super::{PlaneOut, SourceInfo, VolumeSource};
 use crate::sample_format::SampleFormat;
 
 /// A TIFF file holding a z-stack of one or more channels.
@@ -19,7 +19,9 @@ pub struct TiffSource {
     decoder: Decoder<BufReader<File>>,
     layout: StackLayout,
     samples_per_pixel: usize,
-    cached: Option<(u64, DecodingResult)>,
+    /// Index of the page decoded in `page`.
+    cached: Option<u64>,
+    page: Vec<u8>,
 }
 
 /// Opens a TIFF decoder with no size limits.
@@ -80,30 +82,20 @@ pub(super) fn page_format(
     Ok((format, samples))
 }
 
-/// Converts one decoded page into a plane of the given sample of each pixel.
-pub(super) fn decoded_to_plane(
-    data: &DecodingResult,
-    sample: usize,
+/// Decodes the current page of `decoder` into `page` (native byte order), reusing its memory.
+pub(super) fn decode_page(
+    decoder: &mut Decoder<BufReader<File>>,
+    format: SampleFormat,
     samples: usize,
-    path: &Path,
-) -> Result<Plane> {
-    fn pick<T: Copy>(v: &[T], sample: usize, samples: usize) -> Vec<T> {
-        if samples == 1 {
-            v.to_vec()
-        } else {
-            v.iter().skip(sample).step_by(samples).copied().collect()
-        }
-    }
-    Ok(match data {
-        DecodingResult::U8(v) => Plane::U8(pick(v, sample, samples)),
-        DecodingResult::U16(v) => Plane::U16(pick(v, sample, samples)),
-        DecodingResult::I16(v) => Plane::I16(pick(v, sample, samples)),
-        DecodingResult::U32(v) => Plane::U32(pick(v, sample, samples)),
-        DecodingResult::I32(v) => Plane::I32(pick(v, sample, samples)),
-        DecodingResult::F32(v) => Plane::F32(pick(v, sample, samples)),
-        _ => bail!("{}: unsupported sample format", path.display()),
-    })
+    page: &mut Vec<u8>,
+) -> tiff::TiffResult<()> {
+    let (w, h) = decoder.dimensions()?;
+    page.resize(w as usize * h as usize * samples * format.bytes(), 0);
+    decoder.read_image_bytes(page)
 }
+
+/// Whether decoded pages are big-endian (they are in native byte order).
+pub(super) const NATIVE_BIG_ENDIAN: bool = cfg!(target_endian = "big");
 
 fn rational(value: tiff::decoder::ifd::Value) -> Option<f64> {
     use tiff::decoder::ifd::Value;
@@ -220,6 +212,7 @@ impl TiffSource {
             layout,
             samples_per_pixel,
             cached: None,
+            page: Vec::new(),
         })
     }
 }
@@ -229,12 +222,13 @@ impl VolumeSource for TiffSource {
         &self.info
     }
 
-    fn read_plane(&mut self, channel: usize, z: u64) -> Result<Plane> {
+    fn read_plane(&mut self, channel: usize, z: u64, mut out: PlaneOut<'_>) -> Result<()> {
         let spp = self.samples_per_pixel;
         let page = (channel / spp) as u64 * self.layout.channel_stride + z * self.layout.z_stride;
         let path = self.info.path.clone();
-        if self.cached.as_ref().map(|c| c.0) != Some(page) {
-            let shown = path.display();
+        let shown = path.display();
+        if self.cached != Some(page) {
+            self.cached = None;
             self.decoder.seek_to_image(page as usize).with_context(|| {
                 format!("{shown}: cannot find page {page} (truncated or corrupt TIFF)")
             })?;
@@ -243,24 +237,29 @@ impl VolumeSource for TiffSource {
             if (h as u64, w as u64) != (ey, ex) {
                 bail!("{shown}: page {page} is {w}x{h} pixels but page 0 is {ex}x{ey}");
             }
-            let (format, _) = page_format(&mut self.decoder, &path)?;
-            if format != self.info.format {
+            let (format, samples) = page_format(&mut self.decoder, &path)?;
+            if (format, samples) != (self.info.format, spp) {
                 bail!(
-                    "{shown}: page {page} holds {format} samples but page 0 holds {}",
+                    "{shown}: page {page} holds {samples} x {format} samples per pixel but page 0 holds {spp} x {}",
                     self.info.format
                 );
             }
-            let data = self.decoder.read_image().with_context(|| {
+            decode_page(&mut self.decoder, format, spp, &mut self.page).with_context(|| {
                 format!("{shown}: cannot decode page {page} (truncated or corrupt TIFF)")
             })?;
-            self.cached = Some((page, data));
+            self.cached = Some(page);
         }
-        let data = &self.cached.as_ref().expect("cached page").1;
-        let plane = decoded_to_plane(data, channel % spp, spp, &path)?;
         let [_, y, x] = self.info.shape;
-        if plane.len() as u64 != y * x {
-            bail!("{}: page {page} decoded to the wrong size", path.display());
+        if out.len() as u64 != y * x {
+            bail!("{shown}: plane buffer has the wrong size");
         }
-        Ok(plane)
+        out.fill_from_bytes(
+            &self.page,
+            self.info.format,
+            NATIVE_BIG_ENDIAN,
+            spp,
+            channel % spp,
+        );
+        Ok(())
     }
 }
