@@ -235,7 +235,16 @@ fn open_inputs(options: &ConvertOptions) -> Result<Inputs> {
 /// Converts the inputs to an OME-Zarr store, as `ingest convert` does.
 pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary> {
     let inputs = open_inputs(options)?;
-    with_sample_type!(inputs.format, T => convert_typed::<T>(options, inputs))
+    let result = with_sample_type!(inputs.format, T => convert_typed::<T>(options, inputs));
+    if result.is_err() {
+        // A failed run leaves nothing behind (a killed one leaves only the hidden partial
+        // folder, which has no root metadata and which the next run removes).
+        let partial = crate::store::partial_path(&options.output);
+        if partial.exists() {
+            let _ = std::fs::remove_dir_all(&partial);
+        }
+    }
+    result
 }
 
 /// Per-level state during the pass.

@@ -211,6 +211,8 @@ fn index_typed<T: Sample>(
         })
         .collect();
     let (regions, _) = write_region_metadata(&writer, &region_levels, &stats, labels, brick)?;
+    // The metadata arrays reach the disk before the attributes that point to them.
+    crate::store::sync_file_system(path)?;
     writer.set_root_attribute(REGIONS_KEY, serde_json::to_value(&regions)?)?;
     Ok(format!(
         "indexed {shown}: {} levels, {} channels, bricks {:?}\n",

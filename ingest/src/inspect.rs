@@ -125,9 +125,16 @@ pub fn inspect(path: &Path) -> Result<String> {
         .unwrap_or_default();
     match serde_json::from_value::<RegionMetadata>(attrs[REGIONS_KEY].clone()) {
         Ok(regions) => {
+            let datasets = ms["datasets"].as_array().map_or(0, Vec::len);
+            let covered = ms["datasets"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter(|d| regions.levels.iter().any(|l| d["path"] == l.image.as_str()))
+                .count();
             writeln!(
                 out,
-                "region metadata: {} levels, cells {:?} (+{} halo), bricks {:?}, {} histogram bins",
+                "region metadata: {} levels (covers {covered} of {datasets} image levels), cells {:?} (+{} halo), bricks {:?}, {} histogram bins",
                 regions.levels.len(),
                 regions.cell_shape,
                 regions.halo,

@@ -128,7 +128,7 @@ impl WritableStorageTraits for StagingStore {
 }
 
 /// Flushes every file system holding `path` to disk (`syncfs`).
-fn sync_file_system(path: &Path) -> Result<()> {
+pub fn sync_file_system(path: &Path) -> Result<()> {
     use std::os::fd::AsRawFd;
     let dir = std::fs::File::open(path)
         .with_context(|| format!("{}: cannot open to sync", path.display()))?;

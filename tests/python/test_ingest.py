@@ -262,7 +262,7 @@ def test_index_adds_metadata_to_a_foreign_store(tmp_path):
     assert {q: q.read_bytes() for q in chunk_bytes} == chunk_bytes  # data untouched
     assert_region_metadata(store)
     open_ome_zarr(zarr.open_group(str(store), mode="r"))
-    assert "region metadata: 2 levels" in run_ingest("inspect", store).stdout
+    assert "region metadata: 2 levels (covers 2 of 2 image levels)" in run_ingest("inspect", store).stdout
 
 
 def test_inspect_reports_levels_codecs_and_statistics(tmp_path):
@@ -298,6 +298,7 @@ def test_truncated_tiff_names_the_file(tmp_path):
     out = tmp_path / "cut.ome.zarr"
     expect_failure(["convert", src, "-o", out, "--quiet"], src, "truncated or corrupt TIFF")
     assert not out.exists()
+    assert not (tmp_path / ".cut.ome.zarr.partial").exists(), "a failed run cleans up after itself"
 
 
 def test_raw_size_mismatch(tmp_path):
