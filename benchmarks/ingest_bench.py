@@ -31,15 +31,15 @@ ZARRS_OME = shutil.which("zarrs_ome") or "/tmp/zarrs_tools/bin/zarrs_ome"
 
 
 def timed(cmd, out):
-    """Runs `cmd` under GNU time; returns (wall seconds, peak RSS MB) or an error string."""
+    """Runs `cmd` under GNU time; returns (wall seconds, peak RSS MB, CPU %) or an error string."""
     if out.exists():
         shutil.rmtree(out)
     subprocess.run(["sync"], check=True)
-    p = subprocess.run(["/usr/bin/time", "-f", "%e %M", *map(str, cmd)], capture_output=True, text=True)
+    p = subprocess.run(["/usr/bin/time", "-f", "%e %M %P", *map(str, cmd)], capture_output=True, text=True)
     if p.returncode != 0:
         return f"failed: {p.stderr.strip().splitlines()[-2] if len(p.stderr.strip().splitlines()) > 1 else p.stderr.strip()}"
-    wall, rss_kb = p.stderr.strip().splitlines()[-1].split()
-    return float(wall), int(rss_kb) / 1024
+    wall, rss_kb, cpu = p.stderr.strip().splitlines()[-1].split()
+    return float(wall), int(rss_kb) / 1024, cpu
 
 
 def levels_of(store):
@@ -79,16 +79,16 @@ def table(results):
     for size, (input_mb, levels, rows) in results.items():
         base = rows["ingest"]
         lines.append(f"\n**{size} MiB** ({input_mb:.0f} MB of uint16, {levels} levels)\n")
-        lines.append("| Tool | Wall s | MB/s | Peak RSS MB | Time vs ingest | RSS vs ingest |")
-        lines.append("|---|---|---|---|---|---|")
+        lines.append("| Tool | Wall s | MB/s | Peak RSS MB | CPU | Time vs ingest | RSS vs ingest |")
+        lines.append("|---|---|---|---|---|---|---|")
         for tool, r in rows.items():
             if isinstance(r, str):
-                lines.append(f"| {tool} | {r} | | | | |")
+                lines.append(f"| {tool} | {r} | | | | | |")
                 continue
-            wall, rss = r
+            wall, rss, cpu = r
             ratio_t = wall / base[0] if not isinstance(base, str) else float("nan")
             ratio_m = rss / base[1] if not isinstance(base, str) else float("nan")
-            lines.append(f"| {tool} | {wall:.2f} | {input_mb / wall:.0f} | {rss:.0f} | {ratio_t:.2f}x | {ratio_m:.2f}x |")
+            lines.append(f"| {tool} | {wall:.2f} | {input_mb / wall:.0f} | {rss:.0f} | {cpu} | {ratio_t:.2f}x | {ratio_m:.2f}x |")
     return "\n".join(lines)
 
 

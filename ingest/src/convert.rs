@@ -566,9 +566,19 @@ fn convert_typed<T: Sample>(
     let mut sources = std::mem::take(&mut inputs.sources);
     let reader = std::thread::spawn(move || {
         let mut z0 = 0;
+        let mut allocated = 0;
         while z0 < depth {
             let nz = oz.min(depth - z0);
-            let mut slab = recycle_rx.try_recv().unwrap_or_default();
+            // At most two slabs exist: the one being processed and the one being read.
+            let mut slab = if allocated < 2 {
+                allocated += 1;
+                Vec::new()
+            } else {
+                match recycle_rx.recv() {
+                    Ok(slab) => slab,
+                    Err(_) => return,
+                }
+            };
             slab.resize(channels * nz as usize * plane, T::default());
             let mut rest: &mut [T] = &mut slab;
             let mut parts = Vec::new();
@@ -605,7 +615,9 @@ fn convert_typed<T: Sample>(
         }
         Ok(())
     })();
+    // Unblock the reader whether it waits to send a slab or to get one back.
     drop(rx);
+    drop(recycle_tx);
     reader
         .join()
         .map_err(|_| anyhow::anyhow!("reader thread panicked"))?;
