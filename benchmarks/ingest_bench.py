@@ -64,7 +64,7 @@ def bench(size_mib, work):
     if os.path.exists(ZARRS_OME):
         plain = d / "plain.zarr"
         if not plain.exists():
-            subprocess.run([PY, PEERS, "zarr-array", src, plain, levels], check=True)
+            subprocess.run([PY, PEERS, "zarr-array", src, plain, str(levels)], check=True)
         out = d / "zarrs_ome.zarr"
         rows["zarrs_ome"] = timed(
             [ZARRS_OME, "--ome-zarr-version", "0.5", "--max-levels", levels - 1, plain, out], out

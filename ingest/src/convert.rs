@@ -255,6 +255,8 @@ struct Level<T: Sample> {
     outer: [u64; 3],
     /// First z of the slab the accumulator is filling (levels ≥ 1).
     acc_z0: u64,
+    /// Planes per channel in the accumulator: `min(outer z, level depth)`.
+    acc_depth: u64,
     /// Exact sums `[c][outer_z][y][x]` of level-0 voxels (levels ≥ 1).
     sum: Vec<T::Sum>,
     /// Non-NaN level-0 voxel counts matching `sum`.
@@ -442,7 +444,7 @@ fn accumulate<T: Sample>(
     let step = next.plan.step;
     let [_, ny, nx] = next.plan.shape;
     let [_, sy, sx] = src_shape;
-    let oz = next.outer[0];
+    let oz = next.acc_depth;
     let a0 = next.acc_z0;
     let src_plane = (sy * sx) as usize;
     next.sum
@@ -517,16 +519,19 @@ fn convert_typed<T: Sample>(
             dimension_names: Some(vec!["c", "z", "y", "x"]),
         };
         let array = writer.create_array(&format!("/{i}"), &layout)?;
+        // One slab of the level: a chunk deep, or the whole level when that is shallower.
+        let acc_depth = outer[0].min(z);
         let acc_len = if i == 0 {
             0
         } else {
-            channels * (outer[0] * y * x) as usize
+            channels * (acc_depth * y * x) as usize
         };
         levels.push(Level {
             plan: plan.clone(),
             array,
             outer,
             acc_z0: 0,
+            acc_depth,
             sum: vec![T::Sum::default(); acc_len],
             count: vec![0; acc_len],
             values: Vec::new(),
@@ -755,7 +760,7 @@ fn flush_if_full<T: Sample>(
             .par_chunks_mut(slab_len)
             .enumerate()
             .for_each(|(c, out)| {
-                let start = c * oz as usize * plane;
+                let start = c * level.acc_depth as usize * plane;
                 let sum = &level.sum[start..start + slab_len];
                 let count = &level.count[start..start + slab_len];
                 for ((o, &s), &n) in out.iter_mut().zip(sum).zip(count) {
@@ -789,7 +794,7 @@ fn flush_if_full<T: Sample>(
             sum: &this.sum,
             count: &this.count,
             nz_plane: nz as usize * plane,
-            oz_plane: oz as usize * plane,
+            oz_plane: this.acc_depth as usize * plane,
         };
         accumulate(&mut upper[0], channels, shape, z0, nz, &sums);
         flush_if_full(levels, l + 1, channels, brick, z0 + nz)?;
