@@ -1,0 +1,15 @@
+//! `residency-brickserver`: serves OME-Zarr stores written by `ingest` (or anyone) over HTTP,
+//! verbatim at their Zarr keys, so any OME-Zarr viewer reads them unchanged.
+//!
+//! - [`datasets`]: the configured datasets and their names;
+//! - [`store_keys`]: turning a request path into a file inside a dataset, safely;
+//! - [`responses`]: file answers with `ETag`, `Range`, `Cache-Control` and `Content-Type`;
+//! - [`routes`]: the axum router (Zarr keys, dataset listing, health).
+
+pub mod datasets;
+pub mod responses;
+pub mod routes;
+pub mod store_keys;
+
+pub use datasets::{Dataset, Datasets};
+pub use routes::router;

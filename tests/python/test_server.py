@@ -1,0 +1,173 @@
+"""`brickserver` with real clients: zarr-python and ome-zarr-models over HTTP, plain HTTP
+requests for headers, and raw requests for path traversal."""
+
+import http.client
+import os
+import pathlib
+import signal
+import subprocess
+
+import numpy as np
+import pytest
+import requests
+import tifffile
+import zarr
+from ome_zarr_models import open_ome_zarr
+
+from conftest import BIN, run_ingest
+
+
+@pytest.fixture(scope="module")
+def served(tmp_path_factory):
+    """A store made by `ingest` (3 levels, empty bricks included), served on a free port.
+    Yields (base URL, store path, server process)."""
+    d = tmp_path_factory.mktemp("served")
+    rng = np.random.default_rng(3)
+    vol = np.zeros((2, 24, 40, 36), np.uint16)
+    vol[:, 4:20, 5:30, 3:20] = rng.integers(1, 4000, (2, 16, 25, 17))
+    src = d / "data.ome.tif"
+    tifffile.imwrite(src, vol, ome=True, photometric="minisblack", metadata={"axes": "CZYX"})
+    store = d / "cells.ome.zarr"
+    run_ingest("convert", src, "-o", store, "--chunk", "8", "--quiet")
+    (d / "secret.txt").write_text("TOP SECRET")
+    os.symlink(d / "secret.txt", store / "escape")
+    proc = subprocess.Popen(
+        [str(BIN / "brickserver"), "serve", str(store), "--bind", "127.0.0.1:0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    line = ""
+    for line in proc.stdout:
+        if line.startswith("listening on "):
+            break
+    base = line.split("listening on ")[1].strip()
+    yield base, store, proc
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=10)
+
+
+def test_zarr_python_reads_every_level_over_http(served):
+    base, store, _ = served
+    remote = zarr.open_group(f"{base}/cells/", mode="r")
+    local = zarr.open_group(str(store), mode="r")
+    for level in ["0", "1", "2"]:
+        np.testing.assert_array_equal(remote[level][...], local[level][...])
+    open_ome_zarr(remote)
+
+
+def test_every_key_is_served_verbatim(served):
+    base, store, _ = served
+    files = [p for p in store.rglob("*") if p.is_file() and not p.is_symlink()]
+    assert len(files) > 20
+    with requests.Session() as s:
+        for p in files:
+            key = p.relative_to(store).as_posix()
+            r = s.get(f"{base}/cells/{key}")
+            assert r.status_code == 200, key
+            assert r.content == p.read_bytes(), key
+
+
+def test_headers_etag_range_cache_and_types(served):
+    base, store, _ = served
+    chunk = next(p for p in (store / "0" / "c").rglob("*") if p.is_file())
+    key = chunk.relative_to(store).as_posix()
+    data = chunk.read_bytes()
+    r = requests.get(f"{base}/cells/{key}")
+    assert r.headers["Content-Type"] == "application/octet-stream"
+    assert r.headers["Cache-Control"] == "public, max-age=31536000, immutable"
+    assert r.headers["Accept-Ranges"] == "bytes"
+    assert r.headers["Access-Control-Allow-Origin"] == "*"
+    etag = r.headers["ETag"]
+    assert requests.get(f"{base}/cells/{key}", headers={"If-None-Match": etag}).status_code == 304
+    assert requests.get(f"{base}/cells/{key}", headers={"If-None-Match": '"other"'}).status_code == 200
+    part = requests.get(f"{base}/cells/{key}", headers={"Range": "bytes=2-9"})
+    assert part.status_code == 206 and part.content == data[2:10]
+    assert part.headers["Content-Range"] == f"bytes 2-9/{len(data)}"
+    tail = requests.get(f"{base}/cells/{key}", headers={"Range": "bytes=-4"})
+    assert tail.content == data[-4:]
+    bad = requests.get(f"{base}/cells/{key}", headers={"Range": f"bytes={len(data)}-"})
+    assert bad.status_code == 416 and bad.headers["Content-Range"] == f"bytes */{len(data)}"
+    head = requests.head(f"{base}/cells/{key}")
+    assert head.status_code == 200 and head.content == b"" and int(head.headers["Content-Length"]) == len(data)
+    meta = requests.get(f"{base}/cells/zarr.json")
+    assert meta.headers["Content-Type"] == "application/json"
+    assert meta.headers["Cache-Control"] == "public, no-cache"
+
+
+def test_missing_chunk_is_404_and_cors_preflight_works(served):
+    base, store, _ = served
+    assert not (store / "0" / "c" / "0" / "0" / "4" / "0").exists()  # an empty brick (y 32..40)
+    assert requests.get(f"{base}/cells/0/c/0/0/4/0").status_code == 404
+    assert requests.get(f"{base}/nosuch/zarr.json").status_code == 404
+    pre = requests.options(
+        f"{base}/cells/zarr.json",
+        headers={"Origin": "http://viewer.example", "Access-Control-Request-Method": "GET", "Access-Control-Request-Headers": "range"},
+    )
+    assert pre.status_code == 200
+    assert pre.headers["Access-Control-Allow-Origin"] == "*"
+    assert "GET" in pre.headers["Access-Control-Allow-Methods"]
+
+
+@pytest.mark.parametrize("method", ["POST", "PUT", "DELETE", "PATCH"])
+def test_read_only(served, method):
+    base, _, _ = served
+    assert requests.request(method, f"{base}/cells/zarr.json").status_code == 405
+
+
+@pytest.mark.parametrize(
+    "path",
+    [
+        "/cells/../secret.txt",
+        "/cells/%2e%2e/secret.txt",
+        "/cells/%2E%2E%2Fsecret.txt",
+        "/cells/..%2fsecret.txt",
+        "/cells/..\\secret.txt",
+        "/cells/%5c..%5csecret.txt",
+        "/cells//etc/passwd",
+        "/cells/%2fetc%2fpasswd",
+        "/cells/zarr.json%00",
+        "/cells/escape",
+    ],
+)
+def test_nothing_outside_a_dataset_is_reachable(served, path):
+    base, _, _ = served
+    host, port = base.removeprefix("http://").split(":")
+    conn = http.client.HTTPConnection(host, int(port), timeout=5)
+    conn.putrequest("GET", path, skip_accept_encoding=True)  # sent exactly as written
+    conn.endheaders()
+    r = conn.getresponse()
+    body = r.read()
+    assert 400 <= r.status < 500, (path, r.status)
+    assert b"TOP SECRET" not in body and b"root:" not in body
+
+
+def test_listing_links_open_each_dataset(served):
+    base, _, _ = served
+    for path in ["/", "/datasets"]:
+        items = requests.get(base + path).json()["datasets"]
+        assert [d["name"] for d in items] == ["cells"]
+        assert items[0]["url"] == f"{base}/cells/"
+        assert items[0]["vizarr"].endswith(f"source={base}/cells/")
+        assert "zarr3%3A%2F%2F" in items[0]["neuroglancer"]
+    assert requests.get(base + "/healthz").text == "ok\n"
+
+
+def test_graceful_shutdown_on_sigterm(tmp_path):
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
+    store = tmp_path / "a.ome.zarr"
+    run_ingest("convert", src, "-o", store, "--quiet")
+    proc = subprocess.Popen([str(BIN / "brickserver"), "serve", str(store), "--bind", "127.0.0.1:0"], stdout=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if line.startswith("listening on "):
+            break
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=10) == 0
+
+
+def test_bad_dataset_is_a_clear_error(tmp_path):
+    p = subprocess.run([str(BIN / "brickserver"), "serve", str(tmp_path / "missing.ome.zarr")], capture_output=True, text=True)
+    assert p.returncode != 0
+    assert "missing.ome.zarr: cannot open dataset" in p.stderr
