@@ -12,4 +12,4 @@ pub mod routes;
 pub mod store_keys;
 
 pub use datasets::{Dataset, Datasets};
-pub use routes::router;
+pub use routes::{ServerOptions, router};

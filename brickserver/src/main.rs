@@ -7,7 +7,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use residency_brickserver::{Datasets, router};
+use residency_brickserver::{Datasets, ServerOptions, router};
 
 #[derive(Parser)]
 #[command(
@@ -32,6 +32,10 @@ enum Command {
         /// Serve PATH under /NAME/ (repeatable).
         #[arg(long = "name", value_name = "NAME=PATH")]
         named: Vec<String>,
+        /// Require `Authorization: Bearer <token>` on every request but /healthz; the token
+        /// is the file's content without surrounding whitespace.
+        #[arg(long)]
+        token_file: Option<PathBuf>,
     },
 }
 
@@ -50,7 +54,18 @@ fn shutdown_signal() -> Result<impl std::future::Future<Output = ()>> {
     })
 }
 
-async fn serve(datasets: Datasets, bind: SocketAddr) -> Result<()> {
+fn read_token(path: &std::path::Path) -> Result<String> {
+    let token = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read token file", path.display()))?
+        .trim()
+        .to_string();
+    if token.is_empty() {
+        anyhow::bail!("{}: token file is empty", path.display());
+    }
+    Ok(token)
+}
+
+async fn serve(datasets: Datasets, bind: SocketAddr, options: ServerOptions) -> Result<()> {
     let listener = tokio::net::TcpListener::bind(bind)
         .await
         .with_context(|| format!("cannot listen on {bind}"))?;
@@ -61,7 +76,7 @@ async fn serve(datasets: Datasets, bind: SocketAddr) -> Result<()> {
     }
     println!("listening on http://{addr}");
     std::io::stdout().flush()?;
-    axum::serve(listener, router(datasets))
+    axum::serve(listener, router(datasets, options))
         .with_graceful_shutdown(shutdown)
         .await
         .context("server error")
@@ -79,11 +94,16 @@ fn main() -> ExitCode {
             datasets,
             bind,
             named,
-        } => Datasets::from_args(&datasets, &named).and_then(|d| {
+            token_file,
+        } => (|| {
+            let datasets = Datasets::from_args(&datasets, &named)?;
+            let options = ServerOptions {
+                token: token_file.as_deref().map(read_token).transpose()?,
+            };
             tokio::runtime::Runtime::new()
                 .context("cannot start the runtime")?
-                .block_on(serve(d, bind))
-        }),
+                .block_on(serve(datasets, bind, options))
+        })(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -4,8 +4,9 @@ use std::sync::Arc;
 
 use axum::Router;
 use axum::body::Body;
-use axum::extract::{Path, State};
+use axum::extract::{Path, Request, State};
 use axum::http::{HeaderMap, Method, Response, StatusCode, Uri, header};
+use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Json};
 use axum::routing::get;
 use serde_json::json;
@@ -18,8 +19,57 @@ use crate::store_keys::{KeyError, resolve};
 /// Shared state of the routes.
 pub type AppState = Arc<Datasets>;
 
+/// Server-wide options of the router.
+#[derive(Clone, Debug, Default)]
+pub struct ServerOptions {
+    /// When set, every request but `/healthz` must carry `Authorization: Bearer <token>`.
+    pub token: Option<String>,
+}
+
+/// Refuses requests without the configured bearer token (401), except health checks and
+/// CORS preflights, which browsers send without credentials.
+async fn require_token(
+    State(token): State<Arc<Option<String>>>,
+    request: Request,
+    next: Next,
+) -> Response<Body> {
+    let Some(token) = token.as_deref() else {
+        return next.run(request).await;
+    };
+    let preflight = request.method() == Method::OPTIONS
+        && request
+            .headers()
+            .contains_key(header::ACCESS_CONTROL_REQUEST_METHOD);
+    if request.uri().path() == "/healthz" || preflight {
+        return next.run(request).await;
+    }
+    let given = request
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "));
+    // Compare in constant time so the token cannot be guessed byte by byte from timings.
+    let ok = given.is_some_and(|g| {
+        g.len() == token.len()
+            && g.bytes()
+                .zip(token.bytes())
+                .fold(0u8, |a, (x, y)| a | (x ^ y))
+                == 0
+    });
+    if ok {
+        next.run(request).await
+    } else {
+        (
+            StatusCode::UNAUTHORIZED,
+            [(header::WWW_AUTHENTICATE, "Bearer")],
+            "missing or wrong bearer token\n",
+        )
+            .into_response()
+    }
+}
+
 /// The router serving `datasets`.
-pub fn router(datasets: Datasets) -> Router {
+pub fn router(datasets: Datasets, options: ServerOptions) -> Router {
     let cors = CorsLayer::new()
         .allow_origin(Any)
         .allow_methods([Method::GET, Method::HEAD, Method::OPTIONS])
@@ -32,15 +82,22 @@ pub fn router(datasets: Datasets) -> Router {
         ])
         .max_age(std::time::Duration::from_secs(86400));
     Router::new()
-        .route("/", get(list).options(options))
-        .route("/datasets", get(list).options(options))
-        .route("/healthz", get(|| async { "ok\n" }).options(options))
-        .route("/{name}/{*key}", get(serve_key).options(options))
+        .route("/", get(list).options(allowed_methods))
+        .route("/datasets", get(list).options(allowed_methods))
+        .route(
+            "/healthz",
+            get(|| async { "ok\n" }).options(allowed_methods),
+        )
+        .route("/{name}/{*key}", get(serve_key).options(allowed_methods))
         .with_state(Arc::new(datasets))
+        .layer(middleware::from_fn_with_state(
+            Arc::new(options.token),
+            require_token,
+        ))
         .layer(cors)
 }
 
-async fn options() -> impl IntoResponse {
+async fn allowed_methods() -> impl IntoResponse {
     (
         StatusCode::NO_CONTENT,
         [(header::ALLOW, "GET, HEAD, OPTIONS")],

@@ -171,3 +171,44 @@ def test_bad_dataset_is_a_clear_error(tmp_path):
     p = subprocess.run([str(BIN / "brickserver"), "serve", str(tmp_path / "missing.ome.zarr")], capture_output=True, text=True)
     assert p.returncode != 0
     assert "missing.ome.zarr: cannot open dataset" in p.stderr
+
+
+def test_token_file_guards_everything_but_health(tmp_path):
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
+    store = tmp_path / "a.ome.zarr"
+    run_ingest("convert", src, "-o", store, "--quiet")
+    token_file = tmp_path / "token"
+    token_file.write_text("s3cret-token\n")
+    proc = subprocess.Popen(
+        [str(BIN / "brickserver"), "serve", str(store), "--bind", "127.0.0.1:0", "--token-file", str(token_file)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        for line in proc.stdout:
+            if line.startswith("listening on "):
+                break
+        base = line.split("listening on ")[1].strip()
+        good = {"Authorization": "Bearer s3cret-token"}
+        for path in ["/a/zarr.json", "/datasets", "/", "/a/0/zarr.json"]:
+            assert requests.get(base + path).status_code == 401, path
+            assert requests.get(base + path, headers={"Authorization": "Bearer wrong"}).status_code == 401, path
+            r = requests.get(base + path, headers=good)
+            assert r.status_code == 200, path
+        assert requests.get(base + "/a/zarr.json").headers["WWW-Authenticate"] == "Bearer"
+        assert requests.get(base + "/healthz").status_code == 200
+        assert requests.get(base + "/a/zarr.json", headers=good).content == (store / "zarr.json").read_bytes()
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=10)
+
+
+def test_empty_token_file_is_refused(tmp_path):
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
+    store = tmp_path / "a.ome.zarr"
+    run_ingest("convert", src, "-o", store, "--quiet")
+    (tmp_path / "token").write_text("  \n")
+    p = subprocess.run([str(BIN / "brickserver"), "serve", str(store), "--token-file", str(tmp_path / "token")], capture_output=True, text=True)
+    assert p.returncode != 0 and "token file is empty" in p.stderr
