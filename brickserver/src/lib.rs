@@ -4,9 +4,11 @@
 //! - [`datasets`]: the configured datasets and their names;
 //! - [`store_keys`]: turning a request path into a file inside a dataset, safely;
 //! - [`responses`]: file answers with `ETag`, `Range`, `Cache-Control` and `Content-Type`;
-//! - [`routes`]: the axum router (Zarr keys, dataset listing, health).
+//! - [`metrics`]: Prometheus metrics;
+//! - [`routes`]: the axum router (Zarr keys, dataset listing, health, metrics).
 
 pub mod datasets;
+pub mod metrics;
 pub mod responses;
 pub mod routes;
 pub mod store_keys;

@@ -13,6 +13,7 @@ use serde_json::json;
 use tower_http::cors::{Any, CorsLayer};
 
 use crate::datasets::Datasets;
+use crate::metrics::{Metrics, track};
 use crate::responses::file_response;
 use crate::store_keys::{KeyError, resolve};
 
@@ -81,7 +82,21 @@ pub fn router(datasets: Datasets, options: ServerOptions) -> Router {
             header::ACCEPT_RANGES,
         ])
         .max_age(std::time::Duration::from_secs(86400));
+    let metrics = Arc::new(Metrics::default());
+    let shown = metrics.clone();
     Router::new()
+        .route(
+            "/metrics",
+            get(move || async move {
+                (
+                    [(
+                        header::CONTENT_TYPE,
+                        "application/openmetrics-text; version=1.0.0; charset=utf-8",
+                    )],
+                    shown.render(),
+                )
+            }),
+        )
         .route("/", get(list).options(allowed_methods))
         .route("/datasets", get(list).options(allowed_methods))
         .route(
@@ -94,6 +109,7 @@ pub fn router(datasets: Datasets, options: ServerOptions) -> Router {
             Arc::new(options.token),
             require_token,
         ))
+        .layer(middleware::from_fn_with_state(metrics, track))
         .layer(cors)
 }
 

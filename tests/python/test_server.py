@@ -212,3 +212,29 @@ def test_empty_token_file_is_refused(tmp_path):
     (tmp_path / "token").write_text("  \n")
     p = subprocess.run([str(BIN / "brickserver"), "serve", str(store), "--token-file", str(tmp_path / "token")], capture_output=True, text=True)
     assert p.returncode != 0 and "token file is empty" in p.stderr
+
+
+def metric(text, name):
+    """The value of the sample `name` (with labels, as written) in OpenMetrics text."""
+    for line in text.splitlines():
+        if line.startswith(name + " "):
+            return float(line.split()[-1])
+    raise AssertionError(f"{name} not in metrics:\n{text}")
+
+
+def test_metrics_count_requests_bytes_and_latency(served):
+    base, store, _ = served
+    chunk = next(p for p in (store / "0" / "c").rglob("*") if p.is_file())
+    key = chunk.relative_to(store).as_posix()
+    first = requests.get(base + "/metrics")
+    assert first.headers["Content-Type"].startswith("application/openmetrics-text")
+    requests.get(f"{base}/cells/{key}")
+    requests.get(f"{base}/cells/no/such/key")
+    second = requests.get(base + "/metrics").text
+    t1 = first.text
+    assert metric(second, 'brickserver_requests_total{class="2xx"}') - metric(t1, 'brickserver_requests_total{class="2xx"}') == 2
+    assert metric(second, 'brickserver_requests_total{class="4xx"}') - metric(t1, 'brickserver_requests_total{class="4xx"}') == 1
+    not_found = len(f"no key 'no/such/key' in 'cells'\n")
+    assert metric(second, "brickserver_response_bytes_total") - metric(t1, "brickserver_response_bytes_total") == len(first.content) + chunk.stat().st_size + not_found
+    assert metric(second, "brickserver_request_duration_seconds_count") - metric(t1, "brickserver_request_duration_seconds_count") == 3
+    assert 'brickserver_request_duration_seconds_bucket{le="0.001"}' in second

@@ -1,0 +1,102 @@
+//! Server metrics in the Prometheus (OpenMetrics) text format: requests by status class,
+//! bytes sent, and a latency histogram.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use axum::body::{Body, HttpBody};
+use axum::extract::{Request, State};
+use axum::http::{Response, header};
+use axum::middleware::Next;
+use prometheus_client::encoding::EncodeLabelSet;
+use prometheus_client::encoding::text::encode;
+use prometheus_client::metrics::counter::Counter;
+use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::histogram::Histogram;
+use prometheus_client::registry::Registry;
+
+/// Label of a request counter: the response's status class (`2xx`, `3xx`, `4xx`, `5xx`).
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+pub struct StatusClass {
+    /// `2xx`, `3xx`, `4xx` or `5xx`.
+    pub class: String,
+}
+
+/// The server's metrics and their registry.
+pub struct Metrics {
+    registry: Registry,
+    requests: Family<StatusClass, Counter>,
+    bytes: Counter,
+    latency: Histogram,
+}
+
+impl Default for Metrics {
+    fn default() -> Self {
+        let mut registry = Registry::default();
+        let requests = Family::<StatusClass, Counter>::default();
+        let bytes = Counter::default();
+        let latency = Histogram::new(
+            [
+                0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0,
+            ]
+            .into_iter(),
+        );
+        registry.register(
+            "brickserver_requests",
+            "Requests answered, by status class",
+            requests.clone(),
+        );
+        registry.register(
+            "brickserver_response_bytes",
+            "Response body bytes sent",
+            bytes.clone(),
+        );
+        registry.register(
+            "brickserver_request_duration_seconds",
+            "Time from request to response headers",
+            latency.clone(),
+        );
+        Self {
+            registry,
+            requests,
+            bytes,
+            latency,
+        }
+    }
+}
+
+impl Metrics {
+    /// The metrics as OpenMetrics text.
+    pub fn render(&self) -> String {
+        let mut out = String::new();
+        encode(&mut out, &self.registry).expect("writing to a String cannot fail");
+        out
+    }
+}
+
+/// Middleware recording every request in `metrics`.
+pub async fn track(
+    State(metrics): State<Arc<Metrics>>,
+    request: Request,
+    next: Next,
+) -> Response<Body> {
+    let started = Instant::now();
+    let head = request.method() == axum::http::Method::HEAD;
+    let response = next.run(request).await;
+    metrics.latency.observe(started.elapsed().as_secs_f64());
+    let class = format!("{}xx", response.status().as_u16() / 100);
+    metrics.requests.get_or_create(&StatusClass { class }).inc();
+    let announced = response
+        .headers()
+        .get(header::CONTENT_LENGTH)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.parse::<u64>().ok());
+    // HEAD answers announce a length but send no body.
+    if let Some(len) = announced
+        .or_else(|| response.body().size_hint().exact())
+        .filter(|_| !head)
+    {
+        metrics.bytes.inc_by(len);
+    }
+    response
+}
