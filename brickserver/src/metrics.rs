@@ -35,12 +35,9 @@ impl Default for Metrics {
         let mut registry = Registry::default();
         let requests = Family::<StatusClass, Counter>::default();
         let bytes = Counter::default();
-        let latency = Histogram::new(
-            [
-                0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0,
-            ]
-            .into_iter(),
-        );
+        let latency = Histogram::new([
+            0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0,
+        ]);
         registry.register(
             "brickserver_requests",
             "Requests answered, by status class",
