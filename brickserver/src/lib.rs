@@ -7,6 +7,8 @@
 //! - [`metrics`]: Prometheus metrics;
 //! - [`routes`]: the axum router (Zarr keys, dataset listing, health, metrics).
 
+#![warn(missing_docs)]
+
 pub mod datasets;
 pub mod metrics;
 pub mod responses;

@@ -6,11 +6,14 @@
 //! - [`sample_format`]: the voxel types and their exact arithmetic;
 //! - [`pyramid`]: the anisotropy-aware level plan;
 //! - [`regions`]: min/max cells, brick histograms, channel statistics;
+//! - [`region_writer`]: writing them as Zarr arrays and the `residency` document;
 //! - [`convert`]: the streaming pass itself; [`index`] runs the same analysis on an
 //!   existing store;
 //! - [`store`] and [`ome`]: Zarr and OME-Zarr metadata, and atomic writes;
 //! - [`synthetic`]: the built-in sample dataset;
 //! - [`inspect`]: the `ingest inspect` report.
+
+#![warn(missing_docs)]
 
 pub mod convert;
 pub mod index;

@@ -7,6 +7,8 @@
 //! OME-Zarr image group under the key [`REGIONS_KEY`]. It describes the min/max grids and
 //! the per-brick histograms that `ingest` writes as ordinary Zarr arrays inside the group.
 
+#![warn(missing_docs)]
+
 use serde::{Deserialize, Serialize};
 
 /// Attribute key of the region metadata in the image group's attributes.

@@ -1,6 +1,8 @@
 //! Helpers for the workspace-level integration tests in `tests/tests/`: they run the real
 //! release binaries (built by `scripts/test.sh` before `cargo test`).
 
+#![warn(missing_docs)]
+
 use std::path::PathBuf;
 use std::process::{Command, Output};
 
