@@ -99,15 +99,10 @@ pub async fn file_response(
     let meta = file.metadata().await.map_err(io_error)?;
     let len = meta.len();
     let etag = etag_of(&meta);
-    let content_type = if is_metadata(key) {
-        "application/json"
+    let (content_type, cache) = if is_metadata(key) {
+        ("application/json", CACHE_REVALIDATE)
     } else {
-        "application/octet-stream"
-    };
-    let cache = if is_metadata(key) {
-        CACHE_REVALIDATE
-    } else {
-        CACHE_IMMUTABLE
+        ("application/octet-stream", CACHE_IMMUTABLE)
     };
     let builder = Response::builder()
         .header(header::ETAG, &etag)

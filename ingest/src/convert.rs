@@ -283,8 +283,15 @@ pub(crate) struct SlabSink<'a> {
 
 impl SlabSink<'_> {
     /// Writes (when an array is given) the chunks of a slab `[c][nz][Y][X]` starting at `z0`,
-    /// and records brick histograms and statistics. Returns (bricks written, bricks empty).
-    pub fn process<T: Sample>(&self, slab: &[T], z0: u64, nz: u64) -> Result<(u64, u64)> {
+    /// records brick histograms and statistics, and folds the slab into the min/max `cells`.
+    /// Returns (bricks written, bricks empty).
+    pub fn process<T: Sample>(
+        &self,
+        slab: &[T],
+        z0: u64,
+        nz: u64,
+        cells: &mut CellGrid<T>,
+    ) -> Result<(u64, u64)> {
         let [_, ny, nx] = self.shape;
         let [oz, oy, ox] = self.outer;
         let tasks: Vec<(usize, u64, u64)> = (0..self.channels)
@@ -361,9 +368,37 @@ impl SlabSink<'_> {
                 },
             )
             .collect::<Result<Vec<_>>>()?;
+        cells.add_slab(slab, z0, nz, self.shape);
         Ok(counts
             .into_iter()
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))
+    }
+}
+
+impl<T: Sample> Level<T> {
+    /// Writes one slab of this level's values and records its region metadata.
+    fn write_slab(
+        &mut self,
+        values: &[T],
+        z0: u64,
+        nz: u64,
+        channels: usize,
+        brick: [u64; 3],
+        stats: Option<&[Mutex<ChannelAccumulator>]>,
+    ) -> Result<()> {
+        let sink = SlabSink {
+            channels,
+            shape: self.plan.shape,
+            brick,
+            outer: self.outer,
+            array: Some(&self.array),
+            histograms: &self.histograms,
+            stats,
+        };
+        let (written, empty) = sink.process(values, z0, nz, &mut self.cells)?;
+        self.written += written;
+        self.empty += empty;
+        Ok(())
     }
 }
 
@@ -706,23 +741,8 @@ fn process_level0<T: Sample>(
     z0: u64,
     nz: u64,
 ) -> Result<()> {
-    let (written, empty) = {
-        let l = &levels[0];
-        SlabSink {
-            channels,
-            shape: l.plan.shape,
-            brick,
-            outer: l.outer,
-            array: Some(&l.array),
-            histograms: &l.histograms,
-            stats: Some(stats),
-        }
-        .process(slab, z0, nz)?
-    };
+    levels[0].write_slab(slab, z0, nz, channels, brick, Some(stats))?;
     let shape = levels[0].plan.shape;
-    levels[0].written += written;
-    levels[0].empty += empty;
-    levels[0].cells.add_slab(slab, z0, nz, shape);
     if levels.len() > 1 {
         accumulate(&mut levels[1], channels, shape, z0, nz, &Values(slab));
         flush_if_full(levels, 1, channels, brick, z0 + nz)?;
@@ -768,25 +788,9 @@ fn flush_if_full<T: Sample>(
                 }
             });
     }
-    let level = &levels[l];
-    let (written, empty) = SlabSink {
-        channels,
-        shape: level.plan.shape,
-        brick,
-        outer: level.outer,
-        array: Some(&level.array),
-        histograms: &level.histograms,
-        stats: None,
-    }
-    .process(&values, z0, nz)?;
-    let shape = level.plan.shape;
-    {
-        let level = &mut levels[l];
-        level.written += written;
-        level.empty += empty;
-        level.cells.add_slab(&values, z0, nz, shape);
-        level.values = values;
-    }
+    levels[l].write_slab(&values, z0, nz, channels, brick, None)?;
+    levels[l].values = values;
+    let shape = levels[l].plan.shape;
     if l + 1 < levels.len() {
         let (lower, upper) = levels.split_at_mut(l + 1);
         let this = &lower[l];

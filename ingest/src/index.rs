@@ -184,10 +184,9 @@ fn index_typed<T: Sample>(
                 .array
                 .retrieve_array_subset(&ArraySubset::new_with_ranges(&ranges))
                 .with_context(|| format!("{shown}: cannot read level {} at z {z0}", level.path))?;
-            let (w, e) = sink.process(&slab, z0, nz)?;
+            let (w, e) = sink.process(&slab, z0, nz, &mut cells)?;
             written += w;
             empty += e;
-            cells.add_slab(&slab, z0, nz, level.shape);
             z0 += nz;
         }
         gathered.push((cells, histograms, written, empty));

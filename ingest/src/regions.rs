@@ -199,11 +199,6 @@ pub struct FineHistogram {
 }
 
 impl FineHistogram {
-    /// Total count.
-    pub fn total(&self) -> u64 {
-        self.counts.iter().map(|&c| c as u64).sum()
-    }
-
     fn from_keys(keys: &mut [u32; FINE_KEYS]) -> Self {
         let Some(first) = keys.iter().position(|&c| c > 0) else {
             return Self::default();
@@ -441,23 +436,6 @@ impl ChannelAccumulator {
         }
     }
 
-    /// Merges another accumulator into this one.
-    pub fn merge(&mut self, other: &Self) {
-        self.sum += other.sum;
-        self.count += other.count;
-        self.nan += other.nan;
-        self.min = self.min.min(other.min);
-        self.max = self.max.max(other.max);
-        for (a, b) in self.keys.iter_mut().zip(&other.keys) {
-            *a += b;
-        }
-        self.exact
-            .resize(self.exact.len().max(other.exact.len()), 0);
-        for (a, b) in self.exact.iter_mut().zip(&other.exact) {
-            *a += b;
-        }
-    }
-
     /// Percentiles: for data of at most 16 bits, the smallest value with at least that
     /// fraction of voxels at or below it (exact); for 32-bit data, interpolated linearly
     /// inside the fine key that holds it and clamped to `[min, max]`.
@@ -608,7 +586,7 @@ mod tests {
             (f.count, f.nan, f.min, f.max, f.sum),
             (3, 1, -2.0, 1.5, -0.5)
         );
-        assert_eq!(f.fine.total(), 3);
+        assert_eq!(f.fine.counts.iter().sum::<u32>(), 3);
         assert!(!f.all_fill);
         let zeros = [0.0f32; 4];
         assert!(BrickStats::of_rows([&zeros[..]].into_iter(), &mut scratch, false).all_fill);

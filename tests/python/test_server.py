@@ -17,6 +17,30 @@ from ome_zarr_models import open_ome_zarr
 from conftest import BIN, run_ingest
 
 
+def start_server(*args):
+    """Starts `brickserver serve ARGS --bind 127.0.0.1:0`; returns (process, base URL) once
+    it announces that it listens."""
+    proc = subprocess.Popen(
+        [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    for line in proc.stdout:
+        if line.startswith("listening on "):
+            return proc, line.split("listening on ")[1].strip()
+    raise AssertionError(f"brickserver did not start:\n{proc.stderr.read()}")
+
+
+def small_store(tmp_path):
+    """A one-channel store made by `ingest` from a tiny TIFF."""
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
+    store = tmp_path / "a.ome.zarr"
+    run_ingest("convert", src, "-o", store, "--quiet")
+    return store
+
+
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
     """A store made by `ingest` (3 levels, empty bricks included), served on a free port.
@@ -31,17 +55,7 @@ def served(tmp_path_factory):
     run_ingest("convert", src, "-o", store, "--chunk", "8", "--quiet")
     (d / "secret.txt").write_text("TOP SECRET")
     os.symlink(d / "secret.txt", store / "escape")
-    proc = subprocess.Popen(
-        [str(BIN / "brickserver"), "serve", str(store), "--bind", "127.0.0.1:0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    line = ""
-    for line in proc.stdout:
-        if line.startswith("listening on "):
-            break
-    base = line.split("listening on ")[1].strip()
+    proc, base = start_server(store)
     yield base, store, proc
     if proc.poll() is None:
         proc.send_signal(signal.SIGTERM)
@@ -155,14 +169,7 @@ def test_listing_links_open_each_dataset(served):
 
 
 def test_graceful_shutdown_on_sigterm(tmp_path):
-    src = tmp_path / "a.tif"
-    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
-    store = tmp_path / "a.ome.zarr"
-    run_ingest("convert", src, "-o", store, "--quiet")
-    proc = subprocess.Popen([str(BIN / "brickserver"), "serve", str(store), "--bind", "127.0.0.1:0"], stdout=subprocess.PIPE, text=True)
-    for line in proc.stdout:
-        if line.startswith("listening on "):
-            break
+    proc, _ = start_server(small_store(tmp_path))
     proc.send_signal(signal.SIGTERM)
     assert proc.wait(timeout=10) == 0
 
@@ -174,22 +181,11 @@ def test_bad_dataset_is_a_clear_error(tmp_path):
 
 
 def test_token_file_guards_everything_but_health(tmp_path):
-    src = tmp_path / "a.tif"
-    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
-    store = tmp_path / "a.ome.zarr"
-    run_ingest("convert", src, "-o", store, "--quiet")
+    store = small_store(tmp_path)
     token_file = tmp_path / "token"
     token_file.write_text("s3cret-token\n")
-    proc = subprocess.Popen(
-        [str(BIN / "brickserver"), "serve", str(store), "--bind", "127.0.0.1:0", "--token-file", str(token_file)],
-        stdout=subprocess.PIPE,
-        text=True,
-    )
+    proc, base = start_server(store, "--token-file", token_file)
     try:
-        for line in proc.stdout:
-            if line.startswith("listening on "):
-                break
-        base = line.split("listening on ")[1].strip()
         good = {"Authorization": "Bearer s3cret-token"}
         for path in ["/a/zarr.json", "/datasets", "/", "/a/0/zarr.json"]:
             assert requests.get(base + path).status_code == 401, path
@@ -205,10 +201,7 @@ def test_token_file_guards_everything_but_health(tmp_path):
 
 
 def test_empty_token_file_is_refused(tmp_path):
-    src = tmp_path / "a.tif"
-    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
-    store = tmp_path / "a.ome.zarr"
-    run_ingest("convert", src, "-o", store, "--quiet")
+    store = small_store(tmp_path)
     (tmp_path / "token").write_text("  \n")
     p = subprocess.run([str(BIN / "brickserver"), "serve", str(store), "--token-file", str(tmp_path / "token")], capture_output=True, text=True)
     assert p.returncode != 0 and "token file is empty" in p.stderr

@@ -93,6 +93,7 @@ impl PlaneOut<'_> {
         ) {
             let w = S::FORMAT.bytes();
             let stride = w * samples;
+            assert_eq!(bytes.len(), out.len() * stride, "decoded plane size");
             let pixels = bytes.chunks_exact(stride);
             if S::FORMAT == T::FORMAT {
                 // Same format: decode the bytes as the destination type, bit for bit.

@@ -70,11 +70,6 @@ impl SliceFolderSource {
             page: Vec::new(),
         })
     }
-
-    /// The slice files, in z order.
-    pub fn files(&self) -> &[PathBuf] {
-        &self.files
-    }
 }
 
 impl VolumeSource for SliceFolderSource {
