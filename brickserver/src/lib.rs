@@ -4,16 +4,28 @@
 //! - [`datasets`]: the configured datasets and their names;
 //! - [`store_keys`]: turning a request path into a file inside a dataset, safely;
 //! - [`responses`]: file answers with `ETag`, `Range`, `Cache-Control` and `Content-Type`;
+//! - [`cache`]: the bounded memory cache;
+//! - [`regions`]: region queries and the min/max hierarchy, from the stored metadata;
+//! - [`bricks`]: batched bricks;
 //! - [`metrics`]: Prometheus metrics;
-//! - [`routes`]: the axum router (Zarr keys, dataset listing, health, metrics).
+//! - [`openapi`]: the OpenAPI document;
+//! - [`routes`]: the axum router;
+//! - [`listener`]: connections, with a header timeout, a connection limit and graceful
+//!   shutdown.
 
 #![warn(missing_docs)]
 
+pub mod bricks;
+pub mod cache;
 pub mod datasets;
+pub mod listener;
 pub mod metrics;
+pub mod openapi;
+pub mod regions;
 pub mod responses;
 pub mod routes;
 pub mod store_keys;
 
 pub use datasets::{Dataset, Datasets};
-pub use routes::{ServerOptions, router};
+pub use listener::{ConnectionLimits, serve};
+pub use routes::{AppState, ServerOptions, router};

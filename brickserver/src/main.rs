@@ -4,10 +4,13 @@ use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Duration;
 
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
-use residency_brickserver::{Datasets, ServerOptions, router};
+use residency_brickserver::bricks::BatchLimits;
+use residency_brickserver::{AppState, ConnectionLimits, Datasets, ServerOptions, router, serve};
 
 #[derive(Parser)]
 #[command(
@@ -36,6 +39,22 @@ enum Command {
         /// is the file's content without surrounding whitespace.
         #[arg(long)]
         token_file: Option<PathBuf>,
+        /// Memory cache budget in bytes, for chunks and decoded bricks (0: no cache).
+        #[arg(long, default_value_t = 256 << 20)]
+        cache_bytes: u64,
+        /// Most connections open at once; more get a 503 and are closed.
+        #[arg(long, default_value_t = 4096)]
+        max_connections: usize,
+        /// Seconds a client may take to send a request's headers (also the idle limit of a
+        /// kept-alive connection), and a request may take to be answered.
+        #[arg(long, default_value_t = 30.0)]
+        request_timeout: f64,
+        /// Most bricks in one batched request.
+        #[arg(long, default_value_t = 256)]
+        max_batch_bricks: usize,
+        /// Most decoded bytes in one batched request.
+        #[arg(long, default_value_t = 64 << 20)]
+        max_batch_bytes: u64,
     },
 }
 
@@ -65,7 +84,27 @@ fn read_token(path: &std::path::Path) -> Result<String> {
     Ok(token)
 }
 
-async fn serve(datasets: Datasets, bind: SocketAddr, options: ServerOptions) -> Result<()> {
+/// Raises the open-file limit to its hard maximum, as servers do: each connection is a file.
+fn raise_file_limit() {
+    // SAFETY: getrlimit/setrlimit only read and write the struct passed.
+    unsafe {
+        let mut lim = libc::rlimit {
+            rlim_cur: 0,
+            rlim_max: 0,
+        };
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
+            lim.rlim_cur = lim.rlim_max;
+            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
+        }
+    }
+}
+
+async fn run(
+    datasets: Datasets,
+    bind: SocketAddr,
+    options: ServerOptions,
+    limits: ConnectionLimits,
+) -> Result<()> {
     let listener = tokio::net::TcpListener::bind(bind)
         .await
         .with_context(|| format!("cannot listen on {bind}"))?;
@@ -76,10 +115,9 @@ async fn serve(datasets: Datasets, bind: SocketAddr, options: ServerOptions) -> 
     }
     println!("listening on http://{addr}");
     std::io::stdout().flush()?;
-    axum::serve(listener, router(datasets, options))
-        .with_graceful_shutdown(shutdown)
-        .await
-        .context("server error")
+    let state = Arc::new(AppState::new(datasets, &options));
+    let metrics = state.metrics.clone();
+    serve(listener, router(state, &options), limits, metrics, shutdown).await
 }
 
 fn main() -> ExitCode {
@@ -95,14 +133,37 @@ fn main() -> ExitCode {
             bind,
             named,
             token_file,
+            cache_bytes,
+            max_connections,
+            request_timeout,
+            max_batch_bricks,
+            max_batch_bytes,
         } => (|| {
             let datasets = Datasets::from_args(&datasets, &named)?;
+            if !(request_timeout > 0.0 && request_timeout.is_finite()) {
+                anyhow::bail!("--request-timeout must be a positive number of seconds");
+            }
+            if max_connections == 0 || max_batch_bricks == 0 {
+                anyhow::bail!("--max-connections and --max-batch-bricks must be at least 1");
+            }
+            let timeout = Duration::from_secs_f64(request_timeout);
             let options = ServerOptions {
                 token: token_file.as_deref().map(read_token).transpose()?,
+                cache_bytes,
+                batch: BatchLimits {
+                    max_bricks: max_batch_bricks,
+                    max_bytes: max_batch_bytes,
+                },
+                request_timeout: timeout,
             };
+            let limits = ConnectionLimits {
+                max_connections,
+                header_timeout: timeout,
+            };
+            raise_file_limit();
             tokio::runtime::Runtime::new()
                 .context("cannot start the runtime")?
-                .block_on(serve(datasets, bind, options))
+                .block_on(run(datasets, bind, options, limits))
         })(),
     };
     match result {

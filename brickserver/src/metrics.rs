@@ -1,5 +1,6 @@
 //! Server metrics in the Prometheus (OpenMetrics) text format: requests by status class,
-//! bytes sent, and a latency histogram.
+//! bytes sent, a latency histogram, cache hits and misses (the hit rate is
+//! `hits / (hits + misses)`), cached bytes, and open and refused connections.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -12,6 +13,7 @@ use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::encoding::text::encode;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
+use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::metrics::histogram::Histogram;
 use prometheus_client::registry::Registry;
 
@@ -28,6 +30,16 @@ pub struct Metrics {
     requests: Family<StatusClass, Counter>,
     bytes: Counter,
     latency: Histogram,
+    /// Cache lookups that found their entry.
+    pub cache_hits: Counter,
+    /// Cache lookups that did not.
+    pub cache_misses: Counter,
+    /// Bytes held by the cache.
+    pub cache_bytes: Gauge,
+    /// Connections open now.
+    pub connections: Gauge,
+    /// Connections refused (503) because the connection limit was reached.
+    pub connections_refused: Counter,
 }
 
 impl Default for Metrics {
@@ -53,11 +65,44 @@ impl Default for Metrics {
             "Time from request to response headers",
             latency.clone(),
         );
+        let (cache_hits, cache_misses) = (Counter::default(), Counter::default());
+        let (cache_bytes, connections) = (Gauge::default(), Gauge::default());
+        let connections_refused = Counter::default();
+        registry.register(
+            "brickserver_cache_hits",
+            "Cache lookups that found their entry",
+            cache_hits.clone(),
+        );
+        registry.register(
+            "brickserver_cache_misses",
+            "Cache lookups that did not find their entry",
+            cache_misses.clone(),
+        );
+        registry.register(
+            "brickserver_cache_bytes",
+            "Bytes held by the memory cache",
+            cache_bytes.clone(),
+        );
+        registry.register(
+            "brickserver_connections",
+            "Connections open now",
+            connections.clone(),
+        );
+        registry.register(
+            "brickserver_connections_refused",
+            "Connections refused because the connection limit was reached",
+            connections_refused.clone(),
+        );
         Self {
             registry,
             requests,
             bytes,
             latency,
+            cache_hits,
+            cache_misses,
+            cache_bytes,
+            connections,
+            connections_refused,
         }
     }
 }

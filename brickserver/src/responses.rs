@@ -1,13 +1,14 @@
 //! Answers for stored files: the bytes verbatim, with `ETag` / `If-None-Match`, single
 //! `Range` requests, `Cache-Control` and `Content-Type` suited to Zarr keys.
 
-use std::io::SeekFrom;
+use std::io::Read;
 use std::path::Path;
 use std::time::UNIX_EPOCH;
 
-use axum::body::Body;
+use axum::body::{Body, Bytes};
 use axum::http::{HeaderMap, HeaderValue, Response, StatusCode, header};
-use tokio::io::{AsyncReadExt, AsyncSeekExt};
+
+use crate::cache::Cached;
 
 /// `Cache-Control` for chunks and shards: immutable once written by `ingest`.
 pub const CACHE_IMMUTABLE: &str = "public, max-age=31536000, immutable";
@@ -83,36 +84,37 @@ fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
         })
 }
 
-/// The answer for the file at `path`, served as Zarr key `key`.
-pub async fn file_response(
-    path: &Path,
-    key: &str,
-    headers: &HeaderMap,
-) -> Result<Response<Body>, (StatusCode, String)> {
-    let io_error = |e: std::io::Error| {
-        (
-            StatusCode::INTERNAL_SERVER_ERROR,
-            format!("cannot read key '{key}': {e}"),
-        )
-    };
-    let mut file = tokio::fs::File::open(path).await.map_err(io_error)?;
-    let meta = file.metadata().await.map_err(io_error)?;
-    let len = meta.len();
-    let etag = etag_of(&meta);
+/// Reads a stored file whole, with its entity tag (length and modification time). Blocking:
+/// one open, one `fstat` and one read.
+pub fn read_file(path: &Path) -> std::io::Result<Cached> {
+    let mut file = std::fs::File::open(path)?;
+    let meta = file.metadata()?;
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.read_to_end(&mut bytes)?;
+    Ok(Cached {
+        bytes: Bytes::from(bytes),
+        etag: etag_of(&meta).into(),
+    })
+}
+
+/// The answer for a stored file's bytes served as Zarr key `key`: 304 when `If-None-Match`
+/// matches, 206 or 416 for a `Range`, 200 otherwise.
+pub fn file_response(file: &Cached, key: &str, headers: &HeaderMap) -> Response<Body> {
+    let len = file.bytes.len() as u64;
     let (content_type, cache) = if is_metadata(key) {
         ("application/json", CACHE_REVALIDATE)
     } else {
         ("application/octet-stream", CACHE_IMMUTABLE)
     };
     let builder = Response::builder()
-        .header(header::ETAG, &etag)
+        .header(header::ETAG, &*file.etag)
         .header(header::CACHE_CONTROL, cache)
         .header(header::ACCEPT_RANGES, "bytes");
-    if if_none_match(headers, &etag) {
-        return Ok(builder
+    if if_none_match(headers, &file.etag) {
+        return builder
             .status(StatusCode::NOT_MODIFIED)
             .body(Body::empty())
-            .expect("response"));
+            .expect("response");
     }
     let range = headers
         .get(header::RANGE)
@@ -120,34 +122,27 @@ pub async fn file_response(
         .map_or(RangeRequest::Whole, |v| parse_range(v, len));
     let builder = builder.header(header::CONTENT_TYPE, content_type);
     match range {
-        RangeRequest::Unsatisfiable => Ok(builder
+        RangeRequest::Unsatisfiable => builder
             .status(StatusCode::RANGE_NOT_SATISFIABLE)
             .header(header::CONTENT_RANGE, format!("bytes */{len}"))
             .body(Body::empty())
-            .expect("response")),
-        RangeRequest::Whole => {
-            let mut bytes = Vec::with_capacity(len as usize);
-            file.read_to_end(&mut bytes).await.map_err(io_error)?;
-            Ok(builder
-                .status(StatusCode::OK)
-                .header(header::CONTENT_LENGTH, HeaderValue::from(bytes.len()))
-                .body(Body::from(bytes))
-                .expect("response"))
-        }
-        RangeRequest::Part(start, end) => {
-            let mut bytes = vec![0u8; (end - start) as usize];
-            file.seek(SeekFrom::Start(start)).await.map_err(io_error)?;
-            file.read_exact(&mut bytes).await.map_err(io_error)?;
-            Ok(builder
-                .status(StatusCode::PARTIAL_CONTENT)
-                .header(
-                    header::CONTENT_RANGE,
-                    format!("bytes {start}-{}/{len}", end - 1),
-                )
-                .header(header::CONTENT_LENGTH, HeaderValue::from(bytes.len()))
-                .body(Body::from(bytes))
-                .expect("response"))
-        }
+            .expect("response"),
+        RangeRequest::Whole => builder
+            .status(StatusCode::OK)
+            .header(header::CONTENT_LENGTH, HeaderValue::from(len))
+            .body(Body::from(file.bytes.clone()))
+            .expect("response"),
+        RangeRequest::Part(start, end) => builder
+            .status(StatusCode::PARTIAL_CONTENT)
+            .header(
+                header::CONTENT_RANGE,
+                format!("bytes {start}-{}/{len}", end - 1),
+            )
+            .header(header::CONTENT_LENGTH, HeaderValue::from(end - start))
+            .body(Body::from(
+                file.bytes.slice(start as usize..end as usize),
+            ))
+            .expect("response"),
     }
 }
 

@@ -1,30 +1,127 @@
-//! The HTTP routes: Zarr keys under `/NAME/`, the dataset listing, and health.
+//! The HTTP routes: Zarr keys under `/NAME/`, the region API (`/NAME/regions`,
+//! `/NAME/minmax`, `/NAME/bricks`), the dataset listing, health, metrics and the OpenAPI
+//! document.
+//!
+//! The three API paths never collide with a Zarr key: a Zarr node at a store's root is a
+//! folder, so its keys are `regions/zarr.json` and the like, never `regions` itself.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
+use std::time::Duration;
 
 use axum::Router;
-use axum::body::Body;
-use axum::extract::{Path, Request, State};
+use axum::body::{Body, Bytes};
+use axum::extract::{Path, Query, RawQuery, Request, State};
 use axum::http::{HeaderMap, Method, Response, StatusCode, Uri, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Json};
 use axum::routing::get;
+use residency_schemas::server::{ApiError, DatasetEntry, DatasetList};
+use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, MINMAX_MEDIA_TYPE, encode_framed};
+use serde::Deserialize;
 use serde_json::json;
 use tower_http::cors::{Any, CorsLayer};
+use tower_http::timeout::TimeoutLayer;
 
+use crate::bricks::{BatchError, BatchLimits, ImageArrays, parse_batch, read_batch};
+use crate::cache::{ByteCache, CacheKey, Cached};
 use crate::datasets::Datasets;
 use crate::metrics::{Metrics, track};
-use crate::responses::file_response;
+use crate::regions::{QueryError, RegionIndex};
+use crate::responses::{file_response, is_metadata, read_file};
 use crate::store_keys::{KeyError, resolve};
 
-/// Shared state of the routes.
-pub type AppState = Arc<Datasets>;
-
 /// Server-wide options of the router.
-#[derive(Clone, Debug, Default)]
+#[derive(Clone, Debug)]
 pub struct ServerOptions {
     /// When set, every request but `/healthz` must carry `Authorization: Bearer <token>`.
     pub token: Option<String>,
+    /// Memory cache budget in bytes (0: no cache).
+    pub cache_bytes: u64,
+    /// Caps on batched brick requests.
+    pub batch: BatchLimits,
+    /// Longest time a request may take to be answered (its headers; 503 after that).
+    pub request_timeout: Duration,
+}
+
+impl Default for ServerOptions {
+    fn default() -> Self {
+        Self {
+            token: None,
+            cache_bytes: 256 << 20,
+            batch: BatchLimits::default(),
+            request_timeout: Duration::from_secs(30),
+        }
+    }
+}
+
+/// What is loaded once per dataset, on first use.
+#[derive(Default)]
+struct Loaded {
+    regions: OnceLock<Result<Option<Arc<RegionIndex>>, String>>,
+    arrays: OnceLock<Result<Arc<ImageArrays>, String>>,
+}
+
+/// Shared state of the routes.
+pub struct AppState {
+    /// The served datasets.
+    pub datasets: Datasets,
+    /// The memory cache.
+    pub cache: ByteCache,
+    /// The metrics.
+    pub metrics: Arc<Metrics>,
+    batch: BatchLimits,
+    loaded: Vec<Loaded>,
+}
+
+impl AppState {
+    /// State for `datasets` under `options`.
+    pub fn new(datasets: Datasets, options: &ServerOptions) -> Self {
+        let metrics = Arc::new(Metrics::default());
+        let cache = ByteCache::new(
+            options.cache_bytes,
+            metrics.cache_hits.clone(),
+            metrics.cache_misses.clone(),
+            metrics.cache_bytes.clone(),
+        );
+        let loaded = datasets.0.iter().map(|_| Loaded::default()).collect();
+        Self {
+            datasets,
+            cache,
+            metrics,
+            batch: options.batch,
+            loaded,
+        }
+    }
+
+    /// The region index of dataset `i` (loaded on first use; blocking).
+    fn regions(&self, i: usize) -> Result<Option<Arc<RegionIndex>>, String> {
+        self.loaded[i]
+            .regions
+            .get_or_init(|| {
+                let d = &self.datasets.0[i];
+                RegionIndex::load(&d.root)
+                    .map(|r| r.map(Arc::new))
+                    .map_err(|e| format!("dataset '{}': {e:#}", d.name))
+            })
+            .clone()
+    }
+
+    /// The image arrays of dataset `i` (opened on first use; blocking).
+    fn arrays(&self, i: usize) -> Result<Arc<ImageArrays>, String> {
+        self.loaded[i]
+            .arrays
+            .get_or_init(|| {
+                let d = &self.datasets.0[i];
+                ImageArrays::open(&d.root)
+                    .map(Arc::new)
+                    .map_err(|e| format!("dataset '{}': {e:#}", d.name))
+            })
+            .clone()
+    }
+
+    fn index_of(&self, name: &str) -> Option<usize> {
+        self.datasets.0.iter().position(|d| d.name == name)
+    }
 }
 
 /// Refuses requests without the configured bearer token (401), except health checks and
@@ -69,8 +166,8 @@ async fn require_token(
     }
 }
 
-/// The router serving `datasets`.
-pub fn router(datasets: Datasets, options: ServerOptions) -> Router {
+/// The router serving `state`'s datasets.
+pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
     let cors = CorsLayer::new()
         .allow_origin(Any)
         .allow_methods([Method::GET, Method::HEAD, Method::OPTIONS])
@@ -81,32 +178,28 @@ pub fn router(datasets: Datasets, options: ServerOptions) -> Router {
             header::CONTENT_LENGTH,
             header::ACCEPT_RANGES,
         ])
-        .max_age(std::time::Duration::from_secs(86400));
-    let metrics = Arc::new(Metrics::default());
-    let shown = metrics.clone();
+        .max_age(Duration::from_secs(86400));
+    let metrics = state.metrics.clone();
     Router::new()
-        .route(
-            "/metrics",
-            get(move || async move {
-                (
-                    [(
-                        header::CONTENT_TYPE,
-                        "application/openmetrics-text; version=1.0.0; charset=utf-8",
-                    )],
-                    shown.render(),
-                )
-            }),
-        )
+        .route("/metrics", get(show_metrics))
+        .route("/openapi.json", get(openapi).options(allowed_methods))
         .route("/", get(list).options(allowed_methods))
         .route("/datasets", get(list).options(allowed_methods))
         .route(
             "/healthz",
             get(|| async { "ok\n" }).options(allowed_methods),
         )
+        .route("/{name}/regions", get(regions).options(allowed_methods))
+        .route("/{name}/minmax", get(minmax).options(allowed_methods))
+        .route("/{name}/bricks", get(bricks).options(allowed_methods))
         .route("/{name}/{*key}", get(serve_key).options(allowed_methods))
-        .with_state(Arc::new(datasets))
+        .with_state(state)
+        .layer(TimeoutLayer::with_status_code(
+            StatusCode::SERVICE_UNAVAILABLE,
+            options.request_timeout,
+        ))
         .layer(middleware::from_fn_with_state(
-            Arc::new(options.token),
+            Arc::new(options.token.clone()),
             require_token,
         ))
         .layer(middleware::from_fn_with_state(metrics, track))
@@ -120,12 +213,27 @@ async fn allowed_methods() -> impl IntoResponse {
     )
 }
 
-async fn list(State(datasets): State<AppState>, headers: HeaderMap) -> Json<serde_json::Value> {
+async fn show_metrics(State(state): State<Arc<AppState>>) -> impl IntoResponse {
+    (
+        [(
+            header::CONTENT_TYPE,
+            "application/openmetrics-text; version=1.0.0; charset=utf-8",
+        )],
+        state.metrics.render(),
+    )
+}
+
+async fn openapi() -> Json<serde_json::Value> {
+    Json(crate::openapi::document())
+}
+
+async fn list(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Json<DatasetList> {
     let host = headers
         .get(header::HOST)
         .and_then(|h| h.to_str().ok())
         .unwrap_or("localhost");
-    let items: Vec<_> = datasets
+    let datasets = state
+        .datasets
         .0
         .iter()
         .map(|d| {
@@ -136,24 +244,43 @@ async fn list(State(datasets): State<AppState>, headers: HeaderMap) -> Json<serd
                 percent_encoding::NON_ALPHANUMERIC,
             )
             .to_string();
-            json!({
-                "name": d.name,
-                "url": url,
-                "neuroglancer": format!("https://neuroglancer-demo.appspot.com/#!{fragment}"),
-                "vizarr": format!("https://hms-dbmi.github.io/vizarr/?source={url}"),
-            })
+            DatasetEntry {
+                name: d.name.clone(),
+                neuroglancer: format!("https://neuroglancer-demo.appspot.com/#!{fragment}"),
+                vizarr: format!("https://hms-dbmi.github.io/vizarr/?source={url}"),
+                url,
+            }
         })
         .collect();
-    Json(json!({ "datasets": items }))
+    Json(DatasetList { datasets })
+}
+
+/// A JSON error answer.
+fn api_error(status: StatusCode, error: String) -> Response<Body> {
+    if status.is_server_error() {
+        tracing::error!("{error}");
+    }
+    (status, Json(ApiError { error })).into_response()
+}
+
+fn no_dataset(name: &str) -> Response<Body> {
+    api_error(StatusCode::NOT_FOUND, format!("no dataset '{name}'"))
+}
+
+/// Runs blocking work off the async threads.
+async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    tokio::task::spawn_blocking(f)
+        .await
+        .expect("blocking task panicked")
 }
 
 async fn serve_key(
-    State(datasets): State<AppState>,
+    State(state): State<Arc<AppState>>,
     Path((name, _)): Path<(String, String)>,
     uri: Uri,
     headers: HeaderMap,
 ) -> Response<Body> {
-    let Some(dataset) = datasets.get(&name) else {
+    let Some(index) = state.index_of(&name) else {
         return (StatusCode::NOT_FOUND, format!("no dataset '{name}'\n")).into_response();
     };
     // The raw, still percent-encoded key: everything after "/NAME/".
@@ -163,14 +290,29 @@ async fn serve_key(
         .nth(2)
         .unwrap_or_default()
         .to_string();
-    match resolve(&dataset.root, &raw_key) {
-        Ok(path) => match file_response(&path, &raw_key, &headers).await {
-            Ok(response) => response,
-            Err((status, message)) => {
-                tracing::error!(dataset = %name, key = %raw_key, "{message}");
-                (status, format!("{message}\n")).into_response()
+    // Chunks are immutable: a cached copy stands for the file. Metadata documents, which
+    // `ingest index` may rewrite, are always read afresh.
+    let cache_key = (!is_metadata(&raw_key)).then(|| CacheKey::File {
+        dataset: index,
+        key: raw_key.clone(),
+    });
+    if let Some(hit) = cache_key.as_ref().and_then(|k| state.cache.get(k)) {
+        return file_response(&hit, &raw_key, &headers);
+    }
+    let root = state.datasets.0[index].root.clone();
+    let key = raw_key.clone();
+    let read = blocking(move || {
+        let path = resolve(&root, &key)?;
+        read_file(&path).map_err(|e| KeyError::Unreadable(e.to_string()))
+    })
+    .await;
+    match read {
+        Ok(file) => {
+            if let Some(k) = cache_key {
+                state.cache.insert(k, file.clone());
             }
-        },
+            file_response(&file, &raw_key, &headers)
+        }
         Err(KeyError::NotFound) => (
             StatusCode::NOT_FOUND,
             format!("no key '{raw_key}' in '{name}'\n"),
@@ -179,5 +321,178 @@ async fn serve_key(
         Err(KeyError::Refused(why)) => {
             (StatusCode::BAD_REQUEST, format!("refused: {why}\n")).into_response()
         }
+        Err(KeyError::Unreadable(why)) => {
+            let message = format!("cannot read key '{raw_key}' of '{name}': {why}");
+            tracing::error!("{message}");
+            (StatusCode::INTERNAL_SERVER_ERROR, format!("{message}\n")).into_response()
+        }
     }
+}
+
+/// Parses `x,y,z`.
+fn parse_xyz(what: &str, text: &str) -> Result<[u64; 3], String> {
+    let v: Vec<u64> = text
+        .split(',')
+        .map(|s| s.trim().parse::<u64>())
+        .collect::<Result<_, _>>()
+        .map_err(|_| format!("{what} '{text}' is not three integers x,y,z"))?;
+    v.try_into()
+        .map_err(|_| format!("{what} '{text}' is not three integers x,y,z"))
+}
+
+/// Query of `/NAME/regions`.
+#[derive(Deserialize)]
+struct RegionParams {
+    level: usize,
+    channel: usize,
+    min: String,
+    max: String,
+}
+
+/// The region index of a dataset, or the error answer.
+async fn region_index(
+    state: &Arc<AppState>,
+    name: &str,
+) -> Result<Arc<RegionIndex>, Response<Body>> {
+    let index = state.index_of(name).ok_or_else(|| no_dataset(name))?;
+    let st = state.clone();
+    match blocking(move || st.regions(index)).await {
+        Ok(Some(r)) => Ok(r),
+        Ok(None) => Err(api_error(
+            StatusCode::NOT_FOUND,
+            format!(
+                "dataset '{name}' has no region metadata (add it with `ingest index`); \
+                 min/max and histograms are unknown"
+            ),
+        )),
+        Err(e) => Err(api_error(StatusCode::INTERNAL_SERVER_ERROR, e)),
+    }
+}
+
+async fn regions(
+    State(state): State<Arc<AppState>>,
+    Path(name): Path<String>,
+    params: Result<Query<RegionParams>, axum::extract::rejection::QueryRejection>,
+) -> Response<Body> {
+    let Query(p) = match params {
+        Ok(p) => p,
+        Err(e) => {
+            return api_error(
+                StatusCode::BAD_REQUEST,
+                format!("{}; expected level=L&channel=C&min=x,y,z&max=x,y,z", e.body_text()),
+            );
+        }
+    };
+    let index = match region_index(&state, &name).await {
+        Ok(i) => i,
+        Err(r) => return r,
+    };
+    let bounds = parse_xyz("min", &p.min).and_then(|a| Ok((a, parse_xyz("max", &p.max)?)));
+    let (min, max) = match bounds {
+        Ok(b) => b,
+        Err(e) => return api_error(StatusCode::BAD_REQUEST, e),
+    };
+    match index.query(&name, p.level, p.channel, min, max) {
+        Ok(answer) => Json(answer).into_response(),
+        Err(QueryError(e)) => api_error(StatusCode::BAD_REQUEST, e),
+    }
+}
+
+/// Query of `/NAME/minmax`.
+#[derive(Deserialize)]
+struct MinMaxParams {
+    channel: usize,
+}
+
+async fn minmax(
+    State(state): State<Arc<AppState>>,
+    Path(name): Path<String>,
+    params: Result<Query<MinMaxParams>, axum::extract::rejection::QueryRejection>,
+) -> Response<Body> {
+    let Query(p) = match params {
+        Ok(p) => p,
+        Err(e) => {
+            return api_error(
+                StatusCode::BAD_REQUEST,
+                format!("{}; expected channel=C", e.body_text()),
+            );
+        }
+    };
+    let index = match region_index(&state, &name).await {
+        Ok(i) => i,
+        Err(r) => return r,
+    };
+    match index.minmax_document(p.channel) {
+        Ok(doc) => (
+            [
+                (header::CONTENT_TYPE, MINMAX_MEDIA_TYPE),
+                (header::CACHE_CONTROL, "public, no-cache"),
+            ],
+            doc,
+        )
+            .into_response(),
+        Err(QueryError(e)) => api_error(StatusCode::BAD_REQUEST, e),
+    }
+}
+
+async fn bricks(
+    State(state): State<Arc<AppState>>,
+    Path(name): Path<String>,
+    RawQuery(query): RawQuery,
+) -> Response<Body> {
+    let Some(index) = state.index_of(&name) else {
+        return no_dataset(&name);
+    };
+    let (list, encoding) = match parse_batch(query.as_deref().unwrap_or(""), &state.batch) {
+        Ok(b) => b,
+        Err(BatchError::Bad(e)) => return api_error(StatusCode::BAD_REQUEST, e),
+        Err(BatchError::TooLarge(e)) => return api_error(StatusCode::PAYLOAD_TOO_LARGE, e),
+    };
+    let st = state.clone();
+    let arrays = match blocking(move || st.arrays(index)).await {
+        Ok(a) => a,
+        Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e),
+    };
+    let decoded = list.len() as u64 * arrays.brick_bytes();
+    if decoded > state.batch.max_bytes {
+        return api_error(
+            StatusCode::PAYLOAD_TOO_LARGE,
+            format!(
+                "{} bricks of {} bytes exceed the batch limit of {} bytes",
+                list.len(),
+                arrays.brick_bytes(),
+                state.batch.max_bytes
+            ),
+        );
+    }
+    let st = state.clone();
+    let raw = encoding == residency_schemas::wire::BrickEncoding::Raw;
+    let body = blocking(move || {
+        let (header, payload) = read_batch(&arrays, &list, encoding, |at| {
+            let key = CacheKey::Brick {
+                dataset: index,
+                at: (at.level, at.channel, at.brick),
+                raw,
+            };
+            if let Some(hit) = st.cache.get(&key) {
+                return Ok((!hit.bytes.is_empty()).then_some(hit.bytes));
+            }
+            let read = arrays.read(at, encoding)?;
+            let bytes = read.map(Bytes::from).unwrap_or_default();
+            st.cache.insert(
+                key,
+                Cached {
+                    bytes: bytes.clone(),
+                    etag: "".into(),
+                },
+            );
+            Ok((!bytes.is_empty()).then_some(bytes))
+        });
+        for e in header.bricks.iter().filter_map(|b| b.error.as_deref()) {
+            tracing::error!(dataset = %name, "{e}");
+        }
+        encode_framed(BRICKS_MAGIC, &header, &payload)
+    })
+    .await;
+    ([(header::CONTENT_TYPE, BRICKS_MEDIA_TYPE)], body).into_response()
 }

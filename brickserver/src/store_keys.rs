@@ -13,6 +13,9 @@ pub enum KeyError {
     Refused(&'static str),
     /// No such key in the dataset (answered 404).
     NotFound,
+    /// The key exists but cannot be read (a symlink loop, no permission, an I/O error):
+    /// answered 500, naming the key.
+    Unreadable(String),
 }
 
 /// Resolves the raw (still percent-encoded) key part of a request path against `root`
@@ -41,7 +44,10 @@ pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
         }
     }
     let joined = root.join(&*key);
-    let real = joined.canonicalize().map_err(|_| KeyError::NotFound)?;
+    let real = joined.canonicalize().map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory => KeyError::NotFound,
+        _ => KeyError::Unreadable(e.to_string()),
+    })?;
     if !real.starts_with(root) {
         return Err(KeyError::Refused("key leads outside the dataset"));
     }
@@ -78,5 +84,16 @@ mod tests {
             );
         }
         assert_eq!(resolve(&dir, "no-such-key-here"), Err(KeyError::NotFound));
+    }
+
+    #[test]
+    fn a_symlink_loop_is_unreadable_not_missing() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().canonicalize().unwrap();
+        std::os::unix::fs::symlink("loop", root.join("loop")).unwrap();
+        assert!(matches!(
+            resolve(&root, "loop"),
+            Err(KeyError::Unreadable(e)) if e.contains("symbolic links")
+        ));
     }
 }

@@ -78,33 +78,39 @@ pub fn write_region_metadata<T: Sample>(
     for (i, level) in levels.iter().enumerate() {
         writer.write_group(&format!("residency/{i}"), json!({}))?;
         writer.write_group(&format!("residency/{i}/minmax"), json!({}))?;
-        let mut grids = Vec::new();
+        writer.write_group(&format!("residency/{i}/range"), json!({}))?;
+        let (mut minmax, mut range) = (Vec::new(), Vec::new());
         let mut grid = level.cells.clone();
         let mut k = 0;
         loop {
-            let path = format!("residency/{i}/minmax/{k}");
             let g = grid.grid;
-            let array = writer.create_array(
-                &format!("/{path}"),
-                &ArrayLayout {
-                    shape: vec![channels as u64, 2, g[0], g[1], g[2]],
-                    chunk: vec![1, 2, g[0].min(64), g[1].min(64), g[2].min(64)],
-                    inner_chunk: None,
-                    format: T::FORMAT,
-                    dimension_names: None,
-                },
-            )?;
-            array
-                .store_array_subset(
-                    &ArraySubset::new_with_shape(array.shape().to_vec()),
-                    grid.to_min_max_array().as_slice(),
-                )
-                .with_context(|| format!("{shown}: cannot write {path}"))?;
-            grids.push(MinMaxGrid {
-                path,
-                cell_shape: [CELL << k; 3],
-                grid_shape: g,
-            });
+            for (kind, exact, out) in [
+                ("minmax", false, &mut minmax),
+                ("range", true, &mut range),
+            ] {
+                let path = format!("residency/{i}/{kind}/{k}");
+                let array = writer.create_array(
+                    &format!("/{path}"),
+                    &ArrayLayout {
+                        shape: vec![channels as u64, 2, g[0], g[1], g[2]],
+                        chunk: vec![1, 2, g[0].min(64), g[1].min(64), g[2].min(64)],
+                        inner_chunk: None,
+                        format: T::FORMAT,
+                        dimension_names: None,
+                    },
+                )?;
+                array
+                    .store_array_subset(
+                        &ArraySubset::new_with_shape(array.shape().to_vec()),
+                        grid.to_min_max_array(exact).as_slice(),
+                    )
+                    .with_context(|| format!("{shown}: cannot write {path}"))?;
+                out.push(MinMaxGrid {
+                    path,
+                    cell_shape: [CELL << k; 3],
+                    grid_shape: g,
+                });
+            }
             if g == [1, 1, 1] {
                 break;
             }
@@ -138,7 +144,8 @@ pub fn write_region_metadata<T: Sample>(
             image: level.image.clone(),
             shape: level.shape,
             factor: level.factor,
-            minmax: grids,
+            minmax,
+            range,
             histogram: hist_path,
             bricks_written: level.written,
             bricks_empty: level.empty,

@@ -2,10 +2,13 @@
 //! histograms and whole-channel statistics.
 //!
 //! **Min/max cells.** Cell `(k, j, i)` of a level covers voxels `[8k, 8k+8) × [8j, 8j+8) ×
-//! [8i, 8i+8)` and its range is taken over those voxels plus a one-voxel halo on every side
-//! (clipped to the volume). A trilinear sample at any position inside the cell, whichever
-//! voxel-centre convention the renderer uses, interpolates only voxels within the halo, so
-//! the interpolated value lies within `[min, max]`.
+//! [8i, 8i+8)`. Two ranges are kept per cell, gathered in the same pass:
+//! - the *haloed* range, over those voxels plus a one-voxel halo on every side (clipped to the
+//!   volume). A trilinear sample at any position inside the cell, whichever voxel-centre
+//!   convention the renderer uses, interpolates only voxels within the halo, so the
+//!   interpolated value lies within `[min, max]`: this is what culling needs;
+//! - the *exact* range, over the cell's own voxels only: region queries answer from it, so a
+//!   box aligned to the cells gets exactly the range of its voxels.
 //!
 //! **Histograms.** Each sample has a fine key (see [`Sample::key`]). Bricks count keys while
 //! streaming; at the end of the pass, the keys spanned by the channel's global range are
@@ -31,17 +34,46 @@ fn cells_of(v: u64, cells: u64) -> std::ops::RangeInclusive<u64> {
     lo..=hi
 }
 
-/// A min/max grid for all channels of one level: `[c][gz][gy][gx]`.
+/// Per-cell minima and maxima of every channel, `[c][gz][gy][gx]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Ranges<T: Sample> {
+    /// Minimum per cell (`T::HIGHEST` where nothing was seen).
+    pub min: Vec<T>,
+    /// Maximum per cell (`T::LOWEST` where nothing was seen).
+    pub max: Vec<T>,
+}
+
+impl<T: Sample> Ranges<T> {
+    fn new(n: usize) -> Self {
+        Self {
+            min: vec![T::HIGHEST; n],
+            max: vec![T::LOWEST; n],
+        }
+    }
+
+    #[inline]
+    fn fold(&mut self, i: usize, mn: T, mx: T) {
+        if mn < self.min[i] {
+            self.min[i] = mn;
+        }
+        if mx > self.max[i] {
+            self.max[i] = mx;
+        }
+    }
+}
+
+/// The min/max grids of all channels of one level: haloed (for culling) and exact (for
+/// region queries), over the same cells.
 #[derive(Clone, Debug)]
 pub struct CellGrid<T: Sample> {
     /// Number of cells `z, y, x`.
     pub grid: [u64; 3],
     /// Channels.
     pub channels: usize,
-    /// Minimum per cell (`T::HIGHEST` where nothing was seen).
-    pub min: Vec<T>,
-    /// Maximum per cell (`T::LOWEST` where nothing was seen).
-    pub max: Vec<T>,
+    /// Ranges over each cell plus its halo.
+    pub haloed: Ranges<T>,
+    /// Ranges over each cell's own voxels.
+    pub exact: Ranges<T>,
 }
 
 impl<T: Sample> CellGrid<T> {
@@ -51,8 +83,8 @@ impl<T: Sample> CellGrid<T> {
         Self {
             grid,
             channels,
-            min: vec![T::HIGHEST; n],
-            max: vec![T::LOWEST; n],
+            haloed: Ranges::new(n),
+            exact: Ranges::new(n),
         }
     }
 
@@ -73,27 +105,28 @@ impl<T: Sample> CellGrid<T> {
         let [_, ny, nx] = shape;
         let plane = (ny * nx) as usize;
         let [_, gy, gx] = self.grid;
-        let slices: Vec<(usize, u64, Vec<T>, Vec<T>)> = (0..self.channels)
+        let slices: Vec<(usize, u64, SliceCells<T>)> = (0..self.channels)
             .flat_map(|c| (0..nz).map(move |dz| (c, dz)))
             .collect::<Vec<_>>()
             .into_par_iter()
             .map(|(c, dz)| {
                 let start = (c as u64 * nz + dz) as usize * plane;
-                let (mn, mx) = slice_cells(&slab[start..start + plane], ny, nx, gy, gx);
-                (c, z0 + dz, mn, mx)
+                let cells = slice_cells(&slab[start..start + plane], ny, nx, gy, gx);
+                (c, z0 + dz, cells)
             })
             .collect();
-        for (c, z, mn, mx) in slices {
+        for (c, z, cells) in slices {
             for cz in cells_of(z, self.grid[0]) {
                 let base = self.index(c, cz, 0, 0);
-                for i in 0..mn.len() {
-                    if mn[i] < self.min[base + i] {
-                        self.min[base + i] = mn[i];
-                    }
-                    if mx[i] > self.max[base + i] {
-                        self.max[base + i] = mx[i];
-                    }
+                for i in 0..cells.haloed.min.len() {
+                    self.haloed
+                        .fold(base + i, cells.haloed.min[i], cells.haloed.max[i]);
                 }
+            }
+            let base = self.index(c, z / CELL, 0, 0);
+            for i in 0..cells.exact.min.len() {
+                self.exact
+                    .fold(base + i, cells.exact.min[i], cells.exact.max[i]);
             }
         }
     }
@@ -108,12 +141,9 @@ impl<T: Sample> CellGrid<T> {
                     for x in 0..self.grid[2] {
                         let i = self.index(c, z, y, x);
                         let o = out.index(c, z / 2, y / 2, x / 2);
-                        if self.min[i] < out.min[o] {
-                            out.min[o] = self.min[i];
-                        }
-                        if self.max[i] > out.max[o] {
-                            out.max[o] = self.max[i];
-                        }
+                        out.haloed
+                            .fold(o, self.haloed.min[i], self.haloed.max[i]);
+                        out.exact.fold(o, self.exact.min[i], self.exact.max[i]);
                     }
                 }
             }
@@ -121,13 +151,18 @@ impl<T: Sample> CellGrid<T> {
         out
     }
 
-    /// The grid as `[c][2][gz][gy][gx]`, with cells that saw no value (all NaN) as NaN.
-    pub fn to_min_max_array(&self) -> Vec<T> {
+    /// The haloed (`exact == false`) or exact ranges as `[c][2][gz][gy][gx]`, with cells that
+    /// saw no value (all NaN) as NaN.
+    pub fn to_min_max_array(&self, exact: bool) -> Vec<T> {
+        let ranges = if exact { &self.exact } else { &self.haloed };
         let n = (self.grid[0] * self.grid[1] * self.grid[2]) as usize;
         let nan = T::from_f64(f64::NAN);
-        let mut out = Vec::with_capacity(2 * self.min.len());
+        let mut out = Vec::with_capacity(2 * ranges.min.len());
         for c in 0..self.channels {
-            let (mn, mx) = (&self.min[c * n..(c + 1) * n], &self.max[c * n..(c + 1) * n]);
+            let (mn, mx) = (
+                &ranges.min[c * n..(c + 1) * n],
+                &ranges.max[c * n..(c + 1) * n],
+            );
             let empty = |i: usize| mn[i] > mx[i];
             out.extend((0..n).map(|i| if empty(i) { nan } else { mn[i] }));
             out.extend((0..n).map(|i| if empty(i) { nan } else { mx[i] }));
@@ -136,18 +171,26 @@ impl<T: Sample> CellGrid<T> {
     }
 }
 
-/// Haloed min/max cells of one `ny × nx` slice, as `gy × gx` row-major vectors.
-fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> (Vec<T>, Vec<T>) {
-    let mut row_min = vec![T::HIGHEST; gx as usize];
-    let mut row_max = vec![T::LOWEST; gx as usize];
-    let mut min = vec![T::HIGHEST; (gy * gx) as usize];
-    let mut max = vec![T::LOWEST; (gy * gx) as usize];
+/// The cells of one slice: haloed ranges (x and y halo; z is the caller's) and exact ranges.
+struct SliceCells<T: Sample> {
+    haloed: Ranges<T>,
+    exact: Ranges<T>,
+}
+
+/// Min/max cells of one `ny × nx` slice, as `gy × gx` row-major grids: haloed in x and y,
+/// and exact.
+fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> SliceCells<T> {
+    let mut row = Ranges::<T>::new(gx as usize);
+    let mut out = SliceCells {
+        haloed: Ranges::new((gy * gx) as usize),
+        exact: Ranges::new((gy * gx) as usize),
+    };
     for y in 0..ny {
-        row_min.fill(T::HIGHEST);
-        row_max.fill(T::LOWEST);
-        let row = &slice[(y * nx) as usize..((y + 1) * nx) as usize];
-        for (cx, cell) in row.chunks(CELL as usize).enumerate() {
-            let (mut mn, mut mx) = (row_min[cx], row_max[cx]);
+        row.min.fill(T::HIGHEST);
+        row.max.fill(T::LOWEST);
+        let values = &slice[(y * nx) as usize..((y + 1) * nx) as usize];
+        for (cx, cell) in values.chunks(CELL as usize).enumerate() {
+            let (mut mn, mut mx) = (row.min[cx], row.max[cx]);
             for &v in cell {
                 if v < mn {
                     mn = v;
@@ -156,37 +199,30 @@ fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> (V
                     mx = v;
                 }
             }
-            row_min[cx] = mn;
-            row_max[cx] = mx;
+            row.min[cx] = mn;
+            row.max[cx] = mx;
+        }
+        let base = ((y / CELL) * gx) as usize;
+        for i in 0..gx as usize {
+            out.exact.fold(base + i, row.min[i], row.max[i]);
         }
         // Halo in x: the voxel just left of and just right of each cell.
         for cx in 0..gx {
             for x in [(cx * CELL).wrapping_sub(1), (cx + 1) * CELL] {
                 if x < nx {
-                    let v = row[x as usize];
-                    let i = cx as usize;
-                    if v < row_min[i] {
-                        row_min[i] = v;
-                    }
-                    if v > row_max[i] {
-                        row_max[i] = v;
-                    }
+                    let v = values[x as usize];
+                    row.fold(cx as usize, v, v);
                 }
             }
         }
         for cy in cells_of(y, gy) {
             let base = (cy * gx) as usize;
             for i in 0..gx as usize {
-                if row_min[i] < min[base + i] {
-                    min[base + i] = row_min[i];
-                }
-                if row_max[i] > max[base + i] {
-                    max[base + i] = row_max[i];
-                }
+                out.haloed.fold(base + i, row.min[i], row.max[i]);
             }
         }
     }
-    (min, max)
+    out
 }
 
 /// Fine-key counts of one brick and channel, stored from the first to the last non-zero key.
@@ -556,10 +592,19 @@ mod tests {
         let mut g = CellGrid::<u16>::for_shape(1, [1, 1, 20]);
         g.add_slab(&slab, 0, 1, [1, 1, 20]);
         assert_eq!(g.grid, [1, 1, 3]);
-        assert_eq!(g.min, [0, 7, 15]);
-        assert_eq!(g.max, [8, 16, 19]);
+        assert_eq!(g.haloed.min, [0, 7, 15]);
+        assert_eq!(g.haloed.max, [8, 16, 19]);
+        assert_eq!(g.exact.min, [0, 8, 16]);
+        assert_eq!(g.exact.max, [7, 15, 19]);
         let c = g.coarsen();
-        assert_eq!((c.min.clone(), c.max.clone()), (vec![0, 15], vec![16, 19]));
+        assert_eq!(
+            (c.haloed.min.clone(), c.haloed.max.clone()),
+            (vec![0, 15], vec![16, 19])
+        );
+        assert_eq!(
+            (c.exact.min.clone(), c.exact.max.clone()),
+            (vec![0, 16], vec![15, 19])
+        );
     }
 
     #[test]

@@ -6,8 +6,13 @@
 //! The central document is [`RegionMetadata`], stored by `ingest` in the attributes of the
 //! OME-Zarr image group under the key [`REGIONS_KEY`]. It describes the min/max grids and
 //! the per-brick histograms that `ingest` writes as ordinary Zarr arrays inside the group.
+//! [`server`] holds the JSON answers of `brickserver`'s API, and [`wire`] its binary
+//! documents (the min/max hierarchy and brick batches).
 
 #![warn(missing_docs)]
+
+pub mod server;
+pub mod wire;
 
 use serde::{Deserialize, Serialize};
 
@@ -15,7 +20,7 @@ use serde::{Deserialize, Serialize};
 pub const REGIONS_KEY: &str = "residency";
 
 /// Version of the region-metadata layout described by [`RegionMetadata`].
-pub const REGIONS_VERSION: &str = "0.1";
+pub const REGIONS_VERSION: &str = "0.2";
 
 /// Number of histogram bins per brick and channel.
 pub const HISTOGRAM_BINS: usize = 64;
@@ -55,6 +60,11 @@ pub struct RegionLevel {
     /// Min/max grids, finest first. Grid `k` has cells of `cell_shape * 2^k` voxels of this
     /// level; each coarser grid is the min of mins and max of maxes of the finer one.
     pub minmax: Vec<MinMaxGrid>,
+    /// Exact min/max grids, finest first, over the same cells as `minmax` but without the
+    /// halo: each cell's range is that of its own voxels, so region queries over boxes
+    /// aligned to the cells are exact. Absent (empty) in layout `0.1`.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub range: Vec<MinMaxGrid>,
     /// Path of the `uint32` histogram array, shape `[c, bz, by, bx, bins]`.
     pub histogram: String,
     /// Bricks written for this level (all channels).
@@ -98,6 +108,7 @@ pub struct ChannelStatistics {
     /// `edges[i] <= v < edges[i + 1]` (NaN is never counted; `+inf`, whose bin's upper edge
     /// is `+inf` itself, is counted in that bin). The edges cover the channel's whole range;
     /// bins past the last edge hold zero. Infinite edges are written as JSON `null`.
+    #[serde(deserialize_with = "server::edges_with_infinities")]
     pub histogram_edges: Vec<f64>,
 }
 

@@ -94,46 +94,50 @@ def assert_same_bits(a: np.ndarray, b: np.ndarray):
 
 def assert_region_metadata(store: pathlib.Path):
     """Min/max cells equal the haloed range of their voxels (so they bound every trilinear
-    sample inside them), coarser grids are the min of mins / max of maxes, and each brick's
+    sample inside them), exact cells the range of their own voxels, coarser grids are the min of mins / max of maxes, and each brick's
     histogram counts every non-NaN voxel in the bin its documented edges give."""
     g = zarr.open_group(str(store), mode="r")
     meta = root_attributes(store)["residency"]
     cell, halo, brick = meta["cell_shape"][0], meta["halo"], meta["brick_shape"]
     bins = meta["histogram_bins"]
+    assert meta["version"] == "0.2"
     for lvl in meta["levels"]:
         data = g[lvl["image"]][...].astype(np.float64)
         c_count, nz, ny, nx = data.shape
-        grid0 = g[lvl["minmax"][0]["path"]][...].astype(np.float64)
-        gz, gy, gx = lvl["minmax"][0]["grid_shape"]
-        assert grid0.shape == (c_count, 2, gz, gy, gx)
-        for c in range(c_count):
-            for k in range(gz):
-                for j in range(gy):
-                    for i in range(gx):
-                        box = data[
-                            c,
-                            max(k * cell - halo, 0) : (k + 1) * cell + halo,
-                            max(j * cell - halo, 0) : (j + 1) * cell + halo,
-                            max(i * cell - halo, 0) : (i + 1) * cell + halo,
-                        ]
-                        lo, hi = grid0[c, 0, k, j, i], grid0[c, 1, k, j, i]
-                        if np.isnan(box).all():
-                            assert np.isnan(lo) and np.isnan(hi)
-                        else:
-                            assert lo == np.nanmin(box) and hi == np.nanmax(box), (lvl["image"], c, k, j, i)
-        prev = grid0
-        for grid in lvl["minmax"][1:]:
-            cur = g[grid["path"]][...].astype(np.float64)
-            for axis in (2, 3, 4):
-                pad = [(0, 0)] * 5
-                if prev.shape[axis] % 2:
-                    pad[axis] = (0, 1)
-                prev = np.pad(prev, pad, mode="edge")
-            z, y, x = prev.shape[2:]
-            blocks = prev.reshape(c_count, 2, z // 2, 2, y // 2, 2, x // 2, 2)
-            np.testing.assert_array_equal(cur[:, 0], np.nanmin(blocks[:, 0], axis=(2, 4, 6)))
-            np.testing.assert_array_equal(cur[:, 1], np.nanmax(blocks[:, 1], axis=(2, 4, 6)))
-            prev = cur
+        # "minmax": haloed ranges (conservative for trilinear samples); "range": exact.
+        for kind, h in (("minmax", halo), ("range", 0)):
+            assert len(lvl[kind]) == len(lvl["minmax"])
+            grid0 = g[lvl[kind][0]["path"]][...].astype(np.float64)
+            gz, gy, gx = lvl[kind][0]["grid_shape"]
+            assert grid0.shape == (c_count, 2, gz, gy, gx)
+            for c in range(c_count):
+                for k in range(gz):
+                    for j in range(gy):
+                        for i in range(gx):
+                            box = data[
+                                c,
+                                max(k * cell - h, 0) : (k + 1) * cell + h,
+                                max(j * cell - h, 0) : (j + 1) * cell + h,
+                                max(i * cell - h, 0) : (i + 1) * cell + h,
+                            ]
+                            lo, hi = grid0[c, 0, k, j, i], grid0[c, 1, k, j, i]
+                            if np.isnan(box).all():
+                                assert np.isnan(lo) and np.isnan(hi)
+                            else:
+                                assert lo == np.nanmin(box) and hi == np.nanmax(box), (kind, lvl["image"], c, k, j, i)
+            prev = grid0
+            for grid in lvl[kind][1:]:
+                cur = g[grid["path"]][...].astype(np.float64)
+                for axis in (2, 3, 4):
+                    pad = [(0, 0)] * 5
+                    if prev.shape[axis] % 2:
+                        pad[axis] = (0, 1)
+                    prev = np.pad(prev, pad, mode="edge")
+                z, y, x = prev.shape[2:]
+                blocks = prev.reshape(c_count, 2, z // 2, 2, y // 2, 2, x // 2, 2)
+                np.testing.assert_array_equal(cur[:, 0], np.nanmin(blocks[:, 0], axis=(2, 4, 6)))
+                np.testing.assert_array_equal(cur[:, 1], np.nanmax(blocks[:, 1], axis=(2, 4, 6)))
+                prev = cur
         hist = g[lvl["histogram"]][...]
         for c in range(c_count):
             edges = np.array([np.inf if e is None else e for e in meta["channels"][c]["histogram_edges"]])

@@ -1,0 +1,117 @@
+//! The OpenAPI 3.1 document served at `/openapi.json`. Its component schemas are the JSON
+//! Schemas in `schemas/json/`, embedded at build time, so the two cannot drift apart.
+
+use serde_json::{Value, json};
+
+fn schema(text: &str) -> Value {
+    serde_json::from_str(text).expect("the embedded JSON Schemas are valid JSON")
+}
+
+fn error_responses(codes: &[(&str, &str)]) -> Value {
+    let mut out = serde_json::Map::new();
+    for (code, why) in codes {
+        out.insert(
+            (*code).into(),
+            json!({
+                "description": why,
+                "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ApiError"}}}
+            }),
+        );
+    }
+    Value::Object(out)
+}
+
+fn with(mut base: Value, extra: Value) -> Value {
+    if let (Some(b), Value::Object(e)) = (base.as_object_mut(), extra) {
+        b.extend(e);
+    }
+    base
+}
+
+/// The OpenAPI document.
+pub fn document() -> Value {
+    let name = json!({"name": "name", "in": "path", "required": true, "schema": {"type": "string"}, "description": "Dataset name."});
+    let datasets = json!({
+        "get": {
+            "summary": "List the served datasets, with neuroglancer and vizarr links",
+            "responses": {"200": {"description": "The datasets", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/DatasetList"}}}}}
+        }
+    });
+    json!({
+        "openapi": "3.1.0",
+        "info": {
+            "title": "Residency brickserver",
+            "version": env!("CARGO_PKG_VERSION"),
+            "description": "Serves OME-Zarr stores verbatim at their Zarr keys (for any viewer), plus region metadata queries, the binary min/max hierarchy and batched bricks (for renderers). Read-only: GET, HEAD and OPTIONS only. With --token-file, every path but /healthz needs `Authorization: Bearer <token>`."
+        },
+        "paths": {
+            "/": datasets.clone(),
+            "/datasets": datasets,
+            "/healthz": {"get": {"summary": "Liveness", "security": [], "responses": {"200": {"description": "ok", "content": {"text/plain": {"schema": {"type": "string"}}}}}}},
+            "/metrics": {"get": {"summary": "Prometheus metrics: requests by status class, bytes, latency histogram, cache hits/misses/bytes, connections", "responses": {"200": {"description": "OpenMetrics text", "content": {"application/openmetrics-text": {"schema": {"type": "string"}}}}}}},
+            "/openapi.json": {"get": {"summary": "This document", "responses": {"200": {"description": "OpenAPI 3.1", "content": {"application/json": {"schema": {"type": "object"}}}}}}},
+            "/{name}/regions": {"get": {
+                "summary": "Value range and histogram of a box of voxels, from the stored region metadata",
+                "description": "Never narrower than the truth; exact for a box aligned to the stored cells (min/max, 8 voxels at the finest grid) and bricks (histogram), or ending at the level's edge. The answer states the boxes it covers.",
+                "parameters": [
+                    name.clone(),
+                    {"name": "level", "in": "query", "required": true, "schema": {"type": "integer", "minimum": 0}},
+                    {"name": "channel", "in": "query", "required": true, "schema": {"type": "integer", "minimum": 0}},
+                    {"name": "min", "in": "query", "required": true, "schema": {"type": "string", "pattern": "^[0-9]+,[0-9]+,[0-9]+$"}, "description": "First voxel x,y,z of the level."},
+                    {"name": "max", "in": "query", "required": true, "schema": {"type": "string", "pattern": "^[0-9]+,[0-9]+,[0-9]+$"}, "description": "One past the last voxel x,y,z (exclusive)."}
+                ],
+                "responses": with(
+                    json!({"200": {"description": "The answer", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/RegionAnswer"}}}}}),
+                    error_responses(&[("400", "Malformed query, level or channel out of range, or box outside the level"), ("404", "No such dataset, or no region metadata"), ("500", "Region metadata unreadable")])
+                )
+            }},
+            "/{name}/minmax": {"get": {
+                "summary": "The whole conservative min/max hierarchy of one channel, every level and grid, in one framed binary document",
+                "description": "Framing: 8 bytes 'RSMINMAX', little-endian u32 header length, JSON header (schema MinMaxHierarchyHeader), payload.",
+                "parameters": [name.clone(), {"name": "channel", "in": "query", "required": true, "schema": {"type": "integer", "minimum": 0}}],
+                "responses": with(
+                    json!({"200": {"description": "The document", "content": {"application/x-residency-minmax": {"schema": {"type": "string", "contentMediaType": "application/x-residency-minmax"}}}}}),
+                    error_responses(&[("400", "Malformed query or channel out of range"), ("404", "No such dataset, or no region metadata"), ("500", "Region metadata unreadable")])
+                )
+            }},
+            "/{name}/bricks": {"get": {
+                "summary": "Many bricks in one framed binary document",
+                "description": "Framing: 8 bytes 'RSBRICKS', little-endian u32 header length, JSON header (schema BrickBatchHeader), payload. An unreadable or corrupt brick is an `error` entry naming its key; the other bricks are still answered.",
+                "parameters": [
+                    name.clone(),
+                    {"name": "b", "in": "query", "required": true, "schema": {"type": "string"}, "description": "Bricks as L,C,z,y,x separated by ';' (level, channel, brick coordinates)."},
+                    {"name": "encoding", "in": "query", "required": false, "schema": {"enum": ["stored", "raw"], "default": "stored"}}
+                ],
+                "responses": with(
+                    json!({"200": {"description": "The batch", "content": {"application/x-residency-bricks": {"schema": {"type": "string", "contentMediaType": "application/x-residency-bricks"}}}}}),
+                    error_responses(&[("400", "Malformed request"), ("404", "No such dataset"), ("413", "Too many bricks, or too many decoded bytes, in one batch"), ("500", "Image arrays unreadable")])
+                )
+            }},
+            "/{name}/{key}": {"get": {
+                "summary": "A Zarr key of the store, verbatim",
+                "description": "zarr.json, .zattrs, .zarray, chunk and shard keys, residency/ arrays. ETag with If-None-Match (304), single Range (206/416), Cache-Control immutable for chunks and no-cache for metadata, CORS. A missing chunk is a 404 (the fill value to Zarr readers).",
+                "parameters": [name, {"name": "key", "in": "path", "required": true, "schema": {"type": "string"}, "description": "The Zarr key, '/'-separated."}],
+                "responses": {
+                    "200": {"description": "The stored bytes", "content": {"application/json": {"schema": {"type": "object"}}, "application/octet-stream": {"schema": {"type": "string", "contentMediaType": "application/octet-stream"}}}},
+                    "206": {"description": "A byte range of the stored bytes"},
+                    "304": {"description": "Not modified (If-None-Match matched the ETag)"},
+                    "400": {"description": "Refused key: '..', backslash, absolute path, NUL byte, empty segment, or a symlink leading out of the dataset"},
+                    "404": {"description": "No such key (a missing chunk reads as the fill value)"},
+                    "416": {"description": "Range outside the file"},
+                    "500": {"description": "The key exists but cannot be read; the message names it"}
+                }
+            }}
+        },
+        "components": {
+            "schemas": {
+                "DatasetList": schema(include_str!("../../schemas/json/datasets.schema.json")),
+                "RegionAnswer": schema(include_str!("../../schemas/json/region-answer.schema.json")),
+                "ApiError": schema(include_str!("../../schemas/json/api-error.schema.json")),
+                "MinMaxHierarchyHeader": schema(include_str!("../../schemas/json/minmax-hierarchy.schema.json")),
+                "BrickBatchHeader": schema(include_str!("../../schemas/json/brick-batch.schema.json")),
+                "RegionMetadata": schema(include_str!("../../schemas/json/region-metadata.schema.json"))
+            },
+            "securitySchemes": {"bearer": {"type": "http", "scheme": "bearer", "description": "Only when the server runs with --token-file."}}
+        }
+    })
+}

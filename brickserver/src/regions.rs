@@ -1,0 +1,492 @@
+//! Region metadata of one dataset, loaded once from the store's `residency` arrays, and the
+//! answers built from it: region queries (`/NAME/regions`) and the binary min/max hierarchy
+//! (`/NAME/minmax`). Nothing here decodes an image brick.
+//!
+//! **Query contract.** A box of voxels of one level is answered by walking two pyramids from
+//! their root cell down: the exact min/max cells (8³ voxels at the finest grid, doubling per
+//! grid) and the brick histograms (one cell per brick, summed 2×2×2 per coarser grid). A cell
+//! inside the box is taken whole; a cell crossing the box's edge is split into its children,
+//! and at the finest grid taken whole. So the answer covers the smallest union of finest cells
+//! (bricks for the histogram) containing the box: never narrower than the truth, exact for a
+//! box aligned to cells (bricks) or ending at the level's edge, and found in time that grows
+//! with the box's surface, not its volume.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::{Context, Result, bail};
+use axum::body::Bytes;
+use residency_schemas::server::{RegionAnswer, RegionHistogram, VoxelBox};
+use residency_schemas::wire::{
+    MINMAX_MAGIC, MinMaxGridBlock, MinMaxHierarchyHeader, MinMaxLevelBlock, encode_framed,
+    samples_to_f64,
+};
+use residency_schemas::{MinMaxGrid, REGIONS_KEY, RegionMetadata};
+use zarrs::array::{Array, ArrayBytes, ArraySubset};
+use zarrs::filesystem::FilesystemStore;
+
+/// A pyramid of grids: grid `k` has cells of `cell · 2^k` voxels; each cell of grid `k + 1`
+/// aggregates the (up to) 2×2×2 cells below it in grid `k`.
+#[derive(Clone, Debug)]
+struct Pyramid {
+    cell: [u64; 3],
+    shapes: Vec<[u64; 3]>,
+}
+
+/// The cells of a pyramid that cover a box: `(grid, linear index)` pairs, and the box they
+/// cover (`z, y, x`).
+#[derive(Debug, Default, PartialEq)]
+struct Cover {
+    cells: Vec<(usize, usize)>,
+    lo: [u64; 3],
+    hi: [u64; 3],
+}
+
+impl Pyramid {
+    /// The cells covering `[lo, hi)` (`z, y, x`) of a level of `shape`.
+    fn cover(&self, shape: [u64; 3], lo: [u64; 3], hi: [u64; 3]) -> Cover {
+        let mut out = Cover {
+            cells: Vec::new(),
+            lo: hi,
+            hi: lo,
+        };
+        let top = self.shapes.len() - 1;
+        let [gz, gy, gx] = self.shapes[top];
+        for z in 0..gz {
+            for y in 0..gy {
+                for x in 0..gx {
+                    self.visit(top, [z, y, x], shape, lo, hi, &mut out);
+                }
+            }
+        }
+        out
+    }
+
+    fn visit(
+        &self,
+        k: usize,
+        c: [u64; 3],
+        shape: [u64; 3],
+        lo: [u64; 3],
+        hi: [u64; 3],
+        out: &mut Cover,
+    ) {
+        let size: [u64; 3] = std::array::from_fn(|a| self.cell[a] << k);
+        let cell_lo: [u64; 3] = std::array::from_fn(|a| c[a] * size[a]);
+        let cell_hi: [u64; 3] = std::array::from_fn(|a| ((c[a] + 1) * size[a]).min(shape[a]));
+        if (0..3).any(|a| cell_lo[a] >= cell_hi[a] || cell_hi[a] <= lo[a] || cell_lo[a] >= hi[a])
+        {
+            return;
+        }
+        let inside = (0..3).all(|a| lo[a] <= cell_lo[a] && cell_hi[a] <= hi[a]);
+        if inside || k == 0 {
+            let [_, gy, gx] = self.shapes[k];
+            out.cells
+                .push((k, ((c[0] * gy + c[1]) * gx + c[2]) as usize));
+            for a in 0..3 {
+                out.lo[a] = out.lo[a].min(cell_lo[a]);
+                out.hi[a] = out.hi[a].max(cell_hi[a]);
+            }
+            return;
+        }
+        let below = self.shapes[k - 1];
+        for dz in 0..2 {
+            for dy in 0..2 {
+                for dx in 0..2 {
+                    let child = [2 * c[0] + dz, 2 * c[1] + dy, 2 * c[2] + dx];
+                    if (0..3).all(|a| child[a] < below[a]) {
+                        self.visit(k - 1, child, shape, lo, hi, out);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Region data of one level: per channel, the min/max pyramid (values per grid, `[min, max]`
+/// pairs) and the histogram pyramid (`bins` counts per cell).
+struct LevelIndex {
+    shape: [u64; 3],
+    ranges: Pyramid,
+    range_values: Vec<Vec<Vec<[f64; 2]>>>,
+    exact_ranges: bool,
+    bricks: Pyramid,
+    histograms: Vec<Vec<Vec<u64>>>,
+}
+
+/// Everything the server answers region questions from, for one dataset.
+pub struct RegionIndex {
+    /// The store's region metadata document.
+    pub meta: RegionMetadata,
+    /// Zarr data type name of the image.
+    pub data_type: String,
+    levels: Vec<LevelIndex>,
+    minmax_docs: Vec<Bytes>,
+}
+
+/// A bad region query (answered 400).
+#[derive(Debug, PartialEq, Eq)]
+pub struct QueryError(pub String);
+
+fn open_store(root: &Path) -> Result<Arc<FilesystemStore>> {
+    Ok(Arc::new(FilesystemStore::new(root).with_context(|| {
+        format!("{}: cannot open the store", root.display())
+    })?))
+}
+
+/// The data type name of an array (`uint16`, `float32`, ...).
+pub fn data_type_name(array: &Array<FilesystemStore>) -> String {
+    // Display gives "v3 name" or "v3 name / v2 name".
+    let shown = array.data_type().to_string();
+    shown.split(" / ").next().unwrap_or(&shown).to_string()
+}
+
+/// Reads a whole array as little-endian bytes and as `f64` values.
+fn read_array(
+    store: &Arc<FilesystemStore>,
+    path: &str,
+    data_type: &str,
+) -> Result<(Vec<u8>, Vec<f64>)> {
+    let array = Array::open(store.clone(), &format!("/{path}"))
+        .with_context(|| format!("cannot open region array '{path}'"))?;
+    let bytes: ArrayBytes<'static> = array
+        .retrieve_array_subset(&ArraySubset::new_with_shape(array.shape().to_vec()))
+        .with_context(|| format!("cannot read region array '{path}'"))?;
+    let raw = bytes
+        .into_fixed()
+        .with_context(|| format!("region array '{path}' is not of a fixed-size type"))?
+        .into_owned();
+    let values = samples_to_f64(data_type, &raw).with_context(|| format!("array '{path}'"))?;
+    Ok((raw, values))
+}
+
+/// Reads the image attributes of a store (`zarr.json` or `.zattrs`) and returns its region
+/// metadata, or `None` for a store without.
+fn read_region_metadata(root: &Path) -> Result<Option<RegionMetadata>> {
+    let (file, v3) = if root.join("zarr.json").is_file() {
+        (root.join("zarr.json"), true)
+    } else {
+        (root.join(".zattrs"), false)
+    };
+    let text = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
+    let doc: serde_json::Value = serde_json::from_slice(&text)
+        .with_context(|| format!("{} is not valid JSON", file.display()))?;
+    let attrs = if v3 { &doc["attributes"] } else { &doc };
+    let Some(value) = attrs.get(REGIONS_KEY) else {
+        return Ok(None);
+    };
+    let meta = serde_json::from_value(value.clone())
+        .with_context(|| format!("{}: malformed '{REGIONS_KEY}' metadata", file.display()))?;
+    Ok(Some(meta))
+}
+
+/// Splits a grid array `[c, 2, gz, gy, gx]` into per-channel `[min, max]` pairs.
+fn pairs(values: &[f64], channels: usize, cells: usize) -> Vec<Vec<[f64; 2]>> {
+    (0..channels)
+        .map(|c| {
+            let base = c * 2 * cells;
+            (0..cells)
+                .map(|i| [values[base + i], values[base + cells + i]])
+                .collect()
+        })
+        .collect()
+}
+
+fn cells_of(shape: [u64; 3]) -> usize {
+    (shape[0] * shape[1] * shape[2]) as usize
+}
+
+/// Sums a brick histogram grid `[bz, by, bx, bins]` into its 2×2×2 coarser grid.
+fn coarser_histograms(fine: &[u64], shape: [u64; 3], bins: usize) -> ([u64; 3], Vec<u64>) {
+    let coarse = shape.map(|s| s.div_ceil(2));
+    let mut out = vec![0u64; cells_of(coarse) * bins];
+    for z in 0..shape[0] {
+        for y in 0..shape[1] {
+            for x in 0..shape[2] {
+                let i = ((z * shape[1] + y) * shape[2] + x) as usize;
+                let o = (((z / 2) * coarse[1] + y / 2) * coarse[2] + x / 2) as usize;
+                for b in 0..bins {
+                    out[o * bins + b] += fine[i * bins + b];
+                }
+            }
+        }
+    }
+    (coarse, out)
+}
+
+impl RegionIndex {
+    /// Loads the region index of the store at `root`, or `None` for a store without region
+    /// metadata.
+    pub fn load(root: &Path) -> Result<Option<Self>> {
+        let Some(meta) = read_region_metadata(root)? else {
+            return Ok(None);
+        };
+        let store = open_store(root)?;
+        let first = meta.levels.first().context("region metadata lists no level")?;
+        let image = Array::open(store.clone(), &format!("/{}", first.image))
+            .with_context(|| format!("cannot open image array '{}'", first.image))?;
+        let data_type = data_type_name(&image);
+        let channels = meta.channels.len();
+        let bins = meta.histogram_bins;
+        let mut levels = Vec::new();
+        let mut blocks: Vec<Vec<MinMaxLevelBlock>> = vec![Vec::new(); channels];
+        let mut payloads: Vec<Vec<u8>> = vec![Vec::new(); channels];
+        for (l, level) in meta.levels.iter().enumerate() {
+            // The binary hierarchy: haloed grids, per channel.
+            let mut level_blocks: Vec<Vec<MinMaxGridBlock>> = vec![Vec::new(); channels];
+            let mut haloed = Vec::new();
+            for grid in &level.minmax {
+                let (raw, values) = read_array(&store, &grid.path, &data_type)?;
+                let cells = cells_of(grid.grid_shape);
+                let per_channel = raw.len() / channels.max(1);
+                if values.len() != channels * 2 * cells {
+                    bail!(
+                        "region array '{}' holds {} values, expected {}",
+                        grid.path,
+                        values.len(),
+                        channels * 2 * cells
+                    );
+                }
+                for c in 0..channels {
+                    let payload = &mut payloads[c];
+                    level_blocks[c].push(MinMaxGridBlock {
+                        cell_shape: grid.cell_shape,
+                        grid_shape: grid.grid_shape,
+                        offset: payload.len() as u64,
+                        length: per_channel as u64,
+                    });
+                    payload.extend_from_slice(&raw[c * per_channel..(c + 1) * per_channel]);
+                }
+                haloed.push(pairs(&values, channels, cells));
+            }
+            for (c, grids) in level_blocks.into_iter().enumerate() {
+                blocks[c].push(MinMaxLevelBlock {
+                    level: l,
+                    shape: level.shape,
+                    grids,
+                });
+            }
+            // Query pyramids: exact ranges where the store has them.
+            let (grids, exact_ranges): (&[MinMaxGrid], bool) = if level.range.is_empty() {
+                (&level.minmax, false)
+            } else {
+                (&level.range, true)
+            };
+            let range_grids: Vec<Vec<Vec<[f64; 2]>>> = if exact_ranges {
+                grids
+                    .iter()
+                    .map(|g| {
+                        let (_, values) = read_array(&store, &g.path, &data_type)?;
+                        Ok(pairs(&values, channels, cells_of(g.grid_shape)))
+                    })
+                    .collect::<Result<_>>()?
+            } else {
+                haloed
+            };
+            let range_values = (0..channels)
+                .map(|c| range_grids.iter().map(|g| g[c].clone()).collect())
+                .collect();
+            let (_, counts) = read_array(&store, &level.histogram, "uint32")?;
+            let brick_grid: [u64; 3] =
+                std::array::from_fn(|a| level.shape[a].div_ceil(meta.brick_shape[a]));
+            let per_channel = cells_of(brick_grid) * bins;
+            if counts.len() != channels * per_channel {
+                bail!(
+                    "histogram array '{}' holds {} counts, expected {}",
+                    level.histogram,
+                    counts.len(),
+                    channels * per_channel
+                );
+            }
+            let mut brick_shapes = vec![brick_grid];
+            let mut histograms: Vec<Vec<Vec<u64>>> = (0..channels)
+                .map(|c| {
+                    vec![
+                        counts[c * per_channel..(c + 1) * per_channel]
+                            .iter()
+                            .map(|&n| n as u64)
+                            .collect(),
+                    ]
+                })
+                .collect();
+            while *brick_shapes.last().expect("one grid") != [1, 1, 1] {
+                let shape = *brick_shapes.last().expect("one grid");
+                for per_channel in &mut histograms {
+                    let (_, coarse) =
+                        coarser_histograms(per_channel.last().expect("one grid"), shape, bins);
+                    per_channel.push(coarse);
+                }
+                brick_shapes.push(shape.map(|s| s.div_ceil(2)));
+            }
+            levels.push(LevelIndex {
+                shape: level.shape,
+                ranges: Pyramid {
+                    cell: grids[0].cell_shape,
+                    shapes: grids.iter().map(|g| g.grid_shape).collect(),
+                },
+                range_values,
+                exact_ranges,
+                bricks: Pyramid {
+                    cell: meta.brick_shape,
+                    shapes: brick_shapes,
+                },
+                histograms,
+            });
+        }
+        let minmax_docs = blocks
+            .into_iter()
+            .zip(payloads)
+            .enumerate()
+            .map(|(channel, (levels, payload))| {
+                let header = MinMaxHierarchyHeader {
+                    channel,
+                    data_type: data_type.clone(),
+                    halo: meta.halo,
+                    levels,
+                };
+                Bytes::from(encode_framed(MINMAX_MAGIC, &header, &payload))
+            })
+            .collect();
+        Ok(Some(Self {
+            meta,
+            data_type,
+            levels,
+            minmax_docs,
+        }))
+    }
+
+    /// The framed min/max hierarchy document of `channel`.
+    pub fn minmax_document(&self, channel: usize) -> Result<Bytes, QueryError> {
+        self.minmax_docs.get(channel).cloned().ok_or_else(|| {
+            QueryError(format!(
+                "channel {channel} does not exist (the dataset has {})",
+                self.minmax_docs.len()
+            ))
+        })
+    }
+
+    /// Answers a region query; `min`/`max` are `x, y, z` voxel coordinates of the level,
+    /// `max` exclusive.
+    pub fn query(
+        &self,
+        dataset: &str,
+        level: usize,
+        channel: usize,
+        min: [u64; 3],
+        max: [u64; 3],
+    ) -> Result<RegionAnswer, QueryError> {
+        let l = self.levels.get(level).ok_or_else(|| {
+            QueryError(format!(
+                "level {level} does not exist (the dataset has {})",
+                self.levels.len()
+            ))
+        })?;
+        if channel >= self.meta.channels.len() {
+            return Err(QueryError(format!(
+                "channel {channel} does not exist (the dataset has {})",
+                self.meta.channels.len()
+            )));
+        }
+        let [nz, ny, nx] = l.shape;
+        let (lo, hi) = ([min[2], min[1], min[0]], [max[2], max[1], max[0]]);
+        if (0..3).any(|a| lo[a] >= hi[a]) {
+            return Err(QueryError(format!(
+                "empty box: min {min:?} must be below max {max:?} on every axis"
+            )));
+        }
+        if (0..3).any(|a| hi[a] > l.shape[a]) {
+            return Err(QueryError(format!(
+                "box max {max:?} lies outside level {level} (x, y, z size {:?})",
+                [nx, ny, nz]
+            )));
+        }
+        let to_xyz = |zyx: [u64; 3]| [zyx[2], zyx[1], zyx[0]];
+        let query = VoxelBox { min, max };
+
+        let cover = l.ranges.cover(l.shape, lo, hi);
+        let (mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &(k, i) in &cover.cells {
+            let [a, b] = l.range_values[channel][k][i];
+            if !a.is_nan() {
+                vmin = vmin.min(a);
+                vmax = vmax.max(b);
+            }
+        }
+        let seen = vmin <= vmax;
+        let minmax_box = VoxelBox {
+            min: to_xyz(cover.lo),
+            max: to_xyz(cover.hi),
+        };
+
+        let bins = self.meta.histogram_bins;
+        let bricks = l.bricks.cover(l.shape, lo, hi);
+        let mut counts = vec![0u64; bins];
+        for &(k, i) in &bricks.cells {
+            let cell = &l.histograms[channel][k][i * bins..(i + 1) * bins];
+            for (acc, n) in counts.iter_mut().zip(cell) {
+                *acc += n;
+            }
+        }
+        let edges = self.meta.channels[channel].histogram_edges.clone();
+        counts.truncate(edges.len().saturating_sub(1).max(1));
+        let hist_box = VoxelBox {
+            min: to_xyz(bricks.lo),
+            max: to_xyz(bricks.hi),
+        };
+        Ok(RegionAnswer {
+            dataset: dataset.to_string(),
+            level,
+            channel,
+            query,
+            min: seen.then_some(vmin),
+            max: seen.then_some(vmax),
+            minmax_box,
+            minmax_exact: l.exact_ranges && minmax_box == query,
+            histogram: RegionHistogram {
+                edges,
+                voxels: counts.iter().sum(),
+                counts,
+                covered: hist_box,
+                exact: hist_box == query,
+            },
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cover_takes_whole_cells_inside_and_splits_at_the_edges() {
+        // A 20 × 20 × 20 level with 8³ cells: grids 3³, 2³, 1.
+        let p = Pyramid {
+            cell: [8; 3],
+            shapes: vec![[3; 3], [2; 3], [1; 3]],
+        };
+        let whole = p.cover([20; 3], [0; 3], [20; 3]);
+        assert_eq!(whole.cells, vec![(2, 0)]);
+        assert_eq!((whole.lo, whole.hi), ([0; 3], [20; 3]));
+        // Aligned to cells: exactly the cells inside.
+        let aligned = p.cover([20; 3], [8, 0, 0], [16, 8, 8]);
+        assert_eq!(aligned.cells, vec![(0, 9)]);
+        assert_eq!((aligned.lo, aligned.hi), ([8, 0, 0], [16, 8, 8]));
+        // Unaligned: widened to the finest cells it touches.
+        let loose = p.cover([20; 3], [3, 3, 3], [9, 4, 4]);
+        assert_eq!((loose.lo, loose.hi), ([0, 0, 0], [16, 8, 8]));
+        assert_eq!(loose.cells.len(), 2);
+        // Ending at the volume's edge counts as aligned.
+        let edge = p.cover([20; 3], [16, 16, 16], [20, 20, 20]);
+        assert_eq!((edge.lo, edge.hi), ([16; 3], [20; 3]));
+        // The coarser cell (1, 1, 1) of grid 1, clipped to the level, is the same voxels.
+        assert_eq!(edge.cells, vec![(1, 7)]);
+    }
+
+    #[test]
+    fn coarser_histograms_sum_their_children() {
+        // 3 × 1 × 1 bricks of 2 bins.
+        let (shape, out) = coarser_histograms(&[1, 0, 2, 1, 5, 5], [3, 1, 1], 2);
+        assert_eq!(shape, [2, 1, 1]);
+        assert_eq!(out, vec![3, 1, 5, 5]);
+    }
+}

@@ -1,0 +1,541 @@
+// Residency-octree ray caster: Algorithm 1 of the residency octree paper, extended to
+// multi-channel traversal (Sec. 6.1). One thread per pixel.
+//
+// Positions are node-local: a ray's position is an integer leaf cell (i32, leaf units of the
+// octree) plus an f32 offset inside it, so precision does not depend on the volume's width.
+// Everything about layout (words per node, table offsets) is documented in viewer/src/gpu/.
+
+const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
+const ENTRY_EMPTY: u32 = 1u; // page-table entry: brick equals the fill value 0
+const LEVEL_WORDS: u32 = 12u;
+const CHANNEL_WORDS: u32 = 16u;
+const MAX_ITERATIONS: u32 = 1000000u;
+
+struct Params {
+    size: vec4<u32>, // width, height, frame (>= 1), channel count
+    tree: vec4<u32>, // leaf depth D, level count, sample kind (0 u, 1 i, 2 f), request cap
+    tables: vec4<u32>, // start depth, TF bins, level table offset, channel table offset
+    eye_cell: vec4<i32>, // eye, leaf units: integer part
+    eye_frac: vec4<f32>, // eye, leaf units: fraction (xyz); w: reference step Δ0 (world)
+    right: vec4<f32>, // camera right · tan(fov/2) · aspect; w: LOD bias (log2)
+    up: vec4<f32>, // camera up · tan(fov/2); w: pixel footprint per unit distance
+    forward: vec4<f32>, // camera forward (unit); w: step as a fraction of a voxel
+    world_to_leaf: vec4<f32>, // leaf units per world unit, per axis; w: leaf edge (world, min axis)
+    volume_leaf: vec4<f32>, // volume extent in leaf units
+    background: vec4<f32>,
+    leaf_shift: vec4<i32>, // log2 of a leaf edge in level-0 voxels, per axis
+    brick: vec4<u32>, // brick edge in voxels, per axis
+    slots: vec4<u32>, // atlas slots per axis
+}
+
+struct Requests {
+    // 0 request count, 1 samples, 2 empty nodes skipped, 3 bricks substituted,
+    // 4 homogeneous nodes, 5 requests over the cap, 6 samples with no data, 7 reserved
+    header: array<atomic<u32>, 8>,
+    entries: array<vec2<u32>>, // (page-table id, ray distance bits)
+}
+
+@group(0) @binding(0) var<uniform> P: Params;
+@group(0) @binding(1) var<storage, read> nodes: array<u32>;
+@group(0) @binding(2) var<storage, read> tables: array<u32>;
+@group(0) @binding(3) var<storage, read> page_table: array<u32>;
+@group(0) @binding(4) var<storage, read_write> flags: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read_write> requests: Requests;
+@group(0) @binding(6) var<storage, read_write> usage: array<u32>;
+@group(0) @binding(7) var<storage, read_write> out_color: array<vec4<f32>>;
+@group(0) @binding(8) var atlas_u: texture_3d<u32>;
+@group(0) @binding(9) var atlas_i: texture_3d<i32>;
+@group(0) @binding(10) var atlas_f: texture_3d<f32>;
+
+// ---- tables ----
+
+fn tf32(i: u32) -> f32 {
+    return bitcast<f32>(tables[i]);
+}
+
+fn level_base(l: u32) -> u32 {
+    return P.tables.z + l * LEVEL_WORDS;
+}
+
+fn level_shift(l: u32) -> vec3<i32> {
+    let b = level_base(l);
+    return vec3<i32>(i32(tables[b]), i32(tables[b + 1u]), i32(tables[b + 2u]));
+}
+
+fn level_shape(l: u32) -> vec3<i32> {
+    let b = level_base(l);
+    return vec3<i32>(i32(tables[b + 3u]), i32(tables[b + 4u]), i32(tables[b + 5u]));
+}
+
+fn level_bricks(l: u32) -> vec3<u32> {
+    let b = level_base(l);
+    return vec3<u32>(tables[b + 6u], tables[b + 7u], tables[b + 8u]);
+}
+
+// Smallest edge of a voxel of level l, world units.
+fn level_voxel(l: u32) -> f32 {
+    return tf32(level_base(l) + 9u);
+}
+
+fn page_offset(c: u32, l: u32) -> u32 {
+    return tables[P.tables.z + P.tree.y * LEVEL_WORDS + c * P.tree.y + l];
+}
+
+fn channel_base(c: u32) -> u32 {
+    return P.tables.w + c * CHANNEL_WORDS;
+}
+
+// Opacity at the reference step (piecewise linear, end values held; NaN is transparent).
+fn tf_opacity(c: u32, v: f32) -> f32 {
+    let cb = channel_base(c);
+    let off = tables[cb + 5u];
+    let n = tables[cb + 6u];
+    if n == 0u || v != v {
+        return 0.0;
+    }
+    if v <= tf32(off) {
+        return tf32(off + 1u);
+    }
+    for (var i = 1u; i < n; i++) {
+        let a = vec2<f32>(tf32(off + 2u * (i - 1u)), tf32(off + 2u * (i - 1u) + 1u));
+        let b = vec2<f32>(tf32(off + 2u * i), tf32(off + 2u * i + 1u));
+        if v <= b.x {
+            if b.x == a.x {
+                return b.y;
+            }
+            return a.y + (v - a.x) / (b.x - a.x) * (b.y - a.y);
+        }
+    }
+    return tf32(off + 2u * (n - 1u) + 1u);
+}
+
+// Whether channel c's opacity is zero over [lo, hi]: O(1) with the prefix count of bins of
+// non-zero opacity (conservative by one bin on each side).
+fn tf_transparent(c: u32, lo: f32, hi: f32) -> bool {
+    if !(lo <= hi) {
+        return true; // no data in the node
+    }
+    let cb = channel_base(c);
+    if tables[cb + 6u] == 0u {
+        return true;
+    }
+    let d0 = tf32(cb + 8u);
+    let d1 = tf32(cb + 9u);
+    if lo < d0 && tf32(cb + 10u) > 0.0 {
+        return false;
+    }
+    if hi > d1 && tf32(cb + 11u) > 0.0 {
+        return false;
+    }
+    if hi < d0 || lo > d1 {
+        return true;
+    }
+    let bins = P.tables.y;
+    let scale = f32(bins) / (d1 - d0);
+    let fb = f32(bins) - 1.0;
+    let b0 = u32(clamp(floor((lo - d0) * scale) - 1.0, 0.0, fb));
+    let b1 = u32(clamp(floor((hi - d0) * scale) + 1.0, 0.0, fb));
+    let pre = tables[cb + 7u];
+    return tables[pre + b1 + 1u] == tables[pre + b0];
+}
+
+// ---- octree ----
+
+fn node_index(d: u32, cell: vec3<i32>) -> u32 {
+    let s = P.tree.x - d;
+    let n = vec3<u32>(cell >> vec3<u32>(s));
+    let offset = ((1u << (3u * d)) - 1u) / 7u;
+    return offset + (((n.z << d) + n.y) << d) + n.x;
+}
+
+fn node_word(node: u32, c: u32, k: u32) -> u32 {
+    return nodes[(node * P.size.w + c) * 3u + k];
+}
+
+// ---- sampling ----
+
+fn scaled_int(cell: i32, sh: i32) -> i32 {
+    if sh >= 0 {
+        return cell << u32(sh);
+    }
+    return cell >> u32(-sh);
+}
+
+fn scaled_frac(cell: i32, local: f32, sh: i32) -> f32 {
+    if sh >= 0 {
+        return ldexp(local, sh);
+    }
+    let rem = cell & ((1 << u32(-sh)) - 1);
+    return ldexp(f32(rem) + local, sh);
+}
+
+fn load_voxel(entry: u32, v: vec3<u32>) -> f32 {
+    if entry == ENTRY_EMPTY {
+        return 0.0;
+    }
+    let slot = entry - 2u;
+    usage[slot] = P.size.z;
+    let sc = vec3<u32>(slot % P.slots.x, (slot / P.slots.x) % P.slots.y, slot / (P.slots.x * P.slots.y));
+    let p = vec3<i32>(sc * P.brick.xyz + v);
+    switch P.tree.z {
+        case 0u: {
+            return f32(textureLoad(atlas_u, p, 0).x);
+        }
+        case 1u: {
+            return f32(textureLoad(atlas_i, p, 0).x);
+        }
+        default: {
+            return textureLoad(atlas_f, p, 0).x;
+        }
+    }
+}
+
+fn request(pid: u32, t: f32) {
+    let old = atomicExchange(&flags[2u * pid], P.size.z);
+    if old != P.size.z {
+        let i = atomicAdd(&requests.header[0], 1u);
+        if i < P.tree.w {
+            requests.entries[i] = vec2<u32>(pid, bitcast<u32>(t));
+        } else {
+            atomicAdd(&requests.header[5], 1u);
+        }
+    }
+}
+
+fn note_substituted(pid: u32) {
+    let old = atomicExchange(&flags[2u * pid + 1u], P.size.z);
+    if old != P.size.z {
+        atomicAdd(&requests.header[3], 1u);
+    }
+}
+
+struct Sampled {
+    value: f32,
+    ok: bool,
+    missing: u32, // page-table id + 1 of a missing brick, 0 when none
+}
+
+// Trilinear sample of channel c at level l (voxel centres at i + ½, clamped to the edge
+// voxels), reading each of the 8 voxels through the page table. With `want`, every missing
+// brick is requested.
+fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
+    let sh = P.leaf_shift.xyz - level_shift(l);
+    let shape = level_shape(l);
+    let nb = level_bricks(l);
+    let ip = vec3<i32>(scaled_int(cell.x, sh.x), scaled_int(cell.y, sh.y), scaled_int(cell.z, sh.z));
+    let fp = vec3<f32>(
+        scaled_frac(cell.x, local.x, sh.x),
+        scaled_frac(cell.y, local.y, sh.y),
+        scaled_frac(cell.z, local.z, sh.z),
+    ) - vec3<f32>(0.5);
+    let fl = floor(fp);
+    let w = fp - fl;
+    let i0 = ip + vec3<i32>(fl);
+    let hi = shape - vec3<i32>(1);
+    let c0 = vec3<u32>(clamp(i0, vec3<i32>(0), hi));
+    let c1 = vec3<u32>(clamp(i0 + vec3<i32>(1), vec3<i32>(0), hi));
+    let base = page_offset(c, l);
+    var result = Sampled(0.0, true, 0u);
+    var acc = 0.0;
+    for (var k = 0u; k < 8u; k++) {
+        let bits = vec3<bool>((k & 1u) != 0u, (k & 2u) != 0u, (k & 4u) != 0u);
+        let v = select(c0, c1, bits);
+        let b = v / P.brick.xyz;
+        let pid = base + (b.z * nb.y + b.y) * nb.x + b.x;
+        let entry = page_table[pid];
+        let wk = select(vec3<f32>(1.0) - w, w, bits);
+        if entry == 0u {
+            result.ok = false;
+            result.missing = pid + 1u;
+            if want {
+                request(pid, t);
+            } else {
+                return result;
+            }
+        } else if result.ok {
+            acc += wk.x * wk.y * wk.z * load_voxel(entry, v % P.brick.xyz);
+        }
+    }
+    result.value = acc;
+    return result;
+}
+
+// Finest level whose voxel is at least the pixel footprint at distance t (scaled by the LOD
+// bias), within the channel's level bounds.
+fn choose_level(c: u32, t: f32) -> u32 {
+    let cb = channel_base(c);
+    let target_size = max(t, 0.0) * P.up.w * exp2(P.right.w);
+    var l = tables[cb + 3u];
+    let lmax = min(tables[cb + 4u], P.tree.y - 1u);
+    loop {
+        if l >= lmax || level_voxel(l) >= target_size {
+            break;
+        }
+        l++;
+    }
+    return min(l, lmax);
+}
+
+fn corrected(a: f32, step: f32) -> f32 {
+    if a >= 1.0 {
+        return 1.0;
+    }
+    return 1.0 - pow(1.0 - max(a, 0.0), step / P.eye_frac.w);
+}
+
+// ---- ray state ----
+
+struct Ray {
+    cell: vec3<i32>,
+    local: vec3<f32>,
+    t: f32,
+}
+
+fn advance(ray: ptr<function, Ray>, dir: vec3<f32>, dt: f32) {
+    var local = (*ray).local + dir * dt;
+    let f = floor(local);
+    (*ray).cell += vec3<i32>(f);
+    (*ray).local = local - f;
+    (*ray).t += dt;
+}
+
+// World distance from the ray's position to the exit of the node of depth d holding it.
+fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
+    let s = P.tree.x - d;
+    let lo = (ray.cell >> vec3<u32>(s)) << vec3<u32>(s);
+    let size = f32(1u << s);
+    let rel = vec3<f32>(ray.cell - lo) + ray.local;
+    let far = select(-rel, vec3<f32>(size) - rel, dir > vec3<f32>(0.0));
+    let tt = far / dir;
+    return max(min(tt.x, min(tt.y, tt.z)), 0.0);
+}
+
+@compute @workgroup_size(8, 8, 1)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= P.size.x || gid.y >= P.size.y {
+        return;
+    }
+    let pixel = gid.y * P.size.x + gid.x;
+    let ndc = vec2<f32>(
+        (f32(gid.x) + 0.5) / f32(P.size.x) * 2.0 - 1.0,
+        1.0 - (f32(gid.y) + 0.5) / f32(P.size.y) * 2.0,
+    );
+    let world_dir = normalize(P.forward.xyz + ndc.x * P.right.xyz + ndc.y * P.up.xyz);
+    var dir = world_dir * P.world_to_leaf.xyz; // leaf units per world unit
+    dir = select(dir, vec3<f32>(1e-20), abs(dir) < vec3<f32>(1e-20));
+
+    // Slab test against the volume box, relative to the eye (leaf units).
+    let eye_rel_lo = -vec3<f32>(P.eye_cell.xyz) - P.eye_frac.xyz;
+    let eye_rel_hi = P.volume_leaf.xyz + eye_rel_lo;
+    let ta = eye_rel_lo / dir;
+    let tb = eye_rel_hi / dir;
+    let tmin = min(ta, tb);
+    let tmax = max(ta, tb);
+    let t_enter = max(max(tmin.x, max(tmin.y, tmin.z)), 0.0);
+    let t_exit = min(tmax.x, min(tmax.y, tmax.z));
+
+    var color = vec3<f32>(0.0);
+    var trans = 1.0;
+    var samples = 0u;
+    var skipped = 0u;
+    var homogeneous = 0u;
+    var nodata = 0u;
+    let nudge = 1e-4 / max(abs(dir.x), max(abs(dir.y), abs(dir.z)));
+
+    if t_exit > t_enter {
+        var ray = Ray(P.eye_cell.xyz, P.eye_frac.xyz, 0.0);
+        advance(&ray, dir, t_enter + nudge);
+        let depth = P.tree.x;
+        let leaves = 1 << depth;
+        let channels = P.size.w;
+        var last_depth = P.tables.x + 1u;
+        var iterations = 0u;
+        loop {
+            iterations++;
+            if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
+                break;
+            }
+            if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= vec3<i32>(leaves)) {
+                break;
+            }
+            // Desired level and step: the finest over channels.
+            var finest = P.tree.y - 1u;
+            for (var c = 0u; c < channels; c++) {
+                finest = min(finest, choose_level(c, ray.t));
+            }
+            let desired_step = P.forward.w * level_voxel(finest);
+            // Traversal depth: deepest node whose edge is at least the step.
+            var max_depth = depth;
+            var edge = P.world_to_leaf.w;
+            loop {
+                if max_depth == 0u || edge >= desired_step {
+                    break;
+                }
+                max_depth--;
+                edge *= 2.0;
+            }
+            var d = clamp(last_depth, P.tables.x + 1u, depth + 1u) - 1u;
+            d = min(d, max_depth);
+            // Walk down (Algorithm 1, multi-channel): per channel, whether it is empty here.
+            var empty_bits = 0u;
+            var action = 0u; // 0 sample, 1 skip empty, 2 homogeneous, 3 skip unmapped
+            var node = 0u;
+            loop {
+                node = node_index(d, ray.cell);
+                var all_empty = true;
+                var all_homog = true;
+                var all_unmapped = true;
+                empty_bits = 0u;
+                for (var c = 0u; c < channels; c++) {
+                    let lo = bitcast<f32>(node_word(node, c, 1u));
+                    let hi = bitcast<f32>(node_word(node, c, 2u));
+                    if tf_transparent(c, lo, hi) {
+                        empty_bits |= 1u << c;
+                    } else {
+                        all_empty = false;
+                        if !(lo == hi) {
+                            all_homog = false;
+                            if node_word(node, c, 0u) != 0u {
+                                all_unmapped = false;
+                            }
+                        }
+                    }
+                }
+                if all_empty {
+                    action = 1u;
+                    break;
+                }
+                if all_homog {
+                    action = 2u;
+                    break;
+                }
+                if d >= max_depth {
+                    if all_unmapped {
+                        action = 3u;
+                    }
+                    break;
+                }
+                d++;
+            }
+            last_depth = d;
+            if action == 1u {
+                skipped++;
+                advance(&ray, dir, node_exit(ray, d, dir) + nudge);
+                continue;
+            }
+            if action == 3u {
+                // Not even partially mapped in any needed channel: request the bricks at this
+                // sample and skip the node (Algorithm 1, lines 13-16).
+                for (var c = 0u; c < channels; c++) {
+                    if (empty_bits & (1u << c)) == 0u {
+                        let lo = bitcast<f32>(node_word(node, c, 1u));
+                        let hi = bitcast<f32>(node_word(node, c, 2u));
+                        if !(lo == hi) {
+                            _ = sample_level(c, choose_level(c, ray.t), ray.cell, ray.local, true, ray.t);
+                        }
+                    }
+                }
+                nodata++;
+                advance(&ray, dir, node_exit(ray, d, dir) + nudge);
+                continue;
+            }
+            if action == 2u {
+                // Homogeneous in every channel: integrate analytically over the node as
+                // seg/Δ steps of the per-step opacity.
+                let seg = min(node_exit(ray, d, dir) + nudge, t_exit - ray.t);
+                var col = vec3<f32>(0.0);
+                var asum = 0.0;
+                for (var c = 0u; c < channels; c++) {
+                    if (empty_bits & (1u << c)) == 0u {
+                        let v = bitcast<f32>(node_word(node, c, 1u));
+                        let a = corrected(tf_opacity(c, v), desired_step);
+                        let cb = channel_base(c);
+                        col += a * vec3<f32>(tf32(cb), tf32(cb + 1u), tf32(cb + 2u));
+                        asum += a;
+                    }
+                }
+                homogeneous++;
+                samples++;
+                let alpha = min(asum, 1.0);
+                if alpha > 0.0 {
+                    let keep = pow(1.0 - alpha, seg / desired_step);
+                    color += trans * col / alpha * (1.0 - keep);
+                    trans *= keep;
+                }
+                advance(&ray, dir, seg + nudge);
+                continue;
+            }
+            // Sample every non-empty channel at its level, substituting missing bricks.
+            var col = vec3<f32>(0.0);
+            var asum = 0.0;
+            var used = P.tree.y - 1u;
+            var any_value = false;
+            var values: array<f32, 8>;
+            var have = 0u;
+            for (var c = 0u; c < channels; c++) {
+                if (empty_bits & (1u << c)) != 0u {
+                    continue;
+                }
+                let mask = node_word(node, c, 0u);
+                let l = choose_level(c, ray.t);
+                var s = sample_level(c, l, ray.cell, ray.local, true, ray.t);
+                var got = l;
+                if !s.ok {
+                    let missing = s.missing - 1u;
+                    var found = false;
+                    // Coarser levels first, then finer ones, among those the node maps.
+                    for (var k = l + 1u; k < P.tree.y && !found; k++) {
+                        if (mask & (1u << k)) != 0u {
+                            let alt = sample_level(c, k, ray.cell, ray.local, false, ray.t);
+                            if alt.ok {
+                                s = alt;
+                                got = k;
+                                found = true;
+                            }
+                        }
+                    }
+                    for (var k = i32(l) - 1; k >= 0 && !found; k--) {
+                        if (mask & (1u << u32(k))) != 0u {
+                            let alt = sample_level(c, u32(k), ray.cell, ray.local, false, ray.t);
+                            if alt.ok {
+                                s = alt;
+                                got = u32(k);
+                                found = true;
+                            }
+                        }
+                    }
+                    if found {
+                        note_substituted(missing);
+                    }
+                }
+                if s.ok {
+                    values[c] = s.value;
+                    have |= 1u << c;
+                    used = min(used, got);
+                    any_value = true;
+                }
+            }
+            let step = select(desired_step, P.forward.w * level_voxel(used), any_value);
+            for (var c = 0u; c < channels; c++) {
+                if (have & (1u << c)) != 0u {
+                    let a = corrected(tf_opacity(c, values[c]), step);
+                    let cb = channel_base(c);
+                    col += a * vec3<f32>(tf32(cb), tf32(cb + 1u), tf32(cb + 2u));
+                    asum += a;
+                }
+            }
+            if !any_value {
+                nodata++;
+            }
+            samples++;
+            color += trans * col;
+            trans *= 1.0 - min(asum, 1.0);
+            advance(&ray, dir, step);
+        }
+    }
+    out_color[pixel] = vec4<f32>(tf_opacity(0u, 100.0), tf32(channel_base(0u)), P.eye_frac.w, level_voxel(0u));
+    atomicAdd(&requests.header[1], samples);
+    atomicAdd(&requests.header[2], skipped);
+    atomicAdd(&requests.header[4], homogeneous);
+    atomicAdd(&requests.header[6], nodata);
+}

@@ -1,0 +1,21 @@
+//! The GPU side of the renderer, one concept per module:
+//!
+//! - [`device`]: adapter and device creation (lavapipe works), timestamp-query support;
+//! - [`page_table`]: page tables per (channel, level) and the brick ids the shader reports;
+//! - [`brick_cache`]: the brick cache atlas per sample format, with LRU eviction driven by the
+//!   shader's usage feedback;
+//! - [`tables`]: the read-only tables the shader consults (levels, channels, transfer
+//!   functions with their prefix tables for O(1) emptiness tests);
+//! - [`renderer`]: the `raycast.wgsl` compute pass, its buffers and one frame's readback
+//!   (image, capped request list, usage, statistics);
+//! - [`streaming`]: worker threads fetching bricks, and the progressive loop
+//!   render → read requests → fetch → upload → insert into the octree → repeat;
+//! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
+
+pub mod brick_cache;
+pub mod device;
+pub mod page_table;
+pub mod renderer;
+pub mod streaming;
+pub mod synthetic;
+pub mod tables;

@@ -1,0 +1,635 @@
+//! The `raycast.wgsl` compute pass: its buffers, its per-frame parameters, and one frame's
+//! dispatch and readback (image, capped request list, slot usage, statistics, GPU time).
+//! Also owns the residency state that changes between frames: octree, page tables and cache.
+
+use anyhow::{Context, Result, bail, ensure};
+use bytemuck::{Pod, Zeroable};
+use serde::Serialize;
+
+use super::brick_cache::BrickCache;
+use super::device::Gpu;
+use super::page_table::{ENTRY_EMPTY, ENTRY_MISSING, PageTables};
+use super::tables::{self, ChannelTable};
+use crate::octree::{OctreeGeometry, ResidencyOctree};
+use crate::scene::{Camera, Scene};
+use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
+
+/// The shader source, `shaders/raycast.wgsl`.
+pub const RAYCAST_WGSL: &str = include_str!("../../../shaders/raycast.wgsl");
+
+/// Most channels rendered at once (the shader keeps one value per channel in registers).
+pub const MAX_CHANNELS: usize = 8;
+
+const HEADER_WORDS: usize = 8;
+
+/// Renderer settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RenderOptions {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Brick cache budget in bytes.
+    pub cache_bytes: u64,
+    /// LOD bias, `log2` of the pixel footprint scale: positive picks coarser levels.
+    pub lod_bias: f32,
+    /// Step length as a fraction of the smallest voxel edge of the level in use.
+    pub step_factor: f32,
+    /// Octree leaf depth; `None` picks leaves of about [`Self::leaf_voxels`] voxels.
+    pub octree_depth: Option<u32>,
+    /// Target leaf edge in level-0 voxels when `octree_depth` is `None`.
+    pub leaf_voxels: u64,
+    /// Depth traversal starts at (and never restarts above).
+    pub start_depth: u32,
+    /// Most brick requests the shader records per frame.
+    pub max_requests: u32,
+    /// `(finest, coarsest)` level bounds per rendered channel, in scene order; missing
+    /// entries allow every level.
+    pub level_bounds: Vec<(u32, u32)>,
+}
+
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            width: 256,
+            height: 256,
+            cache_bytes: 256 << 20,
+            lod_bias: 0.0,
+            step_factor: 0.5,
+            octree_depth: None,
+            leaf_voxels: 8,
+            start_depth: 0,
+            max_requests: 4096,
+            level_bounds: Vec::new(),
+        }
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct Params {
+    size: [u32; 4],
+    tree: [u32; 4],
+    tables: [u32; 4],
+    eye_cell: [i32; 4],
+    eye_frac: [f32; 4],
+    right: [f32; 4],
+    up: [f32; 4],
+    forward: [f32; 4],
+    world_to_leaf: [f32; 4],
+    volume_leaf: [f32; 4],
+    background: [f32; 4],
+    leaf_shift: [i32; 4],
+    brick: [u32; 4],
+    slots: [u32; 4],
+}
+
+/// What the shader counted in one frame.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ShaderCounts {
+    /// Samples taken (a homogeneous node integrated analytically counts as one).
+    pub samples: u64,
+    /// Octree nodes skipped as empty in every channel.
+    pub empty_nodes_skipped: u64,
+    /// Homogeneous nodes integrated analytically.
+    pub homogeneous_nodes: u64,
+    /// Distinct missing bricks requested (before the cap).
+    pub bricks_requested: u64,
+    /// Requests over the per-frame cap (dropped; repeated next frame).
+    pub requests_over_cap: u64,
+    /// Distinct missing bricks for which another resident level was substituted.
+    pub bricks_substituted: u64,
+    /// Samples (or unmapped nodes) with no resident data in any channel.
+    pub samples_without_data: u64,
+}
+
+/// One missing brick the shader reported.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BrickRequest {
+    /// The brick.
+    pub key: BrickKey,
+    /// World distance along the first ray that asked for it.
+    pub distance: f32,
+}
+
+/// One rendered frame, read back.
+#[derive(Clone, Debug)]
+pub struct FrameOutput {
+    /// Linear RGBA per pixel, row-major from the top; alpha is `1 − T`.
+    pub pixels: Vec<[f32; 4]>,
+    /// Missing bricks (distinct, at most the cap).
+    pub requests: Vec<BrickRequest>,
+    /// Shader counters.
+    pub counts: ShaderCounts,
+    /// GPU time of the compute pass in ms, when timestamp queries are supported.
+    pub gpu_time_ms: Option<f64>,
+}
+
+/// Outcome of inserting one brick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inserted {
+    /// Uploaded into a cache slot, evicting the given brick if any.
+    Uploaded {
+        /// The brick evicted to make room.
+        evicted: Option<BrickKey>,
+    },
+    /// Fill value everywhere: marked resident without a slot.
+    Empty,
+    /// Already resident.
+    AlreadyResident,
+    /// Every slot holds a brick the current frame used: nothing evicted, brick dropped.
+    CacheFull,
+}
+
+struct Readback {
+    requests: wgpu::Buffer,
+    usage: wgpu::Buffer,
+    image: wgpu::Buffer,
+    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+}
+
+/// The renderer of one volume and one scene.
+pub struct Renderer {
+    options: RenderOptions,
+    info: VolumeInfo,
+    scene: Scene,
+    octree: ResidencyOctree,
+    pages: PageTables,
+    cache: BrickCache,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+    params: wgpu::Buffer,
+    nodes: wgpu::Buffer,
+    requests: wgpu::Buffer,
+    image: wgpu::Buffer,
+    readback: Readback,
+    tables_words: usize,
+    frame: u32,
+}
+
+fn xyz<T: Copy>(a: [T; 3]) -> [T; 3] {
+    [a[2], a[1], a[0]]
+}
+
+impl Renderer {
+    /// Sets up the renderer of `scene` over the volume `info`: octree (ranges from the
+    /// volume's region metadata), page tables, cache, tables and pipeline. Only visible
+    /// channels are rendered (and ever fetched).
+    pub fn new(gpu: &Gpu, info: &VolumeInfo, scene: &Scene, options: RenderOptions) -> Result<Self> {
+        ensure!(
+            options.width > 0 && options.height > 0,
+            "image size {}×{} is empty",
+            options.width,
+            options.height
+        );
+        let visible: Vec<&crate::scene::ChannelStyle> =
+            scene.channels.iter().filter(|c| c.visible).collect();
+        ensure!(
+            visible.len() <= MAX_CHANNELS,
+            "{} visible channels; at most {MAX_CHANNELS} render at once",
+            visible.len()
+        );
+        let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
+        let depth = match options.octree_depth {
+            Some(d) => d,
+            None => OctreeGeometry::depth_for(info, options.leaf_voxels, 7),
+        };
+        let octree = ResidencyOctree::new(info, &channels, depth)?;
+        let geometry = octree.geometry().clone();
+        let levels = info.levels.len() as u32;
+        let device = &gpu.device;
+        let pages = PageTables::new(device, &geometry, &channels)?;
+        let brick = geometry.brick.map(|b| b as u32);
+        let cache = BrickCache::new(device, &gpu.limits, info.sample_type, brick, options.cache_bytes)?;
+
+        let spacing = xyz(info.voxel_size);
+        let channel_tables: Vec<ChannelTable<'_>> = visible
+            .iter()
+            .enumerate()
+            .map(|(i, style)| {
+                let (lo, hi) = options.level_bounds.get(i).copied().unwrap_or((0, levels - 1));
+                ChannelTable {
+                    style,
+                    min_level: lo.min(levels - 1),
+                    max_level: hi.clamp(lo.min(levels - 1), levels - 1),
+                }
+            })
+            .collect();
+        let t = tables::build(&geometry, spacing, pages.offsets(), &channel_tables);
+
+        let storage = |label, size: u64, extra| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+                mapped_at_creation: false,
+            })
+        };
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("raycast params"),
+            size: std::mem::size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let node_words = geometry.node_count() * octree.words_per_node();
+        let nodes = storage("octree nodes", node_words as u64 * 4, wgpu::BufferUsages::empty());
+        let table_buf = storage("tables", t.words.len() as u64 * 4, wgpu::BufferUsages::empty());
+        gpu.queue.write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
+        let request_bytes = (HEADER_WORDS as u64 + 2 * options.max_requests as u64) * 4;
+        let requests = storage("requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
+        let pixels = options.width as u64 * options.height as u64;
+        let image = storage("image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
+
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raycast.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(RAYCAST_WGSL.into()),
+        });
+        let sb = |binding, read_only| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer {
+                ty: wgpu::BufferBindingType::Storage { read_only },
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
+            count: None,
+        };
+        let tex = |binding, sample_type| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Texture {
+                sample_type,
+                view_dimension: wgpu::TextureViewDimension::D3,
+                multisampled: false,
+            },
+            count: None,
+        };
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("raycast"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                sb(1, true),
+                sb(2, true),
+                sb(3, true),
+                sb(4, false),
+                sb(5, false),
+                sb(6, false),
+                sb(7, false),
+                tex(8, wgpu::TextureSampleType::Uint),
+                tex(9, wgpu::TextureSampleType::Sint),
+                tex(10, wgpu::TextureSampleType::Float { filterable: false }),
+            ],
+        });
+        let views = cache.views();
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("raycast"),
+            layout: &layout,
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: nodes.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: table_buf.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: pages.buffer().as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: pages.flags().as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 5, resource: requests.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 6, resource: cache.usage_buffer().as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 7, resource: image.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&views[0]) },
+                wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&views[1]) },
+                wgpu::BindGroupEntry { binding: 10, resource: wgpu::BindingResource::TextureView(&views[2]) },
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("raycast"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("raycast"),
+            layout: Some(&pipeline_layout),
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+
+        let staging = |label, size: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let timestamps = gpu.timestamps.then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("raycast time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (set, resolve, staging("timestamps readback", 16))
+        });
+        let readback = Readback {
+            requests: staging("requests readback", request_bytes),
+            usage: staging("usage readback", cache.capacity() as u64 * 4),
+            image: staging("image readback", pixels * 16),
+            timestamps,
+        };
+        let mut renderer = Self {
+            options,
+            info: info.clone(),
+            scene: scene.clone(),
+            octree,
+            pages,
+            cache,
+            pipeline,
+            bind_group,
+            params,
+            nodes,
+            requests,
+            image,
+            readback,
+            tables_words: t.words.len(),
+            frame: 0,
+        };
+        renderer.flush(gpu);
+        Ok(renderer)
+    }
+
+    /// The residency octree.
+    pub fn octree(&self) -> &ResidencyOctree {
+        &self.octree
+    }
+
+    /// The brick cache.
+    pub fn cache(&self) -> &BrickCache {
+        &self.cache
+    }
+
+    /// The options in use.
+    pub fn options(&self) -> &RenderOptions {
+        &self.options
+    }
+
+    /// Number of frames rendered so far.
+    pub fn frames(&self) -> u32 {
+        self.frame
+    }
+
+    /// Words of the shader's table buffer.
+    pub fn table_words(&self) -> usize {
+        self.tables_words
+    }
+
+    /// Replaces the camera (the transfer functions stay).
+    pub fn set_camera(&mut self, camera: Camera) {
+        self.scene.camera = camera;
+    }
+
+    /// Whether `key` is resident (in a slot, or as a fill-value brick).
+    pub fn is_resident(&self, key: &BrickKey) -> bool {
+        self.octree.is_resident(key)
+    }
+
+    /// Cache slots free or not used by the last frame: how many bricks can be inserted now
+    /// without evicting the current working set.
+    pub fn insertable(&self) -> usize {
+        self.cache.available(self.frame)
+    }
+
+    /// Inserts a fetched brick: takes a slot (evicting the least recently used brick not used
+    /// by the last frame), uploads it, and updates the page table and the octree. A brick of
+    /// the wrong size or type is an error and changes nothing.
+    pub fn insert(&mut self, gpu: &Gpu, key: BrickKey, voxels: &BrickVoxels) -> Result<Inserted> {
+        let id = self
+            .pages
+            .id(&key)
+            .with_context(|| format!("brick {key:?} is not part of the rendered volume"))?;
+        if self.pages.entry(id) != ENTRY_MISSING {
+            return Ok(Inserted::AlreadyResident);
+        }
+        if let BrickVoxels::Empty = voxels {
+            self.pages.set(id, ENTRY_EMPTY);
+            self.octree.insert(key)?;
+            return Ok(Inserted::Empty);
+        }
+        let Some((slot, evicted_id)) = self.cache.allocate(self.frame) else {
+            return Ok(Inserted::CacheFull);
+        };
+        let evicted = match evicted_id {
+            Some(old) => {
+                let old_key = self.pages.key(old).context("cache slot owner has no key")?;
+                self.pages.set(old, ENTRY_MISSING);
+                self.octree.evict(old_key)?;
+                Some(old_key)
+            }
+            None => None,
+        };
+        if let Err(e) = self.cache.upload(&gpu.queue, slot, voxels) {
+            self.cache.release(slot);
+            return Err(e.context(format!("brick {key:?}")));
+        }
+        self.cache.assign(slot, id);
+        self.pages.set(id, slot + 2);
+        self.octree.insert(key)?;
+        Ok(Inserted::Uploaded { evicted })
+    }
+
+    /// Uploads changed page-table entries and octree nodes.
+    pub fn flush(&mut self, gpu: &Gpu) {
+        self.pages.flush(&gpu.queue);
+        if let Some(range) = self.octree.take_dirty() {
+            let words = self.octree.gpu_words(range.clone());
+            let offset = (range.start * self.octree.words_per_node() * 4) as u64;
+            gpu.queue.write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
+        }
+    }
+
+    fn params(&self) -> Params {
+        let g = self.octree.geometry();
+        let cam = &self.scene.camera;
+        let spacing = xyz(self.info.voxel_size);
+        let leaf_world: [f64; 3] =
+            std::array::from_fn(|a| (g.leaf_shift[a] as f64).exp2() * spacing[a]);
+        let eye_leaf: [f64; 3] = std::array::from_fn(|a| cam.eye[a] / leaf_world[a]);
+        let (forward, right, up) = cam.basis();
+        let tan_half = (cam.fov_y_degrees.to_radians() / 2.0).tan();
+        let aspect = self.options.width as f64 / self.options.height as f64;
+        let v4 = |v: [f64; 3], w: f64| [v[0] as f32, v[1] as f32, v[2] as f32, w as f32];
+        let reference_step = spacing.iter().copied().fold(f64::INFINITY, f64::min);
+        let levels = self.info.levels.len() as u32;
+        let bg = self.scene.background;
+        Params {
+            size: [
+                self.options.width,
+                self.options.height,
+                self.frame,
+                self.octree.channels().len() as u32,
+            ],
+            tree: [
+                g.depth,
+                levels,
+                self.cache.kind() as u32,
+                self.options.max_requests,
+            ],
+            tables: [
+                self.options.start_depth.min(g.depth),
+                tables::TF_BINS as u32,
+                0,
+                self.channels_offset(),
+            ],
+            eye_cell: {
+                let c = eye_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
+                [c[0], c[1], c[2], 0]
+            },
+            eye_frac: {
+                let f = eye_leaf.map(|e| e - e.floor());
+                v4(f, reference_step)
+            },
+            right: v4(right.map(|x| x * tan_half * aspect), self.options.lod_bias as f64),
+            up: v4(up.map(|x| x * tan_half), 2.0 * tan_half / self.options.height as f64),
+            forward: v4(forward, self.options.step_factor as f64),
+            world_to_leaf: v4(
+                leaf_world.map(|w| 1.0 / w),
+                leaf_world.iter().copied().fold(f64::INFINITY, f64::min),
+            ),
+            volume_leaf: v4(
+                std::array::from_fn(|a| {
+                    g.volume_voxels[a] as f64 / (g.leaf_shift[a] as f64).exp2()
+                }),
+                0.0,
+            ),
+            background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 1.0],
+            leaf_shift: [g.leaf_shift[0], g.leaf_shift[1], g.leaf_shift[2], 0],
+            brick: [g.brick[0] as u32, g.brick[1] as u32, g.brick[2] as u32, 0],
+            slots: {
+                let s = self.cache.slots_per_axis();
+                [s[0], s[1], s[2], 0]
+            },
+        }
+    }
+
+    fn channels_offset(&self) -> u32 {
+        let levels = self.info.levels.len();
+        (levels * tables::LEVEL_WORDS + self.pages.offsets().len()) as u32
+    }
+
+    /// Renders one frame and reads back its image, requests, usage feedback (folded into
+    /// the cache's LRU order) and counters.
+    pub fn render(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+        self.flush(gpu);
+        self.frame += 1;
+        let params = self.params();
+        gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let device = &gpu.device;
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("raycast frame"),
+        });
+        encoder.clear_buffer(&self.requests, 0, Some(HEADER_WORDS as u64 * 4));
+        {
+            let timestamp_writes = self.readback.timestamps.as_ref().map(|(set, _, _)| {
+                wgpu::ComputePassTimestampWrites {
+                    query_set: set,
+                    beginning_of_pass_write_index: Some(0),
+                    end_of_pass_write_index: Some(1),
+                }
+            });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("raycast"),
+                timestamp_writes,
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(self.options.width.div_ceil(8), self.options.height.div_ceil(8), 1);
+        }
+        let rb = &self.readback;
+        encoder.copy_buffer_to_buffer(&self.requests, 0, &rb.requests, 0, rb.requests.size());
+        encoder.copy_buffer_to_buffer(self.cache.usage_buffer(), 0, &rb.usage, 0, self.cache.capacity() as u64 * 4);
+        let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
+        encoder.copy_buffer_to_buffer(&self.image, 0, &rb.image, 0, image_bytes);
+        if let Some((set, resolve, staging)) = &rb.timestamps {
+            encoder.resolve_query_set(set, 0..2, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
+        }
+        gpu.queue.submit([encoder.finish()]);
+
+        let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage, &rb.image];
+        if let Some((_, _, staging)) = &rb.timestamps {
+            maps.push(staging);
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        for (i, b) in maps.iter().enumerate() {
+            let tx = tx.clone();
+            b.map_async(wgpu::MapMode::Read, .., move |r| {
+                let _ = tx.send((i, r));
+            });
+        }
+        drop(tx);
+        device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .context("waiting for the GPU")?;
+        for (i, r) in rx.iter() {
+            if r.is_err() {
+                bail!("cannot read back GPU buffer {i}");
+            }
+        }
+
+        let words: Vec<u32> = bytemuck::cast_slice(&rb.requests.get_mapped_range(..)?).to_vec();
+        let usage: Vec<u32> = bytemuck::cast_slice(&rb.usage.get_mapped_range(..)?).to_vec();
+        let pixels: Vec<[f32; 4]> =
+            bytemuck::cast_slice(&rb.image.get_mapped_range(0..image_bytes)?).to_vec();
+        let gpu_time_ms = match &rb.timestamps {
+            Some((_, _, staging)) => {
+                let t: Vec<u64> = bytemuck::cast_slice(&staging.get_mapped_range(..)?).to_vec();
+                let period = gpu.queue.get_timestamp_period() as f64;
+                Some(t[1].saturating_sub(t[0]) as f64 * period / 1e6)
+            }
+            None => None,
+        };
+        for b in maps {
+            b.unmap();
+        }
+        self.cache.note_usage(&usage);
+
+        let requested = words[0] as usize;
+        let n = requested.min(self.options.max_requests as usize);
+        let mut requests = Vec::with_capacity(n);
+        for i in 0..n {
+            let id = words[HEADER_WORDS + 2 * i];
+            let distance = f32::from_bits(words[HEADER_WORDS + 2 * i + 1]);
+            let key = self
+                .pages
+                .key(id)
+                .with_context(|| format!("shader reported an unknown brick id {id}"))?;
+            requests.push(BrickRequest { key, distance });
+        }
+        Ok(FrameOutput {
+            pixels,
+            requests,
+            counts: ShaderCounts {
+                samples: words[1] as u64,
+                empty_nodes_skipped: words[2] as u64,
+                bricks_substituted: words[3] as u64,
+                homogeneous_nodes: words[4] as u64,
+                requests_over_cap: words[5] as u64,
+                samples_without_data: words[6] as u64,
+                bricks_requested: requested as u64,
+            },
+            gpu_time_ms,
+        })
+    }
+}

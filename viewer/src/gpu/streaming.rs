@@ -1,0 +1,314 @@
+//! Brick streaming and the progressive loop.
+//!
+//! [`Fetcher`] runs worker threads that take batches of keys off a shared queue and call the
+//! blocking [`BrickSource::fetch`], so requests overlap. Submitting a new request list
+//! replaces whatever is still queued (stale requests are cancelled; fetches already under way
+//! complete). [`render_progressive`] drives render → read requests → fetch (coarse before
+//! fine, near before far, only what the cache can take) → upload → insert into the octree →
+//! repeat, until a frame requests nothing, or the frame or time budget runs out, or the cache
+//! cannot take any more bricks without evicting the current view's working set.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::{Arc, Condvar, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::Result;
+use serde::Serialize;
+
+use super::device::Gpu;
+use super::renderer::{BrickRequest, Inserted, RenderOptions, Renderer, ShaderCounts};
+use crate::scene::Scene;
+use crate::source::{BrickKey, BrickSource, BrickVoxels};
+
+#[derive(Default)]
+struct Queue {
+    pending: VecDeque<BrickKey>,
+    in_flight: usize,
+    done: Vec<(BrickKey, Result<BrickVoxels>)>,
+    shutdown: bool,
+}
+
+/// A pool of fetch workers over one [`BrickSource`].
+pub struct Fetcher {
+    shared: Arc<(Mutex<Queue>, Condvar)>,
+    workers: Vec<JoinHandle<()>>,
+}
+
+impl Fetcher {
+    /// Starts `workers` threads fetching batches of up to `batch` keys from `source`.
+    pub fn new(source: Arc<dyn BrickSource>, workers: usize, batch: usize) -> Self {
+        let shared = Arc::new((Mutex::new(Queue::default()), Condvar::new()));
+        let batch = batch.max(1);
+        let workers = (0..workers.max(1))
+            .map(|_| {
+                let shared = Arc::clone(&shared);
+                let source = Arc::clone(&source);
+                std::thread::spawn(move || {
+                    let (lock, cv) = &*shared;
+                    loop {
+                        let keys: Vec<BrickKey> = {
+                            let mut q = lock.lock().expect("fetch queue");
+                            while q.pending.is_empty() && !q.shutdown {
+                                q = cv.wait(q).expect("fetch queue");
+                            }
+                            if q.shutdown {
+                                return;
+                            }
+                            let n = q.pending.len().min(batch);
+                            q.in_flight += n;
+                            q.pending.drain(..n).collect()
+                        };
+                        let mut results = source.fetch(&keys);
+                        results.resize_with(keys.len(), || {
+                            Err(anyhow::anyhow!("brick source returned too few results"))
+                        });
+                        let mut q = lock.lock().expect("fetch queue");
+                        q.in_flight -= keys.len();
+                        q.done.extend(keys.into_iter().zip(results));
+                        cv.notify_all();
+                    }
+                })
+            })
+            .collect();
+        Self { shared, workers }
+    }
+
+    /// Replaces the queued (not yet started) requests with `keys`, in priority order.
+    /// Returns how many queued requests were cancelled.
+    pub fn submit(&self, keys: Vec<BrickKey>) -> usize {
+        let (lock, cv) = &*self.shared;
+        let mut q = lock.lock().expect("fetch queue");
+        let cancelled = q.pending.iter().filter(|k| !keys.contains(k)).count();
+        q.pending = keys.into();
+        cv.notify_all();
+        cancelled
+    }
+
+    /// Waits until nothing is queued or in flight (or `deadline` passes) and returns every
+    /// completed fetch.
+    pub fn wait(&self, deadline: Option<Instant>) -> Vec<(BrickKey, Result<BrickVoxels>)> {
+        let (lock, cv) = &*self.shared;
+        let mut q = lock.lock().expect("fetch queue");
+        while !(q.pending.is_empty() && q.in_flight == 0) {
+            match deadline {
+                Some(d) => {
+                    let now = Instant::now();
+                    if now >= d {
+                        break;
+                    }
+                    q = cv.wait_timeout(q, d - now).expect("fetch queue").0;
+                }
+                None => q = cv.wait(q).expect("fetch queue"),
+            }
+        }
+        std::mem::take(&mut q.done)
+    }
+}
+
+impl Drop for Fetcher {
+    fn drop(&mut self) {
+        let (lock, cv) = &*self.shared;
+        lock.lock().expect("fetch queue").shutdown = true;
+        cv.notify_all();
+        for w in self.workers.drain(..) {
+            let _ = w.join();
+        }
+    }
+}
+
+/// Budgets of a progressive render.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Budget {
+    /// Most frames rendered.
+    pub max_frames: u32,
+    /// Wall-clock limit.
+    pub time: Option<Duration>,
+    /// Fetch worker threads.
+    pub workers: usize,
+    /// Keys per [`BrickSource::fetch`] call.
+    pub batch: usize,
+}
+
+impl Default for Budget {
+    fn default() -> Self {
+        Self {
+            max_frames: 64,
+            time: None,
+            workers: 4,
+            batch: 16,
+        }
+    }
+}
+
+/// Statistics of one frame (the shader's counters plus what streaming did after it).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FrameStats {
+    /// Frame number, from 1.
+    pub frame: u32,
+    /// Shader counters.
+    #[serde(flatten)]
+    pub shader: ShaderCounts,
+    /// Bricks fetched successfully after this frame.
+    pub bricks_fetched: u64,
+    /// Bricks whose fetch or upload failed after this frame (never requested again).
+    pub bricks_failed: u64,
+    /// Bricks evicted to make room.
+    pub bricks_evicted: u64,
+    /// Requested bricks not fetched because the cache could not take them this frame.
+    pub bricks_deferred: u64,
+    /// Queued requests cancelled as stale.
+    pub requests_cancelled: u64,
+    /// Decoded bytes of the bricks fetched.
+    pub bytes_fetched: u64,
+    /// GPU time of the ray-casting pass (timestamp queries), `null` when unsupported.
+    pub gpu_time_ms: Option<f64>,
+    /// Wall time of the frame including fetching and uploading.
+    pub wall_ms: f64,
+}
+
+/// Result of a progressive render.
+#[derive(Clone, Debug)]
+pub struct Progressive {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// The last frame's pixels: linear RGBA, row-major from the top.
+    pub pixels: Vec<[f32; 4]>,
+    /// Per-frame statistics.
+    pub frames: Vec<FrameStats>,
+    /// Whether the last frame requested nothing (beyond bricks that failed).
+    pub converged: bool,
+    /// Why the loop stopped.
+    pub stop_reason: String,
+    /// Every brick requested by the shader, in order of first request.
+    pub request_log: Vec<BrickKey>,
+    /// Bricks that could not be fetched or uploaded, with the error.
+    pub failed: Vec<(BrickKey, String)>,
+}
+
+fn decoded_bytes(v: &BrickVoxels) -> u64 {
+    match v {
+        BrickVoxels::Empty => 0,
+        BrickVoxels::U8(v) => v.len() as u64,
+        BrickVoxels::U16(v) => 2 * v.len() as u64,
+        BrickVoxels::I16(v) => 2 * v.len() as u64,
+        BrickVoxels::U32(v) => 4 * v.len() as u64,
+        BrickVoxels::I32(v) => 4 * v.len() as u64,
+        BrickVoxels::F32(v) => 4 * v.len() as u64,
+    }
+}
+
+/// Orders requests coarse before fine, then near before far.
+pub fn prioritise(requests: &mut [BrickRequest]) {
+    requests.sort_by(|a, b| {
+        b.key
+            .level
+            .cmp(&a.key.level)
+            .then(a.distance.total_cmp(&b.distance))
+            .then(a.key.cmp(&b.key))
+    });
+}
+
+/// Renders `scene` from `source` progressively until converged or out of budget.
+pub fn render_progressive(
+    gpu: &Gpu,
+    source: Arc<dyn BrickSource>,
+    scene: &Scene,
+    options: RenderOptions,
+    budget: &Budget,
+) -> Result<Progressive> {
+    let start = Instant::now();
+    let deadline = budget.time.map(|t| start + t);
+    let mut renderer = Renderer::new(gpu, source.info(), scene, options)?;
+    let fetcher = Fetcher::new(Arc::clone(&source), budget.workers, budget.batch);
+    let mut frames = Vec::new();
+    let mut request_log = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    let mut failed: HashMap<BrickKey, String> = HashMap::new();
+    let mut pixels = Vec::new();
+    let mut converged = false;
+    let mut stop_reason = format!("frame budget of {} frames spent", budget.max_frames);
+    for _ in 0..budget.max_frames.max(1) {
+        let frame_start = Instant::now();
+        let out = renderer.render(gpu)?;
+        pixels = out.pixels;
+        let mut stats = FrameStats {
+            frame: renderer.frames(),
+            shader: out.counts,
+            gpu_time_ms: out.gpu_time_ms,
+            ..Default::default()
+        };
+        let mut wanted: Vec<BrickRequest> = out
+            .requests
+            .into_iter()
+            .filter(|r| !failed.contains_key(&r.key) && !renderer.is_resident(&r.key))
+            .collect();
+        for r in &wanted {
+            if seen.insert(r.key) {
+                request_log.push(r.key);
+            }
+        }
+        if wanted.is_empty() && stats.shader.requests_over_cap == 0 {
+            stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+            frames.push(stats);
+            converged = true;
+            stop_reason = "converged: no brick requested".into();
+            break;
+        }
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+            frames.push(stats);
+            stop_reason = "time budget spent".into();
+            break;
+        }
+        prioritise(&mut wanted);
+        let room = renderer.insertable();
+        stats.bricks_deferred = wanted.len().saturating_sub(room) as u64;
+        wanted.truncate(room);
+        if wanted.is_empty() {
+            stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+            frames.push(stats);
+            stop_reason = "cache full: every slot holds a brick the current view uses".into();
+            break;
+        }
+        stats.requests_cancelled = fetcher.submit(wanted.iter().map(|r| r.key).collect()) as u64;
+        for (key, result) in fetcher.wait(deadline) {
+            let inserted = result.and_then(|voxels| {
+                let bytes = decoded_bytes(&voxels);
+                renderer.insert(gpu, key, &voxels).map(|i| (i, bytes))
+            });
+            match inserted {
+                Ok((i, bytes)) => {
+                    stats.bricks_fetched += 1;
+                    stats.bytes_fetched += bytes;
+                    match i {
+                        Inserted::Uploaded { evicted: Some(_) } => stats.bricks_evicted += 1,
+                        Inserted::CacheFull => stats.bricks_deferred += 1,
+                        _ => {}
+                    }
+                }
+                Err(e) => {
+                    tracing::warn!("brick {key:?}: {e:#}; substituting other levels");
+                    stats.bricks_failed += 1;
+                    failed.insert(key, format!("{e:#}"));
+                }
+            }
+        }
+        stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+        frames.push(stats);
+    }
+    let mut failed: Vec<(BrickKey, String)> = failed.into_iter().collect();
+    failed.sort_by_key(|(k, _)| *k);
+    Ok(Progressive {
+        width: renderer.options().width,
+        height: renderer.options().height,
+        pixels,
+        frames,
+        converged,
+        stop_reason,
+        request_log,
+        failed,
+    })
+}

@@ -1,0 +1,208 @@
+//! Linear-RGB `f32` images, as the renderers produce them and `viewer compare` reads them,
+//! written and read as PNG (8-bit sRGB) or OpenEXR (32-bit float, linear) by file extension.
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail, ensure};
+
+/// A linear-RGB image, rows top to bottom, pixels left to right.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RgbImage {
+    /// Width in pixels.
+    pub width: usize,
+    /// Height in pixels.
+    pub height: usize,
+    /// `width · height` pixels, row-major from the top-left.
+    pub pixels: Vec<[f32; 3]>,
+}
+
+/// File formats of [`RgbImage::write`] and [`RgbImage::read`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// PNG, 8-bit sRGB (linear values clamped to `[0, 1]` and encoded).
+    Png,
+    /// OpenEXR, 32-bit float linear RGB.
+    Exr,
+}
+
+impl ImageFormat {
+    /// The format named by `path`'s extension (`.png` or `.exr`, any case).
+    pub fn of(path: &Path) -> Result<Self> {
+        let ext = path
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("png") => Ok(Self::Png),
+            Some("exr") => Ok(Self::Exr),
+            _ => bail!(
+                "{}: unknown image format (use a .png or .exr file name)",
+                path.display()
+            ),
+        }
+    }
+}
+
+/// Linear light in `[0, 1]` to the sRGB encoding.
+pub fn linear_to_srgb(v: f32) -> f32 {
+    let v = v.clamp(0.0, 1.0);
+    if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The sRGB encoding in `[0, 1]` to linear light.
+pub fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.040_45 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+impl RgbImage {
+    /// An image of one colour.
+    pub fn filled(width: usize, height: usize, colour: [f32; 3]) -> Self {
+        Self {
+            width,
+            height,
+            pixels: vec![colour; width * height],
+        }
+    }
+
+    /// Pixel `(x, y)`.
+    pub fn get(&self, x: usize, y: usize) -> [f32; 3] {
+        self.pixels[y * self.width + x]
+    }
+
+    /// Writes the image, in the format of `path`'s extension.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let shown = path.display();
+        ensure!(
+            self.pixels.len() == self.width * self.height,
+            "{shown}: image has {} pixels for {}×{}",
+            self.pixels.len(),
+            self.width,
+            self.height
+        );
+        match ImageFormat::of(path)? {
+            ImageFormat::Png => {
+                let bytes: Vec<u8> = self
+                    .pixels
+                    .iter()
+                    .flat_map(|p| p.map(|v| (linear_to_srgb(v) * 255.0).round() as u8))
+                    .collect();
+                image::save_buffer_with_format(
+                    path,
+                    &bytes,
+                    self.width as u32,
+                    self.height as u32,
+                    image::ColorType::Rgb8,
+                    image::ImageFormat::Png,
+                )
+                .with_context(|| format!("{shown}: cannot write PNG"))
+            }
+            ImageFormat::Exr => exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
+                let p = self.get(x, y);
+                (p[0], p[1], p[2])
+            })
+            .with_context(|| format!("{shown}: cannot write OpenEXR")),
+        }
+    }
+
+    /// Reads an image written by [`RgbImage::write`] (or any 8/16-bit PNG, taken as sRGB, or
+    /// OpenEXR with RGB channels, taken as linear).
+    pub fn read(path: &Path) -> Result<Self> {
+        let shown = path.display();
+        match ImageFormat::of(path)? {
+            ImageFormat::Png => {
+                let img = image::open(path).with_context(|| format!("{shown}: cannot read PNG"))?;
+                let rgb = img.to_rgb32f();
+                Ok(Self {
+                    width: rgb.width() as usize,
+                    height: rgb.height() as usize,
+                    pixels: rgb
+                        .pixels()
+                        .map(|p| [0, 1, 2].map(|i| srgb_to_linear(p.0[i])))
+                        .collect(),
+                })
+            }
+            ImageFormat::Exr => {
+                let image = exr::prelude::read_first_rgba_layer_from_file(
+                    path,
+                    |size, _| Self::filled(size.width(), size.height(), [0.0; 3]),
+                    |img: &mut Self, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                        let w = img.width;
+                        img.pixels[pos.y() * w + pos.x()] = [r, g, b];
+                    },
+                )
+                .with_context(|| format!("{shown}: cannot read OpenEXR RGB"))?;
+                Ok(image.layer_data.channel_data.pixels)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gradient() -> RgbImage {
+        let (w, h) = (5, 3);
+        RgbImage {
+            width: w,
+            height: h,
+            pixels: (0..w * h)
+                .map(|i| [i as f32 / 14.0, 0.25, 1.0 - i as f32 / 14.0])
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn exr_round_trips_exactly() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.exr");
+        let mut img = gradient();
+        img.pixels[3] = [2.5, -0.125, 1e-7];
+        img.write(&path).unwrap();
+        assert_eq!(RgbImage::read(&path).unwrap(), img);
+    }
+
+    #[test]
+    fn png_round_trips_within_8_bit_srgb() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a.PNG");
+        let img = gradient();
+        img.write(&path).unwrap();
+        let back = RgbImage::read(&path).unwrap();
+        assert_eq!((back.width, back.height), (5, 3));
+        for (a, b) in img.pixels.iter().zip(&back.pixels) {
+            for i in 0..3 {
+                // Half an 8-bit step of the sRGB encoding, in the encoded domain.
+                let d = (linear_to_srgb(a[i]) - linear_to_srgb(b[i])).abs();
+                assert!(d <= 0.5 / 255.0 + 1e-6, "{a:?} vs {b:?}");
+            }
+        }
+        assert_eq!(back.get(0, 0)[0], 0.0);
+        assert_eq!(back.get(4, 2)[0], 1.0);
+    }
+
+    #[test]
+    fn srgb_round_trips_and_bad_names_are_refused() {
+        for v in [0.0, 0.001, 0.2, 0.5, 1.0] {
+            assert!((srgb_to_linear(linear_to_srgb(v)) - v).abs() < 1e-6);
+        }
+        assert!((linear_to_srgb(0.5) - 0.735_357).abs() < 1e-6);
+        let e = gradient().write(Path::new("out.tiff")).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "out.tiff: unknown image format (use a .png or .exr file name)"
+        );
+        let e = RgbImage::read(Path::new("/nonexistent/x.exr")).unwrap_err();
+        assert!(
+            format!("{e:#}").starts_with("/nonexistent/x.exr: cannot read OpenEXR RGB"),
+            "{e:#}"
+        );
+    }
+}

@@ -1,0 +1,20 @@
+//! `residency-viewer`: residency-octree volume rendering on wgpu (the renderer of
+//! `../shared/papers/residency-octree.txt`), streamed from a `brickserver` or read from a local
+//! OME-Zarr store, plus an f64 CPU reference ray caster and image comparison.
+//!
+//! - [`scene`]: camera, per-channel transfer functions and the compositing rule shared by the
+//!   GPU renderer and the reference;
+//! - [`source`]: where volume metadata and bricks come from (HTTP brick server or local store);
+//! - [`reference`]: the f64 CPU reference ray caster;
+//! - [`image`]: linear-RGB images, PNG and EXR; [`metrics`]: PSNR, SSIM, max abs error.
+
+#![warn(missing_docs)]
+
+pub mod cli;
+pub mod gpu;
+pub mod image;
+pub mod metrics;
+pub mod octree;
+pub mod reference;
+pub mod scene;
+pub mod source;

@@ -1,0 +1,48 @@
+//! The `viewer` command line.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+use residency_viewer::cli;
+
+#[derive(Parser)]
+#[command(
+    name = "viewer",
+    version,
+    about = "Residency-octree volume rendering of OME-Zarr volumes on wgpu"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene on the GPU, progressively, until converged or out of budget.
+    Render(cli::render::Args),
+    /// Render the same scene's ground truth on the CPU in f64 (full resolution, fine step).
+    Reference(cli::reference::Args),
+    /// Compare two images: PSNR, SSIM, max abs error, and an EXR error map.
+    Compare(cli::compare::Args),
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "info".into()),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let result = match Cli::parse().command {
+        Command::Render(args) => cli::render::run(args),
+        Command::Reference(args) => cli::reference::run(args),
+        Command::Compare(args) => cli::compare::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

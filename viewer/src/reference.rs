@@ -1,0 +1,445 @@
+//! The reference ray caster: the scene's ground truth, on the CPU in `f64`, at level 0, with
+//! trilinear sampling and a fine fixed step, following the conventions of [`crate::scene`]
+//! exactly (world space, projection, opacity correction and compositing).
+//!
+//! Each ray is clipped to the volume box `[0, extent]` and cut into segments of the step `Δ`
+//! from the entry point, the last one shorter; each segment is sampled at its midpoint and
+//! composited with its own length. Level-0 bricks are read through any [`BrickSource`] on
+//! first use and kept, decoded, for the whole render. Pixels are rendered in parallel.
+
+use std::collections::HashMap;
+use std::sync::{Arc, RwLock};
+
+use anyhow::{Context, Result, ensure};
+use rayon::prelude::*;
+
+use crate::image::RgbImage;
+use crate::scene::{ChannelStyle, Scene, corrected_opacity};
+use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
+
+/// Default step, as a fraction of the finest level-0 voxel spacing.
+pub const DEFAULT_STEP_FRACTION: f64 = 0.25;
+
+/// How the reference is rendered.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReferenceOptions {
+    /// Image width in pixels.
+    pub width: usize,
+    /// Image height in pixels.
+    pub height: usize,
+    /// Step as a fraction of the finest level-0 voxel spacing.
+    pub step_fraction: f64,
+    /// Stop a ray once its transmittance falls below this (0: never stop early).
+    pub min_transmittance: f64,
+}
+
+impl ReferenceOptions {
+    /// A `width × height` render with the default step and no early termination.
+    pub fn new(width: usize, height: usize) -> Self {
+        Self {
+            width,
+            height,
+            step_fraction: DEFAULT_STEP_FRACTION,
+            min_transmittance: 0.0,
+        }
+    }
+}
+
+/// Level-0 voxels of one channel, read brick by brick through a source and cached.
+struct Level0<'a> {
+    source: &'a dyn BrickSource,
+    channel: u32,
+    shape: [u64; 3],
+    brick: [u64; 3],
+    cache: RwLock<HashMap<[u64; 3], Arc<BrickVoxels>>>,
+}
+
+impl Level0<'_> {
+    fn brick(&self, b: [u64; 3]) -> Result<Arc<BrickVoxels>> {
+        if let Some(v) = self.cache.read().expect("cache lock").get(&b) {
+            return Ok(v.clone());
+        }
+        let key = BrickKey {
+            level: 0,
+            channel: self.channel,
+            brick: b,
+        };
+        let voxels = self
+            .source
+            .fetch(&[key])
+            .pop()
+            .context("the source answered no brick")??;
+        let voxels = Arc::new(voxels);
+        self.cache
+            .write()
+            .expect("cache lock")
+            .insert(b, voxels.clone());
+        Ok(voxels)
+    }
+
+    /// Voxel `v` (`z, y, x`), which must lie inside the volume.
+    fn voxel(&self, v: [u64; 3], last: &mut Option<([u64; 3], Arc<BrickVoxels>)>) -> Result<f64> {
+        let b: [u64; 3] = std::array::from_fn(|i| v[i] / self.brick[i]);
+        let bricks = match last {
+            Some((lb, data)) if *lb == b => data.clone(),
+            _ => {
+                let data = self.brick(b)?;
+                *last = Some((b, data.clone()));
+                data
+            }
+        };
+        let l: [u64; 3] = std::array::from_fn(|i| v[i] % self.brick[i]);
+        let index = (l[0] * self.brick[1] + l[1]) * self.brick[2] + l[2];
+        Ok(bricks.value(index as usize))
+    }
+
+    /// Trilinear sample at continuous voxel coordinates `u` (`z, y, x`; voxel centres at
+    /// integers), clamped to the edge voxels.
+    fn sample(
+        &self,
+        u: [f64; 3],
+        last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
+    ) -> Result<f64> {
+        let mut i0 = [0u64; 3];
+        let mut i1 = [0u64; 3];
+        let mut f = [0.0; 3];
+        for a in 0..3 {
+            let max = (self.shape[a] - 1) as f64;
+            let x = u[a].clamp(0.0, max);
+            let lo = x.floor();
+            i0[a] = lo as u64;
+            i1[a] = (i0[a] + 1).min(self.shape[a] - 1);
+            f[a] = x - lo;
+        }
+        let mut value = 0.0;
+        for corner in 0..8 {
+            let (z, y, x) = (corner & 4 != 0, corner & 2 != 0, corner & 1 != 0);
+            let w = [(z, 0), (y, 1), (x, 2)]
+                .iter()
+                .map(|&(hi, a)| if hi { f[a] } else { 1.0 - f[a] })
+                .product::<f64>();
+            if w == 0.0 {
+                continue;
+            }
+            let v = [
+                if z { i1[0] } else { i0[0] },
+                if y { i1[1] } else { i0[1] },
+                if x { i1[2] } else { i0[2] },
+            ];
+            value += w * self.voxel(v, last)?;
+        }
+        Ok(value)
+    }
+}
+
+/// Where a ray meets the box `[0, extent]`: `(t_enter, t_exit)` with `t_enter ≥ 0`, or `None`.
+pub fn clip_to_box(eye: [f64; 3], dir: [f64; 3], extent: [f64; 3]) -> Option<(f64, f64)> {
+    let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
+    for a in 0..3 {
+        if dir[a] == 0.0 {
+            if eye[a] < 0.0 || eye[a] > extent[a] {
+                return None;
+            }
+            continue;
+        }
+        let ta = (0.0 - eye[a]) / dir[a];
+        let tb = (extent[a] - eye[a]) / dir[a];
+        t0 = t0.max(ta.min(tb));
+        t1 = t1.min(ta.max(tb));
+    }
+    (t1 > t0).then_some((t0, t1))
+}
+
+/// Renders `scene` from `source` at level 0.
+pub fn render(
+    source: &dyn BrickSource,
+    scene: &Scene,
+    options: &ReferenceOptions,
+) -> Result<RgbImage> {
+    let info = source.info();
+    ensure!(
+        options.width > 0 && options.height > 0,
+        "image size {}×{} is empty",
+        options.width,
+        options.height
+    );
+    ensure!(
+        options.step_fraction > 0.0 && options.step_fraction.is_finite(),
+        "step fraction {} must be positive",
+        options.step_fraction
+    );
+    let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
+    for c in &visible {
+        ensure!(
+            c.channel < info.channels.len(),
+            "scene draws channel {} but {} has {} channels",
+            c.channel,
+            info.name,
+            info.channels.len()
+        );
+    }
+    let volumes: Vec<Level0> = visible
+        .iter()
+        .map(|c| Level0 {
+            source,
+            channel: c.channel as u32,
+            shape: info.levels[0].shape,
+            brick: info.brick_shape,
+            cache: RwLock::new(HashMap::new()),
+        })
+        .collect();
+    let spacing_xyz = [info.voxel_size[2], info.voxel_size[1], info.voxel_size[0]];
+    let reference_step = spacing_xyz.iter().copied().fold(f64::INFINITY, f64::min);
+    let step = options.step_fraction * reference_step;
+    let extent = extent_xyz(info);
+    let pixels = (0..options.width * options.height)
+        .into_par_iter()
+        .map(|p| {
+            let (px, py) = (p % options.width, p / options.width);
+            let dir = scene
+                .camera
+                .ray_direction(px, py, options.width, options.height);
+            let mut lasts: Vec<Option<([u64; 3], Arc<BrickVoxels>)>> = vec![None; volumes.len()];
+            let (colour, t) = march(
+                scene.camera.eye,
+                dir,
+                extent,
+                (step, reference_step),
+                options.min_transmittance,
+                &visible,
+                &volumes,
+                spacing_xyz,
+                &mut lasts,
+            )?;
+            Ok(std::array::from_fn(|i| {
+                (colour[i] + t * scene.background[i]) as f32
+            }))
+        })
+        .collect::<Result<Vec<[f32; 3]>>>()?;
+    Ok(RgbImage {
+        width: options.width,
+        height: options.height,
+        pixels,
+    })
+}
+
+/// Level-0 extent of the volume box, world `x, y, z`.
+fn extent_xyz(info: &VolumeInfo) -> [f64; 3] {
+    let s = info.levels[0].shape;
+    let v = info.voxel_size;
+    [s[2] as f64 * v[2], s[1] as f64 * v[1], s[0] as f64 * v[0]]
+}
+
+/// Marches one ray; returns the accumulated colour and the final transmittance.
+#[allow(clippy::too_many_arguments)]
+fn march(
+    eye: [f64; 3],
+    dir: [f64; 3],
+    extent: [f64; 3],
+    (step, reference_step): (f64, f64),
+    min_transmittance: f64,
+    styles: &[&ChannelStyle],
+    volumes: &[Level0],
+    spacing_xyz: [f64; 3],
+    lasts: &mut [Option<([u64; 3], Arc<BrickVoxels>)>],
+) -> Result<([f64; 3], f64)> {
+    let mut colour = [0.0; 3];
+    let mut t = 1.0;
+    let Some((t0, t1)) = clip_to_box(eye, dir, extent) else {
+        return Ok((colour, t));
+    };
+    let segments = ((t1 - t0) / step).ceil() as u64;
+    for i in 0..segments {
+        if t <= min_transmittance || t == 0.0 {
+            break;
+        }
+        let a = t0 + i as f64 * step;
+        let b = (a + step).min(t1);
+        if b <= a {
+            break;
+        }
+        let mid = 0.5 * (a + b);
+        let p: [f64; 3] = std::array::from_fn(|k| eye[k] + mid * dir[k]);
+        // Continuous voxel coordinates, z, y, x, voxel centres at integers.
+        let u = [
+            p[2] / spacing_xyz[2] - 0.5,
+            p[1] / spacing_xyz[1] - 0.5,
+            p[0] / spacing_xyz[0] - 0.5,
+        ];
+        let mut sample_colour = [0.0; 3];
+        let mut alpha_sum = 0.0;
+        for ((style, volume), last) in styles.iter().zip(volumes).zip(lasts.iter_mut()) {
+            let v = volume.sample(u, last)?;
+            let alpha = corrected_opacity(style.opacity_at(v), b - a, reference_step);
+            alpha_sum += alpha;
+            for k in 0..3 {
+                sample_colour[k] += alpha * style.color[k];
+            }
+        }
+        let alpha = alpha_sum.min(1.0);
+        for k in 0..3 {
+            colour[k] += t * sample_colour[k];
+        }
+        t *= 1.0 - alpha;
+    }
+    Ok((colour, t))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Camera, OpacityPoint};
+    use crate::source::{LevelInfo, SampleType};
+
+    /// An in-memory volume: `value(z, y, x)` over `shape`, bricks of `brick`.
+    struct Memory {
+        info: VolumeInfo,
+        value: fn(u64, u64, u64) -> f32,
+    }
+
+    impl Memory {
+        fn new(shape: [u64; 3], brick: [u64; 3], value: fn(u64, u64, u64) -> f32) -> Self {
+            Self {
+                info: VolumeInfo {
+                    name: "memory".into(),
+                    sample_type: SampleType::F32,
+                    channels: vec!["c0".into()],
+                    display: vec![Default::default()],
+                    voxel_size: [1.0; 3],
+                    brick_shape: brick,
+                    levels: vec![LevelInfo {
+                        shape,
+                        factor: [1; 3],
+                    }],
+                    minmax: None,
+                },
+                value,
+            }
+        }
+    }
+
+    impl BrickSource for Memory {
+        fn info(&self) -> &VolumeInfo {
+            &self.info
+        }
+
+        fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>> {
+            keys.iter()
+                .map(|k| {
+                    self.info.check_key(k)?;
+                    let b = self.info.brick_shape;
+                    let s = self.info.levels[0].shape;
+                    let mut v = Vec::new();
+                    for z in 0..b[0] {
+                        for y in 0..b[1] {
+                            for x in 0..b[2] {
+                                let g = [k.brick[0] * b[0] + z, k.brick[1] * b[1] + y, k.brick[2] * b[2] + x];
+                                v.push(if g[0] < s[0] && g[1] < s[1] && g[2] < s[2] {
+                                    (self.value)(g[0], g[1], g[2])
+                                } else {
+                                    0.0
+                                });
+                            }
+                        }
+                    }
+                    Ok(BrickVoxels::F32(v))
+                })
+                .collect()
+        }
+    }
+
+    fn scene(eye: [f64; 3], target: [f64; 3], opacity: f64) -> Scene {
+        Scene {
+            camera: Camera {
+                eye,
+                target,
+                up: [0.0, 1.0, 0.0],
+                fov_y_degrees: 1e-6,
+            },
+            channels: vec![ChannelStyle {
+                channel: 0,
+                visible: true,
+                color: [1.0, 0.5, 0.25],
+                opacity: vec![OpacityPoint {
+                    value: 0.0,
+                    opacity,
+                }],
+            }],
+            background: [0.0, 0.0, 1.0],
+        }
+    }
+
+    #[test]
+    fn constant_medium_gives_beer_lambert() {
+        // A 6×5×7 volume of constant opacity 0.1 per voxel, seen along -z through 6 voxels:
+        // the transmittance is 0.9^6 whatever the step, and the colour (1 − 0.9^6)·colour.
+        let vol = Memory::new([6, 5, 7], [4, 4, 4], |_, _, _| 1.0);
+        let s = scene([3.5, 2.5, 100.0], [3.5, 2.5, 0.0], 0.1);
+        for fraction in [0.25, 0.3, 1.0] {
+            let mut o = ReferenceOptions::new(1, 1);
+            o.step_fraction = fraction;
+            let img = render(&vol, &s, &o).unwrap();
+            let t = 0.9f64.powi(6);
+            let p = img.pixels[0];
+            let expect = [(1.0 - t), 0.5 * (1.0 - t), 0.25 * (1.0 - t) + t];
+            for i in 0..3 {
+                assert!((p[i] as f64 - expect[i]).abs() < 1e-6, "{p:?} vs {expect:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn trilinear_sampling_follows_voxel_centres() {
+        // value = x: a ray along -z at world x = 2.75 reads 2.25 everywhere (centres at +½).
+        let vol = Memory::new([4, 4, 8], [4, 4, 4], |_, _, x| x as f32);
+        let mut last = None;
+        let l0 = Level0 {
+            source: &vol,
+            channel: 0,
+            shape: [4, 4, 8],
+            brick: [4, 4, 4],
+            cache: RwLock::new(HashMap::new()),
+        };
+        assert_eq!(l0.sample([1.0, 1.0, 2.25], &mut last).unwrap(), 2.25);
+        // Across a brick boundary (x = 3 | 4) and clamped at the edges.
+        assert_eq!(l0.sample([1.0, 1.0, 3.5], &mut last).unwrap(), 3.5);
+        assert_eq!(l0.sample([1.0, 1.0, -0.4], &mut last).unwrap(), 0.0);
+        assert_eq!(l0.sample([1.0, 1.0, 9.0], &mut last).unwrap(), 7.0);
+        // Opacity ramp 0 at x=0 to 1 at x=8 along that ray: a(2.25) = 0.28125 per voxel.
+        let mut s = scene([2.75, 2.0, 50.0], [2.75, 2.0, 0.0], 0.0);
+        s.channels[0].opacity = vec![
+            OpacityPoint {
+                value: 0.0,
+                opacity: 0.0,
+            },
+            OpacityPoint {
+                value: 8.0,
+                opacity: 1.0,
+            },
+        ];
+        let img = render(&vol, &s, &ReferenceOptions::new(1, 1)).unwrap();
+        let t = (1.0 - 0.28125f64).powi(4);
+        assert!((img.pixels[0][0] as f64 - (1.0 - t)).abs() < 1e-6, "{:?}", img.pixels[0]);
+    }
+
+    #[test]
+    fn rays_that_miss_show_the_background_and_channels_add_up() {
+        let vol = Memory::new([4, 4, 4], [4, 4, 4], |_, _, _| 1.0);
+        let s = scene([10.0, 10.0, 10.0], [20.0, 20.0, 20.0], 0.5);
+        let img = render(&vol, &s, &ReferenceOptions::new(2, 2)).unwrap();
+        assert!(img.pixels.iter().all(|p| *p == [0.0, 0.0, 1.0]));
+        assert_eq!(clip_to_box([2.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]), Some((6.0, 10.0)));
+        assert_eq!(clip_to_box([5.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]), None);
+        // Inside the volume: the ray starts at the eye.
+        assert_eq!(clip_to_box([2.0, 2.0, 1.0], [0.0, 0.0, -1.0], [4.0; 3]), Some((0.0, 1.0)));
+    }
+
+    #[test]
+    fn a_missing_channel_is_an_error() {
+        let vol = Memory::new([4, 4, 4], [4, 4, 4], |_, _, _| 1.0);
+        let mut s = scene([2.0, 2.0, 10.0], [2.0, 2.0, 0.0], 0.5);
+        s.channels[0].channel = 3;
+        let e = render(&vol, &s, &ReferenceOptions::new(1, 1)).unwrap_err();
+        assert_eq!(e.to_string(), "scene draws channel 3 but memory has 1 channels");
+    }
+}

@@ -1,0 +1,178 @@
+//! What to draw: the camera, each channel's transfer function and visibility, and the
+//! compositing rule that the GPU renderer and the f64 reference ray caster both follow.
+//!
+//! **World space** is physical space (for example µm), axes `x, y, z`. Level 0 of a volume of
+//! `nx × ny × nz` voxels with spacing `(sx, sy, sz)` fills the box `[0, nx·sx] × [0, ny·sy] ×
+//! [0, nz·sz]`; voxel `(i, j, k)` of level `l` (downsampling factor `f`) has its centre at
+//! `((i + ½)·f_x·sx, (j + ½)·f_y·sy, (k + ½)·f_z·sz)`. Sampling is trilinear between voxel
+//! centres, clamped to the edge voxels.
+//!
+//! **Compositing** (front to back, emission–absorption). At a sample, each visible channel
+//! `c` with value `v` contributes opacity `α_c = 1 − (1 − a_c(v))^(Δ/Δ₀)`, where `a_c` is the
+//! channel's opacity transfer function (defined for the reference step `Δ₀`, one level-0
+//! voxel of the finest spacing) and `Δ` the step actually taken. Channels mix additively
+//! before blending: the sample's colour is `Σ α_c·colour_c` and its opacity
+//! `α = min(1, Σ α_c)`. The ray accumulates `C += T·colour`, `T *= 1 − α`, starting from
+//! `T = 1`, and the final pixel is `C + T·background`.
+//!
+//! **Projection** (pinhole, [`Camera::ray_direction`]): `forward = normalize(target − eye)`,
+//! `right = normalize(forward × up)`, `up' = right × forward`. Pixel `(px, py)` of a `W × H`
+//! image (row 0 at the top) looks along `normalize(forward + nx·tan(fov/2)·(W/H)·right +
+//! ny·tan(fov/2)·up')` with `nx = 2(px + ½)/W − 1` and `ny = 1 − 2(py + ½)/H`.
+//!
+//! **Scene files** are these types as JSON (`schemas/json/scene.schema.json`); `up` defaults
+//! to `+y`, `fov_y_degrees` to 30, `visible` to true and `background` to black.
+
+use serde::{Deserialize, Serialize};
+
+/// A pinhole camera in world space.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Camera {
+    /// Eye position.
+    pub eye: [f64; 3],
+    /// Point looked at.
+    pub target: [f64; 3],
+    /// Up direction (need not be orthogonal to the view direction).
+    #[serde(default = "default_up")]
+    pub up: [f64; 3],
+    /// Vertical field of view, degrees.
+    #[serde(default = "default_fov")]
+    pub fov_y_degrees: f64,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+fn default_fov() -> f64 {
+    30.0
+}
+
+fn default_true() -> bool {
+    true
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+fn normalize(v: [f64; 3]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|x| x / n)
+}
+
+impl Camera {
+    /// The orthonormal camera frame `(forward, right, up')` of the projection in the module
+    /// doc.
+    pub fn basis(&self) -> ([f64; 3], [f64; 3], [f64; 3]) {
+        let forward = normalize(sub(self.target, self.eye));
+        let right = normalize(cross(forward, self.up));
+        let up = cross(right, forward);
+        (forward, right, up)
+    }
+
+    /// The unit direction of the ray through the centre of pixel `(px, py)` of a
+    /// `width × height` image (the projection in the module doc).
+    pub fn ray_direction(&self, px: usize, py: usize, width: usize, height: usize) -> [f64; 3] {
+        let (f, r, u) = self.basis();
+        let tan_half = (self.fov_y_degrees.to_radians() / 2.0).tan();
+        let aspect = width as f64 / height as f64;
+        let nx = (2.0 * (px as f64 + 0.5) / width as f64 - 1.0) * tan_half * aspect;
+        let ny = (1.0 - 2.0 * (py as f64 + 0.5) / height as f64) * tan_half;
+        normalize(std::array::from_fn(|i| f[i] + nx * r[i] + ny * u[i]))
+    }
+}
+
+/// One control point of a piecewise-linear opacity transfer function.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OpacityPoint {
+    /// Data value (in the channel's own units, as stored).
+    pub value: f64,
+    /// Opacity at the reference step, in `[0, 1]`.
+    pub opacity: f64,
+}
+
+/// How one channel is drawn.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ChannelStyle {
+    /// Channel index in the volume.
+    pub channel: usize,
+    /// Whether the channel is drawn at all (an invisible channel is never fetched).
+    #[serde(default = "default_true")]
+    pub visible: bool,
+    /// Linear RGB emission colour, each in `[0, 1]`.
+    pub color: [f64; 3],
+    /// Opacity control points, ascending in value. Below the first point and above the last,
+    /// the end opacities hold.
+    pub opacity: Vec<OpacityPoint>,
+}
+
+impl ChannelStyle {
+    /// Opacity at the reference step for value `v` (NaN is transparent).
+    pub fn opacity_at(&self, v: f64) -> f64 {
+        let pts = &self.opacity;
+        if v.is_nan() || pts.is_empty() {
+            return 0.0;
+        }
+        if v <= pts[0].value {
+            return pts[0].opacity;
+        }
+        for w in pts.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            if v <= b.value {
+                if b.value == a.value {
+                    return b.opacity;
+                }
+                let t = (v - a.value) / (b.value - a.value);
+                return a.opacity + t * (b.opacity - a.opacity);
+            }
+        }
+        pts[pts.len() - 1].opacity
+    }
+
+    /// Whether the transfer function is fully transparent for every value in `[lo, hi]`.
+    pub fn transparent_over(&self, lo: f64, hi: f64) -> bool {
+        // An invisible channel, or a region of NaN only, shows nothing.
+        if !self.visible || lo.is_nan() || hi.is_nan() {
+            return true;
+        }
+        if self.opacity_at(lo) > 0.0 || self.opacity_at(hi) > 0.0 {
+            return false;
+        }
+        self.opacity
+            .iter()
+            .all(|p| p.value <= lo || p.value >= hi || p.opacity == 0.0)
+    }
+}
+
+/// A whole scene: camera, channel styles and background.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// The camera.
+    pub camera: Camera,
+    /// One style per drawn channel; channels not listed are not drawn.
+    pub channels: Vec<ChannelStyle>,
+    /// Linear RGB background.
+    #[serde(default)]
+    pub background: [f64; 3],
+}
+
+/// Opacity of a step of length `step`, given opacity `a` at the reference step `reference`.
+pub fn corrected_opacity(a: f64, step: f64, reference: f64) -> f64 {
+    if a >= 1.0 {
+        return 1.0;
+    }
+    1.0 - (1.0 - a.max(0.0)).powf(step / reference)
+}

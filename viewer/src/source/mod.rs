@@ -1,0 +1,240 @@
+//! Where a volume comes from: its description (levels, bricks, channels, region metadata) and
+//! its bricks, from a brick server over HTTP or from a local OME-Zarr store, behind one trait.
+//!
+//! - [`local`]: [`LocalSource`], a local OME-Zarr store read with zarrs;
+//! - [`http`]: [`HttpSource`], a `brickserver` over HTTP (batched bricks, framed min/max);
+//! - [`ome`]: the OME-Zarr and region-metadata parsing both share.
+
+use anyhow::Result;
+
+pub mod http;
+pub mod local;
+pub mod ome;
+
+
+pub use http::HttpSource;
+pub use local::LocalSource;
+
+/// Sample format of the stored voxels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SampleType {
+    /// Unsigned 8-bit.
+    U8,
+    /// Unsigned 16-bit.
+    U16,
+    /// Signed 16-bit.
+    I16,
+    /// Unsigned 32-bit.
+    U32,
+    /// Signed 32-bit.
+    I32,
+    /// 32-bit IEEE float.
+    F32,
+}
+
+impl SampleType {
+    /// The type of a Zarr v3 data type name (`uint8`, `uint16`, `int16`, `uint32`, `int32`,
+    /// `float32`), or `None` for one the viewer does not read.
+    pub fn from_zarr_name(name: &str) -> Option<Self> {
+        Some(match name {
+            "uint8" => Self::U8,
+            "uint16" => Self::U16,
+            "int16" => Self::I16,
+            "uint32" => Self::U32,
+            "int32" => Self::I32,
+            "float32" => Self::F32,
+            _ => return None,
+        })
+    }
+
+    /// The Zarr v3 data type name.
+    pub fn zarr_name(self) -> &'static str {
+        match self {
+            Self::U8 => "uint8",
+            Self::U16 => "uint16",
+            Self::I16 => "int16",
+            Self::U32 => "uint32",
+            Self::I32 => "int32",
+            Self::F32 => "float32",
+        }
+    }
+
+    /// Bytes per sample.
+    pub fn bytes(self) -> usize {
+        match self {
+            Self::U8 => 1,
+            Self::U16 | Self::I16 => 2,
+            Self::U32 | Self::I32 | Self::F32 => 4,
+        }
+    }
+}
+
+/// One pyramid level.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LevelInfo {
+    /// Voxels `z, y, x`.
+    pub shape: [u64; 3],
+    /// Downsampling factor relative to level 0, `z, y, x`.
+    pub factor: [u64; 3],
+}
+
+/// Conservative (haloed) min/max grids of one channel at one level, finest first: grid `k`
+/// has cells of `cell_shape · 2^k` voxels of the level. Values are `f64` copies of the stored
+/// values; NaN marks a cell with no non-NaN voxel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MinMaxGrid {
+    /// Edge of one cell in voxels of the level, `z, y, x`.
+    pub cell_shape: [u64; 3],
+    /// Cells `z, y, x`.
+    pub grid_shape: [u64; 3],
+    /// Minimum per cell, `z`-major.
+    pub min: Vec<f64>,
+    /// Maximum per cell, `z`-major.
+    pub max: Vec<f64>,
+}
+
+/// Display hints of one channel, from the store's `omero` block and region-metadata
+/// statistics; used for default colours and transfer functions.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ChannelDisplay {
+    /// Linear RGB colour from `omero.channels[].color`, if given.
+    pub color: Option<[f64; 3]>,
+    /// Display window `[start, end]` from `omero.channels[].window`, if given.
+    pub window: Option<[f64; 2]>,
+    /// Level-0 value range `[min, max]` (region-metadata statistics, else the `omero` window's
+    /// `min`/`max`), if known.
+    pub range: Option<[f64; 2]>,
+}
+
+/// Everything a renderer needs to know about a volume before fetching any brick.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VolumeInfo {
+    /// Dataset name.
+    pub name: String,
+    /// Stored sample format.
+    pub sample_type: SampleType,
+    /// Channel labels.
+    pub channels: Vec<String>,
+    /// Display hints, one per channel.
+    pub display: Vec<ChannelDisplay>,
+    /// Level-0 voxel spacing in physical units, `z, y, x`.
+    pub voxel_size: [f64; 3],
+    /// Brick shape shared by all levels and channels, `z, y, x`.
+    pub brick_shape: [u64; 3],
+    /// Levels, finest first.
+    pub levels: Vec<LevelInfo>,
+    /// `minmax[channel][level]`: the min/max grids, or `None` for a store without region
+    /// metadata (a renderer then falls back to computing ranges from bricks, and says so).
+    pub minmax: Option<Vec<Vec<Vec<MinMaxGrid>>>>,
+}
+
+/// One brick of one channel at one level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BrickKey {
+    /// Pyramid level.
+    pub level: u32,
+    /// Channel.
+    pub channel: u32,
+    /// Brick coordinates `z, y, x` (in bricks).
+    pub brick: [u64; 3],
+}
+
+/// Decoded voxels of a full brick (`brick_shape`, `z`-major; voxels past the volume's edge
+/// hold the fill value).
+#[derive(Clone, Debug, PartialEq)]
+pub enum BrickVoxels {
+    /// The brick equals the fill value (0) everywhere; nothing was transferred.
+    Empty,
+    /// Unsigned 8-bit samples.
+    U8(Vec<u8>),
+    /// Unsigned 16-bit samples.
+    U16(Vec<u16>),
+    /// Signed 16-bit samples.
+    I16(Vec<i16>),
+    /// Unsigned 32-bit samples.
+    U32(Vec<u32>),
+    /// Signed 32-bit samples.
+    I32(Vec<i32>),
+    /// 32-bit float samples.
+    F32(Vec<f32>),
+}
+
+impl BrickVoxels {
+    /// Voxel `index` (`z`-major within the brick) as `f64`; an [`BrickVoxels::Empty`] brick
+    /// reads as the fill value 0.
+    ///
+    /// # Panics
+    /// If `index` is outside a non-empty brick.
+    pub fn value(&self, index: usize) -> f64 {
+        match self {
+            Self::Empty => 0.0,
+            Self::U8(v) => v[index] as f64,
+            Self::U16(v) => v[index] as f64,
+            Self::I16(v) => v[index] as f64,
+            Self::U32(v) => v[index] as f64,
+            Self::I32(v) => v[index] as f64,
+            Self::F32(v) => v[index] as f64,
+        }
+    }
+
+    /// Number of samples held (0 for [`BrickVoxels::Empty`]).
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Empty => 0,
+            Self::U8(v) => v.len(),
+            Self::U16(v) => v.len(),
+            Self::I16(v) => v.len(),
+            Self::U32(v) => v.len(),
+            Self::I32(v) => v.len(),
+            Self::F32(v) => v.len(),
+        }
+    }
+
+    /// Whether no samples are held (the brick is [`BrickVoxels::Empty`]).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl VolumeInfo {
+    /// Bricks along `z, y, x` at `level`.
+    pub fn brick_grid(&self, level: usize) -> [u64; 3] {
+        let s = self.levels[level].shape;
+        std::array::from_fn(|i| s[i].div_ceil(self.brick_shape[i]))
+    }
+
+    /// Checks that `key` names an existing brick, with an error naming it otherwise.
+    pub fn check_key(&self, key: &BrickKey) -> Result<()> {
+        let level = key.level as usize;
+        anyhow::ensure!(
+            level < self.levels.len(),
+            "{}: brick {key:?}: no level {level} ({} levels)",
+            self.name,
+            self.levels.len()
+        );
+        anyhow::ensure!(
+            (key.channel as usize) < self.channels.len(),
+            "{}: brick {key:?}: no channel {} ({} channels)",
+            self.name,
+            key.channel,
+            self.channels.len()
+        );
+        let grid = self.brick_grid(level);
+        anyhow::ensure!(
+            key.brick.iter().zip(&grid).all(|(b, g)| b < g),
+            "{}: brick {key:?}: outside the level's brick grid {grid:?}",
+            self.name
+        );
+        Ok(())
+    }
+}
+
+/// A source of volume metadata and bricks. Implementations are thread-safe; `fetch` blocks,
+/// so callers run it on worker threads to overlap requests.
+pub trait BrickSource: Send + Sync {
+    /// The volume's description, loaded once.
+    fn info(&self) -> &VolumeInfo;
+    /// Fetches the given bricks, one result per key, in order. A brick that cannot be read
+    /// gives an error naming it; the others are still returned.
+    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>>;
+}

@@ -1,0 +1,90 @@
+//! Shared helpers of the GPU render tests: scenes over synthetic volumes, the GPU, and image
+//! error measures against the f64 reference.
+
+#![allow(dead_code)]
+
+use std::sync::{Arc, OnceLock};
+
+use residency_viewer::gpu::device::Gpu;
+use residency_viewer::gpu::renderer::RenderOptions;
+use residency_viewer::gpu::streaming::{Budget, Progressive, render_progressive};
+use residency_viewer::gpu::synthetic::SyntheticSource;
+use residency_viewer::image::RgbImage;
+use residency_viewer::reference::{self, ReferenceOptions};
+use residency_viewer::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
+use residency_viewer::source::BrickSource;
+
+/// The GPU (lavapipe on CI), opened once per test binary.
+pub fn gpu() -> &'static Gpu {
+    static GPU: OnceLock<Gpu> = OnceLock::new();
+    GPU.get_or_init(|| {
+        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+            // SAFETY: set before any other thread of this test binary reads the environment.
+            unsafe { std::env::set_var("XDG_RUNTIME_DIR", "/tmp") };
+        }
+        Gpu::new().expect("a GPU adapter (lavapipe)")
+    })
+}
+
+/// A ramp transfer function: transparent up to `lo`, opacity `a` from `hi` on.
+pub fn ramp(channel: usize, color: [f64; 3], lo: f64, hi: f64, a: f64) -> ChannelStyle {
+    ChannelStyle {
+        channel,
+        visible: true,
+        color,
+        opacity: vec![
+            OpacityPoint { value: lo, opacity: 0.0 },
+            OpacityPoint { value: hi, opacity: a },
+        ],
+    }
+}
+
+/// A camera at `eye` looking at `target` with +z up (or +y when looking along z).
+pub fn camera(eye: [f64; 3], target: [f64; 3]) -> Camera {
+    let d = [target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]];
+    let up = if d[0].abs() < 1e-9 && d[1].abs() < 1e-9 { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] };
+    Camera { eye, target, up, fov_y_degrees: 40.0 }
+}
+
+/// Options rendering at level 0 only (what the reference shows).
+pub fn full_res(width: u32, height: u32) -> RenderOptions {
+    RenderOptions {
+        width,
+        height,
+        level_bounds: vec![(0, 0); 8],
+        ..Default::default()
+    }
+}
+
+/// Renders progressively and converts the last frame to an image.
+pub fn render(source: &Arc<SyntheticSource>, scene: &Scene, options: RenderOptions, frames: u32) -> (Progressive, RgbImage) {
+    let src: Arc<dyn BrickSource> = source.clone();
+    let budget = Budget { max_frames: frames, ..Default::default() };
+    let p = render_progressive(gpu(), src, scene, options, &budget).expect("render");
+    let image = RgbImage {
+        width: p.width as usize,
+        height: p.height as usize,
+        pixels: p.pixels.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+    };
+    (p, image)
+}
+
+/// The f64 reference of `scene`.
+pub fn reference(source: &SyntheticSource, scene: &Scene, width: usize, height: usize) -> RgbImage {
+    reference::render(source, scene, &ReferenceOptions::new(width, height)).expect("reference")
+}
+
+/// PSNR in dB over RGB with peak 1, and the max abs error.
+pub fn psnr(a: &RgbImage, b: &RgbImage) -> (f64, f64) {
+    assert_eq!((a.width, a.height), (b.width, b.height));
+    let (mut se, mut max) = (0.0f64, 0.0f64);
+    for (p, q) in a.pixels.iter().zip(&b.pixels) {
+        for k in 0..3 {
+            let d = (p[k] - q[k]) as f64;
+            se += d * d;
+            max = max.max(d.abs());
+        }
+    }
+    let mse = se / (a.pixels.len() * 3) as f64;
+    (10.0 * (1.0 / mse.max(1e-20)).log10(), max)
+}
