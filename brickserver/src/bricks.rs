@@ -305,9 +305,13 @@ impl ImageArrays {
             level.shards.clear();
         }
         match encoding {
-            BrickEncoding::Stored => level
+            BrickEncoding::Stored if level.shards.array_is_sharded() => level
                 .array
                 .retrieve_encoded_subchunk(&level.shards, &indices)
+                .map_err(|e| named(&e)),
+            BrickEncoding::Stored => level
+                .array
+                .retrieve_encoded_chunk(&indices)
                 .map_err(|e| named(&e)),
             BrickEncoding::Raw => {
                 let bytes: ArrayBytes<'static> = level

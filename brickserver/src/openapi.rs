@@ -3,8 +3,31 @@
 
 use serde_json::{Value, json};
 
-fn schema(text: &str) -> Value {
-    serde_json::from_str(text).expect("the embedded JSON Schemas are valid JSON")
+/// An embedded JSON Schema as the component `name`: its local references (`#/$defs/...`)
+/// re-rooted under `#/components/schemas/NAME/`, and its `$id` dropped, so OpenAPI tools that
+/// resolve every reference against the document root find them.
+fn schema(name: &str, text: &str) -> Value {
+    fn reroot(v: &mut Value, prefix: &str) {
+        match v {
+            Value::Object(map) => {
+                map.remove("$id");
+                for (k, child) in map.iter_mut() {
+                    match child {
+                        Value::String(r) if k == "$ref" && r.starts_with("#/") => {
+                            *r = format!("{prefix}{}", &r[1..]);
+                        }
+                        _ => reroot(child, prefix),
+                    }
+                }
+            }
+            Value::Array(items) => items.iter_mut().for_each(|i| reroot(i, prefix)),
+            _ => {}
+        }
+    }
+    let mut value: Value =
+        serde_json::from_str(text).expect("the embedded JSON Schemas are valid JSON");
+    reroot(&mut value, &format!("#/components/schemas/{name}"));
+    value
 }
 
 fn error_responses(codes: &[(&str, &str)]) -> Value {
@@ -104,12 +127,12 @@ pub fn document() -> Value {
         },
         "components": {
             "schemas": {
-                "DatasetList": schema(include_str!("../../schemas/json/datasets.schema.json")),
-                "RegionAnswer": schema(include_str!("../../schemas/json/region-answer.schema.json")),
-                "ApiError": schema(include_str!("../../schemas/json/api-error.schema.json")),
-                "MinMaxHierarchyHeader": schema(include_str!("../../schemas/json/minmax-hierarchy.schema.json")),
-                "BrickBatchHeader": schema(include_str!("../../schemas/json/brick-batch.schema.json")),
-                "RegionMetadata": schema(include_str!("../../schemas/json/region-metadata.schema.json"))
+                "DatasetList": schema("DatasetList", include_str!("../../schemas/json/datasets.schema.json")),
+                "RegionAnswer": schema("RegionAnswer", include_str!("../../schemas/json/region-answer.schema.json")),
+                "ApiError": schema("ApiError", include_str!("../../schemas/json/api-error.schema.json")),
+                "MinMaxHierarchyHeader": schema("MinMaxHierarchyHeader", include_str!("../../schemas/json/minmax-hierarchy.schema.json")),
+                "BrickBatchHeader": schema("BrickBatchHeader", include_str!("../../schemas/json/brick-batch.schema.json")),
+                "RegionMetadata": schema("RegionMetadata", include_str!("../../schemas/json/region-metadata.schema.json"))
             },
             "securitySchemes": {"bearer": {"type": "http", "scheme": "bearer", "description": "Only when the server runs with --token-file."}}
         }
