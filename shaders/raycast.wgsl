@@ -9,7 +9,7 @@ const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/
 const ENTRY_EMPTY: u32 = 1u; // page-table entry: brick equals the fill value 0
 const LEVEL_WORDS: u32 = 12u;
 const CHANNEL_WORDS: u32 = 16u;
-const MAX_ITERATIONS: u32 = 1000000u;
+const MAX_ITERATIONS: u32 = 1000000u; // loop guard per ray (steps plus skips)
 
 struct Params {
     size: vec4<u32>, // width, height, frame (>= 1), channel count
@@ -24,7 +24,7 @@ struct Params {
     volume_leaf: vec4<f32>, // volume extent in leaf units
     background: vec4<f32>,
     leaf_shift: vec4<i32>, // log2 of a leaf edge in level-0 voxels, per axis
-    brick: vec4<u32>, // brick edge in voxels, per axis
+    brick: vec4<u32>, // brick edge in voxels, per axis; w: 1 = skip empty and homogeneous nodes
     slots: vec4<u32>, // atlas slots per axis
 }
 
@@ -119,15 +119,19 @@ fn tf_transparent(c: u32, lo: f32, hi: f32) -> bool {
     if tables[cb + 6u] == 0u {
         return true;
     }
+    if lo == hi {
+        return tf_opacity(c, lo) == 0.0; // homogeneous: exact
+    }
+    // The domain is the first and last control points, rounded outward to f32.
     let d0 = tf32(cb + 8u);
     let d1 = tf32(cb + 9u);
-    if lo < d0 && tf32(cb + 10u) > 0.0 {
+    if lo <= d0 && tf32(cb + 10u) > 0.0 {
         return false;
     }
-    if hi > d1 && tf32(cb + 11u) > 0.0 {
+    if hi >= d1 && tf32(cb + 11u) > 0.0 {
         return false;
     }
-    if hi < d0 || lo > d1 {
+    if hi <= d0 || lo >= d1 {
         return true;
     }
     let bins = P.tables.y;
@@ -348,6 +352,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let depth = P.tree.x;
         let leaves = 1 << depth;
         let channels = P.size.w;
+        let skipping = P.brick.w == 1u;
         var last_depth = P.tables.x + 1u;
         var iterations = 0u;
         loop {
@@ -389,7 +394,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 for (var c = 0u; c < channels; c++) {
                     let lo = bitcast<f32>(node_word(node, c, 1u));
                     let hi = bitcast<f32>(node_word(node, c, 2u));
-                    if tf_transparent(c, lo, hi) {
+                    if skipping && tf_transparent(c, lo, hi) {
                         empty_bits |= 1u << c;
                     } else {
                         all_empty = false;
@@ -405,7 +410,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     action = 1u;
                     break;
                 }
-                if all_homog {
+                if all_homog && skipping {
                     action = 2u;
                     break;
                 }
@@ -533,7 +538,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             advance(&ray, dir, step);
         }
     }
-    out_color[pixel] = vec4<f32>(tf_opacity(0u, 100.0), tf32(channel_base(0u)), P.eye_frac.w, level_voxel(0u));
+    out_color[pixel] = vec4<f32>(color + trans * P.background.xyz, 1.0 - trans);
     atomicAdd(&requests.header[1], samples);
     atomicAdd(&requests.header[2], skipped);
     atomicAdd(&requests.header[4], homogeneous);

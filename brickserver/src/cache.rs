@@ -1,8 +1,6 @@
-//! A bounded in-memory cache of served bytes: chunk files read from disk and bricks decoded
-//! for batches. Its size never exceeds the configured byte budget (`--cache-bytes`); entries
+//! A bounded in-memory cache of bricks served in batches: decoded samples, or stored bytes cut
+//! out of shards. Its size never exceeds the configured byte budget (`--cache-bytes`); entries
 //! are evicted by quick_cache's CLOCK-PRO policy. Hits and misses are counted in the metrics.
-
-use std::sync::Arc;
 
 use axum::body::Bytes;
 use prometheus_client::metrics::counter::Counter;
@@ -10,54 +8,31 @@ use prometheus_client::metrics::gauge::Gauge;
 use quick_cache::Weighter;
 use quick_cache::sync::Cache;
 
-/// What a cache entry holds.
+/// A brick of a batch: dataset (index in the served list), level, channel, brick
+/// coordinates `z, y, x`, and whether it holds decoded samples (`raw`) or stored bytes.
 #[derive(Clone, Debug, Hash, PartialEq, Eq)]
-pub enum CacheKey {
-    /// A stored file of dataset `dataset` (index in the served list) at a decoded Zarr key.
-    File {
-        /// Dataset index.
-        dataset: usize,
-        /// Decoded key.
-        key: String,
-    },
-    /// A brick of a batch, stored bytes (`raw == false`) or decoded samples (`raw == true`).
-    Brick {
-        /// Dataset index.
-        dataset: usize,
-        /// Level, channel and brick coordinates `z, y, x`.
-        at: (u32, u32, [u64; 3]),
-        /// Decoded samples rather than stored bytes.
-        raw: bool,
-    },
-}
-
-/// A cached answer: the bytes and, for files, their `ETag`. A brick entry with no bytes is
-/// an empty brick.
-#[derive(Clone, Debug)]
-pub struct Cached {
-    /// The bytes.
-    pub bytes: Bytes,
-    /// Entity tag of a file (empty for bricks).
-    pub etag: Arc<str>,
+pub struct CacheKey {
+    /// Dataset index.
+    pub dataset: usize,
+    /// Level, channel and brick coordinates `z, y, x`.
+    pub at: (u32, u32, [u64; 3]),
+    /// Decoded samples rather than stored bytes.
+    pub raw: bool,
 }
 
 #[derive(Clone)]
 struct ByteWeight;
 
-impl Weighter<CacheKey, Cached> for ByteWeight {
-    fn weight(&self, key: &CacheKey, value: &Cached) -> u64 {
-        let key_len = match key {
-            CacheKey::File { key, .. } => key.len(),
-            CacheKey::Brick { .. } => 32,
-        };
-        // Count the bookkeeping too, so many tiny entries cannot exceed the budget.
-        (value.bytes.len() + value.etag.len() + key_len + 64) as u64
+impl Weighter<CacheKey, Bytes> for ByteWeight {
+    fn weight(&self, _key: &CacheKey, value: &Bytes) -> u64 {
+        // Count the bookkeeping too, so many empty bricks cannot exceed the budget.
+        (value.len() + 96) as u64
     }
 }
 
 /// The bounded cache, with its hit and miss counters.
 pub struct ByteCache {
-    inner: Option<Cache<CacheKey, Cached, ByteWeight>>,
+    inner: Option<Cache<CacheKey, Bytes, ByteWeight>>,
     hits: Counter,
     misses: Counter,
     bytes: Gauge,
@@ -68,8 +43,8 @@ impl ByteCache {
     /// given metrics.
     pub fn new(capacity: u64, hits: Counter, misses: Counter, bytes: Gauge) -> Self {
         let inner = (capacity > 0).then(|| {
-            // Estimate the entry count from a typical 32 KiB compressed brick.
-            let items = (capacity / 32768).clamp(16, 1 << 20) as usize;
+            // Estimate the entry count from a typical 64 KiB brick.
+            let items = (capacity / 65536).clamp(16, 1 << 20) as usize;
             Cache::with_weighter(items, capacity, ByteWeight)
         });
         Self {
@@ -80,8 +55,8 @@ impl ByteCache {
         }
     }
 
-    /// The cached entry for `key`, counting a hit or a miss.
-    pub fn get(&self, key: &CacheKey) -> Option<Cached> {
+    /// The cached bytes for `key` (empty for an empty brick), counting a hit or a miss.
+    pub fn get(&self, key: &CacheKey) -> Option<Bytes> {
         let found = self.inner.as_ref().and_then(|c| c.get(key));
         if found.is_some() {
             self.hits.inc();
@@ -92,7 +67,7 @@ impl ByteCache {
     }
 
     /// Stores an entry (an entry larger than the whole budget is not kept).
-    pub fn insert(&self, key: CacheKey, value: Cached) {
+    pub fn insert(&self, key: CacheKey, value: Bytes) {
         if let Some(c) = &self.inner {
             c.insert(key, value);
             self.bytes.set(c.weight() as i64);
@@ -113,28 +88,20 @@ mod tests {
     fn never_holds_more_than_its_budget() {
         let (hits, misses) = (Counter::default(), Counter::default());
         let cache = ByteCache::new(100_000, hits.clone(), misses.clone(), Gauge::default());
+        let key = |i: u64| CacheKey {
+            dataset: 0,
+            at: (0, 0, [0, 0, i]),
+            raw: true,
+        };
         for i in 0..1000 {
-            cache.insert(
-                CacheKey::File {
-                    dataset: 0,
-                    key: format!("c/{i}"),
-                },
-                Cached {
-                    bytes: Bytes::from(vec![0u8; 1000]),
-                    etag: "\"x\"".into(),
-                },
-            );
+            cache.insert(key(i), Bytes::from(vec![0u8; 1000]));
             assert!(cache.weight() <= 100_000, "{}", cache.weight());
         }
-        let key = |i: usize| CacheKey::File {
-            dataset: 0,
-            key: format!("c/{i}"),
-        };
         assert!(cache.get(&key(999)).is_some());
         assert!((0..1000).filter(|&i| cache.get(&key(i)).is_some()).count() < 100);
         assert_eq!(hits.get() + misses.get(), 1001);
         let off = ByteCache::new(0, hits, misses.clone(), Gauge::default());
-        off.insert(key(1), cache.get(&key(999)).unwrap());
+        off.insert(key(1), Bytes::from_static(b"x"));
         assert!(off.get(&key(1)).is_none());
     }
 }

@@ -12,6 +12,9 @@ use clap::{Parser, Subcommand};
 use residency_brickserver::bricks::BatchLimits;
 use residency_brickserver::{AppState, ConnectionLimits, Datasets, ServerOptions, router, serve};
 
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 #[derive(Parser)]
 #[command(
     name = "brickserver",
@@ -45,8 +48,8 @@ enum Command {
         /// Most connections open at once; more get a 503 and are closed.
         #[arg(long, default_value_t = 4096)]
         max_connections: usize,
-        /// Seconds a client may take to send a request's headers (also the idle limit of a
-        /// kept-alive connection), and a request may take to be answered.
+        /// Seconds a client may take to send a request's headers, and the longest a
+        /// kept-alive connection may stay idle; the connection is closed after that.
         #[arg(long, default_value_t = 30.0)]
         request_timeout: f64,
         /// Most bricks in one batched request.
@@ -115,7 +118,7 @@ async fn run(
     }
     println!("listening on http://{addr}");
     std::io::stdout().flush()?;
-    let state = Arc::new(AppState::new(datasets, &options));
+    let state = Arc::new(AppState::new(datasets, &options)?);
     let metrics = state.metrics.clone();
     serve(listener, router(state, &options), limits, metrics, shutdown).await
 }
@@ -154,7 +157,6 @@ fn main() -> ExitCode {
                     max_bricks: max_batch_bricks,
                     max_bytes: max_batch_bytes,
                 },
-                request_timeout: timeout,
             };
             let limits = ConnectionLimits {
                 max_connections,

@@ -1,14 +1,11 @@
 //! Answers for stored files: the bytes verbatim, with `ETag` / `If-None-Match`, single
 //! `Range` requests, `Cache-Control` and `Content-Type` suited to Zarr keys.
 
-use std::io::Read;
-use std::path::Path;
 use std::time::UNIX_EPOCH;
 
 use axum::body::{Body, Bytes};
 use axum::http::{HeaderMap, HeaderValue, Response, StatusCode, header};
 
-use crate::cache::Cached;
 
 /// `Cache-Control` for chunks and shards: immutable once written by `ingest`.
 pub const CACHE_IMMUTABLE: &str = "public, max-age=31536000, immutable";
@@ -63,7 +60,8 @@ pub fn parse_range(value: &str, len: u64) -> RangeRequest {
     }
 }
 
-fn etag_of(meta: &std::fs::Metadata) -> String {
+/// The entity tag of a stored file: its length and modification time.
+pub fn etag_of(meta: &std::fs::Metadata) -> String {
     let mtime = meta
         .modified()
         .ok()
@@ -84,43 +82,46 @@ fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
         })
 }
 
-/// Reads a stored file whole, with its entity tag (length and modification time). Blocking:
-/// one open, one `fstat` and one read.
-pub fn read_file(path: &Path) -> std::io::Result<Cached> {
-    let mut file = std::fs::File::open(path)?;
-    let meta = file.metadata()?;
-    let mut bytes = Vec::with_capacity(meta.len() as usize);
-    file.read_to_end(&mut bytes)?;
-    Ok(Cached {
-        bytes: Bytes::from(bytes),
-        etag: etag_of(&meta).into(),
-    })
-}
-
-/// The answer for a stored file's bytes served as Zarr key `key`: 304 when `If-None-Match`
-/// matches, 206 or 416 for a `Range`, 200 otherwise.
-pub fn file_response(file: &Cached, key: &str, headers: &HeaderMap) -> Response<Body> {
-    let len = file.bytes.len() as u64;
-    let (content_type, cache) = if is_metadata(key) {
+/// The `Cache-Control` and `Content-Type` of a key.
+fn kind_of(key: &str) -> (&'static str, &'static str) {
+    if is_metadata(key) {
         ("application/json", CACHE_REVALIDATE)
     } else {
         ("application/octet-stream", CACHE_IMMUTABLE)
-    };
-    let builder = Response::builder()
-        .header(header::ETAG, &*file.etag)
-        .header(header::CACHE_CONTROL, cache)
-        .header(header::ACCEPT_RANGES, "bytes");
-    if if_none_match(headers, &file.etag) {
-        return builder
-            .status(StatusCode::NOT_MODIFIED)
-            .body(Body::empty())
-            .expect("response");
     }
+}
+
+/// The `304 Not Modified` answer for key `key` when `If-None-Match` matches `etag`; checked
+/// before the file is read, so revalidations cost no read.
+pub fn not_modified(key: &str, etag: &str, headers: &HeaderMap) -> Option<Response<Body>> {
+    if !if_none_match(headers, etag) {
+        return None;
+    }
+    Some(
+        Response::builder()
+            .status(StatusCode::NOT_MODIFIED)
+            .header(header::ETAG, etag)
+            .header(header::CACHE_CONTROL, kind_of(key).1)
+            .header(header::ACCEPT_RANGES, "bytes")
+            .body(Body::empty())
+            .expect("response"),
+    )
+}
+
+/// The answer for a stored file's `bytes` served as Zarr key `key`: 206 or 416 for a
+/// `Range`, 200 otherwise.
+pub fn file_response(bytes: Bytes, etag: &str, key: &str, headers: &HeaderMap) -> Response<Body> {
+    let len = bytes.len() as u64;
+    let (content_type, cache) = kind_of(key);
+    let builder = Response::builder()
+        .header(header::ETAG, etag)
+        .header(header::CACHE_CONTROL, cache)
+        .header(header::ACCEPT_RANGES, "bytes")
+        .header(header::CONTENT_TYPE, content_type);
     let range = headers
         .get(header::RANGE)
         .and_then(|v| v.to_str().ok())
         .map_or(RangeRequest::Whole, |v| parse_range(v, len));
-    let builder = builder.header(header::CONTENT_TYPE, content_type);
     match range {
         RangeRequest::Unsatisfiable => builder
             .status(StatusCode::RANGE_NOT_SATISFIABLE)
@@ -130,7 +131,7 @@ pub fn file_response(file: &Cached, key: &str, headers: &HeaderMap) -> Response<
         RangeRequest::Whole => builder
             .status(StatusCode::OK)
             .header(header::CONTENT_LENGTH, HeaderValue::from(len))
-            .body(Body::from(file.bytes.clone()))
+            .body(Body::from(bytes))
             .expect("response"),
         RangeRequest::Part(start, end) => builder
             .status(StatusCode::PARTIAL_CONTENT)
@@ -139,9 +140,7 @@ pub fn file_response(file: &Cached, key: &str, headers: &HeaderMap) -> Response<
                 format!("bytes {start}-{}/{len}", end - 1),
             )
             .header(header::CONTENT_LENGTH, HeaderValue::from(end - start))
-            .body(Body::from(
-                file.bytes.slice(start as usize..end as usize),
-            ))
+            .body(Body::from(bytes.slice(start as usize..end as usize)))
             .expect("response"),
     }
 }

@@ -2,6 +2,10 @@
 //! `/NAME/minmax`, `/NAME/bricks`), the dataset listing, health, metrics and the OpenAPI
 //! document.
 //!
+//! Zarr keys are read from the page cache on each request (as nginx does), so nothing is
+//! copied twice; the memory cache holds what is costly to make: bricks decoded, or cut out of
+//! shards, for batches.
+//!
 //! The three API paths never collide with a Zarr key: a Zarr node at a store's root is a
 //! folder, so its keys are `regions/zarr.json` and the like, never `regions` itself.
 
@@ -20,15 +24,14 @@ use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, MINMAX_MEDIA_TYPE
 use serde::Deserialize;
 use serde_json::json;
 use tower_http::cors::{Any, CorsLayer};
-use tower_http::timeout::TimeoutLayer;
 
 use crate::bricks::{BatchError, BatchLimits, ImageArrays, parse_batch, read_batch};
-use crate::cache::{ByteCache, CacheKey, Cached};
+use crate::cache::{ByteCache, CacheKey};
 use crate::datasets::Datasets;
 use crate::metrics::{Metrics, track};
 use crate::regions::{QueryError, RegionIndex};
-use crate::responses::{file_response, is_metadata, read_file};
-use crate::store_keys::{KeyError, resolve};
+use crate::responses::{etag_of, file_response, not_modified};
+use crate::store_keys::{KeyError, RootDir, read_cached};
 
 /// Server-wide options of the router.
 #[derive(Clone, Debug)]
@@ -39,8 +42,6 @@ pub struct ServerOptions {
     pub cache_bytes: u64,
     /// Caps on batched brick requests.
     pub batch: BatchLimits,
-    /// Longest time a request may take to be answered (its headers; 503 after that).
-    pub request_timeout: Duration,
 }
 
 impl Default for ServerOptions {
@@ -49,7 +50,6 @@ impl Default for ServerOptions {
             token: None,
             cache_bytes: 256 << 20,
             batch: BatchLimits::default(),
-            request_timeout: Duration::from_secs(30),
         }
     }
 }
@@ -71,11 +71,12 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     batch: BatchLimits,
     loaded: Vec<Loaded>,
+    roots: Vec<RootDir>,
 }
 
 impl AppState {
-    /// State for `datasets` under `options`.
-    pub fn new(datasets: Datasets, options: &ServerOptions) -> Self {
+    /// State for `datasets` under `options`; fails if a dataset folder cannot be opened.
+    pub fn new(datasets: Datasets, options: &ServerOptions) -> anyhow::Result<Self> {
         let metrics = Arc::new(Metrics::default());
         let cache = ByteCache::new(
             options.cache_bytes,
@@ -84,13 +85,23 @@ impl AppState {
             metrics.cache_bytes.clone(),
         );
         let loaded = datasets.0.iter().map(|_| Loaded::default()).collect();
-        Self {
+        let roots = datasets
+            .0
+            .iter()
+            .map(|d| {
+                RootDir::open(&d.root).map_err(|e| {
+                    anyhow::anyhow!("{}: cannot open dataset folder: {e}", d.root.display())
+                })
+            })
+            .collect::<anyhow::Result<_>>()?;
+        Ok(Self {
             datasets,
             cache,
             metrics,
             batch: options.batch,
             loaded,
-        }
+            roots,
+        })
     }
 
     /// The region index of dataset `i` (loaded on first use; blocking).
@@ -127,13 +138,10 @@ impl AppState {
 /// Refuses requests without the configured bearer token (401), except health checks and
 /// CORS preflights, which browsers send without credentials.
 async fn require_token(
-    State(token): State<Arc<Option<String>>>,
+    State(token): State<Arc<String>>,
     request: Request,
     next: Next,
 ) -> Response<Body> {
-    let Some(token) = token.as_deref() else {
-        return next.run(request).await;
-    };
     let preflight = request.method() == Method::OPTIONS
         && request
             .headers()
@@ -180,7 +188,7 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
         ])
         .max_age(Duration::from_secs(86400));
     let metrics = state.metrics.clone();
-    Router::new()
+    let router = Router::new()
         .route("/metrics", get(show_metrics))
         .route("/openapi.json", get(openapi).options(allowed_methods))
         .route("/", get(list).options(allowed_methods))
@@ -193,15 +201,16 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
         .route("/{name}/minmax", get(minmax).options(allowed_methods))
         .route("/{name}/bricks", get(bricks).options(allowed_methods))
         .route("/{name}/{*key}", get(serve_key).options(allowed_methods))
-        .with_state(state)
-        .layer(TimeoutLayer::with_status_code(
-            StatusCode::SERVICE_UNAVAILABLE,
-            options.request_timeout,
-        ))
-        .layer(middleware::from_fn_with_state(
-            Arc::new(options.token.clone()),
+        .with_state(state);
+    // The token check is a layer only when a token is configured.
+    let router = match &options.token {
+        Some(token) => router.layer(middleware::from_fn_with_state(
+            Arc::new(token.clone()),
             require_token,
-        ))
+        )),
+        None => router,
+    };
+    router
         .layer(middleware::from_fn_with_state(metrics, track))
         .layer(cors)
 }
@@ -290,29 +299,35 @@ async fn serve_key(
         .nth(2)
         .unwrap_or_default()
         .to_string();
-    // Chunks are immutable: a cached copy stands for the file. Metadata documents, which
-    // `ingest index` may rewrite, are always read afresh.
-    let cache_key = (!is_metadata(&raw_key)).then(|| CacheKey::File {
-        dataset: index,
-        key: raw_key.clone(),
-    });
-    if let Some(hit) = cache_key.as_ref().and_then(|k| state.cache.get(k)) {
-        return file_response(&hit, &raw_key, &headers);
-    }
-    let root = state.datasets.0[index].root.clone();
-    let key = raw_key.clone();
-    let read = blocking(move || {
-        let path = resolve(&root, &key)?;
-        read_file(&path).map_err(|e| KeyError::Unreadable(e.to_string()))
-    })
-    .await;
-    match read {
-        Ok(file) => {
-            if let Some(k) = cache_key {
-                state.cache.insert(k, file.clone());
+    // Open beneath the dataset root and read what the page cache holds right here, as nginx
+    // does; only a read that would wait for the disk moves to the blocking pool.
+    let read = match state.roots[index].open_key(&raw_key) {
+        Ok((file, meta)) => {
+            let etag = etag_of(&meta);
+            if let Some(answer) = not_modified(&raw_key, &etag, &headers) {
+                return answer;
             }
-            file_response(&file, &raw_key, &headers)
+            let len = meta.len() as usize;
+            let (bytes, whole) = read_cached(&file, len);
+            if whole {
+                Ok((bytes, etag))
+            } else {
+                blocking(move || {
+                    use std::os::unix::fs::FileExt;
+                    let mut bytes = bytes;
+                    let done = bytes.len();
+                    bytes.resize(len, 0);
+                    file.read_exact_at(&mut bytes[done..], done as u64)
+                        .map(|()| (bytes, etag))
+                        .map_err(|e| KeyError::Unreadable(e.to_string()))
+                })
+                .await
+            }
         }
+        Err(e) => Err(e),
+    };
+    match read {
+        Ok((bytes, etag)) => file_response(Bytes::from(bytes), &etag, &raw_key, &headers),
         Err(KeyError::NotFound) => (
             StatusCode::NOT_FOUND,
             format!("no key '{raw_key}' in '{name}'\n"),
@@ -469,23 +484,17 @@ async fn bricks(
     let raw = encoding == residency_schemas::wire::BrickEncoding::Raw;
     let body = blocking(move || {
         let (header, payload) = read_batch(&arrays, &list, encoding, |at| {
-            let key = CacheKey::Brick {
+            let key = CacheKey {
                 dataset: index,
                 at: (at.level, at.channel, at.brick),
                 raw,
             };
             if let Some(hit) = st.cache.get(&key) {
-                return Ok((!hit.bytes.is_empty()).then_some(hit.bytes));
+                return Ok((!hit.is_empty()).then_some(hit));
             }
             let read = arrays.read(at, encoding)?;
             let bytes = read.map(Bytes::from).unwrap_or_default();
-            st.cache.insert(
-                key,
-                Cached {
-                    bytes: bytes.clone(),
-                    etag: "".into(),
-                },
-            );
+            st.cache.insert(key, bytes.clone());
             Ok((!bytes.is_empty()).then_some(bytes))
         });
         for e in header.bricks.iter().filter_map(|b| b.error.as_deref()) {

@@ -2,6 +2,9 @@
 //! outside it: `..` in any spelling, backslashes, absolute paths, NUL bytes, and symlinks
 //! that lead out of the dataset.
 
+use std::fs::{File, Metadata};
+use std::io;
+use std::os::fd::{AsRawFd, FromRawFd};
 use std::path::{Path, PathBuf};
 
 use percent_encoding::percent_decode_str;
@@ -18,9 +21,9 @@ pub enum KeyError {
     Unreadable(String),
 }
 
-/// Resolves the raw (still percent-encoded) key part of a request path against `root`
-/// (canonical), returning the canonical path of an existing regular file inside `root`.
-pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
+/// Decodes a raw (still percent-encoded) key and refuses any spelling that could leave the
+/// dataset: `..` and `.` segments, empty segments, backslashes, absolute paths, NUL bytes.
+fn checked_key(raw_key: &str) -> Result<String, KeyError> {
     if raw_key.is_empty() {
         return Err(KeyError::NotFound);
     }
@@ -43,9 +46,16 @@ pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
             _ => {}
         }
     }
-    let joined = root.join(&*key);
+    Ok(key.into_owned())
+}
+
+/// Resolves the raw (still percent-encoded) key part of a request path against `root`
+/// (canonical), returning the canonical path of an existing regular file inside `root`.
+pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
+    let key = checked_key(raw_key)?;
+    let joined = root.join(&key);
     let real = joined.canonicalize().map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound | std::io::ErrorKind::NotADirectory => KeyError::NotFound,
+        io::ErrorKind::NotFound | io::ErrorKind::NotADirectory => KeyError::NotFound,
         _ => KeyError::Unreadable(e.to_string()),
     })?;
     if !real.starts_with(root) {
@@ -55,6 +65,102 @@ pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
         return Err(KeyError::NotFound);
     }
     Ok(real)
+}
+
+/// A dataset's root folder, held open so that keys are opened beneath it in one system call.
+#[derive(Debug)]
+pub struct RootDir {
+    path: PathBuf,
+    dir: File,
+}
+
+impl RootDir {
+    /// Opens the (canonical) root folder `path`.
+    pub fn open(path: &Path) -> io::Result<Self> {
+        Ok(Self {
+            path: path.to_path_buf(),
+            dir: File::open(path)?,
+        })
+    }
+
+    /// Opens the regular file at `raw_key` (still percent-encoded) beneath the root. The
+    /// kernel refuses any resolution that leaves the root, through `..` or a symlink
+    /// (`openat2` with `RESOLVE_BENEATH`); where `openat2` is unavailable the key is
+    /// canonicalised and checked instead.
+    pub fn open_key(&self, raw_key: &str) -> Result<(File, Metadata), KeyError> {
+        let key = checked_key(raw_key)?;
+        let unreadable = |e: io::Error| KeyError::Unreadable(e.to_string());
+        let file = match self.openat2(&key) {
+            Ok(f) => f,
+            Err(e) => match e.raw_os_error() {
+                Some(libc::ENOENT) | Some(libc::ENOTDIR) => return Err(KeyError::NotFound),
+                Some(libc::EXDEV) => return Err(KeyError::Refused("key leads outside the dataset")),
+                Some(libc::ENOSYS) | Some(libc::EPERM) => {
+                    File::open(resolve(&self.path, raw_key)?).map_err(unreadable)?
+                }
+                _ => return Err(unreadable(e)),
+            },
+        };
+        let meta = file.metadata().map_err(unreadable)?;
+        if !meta.is_file() {
+            return Err(KeyError::NotFound);
+        }
+        Ok((file, meta))
+    }
+
+    fn openat2(&self, key: &str) -> io::Result<File> {
+        let path = std::ffi::CString::new(key).map_err(|_| io::ErrorKind::InvalidInput)?;
+        // SAFETY: open_how is plain data; zero is a valid value for every field.
+        let mut how: libc::open_how = unsafe { std::mem::zeroed() };
+        how.flags = (libc::O_RDONLY | libc::O_CLOEXEC) as u64;
+        how.resolve = libc::RESOLVE_BENEATH | libc::RESOLVE_NO_MAGICLINKS;
+        // SAFETY: valid directory descriptor, NUL-terminated path and a correctly sized struct.
+        let fd = unsafe {
+            libc::syscall(
+                libc::SYS_openat2,
+                self.dir.as_raw_fd(),
+                path.as_ptr(),
+                &how as *const libc::open_how,
+                std::mem::size_of::<libc::open_how>(),
+            )
+        };
+        if fd < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: the kernel just returned this descriptor, owned by nobody else.
+        Ok(unsafe { File::from_raw_fd(fd as i32) })
+    }
+}
+
+/// Reads as much of `file` as the page cache holds, without waiting for the disk
+/// (`preadv2` with `RWF_NOWAIT`). Returns the bytes and whether they are the whole file.
+pub fn read_cached(file: &File, len: usize) -> (Vec<u8>, bool) {
+    let mut buf: Vec<u8> = Vec::with_capacity(len);
+    while buf.len() < len {
+        let want = len - buf.len();
+        let rest = &mut buf.spare_capacity_mut()[..want];
+        let iov = libc::iovec {
+            iov_base: rest.as_mut_ptr().cast(),
+            iov_len: rest.len(),
+        };
+        // SAFETY: the iovec points into the vector's spare capacity, which the kernel fills.
+        let n = unsafe {
+            libc::preadv2(
+                file.as_raw_fd(),
+                &iov,
+                1,
+                buf.len() as libc::off_t,
+                libc::RWF_NOWAIT,
+            )
+        };
+        if n <= 0 {
+            break;
+        }
+        // SAFETY: the kernel initialised `n` more bytes.
+        unsafe { buf.set_len(buf.len() + n as usize) };
+    }
+    let whole = buf.len() == len;
+    (buf, whole)
 }
 
 #[cfg(test)]
@@ -84,6 +190,29 @@ mod tests {
             );
         }
         assert_eq!(resolve(&dir, "no-such-key-here"), Err(KeyError::NotFound));
+    }
+
+    #[test]
+    fn keys_open_beneath_the_root_only() {
+        let dir = tempfile::tempdir().unwrap();
+        let root = dir.path().canonicalize().unwrap();
+        std::fs::create_dir(root.join("a")).unwrap();
+        std::fs::write(root.join("a/chunk"), b"12345").unwrap();
+        std::os::unix::fs::symlink("/etc/passwd", root.join("escape")).unwrap();
+        std::os::unix::fs::symlink("a/chunk", root.join("inside")).unwrap();
+        let r = RootDir::open(&root).unwrap();
+        let (f, meta) = r.open_key("a/chunk").unwrap();
+        assert_eq!(meta.len(), 5);
+        assert_eq!(read_cached(&f, 5), (b"12345".to_vec(), true));
+        assert!(r.open_key("inside").is_ok());
+        assert_eq!(
+            r.open_key("escape").unwrap_err(),
+            KeyError::Refused("key leads outside the dataset")
+        );
+        assert_eq!(r.open_key("a").unwrap_err(), KeyError::NotFound);
+        assert_eq!(r.open_key("a/none").unwrap_err(), KeyError::NotFound);
+        assert_eq!(r.open_key("a/chunk/x").unwrap_err(), KeyError::NotFound);
+        assert!(matches!(r.open_key("%2e%2e/x"), Err(KeyError::Refused(_))));
     }
 
     #[test]

@@ -414,22 +414,27 @@ def test_connection_limit_refuses_with_503_then_recovers(stores):
 def test_cache_hits_are_counted_and_the_cache_stays_within_budget(stores):
     _, paths = stores
     store = paths["u16"]
+    meta = root_attributes(store)["residency"]
     budget = 6000
     proc, base = start_server(store, "--cache-bytes", str(budget))
     try:
-        chunks = sorted(p for p in (store / "0" / "c").rglob("*") if p.is_file())
+        everything = all_bricks(meta, 2)
+        some = [b for b in everything if b[0] == 0][:3]
         with requests.Session() as s:
-            key = chunks[0].relative_to(store).as_posix()
-            before = s.get(f"{base}/metrics").text
-            for _ in range(3):
-                assert s.get(f"{base}/u16/{key}").content == chunks[0].read_bytes()
-            after = s.get(f"{base}/metrics").text
-            hits = metric(after, "brickserver_cache_hits_total") - metric(before, "brickserver_cache_hits_total")
-            misses = metric(after, "brickserver_cache_misses_total") - metric(before, "brickserver_cache_misses_total")
-            assert (hits, misses) == (2, 1)
-            for p in chunks:
-                assert s.get(f"{base}/u16/{p.relative_to(store).as_posix()}").content == p.read_bytes()
-                assert metric(s.get(f"{base}/metrics").text, "brickserver_cache_bytes") <= budget
-            assert sum(p.stat().st_size for p in chunks) > 2 * budget
+            m = lambda name: metric(s.get(f"{base}/metrics").text, name)
+            h0, m0 = m("brickserver_cache_hits_total"), m("brickserver_cache_misses_total")
+            first = fetch_batch(base, "u16", some, "raw")
+            assert (m("brickserver_cache_hits_total") - h0, m("brickserver_cache_misses_total") - m0) == (0, 3)
+            assert fetch_batch(base, "u16", some, "raw") == first
+            assert (m("brickserver_cache_hits_total") - h0, m("brickserver_cache_misses_total") - m0) == (3, 3)
+            # Stored and decoded bytes are different entries.
+            fetch_batch(base, "u16", some, "stored")
+            assert m("brickserver_cache_misses_total") - m0 == 6
+            total = 0
+            for i in range(0, len(everything), 50):
+                _, payload = fetch_batch(base, "u16", everything[i : i + 50], "raw")
+                total += len(payload)
+                assert 0 < m("brickserver_cache_bytes") <= budget
+            assert total > 4 * budget
     finally:
         stop(proc)

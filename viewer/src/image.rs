@@ -103,11 +103,13 @@ impl RgbImage {
                 )
                 .with_context(|| format!("{shown}: cannot write PNG"))
             }
-            ImageFormat::Exr => exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
-                let p = self.get(x, y);
-                (p[0], p[1], p[2])
-            })
-            .with_context(|| format!("{shown}: cannot write OpenEXR")),
+            ImageFormat::Exr => {
+                exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
+                    let p = self.get(x, y);
+                    (p[0], p[1], p[2])
+                })
+                .with_context(|| format!("{shown}: cannot write OpenEXR"))
+            }
         }
     }
 

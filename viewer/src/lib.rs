@@ -5,7 +5,7 @@
 //! - [`scene`]: camera, per-channel transfer functions and the compositing rule shared by the
 //!   GPU renderer and the reference;
 //! - [`source`]: where volume metadata and bricks come from (HTTP brick server or local store);
-//! - [`reference`]: the f64 CPU reference ray caster;
+//! - [`reference`](mod@reference): the f64 CPU reference ray caster;
 //! - [`image`]: linear-RGB images, PNG and EXR; [`metrics`]: PSNR, SSIM, max abs error.
 
 #![warn(missing_docs)]

@@ -82,8 +82,9 @@ pub fn luminance(p: [f32; 3]) -> f64 {
 /// The normalised 1-D Gaussian of the SSIM window (the 2-D window is its outer product).
 pub fn gaussian_window() -> [f64; SSIM_WINDOW] {
     let r = (SSIM_WINDOW / 2) as f64;
-    let mut w: [f64; SSIM_WINDOW] =
-        std::array::from_fn(|i| (-((i as f64 - r).powi(2)) / (2.0 * SSIM_SIGMA * SSIM_SIGMA)).exp());
+    let mut w: [f64; SSIM_WINDOW] = std::array::from_fn(|i| {
+        (-((i as f64 - r).powi(2)) / (2.0 * SSIM_SIGMA * SSIM_SIGMA)).exp()
+    });
     let sum: f64 = w.iter().sum();
     w.iter_mut().for_each(|v| *v /= sum);
     w
@@ -157,7 +158,13 @@ mod tests {
         assert_eq!(m.ssim, 1.0);
         assert_eq!(m.max_abs_error, 0.0);
         assert_eq!(m.mse, 0.0);
-        assert!(error_map(&a, &a).unwrap().pixels.iter().all(|p| *p == [0.0; 3]));
+        assert!(
+            error_map(&a, &a)
+                .unwrap()
+                .pixels
+                .iter()
+                .all(|p| *p == [0.0; 3])
+        );
     }
 
     #[test]
@@ -168,7 +175,11 @@ mod tests {
         assert_eq!(m.mse, 0.0625);
         assert_eq!(m.max_abs_error, 0.25);
         // 10·log10(1 / 0.0625) = 10·log10(16)
-        assert!((m.psnr_db - 12.041_199_826_559_248).abs() < 1e-12, "{}", m.psnr_db);
+        assert!(
+            (m.psnr_db - 12.041_199_826_559_248).abs() < 1e-12,
+            "{}",
+            m.psnr_db
+        );
         // Flat images: no variance, so SSIM is the luminance term alone.
         let (x, y) = (luminance([0.25; 3]), luminance([0.5; 3]));
         let expected = (2.0 * x * y + 1e-4) / (x * x + y * y + 1e-4);

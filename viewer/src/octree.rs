@@ -14,10 +14,12 @@
 //! side (the voxels a trilinear sample near the brick's edge also reads), intersects the node.
 //!
 //! **Value ranges** come from the server's min/max grids ([`VolumeInfo::minmax`]): a node's
-//! range is the union, over all levels, of the haloed cells its region touches, so it bounds
-//! every trilinear sample the renderer may take inside it at any level. Never computed from
-//! voxels: a store without region metadata gives every in-volume node the unknown range
-//! `(−∞, +∞)` (no skipping), with a warning.
+//! range is the union of the level-0 haloed cells its region touches, so it bounds every
+//! trilinear sample of the full-resolution data inside the node. Emptiness is a property of
+//! that data: a node transparent at full resolution is skipped whichever level is sampled
+//! (coarser levels only approximate it; their wider halos would make every node non-empty).
+//! Never computed from voxels: a store without region metadata gives every in-volume node the
+//! unknown range `(−∞, +∞)` (no skipping), with a warning.
 
 use std::collections::HashSet;
 use std::ops::Range;
@@ -83,7 +85,11 @@ impl OctreeGeometry {
             depth <= MAX_DEPTH,
             "octree depth {depth} exceeds the maximum {MAX_DEPTH}"
         );
-        ensure!(!info.levels.is_empty(), "{}: volume has no levels", info.name);
+        ensure!(
+            !info.levels.is_empty(),
+            "{}: volume has no levels",
+            info.name
+        );
         ensure!(
             info.levels.len() <= MAX_LEVELS,
             "{}: {} pyramid levels; a residency mask holds at most {MAX_LEVELS}",
@@ -121,7 +127,13 @@ impl OctreeGeometry {
     /// A leaf depth giving leaves of about `leaf_voxels` level-0 voxels along the volume's
     /// longest axis, capped at `max_depth`.
     pub fn depth_for(info: &VolumeInfo, leaf_voxels: u64, max_depth: u32) -> u32 {
-        let longest = info.levels[0].shape.iter().copied().max().unwrap_or(1).max(1);
+        let longest = info.levels[0]
+            .shape
+            .iter()
+            .copied()
+            .max()
+            .unwrap_or(1)
+            .max(1);
         let e = 64 - (longest - 1).leading_zeros();
         let l = 63 - leaf_voxels.max(1).leading_zeros();
         e.saturating_sub(l).min(max_depth)
@@ -307,8 +319,8 @@ impl ResidencyOctree {
             "brick {key:?}: no such level"
         );
         let shape = &self.geometry.level_shape[l];
-        for a in 0..3 {
-            let nb = shape[a].div_ceil(self.geometry.brick[a]);
+        for (a, (&n, &b)) in shape.iter().zip(&self.geometry.brick).enumerate() {
+            let nb = n.div_ceil(b);
             ensure!(
                 key.brick[2 - a] < nb,
                 "brick {key:?}: outside the level's brick grid"
@@ -402,7 +414,11 @@ impl ResidencyOctree {
             d -= 1;
             let mut or = 0u16;
             for k in 0..8u64 {
-                let child = [2 * c[0] + (k & 1), 2 * c[1] + ((k >> 1) & 1), 2 * c[2] + (k >> 2)];
+                let child = [
+                    2 * c[0] + (k & 1),
+                    2 * c[1] + ((k >> 1) & 1),
+                    2 * c[2] + (k >> 2),
+                ];
                 or |= self.masks[node_index(d + 1, child) * m + slot];
             }
             let n = node_index(d, c);
@@ -429,7 +445,9 @@ impl ResidencyOctree {
         let d = self.geometry.depth;
         let mut masks = vec![0u16; self.masks.len()];
         for key in &self.resident {
-            let slot = self.slot_of(key.channel as usize).expect("checked on insert");
+            let slot = self
+                .slot_of(key.channel as usize)
+                .expect("checked on insert");
             let [rx, ry, rz] = self.leaf_coord_ranges(key);
             for z in rz {
                 for y in ry.clone() {
@@ -467,8 +485,7 @@ impl ResidencyOctree {
             for y in 0..n {
                 for x in 0..n {
                     let inside = [x, y, z].iter().enumerate().all(|(a, &k)| {
-                        self.geometry.leaf_interval(a, k).0
-                            < self.geometry.volume_voxels[a] as f64
+                        self.geometry.leaf_interval(a, k).0 < self.geometry.volume_voxels[a] as f64
                     });
                     if inside {
                         let i = node_index(d, [x, y, z]) * m;
@@ -481,7 +498,11 @@ impl ResidencyOctree {
         }
     }
 
-    fn seed_ranges(&mut self, info: &VolumeInfo, grids: &[Vec<Vec<crate::source::MinMaxGrid>>]) -> Result<()> {
+    fn seed_ranges(
+        &mut self,
+        info: &VolumeInfo,
+        grids: &[Vec<Vec<crate::source::MinMaxGrid>>],
+    ) -> Result<()> {
         let m = self.channels.len();
         let d = self.geometry.depth;
         let n = self.geometry.leaves_per_axis() as f64;
@@ -489,9 +510,12 @@ impl ResidencyOctree {
             let per_level = grids.get(channel).ok_or_else(|| {
                 anyhow::anyhow!("{}: no min/max grids for channel {channel}", info.name)
             })?;
-            for (l, level_grids) in per_level.iter().enumerate().take(self.geometry.level_shape.len()) {
+            for (l, level_grids) in per_level.iter().enumerate().take(1) {
                 let Some(grid) = level_grids.first() else {
-                    bail!("{}: channel {channel} level {l}: no min/max grid", info.name);
+                    bail!(
+                        "{}: channel {channel} level {l}: no min/max grid",
+                        info.name
+                    );
                 };
                 let cell = [grid.cell_shape[2], grid.cell_shape[1], grid.cell_shape[0]];
                 let gshape = [grid.grid_shape[2], grid.grid_shape[1], grid.grid_shape[0]];
@@ -531,8 +555,8 @@ impl ResidencyOctree {
                             for z in leaf_ranges[2][gz as usize].clone() {
                                 for y in leaf_ranges[1][gy as usize].clone() {
                                     for x in leaf_ranges[0][gx as usize].clone() {
-                                        let r = &mut self.ranges
-                                            [node_index(d, [x, y, z]) * m + slot];
+                                        let r =
+                                            &mut self.ranges[node_index(d, [x, y, z]) * m + slot];
                                         r.0 = r.0.min(lo);
                                         r.1 = r.1.max(hi);
                                     }

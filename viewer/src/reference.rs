@@ -95,11 +95,7 @@ impl Level0<'_> {
 
     /// Trilinear sample at continuous voxel coordinates `u` (`z, y, x`; voxel centres at
     /// integers), clamped to the edge voxels.
-    fn sample(
-        &self,
-        u: [f64; 3],
-        last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
-    ) -> Result<f64> {
+    fn sample(&self, u: [f64; 3], last: &mut Option<([u64; 3], Arc<BrickVoxels>)>) -> Result<f64> {
         let mut i0 = [0u64; 3];
         let mut i1 = [0u64; 3];
         let mut f = [0.0; 3];
@@ -272,13 +268,13 @@ fn march(
             let v = volume.sample(u, last)?;
             let alpha = corrected_opacity(style.opacity_at(v), b - a, reference_step);
             alpha_sum += alpha;
-            for k in 0..3 {
-                sample_colour[k] += alpha * style.color[k];
+            for (s, c) in sample_colour.iter_mut().zip(style.color) {
+                *s += alpha * c;
             }
         }
         let alpha = alpha_sum.min(1.0);
-        for k in 0..3 {
-            colour[k] += t * sample_colour[k];
+        for (c, s) in colour.iter_mut().zip(sample_colour) {
+            *c += t * s;
         }
         t *= 1.0 - alpha;
     }
@@ -333,7 +329,11 @@ mod tests {
                     for z in 0..b[0] {
                         for y in 0..b[1] {
                             for x in 0..b[2] {
-                                let g = [k.brick[0] * b[0] + z, k.brick[1] * b[1] + y, k.brick[2] * b[2] + x];
+                                let g = [
+                                    k.brick[0] * b[0] + z,
+                                    k.brick[1] * b[1] + y,
+                                    k.brick[2] * b[2] + x,
+                                ];
                                 v.push(if g[0] < s[0] && g[1] < s[1] && g[2] < s[2] {
                                     (self.value)(g[0], g[1], g[2])
                                 } else {
@@ -383,7 +383,10 @@ mod tests {
             let p = img.pixels[0];
             let expect = [(1.0 - t), 0.5 * (1.0 - t), 0.25 * (1.0 - t) + t];
             for i in 0..3 {
-                assert!((p[i] as f64 - expect[i]).abs() < 1e-6, "{p:?} vs {expect:?}");
+                assert!(
+                    (p[i] as f64 - expect[i]).abs() < 1e-6,
+                    "{p:?} vs {expect:?}"
+                );
             }
         }
     }
@@ -419,7 +422,11 @@ mod tests {
         ];
         let img = render(&vol, &s, &ReferenceOptions::new(1, 1)).unwrap();
         let t = (1.0 - 0.28125f64).powi(4);
-        assert!((img.pixels[0][0] as f64 - (1.0 - t)).abs() < 1e-6, "{:?}", img.pixels[0]);
+        assert!(
+            (img.pixels[0][0] as f64 - (1.0 - t)).abs() < 1e-6,
+            "{:?}",
+            img.pixels[0]
+        );
     }
 
     #[test]
@@ -428,10 +435,19 @@ mod tests {
         let s = scene([10.0, 10.0, 10.0], [20.0, 20.0, 20.0], 0.5);
         let img = render(&vol, &s, &ReferenceOptions::new(2, 2)).unwrap();
         assert!(img.pixels.iter().all(|p| *p == [0.0, 0.0, 1.0]));
-        assert_eq!(clip_to_box([2.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]), Some((6.0, 10.0)));
-        assert_eq!(clip_to_box([5.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]), None);
+        assert_eq!(
+            clip_to_box([2.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]),
+            Some((6.0, 10.0))
+        );
+        assert_eq!(
+            clip_to_box([5.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]),
+            None
+        );
         // Inside the volume: the ray starts at the eye.
-        assert_eq!(clip_to_box([2.0, 2.0, 1.0], [0.0, 0.0, -1.0], [4.0; 3]), Some((0.0, 1.0)));
+        assert_eq!(
+            clip_to_box([2.0, 2.0, 1.0], [0.0, 0.0, -1.0], [4.0; 3]),
+            Some((0.0, 1.0))
+        );
     }
 
     #[test]
@@ -440,6 +456,9 @@ mod tests {
         let mut s = scene([2.0, 2.0, 10.0], [2.0, 2.0, 0.0], 0.5);
         s.channels[0].channel = 3;
         let e = render(&vol, &s, &ReferenceOptions::new(1, 1)).unwrap_err();
-        assert_eq!(e.to_string(), "scene draws channel 3 but memory has 1 channels");
+        assert_eq!(
+            e.to_string(),
+            "scene draws channel 3 but memory has 1 channels"
+        );
     }
 }

@@ -21,7 +21,7 @@
 //! ny·tan(fov/2)·up')` with `nx = 2(px + ½)/W − 1` and `ny = 1 − 2(py + ½)/H`.
 //!
 //! **Scene files** are these types as JSON (`schemas/json/scene.schema.json`); `up` defaults
-//! to `+y`, `fov_y_degrees` to 30, `visible` to true and `background` to black.
+//! to `−y` (so that, looking toward `+z`, `x` runs right and `y` down as in a slice viewer), `fov_y_degrees` to 30, `visible` to true and `background` to black.
 
 use serde::{Deserialize, Serialize};
 
@@ -42,7 +42,7 @@ pub struct Camera {
 }
 
 fn default_up() -> [f64; 3] {
-    [0.0, 1.0, 0.0]
+    [0.0, -1.0, 0.0]
 }
 
 fn default_fov() -> f64 {
@@ -175,4 +175,112 @@ pub fn corrected_opacity(a: f64, step: f64, reference: f64) -> f64 {
         return 1.0;
     }
     1.0 - (1.0 - a.max(0.0)).powf(step / reference)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::Value;
+
+    const SCHEMA: &str = include_str!("../../schemas/json/scene.schema.json");
+
+    fn keys(v: &Value) -> Vec<String> {
+        let mut k: Vec<String> = v.as_object().unwrap().keys().cloned().collect();
+        k.sort();
+        k
+    }
+
+    /// The schema's example is a valid scene, and the schema and the serde types name the
+    /// same fields, with the same required ones.
+    #[test]
+    fn schema_example_is_a_scene_and_schema_matches_the_types() {
+        let schema: Value = serde_json::from_str(SCHEMA).unwrap();
+        let example = &schema["examples"][0];
+        let scene: Scene = serde_json::from_value(example.clone()).unwrap();
+        assert_eq!(scene.camera.eye, [60.0, 40.0, 90.0]);
+        assert_eq!(scene.channels.len(), 2);
+        assert!(scene.channels[1].visible, "visible defaults to true");
+        assert_eq!(scene.channels[1].opacity_at(70.0), 0.025);
+        assert_eq!(scene.channels[1].opacity_at(1000.0), 0.05);
+
+        let back = serde_json::to_value(&scene).unwrap();
+        let props = |s: &Value| keys(&s["properties"]);
+        assert_eq!(keys(&back), props(&schema));
+        assert_eq!(
+            keys(&back["camera"]),
+            props(&schema["properties"]["camera"])
+        );
+        let ch = &schema["properties"]["channels"]["items"];
+        assert_eq!(keys(&back["channels"][0]), props(ch));
+        let pt = &ch["properties"]["opacity"]["items"];
+        assert_eq!(keys(&back["channels"][0]["opacity"][0]), props(pt));
+        // What the schema requires is exactly what serde cannot default.
+        let minimal = serde_json::json!({
+            "camera": {"eye": [0, 0, 5], "target": [0, 0, 0]},
+            "channels": [{"channel": 0, "color": [1, 1, 1], "opacity": []}]
+        });
+        let s: Scene = serde_json::from_value(minimal).unwrap();
+        assert_eq!(s.camera.up, [0.0, -1.0, 0.0]);
+        assert_eq!(s.camera.fov_y_degrees, 30.0);
+        assert_eq!(s.background, [0.0; 3]);
+        assert_eq!(
+            schema["required"],
+            serde_json::json!(["camera", "channels"])
+        );
+        assert_eq!(
+            schema["properties"]["camera"]["required"],
+            serde_json::json!(["eye", "target"])
+        );
+        assert_eq!(
+            ch["required"],
+            serde_json::json!(["channel", "color", "opacity"])
+        );
+    }
+
+    #[test]
+    fn unknown_fields_are_refused() {
+        let e = serde_json::from_str::<Scene>(
+            r#"{"camera": {"eye": [0,0,5], "target": [0,0,0], "fov": 40}, "channels": []}"#,
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("unknown field `fov`"), "{e}");
+    }
+
+    #[test]
+    fn rays_follow_the_documented_projection() {
+        let cam = Camera {
+            eye: [0.0, 0.0, 10.0],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_degrees: 90.0,
+        };
+        let (f, r, u) = cam.basis();
+        assert_eq!(
+            (f, r, u),
+            ([0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+        );
+        assert_eq!(cam.ray_direction(0, 0, 1, 1), [0.0, 0.0, -1.0]);
+        // 2×2 pixels, tan(45°) = 1: the top-left pixel centre is at (-½, ½) on the image
+        // plane at distance 1.
+        let d = cam.ray_direction(0, 0, 2, 2);
+        let n = 1.5f64.sqrt();
+        let expect = [-0.5 / n, 0.5 / n, -1.0 / n];
+        assert!(
+            d.iter().zip(expect).all(|(a, b)| (a - b).abs() < 1e-15),
+            "{d:?}"
+        );
+        // A wide image widens the horizontal extent by its aspect ratio.
+        let d = cam.ray_direction(3, 0, 4, 1);
+        assert!((d[0] / -d[2] - 0.75 * 4.0).abs() < 1e-12, "{d:?}");
+        assert!(d[1].abs() < 1e-15);
+    }
+
+    #[test]
+    fn opacity_correction_matches_the_compositing_rule() {
+        assert_eq!(corrected_opacity(0.5, 1.0, 1.0), 0.5);
+        assert_eq!(corrected_opacity(0.5, 2.0, 1.0), 0.75);
+        assert!((corrected_opacity(0.75, 0.5, 1.0) - 0.5).abs() < 1e-15);
+        assert_eq!(corrected_opacity(1.0, 0.1, 1.0), 1.0);
+        assert_eq!(corrected_opacity(-0.2, 1.0, 1.0), 0.0);
+    }
 }

@@ -45,7 +45,11 @@ fn random_inserts_and_evicts_match_recomputation() {
                 for z in 0..g[0] {
                     for y in 0..g[1] {
                         for x in 0..g[2] {
-                            all.push(BrickKey { level: l as u32, channel: c, brick: [z, y, x] });
+                            all.push(BrickKey {
+                                level: l as u32,
+                                channel: c,
+                                brick: [z, y, x],
+                            });
                         }
                     }
                 }
@@ -61,7 +65,11 @@ fn random_inserts_and_evicts_match_recomputation() {
                 assert_eq!(tree.evict(key).unwrap(), resident.remove(&key));
             }
             if step % 25 == 0 {
-                assert_eq!(tree.masks(), &tree.masks_from_scratch()[..], "depth {depth} step {step}");
+                assert_eq!(
+                    tree.masks(),
+                    &tree.masks_from_scratch()[..],
+                    "depth {depth} step {step}"
+                );
             }
         }
         assert_eq!(tree.masks(), &tree.masks_from_scratch()[..]);
@@ -79,33 +87,61 @@ fn a_brick_marks_exactly_its_widened_extent() {
     let source = volume();
     // depth 3: root 64 × 64 × 16 voxels (x, y, z), leaves 8 × 8 × 2.
     let mut tree = ResidencyOctree::new(source.info(), &[0], 3).unwrap();
-    let key = BrickKey { level: 0, channel: 0, brick: [0, 1, 2] }; // x 16..24, y 8..16, z 0..8
+    let key = BrickKey {
+        level: 0,
+        channel: 0,
+        brick: [0, 1, 2],
+    }; // x 16..24, y 8..16, z 0..8
     tree.insert(key).unwrap();
     // Widened by one voxel: x 15..25 → leaves 1..=3; y 7..17 → leaves 0..=2; z 0..9 → 0..=4.
     for z in 0..8u64 {
         for y in 0..8u64 {
             for x in 0..8u64 {
                 let expect = (1..=3).contains(&x) && y <= 2 && z <= 4;
-                assert_eq!(tree.mask(node_index(3, [x, y, z]), 0), expect as u16, "{x} {y} {z}");
+                assert_eq!(
+                    tree.mask(node_index(3, [x, y, z]), 0),
+                    expect as u16,
+                    "{x} {y} {z}"
+                );
             }
         }
     }
     assert_eq!(tree.mask(0, 0), 1);
     // A level-1 brick sets bit 1 and leaves bit 0 alone.
-    tree.insert(BrickKey { level: 1, channel: 0, brick: [0, 0, 0] }).unwrap();
+    tree.insert(BrickKey {
+        level: 1,
+        channel: 0,
+        brick: [0, 0, 0],
+    })
+    .unwrap();
     assert_eq!(tree.mask(0, 0), 0b11);
     assert_eq!(tree.mask(node_index(3, [2, 1, 1]), 0), 0b11);
     tree.evict(key).unwrap();
     assert_eq!(tree.mask(0, 0), 0b10);
-    assert!(tree.insert(BrickKey { level: 0, channel: 5, brick: [0, 0, 0] }).is_err());
+    assert!(
+        tree.insert(BrickKey {
+            level: 0,
+            channel: 5,
+            brick: [0, 0, 0]
+        })
+        .is_err()
+    );
 }
 
 #[test]
 fn ranges_come_from_the_minmax_grids() {
     // x < 16 holds 0, the rest 100 + x: one channel, u8, 32³, bricks 16³, cells 4³.
-    let source = SyntheticSource::new(SampleType::U8, [32, 32, 32], [1.0; 3], [16; 3], 4, 1, |_, [x, _, _]| {
-        if x < 16 { 0.0 } else { 100.0 + x as f64 }
-    });
+    let source = SyntheticSource::new(
+        SampleType::U8,
+        [32, 32, 32],
+        [1.0; 3],
+        [16; 3],
+        4,
+        1,
+        |_, [x, _, _]| {
+            if x < 16 { 0.0 } else { 100.0 + x as f64 }
+        },
+    );
     let tree = ResidencyOctree::new(source.info(), &[0], 3).unwrap(); // leaves 4³ voxels
     // Two levels (32³, 16³). Leaf x 0..4: level-0 cell 0 reads voxels 0..5, level-1 cell 0
     // (8 level-0 voxels) reads level-1 voxels 0..5 = level-0 x < 10: all zero, homogeneous.

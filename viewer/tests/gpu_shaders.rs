@@ -8,14 +8,23 @@ fn every_wgsl_file_validates() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "wgsl") {
             let src = std::fs::read_to_string(&path).unwrap();
-            let module = naga::front::wgsl::parse_str(&src)
-                .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(&src, &path.display().to_string())));
+            let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| {
+                panic!(
+                    "{}",
+                    e.emit_to_string_with_path(&src, &path.display().to_string())
+                )
+            });
             naga::valid::Validator::new(
                 naga::valid::ValidationFlags::all(),
                 naga::valid::Capabilities::empty(),
             )
             .validate(&module)
-            .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(&src, &path.display().to_string())));
+            .unwrap_or_else(|e| {
+                panic!(
+                    "{}",
+                    e.emit_to_string_with_path(&src, &path.display().to_string())
+                )
+            });
             checked += 1;
         }
     }

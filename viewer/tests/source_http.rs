@@ -4,63 +4,11 @@
 
 mod source_common;
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::path::Path;
+use std::process::Command;
 
 use residency_viewer::source::{BrickKey, BrickSource, HttpSource, LocalSource};
-use source_common::{Layout, make_store, strip_region_metadata};
-
-fn binary(name: &str) -> PathBuf {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../target/release").join(name);
-    assert!(
-        path.exists(),
-        "{} is not built: run `cargo build --release --bins` first",
-        path.display()
-    );
-    path
-}
-
-/// A running `brickserver`, killed when dropped.
-struct Server {
-    child: Child,
-    url: String,
-    // Kept open so that the server never writes to a closed pipe.
-    _stdout: BufReader<std::process::ChildStdout>,
-}
-
-impl Server {
-    fn start(stores: &[&Path]) -> Self {
-        let mut child = Command::new(binary("brickserver"))
-            .arg("serve")
-            .args(stores)
-            .args(["--bind", "127.0.0.1:0"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let mut stdout = BufReader::new(child.stdout.take().unwrap());
-        let url = loop {
-            let mut line = String::new();
-            assert!(stdout.read_line(&mut line).unwrap() > 0, "brickserver exited");
-            if let Some(url) = line.trim().strip_prefix("listening on ") {
-                break url.to_string();
-            }
-        };
-        Self {
-            child,
-            url,
-            _stdout: stdout,
-        }
-    }
-}
-
-impl Drop for Server {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
+use source_common::{Layout, Server, binary, make_store, strip_region_metadata};
 
 /// Every brick of every level and channel.
 fn all_keys(src: &dyn BrickSource) -> Vec<BrickKey> {
@@ -72,7 +20,11 @@ fn all_keys(src: &dyn BrickSource) -> Vec<BrickKey> {
             for z in 0..g[0] {
                 for y in 0..g[1] {
                     for x in 0..g[2] {
-                        keys.push(BrickKey { level: l as u32, channel: c, brick: [z, y, x] });
+                        keys.push(BrickKey {
+                            level: l as u32,
+                            channel: c,
+                            brick: [z, y, x],
+                        });
                     }
                 }
             }
@@ -97,7 +49,11 @@ fn http_and_local_sources_agree_on_the_sample() {
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let run = |args: &[String]| {
         let out = Command::new(binary("ingest")).args(args).output().unwrap();
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
     };
     run(&["sample", "-o", &s(&sample), "--size", "24,40,36", "--quiet"].map(String::from));
     let mut args = vec!["convert".to_string()];
@@ -113,7 +69,11 @@ fn http_and_local_sources_agree_on_the_sample() {
     assert!(http.info().minmax.is_some());
     assert_eq!(http.info().channels, ["nuclei", "membranes", "filaments"]);
     // More bricks than one batch holds: the fetch is split, answered in order.
-    assert!(all_keys(&local).len() > http.batch_size(), "{}", all_keys(&local).len());
+    assert!(
+        all_keys(&local).len() > http.batch_size(),
+        "{}",
+        all_keys(&local).len()
+    );
     assert_same(&http, &local);
 }
 
@@ -161,9 +121,21 @@ fn errors_name_the_server_dataset_and_brick() {
         )
     );
     let http = HttpSource::open(&server.url, "vol").unwrap();
-    let bad = BrickKey { level: 0, channel: 1, brick: [0, 1, 1] };
-    let outside = BrickKey { level: 9, channel: 0, brick: [0, 0, 0] };
-    let good = BrickKey { level: 0, channel: 1, brick: [0, 0, 1] };
+    let bad = BrickKey {
+        level: 0,
+        channel: 1,
+        brick: [0, 1, 1],
+    };
+    let outside = BrickKey {
+        level: 9,
+        channel: 0,
+        brick: [0, 0, 0],
+    };
+    let good = BrickKey {
+        level: 0,
+        channel: 1,
+        brick: [0, 0, 1],
+    };
     let mut got = http.fetch(&[bad, outside, good]).into_iter();
     let e = got.next().unwrap().unwrap_err().to_string();
     assert!(
@@ -174,10 +146,65 @@ fn errors_name_the_server_dataset_and_brick() {
         "{e}"
     );
     let e = got.next().unwrap().unwrap_err().to_string();
-    assert_eq!(e, format!("vol: brick {outside:?}: no level 9 ({} levels)", http.info().levels.len()));
+    assert_eq!(
+        e,
+        format!(
+            "vol: brick {outside:?}: no level 9 ({} levels)",
+            http.info().levels.len()
+        )
+    );
     let local = LocalSource::open(&store).unwrap();
     assert_eq!(
         got.next().unwrap().unwrap(),
         local.fetch(&[good]).pop().unwrap().unwrap()
     );
+}
+
+#[test]
+fn a_server_with_a_token_needs_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = make_store(dir.path(), "vol", Layout::V3);
+    let token = dir.path().join("token");
+    std::fs::write(&token, "s3cret\n").unwrap();
+    let server = Server::start_with(&[&store], &["--token-file", token.to_str().unwrap()]);
+    let e = HttpSource::open(&server.url, "vol").unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "{}/vol/zarr.json: HTTP 401: the server needs a token (--token-file)",
+            server.url
+        )
+    );
+    let e = HttpSource::open_with_token(&server.url, "vol", Some("wrong")).unwrap_err();
+    assert_eq!(
+        e.to_string(),
+        format!(
+            "{}/vol/zarr.json: HTTP 401: the server refused the token",
+            server.url
+        )
+    );
+    // Through the command-line flags, reading the token file as the server does.
+    use clap::Parser;
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        source: residency_viewer::cli::scene_args::SourceArgs,
+    }
+    let cli = Cli::try_parse_from([
+        "viewer",
+        "--server",
+        &server.url,
+        "--dataset",
+        "vol",
+        "--token-file",
+        token.to_str().unwrap(),
+    ])
+    .unwrap();
+    let http = cli.source.open().unwrap();
+    let local = LocalSource::open(&store).unwrap();
+    assert_eq!(http.info(), local.info());
+    let keys = all_keys(&local);
+    let a: Vec<_> = http.fetch(&keys).into_iter().map(Result::unwrap).collect();
+    let b: Vec<_> = local.fetch(&keys).into_iter().map(Result::unwrap).collect();
+    assert_eq!(a, b);
 }

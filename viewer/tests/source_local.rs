@@ -8,6 +8,29 @@ use residency_viewer::source::{
 };
 use source_common::{BRICK, Layout, SHAPE, ball, make_store, ramp, strip_region_metadata, voxels};
 
+/// A log sink for `tracing_subscriber`.
+#[derive(Clone, Default)]
+struct Log(std::sync::Arc<std::sync::Mutex<Vec<u8>>>);
+
+impl std::io::Write for Log {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.lock().unwrap().extend_from_slice(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl<'a> tracing_subscriber::fmt::MakeWriter<'a> for Log {
+    type Writer = Log;
+
+    fn make_writer(&'a self) -> Log {
+        self.clone()
+    }
+}
+
 /// The expected level-0 brick of a channel: the voxels, fill value 0 past the edge, or
 /// `Empty` when all zero.
 fn expected_brick(data: &[u16], brick: [u64; 3]) -> BrickVoxels {
@@ -16,7 +39,11 @@ fn expected_brick(data: &[u16], brick: [u64; 3]) -> BrickVoxels {
     for z in 0..BRICK {
         for y in 0..BRICK {
             for x in 0..BRICK {
-                let g = [brick[0] * BRICK + z, brick[1] * BRICK + y, brick[2] * BRICK + x];
+                let g = [
+                    brick[0] * BRICK + z,
+                    brick[1] * BRICK + y,
+                    brick[2] * BRICK + x,
+                ];
                 v.push(if g[0] < nz && g[1] < ny && g[2] < nx {
                     data[((g[0] * ny + g[1]) * nx + g[2]) as usize]
                 } else {
@@ -64,9 +91,18 @@ fn v3_store_reads_metadata_minmax_and_bricks_exactly() {
     assert_eq!(
         info.levels[..3],
         [
-            LevelInfo { shape: [20, 24, 28], factor: [1, 1, 1] },
-            LevelInfo { shape: [20, 12, 14], factor: [1, 2, 2] },
-            LevelInfo { shape: [20, 6, 7], factor: [1, 4, 4] },
+            LevelInfo {
+                shape: [20, 24, 28],
+                factor: [1, 1, 1]
+            },
+            LevelInfo {
+                shape: [20, 12, 14],
+                factor: [1, 2, 2]
+            },
+            LevelInfo {
+                shape: [20, 6, 7],
+                factor: [1, 4, 4]
+            },
         ]
     );
     let last = info.levels.last().unwrap();
@@ -75,12 +111,17 @@ fn v3_store_reads_metadata_minmax_and_bricks_exactly() {
     let ball_max = *voxels(ball).iter().max().unwrap() as f64;
     assert_eq!(info.display[0].range, Some([0.0, ball_max]));
     assert!(info.display[0].window.is_some());
+    // Most of the ball channel is background.
+    assert_eq!(info.display[0].median, Some(0.0));
 
     // Min/max grids: one hierarchy per channel and level, down to a single cell, and the
     // finest level-0 grid holds each 8³ cell's range over its voxels plus a 1-voxel halo.
     let minmax = info.minmax.as_ref().expect("region metadata");
     assert_eq!(minmax.len(), 2);
-    for (c, f) in [ball as fn(u64, u64, u64) -> u16, ramp].into_iter().enumerate() {
+    for (c, f) in [ball as fn(u64, u64, u64) -> u16, ramp]
+        .into_iter()
+        .enumerate()
+    {
         assert_eq!(minmax[c].len(), info.levels.len());
         for grids in &minmax[c] {
             assert_eq!(grids.last().unwrap().grid_shape, [1, 1, 1]);
@@ -105,7 +146,11 @@ fn v3_store_reads_metadata_minmax_and_bricks_exactly() {
                         }
                     }
                     let i = ((cz * 3 + cy) * 4 + cx) as usize;
-                    assert_eq!((g.min[i], g.max[i]), (lo as f64, hi as f64), "cell {cz},{cy},{cx}");
+                    assert_eq!(
+                        (g.min[i], g.max[i]),
+                        (lo as f64, hi as f64),
+                        "cell {cz},{cy},{cx}"
+                    );
                 }
             }
         }
@@ -118,7 +163,10 @@ fn v3_store_reads_metadata_minmax_and_bricks_exactly() {
             assert_eq!(b, expected_brick(&data, k.brick), "{k:?}");
             empty += (b == BrickVoxels::Empty) as usize;
         }
-        assert!(empty > 0 && empty < keys.len(), "channel {c}: {empty} empty");
+        assert!(
+            empty > 0 && empty < keys.len(),
+            "channel {c}: {empty} empty"
+        );
     }
 }
 
@@ -138,7 +186,11 @@ fn sharded_and_v2_stores_read_the_same_as_v3() {
                 for z in 0..g[0] {
                     for y in 0..g[1] {
                         for x in 0..g[2] {
-                            keys.push(BrickKey { level: l as u32, channel: c, brick: [z, y, x] });
+                            keys.push(BrickKey {
+                                level: l as u32,
+                                channel: c,
+                                brick: [z, y, x],
+                            });
                         }
                     }
                 }
@@ -155,12 +207,30 @@ fn a_store_without_region_metadata_has_no_minmax() {
     let dir = tempfile::tempdir().unwrap();
     let store = make_store(dir.path(), "bare", Layout::V3);
     strip_region_metadata(&store);
-    let src = LocalSource::open(&store).unwrap();
+    // Opening says that culling falls back to the bricks.
+    let log = Log::default();
+    let subscriber = tracing_subscriber::fmt()
+        .with_writer(log.clone())
+        .with_ansi(false)
+        .finish();
+    let src = tracing::subscriber::with_default(subscriber, || LocalSource::open(&store)).unwrap();
+    let text = String::from_utf8(log.0.lock().unwrap().clone()).unwrap();
+    assert!(
+        text.contains(&format!(
+            "WARN residency_viewer::source::ome: {}: no region metadata; culling falls back to \
+             computing min/max from bricks",
+            store.display()
+        )),
+        "{text}"
+    );
     assert_eq!(src.info().minmax, None);
     // The omero window still gives display hints, and bricks still read.
     assert!(src.info().display[0].window.is_some());
     let k = level0_keys(1)[1];
-    assert_eq!(src.fetch(&[k]).pop().unwrap().unwrap(), expected_brick(&voxels(ramp), k.brick));
+    assert_eq!(
+        src.fetch(&[k]).pop().unwrap().unwrap(),
+        expected_brick(&voxels(ramp), k.brick)
+    );
 }
 
 #[test]
@@ -168,20 +238,38 @@ fn bad_stores_and_bricks_give_errors_naming_them() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("nothing.ome.zarr");
     let e = LocalSource::open(&missing).unwrap_err();
-    assert_eq!(e.to_string(), format!("{}: no such store", missing.display()));
+    assert_eq!(
+        e.to_string(),
+        format!("{}: no such store", missing.display())
+    );
     let e = LocalSource::open(dir.path()).unwrap_err();
     assert_eq!(
         e.to_string(),
-        format!("{}: not an OME-Zarr image (no zarr.json or .zattrs)", dir.path().display())
+        format!(
+            "{}: not an OME-Zarr image (no zarr.json or .zattrs)",
+            dir.path().display()
+        )
     );
 
     let store = make_store(dir.path(), "vol", Layout::V3);
     // A corrupt chunk: its brick fails with an error naming it; the others still read.
     std::fs::write(store.join("0/c/1/0/1/1"), b"not blosc").unwrap();
     let src = LocalSource::open(&store).unwrap();
-    let bad = BrickKey { level: 0, channel: 1, brick: [0, 1, 1] };
-    let outside = BrickKey { level: 0, channel: 0, brick: [3, 0, 0] };
-    let good = BrickKey { level: 0, channel: 1, brick: [0, 0, 1] };
+    let bad = BrickKey {
+        level: 0,
+        channel: 1,
+        brick: [0, 1, 1],
+    };
+    let outside = BrickKey {
+        level: 0,
+        channel: 0,
+        brick: [3, 0, 0],
+    };
+    let good = BrickKey {
+        level: 0,
+        channel: 1,
+        brick: [0, 0, 1],
+    };
     let mut got = src.fetch(&[bad, outside, good]).into_iter();
     let e = got.next().unwrap().unwrap_err();
     assert!(
@@ -197,5 +285,118 @@ fn bad_stores_and_bricks_give_errors_naming_them() {
         "vol: brick BrickKey { level: 0, channel: 0, brick: [3, 0, 0] }: outside the level's \
          brick grid [3, 3, 4]"
     );
-    assert_eq!(got.next().unwrap().unwrap(), expected_brick(&voxels(ramp), good.brick));
+    assert_eq!(
+        got.next().unwrap().unwrap(),
+        expected_brick(&voxels(ramp), good.brick)
+    );
+}
+
+/// Every sample type `ingest` writes reads back exactly, typed, with its min/max grids.
+#[test]
+fn every_sample_type_reads_back_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let [nz, ny, nx] = [9u64, 10, 11];
+    // A value per voxel, zero in the first brick column (x < 8) so some bricks are empty.
+    let value = |z: u64, y: u64, x: u64| -> f64 {
+        if x < 8 {
+            0.0
+        } else {
+            (x as f64 - 7.0) * 3.0 - y as f64 + z as f64 * 0.5
+        }
+    };
+    for (dtype, sample_type) in [
+        ("uint8", SampleType::U8),
+        ("int16", SampleType::I16),
+        ("uint32", SampleType::U32),
+        ("int32", SampleType::I32),
+        ("float32", SampleType::F32),
+    ] {
+        // Integer types hold the value rounded down (and offset to stay non-negative when
+        // unsigned); float32 holds it exactly.
+        let stored = |z, y, x| -> f64 {
+            let v = value(z, y, x);
+            match sample_type {
+                SampleType::F32 => v,
+                SampleType::U8 | SampleType::U32 if v != 0.0 => (v + 20.0).floor(),
+                _ => v.floor(),
+            }
+        };
+        let mut bytes = Vec::new();
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let v = stored(z, y, x);
+                    match sample_type {
+                        SampleType::U8 => bytes.push(v as u8),
+                        SampleType::I16 => bytes.extend((v as i16).to_le_bytes()),
+                        SampleType::U32 => bytes.extend((v as u32).to_le_bytes()),
+                        SampleType::I32 => bytes.extend((v as i32).to_le_bytes()),
+                        _ => bytes.extend((v as f32).to_le_bytes()),
+                    }
+                }
+            }
+        }
+        let raw = dir.path().join(format!("v_{nx}x{ny}x{nz}_{dtype}.raw"));
+        std::fs::write(&raw, bytes).unwrap();
+        let out = dir.path().join(format!("{dtype}.ome.zarr"));
+        let mut o =
+            residency_ingest::ConvertOptions::new(vec![raw.to_str().unwrap().into()], out.clone());
+        o.brick = [BRICK; 3];
+        residency_ingest::convert(&o).unwrap();
+
+        let src = LocalSource::open(&out).unwrap();
+        assert_eq!(src.info().sample_type, sample_type, "{dtype}");
+        let root = &src.info().minmax.as_ref().unwrap()[0][0];
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    lo = lo.min(stored(z, y, x));
+                    hi = hi.max(stored(z, y, x));
+                }
+            }
+        }
+        let top = root.last().unwrap();
+        assert_eq!((top.min[0], top.max[0]), (lo, hi), "{dtype}");
+        let g = src.info().brick_grid(0);
+        for bz in 0..g[0] {
+            for by in 0..g[1] {
+                for bx in 0..g[2] {
+                    let key = BrickKey {
+                        level: 0,
+                        channel: 0,
+                        brick: [bz, by, bx],
+                    };
+                    let b = src.fetch(&[key]).pop().unwrap().unwrap();
+                    let kind = std::mem::discriminant(&b);
+                    assert_eq!(bx == 0, b == BrickVoxels::Empty, "{dtype} {key:?}");
+                    if bx == 0 {
+                        continue;
+                    }
+                    let typed = match sample_type {
+                        SampleType::U8 => BrickVoxels::U8(vec![]),
+                        SampleType::I16 => BrickVoxels::I16(vec![]),
+                        SampleType::U32 => BrickVoxels::U32(vec![]),
+                        SampleType::I32 => BrickVoxels::I32(vec![]),
+                        _ => BrickVoxels::F32(vec![]),
+                    };
+                    assert_eq!(kind, std::mem::discriminant(&typed), "{dtype}");
+                    for i in 0..BRICK {
+                        for j in 0..BRICK {
+                            for k in 0..BRICK {
+                                let (z, y, x) = (bz * BRICK + i, by * BRICK + j, bx * BRICK + k);
+                                let want = if z < nz && y < ny && x < nx {
+                                    stored(z, y, x)
+                                } else {
+                                    0.0
+                                };
+                                let idx = ((i * BRICK + j) * BRICK + k) as usize;
+                                assert_eq!(b.value(idx), want, "{dtype} voxel {z},{y},{x}");
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
 }

@@ -14,11 +14,19 @@ use crate::source::{BrickSource, HttpSource, LocalSource, SampleType, VolumeInfo
 #[derive(clap::Args, Clone, Debug, Default)]
 pub struct SourceArgs {
     /// Brick server URL, e.g. `http://127.0.0.1:8000` (with `--dataset`).
-    #[arg(long, value_name = "URL", conflicts_with = "store", requires = "dataset")]
+    #[arg(
+        long,
+        value_name = "URL",
+        conflicts_with = "store",
+        requires = "dataset"
+    )]
     pub server: Option<String>,
     /// Dataset name on the brick server.
     #[arg(long, value_name = "NAME", requires = "server")]
     pub dataset: Option<String>,
+    /// File holding the bearer token of a server started with `--token-file`.
+    #[arg(long, value_name = "FILE", requires = "server")]
+    pub token_file: Option<PathBuf>,
     /// Local OME-Zarr store, instead of a server.
     #[arg(long, value_name = "PATH")]
     pub store: Option<PathBuf>,
@@ -28,7 +36,22 @@ impl SourceArgs {
     /// Opens the source the flags name.
     pub fn open(&self) -> Result<Box<dyn BrickSource>> {
         match (&self.server, &self.dataset, &self.store) {
-            (Some(url), Some(name), None) => Ok(Box::new(HttpSource::open(url, name)?)),
+            (Some(url), Some(name), None) => {
+                let token = match &self.token_file {
+                    Some(f) => Some(
+                        std::fs::read_to_string(f)
+                            .with_context(|| format!("{}: cannot read the token", f.display()))?
+                            .trim()
+                            .to_string(),
+                    ),
+                    None => None,
+                };
+                Ok(Box::new(HttpSource::open_with_token(
+                    url,
+                    name,
+                    token.as_deref(),
+                )?))
+            }
             (None, None, Some(path)) => Ok(Box::new(LocalSource::open(path)?)),
             _ => bail!("give either --server URL --dataset NAME, or --store PATH"),
         }
@@ -58,10 +81,11 @@ pub const DEFAULT_COLOURS: [[f64; 3]; 6] = [
 /// A camera given on the command line.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum CameraSpec {
-    /// `AZIMUTH,ELEVATION,DISTANCE`: orbit around the volume centre. Azimuth 0 and elevation 0
-    /// put the eye on the `+z` side looking down `-z`, with `+y` up; azimuth turns toward `+x`
-    /// about the `y` axis, elevation toward `+y`. Angles in degrees, distance in volume
-    /// diagonals from the centre.
+    /// `AZIMUTH,ELEVATION,DISTANCE`: orbit around the volume centre, in the microscope's
+    /// frame. Azimuth 0 and elevation 0 put the eye on the `−z` side looking toward `+z`
+    /// (slice 0 nearest) with `−y` up, so `x` runs right and `y` down, as a slice viewer
+    /// shows the stack; azimuth turns the eye toward `+x` about the `y` axis, elevation
+    /// toward `−y` (up). Angles in degrees, distance in volume diagonals from the centre.
     Orbit {
         /// Degrees.
         azimuth: f64,
@@ -70,7 +94,7 @@ pub enum CameraSpec {
         /// Volume diagonals.
         distance: f64,
     },
-    /// `EX,EY,EZ:TX,TY,TZ`: eye and target in world units (`x, y, z`).
+    /// `EX,EY,EZ:TX,TY,TZ`: eye and target in world units (`x, y, z`), `−y` up.
     LookAt {
         /// Eye position.
         eye: [f64; 3],
@@ -128,11 +152,7 @@ pub fn volume_centre(info: &VolumeInfo) -> [f64; 3] {
 pub fn volume_extent(info: &VolumeInfo) -> [f64; 3] {
     let s = info.levels[0].shape;
     let v = info.voxel_size;
-    [
-        s[2] as f64 * v[2],
-        s[1] as f64 * v[1],
-        s[0] as f64 * v[0],
-    ]
+    [s[2] as f64 * v[2], s[1] as f64 * v[1], s[0] as f64 * v[0]]
 }
 
 impl CameraSpec {
@@ -148,10 +168,10 @@ impl CameraSpec {
                 let e = volume_extent(info);
                 let diagonal = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
                 let (a, el) = (azimuth.to_radians(), elevation.to_radians());
-                let dir = [el.cos() * a.sin(), el.sin(), el.cos() * a.cos()];
+                let dir = [el.cos() * a.sin(), -el.sin(), -el.cos() * a.cos()];
                 // The derivative of the eye position with respect to the elevation: always
                 // orthogonal to the view direction, never zero, even looking straight down.
-                let up = [-el.sin() * a.sin(), el.cos(), -el.sin() * a.cos()];
+                let up = [-el.sin() * a.sin(), -el.cos(), el.sin() * a.cos()];
                 let d = distance * diagonal;
                 Camera {
                     eye: [c[0] + d * dir[0], c[1] + d * dir[1], c[2] + d * dir[2]],
@@ -163,11 +183,11 @@ impl CameraSpec {
             Self::LookAt { eye, target } => {
                 let d = [target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]];
                 let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                // +y up, unless the view is (nearly) along y.
+                // −y up (the scene default), unless the view is (nearly) along y.
                 let up = if len > 0.0 && (d[1] / len).abs() > 0.999 {
                     [0.0, 0.0, 1.0]
                 } else {
-                    [0.0, 1.0, 0.0]
+                    [0.0, -1.0, 0.0]
                 };
                 Camera {
                     eye,
@@ -319,23 +339,41 @@ pub struct SceneArgs {
     pub background: Option<Rgb>,
 }
 
-/// The default transfer-function ramp of a channel: from 0 at the display window's start to
-/// [`DEFAULT_OPACITY`] at its end; without a window, over the channel's value range, else over
-/// the sample type's range (`[0, 1]` for float).
+/// The default transfer-function ramp of a channel, from opacity 0 at `lo` to
+/// [`DEFAULT_OPACITY`] at `hi`, so that the background is transparent and the brightest
+/// structures the most opaque:
+/// - `lo` is the display window's start, raised to the median when that is higher (the
+///   background of sparse fluorescence), else the range minimum, else 0;
+/// - `hi` is halfway between the window's end and the range maximum (a window that ends at
+///   the 99.9th percentile of a very sparse channel would otherwise make nearly all its signal
+///   opaque), else whichever of the two is known;
+/// - with neither above `lo`, the sample type's range (`[0, 1]` for float).
 pub fn default_opacity(info: &VolumeInfo, channel: usize) -> Vec<OpacityPoint> {
     let d = info.display.get(channel).cloned().unwrap_or_default();
-    let [lo, hi] = d
+    let lo = d
         .window
-        .filter(|[a, b]| a < b)
-        .or(d.range.filter(|[a, b]| a < b))
-        .unwrap_or(match info.sample_type {
+        .map(|w| w[0])
+        .or(d.range.map(|r| r[0]))
+        .unwrap_or(0.0)
+        .max(d.median.unwrap_or(f64::NEG_INFINITY));
+    let hi = match (d.window.map(|w| w[1]), d.range.map(|r| r[1])) {
+        (Some(end), Some(max)) if max > end => 0.5 * (end + max),
+        (Some(end), _) => end,
+        (None, Some(max)) => max,
+        (None, None) => f64::NEG_INFINITY,
+    };
+    let [lo, hi] = if hi > lo {
+        [lo, hi]
+    } else {
+        match info.sample_type {
             SampleType::U8 => [0.0, u8::MAX as f64],
             SampleType::U16 => [0.0, u16::MAX as f64],
             SampleType::I16 => [0.0, i16::MAX as f64],
             SampleType::U32 => [0.0, u32::MAX as f64],
             SampleType::I32 => [0.0, i32::MAX as f64],
             SampleType::F32 => [0.0, 1.0],
-        });
+        }
+    };
     vec![
         OpacityPoint {
             value: lo,
@@ -438,5 +476,256 @@ impl SceneArgs {
         }
         scene.channels.sort_by_key(|s| s.channel);
         Ok(scene)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+    use crate::source::{ChannelDisplay, LevelInfo};
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        source: SourceArgs,
+        #[command(flatten)]
+        scene: SceneArgs,
+    }
+
+    fn info() -> VolumeInfo {
+        VolumeInfo {
+            name: "vol".into(),
+            sample_type: SampleType::U16,
+            channels: vec!["a".into(), "b".into(), "c".into()],
+            display: vec![
+                ChannelDisplay {
+                    color: Some([1.0, 0.0, 0.0]),
+                    window: Some([100.0, 900.0]),
+                    range: Some([0.0, 1000.0]),
+                    median: Some(150.0),
+                },
+                ChannelDisplay {
+                    color: None,
+                    window: None,
+                    range: Some([5.0, 50.0]),
+                    median: None,
+                },
+                ChannelDisplay::default(),
+            ],
+            // z, y, x: a box of x 40, y 20, z 30 world units.
+            voxel_size: [3.0, 1.0, 0.5],
+            brick_shape: [8, 8, 8],
+            levels: vec![LevelInfo {
+                shape: [10, 20, 80],
+                factor: [1, 1, 1],
+            }],
+            minmax: None,
+        }
+    }
+
+    fn parse(args: &[&str]) -> Cli {
+        Cli::try_parse_from(std::iter::once("viewer").chain(args.iter().copied())).unwrap()
+    }
+
+    #[test]
+    fn defaults_come_from_the_store() {
+        let info = info();
+        let scene = parse(&["--store", "x"]).scene.scene(&info).unwrap();
+        assert_eq!(volume_centre(&info), [20.0, 10.0, 15.0]);
+        let ramp = |lo, hi| {
+            vec![
+                OpacityPoint {
+                    value: lo,
+                    opacity: 0.0,
+                },
+                OpacityPoint {
+                    value: hi,
+                    opacity: DEFAULT_OPACITY,
+                },
+            ]
+        };
+        let c = &scene.channels;
+        assert_eq!(c.len(), 3);
+        assert!(c.iter().all(|s| s.visible));
+        assert_eq!(
+            (c[0].color, &c[0].opacity),
+            ([1.0, 0.0, 0.0], &ramp(150.0, 950.0))
+        );
+        assert_eq!(
+            (c[1].color, &c[1].opacity),
+            (DEFAULT_COLOURS[1], &ramp(5.0, 50.0))
+        );
+        assert_eq!(c[2].opacity, ramp(0.0, 65535.0));
+        assert_eq!(scene.background, [0.0; 3]);
+        assert_eq!(scene.camera.target, [20.0, 10.0, 15.0]);
+        assert_eq!(scene.camera.fov_y_degrees, DEFAULT_FOV_DEGREES);
+        let d: Vec<f64> = (0..3)
+            .map(|i| scene.camera.eye[i] - scene.camera.target[i])
+            .collect();
+        let diagonal = (40.0f64 * 40.0 + 20.0 * 20.0 + 30.0 * 30.0).sqrt();
+        let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
+        assert!((len - 1.5 * diagonal).abs() < 1e-9);
+    }
+
+    #[test]
+    fn orbit_zero_views_the_stack_like_a_slice_viewer() {
+        let info = info();
+        let cam = "0,0,1".parse::<CameraSpec>().unwrap().camera(&info, 30.0);
+        let diagonal = (40.0f64 * 40.0 + 20.0 * 20.0 + 30.0 * 30.0).sqrt();
+        assert_eq!(cam.eye, [20.0, 10.0, 15.0 - diagonal]);
+        let (forward, right, up) = cam.basis();
+        assert_eq!(
+            (forward, right, up),
+            ([0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0])
+        );
+        // Straight down from above (elevation 90°): the frame stays well defined.
+        let cam = "0,90,1".parse::<CameraSpec>().unwrap().camera(&info, 30.0);
+        let (forward, right, _) = cam.basis();
+        assert!((forward[1] - 1.0).abs() < 1e-12 && (right[0] - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn flags_set_camera_tf_colour_visibility_and_background() {
+        let info = info();
+        let cli = parse(&[
+            "--server",
+            "http://h:1",
+            "--dataset",
+            "d",
+            "--camera",
+            "90,0,2",
+            "--fov",
+            "45",
+            "--tf",
+            "2:-10:10:0.5",
+            "--tf",
+            "1:0=0.1,20=0.2",
+            "--color",
+            "2:0.5,0.25,1",
+            "--channels",
+            "0,2",
+            "--background",
+            "1,1,1",
+        ]);
+        assert_eq!(cli.source.server.as_deref(), Some("http://h:1"));
+        let scene = cli.scene.scene(&info).unwrap();
+        let diagonal = (40.0f64 * 40.0 + 20.0 * 20.0 + 30.0 * 30.0).sqrt();
+        // Azimuth 90°: the eye on the +x side, level, looking down -x, -y up.
+        let eye = scene.camera.eye;
+        assert!((eye[0] - (20.0 + 2.0 * diagonal)).abs() < 1e-9);
+        assert!(
+            (eye[1] - 10.0).abs() < 1e-12 && (eye[2] - 15.0).abs() < 1e-9,
+            "{eye:?}"
+        );
+        assert!((scene.camera.up[1] + 1.0).abs() < 1e-15);
+        assert_eq!(scene.camera.fov_y_degrees, 45.0);
+        let c = &scene.channels;
+        assert_eq!(
+            c.iter().map(|s| s.visible).collect::<Vec<_>>(),
+            [true, false, true]
+        );
+        assert_eq!(c[2].opacity_at(0.0), 0.25);
+        assert_eq!(c[2].color, [0.5, 0.25, 1.0]);
+        assert_eq!(c[1].opacity_at(10.0), 0.15000000000000002);
+        assert_eq!(scene.background, [1.0; 3]);
+    }
+
+    #[test]
+    fn look_at_camera_and_scene_file_with_overrides() {
+        let info = info();
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("scene.json");
+        std::fs::write(
+            &file,
+            r#"{"camera": {"eye": [0, 0, 100], "target": [1, 2, 3]},
+                "channels": [{"channel": 1, "color": [0, 1, 0], "opacity": [{"value": 0, "opacity": 0.3}]}]}"#,
+        )
+        .unwrap();
+        let path = file.to_str().unwrap();
+        let scene = parse(&["--store", "s", "--scene", path])
+            .scene
+            .scene(&info)
+            .unwrap();
+        assert_eq!(scene.channels.len(), 1);
+        assert_eq!(scene.camera.target, [1.0, 2.0, 3.0]);
+        let scene = parse(&[
+            "--store",
+            "s",
+            "--scene",
+            path,
+            "--camera",
+            "1,2,3:4,5,6",
+            "--channels",
+            "0",
+        ])
+        .scene
+        .scene(&info)
+        .unwrap();
+        assert_eq!(
+            (scene.camera.eye, scene.camera.target),
+            ([1.0, 2.0, 3.0], [4.0, 5.0, 6.0])
+        );
+        // Channel 0 joins with its default style; channel 1 stays, hidden.
+        assert_eq!(scene.channels.len(), 2);
+        assert_eq!(
+            (scene.channels[0].channel, scene.channels[0].visible),
+            (0, true)
+        );
+        assert_eq!(
+            (scene.channels[1].channel, scene.channels[1].visible),
+            (1, false)
+        );
+        // Looking straight down y, up switches to +z.
+        let cam = "0,10,0:0,0,0"
+            .parse::<CameraSpec>()
+            .unwrap()
+            .camera(&info, 30.0);
+        assert_eq!(cam.up, [0.0, 0.0, 1.0]);
+    }
+
+    #[test]
+    fn bad_flags_give_clear_errors() {
+        let info = info();
+        let e = parse(&["--store", "s", "--tf", "3:0:1:1"])
+            .scene
+            .scene(&info)
+            .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "--tf: channel 3 does not exist (vol has 3 channels)"
+        );
+        let bad = |args: &[&str]| {
+            Cli::try_parse_from(std::iter::once("viewer").chain(args.iter().copied()))
+                .err()
+                .unwrap()
+                .to_string()
+        };
+        assert!(
+            bad(&["--tf", "0:5:1:0.5"])
+                .contains("transfer function '0:5:1:0.5': LO must be below HI")
+        );
+        assert!(bad(&["--tf", "0:1:5:1.5"]).contains("opacities must lie in [0, 1]"));
+        assert!(
+            bad(&["--camera", "1,2"]).contains("camera '1,2': expected 3 comma-separated numbers")
+        );
+        assert!(bad(&["--camera", "1,2,0"]).contains("distance must be positive"));
+        assert!(bad(&["--color", "0:2,0,0"]).contains("components must lie in [0, 1]"));
+        assert!(
+            bad(&["--server", "u", "--store", "s", "--dataset", "d"])
+                .contains("cannot be used with")
+        );
+        let e = SourceArgs::default().open().err().unwrap();
+        assert_eq!(
+            e.to_string(),
+            "give either --server URL --dataset NAME, or --store PATH"
+        );
+        let missing = tempfile::tempdir().unwrap().path().join("gone.json");
+        let e = parse(&["--scene", missing.to_str().unwrap()])
+            .scene
+            .scene(&info)
+            .unwrap_err();
+        assert_eq!(e.to_string(), format!("{}: cannot read", missing.display()));
     }
 }

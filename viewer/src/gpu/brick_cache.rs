@@ -61,7 +61,8 @@ impl BrickCache {
         cache_bytes: u64,
     ) -> Result<Self> {
         let (format, kind) = atlas_format(sample_type);
-        let brick_bytes = brick.iter().map(|&b| b as u64).product::<u64>() * sample_type.bytes() as u64;
+        let brick_bytes =
+            brick.iter().map(|&b| b as u64).product::<u64>() * sample_type.bytes() as u64;
         let wanted = (cache_bytes / brick_bytes).min(u32::MAX as u64 / 2) as u32;
         let max_dim = limits.max_texture_dimension_3d;
         let fit: [u32; 3] = std::array::from_fn(|a| max_dim / brick[a]);

@@ -30,7 +30,11 @@ pub struct PageTables {
 
 impl PageTables {
     /// Page tables for `channels` (source indices) over the pyramid of `geometry`, all empty.
-    pub fn new(device: &wgpu::Device, geometry: &OctreeGeometry, channels: &[usize]) -> Result<Self> {
+    pub fn new(
+        device: &wgpu::Device,
+        geometry: &OctreeGeometry,
+        channels: &[usize],
+    ) -> Result<Self> {
         let grids: Vec<[u64; 3]> = geometry
             .level_shape
             .iter()
@@ -78,7 +82,10 @@ impl PageTables {
 
     /// The id of `key`, if its channel is rendered and it lies in its level's grid.
     pub fn id(&self, key: &BrickKey) -> Option<u32> {
-        let slot = self.channels.iter().position(|&c| c == key.channel as usize)?;
+        let slot = self
+            .channels
+            .iter()
+            .position(|&c| c == key.channel as usize)?;
         let l = key.level as usize;
         let g = self.grids.get(l)?;
         let b = [key.brick[2], key.brick[1], key.brick[0]];

@@ -46,6 +46,9 @@ pub struct RenderOptions {
     /// `(finest, coarsest)` level bounds per rendered channel, in scene order; missing
     /// entries allow every level.
     pub level_bounds: Vec<(u32, u32)>,
+    /// Skip nodes empty under the transfer functions and integrate homogeneous nodes in
+    /// closed form; `false` is the "no skipping" baseline (every node is sampled).
+    pub empty_space_skipping: bool,
 }
 
 impl Default for RenderOptions {
@@ -61,6 +64,7 @@ impl Default for RenderOptions {
             start_depth: 0,
             max_requests: 4096,
             level_bounds: Vec::new(),
+            empty_space_skipping: true,
         }
     }
 }
@@ -175,7 +179,12 @@ impl Renderer {
     /// Sets up the renderer of `scene` over the volume `info`: octree (ranges from the
     /// volume's region metadata), page tables, cache, tables and pipeline. Only visible
     /// channels are rendered (and ever fetched).
-    pub fn new(gpu: &Gpu, info: &VolumeInfo, scene: &Scene, options: RenderOptions) -> Result<Self> {
+    pub fn new(
+        gpu: &Gpu,
+        info: &VolumeInfo,
+        scene: &Scene,
+        options: RenderOptions,
+    ) -> Result<Self> {
         ensure!(
             options.width > 0 && options.height > 0,
             "image size {}×{} is empty",
@@ -200,14 +209,24 @@ impl Renderer {
         let device = &gpu.device;
         let pages = PageTables::new(device, &geometry, &channels)?;
         let brick = geometry.brick.map(|b| b as u32);
-        let cache = BrickCache::new(device, &gpu.limits, info.sample_type, brick, options.cache_bytes)?;
+        let cache = BrickCache::new(
+            device,
+            &gpu.limits,
+            info.sample_type,
+            brick,
+            options.cache_bytes,
+        )?;
 
         let spacing = xyz(info.voxel_size);
         let channel_tables: Vec<ChannelTable<'_>> = visible
             .iter()
             .enumerate()
             .map(|(i, style)| {
-                let (lo, hi) = options.level_bounds.get(i).copied().unwrap_or((0, levels - 1));
+                let (lo, hi) = options
+                    .level_bounds
+                    .get(i)
+                    .copied()
+                    .unwrap_or((0, levels - 1));
                 ChannelTable {
                     style,
                     min_level: lo.min(levels - 1),
@@ -232,9 +251,37 @@ impl Renderer {
             mapped_at_creation: false,
         });
         let node_words = geometry.node_count() * octree.words_per_node();
-        let nodes = storage("octree nodes", node_words as u64 * 4, wgpu::BufferUsages::empty());
-        let table_buf = storage("tables", t.words.len() as u64 * 4, wgpu::BufferUsages::empty());
-        gpu.queue.write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
+        let max_binding = gpu.limits.max_storage_buffer_binding_size;
+        let too_big = |what: &str, bytes: u64, hint: &str| -> Result<()> {
+            ensure!(
+                bytes <= max_binding && bytes <= gpu.limits.max_buffer_size,
+                "{what} needs {bytes} bytes, over the device's storage-buffer limit of \
+                 {max_binding} bytes; {hint}"
+            );
+            Ok(())
+        };
+        too_big(
+            "the octree",
+            node_words as u64 * 4,
+            "use a smaller --octree-depth",
+        )?;
+        too_big(
+            "the image",
+            options.width as u64 * options.height as u64 * 16,
+            "render a smaller image",
+        )?;
+        let nodes = storage(
+            "octree nodes",
+            node_words as u64 * 4,
+            wgpu::BufferUsages::empty(),
+        );
+        let table_buf = storage(
+            "tables",
+            t.words.len() as u64 * 4,
+            wgpu::BufferUsages::empty(),
+        );
+        gpu.queue
+            .write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
         let request_bytes = (HEADER_WORDS as u64 + 2 * options.max_requests as u64) * 4;
         let requests = storage("requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
         let pixels = options.width as u64 * options.height as u64;
@@ -294,17 +341,50 @@ impl Renderer {
             label: Some("raycast"),
             layout: &layout,
             entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: nodes.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: table_buf.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: pages.buffer().as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: pages.flags().as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 5, resource: requests.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 6, resource: cache.usage_buffer().as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 7, resource: image.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 8, resource: wgpu::BindingResource::TextureView(&views[0]) },
-                wgpu::BindGroupEntry { binding: 9, resource: wgpu::BindingResource::TextureView(&views[1]) },
-                wgpu::BindGroupEntry { binding: 10, resource: wgpu::BindingResource::TextureView(&views[2]) },
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: nodes.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: table_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: pages.buffer().as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: pages.flags().as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: requests.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: cache.usage_buffer().as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: image.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 8,
+                    resource: wgpu::BindingResource::TextureView(&views[0]),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 9,
+                    resource: wgpu::BindingResource::TextureView(&views[1]),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 10,
+                    resource: wgpu::BindingResource::TextureView(&views[2]),
+                },
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -455,7 +535,8 @@ impl Renderer {
         if let Some(range) = self.octree.take_dirty() {
             let words = self.octree.gpu_words(range.clone());
             let offset = (range.start * self.octree.words_per_node() * 4) as u64;
-            gpu.queue.write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
+            gpu.queue
+                .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
         }
     }
 
@@ -500,8 +581,14 @@ impl Renderer {
                 let f = eye_leaf.map(|e| e - e.floor());
                 v4(f, reference_step)
             },
-            right: v4(right.map(|x| x * tan_half * aspect), self.options.lod_bias as f64),
-            up: v4(up.map(|x| x * tan_half), 2.0 * tan_half / self.options.height as f64),
+            right: v4(
+                right.map(|x| x * tan_half * aspect),
+                self.options.lod_bias as f64,
+            ),
+            up: v4(
+                up.map(|x| x * tan_half),
+                2.0 * tan_half / self.options.height as f64,
+            ),
             forward: v4(forward, self.options.step_factor as f64),
             world_to_leaf: v4(
                 leaf_world.map(|w| 1.0 / w),
@@ -515,7 +602,12 @@ impl Renderer {
             ),
             background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 1.0],
             leaf_shift: [g.leaf_shift[0], g.leaf_shift[1], g.leaf_shift[2], 0],
-            brick: [g.brick[0] as u32, g.brick[1] as u32, g.brick[2] as u32, 0],
+            brick: [
+                g.brick[0] as u32,
+                g.brick[1] as u32,
+                g.brick[2] as u32,
+                self.options.empty_space_skipping as u32,
+            ],
             slots: {
                 let s = self.cache.slots_per_axis();
                 [s[0], s[1], s[2], 0]
@@ -534,7 +626,8 @@ impl Renderer {
         self.flush(gpu);
         self.frame += 1;
         let params = self.params();
-        gpu.queue.write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        gpu.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
         let device = &gpu.device;
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("raycast frame"),
@@ -554,11 +647,21 @@ impl Renderer {
             });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.dispatch_workgroups(self.options.width.div_ceil(8), self.options.height.div_ceil(8), 1);
+            pass.dispatch_workgroups(
+                self.options.width.div_ceil(8),
+                self.options.height.div_ceil(8),
+                1,
+            );
         }
         let rb = &self.readback;
         encoder.copy_buffer_to_buffer(&self.requests, 0, &rb.requests, 0, rb.requests.size());
-        encoder.copy_buffer_to_buffer(self.cache.usage_buffer(), 0, &rb.usage, 0, self.cache.capacity() as u64 * 4);
+        encoder.copy_buffer_to_buffer(
+            self.cache.usage_buffer(),
+            0,
+            &rb.usage,
+            0,
+            self.cache.capacity() as u64 * 4,
+        );
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
         encoder.copy_buffer_to_buffer(&self.image, 0, &rb.image, 0, image_bytes);
         if let Some((set, resolve, staging)) = &rb.timestamps {

@@ -19,7 +19,7 @@ use serde::Serialize;
 use super::device::Gpu;
 use super::renderer::{BrickRequest, Inserted, RenderOptions, Renderer, ShaderCounts};
 use crate::scene::Scene;
-use crate::source::{BrickKey, BrickSource, BrickVoxels};
+use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
 
 #[derive(Default)]
 struct Queue {
@@ -31,6 +31,7 @@ struct Queue {
 
 /// A pool of fetch workers over one [`BrickSource`].
 pub struct Fetcher {
+    info: VolumeInfo,
     shared: Arc<(Mutex<Queue>, Condvar)>,
     workers: Vec<JoinHandle<()>>,
 }
@@ -40,6 +41,7 @@ impl Fetcher {
     pub fn new(source: Arc<dyn BrickSource>, workers: usize, batch: usize) -> Self {
         let shared = Arc::new((Mutex::new(Queue::default()), Condvar::new()));
         let batch = batch.max(1);
+        let info = source.info().clone();
         let workers = (0..workers.max(1))
             .map(|_| {
                 let shared = Arc::clone(&shared);
@@ -71,7 +73,11 @@ impl Fetcher {
                 })
             })
             .collect();
-        Self { shared, workers }
+        Self {
+            info,
+            shared,
+            workers,
+        }
     }
 
     /// Replaces the queued (not yet started) requests with `keys`, in priority order.
@@ -219,14 +225,42 @@ pub fn render_progressive(
     options: RenderOptions,
     budget: &Budget,
 ) -> Result<Progressive> {
-    let start = Instant::now();
-    let deadline = budget.time.map(|t| start + t);
     let mut renderer = Renderer::new(gpu, source.info(), scene, options)?;
     let fetcher = Fetcher::new(Arc::clone(&source), budget.workers, budget.batch);
+    converge(gpu, &mut renderer, &fetcher, budget)
+}
+
+/// The brick of the next coarser level covering `key`'s region, if there is one.
+pub fn coarser_brick(info: &VolumeInfo, key: &BrickKey) -> Option<BrickKey> {
+    let l = key.level as usize;
+    let next = info.levels.get(l + 1)?;
+    let ratio: [u64; 3] = std::array::from_fn(|a| next.factor[a] / info.levels[l].factor[a].max(1));
+    Some(BrickKey {
+        level: key.level + 1,
+        channel: key.channel,
+        brick: std::array::from_fn(|a| key.brick[a] / ratio[a].max(1)),
+    })
+}
+
+/// Runs the progressive loop on an existing renderer (its cache and octree carry over, so a
+/// new camera reuses what is resident): render, read requests, fetch what the cache can take
+/// (coarse before fine, near before far), upload, insert, repeat. A brick that fails to fetch
+/// or upload is never requested again; the next coarser brick over its region is fetched in
+/// its place so the shader can substitute it.
+pub fn converge(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    fetcher: &Fetcher,
+    budget: &Budget,
+) -> Result<Progressive> {
+    let start = Instant::now();
+    let deadline = budget.time.map(|t| start + t);
+    let info = fetcher.info.clone();
     let mut frames = Vec::new();
     let mut request_log = Vec::new();
     let mut seen = std::collections::HashSet::new();
     let mut failed: HashMap<BrickKey, String> = HashMap::new();
+    let mut fallbacks: Vec<BrickKey> = Vec::new();
     let mut pixels = Vec::new();
     let mut converged = false;
     let mut stop_reason = format!("frame budget of {} frames spent", budget.max_frames);
@@ -250,6 +284,12 @@ pub fn render_progressive(
                 request_log.push(r.key);
             }
         }
+        fallbacks.retain(|k| !failed.contains_key(k) && !renderer.is_resident(k));
+        wanted.extend(
+            fallbacks
+                .drain(..)
+                .map(|key| BrickRequest { key, distance: 0.0 }),
+        );
         if wanted.is_empty() && stats.shader.requests_over_cap == 0 {
             stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
             frames.push(stats);
@@ -264,6 +304,7 @@ pub fn render_progressive(
             break;
         }
         prioritise(&mut wanted);
+        wanted.dedup_by_key(|r| r.key);
         let room = renderer.insertable();
         stats.bricks_deferred = wanted.len().saturating_sub(room) as u64;
         wanted.truncate(room);
@@ -293,6 +334,7 @@ pub fn render_progressive(
                     tracing::warn!("brick {key:?}: {e:#}; substituting other levels");
                     stats.bricks_failed += 1;
                     failed.insert(key, format!("{e:#}"));
+                    fallbacks.extend(coarser_brick(&info, &key));
                 }
             }
         }

@@ -92,9 +92,8 @@ impl SyntheticSource {
             per_level.push(l0);
             for l in 1..levels.len() {
                 let (ps, s) = (levels[l - 1].shape, levels[l].shape);
-                let ratio: [u64; 3] = std::array::from_fn(|a| {
-                    levels[l].factor[a] / levels[l - 1].factor[a]
-                });
+                let ratio: [u64; 3] =
+                    std::array::from_fn(|a| levels[l].factor[a] / levels[l - 1].factor[a]);
                 let prev = &per_level[l - 1];
                 let mut out = Vec::with_capacity((s[0] * s[1] * s[2]) as usize);
                 for z in 0..s[0] {
@@ -104,8 +103,11 @@ impl SyntheticSource {
                             for dz in 0..ratio[0] {
                                 for dy in 0..ratio[1] {
                                     for dx in 0..ratio[2] {
-                                        let (pz, py, px) =
-                                            (z * ratio[0] + dz, y * ratio[1] + dy, x * ratio[2] + dx);
+                                        let (pz, py, px) = (
+                                            z * ratio[0] + dz,
+                                            y * ratio[1] + dy,
+                                            x * ratio[2] + dx,
+                                        );
                                         if pz < ps[0] && py < ps[1] && px < ps[2] {
                                             sum += prev[((pz * ps[1] + py) * ps[2] + px) as usize];
                                             n += 1.0;

@@ -5,7 +5,7 @@
 //! - page-table offsets, `slot · levels + level`;
 //! - per channel slot (16 words): colour `r, g, b`; level bounds `min, max`; offset and count
 //!   of its opacity control points; offset of its prefix table; TF domain `lo, hi`; opacity
-//!   below and above the domain; three reserved words;
+//!   below and above the domain; four reserved words;
 //! - control points `(value, opacity)` pairs and prefix tables of `bins + 1` counts, where
 //!   `prefix[i + 1] − prefix[i]` is 1 when the opacity is non-zero somewhere in bin `i`, so
 //!   "transparent over `[lo, hi]`" is one subtraction (Octree Rasterization Sec. 4.1).
@@ -50,6 +50,18 @@ pub fn tf_domain(style: &ChannelStyle) -> (f64, f64) {
         (Some(a), _) => (a.value, a.value + 1.0),
         _ => (0.0, 1.0),
     }
+}
+
+/// Largest `f32` not above `v`.
+fn f32_down(v: f64) -> f32 {
+    let f = v as f32;
+    if (f as f64) > v { f.next_down() } else { f }
+}
+
+/// Smallest `f32` not below `v`.
+fn f32_up(v: f64) -> f32 {
+    let f = v as f32;
+    if (f as f64) < v { f.next_up() } else { f }
 }
 
 /// Prefix counts of bins (over the domain) where the opacity is non-zero somewhere.
@@ -97,7 +109,7 @@ pub fn build(
     let channels_offset = w.len() as u32;
     let tail_start = channels_offset as usize + channels.len() * CHANNEL_WORDS;
     let mut tail: Vec<u32> = Vec::new();
-    for ch in channels {
+    for (i, ch) in channels.iter().enumerate() {
         let s = ch.style;
         let points_offset = (tail_start + tail.len()) as u32;
         for p in &s.opacity {
@@ -110,12 +122,21 @@ pub fn build(
         let below = s.opacity.first().map_or(0.0, |p| p.opacity);
         let above = s.opacity.last().map_or(0.0, |p| p.opacity);
         w.extend(s.color.map(f));
-        w.extend([ch.min_level, ch.max_level, points_offset, s.opacity.len() as u32]);
+        w.extend([
+            ch.min_level,
+            ch.max_level,
+            points_offset,
+            s.opacity.len() as u32,
+        ]);
         w.push(prefix_offset);
-        // Round the domain outward so values at its ends are never misclassified.
-        w.push((lo as f32).next_down().to_bits());
-        w.push((hi as f32).next_up().to_bits());
-        w.extend([f(below), f(above), 0, 0, 0]);
+        // Round the domain outward to f32 (exact when representable).
+        w.push(f32_down(lo).to_bits());
+        w.push(f32_up(hi).to_bits());
+        w.extend([f(below), f(above), 0, 0, 0, 0]);
+        debug_assert_eq!(
+            w.len(),
+            tail_start - (channels.len() - 1 - i) * CHANNEL_WORDS
+        );
     }
     w.extend(tail);
     Tables {

@@ -33,6 +33,7 @@ pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(120);
 pub struct HttpSource {
     base: String,
     agent: ureq::Agent,
+    token: Option<String>,
     info: VolumeInfo,
 }
 
@@ -56,6 +57,12 @@ impl HttpSource {
     /// loads its metadata and, when the server has region metadata, every channel's min/max
     /// hierarchy. Without region metadata, `minmax` is `None` and a warning says so.
     pub fn open(server_url: &str, dataset: &str) -> Result<Self> {
+        Self::open_with_token(server_url, dataset, None)
+    }
+
+    /// [`HttpSource::open`] for a server started with `--token-file`: every request carries
+    /// `Authorization: Bearer TOKEN`.
+    pub fn open_with_token(server_url: &str, dataset: &str, token: Option<&str>) -> Result<Self> {
         let agent: ureq::Agent = ureq::Agent::config_builder()
             .http_status_as_error(false)
             .timeout_global(Some(REQUEST_TIMEOUT))
@@ -65,6 +72,7 @@ impl HttpSource {
         let mut source = Self {
             base,
             agent,
+            token: token.map(str::to_string),
             info: VolumeInfo {
                 name: dataset.to_string(),
                 sample_type: SampleType::U8,
@@ -126,9 +134,11 @@ impl HttpSource {
     }
 
     fn get(&self, url: &str) -> Result<Got> {
-        let mut response = self
-            .agent
-            .get(url)
+        let mut request = self.agent.get(url);
+        if let Some(token) = &self.token {
+            request = request.header("Authorization", &format!("Bearer {token}"));
+        }
+        let mut response = request
             .call()
             .map_err(|e| anyhow!("{url}: cannot reach the brick server: {e}"))?;
         let status = response.status().as_u16();
@@ -140,6 +150,15 @@ impl HttpSource {
             .map_err(|e| anyhow!("{url}: cannot read the response: {e}"))?;
         Ok(if status == 200 {
             Got::Ok(body)
+        } else if status == 401 {
+            Got::Status(
+                401,
+                if self.token.is_some() {
+                    "the server refused the token".into()
+                } else {
+                    "the server needs a token (--token-file)".into()
+                },
+            )
         } else {
             // The API answers errors as `{"error": "..."}`; anything else is shown as text.
             let text = serde_json::from_slice::<serde_json::Value>(&body)
@@ -236,8 +255,8 @@ impl HttpSource {
 
     /// Bricks per request: within both of the server's caps, at least one.
     pub fn batch_size(&self) -> usize {
-        let brick = self.info.brick_shape.iter().product::<u64>()
-            * self.info.sample_type.bytes() as u64;
+        let brick =
+            self.info.brick_shape.iter().product::<u64>() * self.info.sample_type.bytes() as u64;
         ((MAX_BATCH_BYTES / brick.max(1)) as usize).clamp(1, MAX_BATCH)
     }
 
@@ -251,7 +270,10 @@ impl HttpSource {
             })
             .collect();
         let url = self.url(&format!("bricks?encoding=raw&b={}", list.join(";")));
-        match self.get_ok(&url).and_then(|body| self.parse_batch(keys, &body, &url)) {
+        match self
+            .get_ok(&url)
+            .and_then(|body| self.parse_batch(keys, &body, &url))
+        {
             Ok(results) => results,
             Err(e) => {
                 let msg = format!("{e:#}");
@@ -388,5 +410,163 @@ impl BrickSource for HttpSource {
             .into_iter()
             .map(|r| r.expect("every key answered"))
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use residency_schemas::wire::{BrickEntry, MinMaxGridBlock, MinMaxLevelBlock, encode_framed};
+
+    use super::*;
+    use crate::source::LevelInfo;
+
+    /// A source for `http://h/v` without a server, for the document parsers.
+    fn source() -> HttpSource {
+        HttpSource {
+            base: "http://h/v".into(),
+            agent: ureq::Agent::new_with_defaults(),
+            token: None,
+            info: VolumeInfo {
+                name: "v".into(),
+                sample_type: SampleType::I16,
+                channels: vec!["a".into(), "b".into()],
+                display: vec![Default::default(); 2],
+                voxel_size: [1.0; 3],
+                brick_shape: [1, 1, 2],
+                levels: vec![LevelInfo {
+                    shape: [1, 1, 4],
+                    factor: [1; 3],
+                }],
+                minmax: None,
+            },
+        }
+    }
+
+    fn key(x: u64) -> BrickKey {
+        BrickKey {
+            level: 0,
+            channel: 1,
+            brick: [0, 0, x],
+        }
+    }
+
+    fn entry(x: u64, status: BrickStatus, offset: u64, length: u64) -> BrickEntry {
+        BrickEntry {
+            level: 0,
+            channel: 1,
+            brick: [0, 0, x],
+            status,
+            offset,
+            length,
+            error: (status == BrickStatus::Error).then(|| "bad chunk".into()),
+        }
+    }
+
+    fn batch(bricks: Vec<BrickEntry>, payload: &[u8]) -> Vec<u8> {
+        let header = BrickBatchHeader {
+            encoding: BrickEncoding::Raw,
+            data_type: "int16".into(),
+            brick_shape: [1, 1, 2],
+            bricks,
+        };
+        encode_framed(BRICKS_MAGIC, &header, payload)
+    }
+
+    #[test]
+    fn brick_batches_decode_per_brick() {
+        let src = source();
+        let payload: Vec<u8> = [-3i16, 7].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let doc = batch(
+            vec![
+                entry(0, BrickStatus::Empty, 0, 0),
+                entry(1, BrickStatus::Ok, 0, 4),
+            ],
+            &payload,
+        );
+        let got = src.parse_batch(&[key(0), key(1)], &doc, "u").unwrap();
+        let got: Vec<BrickVoxels> = got.into_iter().map(Result::unwrap).collect();
+        assert_eq!(got, [BrickVoxels::Empty, BrickVoxels::I16(vec![-3, 7])]);
+
+        let doc = batch(vec![entry(1, BrickStatus::Error, 0, 0)], &[]);
+        let e = src.parse_batch(
+            &[key(1)],
+            &doc,
+            "http://h/v/bricks?encoding=raw&b=0,1,0,0,1",
+        );
+        let e = e.unwrap().pop().unwrap().unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "http://h/v/bricks?encoding=raw: brick {:?}: the server could not read it: bad chunk",
+                key(1)
+            )
+        );
+    }
+
+    #[test]
+    fn corrupt_batches_are_errors_not_panics() {
+        let src = source();
+        let e = src.parse_batch(&[key(0)], b"garbage", "u").unwrap_err();
+        assert_eq!(
+            format!("{e:#}"),
+            "u: corrupt brick batch: not a RSBRICKS document (bad magic)"
+        );
+        // A brick running past the payload.
+        let doc = batch(vec![entry(0, BrickStatus::Ok, 2, 4)], &[0; 4]);
+        let e = src.parse_batch(&[key(0)], &doc, "u").unwrap();
+        assert_eq!(
+            e.into_iter().next().unwrap().unwrap_err().to_string(),
+            format!(
+                "u: brick {:?} at bytes 2+4 is not 4 bytes inside the 4-byte payload",
+                key(0)
+            )
+        );
+        // Answers out of order, or too few.
+        let doc = batch(vec![entry(1, BrickStatus::Empty, 0, 0)], &[]);
+        let e = src.parse_batch(&[key(0)], &doc, "u").unwrap();
+        assert_eq!(
+            e.into_iter().next().unwrap().unwrap_err().to_string(),
+            format!(
+                "u: answered brick 0,1,[0, 0, 1] where {:?} was asked",
+                key(0)
+            )
+        );
+        let e = src.parse_batch(&[key(0), key(1)], &doc, "u").unwrap_err();
+        assert_eq!(e.to_string(), "u: 1 bricks answered for 2 asked");
+    }
+
+    #[test]
+    fn minmax_documents_decode_and_are_checked() {
+        let src = source();
+        let header = |channel: usize, length: u64| MinMaxHierarchyHeader {
+            channel,
+            data_type: "int16".into(),
+            halo: 1,
+            levels: vec![MinMaxLevelBlock {
+                level: 0,
+                shape: [1, 1, 4],
+                grids: vec![MinMaxGridBlock {
+                    cell_shape: [8, 8, 8],
+                    grid_shape: [1, 1, 1],
+                    offset: 0,
+                    length,
+                }],
+            }],
+        };
+        let payload: Vec<u8> = [-5i16, 9].iter().flat_map(|v| v.to_le_bytes()).collect();
+        let doc = encode_framed(MINMAX_MAGIC, &header(1, 4), &payload);
+        let grids = src.parse_minmax(1, &doc, "m").unwrap();
+        assert_eq!(
+            (grids[0][0].min.clone(), grids[0][0].max.clone()),
+            (vec![-5.0], vec![9.0])
+        );
+        let e = src.parse_minmax(0, &doc, "m").unwrap_err();
+        assert_eq!(e.to_string(), "m: min/max document is for channel 1");
+        let doc = encode_framed(MINMAX_MAGIC, &header(1, 8), &payload);
+        let e = src.parse_minmax(1, &doc, "m").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "m: min/max grid of level 0 at bytes 0+8 runs past the 4-byte payload"
+        );
     }
 }

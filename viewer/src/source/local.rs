@@ -75,9 +75,8 @@ impl LocalSource {
             &read_file(&group_file)?,
             &group_file.display().to_string(),
         )?;
-        let store = Arc::new(
-            FilesystemStore::new(path).with_context(|| format!("{shown}: cannot open"))?,
-        );
+        let store =
+            Arc::new(FilesystemStore::new(path).with_context(|| format!("{shown}: cannot open"))?);
         let mut descriptions = Vec::new();
         let mut levels = Vec::new();
         for p in &group.level_paths {

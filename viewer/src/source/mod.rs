@@ -11,7 +11,6 @@ pub mod http;
 pub mod local;
 pub mod ome;
 
-
 pub use http::HttpSource;
 pub use local::LocalSource;
 
@@ -104,6 +103,8 @@ pub struct ChannelDisplay {
     /// Level-0 value range `[min, max]` (region-metadata statistics, else the `omero` window's
     /// `min`/`max`), if known.
     pub range: Option<[f64; 2]>,
+    /// Level-0 median (the 50th percentile of the region-metadata statistics), if known.
+    pub median: Option<f64>,
 }
 
 /// Everything a renderer needs to know about a volume before fetching any brick.

@@ -94,8 +94,8 @@ pub struct ArrayDescription {
 /// hold `ome` and `residency`; or `.zattrs` of Zarr v2). `source` names the document in
 /// errors.
 pub fn parse_group(format: ZarrFormat, document: &[u8], source: &str) -> Result<OmeGroup> {
-    let doc: Value = serde_json::from_slice(document)
-        .with_context(|| format!("{source}: not valid JSON"))?;
+    let doc: Value =
+        serde_json::from_slice(document).with_context(|| format!("{source}: not valid JSON"))?;
     let attrs = match format {
         ZarrFormat::V3 => {
             ensure!(
@@ -172,6 +172,7 @@ pub fn parse_group(format: ZarrFormat, document: &[u8], source: &str) -> Result<
                 color: c["color"].as_str().and_then(hex_colour),
                 window: pair("start", "end"),
                 range: pair("min", "max"),
+                median: None,
             };
             (c["label"].as_str().map(str::to_string), display)
         })
@@ -222,8 +223,8 @@ pub fn srgb_to_linear(v: f64) -> f64 {
 /// Parses one level's array metadata (`zarr.json` or `.zarray`). `source` names the
 /// document in errors.
 pub fn parse_array(format: ZarrFormat, document: &[u8], source: &str) -> Result<ArrayDescription> {
-    let meta: Value = serde_json::from_slice(document)
-        .with_context(|| format!("{source}: not valid JSON"))?;
+    let meta: Value =
+        serde_json::from_slice(document).with_context(|| format!("{source}: not valid JSON"))?;
     let shape: Vec<u64> = serde_json::from_value(meta["shape"].clone())
         .with_context(|| format!("{source}: no valid array shape"))?;
     let (type_name, chunk) = match format {
@@ -240,7 +241,10 @@ pub fn parse_array(format: ZarrFormat, document: &[u8], source: &str) -> Result<
                 Some(s) => s["configuration"]["chunk_shape"].clone(),
                 None => meta["chunk_grid"]["configuration"]["chunk_shape"].clone(),
             };
-            (meta["data_type"].as_str().unwrap_or_default().to_string(), chunk)
+            (
+                meta["data_type"].as_str().unwrap_or_default().to_string(),
+                chunk,
+            )
         }
         ZarrFormat::V2 => {
             let d = meta["dtype"].as_str().unwrap_or_default();
@@ -258,8 +262,8 @@ pub fn parse_array(format: ZarrFormat, document: &[u8], source: &str) -> Result<
     };
     let sample_type = SampleType::from_zarr_name(&type_name)
         .with_context(|| format!("{source}: unsupported data type '{type_name}'"))?;
-    let chunk: Vec<u64> = serde_json::from_value(chunk)
-        .with_context(|| format!("{source}: no valid chunk shape"))?;
+    let chunk: Vec<u64> =
+        serde_json::from_value(chunk).with_context(|| format!("{source}: no valid chunk shape"))?;
     let n = shape.len();
     ensure!(
         n >= 3 && chunk.len() == n,
@@ -308,7 +312,11 @@ pub fn volume_info(
     let first = &arrays[0];
     let mut channels = 1;
     let mut levels = Vec::new();
-    for ((a, path), scale) in arrays.iter().zip(&group.level_paths).zip(&group.level_scales) {
+    for ((a, path), scale) in arrays
+        .iter()
+        .zip(&group.level_paths)
+        .zip(&group.level_scales)
+    {
         ensure!(
             a.shape.len() == n,
             "{source}: level '{path}' has {} dimensions for {n} axes",
@@ -378,10 +386,15 @@ pub fn volume_info(
     let display = (0..channels as usize)
         .map(|c| {
             let mut d = group.omero.get(c).map(|o| o.1.clone()).unwrap_or_default();
-            if let Some(s) = group.regions.as_ref().and_then(|r| r.channels.get(c))
-                && let (Some(lo), Some(hi)) = (s.min, s.max)
-            {
-                d.range = Some([lo, hi]);
+            if let Some(s) = group.regions.as_ref().and_then(|r| r.channels.get(c)) {
+                if let (Some(lo), Some(hi)) = (s.min, s.max) {
+                    d.range = Some([lo, hi]);
+                }
+                d.median = s
+                    .percentiles
+                    .iter()
+                    .find(|p| p.percent == 50.0)
+                    .map(|p| p.value);
             }
             d
         })
@@ -501,7 +514,10 @@ mod tests {
         assert_eq!(info.display[0].window, Some([5.0, 90.0]));
         assert_eq!(info.display[0].range, Some([0.0, 100.0]));
         assert_eq!(info.display[1], ChannelDisplay::default());
-        assert_eq!(AxisLayout::chunk_indices(&g.axes, 1, [2, 3, 4]), [1, 2, 3, 4]);
+        assert_eq!(
+            AxisLayout::chunk_indices(&g.axes, 1, [2, 3, 4]),
+            [1, 2, 3, 4]
+        );
     }
 
     #[test]
@@ -535,6 +551,9 @@ mod tests {
         let g = minmax_grid([8; 3], [1, 1, 2], &[1.0, 2.0, 3.0, 4.0], "m").unwrap();
         assert_eq!((g.min, g.max), (vec![1.0, 2.0], vec![3.0, 4.0]));
         let e = minmax_grid([8; 3], [1, 1, 2], &[1.0], "m").unwrap_err();
-        assert_eq!(e.to_string(), "m: min/max grid [1, 1, 2] needs 4 values, got 1");
+        assert_eq!(
+            e.to_string(),
+            "m: min/max grid [1, 1, 2] needs 4 values, got 1"
+        );
     }
 }

@@ -10,6 +10,7 @@ use residency_viewer::gpu::renderer::RenderOptions;
 use residency_viewer::gpu::streaming::{Budget, Progressive, render_progressive};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::image::RgbImage;
+use residency_viewer::metrics::{self, Metrics};
 use residency_viewer::reference::{self, ReferenceOptions};
 use residency_viewer::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use residency_viewer::source::BrickSource;
@@ -33,8 +34,14 @@ pub fn ramp(channel: usize, color: [f64; 3], lo: f64, hi: f64, a: f64) -> Channe
         visible: true,
         color,
         opacity: vec![
-            OpacityPoint { value: lo, opacity: 0.0 },
-            OpacityPoint { value: hi, opacity: a },
+            OpacityPoint {
+                value: lo,
+                opacity: 0.0,
+            },
+            OpacityPoint {
+                value: hi,
+                opacity: a,
+            },
         ],
     }
 }
@@ -42,8 +49,17 @@ pub fn ramp(channel: usize, color: [f64; 3], lo: f64, hi: f64, a: f64) -> Channe
 /// A camera at `eye` looking at `target` with +z up (or +y when looking along z).
 pub fn camera(eye: [f64; 3], target: [f64; 3]) -> Camera {
     let d = [target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]];
-    let up = if d[0].abs() < 1e-9 && d[1].abs() < 1e-9 { [0.0, 1.0, 0.0] } else { [0.0, 0.0, 1.0] };
-    Camera { eye, target, up, fov_y_degrees: 40.0 }
+    let up = if d[0].abs() < 1e-9 && d[1].abs() < 1e-9 {
+        [0.0, 1.0, 0.0]
+    } else {
+        [0.0, 0.0, 1.0]
+    };
+    Camera {
+        eye,
+        target,
+        up,
+        fov_y_degrees: 40.0,
+    }
 }
 
 /// Options rendering at level 0 only (what the reference shows).
@@ -57,9 +73,17 @@ pub fn full_res(width: u32, height: u32) -> RenderOptions {
 }
 
 /// Renders progressively and converts the last frame to an image.
-pub fn render(source: &Arc<SyntheticSource>, scene: &Scene, options: RenderOptions, frames: u32) -> (Progressive, RgbImage) {
+pub fn render(
+    source: &Arc<SyntheticSource>,
+    scene: &Scene,
+    options: RenderOptions,
+    frames: u32,
+) -> (Progressive, RgbImage) {
     let src: Arc<dyn BrickSource> = source.clone();
-    let budget = Budget { max_frames: frames, ..Default::default() };
+    let budget = Budget {
+        max_frames: frames,
+        ..Default::default()
+    };
     let p = render_progressive(gpu(), src, scene, options, &budget).expect("render");
     let image = RgbImage {
         width: p.width as usize,
@@ -74,17 +98,24 @@ pub fn reference(source: &SyntheticSource, scene: &Scene, width: usize, height: 
     reference::render(source, scene, &ReferenceOptions::new(width, height)).expect("reference")
 }
 
-/// PSNR in dB over RGB with peak 1, and the max abs error.
-pub fn psnr(a: &RgbImage, b: &RgbImage) -> (f64, f64) {
-    assert_eq!((a.width, a.height), (b.width, b.height));
-    let (mut se, mut max) = (0.0f64, 0.0f64);
-    for (p, q) in a.pixels.iter().zip(&b.pixels) {
-        for k in 0..3 {
-            let d = (p[k] - q[k]) as f64;
-            se += d * d;
-            max = max.max(d.abs());
-        }
+/// Compares a GPU image with the reference, printing the metrics.
+pub fn check(label: &str, p: &Progressive, gpu: &RgbImage, reference: &RgbImage) -> Metrics {
+    if let Some(dir) = std::env::var_os("RENDER_DUMP") {
+        let dir = std::path::PathBuf::from(dir);
+        gpu.write(&dir.join(format!("{label}-gpu.png"))).unwrap();
+        reference
+            .write(&dir.join(format!("{label}-ref.png")))
+            .unwrap();
     }
-    let mse = se / (a.pixels.len() * 3) as f64;
-    (10.0 * (1.0 / mse.max(1e-20)).log10(), max)
+    let m = metrics::compare(gpu, reference).expect("compare");
+    eprintln!(
+        "{label}: {} frames ({}), PSNR {:.2} dB, SSIM {:.5}, max {:.4}, last frame {:?}",
+        p.frames.len(),
+        p.stop_reason,
+        m.psnr_db,
+        m.ssim,
+        m.max_abs_error,
+        p.frames.last()
+    );
+    m
 }

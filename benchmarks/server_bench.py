@@ -1,0 +1,312 @@
+"""Server benchmark: `brickserver` against nginx serving the same store directory, in one run,
+with `oha` as the load generator on the same machine (client and servers share the cores).
+
+    python3 benchmarks/server_bench.py [--duration 10] [--soak 300] [--readme]
+
+Needs `oha` (`cargo install oha`), nginx (Debian `nginx-light`) and a release build. Loads:
+
+- random chunk GETs, uniform over a 20,000-chunk store of random bytes with log-normal sizes
+  (median 40 KiB), at 256, 16 and 1 connections;
+- `If-None-Match` revalidations answered 304, at 256 connections;
+- region queries (`/NAME/regions`, random unaligned boxes) on a store made by `ingest`, at 16
+  connections (nginx has no equivalent);
+- optionally a soak: random chunk GETs at 256 connections for `--soak` seconds, sampling the
+  server's RSS every 5 s, counting every non-200 answer and transport error.
+
+Each server's peak RSS (VmHWM, summed over nginx's processes) is read after its loads.
+Results go to benchmarks/results/server.md (and the README between markers with --readme).
+"""
+
+import argparse
+import datetime
+import json
+import os
+import pathlib
+import platform
+import re
+import shutil
+import signal
+import subprocess
+import tempfile
+import time
+
+import numpy as np
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BIN = ROOT / "target" / "release"
+GRID = (20, 25, 40)  # 20,000 chunks, z, y, x
+OHA = shutil.which("oha") or str(pathlib.Path.home() / ".cargo" / "bin" / "oha")
+
+
+def make_store(path: pathlib.Path):
+    """A Zarr-like store of 20,000 chunk files of random bytes, log-normal sizes (median 40 KiB)."""
+    if (path / "done").exists():
+        return
+    rng = np.random.default_rng(7)
+    sizes = np.clip(rng.lognormal(np.log(40 * 1024), 0.6, GRID), 512, 1 << 20).astype(int)
+    blob = rng.integers(0, 256, int(sizes.max()), dtype=np.uint8).tobytes()
+    (path / "0" / "c" / "0").mkdir(parents=True, exist_ok=True)
+    (path / "zarr.json").write_text('{"zarr_format": 3, "node_type": "group", "attributes": {}}')
+    for z in range(GRID[0]):
+        for y in range(GRID[1]):
+            d = path / "0" / "c" / "0" / str(z) / str(y)
+            d.mkdir(parents=True, exist_ok=True)
+            for x in range(GRID[2]):
+                off = int(rng.integers(0, 64))
+                (d / str(x)).write_bytes(blob[off : off + int(sizes[z, y, x])][: int(sizes[z, y, x])])
+    (path / "done").write_text("")
+
+
+def key_regex(base: str) -> str:
+    z, y, x = (f"({'|'.join(str(i) for i in range(n))})" for n in GRID)
+    return f"{base}/0/c/0/{z}/{y}/{x}"
+
+
+def rss_mb(pids) -> float:
+    total = 0
+    for pid in pids:
+        try:
+            for line in pathlib.Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmHWM:"):
+                    total += int(line.split()[1])
+        except FileNotFoundError:
+            pass
+    return total / 1024
+
+
+def current_rss_mb(pids) -> float:
+    total = 0
+    for pid in pids:
+        try:
+            for line in pathlib.Path(f"/proc/{pid}/status").read_text().splitlines():
+                if line.startswith("VmRSS:"):
+                    total += int(line.split()[1])
+        except FileNotFoundError:
+            pass
+    return total / 1024
+
+
+def oha(url, connections, seconds, headers=(), regex=True):
+    cmd = [OHA, "-z", f"{seconds}s", "-c", str(connections), "--no-tui", "--output-format", "json", "--disable-compression"]
+    for h in headers:
+        cmd += ["-H", h]
+    if regex:
+        cmd += ["--rand-regex-url"]
+    cmd.append(url)
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+    r = json.loads(out)
+    codes = {int(k): v for k, v in r.get("statusCodeDistribution", {}).items()}
+    # Requests cut off by the end of the run are not errors of the server.
+    errors = sum(v for k, v in r.get("errorDistribution", {}).items() if "deadline" not in k)
+    summary = r["summary"]
+    lat = r.get("latencyPercentiles", {})
+    return {
+        "rps": summary["requestsPerSec"],
+        "mbps": summary.get("sizePerSec", 0) / 1e6,
+        "p50_ms": (lat.get("p50") or 0) * 1e3,
+        "p99_ms": (lat.get("p99") or 0) * 1e3,
+        "codes": codes,
+        "errors": errors,
+    }
+
+
+def start_brickserver(store, name):
+    p = subprocess.Popen(
+        [str(BIN / "brickserver"), "serve", f"--name={name}={store}", "--bind", "127.0.0.1:0", "--cache-bytes", str(1 << 30)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    for line in p.stdout:
+        if line.startswith("listening on "):
+            return p, [p.pid], line.split("listening on ")[1].strip()
+    raise RuntimeError("brickserver did not start")
+
+
+def start_nginx(root: pathlib.Path, work: pathlib.Path, port: int):
+    conf = work / "nginx.conf"
+    conf.write_text(f"""
+worker_processes auto;
+worker_rlimit_nofile 20000;
+pid {work}/nginx.pid;
+error_log {work}/nginx-error.log warn;
+daemon off;
+events {{ worker_connections 4096; }}
+http {{
+  access_log off;
+  sendfile on; tcp_nopush on; tcp_nodelay on;
+  open_file_cache max=40000 inactive=60s;
+  keepalive_requests 1000000;
+  keepalive_timeout 65;
+  default_type application/octet-stream;
+  client_body_temp_path {work}/tmp; proxy_temp_path {work}/tmp; fastcgi_temp_path {work}/tmp;
+  uwsgi_temp_path {work}/tmp; scgi_temp_path {work}/tmp;
+  server {{ listen 127.0.0.1:{port}; root {root}; }}
+}}
+""")
+    (work / "tmp").mkdir(exist_ok=True)
+    p = subprocess.Popen(["nginx", "-c", str(conf), "-p", str(work)], stderr=subprocess.DEVNULL)
+    for _ in range(100):
+        try:
+            import urllib.request
+
+            urllib.request.urlopen(f"http://127.0.0.1:{port}/bench/zarr.json", timeout=1)
+            break
+        except Exception:
+            time.sleep(0.05)
+    children = subprocess.run(["pgrep", "-P", str(p.pid)], capture_output=True, text=True).stdout.split()
+    return p, [p.pid, *map(int, children)], f"http://127.0.0.1:{port}"
+
+
+def etag_of(url):
+    import urllib.request
+
+    return urllib.request.urlopen(url).headers["ETag"]
+
+
+def loads(base, seconds):
+    """The shared loads against one server; `base` ends in the dataset path."""
+    first = f"{base}/0/c/0/0/0/0"
+    etag = etag_of(first)
+    out = {}
+    for c in (256, 16, 1):
+        out[f"GET, {c} conn"] = oha(key_regex(base), c, seconds)
+    out["304, 256 conn"] = oha(first, 256, seconds, headers=[f"If-None-Match: {etag}"], regex=False)
+    return out
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--duration", type=int, default=10, help="seconds per load")
+    ap.add_argument("--soak", type=int, default=0, help="seconds of soak at 256 connections (0: none)")
+    ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
+    ap.add_argument("--readme", action="store_true")
+    a = ap.parse_args()
+    work = pathlib.Path(a.work)
+    store = work / "www" / "bench"
+    store.mkdir(parents=True, exist_ok=True)
+    make_store(store)
+    sample = work / "sample"
+    region_store = work / "regions.ome.zarr"
+    if not region_store.exists():
+        subprocess.run([BIN / "ingest", "sample", "-o", sample, "--size", "128,256,256", "--quiet"], check=True)
+        subprocess.run([BIN / "ingest", "convert", sample / "nuclei.ome.tif", sample / "membranes.ome.tif", "-o", region_store, "--quiet"], check=True)
+
+    results = {}
+    # nginx first, then ours, each alone on the machine.
+    ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
+    ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
+    try:
+        results["nginx"] = loads(f"{ng_base}/bench", a.duration)
+        results["nginx"]["rss"] = rss_mb(ng_pids)
+    finally:
+        ng.send_signal(signal.SIGQUIT)
+        ng.wait(timeout=10)
+
+    bs, bs_pids, bs_base = start_brickserver(store, "bench")
+    try:
+        results["brickserver"] = loads(f"{bs_base}/bench", a.duration)
+        results["brickserver"]["rss"] = rss_mb(bs_pids)
+    finally:
+        bs.send_signal(signal.SIGTERM)
+        bs.wait(timeout=20)
+
+    rs, rs_pids, rs_base = start_brickserver(region_store, "regions")
+    try:
+        url = f"{rs_base}/regions/regions\\?level=0&channel=[01]&min=[0-9]{{1,2}},[0-9]{{1,2}},[0-9]{{1,2}}&max=2[0-4][0-9],2[0-4][0-9],12[0-8]"
+        subprocess.run(["curl", "-sf", f"{rs_base}/regions/regions?level=0&channel=0&min=0,0,0&max=1,1,1"], check=True, capture_output=True)
+        results["regions"] = oha(url, 16, a.duration)
+        results["regions"]["rss"] = rss_mb(rs_pids)
+    finally:
+        rs.send_signal(signal.SIGTERM)
+        rs.wait(timeout=20)
+
+    soak = None
+    if a.soak:
+        bs, bs_pids, bs_base = start_brickserver(store, "bench")
+        samples = []
+        try:
+            proc = subprocess.Popen(
+                [OHA, "-z", f"{a.soak}s", "-c", "256", "--no-tui", "--output-format", "json", "--rand-regex-url", key_regex(f"{bs_base}/bench")],
+                stdout=subprocess.PIPE,
+                text=True,
+            )
+            t0 = time.time()
+            while proc.poll() is None:
+                samples.append((round(time.time() - t0), current_rss_mb(bs_pids)))
+                time.sleep(5)
+            r = json.loads(proc.stdout.read())
+            codes = {int(k): v for k, v in r.get("statusCodeDistribution", {}).items()}
+            soak = {
+                "seconds": a.soak,
+                "requests": sum(codes.values()),
+                "non_200": sum(v for k, v in codes.items() if k != 200),
+                "errors": sum(v for k, v in r.get("errorDistribution", {}).items() if "deadline" not in k),
+                "rps": r["summary"]["requestsPerSec"],
+                "rss_samples": samples,
+            }
+        finally:
+            bs.send_signal(signal.SIGTERM)
+            bs.wait(timeout=20)
+
+    report = render(results, soak, a)
+    out = ROOT / "benchmarks" / "results" / "server.md"
+    out.write_text(report)
+    (ROOT / "benchmarks" / "results" / "server.json").write_text(json.dumps({"results": results, "soak": soak}, indent=1))
+    print(report)
+    if a.readme:
+        readme = ROOT / "README.md"
+        text = readme.read_text()
+        new = re.sub(r"<!-- server-bench:start -->.*<!-- server-bench:end -->", f"<!-- server-bench:start -->\n{report}<!-- server-bench:end -->", text, flags=re.S)
+        readme.write_text(new)
+
+
+def cpu_name():
+    for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def render(results, soak, a):
+    lines = [
+        f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
+        f"by `benchmarks/server_bench.py --duration {a.duration}{f' --soak {a.soak}' if a.soak else ''}`: oha {subprocess.run([OHA, '--version'], capture_output=True, text=True).stdout.split()[-1]} "
+        "on the same machine as the server (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random. "
+        "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",
+        "",
+        "| Load | nginx req/s | brickserver req/s | ratio | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    ng, bs = results["nginx"], results["brickserver"]
+    for load in ng:
+        if load == "rss":
+            continue
+        n, b = ng[load], bs[load]
+        lines.append(
+            f"| {load} | {n['rps']:,.0f} | {b['rps']:,.0f} | {b['rps'] / n['rps']:.2f}x | {n['mbps']:,.0f} | {b['mbps']:,.0f} | "
+            f"{n['p50_ms']:.2f} / {n['p99_ms']:.2f} | {b['p50_ms']:.2f} / {b['p99_ms']:.2f} | {b['p99_ms'] / max(n['p99_ms'], 1e-9):.2f}x |"
+        )
+    lines.append("")
+    lines.append(f"Peak RSS under these loads: nginx {ng['rss']:.0f} MB (all processes), brickserver {bs['rss']:.0f} MB (cache budget 1 GiB; the 20,000 chunks are ~1 GB).")
+    bad = {k: {c: n for c, n in v["codes"].items() if c not in (200, 304)} for k, v in {**ng, **bs}.items() if k != "rss"}
+    lines.append(f"Answers other than 200/304: {sum(sum(v.values()) for v in bad.values())}; transport errors: nginx {sum(v['errors'] for k, v in ng.items() if k != 'rss')}, brickserver {sum(v['errors'] for k, v in bs.items() if k != 'rss')}.")
+    r = results["regions"]
+    lines.append("")
+    lines.append(
+        f"Region queries (random unaligned boxes of a 2-channel 128×256×256 `ingest sample` store, 16 connections): "
+        f"{r['rps']:,.0f} req/s, p50 {r['p50_ms']:.3f} ms, p99 {r['p99_ms']:.3f} ms; non-200 answers {sum(v for c, v in r['codes'].items() if c != 200)}; server peak RSS {r['rss']:.0f} MB."
+    )
+    if soak:
+        rss = [s[1] for s in soak["rss_samples"]]
+        lines.append("")
+        lines.append(
+            f"Soak: {soak['seconds']} s at 256 connections, {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
+            f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors. Server RSS sampled every 5 s: "
+            f"first {rss[0]:.0f} MB, after 60 s {rss[min(12, len(rss) - 1)]:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB."
+        )
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    main()
