@@ -23,6 +23,7 @@ use zarrs::array::{
 };
 use zarrs::filesystem::FilesystemStore;
 
+use crate::datasets::read_attributes;
 use crate::regions::data_type_name;
 
 /// Caps on one batch.
@@ -155,19 +156,7 @@ pub struct ImageArrays {
 
 /// The level array paths of an OME-Zarr image's first multiscale, finest first.
 fn level_paths(root: &Path) -> Result<Vec<String>> {
-    let (file, v3) = if root.join("zarr.json").is_file() {
-        (root.join("zarr.json"), true)
-    } else {
-        (root.join(".zattrs"), false)
-    };
-    let text = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
-    let doc: serde_json::Value = serde_json::from_slice(&text)
-        .with_context(|| format!("{} is not valid JSON", file.display()))?;
-    let ome = if v3 {
-        &doc["attributes"]["ome"]
-    } else {
-        &doc
-    };
+    let (_, ome, file) = read_attributes(root)?;
     let datasets = ome["multiscales"][0]["datasets"]
         .as_array()
         .with_context(|| format!("{}: no OME-Zarr multiscales", file.display()))?;

@@ -13,6 +13,27 @@ pub struct Dataset {
     pub root: PathBuf,
 }
 
+/// The group attributes of the store at `root` (from `zarr.json` in Zarr v3, `.zattrs` in v2),
+/// the OME block within them (`ome` in OME-Zarr 0.5, the attributes themselves in 0.4), and
+/// the file they came from, for messages.
+pub fn read_attributes(root: &Path) -> Result<(serde_json::Value, serde_json::Value, PathBuf)> {
+    let (file, v3) = if root.join("zarr.json").is_file() {
+        (root.join("zarr.json"), true)
+    } else {
+        (root.join(".zattrs"), false)
+    };
+    let text = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
+    let doc: serde_json::Value = serde_json::from_slice(&text)
+        .with_context(|| format!("{} is not valid JSON", file.display()))?;
+    let attrs = if v3 { doc["attributes"].clone() } else { doc };
+    let ome = if v3 {
+        attrs["ome"].clone()
+    } else {
+        attrs.clone()
+    };
+    Ok((attrs, ome, file))
+}
+
 /// All served datasets, in the order given.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Datasets(pub Vec<Dataset>);

@@ -25,6 +25,8 @@ use residency_schemas::{MinMaxGrid, REGIONS_KEY, RegionMetadata};
 use zarrs::array::{Array, ArrayBytes, ArraySubset};
 use zarrs::filesystem::FilesystemStore;
 
+use crate::datasets::read_attributes;
+
 /// A pyramid of grids: grid `k` has cells of `cell · 2^k` voxels; each cell of grid `k + 1`
 /// aggregates the (up to) 2×2×2 cells below it in grid `k`.
 #[derive(Clone, Debug)]
@@ -74,8 +76,7 @@ impl Pyramid {
         let size: [u64; 3] = std::array::from_fn(|a| self.cell[a] << k);
         let cell_lo: [u64; 3] = std::array::from_fn(|a| c[a] * size[a]);
         let cell_hi: [u64; 3] = std::array::from_fn(|a| ((c[a] + 1) * size[a]).min(shape[a]));
-        if (0..3).any(|a| cell_lo[a] >= cell_hi[a] || cell_hi[a] <= lo[a] || cell_lo[a] >= hi[a])
-        {
+        if (0..3).any(|a| cell_lo[a] >= cell_hi[a] || cell_hi[a] <= lo[a] || cell_lo[a] >= hi[a]) {
             return;
         }
         let inside = (0..3).all(|a| lo[a] <= cell_lo[a] && cell_hi[a] <= hi[a]);
@@ -163,15 +164,7 @@ fn read_array(
 /// Reads the image attributes of a store (`zarr.json` or `.zattrs`) and returns its region
 /// metadata, or `None` for a store without.
 fn read_region_metadata(root: &Path) -> Result<Option<RegionMetadata>> {
-    let (file, v3) = if root.join("zarr.json").is_file() {
-        (root.join("zarr.json"), true)
-    } else {
-        (root.join(".zattrs"), false)
-    };
-    let text = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
-    let doc: serde_json::Value = serde_json::from_slice(&text)
-        .with_context(|| format!("{} is not valid JSON", file.display()))?;
-    let attrs = if v3 { &doc["attributes"] } else { &doc };
+    let (attrs, _, file) = read_attributes(root)?;
     let Some(value) = attrs.get(REGIONS_KEY) else {
         return Ok(None);
     };
@@ -222,7 +215,10 @@ impl RegionIndex {
             return Ok(None);
         };
         let store = open_store(root)?;
-        let first = meta.levels.first().context("region metadata lists no level")?;
+        let first = meta
+            .levels
+            .first()
+            .context("region metadata lists no level")?;
         let image = Array::open(store.clone(), &format!("/{}", first.image))
             .with_context(|| format!("cannot open image array '{}'", first.image))?;
         let data_type = data_type_name(&image);

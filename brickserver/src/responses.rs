@@ -6,7 +6,6 @@ use std::time::UNIX_EPOCH;
 use axum::body::{Body, Bytes};
 use axum::http::{HeaderMap, HeaderValue, Response, StatusCode, header};
 
-
 /// `Cache-Control` for chunks and shards: immutable once written by `ingest`.
 pub const CACHE_IMMUTABLE: &str = "public, max-age=31536000, immutable";
 /// `Cache-Control` for metadata documents, which `ingest index` may update: revalidate.

@@ -10,10 +10,11 @@
 //! folder, so its keys are `regions/zarr.json` and the like, never `regions` itself.
 
 use std::sync::{Arc, OnceLock};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use axum::Router;
 use axum::body::{Body, Bytes};
+use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, RawQuery, Request, State};
 use axum::http::{HeaderMap, Method, Response, StatusCode, Uri, header};
 use axum::middleware::{self, Next};
@@ -30,7 +31,7 @@ use crate::cache::{ByteCache, CacheKey};
 use crate::datasets::Datasets;
 use crate::metrics::{Metrics, track};
 use crate::regions::{QueryError, RegionIndex};
-use crate::responses::{etag_of, file_response, not_modified};
+use crate::responses::{etag_of, file_response, is_metadata, not_modified};
 use crate::store_keys::{KeyError, RootDir, read_cached};
 
 /// Server-wide options of the router.
@@ -72,7 +73,12 @@ pub struct AppState {
     batch: BatchLimits,
     loaded: Vec<Loaded>,
     roots: Vec<RootDir>,
+    etags: quick_cache::sync::Cache<(usize, String), (Arc<str>, Instant)>,
 }
+
+/// How long a remembered chunk `ETag` answers revalidations without a look at the file (as
+/// nginx's `open_file_cache_valid`): chunks are immutable, but a store may be replaced.
+const ETAG_VALID: Duration = Duration::from_secs(60);
 
 impl AppState {
     /// State for `datasets` under `options`; fails if a dataset folder cannot be opened.
@@ -101,6 +107,7 @@ impl AppState {
             batch: options.batch,
             loaded,
             roots,
+            etags: quick_cache::sync::Cache::new(1 << 16),
         })
     }
 
@@ -299,11 +306,27 @@ async fn serve_key(
         .nth(2)
         .unwrap_or_default()
         .to_string();
+    // A revalidation of a chunk whose ETag is remembered needs no system call at all.
+    let chunk = !is_metadata(&raw_key);
+    if chunk && headers.contains_key(header::IF_NONE_MATCH) {
+        let known = state.etags.get(&(index, raw_key.clone()));
+        if let Some((etag, _)) = known.filter(|(_, seen)| seen.elapsed() < ETAG_VALID)
+            && let Some(answer) = not_modified(&raw_key, &etag, &headers)
+        {
+            return answer;
+        }
+    }
     // Open beneath the dataset root and read what the page cache holds right here, as nginx
     // does; only a read that would wait for the disk moves to the blocking pool.
     let read = match state.roots[index].open_key(&raw_key) {
         Ok((file, meta)) => {
             let etag = etag_of(&meta);
+            if chunk {
+                state.etags.insert(
+                    (index, raw_key.clone()),
+                    (etag.as_str().into(), Instant::now()),
+                );
+            }
             if let Some(answer) = not_modified(&raw_key, &etag, &headers) {
                 return answer;
             }
@@ -384,22 +407,36 @@ async fn region_index(
     }
 }
 
+/// The parsed query (or a 400 saying what was `expected`) and the dataset's region index.
+async fn api_input<T>(
+    state: &Arc<AppState>,
+    name: &str,
+    params: Result<Query<T>, QueryRejection>,
+    expected: &str,
+) -> Result<(T, Arc<RegionIndex>), Response<Body>> {
+    let Query(p) = params.map_err(|e| {
+        api_error(
+            StatusCode::BAD_REQUEST,
+            format!("{}; expected {expected}", e.body_text()),
+        )
+    })?;
+    Ok((p, region_index(state, name).await?))
+}
+
 async fn regions(
     State(state): State<Arc<AppState>>,
     Path(name): Path<String>,
-    params: Result<Query<RegionParams>, axum::extract::rejection::QueryRejection>,
+    params: Result<Query<RegionParams>, QueryRejection>,
 ) -> Response<Body> {
-    let Query(p) = match params {
-        Ok(p) => p,
-        Err(e) => {
-            return api_error(
-                StatusCode::BAD_REQUEST,
-                format!("{}; expected level=L&channel=C&min=x,y,z&max=x,y,z", e.body_text()),
-            );
-        }
-    };
-    let index = match region_index(&state, &name).await {
-        Ok(i) => i,
+    let (p, index) = match api_input(
+        &state,
+        &name,
+        params,
+        "level=L&channel=C&min=x,y,z&max=x,y,z",
+    )
+    .await
+    {
+        Ok(got) => got,
         Err(r) => return r,
     };
     let bounds = parse_xyz("min", &p.min).and_then(|a| Ok((a, parse_xyz("max", &p.max)?)));
@@ -422,19 +459,10 @@ struct MinMaxParams {
 async fn minmax(
     State(state): State<Arc<AppState>>,
     Path(name): Path<String>,
-    params: Result<Query<MinMaxParams>, axum::extract::rejection::QueryRejection>,
+    params: Result<Query<MinMaxParams>, QueryRejection>,
 ) -> Response<Body> {
-    let Query(p) = match params {
-        Ok(p) => p,
-        Err(e) => {
-            return api_error(
-                StatusCode::BAD_REQUEST,
-                format!("{}; expected channel=C", e.body_text()),
-            );
-        }
-    };
-    let index = match region_index(&state, &name).await {
-        Ok(i) => i,
+    let (p, index) = match api_input(&state, &name, params, "channel=C").await {
+        Ok(got) => got,
         Err(r) => return r,
     };
     match index.minmax_document(p.channel) {

@@ -94,7 +94,9 @@ impl RootDir {
             Ok(f) => f,
             Err(e) => match e.raw_os_error() {
                 Some(libc::ENOENT) | Some(libc::ENOTDIR) => return Err(KeyError::NotFound),
-                Some(libc::EXDEV) => return Err(KeyError::Refused("key leads outside the dataset")),
+                Some(libc::EXDEV) => {
+                    return Err(KeyError::Refused("key leads outside the dataset"));
+                }
                 Some(libc::ENOSYS) | Some(libc::EPERM) => {
                     File::open(resolve(&self.path, raw_key)?).map_err(unreadable)?
                 }

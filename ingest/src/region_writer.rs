@@ -84,10 +84,8 @@ pub fn write_region_metadata<T: Sample>(
         let mut k = 0;
         loop {
             let g = grid.grid;
-            for (kind, exact, out) in [
-                ("minmax", false, &mut minmax),
-                ("range", true, &mut range),
-            ] {
+            for (kind, exact, out) in [("minmax", false, &mut minmax), ("range", true, &mut range)]
+            {
                 let path = format!("residency/{i}/{kind}/{k}");
                 let array = writer.create_array(
                     &format!("/{path}"),

@@ -141,8 +141,7 @@ impl<T: Sample> CellGrid<T> {
                     for x in 0..self.grid[2] {
                         let i = self.index(c, z, y, x);
                         let o = out.index(c, z / 2, y / 2, x / 2);
-                        out.haloed
-                            .fold(o, self.haloed.min[i], self.haloed.max[i]);
+                        out.haloed.fold(o, self.haloed.min[i], self.haloed.max[i]);
                         out.exact.fold(o, self.exact.min[i], self.exact.max[i]);
                     }
                 }
