@@ -5,6 +5,9 @@ with `oha` as the load generator on the same machine (client and servers share t
 
 Needs `oha` (`cargo install oha`), nginx (Debian `nginx-light`) and a release build. Loads:
 
+Both servers run at once; each load runs on one, then the other, `--repeat` times, and the
+median run is reported, so background load hits both alike.
+
 - random chunk GETs, uniform over a 20,000-chunk store of random bytes with log-normal sizes
   (median 40 KiB), at 256, 16 and 1 connections;
 - `If-None-Match` revalidations answered 304, at 256 connections;
@@ -164,20 +167,36 @@ def etag_of(url):
     return urllib.request.urlopen(url).headers["ETag"]
 
 
-def loads(base, seconds):
-    """The shared loads against one server; `base` ends in the dataset path."""
-    first = f"{base}/0/c/0/0/0/0"
-    etag = etag_of(first)
-    out = {}
-    for c in (256, 16, 1):
-        out[f"GET, {c} conn"] = oha(key_regex(base), c, seconds)
-    out["304, 256 conn"] = oha(first, 256, seconds, headers=[f"If-None-Match: {etag}"], regex=False)
+def median_run(runs):
+    """The run with the median requests/s (latencies come from that same run)."""
+    return sorted(runs, key=lambda r: r["rps"])[len(runs) // 2]
+
+
+def loads(bases, seconds, repeat):
+    """The shared loads against every server in `bases` (name -> URL ending in the dataset
+    path), interleaved: each load runs on each server in turn, `repeat` times, so a change in
+    background load hits both alike. Returns name -> load -> the median run."""
+    out = {name: {} for name in bases}
+    etags = {name: etag_of(f"{b}/0/c/0/0/0/0") for name, b in bases.items()}
+    plan = [(f"GET, {c} conn", c, None) for c in (256, 16, 1)] + [("304, 256 conn", 256, "304")]
+    for load, c, kind in plan:
+        runs = {name: [] for name in bases}
+        for _ in range(repeat):
+            for name, b in bases.items():
+                if kind == "304":
+                    r = oha(f"{b}/0/c/0/0/0/0", c, seconds, headers=[f"If-None-Match: {etags[name]}"], regex=False)
+                else:
+                    r = oha(key_regex(b), c, seconds)
+                runs[name].append(r)
+        for name in bases:
+            out[name][load] = median_run(runs[name])
     return out
 
 
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--duration", type=int, default=10, help="seconds per load")
+    ap.add_argument("--repeat", type=int, default=3, help="runs per load and server, interleaved; the median is reported")
     ap.add_argument("--soak", type=int, default=0, help="seconds of soak at 256 connections (0: none)")
     ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
     ap.add_argument("--readme", action="store_true")
@@ -193,21 +212,18 @@ def main():
         subprocess.run([BIN / "ingest", "convert", sample / "nuclei.ome.tif", sample / "membranes.ome.tif", "-o", region_store, "--quiet"], check=True)
 
     results = {}
-    # nginx first, then ours, each alone on the machine.
     ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
     ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
+    bs, bs_pids, bs_base = start_brickserver(store, "bench")
     try:
-        results["nginx"] = loads(f"{ng_base}/bench", a.duration)
+        # Warm the page cache once for both (they serve the same files).
+        oha(key_regex(f"{ng_base}/bench"), 16, 3)
+        results = loads({"nginx": f"{ng_base}/bench", "brickserver": f"{bs_base}/bench"}, a.duration, a.repeat)
         results["nginx"]["rss"] = rss_mb(ng_pids)
+        results["brickserver"]["rss"] = rss_mb(bs_pids)
     finally:
         ng.send_signal(signal.SIGQUIT)
         ng.wait(timeout=10)
-
-    bs, bs_pids, bs_base = start_brickserver(store, "bench")
-    try:
-        results["brickserver"] = loads(f"{bs_base}/bench", a.duration)
-        results["brickserver"]["rss"] = rss_mb(bs_pids)
-    finally:
         bs.send_signal(signal.SIGTERM)
         bs.wait(timeout=20)
 
@@ -272,8 +288,9 @@ def cpu_name():
 def render(results, soak, a):
     lines = [
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
-        f"by `benchmarks/server_bench.py --duration {a.duration}{f' --soak {a.soak}' if a.soak else ''}`: oha {subprocess.run([OHA, '--version'], capture_output=True, text=True).stdout.split()[-1]} "
-        "on the same machine as the server (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random. "
+        f"by `benchmarks/server_bench.py --duration {a.duration} --repeat {a.repeat}{f' --soak {a.soak}' if a.soak else ''}`: oha {subprocess.run([OHA, '--version'], capture_output=True, text=True).stdout.split()[-1]} "
+        "on the same machine as the servers (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
+        "each load ran on nginx and brickserver in turn, repeatedly, and the median run of each is shown. "
         "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",
         "",
         "| Load | nginx req/s | brickserver req/s | ratio | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio |",

@@ -35,69 +35,69 @@ struct Pyramid {
     shapes: Vec<[u64; 3]>,
 }
 
-/// The cells of a pyramid that cover a box: `(grid, linear index)` pairs, and the box they
-/// cover (`z, y, x`).
-#[derive(Debug, Default, PartialEq)]
-struct Cover {
-    cells: Vec<(usize, usize)>,
-    lo: [u64; 3],
-    hi: [u64; 3],
-}
-
 impl Pyramid {
-    /// The cells covering `[lo, hi)` (`z, y, x`) of a level of `shape`.
-    fn cover(&self, shape: [u64; 3], lo: [u64; 3], hi: [u64; 3]) -> Cover {
-        let mut out = Cover {
-            cells: Vec::new(),
-            lo: hi,
-            hi: lo,
-        };
-        let top = self.shapes.len() - 1;
-        let [gz, gy, gx] = self.shapes[top];
-        for z in 0..gz {
-            for y in 0..gy {
-                for x in 0..gx {
-                    self.visit(top, [z, y, x], shape, lo, hi, &mut out);
-                }
-            }
-        }
-        out
-    }
-
-    fn visit(
+    /// Visits cells covering `[lo, hi)` (voxels `z, y, x` of a level of `shape`) as
+    /// `(grid, linear index)`: every finest cell the box touches is covered exactly once, by
+    /// itself or by a coarser cell made only of such cells. Returns the voxel box covered: the
+    /// box widened to whole finest cells, clipped to the level.
+    fn cover(
         &self,
-        k: usize,
-        c: [u64; 3],
         shape: [u64; 3],
         lo: [u64; 3],
         hi: [u64; 3],
-        out: &mut Cover,
-    ) {
-        let size: [u64; 3] = std::array::from_fn(|a| self.cell[a] << k);
-        let cell_lo: [u64; 3] = std::array::from_fn(|a| c[a] * size[a]);
-        let cell_hi: [u64; 3] = std::array::from_fn(|a| ((c[a] + 1) * size[a]).min(shape[a]));
-        if (0..3).any(|a| cell_lo[a] >= cell_hi[a] || cell_hi[a] <= lo[a] || cell_lo[a] >= hi[a]) {
+        mut visit: impl FnMut(usize, usize),
+    ) -> ([u64; 3], [u64; 3]) {
+        let clo: [u64; 3] = std::array::from_fn(|a| lo[a] / self.cell[a]);
+        let chi: [u64; 3] = std::array::from_fn(|a| hi[a].div_ceil(self.cell[a]));
+        self.fold_box(0, clo, chi, &mut visit);
+        (
+            std::array::from_fn(|a| clo[a] * self.cell[a]),
+            std::array::from_fn(|a| (chi[a] * self.cell[a]).min(shape[a])),
+        )
+    }
+
+    /// Visits the cells `[lo, hi)` of grid `k`: the part aligned to pairs is handed to grid
+    /// `k + 1`, and only the ragged border is visited here, so the cost grows with the box's
+    /// surface.
+    fn fold_box(&self, k: usize, lo: [u64; 3], hi: [u64; 3], visit: &mut impl FnMut(usize, usize)) {
+        if (0..3).any(|a| lo[a] >= hi[a]) {
             return;
         }
-        let inside = (0..3).all(|a| lo[a] <= cell_lo[a] && cell_hi[a] <= hi[a]);
-        if inside || k == 0 {
-            let [_, gy, gx] = self.shapes[k];
-            out.cells
-                .push((k, ((c[0] * gy + c[1]) * gx + c[2]) as usize));
-            for a in 0..3 {
-                out.lo[a] = out.lo[a].min(cell_lo[a]);
-                out.hi[a] = out.hi[a].max(cell_hi[a]);
+        // Cells of grid k + 1 whose children all lie in the box; at the grid's far edge a
+        // coarse cell may have a single child.
+        let n = self.shapes[k];
+        let ilo: [u64; 3] = std::array::from_fn(|a| lo[a].div_ceil(2));
+        let ihi: [u64; 3] = std::array::from_fn(|a| {
+            if hi[a] == n[a] {
+                hi[a].div_ceil(2)
+            } else {
+                hi[a] / 2
             }
+        });
+        if k + 1 == self.shapes.len() || (0..3).any(|a| ilo[a] >= ihi[a]) {
+            self.each(k, lo, hi, visit);
             return;
         }
-        let below = self.shapes[k - 1];
-        for dz in 0..2 {
-            for dy in 0..2 {
-                for dx in 0..2 {
-                    let child = [2 * c[0] + dz, 2 * c[1] + dy, 2 * c[2] + dx];
-                    if (0..3).all(|a| child[a] < below[a]) {
-                        self.visit(k - 1, child, shape, lo, hi, out);
-                    }
+        self.fold_box(k + 1, ilo, ihi, visit);
+        let alo: [u64; 3] = ilo.map(|v| 2 * v);
+        let ahi: [u64; 3] = std::array::from_fn(|a| (2 * ihi[a]).min(hi[a]));
+        // The border: z slabs, then y slabs inside them, then x slabs inside both.
+        self.each(k, lo, [alo[0], hi[1], hi[2]], visit);
+        self.each(k, [ahi[0], lo[1], lo[2]], hi, visit);
+        self.each(k, [alo[0], lo[1], lo[2]], [ahi[0], alo[1], hi[2]], visit);
+        self.each(k, [alo[0], ahi[1], lo[2]], [ahi[0], hi[1], hi[2]], visit);
+        self.each(k, [alo[0], alo[1], lo[2]], [ahi[0], ahi[1], alo[2]], visit);
+        self.each(k, [alo[0], alo[1], ahi[2]], [ahi[0], ahi[1], hi[2]], visit);
+    }
+
+    /// Visits every cell `[lo, hi)` of grid `k`.
+    fn each(&self, k: usize, lo: [u64; 3], hi: [u64; 3], visit: &mut impl FnMut(usize, usize)) {
+        let [_, gy, gx] = self.shapes[k];
+        for z in lo[0]..hi[0] {
+            for y in lo[1]..hi[1] {
+                let row = ((z * gy + y) * gx) as usize;
+                for x in lo[2]..hi[2] {
+                    visit(k, row + x as usize);
                 }
             }
         }
@@ -399,35 +399,38 @@ impl RegionIndex {
         let to_xyz = |zyx: [u64; 3]| [zyx[2], zyx[1], zyx[0]];
         let query = VoxelBox { min, max };
 
-        let cover = l.ranges.cover(l.shape, lo, hi);
         let (mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY);
-        for &(k, i) in &cover.cells {
-            let [a, b] = l.range_values[channel][k][i];
-            if !a.is_nan() {
-                vmin = vmin.min(a);
-                vmax = vmax.max(b);
+        let ranges = &l.range_values[channel];
+        let (mlo, mhi) = l.ranges.cover(l.shape, lo, hi, |k, i| {
+            let [a, b] = ranges[k][i];
+            // NaN (a cell without values) compares false and is skipped.
+            if a < vmin {
+                vmin = a;
             }
-        }
+            if b > vmax {
+                vmax = b;
+            }
+        });
         let seen = vmin <= vmax;
         let minmax_box = VoxelBox {
-            min: to_xyz(cover.lo),
-            max: to_xyz(cover.hi),
+            min: to_xyz(mlo),
+            max: to_xyz(mhi),
         };
 
         let bins = self.meta.histogram_bins;
-        let bricks = l.bricks.cover(l.shape, lo, hi);
         let mut counts = vec![0u64; bins];
-        for &(k, i) in &bricks.cells {
-            let cell = &l.histograms[channel][k][i * bins..(i + 1) * bins];
+        let histograms = &l.histograms[channel];
+        let (hlo, hhi) = l.bricks.cover(l.shape, lo, hi, |k, i| {
+            let cell = &histograms[k][i * bins..(i + 1) * bins];
             for (acc, n) in counts.iter_mut().zip(cell) {
                 *acc += n;
             }
-        }
+        });
         let edges = self.meta.channels[channel].histogram_edges.clone();
         counts.truncate(edges.len().saturating_sub(1).max(1));
         let hist_box = VoxelBox {
-            min: to_xyz(bricks.lo),
-            max: to_xyz(bricks.hi),
+            min: to_xyz(hlo),
+            max: to_xyz(hhi),
         };
         Ok(RegionAnswer {
             dataset: dataset.to_string(),
@@ -453,6 +456,19 @@ impl RegionIndex {
 mod tests {
     use super::*;
 
+    /// The cells `cover` visits, sorted, and the box it reports.
+    fn visited(
+        p: &Pyramid,
+        shape: [u64; 3],
+        lo: [u64; 3],
+        hi: [u64; 3],
+    ) -> (Vec<(usize, usize)>, [u64; 3], [u64; 3]) {
+        let mut cells = Vec::new();
+        let (a, b) = p.cover(shape, lo, hi, |k, i| cells.push((k, i)));
+        cells.sort();
+        (cells, a, b)
+    }
+
     #[test]
     fn cover_takes_whole_cells_inside_and_splits_at_the_edges() {
         // A 20 × 20 × 20 level with 8³ cells: grids 3³, 2³, 1.
@@ -460,22 +476,72 @@ mod tests {
             cell: [8; 3],
             shapes: vec![[3; 3], [2; 3], [1; 3]],
         };
-        let whole = p.cover([20; 3], [0; 3], [20; 3]);
-        assert_eq!(whole.cells, vec![(2, 0)]);
-        assert_eq!((whole.lo, whole.hi), ([0; 3], [20; 3]));
+        let whole = visited(&p, [20; 3], [0; 3], [20; 3]);
+        assert_eq!(whole, (vec![(2, 0)], [0; 3], [20; 3]));
         // Aligned to cells: exactly the cells inside.
-        let aligned = p.cover([20; 3], [8, 0, 0], [16, 8, 8]);
-        assert_eq!(aligned.cells, vec![(0, 9)]);
-        assert_eq!((aligned.lo, aligned.hi), ([8, 0, 0], [16, 8, 8]));
+        let aligned = visited(&p, [20; 3], [8, 0, 0], [16, 8, 8]);
+        assert_eq!(aligned, (vec![(0, 9)], [8, 0, 0], [16, 8, 8]));
         // Unaligned: widened to the finest cells it touches.
-        let loose = p.cover([20; 3], [3, 3, 3], [9, 4, 4]);
-        assert_eq!((loose.lo, loose.hi), ([0, 0, 0], [16, 8, 8]));
-        assert_eq!(loose.cells.len(), 2);
-        // Ending at the volume's edge counts as aligned.
-        let edge = p.cover([20; 3], [16, 16, 16], [20, 20, 20]);
-        assert_eq!((edge.lo, edge.hi), ([16; 3], [20; 3]));
-        // The coarser cell (1, 1, 1) of grid 1, clipped to the level, is the same voxels.
-        assert_eq!(edge.cells, vec![(1, 7)]);
+        let loose = visited(&p, [20; 3], [3, 3, 3], [9, 4, 4]);
+        assert_eq!(loose, (vec![(0, 0), (0, 9)], [0, 0, 0], [16, 8, 8]));
+        // Ending at the volume's edge counts as aligned; the coarse cell (1, 1, 1) of grid 1,
+        // clipped to the level, is the same voxels as the finest cell (2, 2, 2).
+        let edge = visited(&p, [20; 3], [16, 16, 16], [20, 20, 20]);
+        assert_eq!(edge, (vec![(1, 7)], [16; 3], [20; 3]));
+    }
+
+    #[test]
+    fn cover_spans_every_touched_voxel_exactly_once() {
+        // A 37 × 21 × 50 level of 4³ cells; for many random boxes, the voxels of the visited
+        // cells are exactly the box widened to whole cells, each counted once.
+        let shape = [37u64, 21, 50];
+        let cell = [4u64; 3];
+        let mut shapes = vec![shape.map(|s| s.div_ceil(4))];
+        while *shapes.last().unwrap() != [1, 1, 1] {
+            let s = *shapes.last().unwrap();
+            shapes.push(s.map(|v| v.div_ceil(2)));
+        }
+        let p = Pyramid { cell, shapes };
+        let mut seed = 7u64;
+        let mut next = |n: u64| {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 33) % n
+        };
+        let at = |z: u64, y: u64, x: u64| ((z * shape[1] + y) * shape[2] + x) as usize;
+        for _ in 0..300 {
+            let lo: [u64; 3] = std::array::from_fn(|a| next(shape[a]));
+            let hi: [u64; 3] = std::array::from_fn(|a| lo[a] + 1 + next(shape[a] - lo[a]));
+            let mut count = vec![0u32; (shape[0] * shape[1] * shape[2]) as usize];
+            let (a, b) = p.cover(shape, lo, hi, |k, i| {
+                let [_, gy, gx] = p.shapes[k];
+                let c = [i as u64 / (gy * gx), (i as u64 / gx) % gy, i as u64 % gx];
+                let size = cell.map(|v| v << k);
+                let span = |ax: usize| c[ax] * size[ax]..((c[ax] + 1) * size[ax]).min(shape[ax]);
+                for z in span(0) {
+                    for y in span(1) {
+                        for x in span(2) {
+                            count[at(z, y, x)] += 1;
+                        }
+                    }
+                }
+            });
+            for ax in 0..3 {
+                assert!(a[ax] <= lo[ax] && hi[ax] <= b[ax]);
+                assert!(a[ax] % 4 == 0 && lo[ax] - a[ax] < 4);
+                assert!((b[ax] % 4 == 0 || b[ax] == shape[ax]) && b[ax] - hi[ax] < 4);
+            }
+            for z in 0..shape[0] {
+                for y in 0..shape[1] {
+                    for x in 0..shape[2] {
+                        let p = [z, y, x];
+                        let inside = (0..3).all(|ax| a[ax] <= p[ax] && p[ax] < b[ax]);
+                        assert_eq!(count[at(z, y, x)], inside as u32, "{lo:?}..{hi:?} at {p:?}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

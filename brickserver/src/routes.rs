@@ -393,8 +393,15 @@ async fn region_index(
     name: &str,
 ) -> Result<Arc<RegionIndex>, Response<Body>> {
     let index = state.index_of(name).ok_or_else(|| no_dataset(name))?;
-    let st = state.clone();
-    match blocking(move || st.regions(index)).await {
+    // Loaded already: no hop to the blocking pool.
+    let loaded = match state.loaded[index].regions.get() {
+        Some(r) => r.clone(),
+        None => {
+            let st = state.clone();
+            blocking(move || st.regions(index)).await
+        }
+    };
+    match loaded {
         Ok(Some(r)) => Ok(r),
         Ok(None) => Err(api_error(
             StatusCode::NOT_FOUND,
@@ -491,8 +498,14 @@ async fn bricks(
         Err(BatchError::Bad(e)) => return api_error(StatusCode::BAD_REQUEST, e),
         Err(BatchError::TooLarge(e)) => return api_error(StatusCode::PAYLOAD_TOO_LARGE, e),
     };
-    let st = state.clone();
-    let arrays = match blocking(move || st.arrays(index)).await {
+    let loaded = match state.loaded[index].arrays.get() {
+        Some(a) => a.clone(),
+        None => {
+            let st = state.clone();
+            blocking(move || st.arrays(index)).await
+        }
+    };
+    let arrays = match loaded {
         Ok(a) => a,
         Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e),
     };
