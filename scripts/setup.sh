@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what building and testing Residency needs on a fresh Debian machine, idempotently:
-# Debian packages (compiler, Python venv), and a Python virtual environment in .venv with the
+# Debian packages (compiler, Python venv, Mesa's lavapipe Vulkan driver, Xvfb), and a Python virtual environment in .venv with the
 # external clients the tests use (zarr-python, ome-zarr-models, tifffile, ...).
 # Source it or run it; it does nothing that is already done.
 set -euo pipefail
@@ -10,6 +10,9 @@ need_apt=()
 command -v cc >/dev/null 2>&1 || need_apt+=(build-essential)
 command -v pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
 python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || need_apt+=(python3-venv)
+# Vulkan on the CPU (Mesa lavapipe) for the viewer where there is no GPU, Xvfb for the window test.
+ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || need_apt+=(mesa-vulkan-drivers libvulkan1)
+command -v Xvfb >/dev/null 2>&1 || need_apt+=(xvfb)
 if [ ${#need_apt[@]} -gt 0 ]; then
   SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
   $SUDO apt-get update -q
