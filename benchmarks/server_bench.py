@@ -198,6 +198,7 @@ def main():
     ap.add_argument("--duration", type=int, default=10, help="seconds per load")
     ap.add_argument("--repeat", type=int, default=3, help="runs per load and server, interleaved; the median is reported")
     ap.add_argument("--soak", type=int, default=0, help="seconds of soak at 256 connections (0: none)")
+    ap.add_argument("--soak-only", action="store_true", help="run only the soak")
     ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
     ap.add_argument("--readme", action="store_true")
     a = ap.parse_args()
@@ -212,6 +213,31 @@ def main():
         subprocess.run([BIN / "ingest", "convert", sample / "nuclei.ome.tif", sample / "membranes.ome.tif", "-o", region_store, "--quiet"], check=True)
 
     results = {}
+    if not a.soak_only:
+        results = run_loads(a, work, store, region_store)
+    soak = run_soak(a, store) if a.soak else None
+    results_dir = ROOT / "benchmarks" / "results"
+    sections = []
+    if results:
+        sections.append(("server-bench", render(results, a), "server"))
+    if soak:
+        sections.append(("server-soak", render_soak(soak, a), "server-soak"))
+    for marker, report, name in sections:
+        (results_dir / f"{name}.md").write_text(report)
+        print(report)
+        if a.readme:
+            readme = ROOT / "README.md"
+            text = readme.read_text()
+            new = re.sub(f"<!-- {marker}:start -->.*<!-- {marker}:end -->", f"<!-- {marker}:start -->\n{report}<!-- {marker}:end -->", text, flags=re.S)
+            readme.write_text(new)
+    if results:
+        (results_dir / "server.json").write_text(json.dumps(results, indent=1))
+    if soak:
+        (results_dir / "server-soak.json").write_text(json.dumps(soak, indent=1))
+
+
+def run_loads(a, work, store, region_store):
+    """The interleaved loads against nginx and brickserver, then the region queries."""
     ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
     ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
     bs, bs_pids, bs_base = start_brickserver(store, "bench")
@@ -237,7 +263,11 @@ def main():
     finally:
         rs.send_signal(signal.SIGTERM)
         rs.wait(timeout=20)
+    return results
 
+
+def run_soak(a, store):
+    """Random chunk GETs at 256 connections for `a.soak` seconds, sampling the server's RSS."""
     soak = None
     if a.soak:
         bs, bs_pids, bs_base = start_brickserver(store, "bench")
@@ -265,17 +295,7 @@ def main():
         finally:
             bs.send_signal(signal.SIGTERM)
             bs.wait(timeout=20)
-
-    report = render(results, soak, a)
-    out = ROOT / "benchmarks" / "results" / "server.md"
-    out.write_text(report)
-    (ROOT / "benchmarks" / "results" / "server.json").write_text(json.dumps({"results": results, "soak": soak}, indent=1))
-    print(report)
-    if a.readme:
-        readme = ROOT / "README.md"
-        text = readme.read_text()
-        new = re.sub(r"<!-- server-bench:start -->.*<!-- server-bench:end -->", f"<!-- server-bench:start -->\n{report}<!-- server-bench:end -->", text, flags=re.S)
-        readme.write_text(new)
+    return soak
 
 
 def cpu_name():
@@ -285,10 +305,10 @@ def cpu_name():
     return platform.processor()
 
 
-def render(results, soak, a):
+def render(results, a):
     lines = [
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
-        f"by `benchmarks/server_bench.py --duration {a.duration} --repeat {a.repeat}{f' --soak {a.soak}' if a.soak else ''}`: oha {subprocess.run([OHA, '--version'], capture_output=True, text=True).stdout.split()[-1]} "
+        f"by `benchmarks/server_bench.py --duration {a.duration} --repeat {a.repeat}`: oha {subprocess.run([OHA, '--version'], capture_output=True, text=True).stdout.split()[-1]} "
         "on the same machine as the servers (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         "each load ran on nginx and brickserver in turn, repeatedly, and the median run of each is shown. "
         "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",
@@ -317,15 +337,19 @@ def render(results, soak, a):
         f"16 connections {r['rps']:,.0f} req/s, p50 {r['p50_ms']:.3f} ms, p99 {r['p99_ms']:.3f} ms; "
         f"non-200 answers {sum(v for c, v in r['codes'].items() if c != 200) + sum(v for c, v in r1['codes'].items() if c != 200)}; server peak RSS {r['rss']:.0f} MB."
     )
-    if soak:
-        rss = [s[1] for s in soak["rss_samples"]]
-        lines.append("")
-        lines.append(
-            f"Soak: {soak['seconds']} s at 256 connections, {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
-            f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors. Server RSS sampled every 5 s: "
-            f"first {rss[0]:.0f} MB, after 60 s {rss[min(12, len(rss) - 1)]:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB."
-        )
     return "\n".join(lines) + "\n"
+
+
+def render_soak(soak, a):
+    rss = [s[1] for s in soak["rss_samples"]]
+    at60 = rss[min(12, len(rss) - 1)]
+    return (
+        f"Soak measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) by "
+        f"`benchmarks/server_bench.py --soak {soak['seconds']} --soak-only`: {soak['seconds']} s of random chunk GETs "
+        f"at 256 connections (oha on the same machine), {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
+        f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors. Server RSS sampled every 5 s: "
+        f"first {rss[0]:.0f} MB, at 60 s {at60:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB.\n"
+    )
 
 
 if __name__ == "__main__":
