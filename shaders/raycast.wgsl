@@ -24,7 +24,8 @@ struct Params {
     volume_leaf: vec4<f32>, // volume extent in leaf units
     background: vec4<f32>,
     leaf_shift: vec4<i32>, // log2 of a leaf edge in level-0 voxels, per axis
-    brick: vec4<u32>, // brick edge in voxels, per axis; w: 1 = skip empty and homogeneous nodes
+    brick: vec4<u32>, // brick edge in voxels, per axis; w: flags (1 skip empty/homogeneous
+    // nodes, 2 substitute missing bricks from other levels)
     slots: vec4<u32>, // atlas slots per axis
 }
 
@@ -173,14 +174,8 @@ fn scaled_frac(cell: i32, local: f32, sh: i32) -> f32 {
     return ldexp(f32(rem) + local, sh);
 }
 
-fn load_voxel(entry: u32, v: vec3<u32>) -> f32 {
-    if entry == ENTRY_EMPTY {
-        return 0.0;
-    }
-    let slot = entry - 2u;
-    usage[slot] = P.size.z;
-    let sc = vec3<u32>(slot % P.slots.x, (slot / P.slots.x) % P.slots.y, slot / (P.slots.x * P.slots.y));
-    let p = vec3<i32>(sc * P.brick.xyz + v);
+// Atlas texel at p, in whichever atlas holds the sample format.
+fn texel(p: vec3<i32>) -> f32 {
     switch P.tree.z {
         case 0u: {
             return f32(textureLoad(atlas_u, p, 0).x);
@@ -192,6 +187,21 @@ fn load_voxel(entry: u32, v: vec3<u32>) -> f32 {
             return textureLoad(atlas_f, p, 0).x;
         }
     }
+}
+
+// Atlas origin of the slot of a resident page-table entry; records the slot's use (LRU).
+fn slot_origin(entry: u32) -> vec3<i32> {
+    let slot = entry - 2u;
+    usage[slot] = P.size.z;
+    let sc = vec3<u32>(slot % P.slots.x, (slot / P.slots.x) % P.slots.y, slot / (P.slots.x * P.slots.y));
+    return vec3<i32>(sc * P.brick.xyz);
+}
+
+fn load_voxel(entry: u32, v: vec3<u32>) -> f32 {
+    if entry == ENTRY_EMPTY {
+        return 0.0;
+    }
+    return texel(slot_origin(entry) + vec3<i32>(v));
 }
 
 fn request(pid: u32, t: f32) {
@@ -241,6 +251,32 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     let base = page_offset(c, l);
     var result = Sampled(0.0, true, 0u);
     var acc = 0.0;
+    // Fast path: all 8 voxels in one brick (one page-table lookup).
+    let b0 = c0 / P.brick.xyz;
+    if all(b0 == c1 / P.brick.xyz) {
+        let pid = base + (b0.z * nb.y + b0.y) * nb.x + b0.x;
+        let entry = page_table[pid];
+        if entry == 0u {
+            result.ok = false;
+            result.missing = pid + 1u;
+            if want {
+                request(pid, t);
+            }
+            return result;
+        }
+        if entry == ENTRY_EMPTY {
+            return result;
+        }
+        let o = slot_origin(entry);
+        let l0 = o + vec3<i32>(c0 % P.brick.xyz);
+        let l1 = o + vec3<i32>(c1 % P.brick.xyz);
+        let x00 = mix(texel(l0), texel(vec3<i32>(l1.x, l0.y, l0.z)), w.x);
+        let x10 = mix(texel(vec3<i32>(l0.x, l1.y, l0.z)), texel(vec3<i32>(l1.x, l1.y, l0.z)), w.x);
+        let x01 = mix(texel(vec3<i32>(l0.x, l0.y, l1.z)), texel(vec3<i32>(l1.x, l0.y, l1.z)), w.x);
+        let x11 = mix(texel(vec3<i32>(l0.x, l1.y, l1.z)), texel(l1), w.x);
+        result.value = mix(mix(x00, x10, w.y), mix(x01, x11, w.y), w.z);
+        return result;
+    }
     for (var k = 0u; k < 8u; k++) {
         let bits = vec3<bool>((k & 1u) != 0u, (k & 2u) != 0u, (k & 4u) != 0u);
         let v = select(c0, c1, bits);
@@ -352,7 +388,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let depth = P.tree.x;
         let leaves = 1 << depth;
         let channels = P.size.w;
-        let skipping = P.brick.w == 1u;
+        let skipping = (P.brick.w & 1u) != 0u;
+        let substitute = (P.brick.w & 2u) != 0u;
         var last_depth = P.tables.x + 1u;
         var iterations = 0u;
         loop {
@@ -398,7 +435,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         empty_bits |= 1u << c;
                     } else {
                         all_empty = false;
-                        if !(lo == hi) {
+                        if !(lo == hi) || !skipping {
                             all_homog = false;
                             if node_word(node, c, 0u) != 0u {
                                 all_unmapped = false;
@@ -435,7 +472,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if (empty_bits & (1u << c)) == 0u {
                         let lo = bitcast<f32>(node_word(node, c, 1u));
                         let hi = bitcast<f32>(node_word(node, c, 2u));
-                        if !(lo == hi) {
+                        if !(lo == hi) || !skipping {
                             _ = sample_level(c, choose_level(c, ray.t), ray.cell, ray.local, true, ray.t);
                         }
                     }
@@ -485,7 +522,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let l = choose_level(c, ray.t);
                 var s = sample_level(c, l, ray.cell, ray.local, true, ray.t);
                 var got = l;
-                if !s.ok {
+                if !s.ok && substitute {
                     let missing = s.missing - 1u;
                     var found = false;
                     // Coarser levels first, then finer ones, among those the node maps.

@@ -519,22 +519,38 @@ fn convert_typed<T: Sample>(
 ) -> Result<ConvertSummary> {
     let started = Instant::now();
     let shown = options.output.display().to_string();
-    let brick = options.brick;
-    if brick.contains(&0) {
+    let requested = options.brick;
+    if requested.contains(&0) {
         bail!("--chunk must be positive");
     }
-    let outer = match options.shard {
-        Some(s) => {
-            if (0..3).any(|i| s[i] == 0 || s[i] % brick[i] != 0) {
-                bail!("--shard {s:?} must be a positive multiple of --chunk {brick:?}");
-            }
-            if options.version == OmeZarrVersion::V04 {
-                bail!("--shard needs Zarr v3: use --ome-zarr-version 0.5");
-            }
-            s
+    if let Some(s) = options.shard {
+        if (0..3).any(|i| s[i] == 0 || s[i] % requested[i] != 0) {
+            bail!("--shard {s:?} must be a positive multiple of --chunk {requested:?}");
         }
+        if options.version == OmeZarrVersion::V04 {
+            bail!("--shard needs Zarr v3: use --ome-zarr-version 0.5");
+        }
+    }
+    // A brick edge longer than the volume would hold only fill value past it: clamp it to the
+    // volume (and a shard to the bricks that cover the volume), so a huge --chunk costs nothing.
+    let shape = inputs.shape;
+    let brick: [u64; 3] = std::array::from_fn(|i| requested[i].min(shape[i]));
+    let outer: [u64; 3] = match options.shard {
+        Some(s) => std::array::from_fn(|i| s[i].min(shape[i].div_ceil(brick[i]) * brick[i])),
         None => brick,
     };
+    let brick_bytes = brick
+        .iter()
+        .try_fold(T::FORMAT.bytes() as u64, |acc, &e| acc.checked_mul(e))
+        .unwrap_or(u64::MAX);
+    // Blosc compresses at most 2 GiB (less its 16-byte header) in one chunk.
+    if brick_bytes > i32::MAX as u64 - 16 {
+        bail!(
+            "--chunk {requested:?}: a brick of {brick:?} {} voxels is {brick_bytes} bytes, more \
+             than the 2 GiB a Blosc chunk can hold",
+            T::FORMAT
+        );
+    }
     let voxel_size = inputs.voxel_size.unwrap_or([1.0; 3]);
     if voxel_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
         bail!("voxel size {voxel_size:?} must be positive and finite");

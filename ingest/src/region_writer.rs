@@ -53,12 +53,21 @@ pub fn write_region_metadata<T: Sample>(
         let percentiles = s.percentiles::<T>(&PERCENTS);
         let valid = s.count > 0;
         let at = |p: f64| percentiles.iter().find(|x| x.percent == p).map(|x| x.value);
+        // The `omero` window holds JSON numbers only: infinities become the largest finite
+        // values of the type, and a NaN (never expected) 0.
+        let finite = |v: f64| {
+            if v.is_nan() {
+                0.0
+            } else {
+                v.clamp(-(f32::MAX as f64), f32::MAX as f64)
+            }
+        };
         displays.push(ChannelDisplay {
             label: labels[c].clone(),
-            min: if valid { s.min } else { 0.0 },
-            max: if valid { s.max } else { 0.0 },
-            start: at(0.1).unwrap_or(0.0),
-            end: at(99.9).unwrap_or(0.0),
+            min: if valid { finite(s.min) } else { 0.0 },
+            max: if valid { finite(s.max) } else { 0.0 },
+            start: finite(at(0.1).unwrap_or(0.0)),
+            end: finite(at(99.9).unwrap_or(0.0)),
         });
         channel_stats.push(ChannelStatistics {
             label: labels[c].clone(),

@@ -507,7 +507,16 @@ impl ChannelAccumulator {
                         let lo = T::key_lower_edge(k).max(self.min);
                         let hi = T::key_lower_edge(k + 1).min(self.max);
                         let frac = ((target - below as f64) / n as f64).clamp(0.0, 1.0);
-                        value = if T::FORMAT.is_float() {
+                        value = if lo.is_infinite() {
+                            // The key of -inf or +inf holds that infinity alone.
+                            lo
+                        } else if T::FORMAT.is_float() {
+                            // The key just below +inf ends at the largest finite f32.
+                            let hi = if hi.is_infinite() {
+                                f32::MAX as f64
+                            } else {
+                                hi
+                            };
                             lo + (hi - lo) * frac
                         } else {
                             (lo + (hi - lo) * frac).round()
@@ -604,6 +613,40 @@ mod tests {
             (c.exact.min.clone(), c.exact.max.clone()),
             (vec![0, 16], vec![15, 19])
         );
+    }
+
+    #[test]
+    fn percentiles_reaching_infinities_are_those_infinities() {
+        let vals = [
+            f32::NEG_INFINITY,
+            -1.0,
+            0.5,
+            2.0,
+            f32::INFINITY,
+            f32::INFINITY,
+            f32::NAN,
+            3.3e38,
+        ];
+        let mut scratch = StatsScratch::default();
+        let brick = BrickStats::of_rows([&vals[..]].into_iter(), &mut scratch, false);
+        assert_eq!((brick.count, brick.nan), (7, 1));
+        assert_eq!((brick.min, brick.max), (f64::NEG_INFINITY, f64::INFINITY));
+        assert!(brick.sum.is_nan(), "+inf with -inf sums to NaN");
+        let mut acc = ChannelAccumulator::default();
+        acc.add(&brick);
+        let p = acc.percentiles::<f32>(&[0.1, 50.0, 70.0, 99.9]);
+        assert_eq!(p[0].value, f64::NEG_INFINITY);
+        // The median (2.0) lies in its fine key; the 70th percentile (3.3e38) in the key just
+        // below +inf, which ends at the largest finite f32.
+        let key_of = |v: f64| (v as f32).key();
+        assert_eq!(key_of(p[1].value), 2.0f32.key(), "{:?}", p[1]);
+        assert_eq!(key_of(p[2].value), 3.3e38f32.key(), "{:?}", p[2]);
+        assert!(p[2].value <= f32::MAX as f64, "{:?}", p[2]);
+        assert_eq!(p[3].value, f64::INFINITY);
+        // Only +inf: the mean is +inf.
+        let pos = [1.0f32, f32::INFINITY];
+        let b = BrickStats::of_rows([&pos[..]].into_iter(), &mut scratch, false);
+        assert_eq!(b.sum / b.count as f64, f64::INFINITY);
     }
 
     #[test]

@@ -11,6 +11,7 @@
 
 #![warn(missing_docs)]
 
+pub mod float;
 pub mod server;
 pub mod wire;
 
@@ -91,11 +92,17 @@ pub struct MinMaxGrid {
 pub struct ChannelStatistics {
     /// Channel label, as in `omero.channels[].label`.
     pub label: String,
-    /// Smallest value (NaN excluded). `null` when every voxel is NaN.
+    /// Smallest value (NaN excluded). `null` when every voxel is NaN; an infinity is written
+    /// as a string (see [`float`]).
+    #[serde(with = "float::option")]
     pub min: Option<f64>,
-    /// Largest value (NaN excluded). `null` when every voxel is NaN.
+    /// Largest value (NaN excluded). `null` when every voxel is NaN; an infinity is written
+    /// as a string (see [`float`]).
+    #[serde(with = "float::option")]
     pub max: Option<f64>,
-    /// Mean of the non-NaN voxels. `null` when every voxel is NaN.
+    /// Mean of the non-NaN voxels. `null` when every voxel is NaN. With infinities it is
+    /// `"Infinity"` or `"-Infinity"` (one sign present) or `"NaN"` (both present).
+    #[serde(with = "float::option")]
     pub mean: Option<f64>,
     /// Number of voxels in the channel.
     pub voxels: u64,
@@ -117,6 +124,7 @@ pub struct ChannelStatistics {
 pub struct Percentile {
     /// Percent, in `[0, 100]`.
     pub percent: f64,
-    /// Value at that percentile.
+    /// Value at that percentile (an infinity is written as a string, see [`float`]).
+    #[serde(with = "float")]
     pub value: f64,
 }

@@ -50,9 +50,13 @@ pub struct RegionAnswer {
     /// The box asked for.
     #[serde(rename = "box")]
     pub query: VoxelBox,
-    /// Smallest non-NaN value in `minmax_box`; `null` when there is none.
+    /// Smallest non-NaN value in `minmax_box`; `null` when there is none. An infinity is
+    /// written as `"Infinity"` or `"-Infinity"` (see [`crate::float`]).
+    #[serde(with = "crate::float::option")]
     pub min: Option<f64>,
-    /// Largest non-NaN value in `minmax_box`; `null` when there is none.
+    /// Largest non-NaN value in `minmax_box`; `null` when there is none. An infinity is
+    /// written as `"Infinity"` or `"-Infinity"` (see [`crate::float`]).
+    #[serde(with = "crate::float::option")]
     pub max: Option<f64>,
     /// The voxels `min` and `max` were taken over: the box widened to whole cells.
     pub minmax_box: VoxelBox,

@@ -92,6 +92,19 @@ def assert_same_bits(a: np.ndarray, b: np.ndarray):
     assert a.tobytes() == b.tobytes()
 
 
+def histogram_edges(written) -> np.ndarray:
+    """Bin edges as written (an infinite edge is JSON null: -inf first, +inf elsewhere)."""
+    return np.array([(-np.inf if i == 0 else np.inf) if e is None else e for i, e in enumerate(written)], np.float64)
+
+
+def histogram_bins_of(edges: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """The bin of each non-NaN value: bin i counts edges[i] <= v < edges[i+1], and +inf
+    counts in the bin whose upper edge is +inf."""
+    idx = np.searchsorted(edges, values, side="right") - 1
+    top = int(np.searchsorted(edges, np.inf, side="left"))  # first +inf edge
+    return np.where(values == np.inf, top - 1, idx)
+
+
 def assert_region_metadata(store: pathlib.Path):
     """Min/max cells equal the haloed range of their voxels (so they bound every trilinear
     sample inside them), exact cells the range of their own voxels, coarser grids are the min of mins / max of maxes, and each brick's
@@ -102,7 +115,8 @@ def assert_region_metadata(store: pathlib.Path):
     bins = meta["histogram_bins"]
     assert meta["version"] == "0.2"
     for lvl in meta["levels"]:
-        data = g[lvl["image"]][...].astype(np.float64)
+        with np.errstate(invalid="ignore"):  # signalling NaNs
+            data = g[lvl["image"]][...].astype(np.float64)
         c_count, nz, ny, nx = data.shape
         # "minmax": haloed ranges (conservative for trilinear samples); "range": exact.
         for kind, h in (("minmax", halo), ("range", 0)):
@@ -140,7 +154,7 @@ def assert_region_metadata(store: pathlib.Path):
                 prev = cur
         hist = g[lvl["histogram"]][...]
         for c in range(c_count):
-            edges = np.array([np.inf if e is None else e for e in meta["channels"][c]["histogram_edges"]])
+            edges = histogram_edges(meta["channels"][c]["histogram_edges"])
             for bz in range(hist.shape[1]):
                 for by in range(hist.shape[2]):
                     for bx in range(hist.shape[3]):
@@ -154,6 +168,6 @@ def assert_region_metadata(store: pathlib.Path):
                         counts = hist[c, bz, by, bx]
                         assert counts.sum() == vox.size
                         want = np.zeros(bins, dtype=np.int64)
-                        idx = np.searchsorted(edges, vox, side="right") - 1
+                        idx = histogram_bins_of(edges, vox)
                         np.add.at(want, idx, 1)
                         np.testing.assert_array_equal(counts, want)

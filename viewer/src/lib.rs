@@ -6,13 +6,18 @@
 //!   GPU renderer and the reference;
 //! - [`source`]: where volume metadata and bricks come from (HTTP brick server or local store);
 //! - [`reference`](mod@reference): the f64 CPU reference ray caster;
-//! - [`image`]: linear-RGB images, PNG and EXR; [`metrics`]: PSNR, SSIM, max abs error.
+//! - [`image`]: linear-RGB images, PNG and EXR; [`metrics`]: PSNR, SSIM, max abs error;
+//! - [`octree`]: the residency octree (partial-residency masks and value ranges per node);
+//! - [`gpu`]: the wgpu renderer: device, brick cache, page tables, the `raycast.wgsl` pass and
+//!   the progressive streaming loop;
+//! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics).
 
 #![warn(missing_docs)]
 
 pub mod cli;
 pub mod gpu;
 pub mod image;
+pub mod interactive;
 pub mod metrics;
 pub mod octree;
 pub mod reference;

@@ -25,6 +25,8 @@ enum Command {
     Reference(Box<cli::reference::Args>),
     /// Compare two images: PSNR, SSIM, max abs error, and an EXR error map.
     Compare(cli::compare::Args),
+    /// Open an interactive window: orbit, pan, zoom, channel controls, statistics.
+    View(Box<cli::view::Args>),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +40,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cli::render::run(args),
         Command::Reference(args) => cli::reference::run(*args),
         Command::Compare(args) => cli::compare::run(args),
+        Command::View(args) => cli::view::run(*args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

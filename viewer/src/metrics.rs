@@ -36,6 +36,26 @@ pub struct Metrics {
     pub mse: f64,
 }
 
+/// Refuses images holding NaN or infinite values: their errors would be NaN, which PSNR would
+/// turn into `null` (read as "identical") and the maximum would skip.
+fn check_finite(a: &RgbImage, b: &RgbImage) -> Result<()> {
+    for (which, img) in [("first", a), ("second", b)] {
+        if let Some(i) = img
+            .pixels
+            .iter()
+            .position(|p| p.iter().any(|v| !v.is_finite()))
+        {
+            anyhow::bail!(
+                "the {which} image has a non-finite pixel {:?} at ({}, {}); metrics need finite images",
+                img.pixels[i],
+                i % img.width.max(1),
+                i / img.width.max(1)
+            );
+        }
+    }
+    Ok(())
+}
+
 fn check_sizes(a: &RgbImage, b: &RgbImage) -> Result<()> {
     ensure!(
         a.width == b.width && a.height == b.height,
@@ -51,6 +71,7 @@ fn check_sizes(a: &RgbImage, b: &RgbImage) -> Result<()> {
 /// Compares `a` with `b` (same size, at least 11×11).
 pub fn compare(a: &RgbImage, b: &RgbImage) -> Result<Metrics> {
     check_sizes(a, b)?;
+    check_finite(a, b)?;
     let mut sum_sq = 0.0;
     let mut max = 0.0f64;
     for (p, q) in a.pixels.iter().zip(&b.pixels) {
@@ -148,6 +169,26 @@ pub fn error_map(a: &RgbImage, b: &RgbImage) -> Result<RgbImage> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn non_finite_pixels_are_refused_not_averaged_away() {
+        let a = RgbImage::filled(12, 12, [0.5; 3]);
+        let mut b = a.clone();
+        b.pixels[12 * 3 + 5] = [0.5, f32::NAN, 0.5];
+        let e = compare(&a, &b).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "the second image has a non-finite pixel [0.5, NaN, 0.5] at (5, 3); metrics need finite images"
+        );
+        b.pixels[12 * 3 + 5] = [0.5; 3];
+        b.pixels[0] = [f32::INFINITY, 0.0, 0.0];
+        assert!(
+            compare(&b, &a)
+                .unwrap_err()
+                .to_string()
+                .starts_with("the first image")
+        );
+    }
 
     #[test]
     fn identical_images_are_perfect() {

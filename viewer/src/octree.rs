@@ -18,15 +18,18 @@
 //! trilinear sample of the full-resolution data inside the node. Emptiness is a property of
 //! that data: a node transparent at full resolution is skipped whichever level is sampled
 //! (coarser levels only approximate it; their wider halos would make every node non-empty).
-//! Never computed from voxels: a store without region metadata gives every in-volume node the
-//! unknown range `(−∞, +∞)` (no skipping), with a warning.
+//! Never computed from voxels when the server has them. A store without region metadata
+//! starts every in-volume node at the unknown range `(−∞, +∞)` (no skipping), with a warning,
+//! and falls back to ranges computed from level-0 bricks as they arrive
+//! ([`ResidencyOctree::refine_ranges`]): a leaf gets a range once one brick holds all the
+//! voxels its samples can read.
 
 use std::collections::HashSet;
 use std::ops::Range;
 
 use anyhow::{Result, bail, ensure};
 
-use crate::source::{BrickKey, VolumeInfo};
+use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
 /// Deepest leaf depth accepted (`(8^11 − 1)/7` ≈ 1.2 G nodes is already far too many).
 pub const MAX_DEPTH: u32 = 10;
@@ -475,6 +478,100 @@ impl ResidencyOctree {
             }
         }
         masks
+    }
+
+    /// Fallback for a store without region metadata: sets the range of every leaf whose
+    /// trilinear footprint (its voxels plus one on each side, clamped to the volume) lies
+    /// inside level-0 brick `key`, from `voxels`, and updates ancestors. Returns how many
+    /// leaves got a range. Does nothing when the ranges came from the server.
+    pub fn refine_ranges(&mut self, key: &BrickKey, voxels: &BrickVoxels) -> usize {
+        if !self.unknown_ranges || key.level != 0 {
+            return 0;
+        }
+        let Some(slot) = self.slot_of(key.channel as usize) else {
+            return 0;
+        };
+        let g = &self.geometry;
+        let brick = [key.brick[2], key.brick[1], key.brick[0]];
+        let n = g.volume_voxels;
+        // Per axis: leaves whose footprint lies in the brick, with that footprint.
+        let mut axes: [Vec<(u64, u64, u64)>; 3] = Default::default();
+        for a in 0..3 {
+            let (b0, b1) = (
+                brick[a] * g.brick[a],
+                ((brick[a] + 1) * g.brick[a]).min(n[a]),
+            );
+            for k in g.leaves_of_brick_axis(0, a, brick[a]) {
+                let (lo, hi) = g.leaf_interval(a, k);
+                if lo >= n[a] as f64 {
+                    continue;
+                }
+                let first = ((lo - 0.5).floor().max(0.0)) as u64;
+                let last = ((hi - 0.5).ceil().min((n[a] - 1) as f64)) as u64;
+                if first >= b0 && last < b1 {
+                    axes[a].push((k, first - b0, last - b0));
+                }
+            }
+        }
+        let bs = g.brick;
+        let d = g.depth;
+        let m = self.channels.len();
+        let mut count = 0;
+        for &(kz, z0, z1) in &axes[2] {
+            for &(ky, y0, y1) in &axes[1] {
+                for &(kx, x0, x1) in &axes[0] {
+                    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+                    for z in z0..=z1 {
+                        for y in y0..=y1 {
+                            for x in x0..=x1 {
+                                let v = voxels.value(((z * bs[1] + y) * bs[0] + x) as usize);
+                                if !v.is_nan() {
+                                    lo = lo.min(v);
+                                    hi = hi.max(v);
+                                }
+                            }
+                        }
+                    }
+                    let leaf = [kx, ky, kz];
+                    let i = node_index(d, leaf) * m + slot;
+                    if self.ranges[i] != (lo, hi) {
+                        self.ranges[i] = (lo, hi);
+                        self.mark_dirty(node_index(d, leaf));
+                        self.propagate_range_up(leaf, slot);
+                    }
+                    count += 1;
+                }
+            }
+        }
+        count
+    }
+
+    /// Recomputes ancestors' ranges of `leaf` as the union of their children's, stopping at
+    /// the first unchanged one.
+    fn propagate_range_up(&mut self, leaf: [u64; 3], slot: usize) {
+        let m = self.channels.len();
+        let mut c = leaf;
+        let mut d = self.geometry.depth;
+        while d > 0 {
+            c = c.map(|v| v >> 1);
+            d -= 1;
+            let mut r = (f64::INFINITY, f64::NEG_INFINITY);
+            for k in 0..8u64 {
+                let child = [
+                    2 * c[0] + (k & 1),
+                    2 * c[1] + ((k >> 1) & 1),
+                    2 * c[2] + (k >> 2),
+                ];
+                let cr = self.ranges[node_index(d + 1, child) * m + slot];
+                r = (r.0.min(cr.0), r.1.max(cr.1));
+            }
+            let n = node_index(d, c);
+            if self.ranges[n * m + slot] == r {
+                break;
+            }
+            self.ranges[n * m + slot] = r;
+            self.mark_dirty(n);
+        }
     }
 
     fn seed_unknown(&mut self) {

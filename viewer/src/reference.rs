@@ -20,6 +20,12 @@ use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
 /// Default step, as a fraction of the finest level-0 voxel spacing.
 pub const DEFAULT_STEP_FRACTION: f64 = 0.25;
 
+/// The most steps one ray may take: past it the render stops with an error rather than running
+/// for hours (a volume whose voxels are 10⁶ times longer in z than in x, stepped at a fraction
+/// of the x spacing). Without early termination a ray that would need more is refused before
+/// its first step.
+pub const MAX_STEPS_PER_RAY: u64 = 1 << 24;
+
 /// How the reference is rendered.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReferenceOptions {
@@ -188,6 +194,26 @@ pub fn render(
     let reference_step = spacing_xyz.iter().copied().fold(f64::INFINITY, f64::min);
     let step = options.step_fraction * reference_step;
     let extent = extent_xyz(info);
+    ensure!(
+        extent.iter().all(|e| e.is_finite() && *e > 0.0) && step > 0.0 && step.is_finite(),
+        "{}: volume extent {extent:?} (x, y, z) and step {step} must be finite and positive",
+        info.name
+    );
+    let cam = &scene.camera;
+    let (f, r, u) = cam.basis();
+    ensure!(
+        cam.eye.iter().chain(&cam.target).all(|v| v.is_finite())
+            && [f, r, u].iter().flatten().all(|v| v.is_finite())
+            && cam.fov_y_degrees > 0.0
+            && cam.fov_y_degrees < 180.0,
+        "camera eye {:?}, target {:?}, up {:?} and field of view {}° do not define a view: they \
+         must be finite, eye and target distinct, up not along the view, the field of view \
+         between 0 and 180°",
+        cam.eye,
+        cam.target,
+        cam.up,
+        cam.fov_y_degrees
+    );
     let pixels = (0..options.width * options.height)
         .into_par_iter()
         .map(|p| {
@@ -245,7 +271,20 @@ fn march(
         return Ok((colour, t));
     };
     let segments = ((t1 - t0) / step).ceil() as u64;
+    let too_long = || {
+        anyhow::anyhow!(
+            "a ray crossing {:e} of the volume needs {segments} steps of {step:e}, more than \
+             the {MAX_STEPS_PER_RAY} allowed: use a larger --step",
+            t1 - t0
+        )
+    };
+    if segments > MAX_STEPS_PER_RAY && min_transmittance <= 0.0 {
+        return Err(too_long());
+    }
     for i in 0..segments {
+        if i == MAX_STEPS_PER_RAY {
+            return Err(too_long());
+        }
         if t <= min_transmittance || t == 0.0 {
             break;
         }

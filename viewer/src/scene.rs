@@ -67,6 +67,15 @@ fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
 
 fn normalize(v: [f64; 3]) -> [f64; 3] {
     let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    if !(1e-150..=1e150).contains(&n) {
+        // The squares overflow or lose precision (a camera 1e300 units away): scale first.
+        let m = v[0].abs().max(v[1].abs()).max(v[2].abs());
+        if m > 0.0 && m.is_finite() {
+            let w = v.map(|x| x / m);
+            let n = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+            return w.map(|x| x / n);
+        }
+    }
     v.map(|x| x / n)
 }
 
@@ -167,6 +176,21 @@ pub struct Scene {
     /// Linear RGB background.
     #[serde(default)]
     pub background: [f64; 3],
+}
+
+/// Length of the diagonal of a box of `extent`, without overflow or underflow for extents
+/// near the ends of the `f64` range (voxel sizes of `1e300` or `1e-300`).
+pub fn box_diagonal(e: [f64; 3]) -> f64 {
+    let d = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+    if d.is_finite() && d > 0.0 {
+        return d;
+    }
+    let m = e[0].max(e[1]).max(e[2]);
+    if !(m.is_finite() && m > 0.0) {
+        return d;
+    }
+    let [a, b, c] = e.map(|v| v / m);
+    m * (a * a + b * b + c * c).sqrt()
 }
 
 /// Opacity of a step of length `step`, given opacity `a` at the reference step `reference`.

@@ -166,3 +166,65 @@ fn tf_prefix_marks_exactly_the_bins_with_opacity() {
         );
     }
 }
+
+#[test]
+fn renderer_rejects_bad_setups_with_errors() {
+    use residency_viewer::gpu::renderer::{RenderOptions, Renderer};
+    use residency_viewer::scene::{Camera, Scene};
+    let gpu = gpu();
+    let src = SyntheticSource::new(SampleType::U8, [8, 8, 8], [1.0; 3], [8; 3], 4, 1, |_, _| {
+        1.0
+    });
+    let style = |channel| ChannelStyle {
+        channel,
+        visible: true,
+        color: [1.0; 3],
+        opacity: vec![OpacityPoint {
+            value: 0.0,
+            opacity: 0.1,
+        }],
+    };
+    let scene = |channels| Scene {
+        camera: Camera {
+            eye: [-9.0, 4.0, 4.0],
+            target: [4.0; 3],
+            up: [0.0, 0.0, 1.0],
+            fov_y_degrees: 30.0,
+        },
+        channels,
+        background: [0.0; 3],
+    };
+    let err = |s: &Scene, o: RenderOptions| {
+        format!("{:#}", Renderer::new(&gpu, src.info(), s, o).err().unwrap())
+    };
+    let ok = scene(vec![style(0)]);
+    assert!(
+        err(
+            &ok,
+            RenderOptions {
+                width: 0,
+                ..Default::default()
+            }
+        )
+        .contains("is empty")
+    );
+    assert!(err(&scene(vec![style(3)]), RenderOptions::default()).contains("no channel 3"));
+    assert!(
+        err(
+            &scene((0..9).map(|_| style(0)).collect()),
+            RenderOptions::default()
+        )
+        .contains("at most 8")
+    );
+    assert!(
+        err(
+            &ok,
+            RenderOptions {
+                cache_bytes: 10,
+                ..Default::default()
+            }
+        )
+        .contains("holds no brick")
+    );
+    assert!(Renderer::new(&gpu, src.info(), &ok, RenderOptions::default()).is_ok());
+}

@@ -164,3 +164,48 @@ fn ranges_come_from_the_minmax_grids() {
     assert!(tree.unknown_ranges());
     assert_eq!(tree.range(0, 0), (f64::NEG_INFINITY, f64::INFINITY));
 }
+
+#[test]
+fn without_minmax_ranges_come_from_level0_bricks() {
+    // 16³ u8, bricks 8³, value = x; leaves of 2³ voxels (depth 3).
+    let src = SyntheticSource::new(
+        SampleType::U8,
+        [16, 16, 16],
+        [1.0; 3],
+        [8; 3],
+        4,
+        1,
+        |_, [x, _, _]| x as f64,
+    )
+    .without_minmax();
+    let mut tree = ResidencyOctree::new(src.info(), &[0], 3).unwrap();
+    let key = BrickKey {
+        level: 0,
+        channel: 0,
+        brick: [0, 0, 0],
+    };
+    let voxels = src.fetch(&[key]).pop().unwrap().unwrap();
+    tree.take_dirty();
+    // Leaves 0..4 per axis overlap the brick; a leaf's footprint is its 2 voxels plus one on
+    // each side, so leaves 0, 1, 2 fit in voxels 0..8 but leaf 3 (voxels 5..=8) does not.
+    assert_eq!(tree.refine_ranges(&key, &voxels), 27);
+    assert_eq!(tree.range(node_index(3, [0, 0, 0]), 0), (0.0, 2.0));
+    assert_eq!(tree.range(node_index(3, [2, 1, 0]), 0), (3.0, 6.0));
+    assert_eq!(
+        tree.range(node_index(3, [3, 0, 0]), 0),
+        (f64::NEG_INFINITY, f64::INFINITY)
+    );
+    // The depth-2 parent of leaves 0..2 is known once all 8 children are: not yet (leaf 3
+    // of the next parent is unknown, but parent [0,0,0] covers leaves 0..1 only).
+    assert_eq!(tree.range(node_index(2, [0, 0, 0]), 0), (0.0, 4.0));
+    assert_eq!(tree.range(0, 0), (f64::NEG_INFINITY, f64::INFINITY));
+    assert!(tree.take_dirty().is_some());
+    // A level-1 brick changes nothing.
+    let k1 = BrickKey {
+        level: 1,
+        channel: 0,
+        brick: [0, 0, 0],
+    };
+    let v1 = src.fetch(&[k1]).pop().unwrap().unwrap();
+    assert_eq!(tree.refine_ranges(&k1, &v1), 0);
+}

@@ -1,7 +1,7 @@
 //! Converged GPU renders match the f64 reference (`reference::render`, level 0, step ¼
-//! voxel): PSNR ≥ 40 dB and SSIM ≥ 0.99 for 1 and 3 channels, u8/u16/f32, with the camera
-//! outside, inside and on a brick boundary, and with rays parallel to an axis. Renders are
-//! forced to level 0 (the reference's resolution) and must converge (no request left).
+//! voxel): PSNR ≥ 40 dB and SSIM ≥ 0.99 for 1 and 3 channels, u8/u16/i16/u32/f32, with the
+//! camera outside, inside and on a brick boundary, and with rays parallel to an axis. Renders
+//! are forced to level 0 (the reference's resolution) and must converge (no request left).
 
 mod render_common;
 
@@ -235,4 +235,21 @@ fn coarse_level_addressing_matches_a_reference_of_that_level() {
     let m = check("coarse-level", &p, &img, &reference(&coarse, &s2, 64, 64));
     assert!(m.psnr_db >= 35.0, "{}", m.psnr_db);
     assert!(m.ssim >= 0.98, "{}", m.ssim);
+}
+
+#[test]
+fn signed_and_u32_formats() {
+    // i16 (the `texture_3d<i32>` atlas) with negative values, and u32.
+    let src = blob(SampleType::I16, 20000.0, -8000.0, 1);
+    let s = scene(
+        camera([45.0, -20.0, 30.0], [16.0, 16.0, 16.0]),
+        vec![ramp(0, [0.4, 1.0, 0.6], -2000.0, 12000.0, 0.2)],
+    );
+    assert_matches("i16", &src, &s, 48, 48);
+    let src = blob(SampleType::U32, 3.0e6, 1.0e5, 1);
+    let s = scene(
+        camera([45.0, -20.0, 30.0], [16.0, 16.0, 16.0]),
+        vec![ramp(0, [0.4, 1.0, 0.6], 5.0e5, 3.0e6, 0.2)],
+    );
+    assert_matches("u32", &src, &s, 48, 48);
 }

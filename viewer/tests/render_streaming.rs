@@ -249,9 +249,17 @@ fn distant_view_uses_coarse_levels() {
 fn missing_region_metadata_still_renders() {
     let src = Arc::new(half_empty().without_minmax());
     let scene = half_scene();
-    let (p, img) = render(&src, &scene, full_res(48, 48), 20);
+    // Leaves of 2 voxels, so most leaves' footprints fit inside one 8³ brick.
+    let options = RenderOptions {
+        octree_depth: Some(4),
+        ..full_res(48, 48)
+    };
+    let (p, img) = render(&src, &scene, options, 20);
     assert!(p.converged);
+    // Nothing is known before bricks arrive; then ranges computed from level-0 bricks let
+    // the transparent half be skipped.
     assert_eq!(p.frames[0].shader.empty_nodes_skipped, 0);
+    assert!(p.frames.last().unwrap().shader.empty_nodes_skipped > 0);
     let m = check("no-minmax", &p, &img, &reference(&src, &scene, 48, 48));
     assert!(m.psnr_db >= 40.0);
 }
@@ -352,14 +360,53 @@ fn without_skipping_the_transparent_region_is_fetched_and_the_image_is_the_same(
     let skip = Arc::new(half_empty());
     let (ps, img_s) = render(&skip, &scene, full_res(48, 48), 20);
     let all = Arc::new(half_empty());
-    let options = RenderOptions { empty_space_skipping: false, ..full_res(48, 48) };
+    let options = RenderOptions {
+        empty_space_skipping: false,
+        ..full_res(48, 48)
+    };
     let (pa, img_a) = render(&all, &scene, options, 20);
     assert!(ps.converged && pa.converged);
     assert!(skip.fetch_log().iter().all(|k| k.brick[2] >= 1));
-    assert!(all.fetch_log().iter().any(|k| k.brick[2] == 0));
+    assert!(
+        all.fetch_log().iter().any(|k| k.brick[2] == 0),
+        "{:?} {:?}",
+        all.fetch_log(),
+        pa.frames
+    );
     let (s, a) = (ps.frames.last().unwrap(), pa.frames.last().unwrap());
     assert_eq!(a.shader.empty_nodes_skipped, 0);
-    assert!(a.shader.samples > s.shader.samples, "{} vs {}", a.shader.samples, s.shader.samples);
+    assert!(
+        a.shader.samples > s.shader.samples,
+        "{} vs {}",
+        a.shader.samples,
+        s.shader.samples
+    );
     let m = residency_viewer::metrics::compare(&img_s, &img_a).unwrap();
     assert!(m.psnr_db >= 45.0, "{}", m.psnr_db);
+}
+
+#[test]
+fn without_substitution_a_failed_brick_leaves_a_hole() {
+    let bad = BrickKey {
+        level: 0,
+        channel: 0,
+        brick: [1, 1, 2],
+    };
+    let src = Arc::new(half_empty().fail(bad));
+    let options = RenderOptions {
+        substitution: false,
+        ..full_res(48, 48)
+    };
+    let (p, _) = render(&src, &half_scene(), options, 20);
+    assert!(p.converged);
+    let last = p.frames.last().unwrap();
+    // The level-1 parent is resident, but nothing stands in for the missing brick.
+    assert!(src.fetch_log().contains(&BrickKey {
+        level: 1,
+        channel: 0,
+        brick: [0, 0, 1]
+    }));
+    assert_eq!(last.shader.bricks_substituted, 0);
+    assert!(last.shader.samples_without_data > 0);
+    assert_eq!(last.shader.bricks_requested, 1);
 }

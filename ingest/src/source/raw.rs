@@ -73,7 +73,16 @@ impl RawSource {
             .with_context(|| format!("{shown}: cannot stat"))?
             .len();
         let [x, y, z] = dims;
-        let expected = options.header_bytes + x * y * z * format.bytes() as u64;
+        let Some(expected) = [x, y, z]
+            .iter()
+            .try_fold(format.bytes() as u64, |acc, &d| acc.checked_mul(d))
+            .and_then(|data| data.checked_add(options.header_bytes))
+        else {
+            bail!(
+                "{shown}: --dims {x},{y},{z} of {format} with a {}-byte header is more than 2^64 bytes",
+                options.header_bytes
+            );
+        };
         if actual != expected {
             bail!(
                 "{shown}: raw file is {actual} bytes, but --dims {x},{y},{z} of {format} with a {}-byte header need {expected} bytes",

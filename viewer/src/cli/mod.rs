@@ -4,3 +4,4 @@ pub mod compare;
 pub mod reference;
 pub mod render;
 pub mod scene_args;
+pub mod view;

@@ -7,7 +7,7 @@ use std::str::FromStr;
 
 use anyhow::{Context, Result, bail, ensure};
 
-use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
+use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, box_diagonal};
 use crate::source::{BrickSource, HttpSource, LocalSource, SampleType, VolumeInfo};
 
 /// Where the volume comes from: a brick server and dataset name, or a local store.
@@ -166,7 +166,7 @@ impl CameraSpec {
                 distance,
             } => {
                 let e = volume_extent(info);
-                let diagonal = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
+                let diagonal = box_diagonal(e);
                 let (a, el) = (azimuth.to_radians(), elevation.to_radians());
                 let dir = [el.cos() * a.sin(), -el.sin(), -el.cos() * a.cos()];
                 // The derivative of the eye position with respect to the elevation: always
@@ -350,13 +350,15 @@ pub struct SceneArgs {
 /// - with neither above `lo`, the sample type's range (`[0, 1]` for float).
 pub fn default_opacity(info: &VolumeInfo, channel: usize) -> Vec<OpacityPoint> {
     let d = info.display.get(channel).cloned().unwrap_or_default();
-    let lo = d
-        .window
-        .map(|w| w[0])
-        .or(d.range.map(|r| r[0]))
+    // Only finite hints count: a float channel holding ±Inf has an infinite range (and maybe
+    // median), and a ramp ending at infinity would give NaN opacities.
+    let finite = |v: &f64| v.is_finite();
+    let end = |pair: Option<[f64; 2]>, i: usize| pair.map(|p| p[i]).filter(finite);
+    let lo = end(d.window, 0)
+        .or(end(d.range, 0))
         .unwrap_or(0.0)
-        .max(d.median.unwrap_or(f64::NEG_INFINITY));
-    let hi = match (d.window.map(|w| w[1]), d.range.map(|r| r[1])) {
+        .max(d.median.filter(finite).unwrap_or(f64::NEG_INFINITY));
+    let hi = match (end(d.window, 1), end(d.range, 1)) {
         (Some(end), Some(max)) if max > end => 0.5 * (end + max),
         (Some(end), _) => end,
         (None, Some(max)) => max,
@@ -567,6 +569,65 @@ mod tests {
         let diagonal = (40.0f64 * 40.0 + 20.0 * 20.0 + 30.0 * 30.0).sqrt();
         let len = d.iter().map(|x| x * x).sum::<f64>().sqrt();
         assert!((len - 1.5 * diagonal).abs() < 1e-9);
+    }
+
+    #[test]
+    fn infinite_hints_give_a_finite_ramp() {
+        // A float channel holding -Inf and +Inf: its range (and median) may be infinite.
+        let mut info = info();
+        info.sample_type = SampleType::F32;
+        info.display[0] = ChannelDisplay {
+            color: None,
+            window: Some([-2.0, 3.0]),
+            range: Some([f64::NEG_INFINITY, f64::INFINITY]),
+            median: Some(0.5),
+        };
+        info.display[1] = ChannelDisplay {
+            color: None,
+            window: Some([f64::NEG_INFINITY, 4.0]),
+            range: Some([1.0, f64::INFINITY]),
+            median: Some(f64::INFINITY),
+        };
+        let tf = |c| {
+            default_opacity(&info, c)
+                .iter()
+                .map(|p| p.value)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(tf(0), [0.5, 3.0]);
+        assert_eq!(tf(1), [1.0, 4.0]);
+        for c in 0..2 {
+            let style = ChannelStyle {
+                channel: c,
+                visible: true,
+                color: [1.0; 3],
+                opacity: default_opacity(&info, c),
+            };
+            for v in [f64::NEG_INFINITY, -1e38, 0.0, 3e38, f64::INFINITY] {
+                assert!(style.opacity_at(v).is_finite(), "{c} {v}");
+            }
+        }
+    }
+
+    #[test]
+    fn orbits_of_huge_and_tiny_volumes_stay_finite() {
+        for v in [1e300, 1e-300] {
+            let mut info = info();
+            info.voxel_size = [v; 3];
+            let cam = DEFAULT_ORBIT.camera(&info, 30.0);
+            let (f, r, u) = cam.basis();
+            assert!(
+                cam.eye
+                    .iter()
+                    .chain(&f)
+                    .chain(&r)
+                    .chain(&u)
+                    .all(|x| x.is_finite()),
+                "{v}: {cam:?}"
+            );
+            let d = box_diagonal(volume_extent(&info));
+            assert!((d / v / 6900f64.sqrt() - 1.0).abs() < 1e-12, "{d}");
+        }
     }
 
     #[test]

@@ -1,7 +1,7 @@
 //! GPU device creation. Works on any Vulkan/Metal/DX12/GL adapter wgpu finds, including Mesa's
 //! lavapipe software rasteriser (set `XDG_RUNTIME_DIR` when there is no session).
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 
 /// A device, its queue and what the adapter supports.
 pub struct Gpu {
@@ -73,5 +73,19 @@ impl Gpu {
             limits,
             timestamps,
         })
+    }
+
+    /// Runs `f`, turning any GPU validation or out-of-memory error it raises into an error
+    /// naming `what` (instead of wgpu's default panic).
+    pub fn checked<T>(&self, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let result = f();
+        let v = pollster::block_on(validation.pop());
+        let o = pollster::block_on(oom.pop());
+        if let Some(e) = v.or(o) {
+            bail!("{what}: GPU error: {e}");
+        }
+        result
     }
 }

@@ -49,6 +49,9 @@ pub struct RenderOptions {
     /// Skip nodes empty under the transfer functions and integrate homogeneous nodes in
     /// closed form; `false` is the "no skipping" baseline (every node is sampled).
     pub empty_space_skipping: bool,
+    /// Substitute a missing brick from another resident level (coarser first); `false`
+    /// leaves the sample empty, as a page-table-only renderer would.
+    pub substitution: bool,
 }
 
 impl Default for RenderOptions {
@@ -65,6 +68,7 @@ impl Default for RenderOptions {
             max_requests: 4096,
             level_bounds: Vec::new(),
             empty_space_skipping: true,
+            substitution: true,
         }
     }
 }
@@ -185,6 +189,12 @@ impl Renderer {
         scene: &Scene,
         options: RenderOptions,
     ) -> Result<Self> {
+        gpu.checked("setting up the renderer", || {
+            Self::build(gpu, info, scene, options)
+        })
+    }
+
+    fn build(gpu: &Gpu, info: &VolumeInfo, scene: &Scene, options: RenderOptions) -> Result<Self> {
         ensure!(
             options.width > 0 && options.height > 0,
             "image size {}×{} is empty",
@@ -505,6 +515,7 @@ impl Renderer {
         if let BrickVoxels::Empty = voxels {
             self.pages.set(id, ENTRY_EMPTY);
             self.octree.insert(key)?;
+            self.octree.refine_ranges(&key, voxels);
             return Ok(Inserted::Empty);
         }
         let Some((slot, evicted_id)) = self.cache.allocate(self.frame) else {
@@ -526,6 +537,8 @@ impl Renderer {
         self.cache.assign(slot, id);
         self.pages.set(id, slot + 2);
         self.octree.insert(key)?;
+        // Without region metadata, level-0 bricks give ranges (the fallback).
+        self.octree.refine_ranges(&key, voxels);
         Ok(Inserted::Uploaded { evicted })
     }
 
@@ -606,7 +619,7 @@ impl Renderer {
                 g.brick[0] as u32,
                 g.brick[1] as u32,
                 g.brick[2] as u32,
-                self.options.empty_space_skipping as u32,
+                self.options.empty_space_skipping as u32 | (self.options.substitution as u32) << 1,
             ],
             slots: {
                 let s = self.cache.slots_per_axis();
@@ -623,6 +636,10 @@ impl Renderer {
     /// Renders one frame and reads back its image, requests, usage feedback (folded into
     /// the cache's LRU order) and counters.
     pub fn render(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+        gpu.checked("rendering a frame", || self.render_frame(gpu))
+    }
+
+    fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
         self.flush(gpu);
         self.frame += 1;
         let params = self.params();

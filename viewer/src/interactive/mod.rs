@@ -1,0 +1,15 @@
+//! The interactive window of `viewer view`: the progressive GPU render of
+//! [`crate::gpu::streaming`] driven one step at a time behind a winit window, with orbit, pan
+//! and zoom, per-channel visibility, colour and window/level, and on-screen statistics.
+//!
+//! - [`camera_control`]: orbit, pan and zoom as pure functions of the camera;
+//! - [`controls`]: channel visibility, palette colours and opacity-ramp window/level;
+//! - [`overlay`]: sRGB conversion, scaling to the window and the bitmap-font statistics panel;
+//! - [`session`]: the non-blocking progressive loop (render, fetch, insert, repeat);
+//! - [`window`]: the winit event loop and `softbuffer` presentation.
+
+pub mod camera_control;
+pub mod controls;
+pub mod overlay;
+pub mod session;
+pub mod window;
