@@ -768,3 +768,34 @@ def test_viewer_errors_name_the_dataset(tmp_path):
         assert (img == np.float32(0.5)).all()
     finally:
         stop(proc)
+
+
+def test_big_endian_and_promoted_inputs_keep_every_value(tmp_path):
+    """Full-range i16 read big-endian, and full-range u16 beside hostile f32 (promoted to f32,
+    where every u16 is exact): level 0 bit for bit, statistics exact per channel."""
+    i16 = VOLUMES["full_i16"][0]
+    raw = tmp_path / "be.raw"
+    i16.astype(">i2").tofile(raw)
+    store = tmp_path / "be.ome.zarr"
+    nz, ny, nx = i16.shape
+    run_ingest("convert", raw, "-o", store, "--dims", f"{nx},{ny},{nz}", "--dtype", "int16", "--endian", "big", "--quiet", timeout=TIMEOUT)
+    assert zarr.open_group(str(store), mode="r")["0"][0].tobytes() == i16.astype("<i2").tobytes()
+    assert_channel_statistics(root_attributes(store)["residency"], i16[None])
+
+    u16 = np.zeros((11, 13, 17), np.uint16)
+    u16[...] = np.random.default_rng(13).integers(0, 65536, u16.shape)
+    u16[0, 0, 0], u16[1, 1, 1] = 0, 65535
+    f = hostile_f32()
+    a, b = tmp_path / "u16.tif", tmp_path / "f32.tif"
+    tifffile.imwrite(a, u16, photometric="minisblack")
+    tifffile.imwrite(b, f, photometric="minisblack")
+    store = tmp_path / "mixed.ome.zarr"
+    run_ingest("convert", a, b, "-o", store, "--chunk", "8", "--quiet", timeout=TIMEOUT)
+    level0 = np.stack([u16.astype(np.float32), f])
+    got = zarr.open_group(str(store), mode="r")["0"][...]
+    assert got.dtype == np.float32 and got.tobytes() == level0.tobytes()
+    assert_pyramid(store, level0)
+    assert_region_metadata(store)
+    meta = root_attributes(store)["residency"]
+    assert_channel_statistics(meta, level0)
+    assert (num(meta["channels"][0]["min"]), num(meta["channels"][0]["max"])) == (0.0, 65535.0)
