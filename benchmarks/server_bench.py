@@ -138,7 +138,7 @@ events {{ worker_connections 4096; }}
 http {{
   access_log off;
   sendfile on; tcp_nopush on; tcp_nodelay on;
-  open_file_cache max=40000 inactive=60s;
+  open_file_cache max=4000 inactive=60s;  # per worker, well below the open-file limit
   keepalive_requests 1000000;
   keepalive_timeout 65;
   default_type application/octet-stream;
