@@ -3,5 +3,6 @@
 pub mod compare;
 pub mod reference;
 pub mod render;
+pub mod renderer_args;
 pub mod scene_args;
 pub mod view;

@@ -6,12 +6,12 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result, ensure};
+use anyhow::{Context, Result};
 use serde::Serialize;
 
+use super::renderer_args::RendererArgs;
 use super::scene_args::{SceneArgs, SourceArgs};
 use crate::gpu::device::Gpu;
-use crate::gpu::renderer::RenderOptions;
 use crate::gpu::streaming::{Budget, FrameStats, render_progressive};
 use crate::image::{ImageFormat, RgbImage};
 use crate::source::{BrickKey, BrickSource};
@@ -43,30 +43,9 @@ pub struct Args {
     /// Wall-clock budget in seconds.
     #[arg(long, value_name = "S")]
     pub time_budget_s: Option<f64>,
-    /// Brick cache budget in bytes.
-    #[arg(long, default_value_t = 256 << 20)]
-    pub cache_bytes: u64,
-    /// LOD bias (`log2` scale of the pixel footprint; positive is coarser).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub lod_bias: f32,
-    /// Step as a fraction of the smallest voxel edge of the level sampled.
-    #[arg(long, default_value_t = 0.5)]
-    pub step: f32,
-    /// Finest level any channel may use.
-    #[arg(long, default_value_t = 0)]
-    pub min_level: u32,
-    /// Coarsest level any channel may use [default: the coarsest].
-    #[arg(long)]
-    pub max_level: Option<u32>,
-    /// Octree leaf depth [default: leaves of about 8 level-0 voxels, at most depth 7].
-    #[arg(long)]
-    pub octree_depth: Option<u32>,
-    /// Disable empty-space skipping and homogeneous-node integration (a baseline).
-    #[arg(long)]
-    pub no_skipping: bool,
-    /// Brick fetch worker threads.
-    #[arg(long, default_value_t = 8)]
-    pub workers: usize,
+    /// Renderer settings.
+    #[command(flatten)]
+    pub renderer: RendererArgs,
 }
 
 #[derive(Serialize)]
@@ -101,36 +80,16 @@ fn key_name(k: &BrickKey) -> String {
 /// Runs `viewer render`.
 pub fn run(args: Args) -> Result<()> {
     ImageFormat::of(&args.out)?;
-    ensure!(
-        args.step > 0.0 && args.step.is_finite(),
-        "--step {} must be positive",
-        args.step
-    );
     let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
     let info = source.info().clone();
     let scene = args.scene.scene(&info)?;
-    let levels = info.levels.len() as u32;
-    let max_level = args.max_level.unwrap_or(levels - 1).min(levels - 1);
-    ensure!(
-        args.min_level <= max_level,
-        "--min-level {} is coarser than --max-level {max_level}",
-        args.min_level
-    );
-    let options = RenderOptions {
-        width: args.width,
-        height: args.height,
-        cache_bytes: args.cache_bytes,
-        lod_bias: args.lod_bias,
-        step_factor: args.step,
-        octree_depth: args.octree_depth,
-        level_bounds: vec![(args.min_level, max_level); scene.channels.len()],
-        empty_space_skipping: !args.no_skipping,
-        ..Default::default()
-    };
+    let options = args
+        .renderer
+        .options(args.width, args.height, &info, &scene)?;
     let budget = Budget {
         max_frames: args.max_frames,
         time: args.time_budget_s.map(Duration::from_secs_f64),
-        workers: args.workers,
+        workers: args.renderer.workers,
         ..Default::default()
     };
     let start = Instant::now();

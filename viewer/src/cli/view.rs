@@ -5,9 +5,9 @@ use std::time::Duration;
 
 use anyhow::{Result, ensure};
 
+use super::renderer_args::RendererArgs;
 use super::scene_args::{SceneArgs, SourceArgs};
 use crate::gpu::device::Gpu;
-use crate::gpu::renderer::RenderOptions;
 use crate::interactive::session::Session;
 use crate::interactive::window::{self, ViewConfig};
 use crate::source::BrickSource;
@@ -57,30 +57,9 @@ pub struct Args {
     /// Rendered image size relative to the window (below 1 renders faster, scaled up).
     #[arg(long, default_value_t = 1.0)]
     pub render_scale: f64,
-    /// Brick cache budget in bytes.
-    #[arg(long, default_value_t = 256 << 20)]
-    pub cache_bytes: u64,
-    /// LOD bias (`log2` scale of the pixel footprint; positive is coarser).
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub lod_bias: f32,
-    /// Step as a fraction of the smallest voxel edge of the level sampled.
-    #[arg(long, default_value_t = 0.5)]
-    pub step: f32,
-    /// Finest level any channel may use.
-    #[arg(long, default_value_t = 0)]
-    pub min_level: u32,
-    /// Coarsest level any channel may use [default: the coarsest].
-    #[arg(long)]
-    pub max_level: Option<u32>,
-    /// Octree leaf depth [default: leaves of about 8 level-0 voxels, at most depth 7].
-    #[arg(long)]
-    pub octree_depth: Option<u32>,
-    /// Disable empty-space skipping and homogeneous-node integration (a baseline).
-    #[arg(long)]
-    pub no_skipping: bool,
-    /// Brick fetch worker threads.
-    #[arg(long, default_value_t = 8)]
-    pub workers: usize,
+    /// Renderer settings.
+    #[command(flatten)]
+    pub renderer: RendererArgs,
     /// For tests and demos: once the view settles (converged, or N frames shown since the
     /// last input), print a summary line on standard output, and quit if no input comes
     /// within `--exit-delay-ms` (input starts over).
@@ -95,11 +74,6 @@ pub struct Args {
 /// Runs `viewer view`.
 pub fn run(args: Args) -> Result<()> {
     ensure!(
-        args.step > 0.0 && args.step.is_finite(),
-        "--step {} must be positive",
-        args.step
-    );
-    ensure!(
         args.render_scale > 0.0 && args.render_scale <= 4.0,
         "--render-scale {} must lie in (0, 4]",
         args.render_scale
@@ -113,24 +87,9 @@ pub fn run(args: Args) -> Result<()> {
     let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
     let info = source.info().clone();
     let scene = args.scene.scene(&info)?;
-    let levels = info.levels.len() as u32;
-    let max_level = args.max_level.unwrap_or(levels - 1).min(levels - 1);
-    ensure!(
-        args.min_level <= max_level,
-        "--min-level {} is coarser than --max-level {max_level}",
-        args.min_level
-    );
-    let options = RenderOptions {
-        width: args.width,
-        height: args.height,
-        cache_bytes: args.cache_bytes,
-        lod_bias: args.lod_bias,
-        step_factor: args.step,
-        octree_depth: args.octree_depth,
-        level_bounds: vec![(args.min_level, max_level)],
-        empty_space_skipping: !args.no_skipping,
-        ..Default::default()
-    };
+    let options = args
+        .renderer
+        .options(args.width, args.height, &info, &scene)?;
     let gpu = Gpu::new()?;
     tracing::info!(
         "{}: {} channels, GPU {} ({:?})",
@@ -139,7 +98,7 @@ pub fn run(args: Args) -> Result<()> {
         gpu.adapter_info.name,
         gpu.adapter_info.backend
     );
-    let session = Session::new(gpu, source, scene, options, args.workers, 16);
+    let session = Session::new(gpu, source, scene, options, args.renderer.workers, 16);
     window::run(
         session,
         ViewConfig {
