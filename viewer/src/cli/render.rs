@@ -83,9 +83,12 @@ pub fn run(args: Args) -> Result<()> {
     let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
     let info = source.info().clone();
     let scene = args.scene.scene(&info)?;
-    let options = args
-        .renderer
-        .options(args.width, args.height, &info, &scene)?;
+    let options = args.renderer.options(
+        args.width,
+        args.height,
+        info.levels.len(),
+        scene.channels.len(),
+    )?;
     let budget = Budget {
         max_frames: args.max_frames,
         time: args.time_budget_s.map(Duration::from_secs_f64),

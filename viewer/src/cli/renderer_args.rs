@@ -4,8 +4,6 @@
 use anyhow::{Result, ensure};
 
 use crate::gpu::renderer::RenderOptions;
-use crate::scene::Scene;
-use crate::source::VolumeInfo;
 
 /// Renderer flags (flattened into `viewer render` and `viewer view`).
 #[derive(clap::Args, Debug)]
@@ -31,27 +29,32 @@ pub struct RendererArgs {
     /// Disable empty-space skipping and homogeneous-node integration (a baseline).
     #[arg(long)]
     pub no_skipping: bool,
+    /// Never substitute a missing brick from another resident level: a brick not resident
+    /// yet is a hole until it arrives (the page-table-only baseline's behaviour).
+    #[arg(long)]
+    pub no_substitution: bool,
     /// Brick fetch worker threads.
     #[arg(long, default_value_t = 8)]
     pub workers: usize,
 }
 
 impl RendererArgs {
-    /// The options for a `width × height` image of `scene` over the volume `info`, after
-    /// checking the flags: the level bounds apply to every channel of the scene.
+    /// The options for a `width × height` image of a scene of `channels` channel styles over a
+    /// volume of `levels` levels, after checking the flags: the level bounds apply to every
+    /// channel.
     pub fn options(
         &self,
         width: u32,
         height: u32,
-        info: &VolumeInfo,
-        scene: &Scene,
+        levels: usize,
+        channels: usize,
     ) -> Result<RenderOptions> {
         ensure!(
             self.step > 0.0 && self.step.is_finite(),
             "--step {} must be positive",
             self.step
         );
-        let levels = info.levels.len() as u32;
+        let levels = levels as u32;
         let max_level = self.max_level.unwrap_or(levels - 1).min(levels - 1);
         ensure!(
             self.min_level <= max_level,
@@ -65,9 +68,63 @@ impl RendererArgs {
             lod_bias: self.lod_bias,
             step_factor: self.step,
             octree_depth: self.octree_depth,
-            level_bounds: vec![(self.min_level, max_level); scene.channels.len()],
+            level_bounds: vec![(self.min_level, max_level); channels],
             empty_space_skipping: !self.no_skipping,
+            substitution: !self.no_substitution,
             ..Default::default()
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Flags {
+        #[command(flatten)]
+        renderer: RendererArgs,
+    }
+
+    fn options(args: &[&str]) -> Result<RenderOptions> {
+        let mut all = vec!["viewer"];
+        all.extend(args);
+        Flags::parse_from(all).renderer.options(64, 32, 4, 3)
+    }
+
+    #[test]
+    fn flags_become_render_options() {
+        let o = options(&[]).unwrap();
+        assert_eq!((o.width, o.height, o.cache_bytes), (64, 32, 256 << 20));
+        assert_eq!(o.level_bounds, vec![(0, 3); 3]);
+        assert!(o.empty_space_skipping && o.substitution);
+        let o = options(&[
+            "--min-level",
+            "1",
+            "--max-level",
+            "9",
+            "--no-skipping",
+            "--no-substitution",
+            "--lod-bias",
+            "-1.5",
+            "--step",
+            "0.25",
+        ])
+        .unwrap();
+        assert_eq!(o.level_bounds, vec![(1, 3); 3]);
+        assert!(!o.empty_space_skipping && !o.substitution);
+        assert_eq!((o.lod_bias, o.step_factor), (-1.5, 0.25));
+        assert_eq!(
+            options(&["--min-level", "2", "--max-level", "1"])
+                .unwrap_err()
+                .to_string(),
+            "--min-level 2 is coarser than --max-level 1"
+        );
+        assert_eq!(
+            options(&["--step", "0"]).unwrap_err().to_string(),
+            "--step 0 must be positive"
+        );
     }
 }
