@@ -65,28 +65,25 @@ def key_regex(base: str) -> str:
     return f"{base}/0/c/0/{z}/{y}/{x}"
 
 
-def rss_mb(pids) -> float:
+def status_mb(pids, field) -> float:
+    """A /proc/PID/status memory field (VmHWM: peak RSS, VmRSS: current), summed over `pids`, in MB."""
     total = 0
     for pid in pids:
         try:
             for line in pathlib.Path(f"/proc/{pid}/status").read_text().splitlines():
-                if line.startswith("VmHWM:"):
+                if line.startswith(field + ":"):
                     total += int(line.split()[1])
         except FileNotFoundError:
             pass
     return total / 1024
+
+
+def rss_mb(pids) -> float:
+    return status_mb(pids, "VmHWM")
 
 
 def current_rss_mb(pids) -> float:
-    total = 0
-    for pid in pids:
-        try:
-            for line in pathlib.Path(f"/proc/{pid}/status").read_text().splitlines():
-                if line.startswith("VmRSS:"):
-                    total += int(line.split()[1])
-        except FileNotFoundError:
-            pass
-    return total / 1024
+    return status_mb(pids, "VmRSS")
 
 
 def oha(url, connections, seconds, headers=(), regex=True):

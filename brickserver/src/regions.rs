@@ -119,8 +119,6 @@ struct LevelIndex {
 pub struct RegionIndex {
     /// The store's region metadata document.
     pub meta: RegionMetadata,
-    /// Zarr data type name of the image.
-    pub data_type: String,
     levels: Vec<LevelIndex>,
     minmax_docs: Vec<Bytes>,
 }
@@ -253,7 +251,10 @@ impl RegionIndex {
                     });
                     payload.extend_from_slice(&raw[c * per_channel..(c + 1) * per_channel]);
                 }
-                haloed.push(pairs(&values, channels, cells));
+                // The haloed ranges answer queries only for stores without exact ones.
+                if level.range.is_empty() {
+                    haloed.push(pairs(&values, channels, cells));
+                }
             }
             for (c, grids) in level_blocks.into_iter().enumerate() {
                 blocks[c].push(MinMaxLevelBlock {
@@ -345,7 +346,6 @@ impl RegionIndex {
             .collect();
         Ok(Some(Self {
             meta,
-            data_type,
             levels,
             minmax_docs,
         }))

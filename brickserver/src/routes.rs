@@ -28,7 +28,7 @@ use tower_http::cors::{Any, CorsLayer};
 
 use crate::bricks::{BatchError, BatchLimits, ImageArrays, parse_batch, read_batch};
 use crate::cache::{ByteCache, CacheKey};
-use crate::datasets::Datasets;
+use crate::datasets::{Dataset, Datasets};
 use crate::metrics::{Metrics, track};
 use crate::regions::{QueryError, RegionIndex};
 use crate::responses::{etag_of, file_response, is_metadata, not_modified};
@@ -109,32 +109,6 @@ impl AppState {
             roots,
             etags: quick_cache::sync::Cache::new(1 << 16),
         })
-    }
-
-    /// The region index of dataset `i` (loaded on first use; blocking).
-    fn regions(&self, i: usize) -> Result<Option<Arc<RegionIndex>>, String> {
-        self.loaded[i]
-            .regions
-            .get_or_init(|| {
-                let d = &self.datasets.0[i];
-                RegionIndex::load(&d.root)
-                    .map(|r| r.map(Arc::new))
-                    .map_err(|e| format!("dataset '{}': {e:#}", d.name))
-            })
-            .clone()
-    }
-
-    /// The image arrays of dataset `i` (opened on first use; blocking).
-    fn arrays(&self, i: usize) -> Result<Arc<ImageArrays>, String> {
-        self.loaded[i]
-            .arrays
-            .get_or_init(|| {
-                let d = &self.datasets.0[i];
-                ImageArrays::open(&d.root)
-                    .map(Arc::new)
-                    .map_err(|e| format!("dataset '{}': {e:#}", d.name))
-            })
-            .clone()
     }
 
     fn index_of(&self, name: &str) -> Option<usize> {
@@ -283,6 +257,27 @@ fn no_dataset(name: &str) -> Response<Body> {
     api_error(StatusCode::NOT_FOUND, format!("no dataset '{name}'"))
 }
 
+/// A once-loaded part of dataset `i` (`cell` picks which): read directly once loaded, else
+/// made by `load` on the blocking pool (the first caller loads, later ones wait for it).
+async fn loaded<T: Clone + Send + Sync + 'static>(
+    state: &Arc<AppState>,
+    i: usize,
+    cell: fn(&Loaded) -> &OnceLock<Result<T, String>>,
+    load: fn(&Dataset) -> anyhow::Result<T>,
+) -> Result<T, String> {
+    if let Some(done) = cell(&state.loaded[i]).get() {
+        return done.clone();
+    }
+    let st = state.clone();
+    blocking(move || {
+        let d = &st.datasets.0[i];
+        cell(&st.loaded[i])
+            .get_or_init(|| load(d).map_err(|e| format!("dataset '{}': {e:#}", d.name)))
+            .clone()
+    })
+    .await
+}
+
 /// Runs blocking work off the async threads.
 async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
     tokio::task::spawn_blocking(f)
@@ -393,15 +388,13 @@ async fn region_index(
     name: &str,
 ) -> Result<Arc<RegionIndex>, Response<Body>> {
     let index = state.index_of(name).ok_or_else(|| no_dataset(name))?;
-    // Loaded already: no hop to the blocking pool.
-    let loaded = match state.loaded[index].regions.get() {
-        Some(r) => r.clone(),
-        None => {
-            let st = state.clone();
-            blocking(move || st.regions(index)).await
-        }
-    };
-    match loaded {
+    let regions = loaded(
+        state,
+        index,
+        |l| &l.regions,
+        |d| Ok(RegionIndex::load(&d.root)?.map(Arc::new)),
+    );
+    match regions.await {
         Ok(Some(r)) => Ok(r),
         Ok(None) => Err(api_error(
             StatusCode::NOT_FOUND,
@@ -498,14 +491,13 @@ async fn bricks(
         Err(BatchError::Bad(e)) => return api_error(StatusCode::BAD_REQUEST, e),
         Err(BatchError::TooLarge(e)) => return api_error(StatusCode::PAYLOAD_TOO_LARGE, e),
     };
-    let loaded = match state.loaded[index].arrays.get() {
-        Some(a) => a.clone(),
-        None => {
-            let st = state.clone();
-            blocking(move || st.arrays(index)).await
-        }
-    };
-    let arrays = match loaded {
+    let arrays = loaded(
+        &state,
+        index,
+        |l| &l.arrays,
+        |d| Ok(Arc::new(ImageArrays::open(&d.root)?)),
+    );
+    let arrays = match arrays.await {
         Ok(a) => a,
         Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e),
     };

@@ -51,14 +51,33 @@ pub fn node_index(d: u32, c: [u64; 3]) -> usize {
     depth_offset(d) + ((((c[2] << d) + c[1]) << d) + c[0]) as usize
 }
 
+/// Child `k` (`0..8`, `x` in bit 0, `y` in bit 1, `z` in bit 2) of the node at `c`, one
+/// depth down.
+fn child(c: [u64; 3], k: u64) -> [u64; 3] {
+    [
+        2 * c[0] + (k & 1),
+        2 * c[1] + ((k >> 1) & 1),
+        2 * c[2] + (k >> 2),
+    ]
+}
+
+/// The cells `[x, y, z]` of the box `x in rx, y in ry, z in rz`, `x` fastest.
+fn cells([rx, ry, rz]: [Range<u64>; 3]) -> impl Iterator<Item = [u64; 3]> {
+    rz.flat_map(move |z| {
+        let rx = rx.clone();
+        ry.clone()
+            .flat_map(move |y| rx.clone().map(move |x| [x, y, z]))
+    })
+}
+
 /// Largest `f32` not above `v` (for conservative minima).
-fn f32_down(v: f64) -> f32 {
+pub(crate) fn f32_down(v: f64) -> f32 {
     let f = v as f32;
     if (f as f64) > v { f.next_down() } else { f }
 }
 
 /// Smallest `f32` not below `v` (for conservative maxima).
-fn f32_up(v: f64) -> f32 {
+pub(crate) fn f32_up(v: f64) -> f32 {
     let f = v as f32;
     if (f as f64) < v { f.next_up() } else { f }
 }
@@ -342,18 +361,13 @@ impl ResidencyOctree {
         let bit = 1u16 << key.level;
         let d = self.geometry.depth;
         let m = self.channels.len();
-        let [rx, ry, rz] = self.leaf_coord_ranges(&key);
-        for z in rz {
-            for y in ry.clone() {
-                for x in rx.clone() {
-                    let n = node_index(d, [x, y, z]);
-                    let i = n * m + slot;
-                    if self.masks[i] & bit == 0 {
-                        self.masks[i] |= bit;
-                        self.mark_dirty(n);
-                        self.propagate_up([x, y, z], slot);
-                    }
-                }
+        for leaf in cells(self.leaf_coord_ranges(&key)) {
+            let n = node_index(d, leaf);
+            let i = n * m + slot;
+            if self.masks[i] & bit == 0 {
+                self.masks[i] |= bit;
+                self.mark_dirty(n);
+                self.propagate_up(leaf, slot);
             }
         }
         Ok(true)
@@ -372,35 +386,28 @@ impl ResidencyOctree {
         let bit = 1u16 << key.level;
         let d = self.geometry.depth;
         let m = self.channels.len();
-        let [rx, ry, rz] = self.leaf_coord_ranges(&key);
-        for z in rz {
-            for y in ry.clone() {
-                for x in rx.clone() {
-                    let leaf = [x, y, z];
-                    let still = {
-                        let [bx, by, bz] = std::array::from_fn(|a| {
-                            self.geometry.bricks_of_leaf_axis(l, a, leaf[a])
-                        });
-                        bz.clone().any(|bz| {
-                            by.clone().any(|by| {
-                                bx.clone().any(|bx| {
-                                    self.resident.contains(&BrickKey {
-                                        level: key.level,
-                                        channel: key.channel,
-                                        brick: [bz, by, bx],
-                                    })
-                                })
+        for leaf in cells(self.leaf_coord_ranges(&key)) {
+            let still = {
+                let [bx, by, bz] =
+                    std::array::from_fn(|a| self.geometry.bricks_of_leaf_axis(l, a, leaf[a]));
+                bz.clone().any(|bz| {
+                    by.clone().any(|by| {
+                        bx.clone().any(|bx| {
+                            self.resident.contains(&BrickKey {
+                                level: key.level,
+                                channel: key.channel,
+                                brick: [bz, by, bx],
                             })
                         })
-                    };
-                    let n = node_index(d, leaf);
-                    let i = n * m + slot;
-                    if !still && self.masks[i] & bit != 0 {
-                        self.masks[i] &= !bit;
-                        self.mark_dirty(n);
-                        self.propagate_up(leaf, slot);
-                    }
-                }
+                    })
+                })
+            };
+            let n = node_index(d, leaf);
+            let i = n * m + slot;
+            if !still && self.masks[i] & bit != 0 {
+                self.masks[i] &= !bit;
+                self.mark_dirty(n);
+                self.propagate_up(leaf, slot);
             }
         }
         Ok(true)
@@ -417,12 +424,7 @@ impl ResidencyOctree {
             d -= 1;
             let mut or = 0u16;
             for k in 0..8u64 {
-                let child = [
-                    2 * c[0] + (k & 1),
-                    2 * c[1] + ((k >> 1) & 1),
-                    2 * c[2] + (k >> 2),
-                ];
-                or |= self.masks[node_index(d + 1, child) * m + slot];
+                or |= self.masks[node_index(d + 1, child(c, k)) * m + slot];
             }
             let n = node_index(d, c);
             if self.masks[n * m + slot] == or {
@@ -451,13 +453,8 @@ impl ResidencyOctree {
             let slot = self
                 .slot_of(key.channel as usize)
                 .expect("checked on insert");
-            let [rx, ry, rz] = self.leaf_coord_ranges(key);
-            for z in rz {
-                for y in ry.clone() {
-                    for x in rx.clone() {
-                        masks[node_index(d, [x, y, z]) * m + slot] |= 1 << key.level;
-                    }
-                }
+            for leaf in cells(self.leaf_coord_ranges(key)) {
+                masks[node_index(d, leaf) * m + slot] |= 1 << key.level;
             }
         }
         for depth in (0..d).rev() {
@@ -467,8 +464,7 @@ impl ResidencyOctree {
                     for x in 0..n {
                         let parent = node_index(depth, [x, y, z]);
                         for k in 0..8u64 {
-                            let child = [2 * x + (k & 1), 2 * y + ((k >> 1) & 1), 2 * z + (k >> 2)];
-                            let ci = node_index(depth + 1, child);
+                            let ci = node_index(depth + 1, child([x, y, z], k));
                             for s in 0..m {
                                 masks[parent * m + s] |= masks[ci * m + s];
                             }
@@ -557,12 +553,7 @@ impl ResidencyOctree {
             d -= 1;
             let mut r = (f64::INFINITY, f64::NEG_INFINITY);
             for k in 0..8u64 {
-                let child = [
-                    2 * c[0] + (k & 1),
-                    2 * c[1] + ((k >> 1) & 1),
-                    2 * c[2] + (k >> 2),
-                ];
-                let cr = self.ranges[node_index(d + 1, child) * m + slot];
+                let cr = self.ranges[node_index(d + 1, child(c, k)) * m + slot];
                 r = (r.0.min(cr.0), r.1.max(cr.1));
             }
             let n = node_index(d, c);
@@ -679,9 +670,8 @@ impl ResidencyOctree {
                         for s in 0..m {
                             let mut r = (f64::INFINITY, f64::NEG_INFINITY);
                             for k in 0..8u64 {
-                                let child =
-                                    [2 * x + (k & 1), 2 * y + ((k >> 1) & 1), 2 * z + (k >> 2)];
-                                let c = self.ranges[node_index(depth + 1, child) * m + s];
+                                let c =
+                                    self.ranges[node_index(depth + 1, child([x, y, z], k)) * m + s];
                                 r = (r.0.min(c.0), r.1.max(c.1));
                             }
                             self.ranges[parent * m + s] = r;

@@ -449,16 +449,7 @@ mod tests {
         assert_eq!(l0.sample([1.0, 1.0, 9.0], &mut last).unwrap(), 7.0);
         // Opacity ramp 0 at x=0 to 1 at x=8 along that ray: a(2.25) = 0.28125 per voxel.
         let mut s = scene([2.75, 2.0, 50.0], [2.75, 2.0, 0.0], 0.0);
-        s.channels[0].opacity = vec![
-            OpacityPoint {
-                value: 0.0,
-                opacity: 0.0,
-            },
-            OpacityPoint {
-                value: 8.0,
-                opacity: 1.0,
-            },
-        ];
+        s.channels[0].opacity = OpacityPoint::ramp(0.0, 8.0, 1.0);
         let img = render(&vol, &s, &ReferenceOptions::new(1, 1)).unwrap();
         let t = (1.0 - 0.28125f64).powi(4);
         assert!(

@@ -111,6 +111,19 @@ pub struct OpacityPoint {
     pub opacity: f64,
 }
 
+impl OpacityPoint {
+    /// A two-point ramp: opacity 0 at `lo` rising to `opacity` at `hi`.
+    pub fn ramp(lo: f64, hi: f64, opacity: f64) -> Vec<Self> {
+        vec![
+            Self {
+                value: lo,
+                opacity: 0.0,
+            },
+            Self { value: hi, opacity },
+        ]
+    }
+}
+
 /// How one channel is drawn.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -53,21 +53,25 @@ fn constant_volume_gives_beer_lambert_through_the_cli() {
     .unwrap();
     let out = dir.path().join("ref.exr");
     let s = |p: &Path| p.to_str().unwrap().to_string();
-    viewer(&[
-        "reference",
-        "--store",
-        &s(&store),
-        "--scene",
-        &s(&scene),
-        "--width",
-        "5",
-        "--height",
-        "3",
-        "--step",
-        "0.3",
-        "--out",
-        &s(&out),
-    ]);
+    // The same render, written to `out` (its format from the extension).
+    let render_to = |out: &Path| {
+        viewer(&[
+            "reference",
+            "--store",
+            &s(&store),
+            "--scene",
+            &s(&scene),
+            "--width",
+            "5",
+            "--height",
+            "3",
+            "--step",
+            "0.3",
+            "--out",
+            &s(out),
+        ]);
+    };
+    render_to(&out);
     let img = RgbImage::read(&out).unwrap();
     assert_eq!((img.width, img.height), (5, 3));
     let t = 0.8f64.powi(12);
@@ -81,21 +85,7 @@ fn constant_volume_gives_beer_lambert_through_the_cli() {
     }
     // A PNG of the same render is its 8-bit sRGB encoding.
     let png = dir.path().join("ref.png");
-    viewer(&[
-        "reference",
-        "--store",
-        &s(&store),
-        "--scene",
-        &s(&scene),
-        "--width",
-        "5",
-        "--height",
-        "3",
-        "--step",
-        "0.3",
-        "--out",
-        &s(&png),
-    ]);
+    render_to(&png);
     let back = RgbImage::read(&png).unwrap();
     let enc = |v: f32| (residency_viewer::image::linear_to_srgb(v) * 255.0).round();
     for (a, b) in img.pixels.iter().zip(&back.pixels) {

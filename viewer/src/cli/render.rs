@@ -9,12 +9,12 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use serde::Serialize;
 
-use super::renderer_args::RendererArgs;
+use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use crate::gpu::device::Gpu;
 use crate::gpu::streaming::{Budget, FrameStats, render_progressive};
 use crate::image::{ImageFormat, RgbImage};
-use crate::source::{BrickKey, BrickSource};
+use crate::source::BrickKey;
 
 /// Arguments of `viewer render`.
 #[derive(clap::Args, Debug)]
@@ -80,14 +80,12 @@ fn key_name(k: &BrickKey) -> String {
 /// Runs `viewer render`.
 pub fn run(args: Args) -> Result<()> {
     ImageFormat::of(&args.out)?;
-    let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
-    let info = source.info().clone();
-    let scene = args.scene.scene(&info)?;
-    let options = args.renderer.options(
+    let (source, scene, options) = open_scene(
+        &args.source,
+        &args.scene,
+        &args.renderer,
         args.width,
         args.height,
-        info.levels.len(),
-        scene.channels.len(),
     )?;
     let budget = Budget {
         max_frames: args.max_frames,
@@ -115,7 +113,7 @@ pub fn run(args: Args) -> Result<()> {
     );
     if let Some(path) = &args.stats {
         let stats = Stats {
-            dataset: &info.name,
+            dataset: &source.info().name,
             adapter: gpu.adapter_info.name.clone(),
             backend: format!("{:?}", gpu.adapter_info.backend),
             width: result.width,

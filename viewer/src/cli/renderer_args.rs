@@ -1,9 +1,14 @@
 //! The renderer flags `viewer render` and `viewer view` share, and the [`RenderOptions`] they
 //! make.
 
+use std::sync::Arc;
+
 use anyhow::{Result, ensure};
 
+use super::scene_args::{SceneArgs, SourceArgs};
 use crate::gpu::renderer::RenderOptions;
+use crate::scene::Scene;
+use crate::source::BrickSource;
 
 /// Renderer flags (flattened into `viewer render` and `viewer view`).
 #[derive(clap::Args, Debug)]
@@ -74,6 +79,22 @@ impl RendererArgs {
             ..Default::default()
         })
     }
+}
+
+/// Opens the source, builds its scene and checks the renderer flags for a `width × height`
+/// image: the start `viewer render` and `viewer view` share.
+pub fn open_scene(
+    source: &SourceArgs,
+    scene: &SceneArgs,
+    renderer: &RendererArgs,
+    width: u32,
+    height: u32,
+) -> Result<(Arc<dyn BrickSource>, Scene, RenderOptions)> {
+    let source: Arc<dyn BrickSource> = Arc::from(source.open()?);
+    let info = source.info();
+    let scene = scene.scene(info)?;
+    let options = renderer.options(width, height, info.levels.len(), scene.channels.len())?;
+    Ok((source, scene, options))
 }
 
 #[cfg(test)]

@@ -37,19 +37,18 @@ impl SourceArgs {
     pub fn open(&self) -> Result<Box<dyn BrickSource>> {
         match (&self.server, &self.dataset, &self.store) {
             (Some(url), Some(name), None) => {
-                let token = match &self.token_file {
-                    Some(f) => Some(
+                let token = self
+                    .token_file
+                    .as_ref()
+                    .map(|f| {
                         std::fs::read_to_string(f)
-                            .with_context(|| format!("{}: cannot read the token", f.display()))?
-                            .trim()
-                            .to_string(),
-                    ),
-                    None => None,
-                };
+                            .with_context(|| format!("{}: cannot read the token", f.display()))
+                    })
+                    .transpose()?;
                 Ok(Box::new(HttpSource::open_with_token(
                     url,
                     name,
-                    token.as_deref(),
+                    token.as_deref().map(str::trim),
                 )?))
             }
             (None, None, Some(path)) => Ok(Box::new(LocalSource::open(path)?)),
@@ -234,16 +233,7 @@ impl FromStr for TfSpec {
                 if lo >= hi {
                     return Err(bad("LO must be below HI"));
                 }
-                vec![
-                    OpacityPoint {
-                        value: lo,
-                        opacity: 0.0,
-                    },
-                    OpacityPoint {
-                        value: hi,
-                        opacity: a,
-                    },
-                ]
+                OpacityPoint::ramp(lo, hi, a)
             }
             2 => parts[1]
                 .split(',')
@@ -376,16 +366,7 @@ pub fn default_opacity(info: &VolumeInfo, channel: usize) -> Vec<OpacityPoint> {
             SampleType::F32 => [0.0, 1.0],
         }
     };
-    vec![
-        OpacityPoint {
-            value: lo,
-            opacity: 0.0,
-        },
-        OpacityPoint {
-            value: hi,
-            opacity: DEFAULT_OPACITY,
-        },
-    ]
+    OpacityPoint::ramp(lo, hi, DEFAULT_OPACITY)
 }
 
 /// The default style of every channel of `info`.
@@ -536,18 +517,7 @@ mod tests {
         let info = info();
         let scene = parse(&["--store", "x"]).scene.scene(&info).unwrap();
         assert_eq!(volume_centre(&info), [20.0, 10.0, 15.0]);
-        let ramp = |lo, hi| {
-            vec![
-                OpacityPoint {
-                    value: lo,
-                    opacity: 0.0,
-                },
-                OpacityPoint {
-                    value: hi,
-                    opacity: DEFAULT_OPACITY,
-                },
-            ]
-        };
+        let ramp = |lo, hi| OpacityPoint::ramp(lo, hi, DEFAULT_OPACITY);
         let c = &scene.channels;
         assert_eq!(c.len(), 3);
         assert!(c.iter().all(|s| s.visible));

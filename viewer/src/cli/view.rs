@@ -1,16 +1,14 @@
 //! `viewer view`: the interactive window ([`crate::interactive`]).
 
-use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{Result, ensure};
 
-use super::renderer_args::RendererArgs;
+use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use crate::gpu::device::Gpu;
 use crate::interactive::session::Session;
 use crate::interactive::window::{self, ViewConfig};
-use crate::source::BrickSource;
 
 /// The mouse and key controls, shown by `viewer view --help`.
 pub const CONTROLS: &str = "\
@@ -84,15 +82,14 @@ pub fn run(args: Args) -> Result<()> {
         args.width,
         args.height
     );
-    let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
-    let info = source.info().clone();
-    let scene = args.scene.scene(&info)?;
-    let options = args.renderer.options(
+    let (source, scene, options) = open_scene(
+        &args.source,
+        &args.scene,
+        &args.renderer,
         args.width,
         args.height,
-        info.levels.len(),
-        scene.channels.len(),
     )?;
+    let info = source.info();
     let gpu = Gpu::new()?;
     tracing::info!(
         "{}: {} channels, GPU {} ({:?})",

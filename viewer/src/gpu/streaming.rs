@@ -194,6 +194,7 @@ pub struct Progressive {
     pub failed: Vec<(BrickKey, String)>,
 }
 
+/// Decoded size of a brick's samples in bytes (0 for an empty brick).
 fn decoded_bytes(v: &BrickVoxels) -> u64 {
     match v {
         BrickVoxels::Empty => 0,
@@ -240,6 +241,38 @@ pub fn coarser_brick(info: &VolumeInfo, key: &BrickKey) -> Option<BrickKey> {
         channel: key.channel,
         brick: std::array::from_fn(|a| key.brick[a] / ratio[a].max(1)),
     })
+}
+
+/// Inserts one finished fetch of `key` into `renderer` and counts it in `stats` (fetched,
+/// bytes, evicted, deferred; or failed, with a warning). Returns what the insert did and the
+/// brick's decoded bytes, or the fetch or upload error.
+pub fn insert_fetched(
+    gpu: &Gpu,
+    renderer: &mut Renderer,
+    key: BrickKey,
+    result: Result<BrickVoxels>,
+    stats: &mut FrameStats,
+) -> Result<(Inserted, u64)> {
+    let inserted = result.and_then(|voxels| {
+        let bytes = decoded_bytes(&voxels);
+        renderer.insert(gpu, key, &voxels).map(|i| (i, bytes))
+    });
+    match &inserted {
+        Ok((i, bytes)) => {
+            stats.bricks_fetched += 1;
+            stats.bytes_fetched += bytes;
+            match i {
+                Inserted::Uploaded { evicted: Some(_) } => stats.bricks_evicted += 1,
+                Inserted::CacheFull => stats.bricks_deferred += 1,
+                _ => {}
+            }
+        }
+        Err(e) => {
+            tracing::warn!("brick {key:?}: {e:#}; substituting other levels");
+            stats.bricks_failed += 1;
+        }
+    }
+    inserted
 }
 
 /// Runs the progressive loop on an existing renderer (its cache and octree carry over, so a
@@ -316,26 +349,9 @@ pub fn converge(
         }
         stats.requests_cancelled = fetcher.submit(wanted.iter().map(|r| r.key).collect()) as u64;
         for (key, result) in fetcher.wait(deadline) {
-            let inserted = result.and_then(|voxels| {
-                let bytes = decoded_bytes(&voxels);
-                renderer.insert(gpu, key, &voxels).map(|i| (i, bytes))
-            });
-            match inserted {
-                Ok((i, bytes)) => {
-                    stats.bricks_fetched += 1;
-                    stats.bytes_fetched += bytes;
-                    match i {
-                        Inserted::Uploaded { evicted: Some(_) } => stats.bricks_evicted += 1,
-                        Inserted::CacheFull => stats.bricks_deferred += 1,
-                        _ => {}
-                    }
-                }
-                Err(e) => {
-                    tracing::warn!("brick {key:?}: {e:#}; substituting other levels");
-                    stats.bricks_failed += 1;
-                    failed.insert(key, format!("{e:#}"));
-                    fallbacks.extend(coarser_brick(&info, &key));
-                }
+            if let Err(e) = insert_fetched(gpu, renderer, key, result, &mut stats) {
+                failed.insert(key, format!("{e:#}"));
+                fallbacks.extend(coarser_brick(&info, &key));
             }
         }
         stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;

@@ -10,7 +10,7 @@
 //!   `prefix[i + 1] − prefix[i]` is 1 when the opacity is non-zero somewhere in bin `i`, so
 //!   "transparent over `[lo, hi]`" is one subtraction (Octree Rasterization Sec. 4.1).
 
-use crate::octree::OctreeGeometry;
+use crate::octree::{OctreeGeometry, f32_down, f32_up};
 use crate::scene::ChannelStyle;
 
 /// Words per level entry.
@@ -50,18 +50,6 @@ pub fn tf_domain(style: &ChannelStyle) -> (f64, f64) {
         (Some(a), _) => (a.value, a.value + 1.0),
         _ => (0.0, 1.0),
     }
-}
-
-/// Largest `f32` not above `v`.
-fn f32_down(v: f64) -> f32 {
-    let f = v as f32;
-    if (f as f64) > v { f.next_down() } else { f }
-}
-
-/// Smallest `f32` not below `v`.
-fn f32_up(v: f64) -> f32 {
-    let f = v as f32;
-    if (f as f64) < v { f.next_up() } else { f }
 }
 
 /// Prefix counts of bins (over the domain) where the opacity is non-zero somewhere.

@@ -17,7 +17,7 @@ use anyhow::Result;
 
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{BrickRequest, Inserted, RenderOptions, Renderer};
-use crate::gpu::streaming::{Fetcher, FrameStats, coarser_brick, prioritise};
+use crate::gpu::streaming::{Fetcher, FrameStats, coarser_brick, insert_fetched, prioritise};
 use crate::scene::{Camera, Scene};
 use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
 
@@ -70,18 +70,6 @@ pub struct Session {
     size: (u32, u32),
     status: String,
     totals: Totals,
-}
-
-fn decoded_bytes(v: &BrickVoxels) -> u64 {
-    match v {
-        BrickVoxels::Empty => 0,
-        BrickVoxels::U8(v) => v.len() as u64,
-        BrickVoxels::U16(v) => 2 * v.len() as u64,
-        BrickVoxels::I16(v) => 2 * v.len() as u64,
-        BrickVoxels::U32(v) => 4 * v.len() as u64,
-        BrickVoxels::I32(v) => 4 * v.len() as u64,
-        BrickVoxels::F32(v) => 4 * v.len() as u64,
-    }
 }
 
 impl Session {
@@ -239,26 +227,13 @@ impl Session {
             if !self.drawn.contains(&(key.channel as usize)) {
                 continue; // fetched for an earlier set of channels
             }
-            let inserted = result.and_then(|voxels| {
-                let bytes = decoded_bytes(&voxels);
-                renderer.insert(&self.gpu, key, &voxels).map(|i| (i, bytes))
-            });
-            match inserted {
+            match insert_fetched(&self.gpu, renderer, key, result, &mut self.pending) {
                 Ok((i, bytes)) => {
-                    self.pending.bricks_fetched += 1;
-                    self.pending.bytes_fetched += bytes;
                     self.totals.bricks_fetched += 1;
                     self.totals.bytes_fetched += bytes;
-                    match i {
-                        Inserted::Uploaded { evicted: Some(_) } => self.pending.bricks_evicted += 1,
-                        Inserted::CacheFull => self.pending.bricks_deferred += 1,
-                        _ => {}
-                    }
                     changed |= !matches!(i, Inserted::AlreadyResident | Inserted::CacheFull);
                 }
                 Err(e) => {
-                    tracing::warn!("brick {key:?}: {e:#}; substituting other levels");
-                    self.pending.bricks_failed += 1;
                     self.totals.bricks_failed += 1;
                     self.failed.insert(key, format!("{e:#}"));
                     self.fallbacks.extend(coarser_brick(&self.info, &key));
