@@ -10,6 +10,13 @@ const ENTRY_EMPTY: u32 = 1u; // page-table entry: brick equals the fill value 0
 const LEVEL_WORDS: u32 = 12u;
 const CHANNEL_WORDS: u32 = 16u;
 const MAX_ITERATIONS: u32 = 1000000u; // loop guard per ray (steps plus skips)
+// Sample format of the atlas (0 unsigned, 1 signed, 2 float), fixed when the pipeline is
+// built so that only one atlas is read.
+override SAMPLE_KIND: u32 = 0u;
+// Traversal method (`Method` in viewer/src/gpu/renderer.rs): 0 residency octree, 1 page table
+// only (MRMCPT), 2 octree of one node per brick (GigaVoxels style).
+override METHOD: u32 = 0u;
+const NO_LEVEL: u32 = 0xffffffffu;
 
 struct Params {
     size: vec4<u32>, // width, height, frame (>= 1), channel count
@@ -26,7 +33,7 @@ struct Params {
     leaf_shift: vec4<i32>, // log2 of a leaf edge in level-0 voxels, per axis
     brick: vec4<u32>, // brick edge in voxels, per axis; w: flags (1 skip empty/homogeneous
     // nodes, 2 substitute missing bricks from other levels)
-    slots: vec4<u32>, // atlas slots per axis
+    slots: vec4<u32>, // log2 of atlas slots per x, per y; slots per z
 }
 
 struct Requests {
@@ -47,6 +54,8 @@ struct Requests {
 @group(0) @binding(8) var atlas_u: texture_3d<u32>;
 @group(0) @binding(9) var atlas_i: texture_3d<i32>;
 @group(0) @binding(10) var atlas_f: texture_3d<f32>;
+// Per page-table id: (min, max) of the brick, for the baselines' brick-granular culling.
+@group(0) @binding(11) var<storage, read> brick_ranges: array<vec2<f32>>;
 
 // ---- tables ----
 
@@ -176,7 +185,7 @@ fn scaled_frac(cell: i32, local: f32, sh: i32) -> f32 {
 
 // Atlas texel at p, in whichever atlas holds the sample format.
 fn texel(p: vec3<i32>) -> f32 {
-    switch P.tree.z {
+    switch SAMPLE_KIND {
         case 0u: {
             return f32(textureLoad(atlas_u, p, 0).x);
         }
@@ -189,19 +198,15 @@ fn texel(p: vec3<i32>) -> f32 {
     }
 }
 
-// Atlas origin of the slot of a resident page-table entry; records the slot's use (LRU).
+// Atlas origin of the slot of a resident page-table entry; records the slot's use (LRU, and
+// the bricks a frame needs resident). Slots per x and y are powers of two (P.slots.xy: log2).
 fn slot_origin(entry: u32) -> vec3<i32> {
     let slot = entry - 2u;
     usage[slot] = P.size.z;
-    let sc = vec3<u32>(slot % P.slots.x, (slot / P.slots.x) % P.slots.y, slot / (P.slots.x * P.slots.y));
+    let lx = P.slots.x;
+    let ly = P.slots.y;
+    let sc = vec3<u32>(slot & ((1u << lx) - 1u), (slot >> lx) & ((1u << ly) - 1u), slot >> (lx + ly));
     return vec3<i32>(sc * P.brick.xyz);
-}
-
-fn load_voxel(entry: u32, v: vec3<u32>) -> f32 {
-    if entry == ENTRY_EMPTY {
-        return 0.0;
-    }
-    return texel(slot_origin(entry) + vec3<i32>(v));
 }
 
 fn request(pid: u32, t: f32) {
@@ -223,6 +228,47 @@ fn note_substituted(pid: u32) {
     }
 }
 
+// A ray position in voxels of level l: integer part plus offset (node-local precision).
+struct LevelPos {
+    ip: vec3<i32>,
+    fp: vec3<f32>,
+}
+
+fn level_pos(l: u32, cell: vec3<i32>, local: vec3<f32>) -> LevelPos {
+    let sh = P.leaf_shift.xyz - level_shift(l);
+    return LevelPos(
+        vec3<i32>(scaled_int(cell.x, sh.x), scaled_int(cell.y, sh.y), scaled_int(cell.z, sh.z)),
+        vec3<f32>(
+            scaled_frac(cell.x, local.x, sh.x),
+            scaled_frac(cell.y, local.y, sh.y),
+            scaled_frac(cell.z, local.z, sh.z),
+        ),
+    );
+}
+
+// Page-table id of brick b of channel c at level l.
+fn brick_id(c: u32, l: u32, b: vec3<u32>) -> u32 {
+    let nb = level_bricks(l);
+    return page_offset(c, l) + (b.z * nb.y + b.y) * nb.x + b.x;
+}
+
+// The brick of level l holding a position (not its trilinear footprint).
+fn point_brick(l: u32, pos: LevelPos) -> vec3<u32> {
+    let v = clamp(pos.ip + vec3<i32>(floor(pos.fp)), vec3<i32>(0), level_shape(l) - vec3<i32>(1));
+    return vec3<u32>(v) / P.brick.xyz;
+}
+
+// World distance from a position to the exit of the box of brick b of level l, along a ray
+// of `dir` leaf units per world unit.
+fn brick_exit(l: u32, b: vec3<u32>, pos: LevelPos, dir: vec3<f32>) -> f32 {
+    let sh = P.leaf_shift.xyz - level_shift(l);
+    let rel = vec3<f32>(pos.ip - vec3<i32>(b * P.brick.xyz)) + pos.fp;
+    let d = dir * vec3<f32>(ldexp(1.0, sh.x), ldexp(1.0, sh.y), ldexp(1.0, sh.z));
+    let far = select(-rel, vec3<f32>(P.brick.xyz) - rel, d > vec3<f32>(0.0));
+    let tt = far / d;
+    return max(min(tt.x, min(tt.y, tt.z)), 0.0);
+}
+
 struct Sampled {
     value: f32,
     ok: bool,
@@ -230,31 +276,29 @@ struct Sampled {
 }
 
 // Trilinear sample of channel c at level l (voxel centres at i + ½, clamped to the edge
-// voxels), reading each of the 8 voxels through the page table. With `want`, every missing
-// brick is requested.
+// voxels). The 8 voxels lie in at most 8 bricks; each brick is looked up once per run of
+// corners in it, with one integer division per axis for the whole sample and a single
+// texel-fetch site (a CPU Vulkan driver runs every branch's code, so the shader keeps few).
+// With `want`, every missing brick is requested; without it the first miss returns.
 fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
-    let sh = P.leaf_shift.xyz - level_shift(l);
-    let shape = level_shape(l);
-    let nb = level_bricks(l);
-    let ip = vec3<i32>(scaled_int(cell.x, sh.x), scaled_int(cell.y, sh.y), scaled_int(cell.z, sh.z));
-    let fp = vec3<f32>(
-        scaled_frac(cell.x, local.x, sh.x),
-        scaled_frac(cell.y, local.y, sh.y),
-        scaled_frac(cell.z, local.z, sh.z),
-    ) - vec3<f32>(0.5);
+    let pos = level_pos(l, cell, local);
+    let fp = pos.fp - vec3<f32>(0.5);
     let fl = floor(fp);
     let w = fp - fl;
-    let i0 = ip + vec3<i32>(fl);
-    let hi = shape - vec3<i32>(1);
+    let i0 = pos.ip + vec3<i32>(fl);
+    let hi = level_shape(l) - vec3<i32>(1);
     let c0 = vec3<u32>(clamp(i0, vec3<i32>(0), hi));
     let c1 = vec3<u32>(clamp(i0 + vec3<i32>(1), vec3<i32>(0), hi));
-    let base = page_offset(c, l);
+    let bs = P.brick.xyz;
+    let b0 = c0 / bs;
+    let r0 = c0 - b0 * bs;
+    let r0n = r0 + (c1 - c0);
+    let wrap = r0n == bs;
+    let b1 = b0 + select(vec3<u32>(0u), vec3<u32>(1u), wrap);
+    let r1 = select(r0n, vec3<u32>(0u), wrap);
     var result = Sampled(0.0, true, 0u);
-    var acc = 0.0;
-    // Fast path: all 8 voxels in one brick (one page-table lookup).
-    let b0 = c0 / P.brick.xyz;
-    if all(b0 == c1 / P.brick.xyz) {
-        let pid = base + (b0.z * nb.y + b0.y) * nb.x + b0.x;
+    if all(b0 == b1) {
+        let pid = brick_id(c, l, b0);
         let entry = page_table[pid];
         if entry == 0u {
             result.ok = false;
@@ -268,8 +312,8 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
             return result;
         }
         let o = slot_origin(entry);
-        let l0 = o + vec3<i32>(c0 % P.brick.xyz);
-        let l1 = o + vec3<i32>(c1 % P.brick.xyz);
+        let l0 = o + vec3<i32>(r0);
+        let l1 = o + vec3<i32>(r1);
         let x00 = mix(texel(l0), texel(vec3<i32>(l1.x, l0.y, l0.z)), w.x);
         let x10 = mix(texel(vec3<i32>(l0.x, l1.y, l0.z)), texel(vec3<i32>(l1.x, l1.y, l0.z)), w.x);
         let x01 = mix(texel(vec3<i32>(l0.x, l0.y, l1.z)), texel(vec3<i32>(l1.x, l0.y, l1.z)), w.x);
@@ -277,27 +321,57 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
         result.value = mix(mix(x00, x10, w.y), mix(x01, x11, w.y), w.z);
         return result;
     }
+    var acc = 0.0;
+    var last = 0xffffffffu;
+    var entry = 0u;
+    var origin = vec3<i32>(0);
     for (var k = 0u; k < 8u; k++) {
         let bits = vec3<bool>((k & 1u) != 0u, (k & 2u) != 0u, (k & 4u) != 0u);
-        let v = select(c0, c1, bits);
-        let b = v / P.brick.xyz;
-        let pid = base + (b.z * nb.y + b.y) * nb.x + b.x;
-        let entry = page_table[pid];
-        let wk = select(vec3<f32>(1.0) - w, w, bits);
-        if entry == 0u {
-            result.ok = false;
-            result.missing = pid + 1u;
-            if want {
+        let pid = brick_id(c, l, select(b0, b1, bits));
+        if pid != last {
+            last = pid;
+            entry = page_table[pid];
+            if entry == 0u {
+                result.ok = false;
+                result.missing = pid + 1u;
+                if !want {
+                    return result;
+                }
                 request(pid, t);
-            } else {
-                return result;
+            } else if entry != ENTRY_EMPTY {
+                origin = slot_origin(entry);
             }
-        } else if result.ok {
-            acc += wk.x * wk.y * wk.z * load_voxel(entry, v % P.brick.xyz);
+        }
+        if entry > ENTRY_EMPTY {
+            let wk = select(vec3<f32>(1.0) - w, w, bits);
+            acc += wk.x * wk.y * wk.z * texel(origin + vec3<i32>(select(r0, r1, bits)));
         }
     }
-    result.value = acc;
+    if result.ok {
+        result.value = acc;
+    }
     return result;
+}
+
+// Next level to try for a missing sample at level `first`, having just tried `k`: coarser
+// levels the node maps first (ascending), then finer ones (descending); NO_LEVEL when none.
+fn next_candidate(mask: u32, first: u32, k: u32) -> u32 {
+    if k >= first {
+        let up = mask & ~((2u << k) - 1u);
+        if up != 0u {
+            return firstTrailingBit(up);
+        }
+        let down = mask & ((1u << first) - 1u);
+        if down != 0u {
+            return firstLeadingBit(down);
+        }
+        return NO_LEVEL;
+    }
+    let down = mask & ((1u << k) - 1u);
+    if down != 0u {
+        return firstLeadingBit(down);
+    }
+    return NO_LEVEL;
 }
 
 // Finest level whose voxel is at least the pixel footprint at distance t (scaled by the LOD
@@ -400,91 +474,145 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= vec3<i32>(leaves)) {
                 break;
             }
-            // Desired level and step: the finest over channels.
+            // Desired level per channel, and step: the finest over channels.
+            var chosen: array<u32, 8>;
             var finest = P.tree.y - 1u;
             for (var c = 0u; c < channels; c++) {
-                finest = min(finest, choose_level(c, ray.t));
+                chosen[c] = choose_level(c, ray.t);
+                finest = min(finest, chosen[c]);
             }
             let desired_step = P.forward.w * level_voxel(finest);
-            // Traversal depth: deepest node whose edge is at least the step.
-            var max_depth = depth;
-            var edge = P.world_to_leaf.w;
-            loop {
-                if max_depth == 0u || edge >= desired_step {
-                    break;
-                }
-                max_depth--;
-                edge *= 2.0;
-            }
-            var d = clamp(last_depth, P.tables.x + 1u, depth + 1u) - 1u;
-            d = min(d, max_depth);
-            // Walk down (Algorithm 1, multi-channel): per channel, whether it is empty here.
             var empty_bits = 0u;
-            var action = 0u; // 0 sample, 1 skip empty, 2 homogeneous, 3 skip unmapped
+            var action = 0u; // 0 sample, 1 skip empty, 2 homogeneous, 3 request and skip
             var node = 0u;
-            loop {
-                node = node_index(d, ray.cell);
+            var skip = 0.0;
+            if METHOD == 0u {
+                // Traversal depth: deepest node whose edge is at least the step.
+                var max_depth = depth;
+                var edge = P.world_to_leaf.w;
+                loop {
+                    if max_depth == 0u || edge >= desired_step {
+                        break;
+                    }
+                    max_depth--;
+                    edge *= 2.0;
+                }
+                var d = clamp(last_depth, P.tables.x + 1u, depth + 1u) - 1u;
+                d = min(d, max_depth);
+                // Walk down (Algorithm 1, multi-channel): per channel, whether it is empty.
+                loop {
+                    node = node_index(d, ray.cell);
+                    var all_empty = true;
+                    var all_homog = true;
+                    var all_unmapped = true;
+                    empty_bits = 0u;
+                    for (var c = 0u; c < channels; c++) {
+                        let lo = bitcast<f32>(node_word(node, c, 1u));
+                        let hi = bitcast<f32>(node_word(node, c, 2u));
+                        if skipping && tf_transparent(c, lo, hi) {
+                            empty_bits |= 1u << c;
+                        } else {
+                            all_empty = false;
+                            if !(lo == hi) || !skipping {
+                                all_homog = false;
+                                if node_word(node, c, 0u) != 0u {
+                                    all_unmapped = false;
+                                }
+                            }
+                        }
+                    }
+                    if all_empty {
+                        action = 1u;
+                        break;
+                    }
+                    if all_homog && skipping {
+                        action = 2u;
+                        break;
+                    }
+                    if d >= max_depth {
+                        if all_unmapped {
+                            action = 3u;
+                        }
+                        break;
+                    }
+                    d++;
+                }
+                last_depth = d;
+                if action == 1u || action == 3u {
+                    skip = node_exit(ray, d, dir);
+                }
+            } else {
+                // Baselines: culling and residency per brick of the level each channel wants.
+                skip = 3.0e38;
                 var all_empty = true;
-                var all_homog = true;
-                var all_unmapped = true;
-                empty_bits = 0u;
                 for (var c = 0u; c < channels; c++) {
-                    let lo = bitcast<f32>(node_word(node, c, 1u));
-                    let hi = bitcast<f32>(node_word(node, c, 2u));
-                    if skipping && tf_transparent(c, lo, hi) {
-                        empty_bits |= 1u << c;
+                    let l = chosen[c];
+                    if METHOD == 1u {
+                        // Page table: is the brick at the sample empty under the TF?
+                        let pos = level_pos(l, ray.cell, ray.local);
+                        let b = point_brick(l, pos);
+                        let r = brick_ranges[brick_id(c, l, b)];
+                        if skipping && tf_transparent(c, r.x, r.y) {
+                            empty_bits |= 1u << c;
+                            skip = min(skip, brick_exit(l, b, pos, dir));
+                        } else {
+                            all_empty = false;
+                        }
                     } else {
-                        all_empty = false;
-                        if !(lo == hi) || !skipping {
-                            all_homog = false;
-                            if node_word(node, c, 0u) != 0u {
-                                all_unmapped = false;
+                        // Octree of bricks: descend from the coarsest level; every ancestor
+                        // must be resident, the first missing one is requested, and the
+                        // finest resident one is sampled.
+                        let top = min(tables[channel_base(c) + 4u], P.tree.y - 1u);
+                        var k = top;
+                        var resident = NO_LEVEL;
+                        var missing = 0u;
+                        loop {
+                            let pos = level_pos(k, ray.cell, ray.local);
+                            let b = point_brick(k, pos);
+                            let pid = brick_id(c, k, b);
+                            let r = brick_ranges[pid];
+                            if skipping && tf_transparent(c, r.x, r.y) {
+                                empty_bits |= 1u << c;
+                                skip = min(skip, brick_exit(k, b, pos, dir));
+                                break;
+                            }
+                            let entry = page_table[pid];
+                            if entry == 0u {
+                                request(pid, ray.t);
+                                missing = pid + 1u;
+                                break;
+                            }
+                            if entry != ENTRY_EMPTY {
+                                _ = slot_origin(entry);
+                            }
+                            resident = k;
+                            if k <= l {
+                                break;
+                            }
+                            k--;
+                        }
+                        if (empty_bits & (1u << c)) == 0u {
+                            all_empty = false;
+                            chosen[c] = resident;
+                            if missing != 0u && resident != NO_LEVEL {
+                                note_substituted(missing - 1u);
                             }
                         }
                     }
                 }
                 if all_empty {
                     action = 1u;
-                    break;
                 }
-                if all_homog && skipping {
-                    action = 2u;
-                    break;
-                }
-                if d >= max_depth {
-                    if all_unmapped {
-                        action = 3u;
-                    }
-                    break;
-                }
-                d++;
             }
-            last_depth = d;
             if action == 1u {
                 skipped++;
-                advance(&ray, dir, node_exit(ray, d, dir) + nudge);
-                continue;
-            }
-            if action == 3u {
-                // Not even partially mapped in any needed channel: request the bricks at this
-                // sample and skip the node (Algorithm 1, lines 13-16).
-                for (var c = 0u; c < channels; c++) {
-                    if (empty_bits & (1u << c)) == 0u {
-                        let lo = bitcast<f32>(node_word(node, c, 1u));
-                        let hi = bitcast<f32>(node_word(node, c, 2u));
-                        if !(lo == hi) || !skipping {
-                            _ = sample_level(c, choose_level(c, ray.t), ray.cell, ray.local, true, ray.t);
-                        }
-                    }
-                }
-                nodata++;
-                advance(&ray, dir, node_exit(ray, d, dir) + nudge);
+                advance(&ray, dir, skip + nudge);
                 continue;
             }
             if action == 2u {
                 // Homogeneous in every channel: integrate analytically over the node as
                 // seg/Δ steps of the per-step opacity.
-                let seg = min(node_exit(ray, d, dir) + nudge, t_exit - ray.t);
+                let seg = min(node_exit(ray, last_depth, dir) + nudge, t_exit - ray.t);
                 var col = vec3<f32>(0.0);
                 var asum = 0.0;
                 for (var c = 0u; c < channels; c++) {
@@ -507,57 +635,64 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 advance(&ray, dir, seg + nudge);
                 continue;
             }
-            // Sample every non-empty channel at its level, substituting missing bricks.
-            var col = vec3<f32>(0.0);
-            var asum = 0.0;
+            // Sample every non-empty channel at its level, substituting missing bricks. For a
+            // node no needed channel maps (action 3), this only requests the bricks.
             var used = P.tree.y - 1u;
             var any_value = false;
             var values: array<f32, 8>;
             var have = 0u;
             for (var c = 0u; c < channels; c++) {
-                if (empty_bits & (1u << c)) != 0u {
+                if (empty_bits & (1u << c)) != 0u || chosen[c] == NO_LEVEL {
                     continue;
                 }
-                let mask = node_word(node, c, 0u);
-                let l = choose_level(c, ray.t);
-                var s = sample_level(c, l, ray.cell, ray.local, true, ray.t);
-                var got = l;
-                if !s.ok && substitute {
-                    let missing = s.missing - 1u;
-                    var found = false;
-                    // Coarser levels first, then finer ones, among those the node maps.
-                    for (var k = l + 1u; k < P.tree.y && !found; k++) {
-                        if (mask & (1u << k)) != 0u {
-                            let alt = sample_level(c, k, ray.cell, ray.local, false, ray.t);
-                            if alt.ok {
-                                s = alt;
-                                got = k;
-                                found = true;
-                            }
+                var mask = 0u;
+                if METHOD == 0u {
+                    if action == 3u && skipping {
+                        let lo = bitcast<f32>(node_word(node, c, 1u));
+                        let hi = bitcast<f32>(node_word(node, c, 2u));
+                        if lo == hi {
+                            continue; // homogeneous: known without its bricks
                         }
                     }
-                    for (var k = i32(l) - 1; k >= 0 && !found; k--) {
-                        if (mask & (1u << u32(k))) != 0u {
-                            let alt = sample_level(c, u32(k), ray.cell, ray.local, false, ray.t);
-                            if alt.ok {
-                                s = alt;
-                                got = u32(k);
-                                found = true;
-                            }
-                        }
+                    if substitute && action == 0u {
+                        mask = node_word(node, c, 0u);
                     }
-                    if found {
-                        note_substituted(missing);
+                }
+                let l = chosen[c];
+                var k = l;
+                var s = Sampled(0.0, false, 0u);
+                var first_missing = 0u;
+                loop {
+                    s = sample_level(c, k, ray.cell, ray.local, k == l, ray.t);
+                    if s.ok {
+                        break;
+                    }
+                    if k == l {
+                        first_missing = s.missing;
+                    }
+                    k = next_candidate(mask, l, k);
+                    if k == NO_LEVEL {
+                        break;
                     }
                 }
                 if s.ok {
+                    if k != l {
+                        note_substituted(first_missing - 1u);
+                    }
                     values[c] = s.value;
                     have |= 1u << c;
-                    used = min(used, got);
+                    used = min(used, k);
                     any_value = true;
                 }
             }
+            if action == 3u {
+                nodata++;
+                advance(&ray, dir, skip + nudge);
+                continue;
+            }
             let step = select(desired_step, P.forward.w * level_voxel(used), any_value);
+            var col = vec3<f32>(0.0);
+            var asum = 0.0;
             for (var c = 0u; c < channels; c++) {
                 if (have & (1u << c)) != 0u {
                     let a = corrected(tf_opacity(c, values[c]), step);

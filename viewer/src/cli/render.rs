@@ -12,6 +12,7 @@ use serde::Serialize;
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use crate::gpu::device::Gpu;
+use crate::gpu::renderer::Method;
 use crate::gpu::streaming::{Budget, FrameStats, render_progressive};
 use crate::image::{ImageFormat, RgbImage};
 use crate::source::BrickKey;
@@ -57,6 +58,8 @@ struct FailedBrick {
 #[derive(Serialize)]
 struct Stats<'a> {
     dataset: &'a str,
+    method: Method,
+    empty_space_skipping: bool,
     adapter: String,
     backend: String,
     width: u32,
@@ -93,6 +96,7 @@ pub fn run(args: Args) -> Result<()> {
         workers: args.renderer.workers,
         ..Default::default()
     };
+    let (method, empty_space_skipping) = (options.method, options.empty_space_skipping);
     let start = Instant::now();
     let gpu = Gpu::new()?;
     let result = render_progressive(&gpu, Arc::clone(&source), &scene, options, &budget)?;
@@ -114,6 +118,8 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(path) = &args.stats {
         let stats = Stats {
             dataset: &source.info().name,
+            method,
+            empty_space_skipping,
             adapter: gpu.adapter_info.name.clone(),
             backend: format!("{:?}", gpu.adapter_info.backend),
             width: result.width,

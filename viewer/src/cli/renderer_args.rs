@@ -6,7 +6,7 @@ use std::sync::Arc;
 use anyhow::{Result, ensure};
 
 use super::scene_args::{SceneArgs, SourceArgs};
-use crate::gpu::renderer::RenderOptions;
+use crate::gpu::renderer::{Method, RenderOptions};
 use crate::scene::Scene;
 use crate::source::BrickSource;
 
@@ -38,6 +38,10 @@ pub struct RendererArgs {
     /// yet is a hole until it arrives (the page-table-only baseline's behaviour).
     #[arg(long)]
     pub no_substitution: bool,
+    /// Traversal method: ours (`residency`), or a baseline: `page-table` (MRMCPT: whole-brick
+    /// skipping, no substitution) or `octree` (one node per brick, GigaVoxels style).
+    #[arg(long, value_enum, default_value_t = Method::Residency)]
+    pub method: Method,
     /// Brick fetch worker threads.
     #[arg(long, default_value_t = 8)]
     pub workers: usize,
@@ -76,6 +80,7 @@ impl RendererArgs {
             level_bounds: vec![(self.min_level, max_level); channels],
             empty_space_skipping: !self.no_skipping,
             substitution: !self.no_substitution,
+            method: self.method,
             ..Default::default()
         })
     }
@@ -121,6 +126,15 @@ mod tests {
         assert_eq!((o.width, o.height, o.cache_bytes), (64, 32, 256 << 20));
         assert_eq!(o.level_bounds, vec![(0, 3); 3]);
         assert!(o.empty_space_skipping && o.substitution);
+        assert_eq!(o.method, Method::Residency);
+        assert_eq!(
+            options(&["--method", "page-table"]).unwrap().method,
+            Method::PageTable
+        );
+        assert_eq!(
+            options(&["--method", "octree"]).unwrap().method,
+            Method::Octree
+        );
         let o = options(&[
             "--min-level",
             "1",

@@ -74,8 +74,11 @@ impl BrickCache {
             wanted > 0,
             "cache of {cache_bytes} bytes holds no brick of {brick_bytes} bytes"
         );
-        let sx = wanted.min(fit[0]);
-        let sy = wanted.div_ceil(sx).min(fit[1]);
+        // Slots per x and y axis are powers of two, so the shader finds a slot's atlas
+        // position with shifts rather than integer division.
+        let pow2_floor = |v: u32| 1u32 << (31 - v.max(1).leading_zeros());
+        let sx = pow2_floor(wanted.min(fit[0]));
+        let sy = pow2_floor(wanted.div_ceil(sx).min(fit[1]));
         let sz = wanted.div_ceil(sx * sy).min(fit[2]);
         let capacity = wanted.min(sx * sy * sz);
         if capacity < wanted {

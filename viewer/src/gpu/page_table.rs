@@ -113,6 +113,16 @@ impl PageTables {
         })
     }
 
+    /// Number of ids (bricks of every rendered channel and level).
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// Whether there are no ids at all.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
     /// The entry of `id`.
     pub fn entry(&self, id: u32) -> u32 {
         self.entries[id as usize]

@@ -22,6 +22,37 @@ pub const MAX_CHANNELS: usize = 8;
 
 const HEADER_WORDS: usize = 8;
 
+/// How the ray caster finds data and skips empty space: the residency octree, or one of the
+/// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
+/// functions so that their ratios are fair.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// The residency octree: per-channel residency masks and min/max per node, nodes finer
+    /// than a brick, substitution of missing bricks from other resident levels.
+    #[default]
+    Residency,
+    /// Multi-resolution multi-channel page table (MRMCPT): data is read straight through the
+    /// page table; only whole bricks empty in every channel are skipped; a missing brick is a
+    /// hole until it arrives.
+    PageTable,
+    /// Octree of one node per brick (GigaVoxels style): each channel descends from the
+    /// coarsest level to the level it wants, needs every ancestor brick resident, and renders
+    /// from the finest resident ancestor while a brick is missing.
+    Octree,
+}
+
+impl Method {
+    /// The name used on the command line and in statistics.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Residency => "residency",
+            Self::PageTable => "page-table",
+            Self::Octree => "octree",
+        }
+    }
+}
+
 /// Renderer settings.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RenderOptions {
@@ -52,6 +83,8 @@ pub struct RenderOptions {
     /// Substitute a missing brick from another resident level (coarser first); `false`
     /// leaves the sample empty, as a page-table-only renderer would.
     pub substitution: bool,
+    /// Traversal method: ours or a baseline.
+    pub method: Method,
 }
 
 impl Default for RenderOptions {
@@ -69,6 +102,7 @@ impl Default for RenderOptions {
             level_bounds: Vec::new(),
             empty_space_skipping: true,
             substitution: true,
+            method: Method::Residency,
         }
     }
 }
@@ -109,6 +143,9 @@ pub struct ShaderCounts {
     pub bricks_substituted: u64,
     /// Samples (or unmapped nodes) with no resident data in any channel.
     pub samples_without_data: u64,
+    /// Distinct cache slots the frame read (usage feedback): the bricks this method needs
+    /// resident for this view.
+    pub bricks_used: u64,
 }
 
 /// One missing brick the shader reported.
@@ -292,6 +329,32 @@ impl Renderer {
         );
         gpu.queue
             .write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
+        // Per-brick value ranges (two f32 per page-table id), read by the baselines only.
+        let brick_ranges: Vec<f32> = if options.method == Method::Residency {
+            vec![0.0; 2]
+        } else {
+            (0..pages.len() as u32)
+                .flat_map(|id| {
+                    let (lo, hi) = pages
+                        .key(id)
+                        .map(|k| info.brick_range(&k))
+                        .unwrap_or((f64::INFINITY, f64::NEG_INFINITY));
+                    [crate::octree::f32_down(lo), crate::octree::f32_up(hi)]
+                })
+                .collect()
+        };
+        too_big(
+            "the per-brick ranges",
+            brick_ranges.len() as u64 * 4,
+            "use the residency method",
+        )?;
+        let brick_range_buf = storage(
+            "brick ranges",
+            brick_ranges.len() as u64 * 4,
+            wgpu::BufferUsages::empty(),
+        );
+        gpu.queue
+            .write_buffer(&brick_range_buf, 0, bytemuck::cast_slice(&brick_ranges));
         let request_bytes = (HEADER_WORDS as u64 + 2 * options.max_requests as u64) * 4;
         let requests = storage("requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
         let pixels = options.width as u64 * options.height as u64;
@@ -343,6 +406,7 @@ impl Renderer {
                 sb(7, false),
                 tex(8, wgpu::TextureSampleType::Uint),
                 tex(9, wgpu::TextureSampleType::Sint),
+                sb(11, true),
                 tex(10, wgpu::TextureSampleType::Float { filterable: false }),
             ],
         });
@@ -395,6 +459,10 @@ impl Renderer {
                     binding: 10,
                     resource: wgpu::BindingResource::TextureView(&views[2]),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 11,
+                    resource: brick_range_buf.as_entire_binding(),
+                },
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -407,7 +475,15 @@ impl Renderer {
             layout: Some(&pipeline_layout),
             module: &module,
             entry_point: Some("main"),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                // Fixed per pipeline so that the driver compiles only the code this renderer
+                // runs: one atlas format, one traversal method.
+                constants: &[
+                    ("SAMPLE_KIND", f64::from(cache.kind() as u32)),
+                    ("METHOD", f64::from(options.method as u32)),
+                ],
+                ..Default::default()
+            },
             cache: None,
         });
 
@@ -622,8 +698,9 @@ impl Renderer {
                 self.options.empty_space_skipping as u32 | (self.options.substitution as u32) << 1,
             ],
             slots: {
+                // Slots per x and y are powers of two: the shader takes their log2.
                 let s = self.cache.slots_per_axis();
-                [s[0], s[1], s[2], 0]
+                [s[0].trailing_zeros(), s[1].trailing_zeros(), s[2], 0]
             },
         }
     }
@@ -724,6 +801,7 @@ impl Renderer {
             b.unmap();
         }
         self.cache.note_usage(&usage);
+        let bricks_used = usage.iter().filter(|&&u| u == self.frame).count() as u64;
 
         let requested = words[0] as usize;
         let n = requested.min(self.options.max_requests as usize);
@@ -748,6 +826,7 @@ impl Renderer {
                 requests_over_cap: words[5] as u64,
                 samples_without_data: words[6] as u64,
                 bricks_requested: requested as u64,
+                bricks_used,
             },
             gpu_time_ms,
         })

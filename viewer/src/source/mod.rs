@@ -204,6 +204,44 @@ impl VolumeInfo {
         std::array::from_fn(|i| s[i].div_ceil(self.brick_shape[i]))
     }
 
+    /// Conservative value range `(min, max)` of a brick under trilinear sampling: the union of
+    /// the finest (haloed) min/max cells of its level that overlap it, so every value a
+    /// sample inside the brick can interpolate lies in it. `min > max`: the brick holds only
+    /// NaN. Unbounded when the store has no region metadata for this channel and level.
+    pub fn brick_range(&self, key: &BrickKey) -> (f64, f64) {
+        let grid = self
+            .minmax
+            .as_ref()
+            .and_then(|m| m.get(key.channel as usize))
+            .and_then(|c| c.get(key.level as usize))
+            .and_then(|g| g.first());
+        let Some(g) = grid else {
+            return (f64::NEG_INFINITY, f64::INFINITY);
+        };
+        let cells: [std::ops::Range<u64>; 3] = std::array::from_fn(|a| {
+            let lo = key.brick[a] * self.brick_shape[a];
+            let hi = (lo + self.brick_shape[a]).min(self.levels[key.level as usize].shape[a]);
+            let c = g.cell_shape[a].max(1);
+            (lo / c).min(g.grid_shape[a])..hi.div_ceil(c).min(g.grid_shape[a])
+        });
+        let mut r = (f64::INFINITY, f64::NEG_INFINITY);
+        for z in cells[0].clone() {
+            for y in cells[1].clone() {
+                for x in cells[2].clone() {
+                    let i = ((z * g.grid_shape[1] + y) * g.grid_shape[2] + x) as usize;
+                    let (lo, hi) = match (g.min.get(i), g.max.get(i)) {
+                        (Some(&lo), Some(&hi)) => (lo, hi),
+                        _ => return (f64::NEG_INFINITY, f64::INFINITY), // malformed: no culling
+                    };
+                    if !(lo.is_nan() || hi.is_nan()) {
+                        r = (r.0.min(lo), r.1.max(hi));
+                    }
+                }
+            }
+        }
+        r
+    }
+
     /// Checks that `key` names an existing brick, with an error naming it otherwise.
     pub fn check_key(&self, key: &BrickKey) -> Result<()> {
         let level = key.level as usize;
