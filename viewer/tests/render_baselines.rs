@@ -249,3 +249,71 @@ fn bricks_used_counts_the_working_set() {
         );
     }
 }
+
+/// The baselines' culling data is conservative: a brick's range holds every voxel of its
+/// level within one voxel of its box (what a trilinear sample inside it reads), and its
+/// subtree range also holds those of every finer level under its box. Checked for every
+/// brick of a volume with odd sizes (partial edge bricks) against the voxels themselves.
+#[test]
+fn brick_ranges_bound_what_samples_read() {
+    use residency_viewer::source::BrickKey;
+    let src = SyntheticSource::new(
+        SampleType::U16,
+        [20, 40, 36],
+        [1.0; 3],
+        [8, 8, 8],
+        4,
+        1,
+        |_, [x, y, z]| ((x * 37 + y * 11 + z * 5) % 97) as f64 * ((x + y) % 3) as f64,
+    );
+    let info = src.info().clone();
+    let voxels_near = |level: usize, lo: [u64; 3], hi: [u64; 3]| {
+        let s = info.levels[level].shape;
+        let mut r = (f64::INFINITY, f64::NEG_INFINITY);
+        for z in lo[0].saturating_sub(1)..(hi[0] + 1).min(s[0]) {
+            for y in lo[1].saturating_sub(1)..(hi[1] + 1).min(s[1]) {
+                for x in lo[2].saturating_sub(1)..(hi[2] + 1).min(s[2]) {
+                    let v = src.value(0, level, [x, y, z]);
+                    r = (r.0.min(v), r.1.max(v));
+                }
+            }
+        }
+        r
+    };
+    let mut checked = 0;
+    for (l, level) in info.levels.iter().enumerate() {
+        let grid = info.brick_grid(l);
+        for bz in 0..grid[0] {
+            for by in 0..grid[1] {
+                for bx in 0..grid[2] {
+                    let key = BrickKey {
+                        level: l as u32,
+                        channel: 0,
+                        brick: [bz, by, bx],
+                    };
+                    let own = info.brick_range(&key);
+                    let sub = info.subtree_range(&key);
+                    for j in 0..=l {
+                        let f: [u64; 3] =
+                            std::array::from_fn(|a| level.factor[a] / info.levels[j].factor[a]);
+                        let s = info.levels[j].shape;
+                        let lo = std::array::from_fn(|a| key.brick[a] * info.brick_shape[a] * f[a]);
+                        let hi = std::array::from_fn(|a| {
+                            ((key.brick[a] + 1) * info.brick_shape[a] * f[a]).min(s[a])
+                        });
+                        let (a, b) = voxels_near(j, lo, hi);
+                        assert!(
+                            sub.0 <= a && b <= sub.1,
+                            "{key:?} level {j}: {sub:?} vs {a}..{b}"
+                        );
+                        if j == l {
+                            assert!(own.0 <= a && b <= own.1, "{key:?}: {own:?} vs {a}..{b}");
+                        }
+                        checked += 1;
+                    }
+                }
+            }
+        }
+    }
+    assert!(checked > 40, "{checked}");
+}

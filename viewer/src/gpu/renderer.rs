@@ -329,7 +329,8 @@ impl Renderer {
         );
         gpu.queue
             .write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
-        // Per-brick value ranges (two f32 per page-table id), read by the baselines only.
+        // Per-brick value ranges (two f32 per page-table id), read by the baselines only:
+        // the page table culls the brick it samples, the octree a brick and its subtree.
         let brick_ranges: Vec<f32> = if options.method == Method::Residency {
             vec![0.0; 2]
         } else {
@@ -337,7 +338,11 @@ impl Renderer {
                 .flat_map(|id| {
                     let (lo, hi) = pages
                         .key(id)
-                        .map(|k| info.brick_range(&k))
+                        .map(|k| match options.method {
+                            // Culling a brick of the octree culls its subtree.
+                            Method::Octree => info.subtree_range(&k),
+                            _ => info.brick_range(&k),
+                        })
                         .unwrap_or((f64::INFINITY, f64::NEG_INFINITY));
                     [crate::octree::f32_down(lo), crate::octree::f32_up(hi)]
                 })

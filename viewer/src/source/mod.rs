@@ -209,20 +209,51 @@ impl VolumeInfo {
     /// sample inside the brick can interpolate lies in it. `min > max`: the brick holds only
     /// NaN. Unbounded when the store has no region metadata for this channel and level.
     pub fn brick_range(&self, key: &BrickKey) -> (f64, f64) {
+        let level = key.level as usize;
+        let (lo, hi) = self.brick_box(key, level);
+        self.region_range(key.channel as usize, level, lo, hi)
+    }
+
+    /// Conservative value range of a brick *and of every finer level* over its region (each
+    /// level's haloed cells under the brick's box), so that a sample of any level inside the
+    /// box lies in it. A brick-granular octree culls a whole subtree with it.
+    pub fn subtree_range(&self, key: &BrickKey) -> (f64, f64) {
+        (0..=key.level as usize).fold((f64::INFINITY, f64::NEG_INFINITY), |r, level| {
+            let (lo, hi) = self.brick_box(key, level);
+            let (a, b) = self.region_range(key.channel as usize, level, lo, hi);
+            (r.0.min(a), r.1.max(b))
+        })
+    }
+
+    /// The voxel box `[lo, hi)` (`z, y, x`) of a brick, in voxels of level `at` (finer or
+    /// equal), clipped to that level.
+    fn brick_box(&self, key: &BrickKey, at: usize) -> ([u64; 3], [u64; 3]) {
+        let l = key.level as usize;
+        let (f, g) = (self.levels[l].factor, self.levels[at].factor);
+        let shape = self.levels[at].shape;
+        let scale = |a: usize, v: u64| v * (f[a] / g[a].max(1)).max(1);
+        let lo = std::array::from_fn(|a| scale(a, key.brick[a] * self.brick_shape[a]));
+        let hi = std::array::from_fn(|a| {
+            scale(a, (key.brick[a] + 1) * self.brick_shape[a]).min(shape[a])
+        });
+        (lo, hi)
+    }
+
+    /// Union of the finest min/max cells of `channel` at `level` overlapping the voxel box
+    /// `[lo, hi)`; unbounded without region metadata (or with a malformed grid).
+    fn region_range(&self, channel: usize, level: usize, lo: [u64; 3], hi: [u64; 3]) -> (f64, f64) {
         let grid = self
             .minmax
             .as_ref()
-            .and_then(|m| m.get(key.channel as usize))
-            .and_then(|c| c.get(key.level as usize))
+            .and_then(|m| m.get(channel))
+            .and_then(|c| c.get(level))
             .and_then(|g| g.first());
         let Some(g) = grid else {
             return (f64::NEG_INFINITY, f64::INFINITY);
         };
         let cells: [std::ops::Range<u64>; 3] = std::array::from_fn(|a| {
-            let lo = key.brick[a] * self.brick_shape[a];
-            let hi = (lo + self.brick_shape[a]).min(self.levels[key.level as usize].shape[a]);
             let c = g.cell_shape[a].max(1);
-            (lo / c).min(g.grid_shape[a])..hi.div_ceil(c).min(g.grid_shape[a])
+            (lo[a] / c).min(g.grid_shape[a])..hi[a].div_ceil(c).min(g.grid_shape[a])
         });
         let mut r = (f64::INFINITY, f64::NEG_INFINITY);
         for z in cells[0].clone() {
