@@ -10,10 +10,12 @@
 //! - [`octree`]: the residency octree (partial-residency masks and value ranges per node);
 //! - [`gpu`]: the wgpu renderer: device, brick cache, page tables, the `raycast.wgsl` pass and
 //!   the progressive streaming loop;
-//! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics).
+//! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
+//! - [`bench`]: the renderer benchmark suite (`viewer bench`).
 
 #![warn(missing_docs)]
 
+pub mod bench;
 pub mod cli;
 pub mod gpu;
 pub mod image;

@@ -27,6 +27,8 @@ enum Command {
     Compare(cli::compare::Args),
     /// Open an interactive window: orbit, pan, zoom, channel controls, statistics.
     View(Box<cli::view::Args>),
+    /// Benchmark the renderer: methods side by side, time against error, skipped work, scaling.
+    Bench(cli::bench::Args),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Command::Reference(args) => cli::reference::run(*args),
         Command::Compare(args) => cli::compare::run(args),
         Command::View(args) => cli::view::run(*args),
+        Command::Bench(args) => cli::bench::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

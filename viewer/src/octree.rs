@@ -325,22 +325,6 @@ impl ResidencyOctree {
         self.resident.len()
     }
 
-    /// Value range `(min, max)` of a whole brick from the leaves it overlaps (coarser than
-    /// [`crate::source::VolumeInfo::brick_range`], which reads the region metadata at the
-    /// brick's own level). `min > max`: no data.
-    pub fn brick_range(&self, key: &BrickKey) -> (f64, f64) {
-        let Some(slot) = self.slot_of(key.channel as usize) else {
-            return (f64::NEG_INFINITY, f64::INFINITY);
-        };
-        let d = self.geometry.depth;
-        let mut r = (f64::INFINITY, f64::NEG_INFINITY);
-        for c in cells(self.leaf_coord_ranges(key)) {
-            let (lo, hi) = self.range(node_index(d, c), slot);
-            r = (r.0.min(lo), r.1.max(hi));
-        }
-        r
-    }
-
     fn leaf_coord_ranges(&self, key: &BrickKey) -> [Range<u64>; 3] {
         let l = key.level as usize;
         let b = [key.brick[2], key.brick[1], key.brick[0]];

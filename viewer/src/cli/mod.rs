@@ -1,5 +1,6 @@
 //! The `viewer` subcommands, one module each.
 
+pub mod bench;
 pub mod compare;
 pub mod reference;
 pub mod render;

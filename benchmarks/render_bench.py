@@ -1,0 +1,197 @@
+"""Renderer benchmark: generates the datasets, runs `viewer bench run` on each, and writes the
+report (markdown, PNG plots, raw JSON) with `viewer bench report`.
+
+    python3 benchmarks/render_bench.py [--short] [--readme] [--out-dir DIR] [--data-dir DIR]
+
+Builds nothing: it needs `target/release/ingest` and `target/release/viewer`
+(`cargo build --release`), or the folder named by RESIDENCY_BIN. Datasets come from
+`ingest sample --kind sparse|dense|cycif` (an `ingest` without `--kind` makes every dataset
+from the fluorescence sample, and the report says so through the kind). Multi-channel sparse
+and dense stores repeat channel 0 (the paper's simulated channels), rendered with shifted
+transfer functions (`--vary-tf`). The renderer draws at most 8 channels at once, so the
+16-channel CyCIF-like store renders 8.
+
+Experiments (see `viewer bench run --help` and docs/benchmarks/render-bench.md):
+- table1: every method over the same orbit (sparse 1 and 4 channels, dense 1 and 4, cycif);
+- sweep: step, LOD bias, cache budget and leaf size on sparse 1 channel; leaf size again on
+  stores of smaller and larger bricks;
+- skipped: bytes fetched against a naive frustum loader (sparse, dense, cycif);
+- scaling: sparse at three sizes, and 1, 2, 4, 8 channels.
+
+`--short` runs tiny sizes, one view, one timed frame, 32x32 images (CI's mode, a few minutes
+on two cores; it asserts nothing about speed). Outputs go to docs/benchmarks/ (full) or
+benchmarks/data/short-report/ (short) unless --out-dir says otherwise; `--readme` also
+rewrites the summary table in README.md between the render-bench markers.
+"""
+
+import argparse
+import datetime
+import json
+import os
+import pathlib
+import shutil
+import subprocess
+import sys
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BIN = pathlib.Path(os.environ.get("RESIDENCY_BIN", ROOT / "target" / "release"))
+START, END = "<!-- render-bench:start -->", "<!-- render-bench:end -->"
+
+
+def run(cmd, quiet=False):
+    """Runs `cmd`; on failure raises with the command and its stderr."""
+    t = time.time()
+    env = dict(os.environ)
+    env.setdefault("XDG_RUNTIME_DIR", "/tmp")
+    p = subprocess.run([str(c) for c in cmd], capture_output=True, text=True, env=env)
+    if p.returncode != 0:
+        raise SystemExit(f"failed ({p.returncode}): {' '.join(map(str, cmd))}\n{p.stderr[-4000:]}")
+    if not quiet:
+        print(f"  {time.time() - t:6.1f} s  {' '.join(map(str, cmd[:3]))} ... {cmd[-1]}", flush=True)
+    return p.stdout
+
+
+def ingest_has_kind():
+    return "--kind" in run([BIN / "ingest", "sample", "--help"], quiet=True)
+
+
+class Data:
+    """Generates and converts the datasets on demand, once each."""
+
+    def __init__(self, folder: pathlib.Path, has_kind: bool):
+        self.folder = folder
+        self.has_kind = has_kind
+        folder.mkdir(parents=True, exist_ok=True)
+
+    def kind(self, kind):
+        return kind if self.has_kind else "fluorescence"
+
+    def sample(self, kind, size, channels=None):
+        z, y, x = size
+        name = f"{self.kind(kind)}-{z}x{y}x{x}" + (f"-{channels}c" if channels else "")
+        out = self.folder / "tiff" / name
+        if not (out / "done").exists():
+            shutil.rmtree(out, ignore_errors=True)
+            cmd = [BIN / "ingest", "sample", "-o", out, "--size", f"{z},{y},{x}", "--quiet"]
+            if self.has_kind:
+                cmd += ["--kind", kind]
+                if channels:
+                    cmd += ["--channels", str(channels)]
+            run(cmd)
+            (out / "done").write_text("")
+        tiffs = sorted(out.glob("*.tif"))
+        if not tiffs:
+            raise SystemExit(f"{out}: ingest sample wrote no TIFF")
+        return name, tiffs
+
+    def store(self, kind, size, chunk, repeat=1, channels=None):
+        """A store of the `kind` sample: channel 0 repeated `repeat` times, or all channels of
+        a `channels`-channel sample when `repeat` is None."""
+        name, tiffs = self.sample(kind, size, channels)
+        if repeat is None:
+            inputs, tag = tiffs, "all"
+        else:
+            inputs, tag = [tiffs[0]] * repeat, f"x{repeat}"
+        store = self.folder / f"{name}-{tag}-b{chunk}.ome.zarr"
+        if not (store / "zarr.json").exists():
+            cmd = [BIN / "ingest", "convert", *inputs, "-o", store, "--chunk", str(chunk), "--overwrite", "--quiet"]
+            if repeat is not None and repeat > 1:
+                cmd += ["--channel-names", ",".join(f"c{i}" for i in range(repeat))]
+            run(cmd)
+        return store
+
+
+def plan(short: bool):
+    """Datasets and experiments: (label, kind, size, chunk, repeat, sample channels, visible
+    channels or None for all, experiments, extra flags)."""
+    if short:
+        s, big, cy, chunk = (32, 32, 32), (48, 48, 48), (8, 64, 64), 16
+    else:
+        s, big, cy, chunk = (128, 128, 128), (192, 192, 192), (24, 256, 256), 16
+    small = tuple(v // 2 for v in s)
+    sweep_leaf = ["--sweep-params", "leaf"]
+    p = [
+        (f"sparse {s[0]}³", "sparse", s, chunk, 1, None, None, "table1,skipped,sweep,scaling", []),
+        (f"sparse {s[0]}³ ×4", "sparse", s, chunk, 4, None, None, "table1,scaling", ["--vary-tf"]),
+        (f"dense {s[0]}³", "dense", s, chunk, 1, None, None, "table1,skipped,scaling", []),
+        (f"dense {s[0]}³ ×4", "dense", s, chunk, 4, None, None, "table1", ["--vary-tf"]),
+        (f"cycif {cy[0]}×{cy[1]}×{cy[2]}", "cycif", cy, chunk, None, 16, list(range(8)), "table1,skipped", []),
+        (f"sparse {small[0]}³", "sparse", small, chunk, 1, None, None, "scaling", []),
+        (f"sparse {big[0]}³", "sparse", big, chunk, 1, None, None, "scaling", []),
+        (f"sparse {s[0]}³ ×8 (2 shown)", "sparse", s, chunk, 8, None, [0, 1], "scaling", ["--vary-tf"]),
+        (f"sparse {s[0]}³ ×8", "sparse", s, chunk, 8, None, None, "scaling", ["--vary-tf"]),
+        (f"sparse {s[0]}³ bricks {chunk // 2}", "sparse", s, chunk // 2, 1, None, None, "sweep", sweep_leaf),
+        (f"sparse {s[0]}³ bricks {chunk * 2}", "sparse", s, chunk * 2, 1, None, None, "sweep", sweep_leaf),
+    ]
+    if short:
+        # Keep CI's run small: one leaf-vs-brick store is enough to exercise the code.
+        p = [x for x in p if not x[0].endswith(f"bricks {chunk * 2}")]
+    return p
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--short", action="store_true", help="tiny sizes, 1 view, 1 timed frame, 32x32 images")
+    ap.add_argument("--readme", action="store_true", help="rewrite the summary table in README.md")
+    ap.add_argument("--out-dir", type=pathlib.Path, help="report folder [docs/benchmarks, or benchmarks/data/short-report with --short]")
+    ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data", help="scratch folder for datasets")
+    ap.add_argument("--views", type=int, help="views of the orbit [4; 1 with --short]")
+    ap.add_argument("--size", type=int, help="image edge in pixels [96; 32 with --short]")
+    ap.add_argument("--timed-frames", type=int, help="frames timed per view [3; 1 with --short]")
+    args = ap.parse_args()
+    for exe in ("ingest", "viewer"):
+        if not (BIN / exe).exists():
+            raise SystemExit(f"{BIN / exe} not built: run cargo build --release")
+    out = args.out_dir or (ROOT / "benchmarks" / "data" / "short-report" if args.short else ROOT / "docs" / "benchmarks")
+    raw = out / "raw"
+    raw.mkdir(parents=True, exist_ok=True)
+    for old in raw.glob("*.json"):  # a stale file would be mistaken for this run's
+        old.unlink()
+    views = args.views or (1 if args.short else 3)
+    size = args.size or (32 if args.short else 96)
+    frames = args.timed_frames or (1 if args.short else 3)
+    has_kind = ingest_has_kind()
+    if not has_kind:
+        print("note: this ingest has no `sample --kind`; every dataset is the fluorescence sample", file=sys.stderr)
+    data = Data(args.data_dir, has_kind)
+    started = time.time()
+    results = []
+    for i, (label, kind, shape, chunk, repeat, channels, visible, experiments, extra) in enumerate(plan(args.short)):
+        store = data.store(kind, shape, chunk, repeat, channels)
+        k = data.kind(kind)
+        if k != kind:
+            label = label.replace(kind, k, 1)
+        result = raw / f"{i:02d}-{'-'.join(label.replace('³', '').replace('×', 'x').replace('(', '').replace(')', '').split())}.json"
+        cmd = [BIN / "viewer", "bench", "run", "--store", store, "--experiment", experiments, "--label", label,
+               "--kind", k, "--width", size, "--height", size, "--views", views, "--timed-frames", frames,
+               "--out", result, "--quiet", *extra]
+        if visible is not None:
+            cmd += ["--channels", ",".join(map(str, visible))]
+        print(f"[{i + 1}/{len(plan(args.short))}] {label}: {experiments}", flush=True)
+        run(cmd)
+        results.append(result)
+    mode = "--short" if args.short else ""
+    command = f"benchmarks/render_bench.py {mode}".strip()
+    run([BIN / "viewer", "bench", "report", *results, "--out-dir", out, "--command", command])
+    summary = (out / "summary.md").read_text()
+    stamp = datetime.date.today().isoformat()
+    summary = summary.replace("Measured on", f"Measured {stamp} on", 1)
+    (out / "summary.md").write_text(summary)
+    print(f"\nwrote {out / 'render-bench.md'} in {time.time() - started:.0f} s\n")
+    print(summary)
+    if args.readme:
+        readme = ROOT / "README.md"
+        text = readme.read_text()
+        if START not in text or END not in text:
+            raise SystemExit(f"{readme}: no {START} / {END} markers")
+        head, rest = text.split(START, 1)
+        _, tail = rest.split(END, 1)
+        readme.write_text(f"{head}{START}\n{summary.strip()}\n{END}{tail}")
+        print(f"updated {readme}")
+    # The raw results files, in run order, for whoever reads the folder.
+    (raw / "index.json").write_text(json.dumps([r.name for r in results], indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,72 @@
+"""The renderer benchmark's short mode (CI's): `benchmarks/render_bench.py --short` runs every
+experiment of `viewer bench` on tiny datasets into a temporary folder; its outputs exist, every
+results file validates against schemas/json/render-bench.schema.json, every method produced
+finite times and an image compared with the reference, and each sweep has a Pareto front.
+Nothing here is about speed."""
+
+import json
+import math
+import os
+import subprocess
+import sys
+
+import jsonschema
+
+from conftest import BIN, ROOT
+
+SCHEMA = ROOT / "schemas" / "json" / "render-bench.schema.json"
+
+
+def test_short_mode_runs_every_experiment_and_validates(tmp_path):
+    out, data = tmp_path / "report", tmp_path / "data"
+    env = dict(os.environ, RESIDENCY_BIN=str(BIN), XDG_RUNTIME_DIR=os.environ.get("XDG_RUNTIME_DIR", "/tmp"))
+    p = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "render_bench.py"), "--short", "--out-dir", str(out), "--data-dir", str(data)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    assert "| Dataset |" in p.stdout
+
+    report = (out / "render-bench.md").read_text()
+    for section in ("## Table 1", "## Run time against error", "## Skipped work", "## Scaling"):
+        assert section in report, section
+    assert (out / "summary.md").read_text().strip()
+    pngs = sorted(out.glob("*.png"))
+    assert any(p.name.startswith("sweep-") for p in pngs) and (out / "scaling-size.png").exists()
+    assert (out / "scaling-channels.png").exists()
+    for png in pngs:
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", png
+
+    validator = jsonschema.Draft202012Validator(json.loads(SCHEMA.read_text()))
+    files = [out / "raw" / name for name in json.loads((out / "raw" / "index.json").read_text())]
+    assert len(files) >= 5
+    methods = set()
+    sweeps = 0
+    for f in files:
+        r = json.loads(f.read_text())
+        validator.validate(r)
+        assert r["device"]["adapter"] and r["device"]["cpu"]
+        for run in r["runs"]:
+            if run["experiment"] == "table1":
+                methods.add(run["label"])
+            assert math.isfinite(run["wall_ms"]) and run["wall_ms"] > 0, (f.name, run["label"])
+            if r["device"]["timestamps"]:
+                assert run["gpu_ms"] is not None and math.isfinite(run["gpu_ms"]) and run["gpu_ms"] >= 0
+            for v in run["views"]:
+                # An image was rendered and compared with the reference of the same view.
+                assert 0 < v["ssim"] <= 1 and math.isfinite(v["max_abs_error"]), (f.name, run["label"])
+                assert v["psnr_db"] is None or math.isfinite(v["psnr_db"])
+                assert v["samples"] > 0
+        for s in r["skipped"]:
+            assert s["naive_bricks"] >= s["naive_fill_bricks"] and s["naive_bricks"] >= 1
+            assert s["ours_bricks_fetched"] >= 1 and 0 < s["ours_ssim"] <= 1
+        if any(run["experiment"] == "sweep" for run in r["runs"]):
+            sweeps += 1
+            assert sum(run["is_default"] for run in r["runs"] if run["experiment"] == "sweep") == 1
+    assert {"page-table", "octree", "residency", "residency (no skipping)"} <= methods
+    assert sweeps >= 1
+    # The report marks a non-empty Pareto front for every sweep.
+    assert report.count("| on front |") >= sweeps

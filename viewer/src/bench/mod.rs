@@ -1,0 +1,934 @@
+//! The renderer benchmark suite (`viewer bench`): the records it writes
+//! (`schemas/json/render-bench.schema.json`) and the experiment driver.
+//!
+//! Every measurement renders the same scene from the same camera path, an orbit of `K` views
+//! about the vertical (`y`) axis, in one process on one device. For each view a method first
+//! converges (fetches until a frame requests nothing: a warm cache), then `R` further frames
+//! are timed: the median GPU time (timestamp queries) and median wall time per converged
+//! frame, the bricks the frame read (`bricks_used`, times the slot size: the bytes the cache
+//! needs resident), the samples taken, and the error of the converged image against the f64
+//! reference of the same view ([`crate::reference`]: PSNR, SSIM, max abs).
+//!
+//! - [`naive`]: the naive frustum loader of the skipped-work comparison;
+//! - [`pareto`]: the Pareto front of time against error;
+//! - [`plots`]: PNG plots (plotters); [`report`]: markdown tables.
+
+pub mod naive;
+pub mod pareto;
+pub mod plots;
+pub mod report;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result, ensure};
+use serde::{Deserialize, Serialize};
+
+use crate::cli::scene_args::CameraSpec;
+use crate::gpu::device::Gpu;
+use crate::gpu::renderer::{Method, RenderOptions, Renderer};
+use crate::gpu::streaming::{Budget, Fetcher, Progressive, converge};
+use crate::image::RgbImage;
+use crate::metrics;
+use crate::octree::OctreeGeometry;
+use crate::reference::{self, ReferenceOptions};
+use crate::scene::{Camera, Scene};
+use crate::source::{BrickSource, VolumeInfo};
+
+/// Format tag of a results file.
+pub const FORMAT: &str = "residency-render-bench/1";
+
+/// The machine a result was measured on.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeviceInfo {
+    /// GPU adapter name (`llvmpipe (LLVM …)` for Mesa's lavapipe).
+    pub adapter: String,
+    /// wgpu backend.
+    pub backend: String,
+    /// Driver name and version, as the adapter reports them.
+    pub driver: String,
+    /// CPU model (`/proc/cpuinfo`).
+    pub cpu: String,
+    /// Logical cores available to the process.
+    pub cores: usize,
+    /// Whether GPU times come from timestamp queries (else they are `null`).
+    pub timestamps: bool,
+}
+
+impl DeviceInfo {
+    /// The description of `gpu` and of this machine's CPU.
+    pub fn of(gpu: &Gpu) -> Self {
+        let cpu = std::fs::read_to_string("/proc/cpuinfo")
+            .ok()
+            .and_then(|s| {
+                s.lines()
+                    .find(|l| l.starts_with("model name"))
+                    .and_then(|l| l.split_once(':'))
+                    .map(|(_, v)| v.trim().to_string())
+            })
+            .unwrap_or_else(|| std::env::consts::ARCH.to_string());
+        let info = &gpu.adapter_info;
+        Self {
+            adapter: info.name.clone(),
+            backend: format!("{:?}", info.backend),
+            driver: format!("{} {}", info.driver, info.driver_info)
+                .trim()
+                .to_string(),
+            cpu,
+            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            timestamps: gpu.timestamps,
+        }
+    }
+}
+
+/// The dataset measured.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DatasetInfo {
+    /// Label given on the command line (e.g. `sparse 128³`), else the dataset name.
+    pub label: String,
+    /// Kind of data (`sparse`, `dense`, `cycif`, `fluorescence`, …), as given.
+    pub kind: String,
+    /// Dataset name from the store.
+    pub name: String,
+    /// Stored sample format (Zarr name).
+    pub sample_type: String,
+    /// Level-0 shape `z, y, x`.
+    pub shape: [u64; 3],
+    /// Brick shape `z, y, x`.
+    pub brick_shape: [u64; 3],
+    /// Pyramid levels.
+    pub levels: usize,
+    /// Channels in the store.
+    pub channels: usize,
+    /// Channels rendered (visible in the scene).
+    pub visible_channels: usize,
+    /// Level-0 voxels per channel.
+    pub voxels: u64,
+}
+
+impl DatasetInfo {
+    fn of(info: &VolumeInfo, scene: &Scene, label: Option<&str>, kind: &str) -> Self {
+        Self {
+            label: label.map_or_else(|| info.name.clone(), str::to_string),
+            kind: kind.to_string(),
+            name: info.name.clone(),
+            sample_type: info.sample_type.zarr_name().to_string(),
+            shape: info.levels[0].shape,
+            brick_shape: info.brick_shape,
+            levels: info.levels.len(),
+            channels: info.channels.len(),
+            visible_channels: scene.channels.iter().filter(|c| c.visible).count(),
+            voxels: info.levels[0].shape.iter().product(),
+        }
+    }
+}
+
+/// How the suite ran.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Settings {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Views of the orbit.
+    pub views: usize,
+    /// Frames timed per view after convergence.
+    pub timed_frames: usize,
+    /// Most frames to converge one view.
+    pub max_frames: u32,
+    /// Orbit elevation, degrees.
+    pub elevation: f64,
+    /// Orbit distance, volume diagonals.
+    pub distance: f64,
+    /// Azimuth of the first view, degrees (the others follow at equal steps around 360°).
+    pub first_azimuth: f64,
+    /// Reference step as a fraction of the finest level-0 voxel.
+    pub reference_step: f64,
+    /// Seconds spent computing the reference images.
+    pub reference_s: f64,
+}
+
+/// The renderer options of one run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OptionsRecord {
+    /// Step as a fraction of the voxel of the level in use.
+    pub step: f64,
+    /// LOD bias.
+    pub lod_bias: f64,
+    /// Cache budget asked for, bytes.
+    pub cache_bytes: u64,
+    /// Cache capacity obtained, bytes (slots × slot bytes).
+    pub cache_capacity_bytes: u64,
+    /// Leaf target in level-0 voxels (when the depth is not given).
+    pub leaf_voxels: u64,
+    /// Octree leaf depth in use.
+    pub octree_depth: u32,
+    /// Leaf edge in level-0 voxels along the longest axis.
+    pub leaf_edge: f64,
+    /// Empty-space skipping on.
+    pub skipping: bool,
+    /// Substitution of missing bricks on.
+    pub substitution: bool,
+}
+
+/// One view of one run.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ViewRecord {
+    /// Camera azimuth, degrees.
+    pub azimuth: f64,
+    /// Whether the view converged (a frame requested nothing).
+    pub converged: bool,
+    /// Why converging stopped.
+    pub stop_reason: String,
+    /// Frames rendered to converge.
+    pub frames_to_converge: usize,
+    /// Bricks fetched while converging this view (after the previous views).
+    pub bricks_fetched: u64,
+    /// Decoded bytes fetched while converging this view.
+    pub bytes_fetched: u64,
+    /// Distinct bricks the shader requested while converging this view.
+    pub bricks_requested: u64,
+    /// Of those, bricks transparent under the transfer function (by their conservative range).
+    pub requested_empty: u64,
+    /// Median GPU ms per converged frame (`null` without timestamp queries).
+    pub gpu_ms: Option<f64>,
+    /// Median wall ms per converged frame (render, read back).
+    pub wall_ms: f64,
+    /// Distinct cache slots the converged frame read.
+    pub bricks_used: u64,
+    /// `bricks_used` × slot bytes.
+    pub resident_bytes: u64,
+    /// Samples per converged frame.
+    pub samples: u64,
+    /// PSNR against the reference, dB (`null`: identical).
+    pub psnr_db: Option<f64>,
+    /// SSIM against the reference.
+    pub ssim: f64,
+    /// Max abs error against the reference.
+    pub max_abs_error: f64,
+}
+
+/// A swept parameter and its value.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SweepParam {
+    /// `step`, `lod_bias`, `cache_fraction` or `leaf_voxels` (`default` for the defaults).
+    pub name: String,
+    /// The value.
+    pub value: f64,
+}
+
+/// One configuration measured over the whole orbit.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunRecord {
+    /// `table1`, `sweep` or `scaling`.
+    pub experiment: String,
+    /// Short label (`residency`, `step 0.25`, …).
+    pub label: String,
+    /// Traversal method (`residency`, `page-table`, `octree`).
+    pub method: String,
+    /// Rendered channels.
+    pub channels: usize,
+    /// The swept parameter, for sweep runs.
+    pub sweep: Option<SweepParam>,
+    /// Whether every option equals the renderer's default.
+    pub is_default: bool,
+    /// The options.
+    pub options: OptionsRecord,
+    /// Views that converged.
+    pub converged_views: usize,
+    /// Mean over views of the median GPU ms per converged frame.
+    pub gpu_ms: Option<f64>,
+    /// Mean over views of the median wall ms per converged frame.
+    pub wall_ms: f64,
+    /// Mean over views of the bytes the cache needs resident.
+    pub resident_bytes: f64,
+    /// Mean over views of the bricks the frame read.
+    pub bricks_used: f64,
+    /// Bytes fetched to converge the first view from a cold cache.
+    pub cold_bytes_fetched: u64,
+    /// Bytes fetched over the whole orbit.
+    pub bytes_fetched: u64,
+    /// Bricks fetched over the whole orbit.
+    pub bricks_fetched: u64,
+    /// Mean samples per converged frame.
+    pub samples: f64,
+    /// Mean PSNR over views, dB (`null` if every view was identical to the reference).
+    pub psnr_db: Option<f64>,
+    /// Mean SSIM over views.
+    pub ssim: f64,
+    /// Largest max abs error over views.
+    pub max_abs_error: f64,
+    /// Per view.
+    pub views: Vec<ViewRecord>,
+}
+
+/// Skipped work for one view: the naive frustum loader against ours, each from a cold cache.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SkippedRecord {
+    /// Camera azimuth, degrees.
+    pub azimuth: f64,
+    /// Level the naive loader picks (LOD rule at the volume centre's distance).
+    pub naive_level: u32,
+    /// Bricks of that level in the frustum, over the visible channels.
+    pub naive_bricks: u64,
+    /// Of those, bricks holding only the fill value (no chunk stored; nothing to transfer).
+    pub naive_fill_bricks: u64,
+    /// Of those, bricks transparent under the transfer function (fill bricks included).
+    pub naive_empty_bricks: u64,
+    /// Decoded bytes of the naive loader's non-fill bricks.
+    pub naive_bytes: u64,
+    /// Samples of a ray caster without skipping, pinned to the naive level.
+    pub naive_samples: u64,
+    /// PSNR of that render against the reference (`null`: identical).
+    pub naive_psnr_db: Option<f64>,
+    /// SSIM of that render.
+    pub naive_ssim: f64,
+    /// Bricks ours fetched from a cold cache to convergence.
+    pub ours_bricks_fetched: u64,
+    /// Decoded bytes ours fetched.
+    pub ours_bytes_fetched: u64,
+    /// Distinct bricks ours requested.
+    pub ours_bricks_requested: u64,
+    /// Of those, bricks transparent under the transfer function.
+    pub ours_requested_empty: u64,
+    /// Samples of our converged frame.
+    pub ours_samples: u64,
+    /// PSNR of our converged frame (`null`: identical).
+    pub ours_psnr_db: Option<f64>,
+    /// SSIM of our converged frame.
+    pub ours_ssim: f64,
+    /// `naive_bytes / ours_bytes_fetched` (`null` when ours fetched nothing).
+    pub bytes_ratio: Option<f64>,
+}
+
+/// A results file: one dataset, one device, any experiments.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BenchResults {
+    /// [`FORMAT`].
+    pub format: String,
+    /// When it ran (seconds since the Unix epoch).
+    pub unix_time: u64,
+    /// The device.
+    pub device: DeviceInfo,
+    /// The dataset.
+    pub dataset: DatasetInfo,
+    /// Settings.
+    pub settings: Settings,
+    /// Experiments run, in order.
+    pub experiments: Vec<String>,
+    /// Runs of `table1`, `sweep` and `scaling`.
+    pub runs: Vec<RunRecord>,
+    /// Views of `skipped`.
+    pub skipped: Vec<SkippedRecord>,
+}
+
+/// An experiment of `viewer bench run`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum Experiment {
+    /// Table 1 of the paper: every method, GPU and wall ms per converged frame, resident bytes.
+    Table1,
+    /// Time against error: step, LOD bias, cache budget and leaf size, one at a time.
+    Sweep,
+    /// Skipped work against a naive frustum loader.
+    Skipped,
+    /// One residency run (frame time, resident and fetched bytes) for the scaling plots.
+    Scaling,
+}
+
+impl Experiment {
+    /// The name in results files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Table1 => "table1",
+            Self::Sweep => "sweep",
+            Self::Skipped => "skipped",
+            Self::Scaling => "scaling",
+        }
+    }
+}
+
+/// The values a sweep visits.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SweepValues {
+    /// Step factors.
+    pub steps: Vec<f32>,
+    /// LOD biases.
+    pub lod_biases: Vec<f32>,
+    /// Cache budgets as fractions of the default run's working set (largest `bricks_used`).
+    pub cache_fractions: Vec<f64>,
+    /// Leaf targets in level-0 voxels.
+    pub leaf_voxels: Vec<u64>,
+}
+
+/// What to measure and how.
+#[derive(Clone, Debug)]
+pub struct Plan {
+    /// Experiments, in order.
+    pub experiments: Vec<Experiment>,
+    /// Dataset label.
+    pub label: Option<String>,
+    /// Dataset kind.
+    pub kind: String,
+    /// Views of the orbit.
+    pub views: usize,
+    /// Frames timed per view.
+    pub timed_frames: usize,
+    /// Most frames to converge a view.
+    pub max_frames: u32,
+    /// Orbit elevation, degrees.
+    pub elevation: f64,
+    /// Orbit distance, volume diagonals.
+    pub distance: f64,
+    /// First azimuth, degrees.
+    pub first_azimuth: f64,
+    /// Reference step fraction.
+    pub reference_step: f64,
+    /// Fetch workers.
+    pub workers: usize,
+    /// Table-1 configurations: `(method, skipping)`.
+    pub methods: Vec<(Method, bool)>,
+    /// Sweep values.
+    pub sweep: SweepValues,
+    /// Show a progress bar.
+    pub progress: bool,
+}
+
+/// The label of a method configuration.
+pub fn method_label(method: Method, skipping: bool) -> String {
+    if skipping {
+        method.name().to_string()
+    } else {
+        format!("{} (no skipping)", method.name())
+    }
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n == 0 {
+        f64::NAN
+    } else if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
+}
+
+fn finite_psnr(m: &metrics::Metrics) -> Option<f64> {
+    m.psnr_db.is_finite().then_some(m.psnr_db)
+}
+
+fn to_image(width: u32, height: u32, pixels: &[[f32; 4]]) -> RgbImage {
+    RgbImage {
+        width: width as usize,
+        height: height as usize,
+        pixels: pixels.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+    }
+}
+
+/// The driver: one source, scene, device, orbit and set of reference images.
+pub struct Bench {
+    gpu: Gpu,
+    source: Arc<dyn BrickSource>,
+    scene: Scene,
+    base: RenderOptions,
+    plan: Plan,
+    cameras: Vec<(f64, Camera)>,
+    references: Vec<RgbImage>,
+    reference_s: f64,
+    bar: indicatif::ProgressBar,
+}
+
+impl Bench {
+    /// Opens the device, lays out the orbit and renders the reference of every view.
+    pub fn new(
+        source: Arc<dyn BrickSource>,
+        scene: Scene,
+        base: RenderOptions,
+        plan: Plan,
+    ) -> Result<Self> {
+        ensure!(plan.views > 0, "--views must be at least 1");
+        ensure!(plan.timed_frames > 0, "--timed-frames must be at least 1");
+        let gpu = Gpu::new()?;
+        let info = source.info().clone();
+        let fov = scene.camera.fov_y_degrees;
+        let cameras: Vec<(f64, Camera)> = (0..plan.views)
+            .map(|k| {
+                let azimuth = plan.first_azimuth + 360.0 * k as f64 / plan.views as f64;
+                let spec = CameraSpec::Orbit {
+                    azimuth,
+                    elevation: plan.elevation,
+                    distance: plan.distance,
+                };
+                (azimuth, spec.camera(&info, fov))
+            })
+            .collect();
+        let bar = if plan.progress {
+            let bar = indicatif::ProgressBar::new(0);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{prefix} [{elapsed_precise}] {wide_bar} {pos}/{len} views, ETA {eta} {msg}",
+                )
+                .expect("progress template"),
+            );
+            bar.set_prefix(info.name.clone());
+            bar
+        } else {
+            indicatif::ProgressBar::hidden()
+        };
+        let start = Instant::now();
+        let mut references = Vec::new();
+        for (k, (_, cam)) in cameras.iter().enumerate() {
+            bar.set_message(format!("reference of view {}", k + 1));
+            let mut s = scene.clone();
+            s.camera = cam.clone();
+            let options = ReferenceOptions {
+                width: base.width as usize,
+                height: base.height as usize,
+                step_fraction: plan.reference_step,
+                min_transmittance: 0.0,
+            };
+            references.push(
+                reference::render(source.as_ref(), &s, &options)
+                    .with_context(|| format!("{}: reference of view {}", info.name, k + 1))?,
+            );
+        }
+        let reference_s = start.elapsed().as_secs_f64();
+        tracing::info!(
+            "{}: {} reference images in {reference_s:.1} s",
+            info.name,
+            references.len()
+        );
+        Ok(Self {
+            gpu,
+            source,
+            scene,
+            base,
+            plan,
+            cameras,
+            references,
+            reference_s,
+            bar,
+        })
+    }
+
+    fn info(&self) -> &VolumeInfo {
+        self.source.info()
+    }
+
+    fn budget(&self) -> Budget {
+        Budget {
+            max_frames: self.plan.max_frames,
+            time: None,
+            workers: self.plan.workers,
+            ..Default::default()
+        }
+    }
+
+    fn options_record(&self, options: &RenderOptions, renderer: &Renderer) -> OptionsRecord {
+        let g = renderer.octree().geometry();
+        let longest = (0..3).max_by_key(|&a| g.volume_voxels[a]).unwrap_or(0);
+        OptionsRecord {
+            step: options.step_factor as f64,
+            lod_bias: options.lod_bias as f64,
+            cache_bytes: options.cache_bytes,
+            cache_capacity_bytes: renderer.cache().capacity() as u64
+                * renderer.cache().slot_bytes(),
+            leaf_voxels: options.leaf_voxels,
+            octree_depth: g.depth,
+            leaf_edge: (g.leaf_shift[longest] as f64).exp2(),
+            skipping: options.empty_space_skipping,
+            substitution: options.substitution,
+        }
+    }
+
+    fn requested_empty(&self, p: &Progressive) -> u64 {
+        p.request_log
+            .iter()
+            .filter(|k| naive::transparent(self.info(), &self.scene, k))
+            .count() as u64
+    }
+
+    /// Converges `renderer` on view `k`, times the converged frames and compares the image.
+    fn measure_view(
+        &self,
+        renderer: &mut Renderer,
+        fetcher: &Fetcher,
+        k: usize,
+    ) -> Result<ViewRecord> {
+        let (azimuth, cam) = &self.cameras[k];
+        renderer.set_camera(cam.clone());
+        let p = converge(&self.gpu, renderer, fetcher, &self.budget())?;
+        let mut gpu_ms = Vec::new();
+        let mut wall_ms = Vec::new();
+        let mut last = None;
+        for _ in 0..self.plan.timed_frames {
+            let t = Instant::now();
+            let out = renderer.render(&self.gpu)?;
+            wall_ms.push(t.elapsed().as_secs_f64() * 1e3);
+            if let Some(g) = out.gpu_time_ms {
+                gpu_ms.push(g);
+            }
+            last = Some(out);
+        }
+        let out = last.context("no frame timed")?;
+        let o = renderer.options();
+        let image = to_image(o.width, o.height, &out.pixels);
+        let m = metrics::compare(&image, &self.references[k])
+            .with_context(|| format!("{}: view {} against its reference", self.info().name, k))?;
+        let slot = renderer.cache().slot_bytes();
+        self.bar.inc(1);
+        Ok(ViewRecord {
+            azimuth: *azimuth,
+            converged: p.converged,
+            stop_reason: p.stop_reason.clone(),
+            frames_to_converge: p.frames.len(),
+            bricks_fetched: p.frames.iter().map(|f| f.bricks_fetched).sum(),
+            bytes_fetched: p.frames.iter().map(|f| f.bytes_fetched).sum(),
+            bricks_requested: p.request_log.len() as u64,
+            requested_empty: self.requested_empty(&p),
+            gpu_ms: (!gpu_ms.is_empty()).then(|| median(&mut gpu_ms)),
+            wall_ms: median(&mut wall_ms),
+            bricks_used: out.counts.bricks_used,
+            resident_bytes: out.counts.bricks_used * slot,
+            samples: out.counts.samples,
+            psnr_db: finite_psnr(&m),
+            ssim: m.ssim,
+            max_abs_error: m.max_abs_error,
+        })
+    }
+
+    /// Measures one configuration over the orbit with one renderer (cold at the first view,
+    /// warm after).
+    pub fn run(
+        &self,
+        experiment: &str,
+        label: String,
+        options: RenderOptions,
+        sweep: Option<SweepParam>,
+    ) -> Result<RunRecord> {
+        self.bar.set_message(format!("{experiment}: {label}"));
+        let mut renderer = Renderer::new(&self.gpu, self.info(), &self.scene, options.clone())
+            .with_context(|| format!("{}: {label}", self.info().name))?;
+        let fetcher = Fetcher::new(Arc::clone(&self.source), self.plan.workers, 16);
+        let record = self.options_record(&options, &renderer);
+        let views = (0..self.cameras.len())
+            .map(|k| self.measure_view(&mut renderer, &fetcher, k))
+            .collect::<Result<Vec<_>>>()
+            .with_context(|| format!("{}: {experiment} {label}", self.info().name))?;
+        let n = views.len() as f64;
+        let mean = |f: &dyn Fn(&ViewRecord) -> f64| views.iter().map(f).sum::<f64>() / n;
+        let gpu: Vec<f64> = views.iter().filter_map(|v| v.gpu_ms).collect();
+        let psnr: Vec<f64> = views.iter().filter_map(|v| v.psnr_db).collect();
+        let defaults = RenderOptions {
+            width: options.width,
+            height: options.height,
+            level_bounds: options.level_bounds.clone(),
+            cache_bytes: self.base.cache_bytes,
+            ..Default::default()
+        };
+        let is_default = options == defaults;
+        Ok(RunRecord {
+            experiment: experiment.to_string(),
+            label,
+            method: options.method.name().to_string(),
+            channels: self.scene.channels.iter().filter(|c| c.visible).count(),
+            sweep,
+            is_default,
+            options: record,
+            converged_views: views.iter().filter(|v| v.converged).count(),
+            gpu_ms: (gpu.len() == views.len()).then(|| gpu.iter().sum::<f64>() / n),
+            wall_ms: mean(&|v| v.wall_ms),
+            resident_bytes: mean(&|v| v.resident_bytes as f64),
+            bricks_used: mean(&|v| v.bricks_used as f64),
+            cold_bytes_fetched: views[0].bytes_fetched,
+            bytes_fetched: views.iter().map(|v| v.bytes_fetched).sum(),
+            bricks_fetched: views.iter().map(|v| v.bricks_fetched).sum(),
+            samples: mean(&|v| v.samples as f64),
+            psnr_db: (!psnr.is_empty()).then(|| psnr.iter().sum::<f64>() / psnr.len() as f64),
+            ssim: mean(&|v| v.ssim),
+            max_abs_error: views.iter().map(|v| v.max_abs_error).fold(0.0, f64::max),
+            views,
+        })
+    }
+
+    /// Table 1: every configured method over the orbit.
+    pub fn table1(&self) -> Result<Vec<RunRecord>> {
+        self.plan
+            .methods
+            .iter()
+            .map(|&(method, skipping)| {
+                let options = RenderOptions {
+                    method,
+                    empty_space_skipping: skipping,
+                    ..self.base.clone()
+                };
+                self.run("table1", method_label(method, skipping), options, None)
+            })
+            .collect()
+    }
+
+    /// Time against error: the defaults, then each parameter swept alone.
+    pub fn sweep(&self) -> Result<Vec<RunRecord>> {
+        let param = |name: &str, value: f64| {
+            Some(SweepParam {
+                name: name.to_string(),
+                value,
+            })
+        };
+        let default = self.run(
+            "sweep",
+            "defaults".into(),
+            self.base.clone(),
+            param("default", 0.0),
+        )?;
+        let working_set = default
+            .views
+            .iter()
+            .map(|v| v.bricks_used)
+            .max()
+            .unwrap_or(1)
+            .max(1);
+        let slot = self.slot_bytes();
+        let mut runs = vec![default];
+        let sv = self.plan.sweep.clone();
+        for s in sv.steps {
+            if s == self.base.step_factor {
+                continue;
+            }
+            let o = RenderOptions {
+                step_factor: s,
+                ..self.base.clone()
+            };
+            runs.push(self.run("sweep", format!("step {s}"), o, param("step", s as f64))?);
+        }
+        for b in sv.lod_biases {
+            if b == self.base.lod_bias {
+                continue;
+            }
+            let o = RenderOptions {
+                lod_bias: b,
+                ..self.base.clone()
+            };
+            runs.push(self.run(
+                "sweep",
+                format!("LOD bias {b}"),
+                o,
+                param("lod_bias", b as f64),
+            )?);
+        }
+        for f in sv.cache_fractions {
+            let slots = ((working_set as f64 * f).round() as u64).max(1);
+            let o = RenderOptions {
+                cache_bytes: slots * slot,
+                ..self.base.clone()
+            };
+            runs.push(self.run(
+                "sweep",
+                format!("cache {f}× working set ({slots} bricks)"),
+                o,
+                param("cache_fraction", f),
+            )?);
+        }
+        let default_depth = OctreeGeometry::depth_for(self.info(), self.base.leaf_voxels, 7);
+        for l in sv.leaf_voxels {
+            let depth = OctreeGeometry::depth_for(self.info(), l, 7);
+            if self.base.octree_depth.is_none() && depth == default_depth {
+                continue;
+            }
+            let o = RenderOptions {
+                leaf_voxels: l,
+                octree_depth: None,
+                ..self.base.clone()
+            };
+            runs.push(self.run(
+                "sweep",
+                format!("leaf {l} voxels"),
+                o,
+                param("leaf_voxels", l as f64),
+            )?);
+        }
+        Ok(runs)
+    }
+
+    fn slot_bytes(&self) -> u64 {
+        let info = self.info();
+        info.brick_shape.iter().product::<u64>() * info.sample_type.bytes() as u64
+    }
+
+    /// Scaling: one residency run with the base options.
+    pub fn scaling(&self) -> Result<Vec<RunRecord>> {
+        Ok(vec![self.run(
+            "scaling",
+            "residency".into(),
+            self.base.clone(),
+            None,
+        )?])
+    }
+
+    /// Converges a fresh renderer (cold cache) on view `k` and returns it with the result.
+    fn cold(&self, k: usize, options: RenderOptions) -> Result<(Renderer, Progressive)> {
+        let mut scene = self.scene.clone();
+        scene.camera = self.cameras[k].1.clone();
+        let mut renderer = Renderer::new(&self.gpu, self.info(), &scene, options)?;
+        let fetcher = Fetcher::new(Arc::clone(&self.source), self.plan.workers, 16);
+        let p = converge(&self.gpu, &mut renderer, &fetcher, &self.budget())?;
+        self.bar.inc(1);
+        Ok((renderer, p))
+    }
+
+    /// Skipped work: per view, ours from a cold cache against the naive frustum loader.
+    pub fn skipped(&self) -> Result<Vec<SkippedRecord>> {
+        let info = self.info().clone();
+        let brick_bytes = self.slot_bytes();
+        (0..self.cameras.len())
+            .map(|k| {
+                self.bar
+                    .set_message(format!("skipped work, view {}", k + 1));
+                let mut scene = self.scene.clone();
+                scene.camera = self.cameras[k].1.clone();
+                let naive = naive::naive_fetch(&info, &scene, &self.base);
+                // Equal error: ours renders at the level the naive loader chose, so the two
+                // differ only in what skipping leaves out.
+                let at_naive_level = vec![(naive.level, naive.level); self.scene.channels.len()];
+                let o = RenderOptions {
+                    level_bounds: at_naive_level.clone(),
+                    ..self.base.clone()
+                };
+                let (_, p) = self.cold(k, o.clone())?;
+                let ours_image = to_image(o.width, o.height, &p.pixels);
+                let ours_m = metrics::compare(&ours_image, &self.references[k])?;
+                let fill = naive
+                    .bricks
+                    .iter()
+                    .filter(|b| naive::fill_only(&info, b))
+                    .count() as u64;
+                let empty = naive
+                    .bricks
+                    .iter()
+                    .filter(|b| naive::transparent(&info, &scene, b))
+                    .count() as u64;
+                let ours_bytes: u64 = p.frames.iter().map(|f| f.bytes_fetched).sum();
+                let naive_bytes = (naive.bricks.len() as u64 - fill) * brick_bytes;
+                let pinned = RenderOptions {
+                    empty_space_skipping: false,
+                    level_bounds: at_naive_level,
+                    ..self.base.clone()
+                };
+                let (_, np) = self.cold(k, pinned)?;
+                let naive_image = to_image(o.width, o.height, &np.pixels);
+                let naive_m = metrics::compare(&naive_image, &self.references[k])?;
+                Ok(SkippedRecord {
+                    azimuth: self.cameras[k].0,
+                    naive_level: naive.level,
+                    naive_bricks: naive.bricks.len() as u64,
+                    naive_fill_bricks: fill,
+                    naive_empty_bricks: empty,
+                    naive_bytes,
+                    naive_samples: np.frames.last().map_or(0, |f| f.shader.samples),
+                    naive_psnr_db: finite_psnr(&naive_m),
+                    naive_ssim: naive_m.ssim,
+                    ours_bricks_fetched: p.frames.iter().map(|f| f.bricks_fetched).sum(),
+                    ours_bytes_fetched: ours_bytes,
+                    ours_bricks_requested: p.request_log.len() as u64,
+                    ours_requested_empty: self.requested_empty(&p),
+                    ours_samples: p.frames.last().map_or(0, |f| f.shader.samples),
+                    ours_psnr_db: finite_psnr(&ours_m),
+                    ours_ssim: ours_m.ssim,
+                    bytes_ratio: (ours_bytes > 0).then(|| naive_bytes as f64 / ours_bytes as f64),
+                })
+            })
+            .collect()
+    }
+
+    /// Runs every experiment of the plan and gathers the results.
+    pub fn run_all(&self) -> Result<BenchResults> {
+        let views = self.cameras.len() as u64;
+        let mut total = 0;
+        for e in &self.plan.experiments {
+            total += match e {
+                Experiment::Table1 => self.plan.methods.len() as u64 * views,
+                Experiment::Sweep => {
+                    let s = &self.plan.sweep;
+                    (1 + s.steps.len()
+                        + s.lod_biases.len()
+                        + s.cache_fractions.len()
+                        + s.leaf_voxels.len()) as u64
+                        * views
+                }
+                Experiment::Skipped => 2 * views,
+                Experiment::Scaling => views,
+            };
+        }
+        self.bar.set_length(total);
+        let mut runs = Vec::new();
+        let mut skipped = Vec::new();
+        for e in &self.plan.experiments {
+            let t = Instant::now();
+            match e {
+                Experiment::Table1 => runs.extend(self.table1()?),
+                Experiment::Sweep => runs.extend(self.sweep()?),
+                Experiment::Skipped => skipped.extend(self.skipped()?),
+                Experiment::Scaling => runs.extend(self.scaling()?),
+            }
+            tracing::info!(
+                "{}: {} done in {:.1} s",
+                self.info().name,
+                e.name(),
+                t.elapsed().as_secs_f64()
+            );
+        }
+        self.bar.finish_and_clear();
+        Ok(BenchResults {
+            format: FORMAT.to_string(),
+            unix_time: std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_secs()),
+            device: DeviceInfo::of(&self.gpu),
+            dataset: DatasetInfo::of(
+                self.info(),
+                &self.scene,
+                self.plan.label.as_deref(),
+                &self.plan.kind,
+            ),
+            settings: Settings {
+                width: self.base.width,
+                height: self.base.height,
+                views: self.cameras.len(),
+                timed_frames: self.plan.timed_frames,
+                max_frames: self.plan.max_frames,
+                elevation: self.plan.elevation,
+                distance: self.plan.distance,
+                first_azimuth: self.plan.first_azimuth,
+                reference_step: self.plan.reference_step,
+                reference_s: self.reference_s,
+            },
+            experiments: self
+                .plan
+                .experiments
+                .iter()
+                .map(|e| e.name().to_string())
+                .collect(),
+            runs,
+            skipped,
+        })
+    }
+}
+
+/// Gives the visible channels after the first distinct transfer functions, as the paper does
+/// for simulated channels ("duplicating the volume n times, rendering channels with different
+/// transfer functions"): channel `i`'s ramp starts `i/(2n)` of the way further up its range.
+pub fn vary_transfer_functions(scene: &mut Scene) {
+    let n = scene.channels.len().max(1) as f64;
+    for (i, style) in scene.channels.iter_mut().enumerate().skip(1) {
+        if let (Some(first), Some(last)) = (style.opacity.first(), style.opacity.last()) {
+            let (lo, hi) = (first.value, last.value);
+            let shift = (hi - lo) * i as f64 / (2.0 * n);
+            for p in &mut style.opacity {
+                if p.value < hi {
+                    p.value = (p.value + shift).min(hi);
+                }
+            }
+        }
+    }
+}

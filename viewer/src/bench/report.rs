@@ -1,0 +1,757 @@
+//! The benchmark report: markdown tables (Table 1 with the paper's ratios beside ours, the
+//! time–error sweep with its Pareto front and a verdict on each default, skipped work against
+//! the naive loader, scaling) and the PNG plots, from one or more results files.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result, ensure};
+
+use super::plots::{self, ScalingSeries, TradeoffPoint};
+use super::{BenchResults, FORMAT, RunRecord, pareto};
+
+/// Table 1 of the residency-octree paper: ms per frame and GPU memory (GB) per method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PaperRow {
+    /// Data set.
+    pub dataset: &'static str,
+    /// Channels rendered.
+    pub channels: usize,
+    /// MRMCPT, Octree, Ours: ms per frame.
+    pub ms: [f64; 3],
+    /// MRMCPT, Octree, Ours: GB per frame.
+    pub gb: [f64; 3],
+}
+
+/// The rows of the paper's Table 1 that our synthetic kinds stand in for.
+pub const PAPER: [PaperRow; 5] = [
+    PaperRow {
+        dataset: "Kingsnake",
+        channels: 1,
+        ms: [15.0, 11.6, 5.1],
+        gb: [0.66, 0.23, 0.13],
+    },
+    PaperRow {
+        dataset: "Kingsnake",
+        channels: 4,
+        ms: [42.5, 60.7, 19.8],
+        gb: [1.88, 0.89, 0.48],
+    },
+    PaperRow {
+        dataset: "Rayleigh–Taylor",
+        channels: 1,
+        ms: [11.2, 13.8, 6.4],
+        gb: [0.13, 0.06, 0.04],
+    },
+    PaperRow {
+        dataset: "Rayleigh–Taylor",
+        channels: 4,
+        ms: [24.3, 54.9, 20.0],
+        gb: [0.31, 0.19, 0.14],
+    },
+    PaperRow {
+        dataset: "CyCIF Small",
+        channels: 16,
+        ms: [34.0, 122.8, 25.7],
+        gb: [0.95, 0.46, 0.29],
+    },
+];
+
+/// The paper row our dataset `kind` with `channels` visible channels stands in for: sparse →
+/// Kingsnake, dense → Rayleigh–Taylor (1 or 4 channels), cycif → CyCIF Small (16).
+pub fn paper_row(kind: &str, channels: usize) -> Option<&'static PaperRow> {
+    let (name, ch) = match kind {
+        "sparse" => ("Kingsnake", if channels > 1 { 4 } else { 1 }),
+        "dense" => ("Rayleigh–Taylor", if channels > 1 { 4 } else { 1 }),
+        "cycif" => ("CyCIF Small", 16),
+        _ => return None,
+    };
+    PAPER.iter().find(|r| r.dataset == name && r.channels == ch)
+}
+
+/// Reads and checks a results file.
+pub fn read(path: &Path) -> Result<BenchResults> {
+    let shown = path.display();
+    let bytes = std::fs::read(path).with_context(|| format!("{shown}: cannot read"))?;
+    let r: BenchResults = serde_json::from_slice(&bytes)
+        .with_context(|| format!("{shown}: not a render-bench results file"))?;
+    ensure!(
+        r.format == FORMAT,
+        "{shown}: format {:?}, expected {FORMAT:?}",
+        r.format
+    );
+    Ok(r)
+}
+
+fn mb(bytes: f64) -> String {
+    format!("{:.2}", bytes / 1e6)
+}
+
+fn opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or_else(|| "–".into(), |v| format!("{v:.digits$}"))
+}
+
+fn psnr(v: Option<f64>) -> String {
+    v.map_or_else(|| "∞".into(), |v| format!("{v:.1}"))
+}
+
+/// The time of a run: GPU ms when every run of the set has it, else wall ms.
+fn time_of(r: &RunRecord, gpu: bool) -> f64 {
+    if gpu {
+        r.gpu_ms.unwrap_or(f64::NAN)
+    } else {
+        r.wall_ms
+    }
+}
+
+fn ratio(a: Option<f64>, b: Option<f64>) -> String {
+    match (a, b) {
+        (Some(a), Some(b)) if b > 0.0 => format!("{:.2}×", a / b),
+        _ => "–".into(),
+    }
+}
+
+/// Device line of a results file.
+pub fn device_line(r: &BenchResults) -> String {
+    format!(
+        "{} ({}, {}), CPU {} × {} cores",
+        r.device.adapter, r.device.backend, r.device.driver, r.device.cpu, r.device.cores
+    )
+}
+
+fn dataset_line(r: &BenchResults) -> String {
+    let d = &r.dataset;
+    format!(
+        "{} ({} {}, {}×{}×{} voxels z,y,x, bricks {}×{}×{}, {} levels, {} of {} channels rendered)",
+        d.label,
+        d.kind,
+        d.sample_type,
+        d.shape[0],
+        d.shape[1],
+        d.shape[2],
+        d.brick_shape[0],
+        d.brick_shape[1],
+        d.brick_shape[2],
+        d.levels,
+        d.visible_channels,
+        d.channels
+    )
+}
+
+/// What `viewer bench report` wrote.
+#[derive(Clone, Debug, Default)]
+pub struct Written {
+    /// The full markdown report.
+    pub report: PathBuf,
+    /// The README summary table.
+    pub summary: PathBuf,
+    /// PNG plots.
+    pub plots: Vec<PathBuf>,
+    /// Per sweep dataset: the defaults' verdicts, one line each.
+    pub verdicts: Vec<String>,
+}
+
+struct Table1Row<'a> {
+    results: &'a BenchResults,
+    by: [Option<&'a RunRecord>; 4],
+}
+
+fn table1_rows(all: &[BenchResults]) -> Vec<Table1Row<'_>> {
+    all.iter()
+        .filter(|r| r.runs.iter().any(|x| x.experiment == "table1"))
+        .map(|r| {
+            let find = |label: &str| {
+                r.runs
+                    .iter()
+                    .find(|x| x.experiment == "table1" && x.label == label)
+            };
+            Table1Row {
+                results: r,
+                by: [
+                    find("page-table"),
+                    find("octree"),
+                    find("residency"),
+                    find("residency (no skipping)"),
+                ],
+            }
+        })
+        .collect()
+}
+
+fn table1(out: &mut String, all: &[BenchResults], summary: bool) {
+    let rows = table1_rows(all);
+    if rows.is_empty() {
+        return;
+    }
+    let gpu = rows
+        .iter()
+        .all(|r| r.by.iter().flatten().all(|x| x.gpu_ms.is_some()));
+    let unit = if gpu { "GPU ms" } else { "wall ms" };
+    let t = |x: Option<&RunRecord>| x.map(|x| time_of(x, gpu));
+    let m = |x: Option<&RunRecord>| x.map(|x| x.resident_bytes);
+    if summary {
+        let _ = writeln!(
+            out,
+            "| Dataset | ch | MRMCPT {unit} | Octree {unit} | Ours {unit} | no-skip {unit} | MRMCPT/Ours (paper) | Octree/Ours (paper) | resident MB MRMCPT / Octree / Ours | memory ratios (paper) |\n|---|---|---|---|---|---|---|---|---|---|"
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "| Dataset | ch | MRMCPT {unit} | Octree {unit} | Ours {unit} | no-skip {unit} | MRMCPT/Ours | paper | Octree/Ours | paper | wall ms MRMCPT / Octree / Ours | resident MB MRMCPT / Octree / Ours | MRMCPT/Ours mem | paper | Octree/Ours mem | paper | PSNR dB MRMCPT / Octree / Ours / no-skip |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
+        );
+    }
+    for row in &rows {
+        let r = row.results;
+        let [pt, oc, ours, ns] = row.by;
+        let paper = paper_row(&r.dataset.kind, r.dataset.visible_channels);
+        let pr = |i: usize| {
+            paper.map_or_else(
+                || "–".into(),
+                |p| format!("{:.2}× ({} {}ch)", p.ms[i] / p.ms[2], p.dataset, p.channels),
+            )
+        };
+        let prm =
+            |i: usize| paper.map_or_else(|| "–".into(), |p| format!("{:.2}×", p.gb[i] / p.gb[2]));
+        let ms = |x: Option<&RunRecord>| opt(t(x), 1);
+        let mbs = |x: Option<&RunRecord>| x.map_or_else(|| "–".into(), |x| mb(x.resident_bytes));
+        if summary {
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {} | {} | {} ({}) | {} ({}) | {} / {} / {} | {} ({}), {} ({}) |",
+                r.dataset.label,
+                r.dataset.visible_channels,
+                ms(pt),
+                ms(oc),
+                ms(ours),
+                ms(ns),
+                ratio(t(pt), t(ours)),
+                pr(0).split(' ').next().unwrap_or("–"),
+                ratio(t(oc), t(ours)),
+                pr(1).split(' ').next().unwrap_or("–"),
+                mbs(pt),
+                mbs(oc),
+                mbs(ours),
+                ratio(m(pt), m(ours)),
+                prm(0),
+                ratio(m(oc), m(ours)),
+                prm(1),
+            );
+        } else {
+            let wall = |x: Option<&RunRecord>| {
+                x.map_or_else(|| "–".into(), |x| format!("{:.1}", x.wall_ms))
+            };
+            let ps = |x: Option<&RunRecord>| x.map_or_else(|| "–".into(), |x| psnr(x.psnr_db));
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} / {} / {} | {} / {} / {} | {} | {} | {} | {} | {} / {} / {} / {} |",
+                r.dataset.label,
+                r.dataset.visible_channels,
+                ms(pt),
+                ms(oc),
+                ms(ours),
+                ms(ns),
+                ratio(t(pt), t(ours)),
+                pr(0),
+                ratio(t(oc), t(ours)),
+                pr(1),
+                wall(pt),
+                wall(oc),
+                wall(ours),
+                mbs(pt),
+                mbs(oc),
+                mbs(ours),
+                ratio(m(pt), m(ours)),
+                prm(0),
+                ratio(m(oc), m(ours)),
+                prm(1),
+                ps(pt),
+                ps(oc),
+                ps(ours),
+                ps(ns),
+            );
+        }
+    }
+}
+
+fn short_label(r: &RunRecord) -> String {
+    match &r.sweep {
+        Some(p) => match p.name.as_str() {
+            "default" => "default".into(),
+            "step" => format!("s{}", p.value),
+            "lod_bias" => format!("b{}", p.value),
+            "cache_fraction" => format!("c{}", p.value),
+            "leaf_voxels" => format!("l{}", p.value),
+            other => format!("{other}{}", p.value),
+        },
+        None => r.label.clone(),
+    }
+}
+
+/// The sweep of one results file: its table, plot and verdicts on the defaults.
+fn sweep(
+    out: &mut String,
+    r: &BenchResults,
+    dir: &Path,
+    index: usize,
+    written: &mut Written,
+) -> Result<()> {
+    let runs: Vec<&RunRecord> = r.runs.iter().filter(|x| x.experiment == "sweep").collect();
+    if runs.is_empty() {
+        return Ok(());
+    }
+    let gpu = runs.iter().all(|x| x.gpu_ms.is_some());
+    let unit = if gpu { "GPU ms" } else { "wall ms" };
+    let points: Vec<(f64, f64)> = runs
+        .iter()
+        .map(|x| (time_of(x, gpu), x.psnr_db.unwrap_or(f64::INFINITY)))
+        .collect();
+    let front = pareto::front(&points);
+    let _ = writeln!(out, "\n### Time against error: {}\n", dataset_line(r));
+    let _ = writeln!(
+        out,
+        "Device: {}. {}×{} pixels, {} views, median of {} converged frames per view. Each parameter is swept alone from the defaults; the cache budget is a fraction of the defaults' working set (the most bricks one view read). Time is {unit} per converged frame, error is against the f64 reference of the same view (mean over views; max abs is the largest).\n",
+        device_line(r),
+        r.settings.width,
+        r.settings.height,
+        r.settings.views,
+        r.settings.timed_frames
+    );
+    let _ = writeln!(
+        out,
+        "| Configuration | {unit} | wall ms | resident MB | samples/frame | PSNR dB | SSIM | max abs | converged views | Pareto |\n|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for (i, x) in runs.iter().enumerate() {
+        let _ = writeln!(
+            out,
+            "| {}{} | {:.1} | {:.1} | {} | {:.0} | {} | {:.4} | {:.4} | {}/{} | {} |",
+            x.label,
+            if x.is_default { " **(defaults)**" } else { "" },
+            time_of(x, gpu),
+            x.wall_ms,
+            mb(x.resident_bytes),
+            x.samples,
+            psnr(x.psnr_db),
+            x.ssim,
+            x.max_abs_error,
+            x.converged_views,
+            x.views.len(),
+            if front.contains(&i) { "on front" } else { "" }
+        );
+    }
+    let name = format!("sweep-{index}-{}.png", slug(&r.dataset.label));
+    let path = dir.join(&name);
+    let tp: Vec<TradeoffPoint> = runs
+        .iter()
+        .enumerate()
+        .map(|(i, x)| TradeoffPoint {
+            label: short_label(x),
+            ms: points[i].0,
+            psnr: x.psnr_db.unwrap_or(
+                points
+                    .iter()
+                    .map(|p| p.1)
+                    .filter(|v| v.is_finite())
+                    .fold(0.0, f64::max)
+                    + 1.0,
+            ),
+            front: front.contains(&i),
+            default: x.is_default,
+        })
+        .collect();
+    plots::tradeoff(
+        &path,
+        &format!("{}: {unit} vs PSNR ({})", r.dataset.label, r.device.adapter),
+        &format!("{unit} per converged frame"),
+        &tp,
+    )?;
+    written.plots.push(path);
+    let _ = writeln!(
+        out,
+        "\n![time against error, {}]({name})\n\nLabels: `s` step, `b` LOD bias, `c` cache fraction, `l` leaf voxels; the ringed point is the defaults; red points and the line are the Pareto front.\n",
+        r.dataset.label
+    );
+    // Verdicts: the defaults against the whole front, and against each parameter's own sweep.
+    if let Some(d) = runs.iter().position(|x| x.is_default) {
+        let on = front.contains(&d);
+        let dp = points[d];
+        let mut lines = vec![format!(
+            "{}: defaults (step 0.5, LOD bias 0, leaf {} voxels, full cache) at {:.1} {unit}, {} dB: {} the Pareto front of all {} points",
+            r.dataset.label,
+            runs[d].options.leaf_voxels,
+            dp.0,
+            psnr(runs[d].psnr_db),
+            if on { "on" } else { "OFF" },
+            runs.len()
+        )];
+        for param in ["step", "lod_bias", "cache_fraction", "leaf_voxels"] {
+            let idx: Vec<usize> = (0..runs.len())
+                .filter(|&i| i == d || runs[i].sweep.as_ref().is_some_and(|p| p.name == param))
+                .collect();
+            if idx.len() < 2 {
+                continue;
+            }
+            let sub: Vec<(f64, f64)> = idx.iter().map(|&i| points[i]).collect();
+            let f = pareto::front(&sub);
+            let pos = idx.iter().position(|&i| i == d).unwrap_or(0);
+            let dominators: Vec<String> = idx
+                .iter()
+                .filter(|&&i| {
+                    i != d
+                        && points[i].0 <= dp.0
+                        && points[i].1 >= dp.1
+                        && (points[i].0 < dp.0 || points[i].1 > dp.1)
+                })
+                .map(|&i| {
+                    format!(
+                        "{} ({:.1} {unit}, {} dB)",
+                        runs[i].label,
+                        points[i].0,
+                        psnr(runs[i].psnr_db)
+                    )
+                })
+                .collect();
+            lines.push(if f.contains(&pos) {
+                format!("  - {param}: the default is on the front of its sweep")
+            } else {
+                format!(
+                    "  - {param}: the default is OFF the front of its sweep, dominated by {}",
+                    dominators.join(", ")
+                )
+            });
+        }
+        for l in &lines {
+            let _ = writeln!(
+                out,
+                "{}",
+                if l.starts_with("  -") {
+                    l.clone()
+                } else {
+                    format!("- {l}")
+                }
+            );
+        }
+        written.verdicts.extend(lines);
+    }
+    Ok(())
+}
+
+fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '-'
+            }
+        })
+        .collect::<String>()
+        .split('-')
+        .filter(|p| !p.is_empty())
+        .collect::<Vec<_>>()
+        .join("-")
+}
+
+fn skipped(out: &mut String, all: &[BenchResults]) {
+    let with: Vec<&BenchResults> = all.iter().filter(|r| !r.skipped.is_empty()).collect();
+    if with.is_empty() {
+        return;
+    }
+    let _ = writeln!(out, "\n## Skipped work against a naive loader\n");
+    let _ = writeln!(
+        out,
+        "Naive: every brick of the level the LOD rule picks at the distance of the volume centre (the shader's `choose_level`) whose box meets the view frustum, for every visible channel; its bytes count the bricks that hold data (fill-value bricks are not stored), its image is a ray caster without skipping pinned to that level. Ours: the residency octree with the defaults from a cold cache until a frame requests nothing. \"Empty\" bricks are transparent under the transfer function by their conservative (haloed) range, so the counts are lower bounds. Bytes are decoded bytes. Per view, then the sum.\n"
+    );
+    let _ = writeln!(
+        out,
+        "| Dataset | view ° | naive level | naive bricks (fill / empty under TF) | naive MB | ours bricks fetched | ours MB | naive/ours bytes | ours requested (empty under TF) | samples naive / ours | PSNR dB naive / ours |\n|---|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for r in with {
+        let mut tn = 0u64;
+        let mut to = 0u64;
+        for s in &r.skipped {
+            tn += s.naive_bytes;
+            to += s.ours_bytes_fetched;
+            let _ = writeln!(
+                out,
+                "| {} | {:.0} | {} | {} ({} / {}) | {} | {} | {} | {} | {} ({}) | {} / {} | {} / {} |",
+                r.dataset.label,
+                s.azimuth,
+                s.naive_level,
+                s.naive_bricks,
+                s.naive_fill_bricks,
+                s.naive_empty_bricks,
+                mb(s.naive_bytes as f64),
+                s.ours_bricks_fetched,
+                mb(s.ours_bytes_fetched as f64),
+                opt(s.bytes_ratio, 2),
+                s.ours_bricks_requested,
+                s.ours_requested_empty,
+                s.naive_samples,
+                s.ours_samples,
+                psnr(s.naive_psnr_db),
+                psnr(s.ours_psnr_db),
+            );
+        }
+        let _ = writeln!(
+            out,
+            "| **{} total** | | | | {} | | {} | {} | | | |",
+            r.dataset.label,
+            mb(tn as f64),
+            mb(to as f64),
+            if to > 0 {
+                format!("{:.2}", tn as f64 / to as f64)
+            } else {
+                "–".into()
+            }
+        );
+    }
+}
+
+/// Bytes ratio naive/ours over every skipped record of `r` (`None` if ours fetched nothing).
+pub fn skipped_ratio(r: &BenchResults) -> Option<f64> {
+    let n: u64 = r.skipped.iter().map(|s| s.naive_bytes).sum();
+    let o: u64 = r.skipped.iter().map(|s| s.ours_bytes_fetched).sum();
+    (o > 0).then(|| n as f64 / o as f64)
+}
+
+fn scaling(
+    out: &mut String,
+    all: &[BenchResults],
+    dir: &Path,
+    written: &mut Written,
+) -> Result<()> {
+    let runs: Vec<(&BenchResults, &RunRecord)> = all
+        .iter()
+        .flat_map(|r| {
+            r.runs
+                .iter()
+                .filter(|x| x.experiment == "scaling")
+                .map(move |x| (r, x))
+        })
+        .collect();
+    if runs.is_empty() {
+        return Ok(());
+    }
+    let gpu = runs.iter().all(|(_, x)| x.gpu_ms.is_some());
+    let unit = if gpu { "GPU ms" } else { "wall ms" };
+    let _ = writeln!(out, "\n## Scaling\n");
+    let _ = writeln!(
+        out,
+        "The residency octree with the defaults over the same orbit; frame time is {unit} per converged frame, resident bytes the bricks a converged frame read, fetched bytes the whole orbit from a cold cache.\n"
+    );
+    let _ = writeln!(
+        out,
+        "| Dataset | kind | voxels | channels | {unit} | wall ms | resident MB | fetched MB (orbit) | cold MB (first view) | PSNR dB |\n|---|---|---|---|---|---|---|---|---|---|"
+    );
+    for (r, x) in &runs {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {:.1} | {:.1} | {} | {} | {} | {} |",
+            r.dataset.label,
+            r.dataset.kind,
+            r.dataset.voxels,
+            x.channels,
+            time_of(x, gpu),
+            x.wall_ms,
+            mb(x.resident_bytes),
+            mb(x.bytes_fetched as f64),
+            mb(x.cold_bytes_fetched as f64),
+            psnr(x.psnr_db)
+        );
+    }
+    let value = |x: &RunRecord| {
+        [
+            time_of(x, gpu),
+            x.resident_bytes / 1e6,
+            x.bytes_fetched as f64 / 1e6,
+        ]
+    };
+    // Size series: same kind and channel count, several sizes.
+    let mut size_series: Vec<ScalingSeries> = Vec::new();
+    let mut chan_series: Vec<ScalingSeries> = Vec::new();
+    let mut keys: Vec<(String, usize)> = runs
+        .iter()
+        .map(|(r, x)| (r.dataset.kind.clone(), x.channels))
+        .collect();
+    keys.sort();
+    keys.dedup();
+    for (kind, ch) in keys {
+        let mut pts: Vec<(f64, [f64; 3])> = runs
+            .iter()
+            .filter(|(r, x)| r.dataset.kind == kind && x.channels == ch)
+            .map(|(r, x)| (r.dataset.voxels as f64, value(x)))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        pts.dedup_by(|a, b| a.0 == b.0);
+        if pts.len() > 1 {
+            size_series.push(ScalingSeries {
+                label: format!("{kind}, {ch} ch"),
+                points: pts,
+            });
+        }
+    }
+    let mut keys: Vec<(String, u64)> = runs
+        .iter()
+        .map(|(r, _)| (r.dataset.kind.clone(), r.dataset.voxels))
+        .collect();
+    keys.sort();
+    keys.dedup();
+    for (kind, vox) in keys {
+        let mut pts: Vec<(f64, [f64; 3])> = runs
+            .iter()
+            .filter(|(r, _)| r.dataset.kind == kind && r.dataset.voxels == vox)
+            .map(|(_, x)| (x.channels as f64, value(x)))
+            .collect();
+        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        pts.dedup_by(|a, b| a.0 == b.0);
+        if pts.len() > 1 {
+            chan_series.push(ScalingSeries {
+                label: format!("{kind}, {vox} voxels"),
+                points: pts,
+            });
+        }
+    }
+    let adapter = &runs[0].0.device.adapter;
+    if !size_series.is_empty() {
+        let p = dir.join("scaling-size.png");
+        plots::scaling(
+            &p,
+            &format!("Scaling with volume size ({adapter})"),
+            "level-0 voxels per channel",
+            true,
+            &size_series,
+        )?;
+        let _ = writeln!(out, "\n![scaling with volume size](scaling-size.png)\n");
+        written.plots.push(p);
+    }
+    if !chan_series.is_empty() {
+        let p = dir.join("scaling-channels.png");
+        plots::scaling(
+            &p,
+            &format!("Scaling with channel count ({adapter})"),
+            "visible channels",
+            false,
+            &chan_series,
+        )?;
+        let _ = writeln!(
+            out,
+            "\n![scaling with channel count](scaling-channels.png)\n"
+        );
+        written.plots.push(p);
+    }
+    Ok(())
+}
+
+/// Writes `render-bench.md`, `summary.md` and the plots into `dir` from `inputs`.
+pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
+    ensure!(!inputs.is_empty(), "no results files given");
+    let all = inputs.iter().map(|p| read(p)).collect::<Result<Vec<_>>>()?;
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    let mut written = Written::default();
+    let devices: Vec<String> = {
+        let mut d: Vec<String> = all.iter().map(device_line).collect();
+        d.sort();
+        d.dedup();
+        d
+    };
+    let mut out = String::new();
+    let _ = writeln!(out, "# Renderer benchmark\n");
+    let _ = writeln!(
+        out,
+        "Measured on {} by `{command}` ({} results files). Numbers are from this machine; the paper's are from an RTX-class GPU, so compare ratios, not milliseconds.\n",
+        devices.join("; "),
+        all.len()
+    );
+    let _ = writeln!(out, "## Datasets\n");
+    for r in &all {
+        let _ = writeln!(
+            out,
+            "- {}: experiments {}; {}×{} pixels, {} views (azimuth from {}° in equal steps, elevation {}°, {} diagonals), {} timed frames per view, reference {:.1} s",
+            dataset_line(r),
+            r.experiments.join(", "),
+            r.settings.width,
+            r.settings.height,
+            r.settings.views,
+            r.settings.first_azimuth,
+            r.settings.elevation,
+            r.settings.distance,
+            r.settings.timed_frames,
+            r.settings.reference_s
+        );
+    }
+    if !table1_rows(&all).is_empty() {
+        let _ = writeln!(out, "\n## Table 1: methods side by side\n");
+        let _ = writeln!(
+            out,
+            "Per dataset, each method over the same orbit in one process: for each view it converges first (warm cache), then the converged frames are timed. ms is the mean over views of the median per view; resident MB is the bricks a converged frame read × the brick size (what the method needs resident); ratios are baseline / ours, beside the paper's ratios for the data set our kind stands in for (Kingsnake for sparse, Rayleigh–Taylor for dense, CyCIF Small at 16 channels for cycif; our renderer draws at most 8 channels at once). Multi-channel sparse and dense datasets duplicate one channel with shifted transfer functions, as the paper does.\n"
+        );
+        table1(&mut out, &all, false);
+    }
+    let sweeps: Vec<&BenchResults> = all
+        .iter()
+        .filter(|r| r.runs.iter().any(|x| x.experiment == "sweep"))
+        .collect();
+    if !sweeps.is_empty() {
+        let _ = writeln!(out, "\n## Run time against error\n");
+        for (i, r) in sweeps.iter().enumerate() {
+            sweep(&mut out, r, dir, i, &mut written)?;
+        }
+    }
+    skipped(&mut out, &all);
+    scaling(&mut out, &all, dir, &mut written)?;
+    let report = dir.join("render-bench.md");
+    std::fs::write(&report, &out).with_context(|| format!("{}: cannot write", report.display()))?;
+
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "Measured on {} by `{command}`; full tables and plots in [docs/benchmarks/render-bench.md](docs/benchmarks/render-bench.md). Ratios are baseline / ours, the paper's Table 1 ratios in parentheses.\n",
+        devices.join("; ")
+    );
+    table1(&mut s, &all, true);
+    let skip: Vec<String> = all
+        .iter()
+        .filter_map(|r| skipped_ratio(r).map(|x| format!("{} {:.2}×", r.dataset.label, x)))
+        .collect();
+    if !skip.is_empty() {
+        let _ = writeln!(
+            s,
+            "\nBytes fetched, naive frustum loader / ours (cold cache, same views): {}.",
+            skip.join(", ")
+        );
+    }
+    if !written.verdicts.is_empty() {
+        let _ = writeln!(s, "\nDefaults against the time–error Pareto front:\n");
+        for v in &written.verdicts {
+            let _ = writeln!(
+                s,
+                "{}",
+                if v.starts_with("  -") {
+                    v.clone()
+                } else {
+                    format!("- {v}")
+                }
+            );
+        }
+    }
+    let summary = dir.join("summary.md");
+    std::fs::write(&summary, &s).with_context(|| format!("{}: cannot write", summary.display()))?;
+    written.report = report;
+    written.summary = summary;
+    Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kinds_map_to_the_papers_rows() {
+        assert_eq!(paper_row("sparse", 1).unwrap().ms, [15.0, 11.6, 5.1]);
+        assert_eq!(paper_row("sparse", 4).unwrap().gb, [1.88, 0.89, 0.48]);
+        assert_eq!(paper_row("dense", 4).unwrap().ms[2], 20.0);
+        assert_eq!(paper_row("cycif", 8).unwrap().channels, 16);
+        assert!(paper_row("fluorescence", 3).is_none());
+        assert_eq!(slug("sparse 128³ (4 ch)"), "sparse-128-4-ch");
+    }
+}

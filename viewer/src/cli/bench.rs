@@ -1,0 +1,251 @@
+//! `viewer bench`: the renderer benchmark suite ([`crate::bench`]). `viewer bench run`
+//! measures one dataset (Table-1 methods, time–error sweep, skipped work, scaling point) into a
+//! JSON results file (`schemas/json/render-bench.schema.json`); `viewer bench report` turns
+//! results files into markdown tables and PNG plots.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{Context, Result, ensure};
+
+use super::renderer_args::RendererArgs;
+use super::scene_args::{SceneArgs, SourceArgs};
+use crate::bench::{self, Bench, Experiment, Plan, SweepValues};
+use crate::gpu::renderer::Method;
+use crate::source::BrickSource;
+
+/// Arguments of `viewer bench`.
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// The `viewer bench` subcommands.
+#[derive(clap::Subcommand, Debug)]
+#[allow(clippy::large_enum_variant)] // parsed once
+pub enum Command {
+    /// Measure one dataset and write a results file.
+    Run(Box<RunArgs>),
+    /// Write markdown tables and PNG plots from results files.
+    Report(ReportArgs),
+}
+
+/// Arguments of `viewer bench run`.
+#[derive(clap::Args, Debug)]
+pub struct RunArgs {
+    /// Where the volume comes from.
+    #[command(flatten)]
+    pub source: SourceArgs,
+    /// What to draw (the camera is replaced by the orbit).
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Base renderer settings (the defaults of every run; `--method` is ignored: every method
+    /// of `--methods` runs).
+    #[command(flatten)]
+    pub renderer: RendererArgs,
+    /// Experiments, comma-separated: table1, sweep, skipped, scaling.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "table1,skipped"
+    )]
+    pub experiment: Vec<Experiment>,
+    /// Dataset label in reports [default: the dataset name].
+    #[arg(long)]
+    pub label: Option<String>,
+    /// Kind of data (sparse, dense, cycif, fluorescence): picks the paper's row to compare with.
+    #[arg(long, default_value = "fluorescence")]
+    pub kind: String,
+    /// Image width in pixels.
+    #[arg(long, default_value_t = 128)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 128)]
+    pub height: u32,
+    /// Views of the orbit about the vertical axis.
+    #[arg(long, default_value_t = 4)]
+    pub views: usize,
+    /// Frames timed per view after convergence (the median is kept).
+    #[arg(long, default_value_t = 3)]
+    pub timed_frames: usize,
+    /// Most frames to converge one view.
+    #[arg(long, default_value_t = 64)]
+    pub max_frames: u32,
+    /// Orbit elevation, degrees.
+    #[arg(long, default_value_t = 20.0, allow_hyphen_values = true)]
+    pub elevation: f64,
+    /// Orbit distance in volume diagonals from the centre.
+    #[arg(long, default_value_t = 1.5)]
+    pub distance: f64,
+    /// Azimuth of the first view, degrees.
+    #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
+    pub first_azimuth: f64,
+    /// Reference step as a fraction of the finest level-0 voxel.
+    #[arg(long, default_value_t = crate::reference::DEFAULT_STEP_FRACTION)]
+    pub reference_step: f64,
+    /// Table-1 methods, comma-separated: residency, page-table, octree, no-skipping.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "page-table,octree,residency,no-skipping"
+    )]
+    pub methods: Vec<String>,
+    /// Give each visible channel after the first a transfer function shifted up its range
+    /// (simulated channels: one volume duplicated, as in the paper).
+    #[arg(long)]
+    pub vary_tf: bool,
+    /// Sweep: which parameters to sweep, comma-separated: step, lod-bias, cache, leaf.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "step,lod-bias,cache,leaf"
+    )]
+    pub sweep_params: Vec<String>,
+    /// Sweep: step factors.
+    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,1,2")]
+    pub steps: Vec<f32>,
+    /// Sweep: LOD biases.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "-1,0,1,2",
+        allow_hyphen_values = true
+    )]
+    pub lod_biases: Vec<f32>,
+    /// Sweep: cache budgets as fractions of the defaults' working set.
+    #[arg(long, value_delimiter = ',', default_value = "0.25,0.5,0.75")]
+    pub cache_fractions: Vec<f64>,
+    /// Sweep: octree leaf targets in level-0 voxels.
+    #[arg(long, value_delimiter = ',', default_value = "4,8,16,32")]
+    pub leaf_voxels: Vec<u64>,
+    /// Results file (JSON).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Arguments of `viewer bench report`.
+#[derive(clap::Args, Debug)]
+pub struct ReportArgs {
+    /// Results files of `viewer bench run`.
+    #[arg(required = true)]
+    pub results: Vec<PathBuf>,
+    /// Folder for `render-bench.md`, `summary.md` and the plots.
+    #[arg(long, value_name = "DIR")]
+    pub out_dir: PathBuf,
+    /// The command line named in the report as how the numbers were made.
+    #[arg(long, default_value = "viewer bench")]
+    pub command: String,
+}
+
+fn parse_method(s: &str) -> Result<(Method, bool)> {
+    Ok(match s.trim() {
+        "residency" => (Method::Residency, true),
+        "page-table" => (Method::PageTable, true),
+        "octree" => (Method::Octree, true),
+        "no-skipping" => (Method::Residency, false),
+        other => anyhow::bail!(
+            "--methods: unknown method {other:?} (residency, page-table, octree, no-skipping)"
+        ),
+    })
+}
+
+/// Runs `viewer bench run`.
+pub fn run_bench(args: RunArgs) -> Result<()> {
+    ensure!(
+        args.width >= 11 && args.height >= 11,
+        "--width and --height must be at least 11 (SSIM's window)"
+    );
+    let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
+    let info = source.info();
+    let mut scene = args.scene.scene(info)?;
+    if args.vary_tf {
+        bench::vary_transfer_functions(&mut scene);
+    }
+    let options = args.renderer.options(
+        args.width,
+        args.height,
+        info.levels.len(),
+        scene.channels.len(),
+    )?;
+    let plan = Plan {
+        experiments: args.experiment.clone(),
+        label: args.label.clone(),
+        kind: args.kind.clone(),
+        views: args.views,
+        timed_frames: args.timed_frames,
+        max_frames: args.max_frames,
+        elevation: args.elevation,
+        distance: args.distance,
+        first_azimuth: args.first_azimuth,
+        reference_step: args.reference_step,
+        workers: args.renderer.workers,
+        methods: args
+            .methods
+            .iter()
+            .map(|m| parse_method(m))
+            .collect::<Result<_>>()?,
+        sweep: {
+            for p in &args.sweep_params {
+                ensure!(
+                    ["step", "lod-bias", "cache", "leaf"].contains(&p.as_str()),
+                    "--sweep-params: unknown parameter {p:?} (step, lod-bias, cache, leaf)"
+                );
+            }
+            let on = |p: &str| args.sweep_params.iter().any(|x| x == p);
+            SweepValues {
+                steps: if on("step") {
+                    args.steps.clone()
+                } else {
+                    Vec::new()
+                },
+                lod_biases: if on("lod-bias") {
+                    args.lod_biases.clone()
+                } else {
+                    Vec::new()
+                },
+                cache_fractions: if on("cache") {
+                    args.cache_fractions.clone()
+                } else {
+                    Vec::new()
+                },
+                leaf_voxels: if on("leaf") {
+                    args.leaf_voxels.clone()
+                } else {
+                    Vec::new()
+                },
+            }
+        },
+        progress: !args.quiet,
+    };
+    let name = info.name.clone();
+    let results = Bench::new(source, scene, options, plan)?
+        .run_all()
+        .with_context(|| format!("{name}: benchmark"))?;
+    let json = serde_json::to_string_pretty(&results)?;
+    std::fs::write(&args.out, json + "\n")
+        .with_context(|| format!("{}: cannot write the results", args.out.display()))?;
+    tracing::info!("{name}: wrote {}", args.out.display());
+    Ok(())
+}
+
+/// Runs `viewer bench`.
+pub fn run(args: Args) -> Result<()> {
+    match args.command {
+        Command::Run(a) => run_bench(*a),
+        Command::Report(a) => {
+            let w = bench::report::write(&a.results, &a.out_dir, &a.command)?;
+            println!("{}", w.report.display());
+            println!("{}", w.summary.display());
+            for p in &w.plots {
+                println!("{}", p.display());
+            }
+            Ok(())
+        }
+    }
+}
