@@ -513,6 +513,37 @@ fn accumulate<T: Sample>(
         });
 }
 
+/// Refuses a conversion whose slabs cannot fit in memory, before anything is allocated or
+/// written: the reader decodes the next slab while the current one is processed, so at least
+/// two slabs of every channel, `depth` planes of `ny × nx` voxels each, are held at once
+/// (the pyramid's sums come on top, so this is a lower bound).
+fn check_slab_memory(
+    output: &str,
+    channels: usize,
+    depth: u64,
+    [ny, nx]: [u64; 2],
+    format: SampleFormat,
+    memory: Option<u64>,
+) -> Result<()> {
+    let Some(memory) = memory else {
+        return Ok(());
+    };
+    let needed = 2
+        * channels as u128
+        * u128::from(depth)
+        * u128::from(ny)
+        * u128::from(nx)
+        * format.bytes() as u128;
+    if needed > u128::from(memory) {
+        bail!(
+            "{output}: converting needs at least {needed} bytes of memory (2 slabs of {channels} \
+             channel(s) × {depth} planes of {ny}×{nx} {format} voxels), more than this machine's \
+             memory ({memory} bytes); a smaller z edge of --chunk (and --shard) needs less"
+        );
+    }
+    Ok(())
+}
+
 fn convert_typed<T: Sample>(
     options: &ConvertOptions,
     mut inputs: Inputs,
@@ -555,6 +586,14 @@ fn convert_typed<T: Sample>(
     if voxel_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
         bail!("voxel size {voxel_size:?} must be positive and finite");
     }
+    check_slab_memory(
+        &shown,
+        inputs.channels,
+        outer[0],
+        [shape[1], shape[2]],
+        T::FORMAT,
+        crate::memory::physical_memory(),
+    )?;
     let plans = plan_levels(inputs.shape, voxel_size, brick, options.levels);
     let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
     let channels = inputs.channels;
@@ -824,4 +863,24 @@ fn flush_if_full<T: Sample>(
     level.count.fill(0);
     level.acc_z0 += nz;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slabs_that_do_not_fit_in_memory_are_refused() {
+        let check =
+            |memory| check_slab_memory("o.ome.zarr", 3, 64, [1000, 500], SampleFormat::U16, memory);
+        // 2 × 3 × 64 × 1000 × 500 × 2 bytes.
+        check(Some(384_000_000)).unwrap();
+        check(None).unwrap();
+        assert_eq!(
+            check(Some(383_999_999)).unwrap_err().to_string(),
+            "o.ome.zarr: converting needs at least 384000000 bytes of memory (2 slabs of 3 \
+             channel(s) × 64 planes of 1000×500 uint16 voxels), more than this machine's memory \
+             (383999999 bytes); a smaller z edge of --chunk (and --shard) needs less"
+        );
+    }
 }

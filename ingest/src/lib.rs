@@ -10,14 +10,17 @@
 //! - [`convert`]: the streaming pass itself; [`index`] runs the same analysis on an
 //!   existing store;
 //! - [`store`] and [`ome`]: Zarr and OME-Zarr metadata, and atomic writes;
-//! - [`synthetic`]: the built-in sample dataset;
-//! - [`inspect`]: the `ingest inspect` report.
+//! - [`synthetic`]: the built-in synthetic samples (light-sheet fluorescence, sparse CT,
+//!   dense simulation, multiplexed immunofluorescence);
+//! - [`inspect`]: the `ingest inspect` report;
+//! - [`memory`]: the machine's memory, for refusing work that cannot fit before allocating.
 
 #![warn(missing_docs)]
 
 pub mod convert;
 pub mod index;
 pub mod inspect;
+pub mod memory;
 pub mod ome;
 pub mod pyramid;
 pub mod region_writer;

@@ -9,7 +9,7 @@ use residency_ingest::convert::{ConvertOptions, convert};
 use residency_ingest::sample_format::SampleFormat;
 use residency_ingest::source::RawOptions;
 use residency_ingest::store::OmeZarrVersion;
-use residency_ingest::synthetic::write_sample;
+use residency_ingest::synthetic::{SampleKind, SampleSpec, write_samples};
 
 /// mimalloc keeps freed chunk and slab buffers for reuse instead of returning them to the
 /// kernel, which the system allocator does for every large buffer (measured: most of the
@@ -34,6 +34,29 @@ enum Version {
     V05,
     #[value(name = "0.4")]
     V04,
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Kind {
+    /// Light-sheet fluorescence: nuclei (uint16), membranes, filaments (uint8); 96,256,256.
+    Fluorescence,
+    /// Micro-CT of a coiled skeleton, mostly exactly 0 (uint16, 1 channel); 256,256,256.
+    Sparse,
+    /// Mixing fluids filling the volume (float32, 1 channel); 256,256,256.
+    Dense,
+    /// Multiplexed immunofluorescence of a thin section (uint16, 16 markers); 24,256,256.
+    Cycif,
+}
+
+impl From<Kind> for SampleKind {
+    fn from(kind: Kind) -> Self {
+        match kind {
+            Kind::Fluorescence => SampleKind::Fluorescence,
+            Kind::Sparse => SampleKind::Sparse,
+            Kind::Dense => SampleKind::Dense,
+            Kind::Cycif => SampleKind::Cycif,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -96,14 +119,22 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
-    /// Write the built-in synthetic fluorescence sample (one OME-TIFF per channel).
+    /// Write a built-in synthetic sample (one OME-TIFF per channel).
     Sample {
         /// Output folder.
         #[arg(short, long)]
         output: PathBuf,
-        /// Extent Z,Y,X in voxels.
-        #[arg(long, default_value = "96,256,256", value_parser = parse_triple_u64)]
-        size: [u64; 3],
+        /// Which specimen.
+        #[arg(long, value_enum, default_value = "fluorescence")]
+        kind: Kind,
+        /// Extent Z,Y,X in voxels (default: 96,256,256 for fluorescence, 256,256,256 for
+        /// sparse and dense, 24,256,256 for cycif).
+        #[arg(long, value_parser = parse_triple_u64)]
+        size: Option<[u64; 3]>,
+        /// Number of channels (default: 3 for fluorescence, which has exactly 3; 1 for sparse
+        /// and dense, whose extra channels are other transfer functions; 16 for cycif).
+        #[arg(long)]
+        channels: Option<usize>,
         /// Random seed.
         #[arg(long, default_value_t = 1)]
         seed: u64,
@@ -217,16 +248,27 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Sample {
             output,
+            kind,
             size,
+            channels,
             seed,
             threads,
             quiet,
         } => {
             set_threads(threads)?;
-            let files = write_sample(&output, size, seed, !quiet)?;
+            let kind = SampleKind::from(kind);
+            let defaults = SampleSpec::new(kind);
+            let spec = SampleSpec {
+                kind,
+                shape: size.unwrap_or(defaults.shape),
+                channels: channels.unwrap_or(defaults.channels),
+                seed,
+            };
+            let files = write_samples(&output, &spec, !quiet)?;
+            let [z, y, x] = spec.shape;
             println!(
-                "wrote the sample stack ({} x {} x {} voxels, z,y,x):",
-                size[0], size[1], size[2]
+                "wrote the {kind} sample stack ({z} x {y} x {x} voxels, z,y,x; {} channels):",
+                spec.channels
             );
             for f in &files {
                 println!("  {}", f.display());

@@ -6,6 +6,7 @@
 mod raw;
 mod slices;
 mod tiff;
+mod tiff_claims;
 mod tiff_metadata;
 
 use std::path::{Path, PathBuf};

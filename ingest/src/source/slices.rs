@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 
-use super::tiff::{NATIVE_BIG_ENDIAN, decode_page, open_decoder, page_format};
+use super::tiff::{NATIVE_BIG_ENDIAN, check_page, decode_page, open_decoder, page_format};
 use super::{PlaneOut, SourceInfo, VolumeSource};
 
 /// A folder or glob of single-slice TIFF files.
@@ -49,11 +49,13 @@ impl SliceFolderSource {
         let first = files
             .first()
             .with_context(|| format!("{}: no TIFF slices found", origin.display()))?;
-        let mut decoder = open_decoder(first)?;
+        let (mut decoder, tiff) = open_decoder(first)?;
         let (w, h) = decoder
             .dimensions()
             .with_context(|| format!("{}: cannot read the image size", first.display()))?;
         let (format, samples_per_pixel) = page_format(&mut decoder, first)?;
+        // The shape comes from the first slice: check it can hold the plane it claims.
+        check_page(&mut decoder, first, 0, tiff, format, samples_per_pixel)?;
         Ok(Self {
             info: SourceInfo {
                 path: origin.to_path_buf(),
@@ -81,7 +83,7 @@ impl VolumeSource for SliceFolderSource {
         let file = &self.files[z as usize];
         if self.cached != Some(z) {
             self.cached = None;
-            let mut decoder = open_decoder(file)?;
+            let (mut decoder, tiff) = open_decoder(file)?;
             let (w, h) = decoder.dimensions()?;
             let [_, ey, ex] = self.info.shape;
             if (h as u64, w as u64) != (ey, ex) {
@@ -101,12 +103,7 @@ impl VolumeSource for SliceFolderSource {
                     self.info.format
                 );
             }
-            decode_page(&mut decoder, format, spp, &mut self.page).with_context(|| {
-                format!(
-                    "{}: cannot decode (truncated or corrupt TIFF)",
-                    file.display()
-                )
-            })?;
+            decode_page(&mut decoder, file, 0, tiff, format, spp, &mut self.page)?;
             self.cached = Some(z);
         }
         out.fill_from_bytes(

@@ -9,6 +9,7 @@ use anyhow::{Context, Result, bail};
 use tiff::decoder::{Decoder, Limits};
 use tiff::tags::Tag;
 
+use super::tiff_claims::PageClaims;
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
 use super::{PlaneOut, SourceInfo, VolumeSource};
 use crate::sample_format::SampleFormat;
@@ -19,17 +20,75 @@ pub struct TiffSource {
     decoder: Decoder<BufReader<File>>,
     layout: StackLayout,
     samples_per_pixel: usize,
+    file: TiffFile,
     /// Index of the page decoded in `page`.
     cached: Option<u64>,
     page: Vec<u8>,
 }
 
-/// Opens a TIFF decoder with no size limits.
-pub(super) fn open_decoder(path: &Path) -> Result<Decoder<BufReader<File>>> {
+/// What the checks of a TIFF file's claims need to know about it.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct TiffFile {
+    /// Length of the file in bytes.
+    pub len: u64,
+    /// Physical memory of the machine, when known.
+    pub memory: Option<u64>,
+}
+
+/// Why the decoder refused a value list: the `tiff` crate's own words ("decoder limits
+/// exceeded") do not say what was wrong with the file.
+fn explain(error: tiff::TiffError) -> anyhow::Error {
+    match error {
+        tiff::TiffError::LimitsExceeded => anyhow::anyhow!(
+            "a directory entry claims more values than the file holds (corrupt TIFF)"
+        ),
+        other => other.into(),
+    }
+}
+
+/// Opens a TIFF decoder. Its limits let a tag's value list be as long as the file could hold
+/// (one value per byte) and no longer, nor take more than half the machine's memory once
+/// decoded, so a directory entry claiming billions of values is an error and not an
+/// allocation; planes are checked separately ([`PageClaims`]) before they are decoded.
+pub(super) fn open_decoder(path: &Path) -> Result<(Decoder<BufReader<File>>, TiffFile)> {
     let file = File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
-    Ok(Decoder::new(BufReader::new(file))
+    let len = file
+        .metadata()
+        .with_context(|| format!("{}: cannot open", path.display()))?
+        .len();
+    let memory = crate::memory::physical_memory();
+    let mut limits = Limits::unlimited();
+    let per_value = std::mem::size_of::<tiff::decoder::ifd::Value>() as u64;
+    let most = len
+        .saturating_mul(per_value)
+        .min(memory.map_or(u64::MAX, |m| m / 2));
+    limits.decoding_buffer_size = usize::try_from(most).unwrap_or(usize::MAX);
+    let decoder = Decoder::new(BufReader::new(file))
+        .map_err(explain)
         .with_context(|| format!("{}: not a readable TIFF file", path.display()))?
-        .with_limits(Limits::unlimited()))
+        .with_limits(limits);
+    Ok((decoder, TiffFile { len, memory }))
+}
+
+/// Checks what the current page (`page` of `path`) claims about its pixel data against what
+/// the file and the machine can hold (see [`PageClaims`]).
+pub(super) fn check_page(
+    decoder: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    page: u64,
+    file: TiffFile,
+    format: SampleFormat,
+    samples: usize,
+) -> Result<()> {
+    PageClaims::read(decoder, format, samples)
+        .map_err(explain)
+        .with_context(|| {
+            format!(
+                "{}: cannot read the strips of page {page} (truncated or corrupt TIFF)",
+                path.display()
+            )
+        })?
+        .check(path, page, file.len, file.memory)
 }
 
 /// The sample format of the current page, or an error naming what is unsupported.
@@ -82,16 +141,26 @@ pub(super) fn page_format(
     Ok((format, samples))
 }
 
-/// Decodes the current page of `decoder` into `page` (native byte order), reusing its memory.
+/// Decodes the current page of `decoder` into `buffer` (native byte order), reusing its
+/// memory, once [`check_page`] has found that the file can hold the plane it claims.
 pub(super) fn decode_page(
     decoder: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    page: u64,
+    file: TiffFile,
     format: SampleFormat,
     samples: usize,
-    page: &mut Vec<u8>,
-) -> tiff::TiffResult<()> {
+    buffer: &mut Vec<u8>,
+) -> Result<()> {
+    check_page(decoder, path, page, file, format, samples)?;
     let (w, h) = decoder.dimensions()?;
-    page.resize(w as usize * h as usize * samples * format.bytes(), 0);
-    decoder.read_image_bytes(page)
+    buffer.resize(w as usize * h as usize * samples * format.bytes(), 0);
+    decoder.read_image_bytes(buffer).with_context(|| {
+        format!(
+            "{}: cannot decode page {page} (truncated or corrupt TIFF)",
+            path.display()
+        )
+    })
 }
 
 /// Whether decoded pages are big-endian (they are in native byte order).
@@ -110,7 +179,7 @@ impl TiffSource {
     /// Opens a TIFF file and works out its channel and z layout from its metadata.
     pub fn open(path: &Path) -> Result<Self> {
         let shown = path.display().to_string();
-        let mut decoder = open_decoder(path)?;
+        let (mut decoder, file) = open_decoder(path)?;
         let (width, height) = decoder
             .dimensions()
             .with_context(|| format!("{shown}: cannot read the image size"))?;
@@ -138,13 +207,19 @@ impl TiffSource {
             .ok()
             .flatten()
             .and_then(rational);
+        // Every page's claims are checked now, before the converter sizes anything from them.
+        check_page(&mut decoder, path, 0, file, format, samples_per_pixel)?;
         let mut pages = 1u64;
         while decoder.more_images() {
-            decoder.next_image().with_context(|| {
+            decoder.next_image().map_err(explain).with_context(|| {
                 format!(
                     "{shown}: cannot read the directory of page {pages} (truncated or corrupt TIFF)"
                 )
             })?;
+            // Pages of another size or format are refused when read; check what they claim.
+            if let Ok((format, samples)) = page_format(&mut decoder, path) {
+                check_page(&mut decoder, path, pages, file, format, samples)?;
+            }
             pages += 1;
         }
 
@@ -211,6 +286,7 @@ impl TiffSource {
             decoder,
             layout,
             samples_per_pixel,
+            file,
             cached: None,
             page: Vec::new(),
         })
@@ -244,9 +320,15 @@ impl VolumeSource for TiffSource {
                     self.info.format
                 );
             }
-            decode_page(&mut self.decoder, format, spp, &mut self.page).with_context(|| {
-                format!("{shown}: cannot decode page {page} (truncated or corrupt TIFF)")
-            })?;
+            decode_page(
+                &mut self.decoder,
+                &path,
+                page,
+                self.file,
+                format,
+                spp,
+                &mut self.page,
+            )?;
             self.cached = Some(page);
         }
         out.fill_from_bytes(

@@ -1,39 +1,18 @@
-//! `ingest sample`: a deterministic synthetic fluorescence stack, generated plane by plane.
+//! The `fluorescence` sample: a cleared-tissue light-sheet acquisition.
 //!
-//! It looks like a cleared-tissue light-sheet acquisition: an ellipsoidal piece of tissue in
-//! mostly empty space, with nuclei (a 16-bit channel), cell membranes around them and thin
-//! filaments (8-bit channels), camera noise inside the tissue and anisotropic voxels
-//! (z spacing 4× the xy spacing). Each channel is written as a BigTIFF OME-TIFF with its
-//! physical voxel size, so the sample exercises the TIFF path of `ingest convert`.
+//! An ellipsoidal piece of tissue in mostly empty space, with nuclei (a 16-bit channel), cell
+//! membranes around them and thin filaments (8-bit channels), camera noise inside the tissue
+//! and anisotropic voxels (z spacing 4× the xy spacing).
 
-use std::fs::File;
-use std::io::BufWriter;
-use std::path::{Path, PathBuf};
-
-use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use rayon::prelude::*;
-use tiff::encoder::{TiffEncoder, colortype};
-use tiff::tags::Tag;
+use super::noise::{hash, unit};
+use super::ome_tiff::{ChannelSpec, PlaneData, Scene};
+use crate::sample_format::SampleFormat;
 
 /// Voxel size of the sample in micrometres, `z, y, x`.
 pub const SAMPLE_VOXEL_SIZE: [f64; 3] = [2.0, 0.5, 0.5];
 
 /// Channel file names of the sample, in channel order.
 pub const SAMPLE_CHANNELS: [&str; 3] = ["nuclei", "membranes", "filaments"];
-
-/// A stateless hash of a 64-bit value (SplitMix64 finaliser), used for noise and placement.
-fn hash(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// Uniform in `[0, 1)` from a hash.
-fn unit(h: u64) -> f64 {
-    (h >> 11) as f64 / (1u64 << 53) as f64
-}
 
 struct Nucleus {
     centre: [f64; 3],
@@ -200,103 +179,36 @@ impl SampleScene {
     }
 }
 
-fn ome_xml(shape: [u64; 3], name: &str, kind: &str) -> String {
-    let [z, y, x] = shape;
-    let [pz, py, px] = SAMPLE_VOXEL_SIZE;
-    format!(
-        r#"<?xml version="1.0" encoding="UTF-8"?><OME xmlns="http://www.openmicroscopy.org/Schemas/OME/2016-06"><Image ID="Image:0" Name="{name}"><Pixels ID="Pixels:0" DimensionOrder="XYZCT" Type="{kind}" SizeX="{x}" SizeY="{y}" SizeZ="{z}" SizeC="1" SizeT="1" PhysicalSizeX="{px}" PhysicalSizeY="{py}" PhysicalSizeZ="{pz}" PhysicalSizeXUnit="&#xB5;m" PhysicalSizeYUnit="&#xB5;m" PhysicalSizeZUnit="&#xB5;m"><Channel ID="Channel:0:0" Name="{name}" SamplesPerPixel="1"/><TiffData/></Pixels></Image></OME>"#
-    )
-}
-
-/// Writes the sample stack of `shape` into `dir`, one OME-TIFF per channel, and returns the
-/// file paths in channel order.
-pub fn write_sample(
-    dir: &Path,
-    shape: [u64; 3],
-    seed: u64,
-    progress: bool,
-) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("{}: cannot create folder", dir.display()))?;
-    let scene = SampleScene::new(shape, seed);
-    let paths: Vec<PathBuf> = SAMPLE_CHANNELS
-        .iter()
-        .map(|c| dir.join(format!("{c}.ome.tif")))
-        .collect();
-    let partial: Vec<PathBuf> = paths
-        .iter()
-        .map(|p| p.with_extension("tif.partial"))
-        .collect();
-    let open = |p: &PathBuf| -> Result<TiffEncoder<BufWriter<File>, tiff::encoder::TiffKindBig>> {
-        let f = File::create(p).with_context(|| format!("{}: cannot create", p.display()))?;
-        TiffEncoder::new_big(BufWriter::with_capacity(1 << 20, f))
-            .with_context(|| format!("{}: cannot start TIFF", p.display()))
-    };
-    let mut enc: Vec<_> = partial.iter().map(open).collect::<Result<_>>()?;
-    let [depth, ny, nx] = shape;
-    let bar = if progress {
-        ProgressBar::with_draw_target(Some(depth), ProgressDrawTarget::stderr())
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} sample [{elapsed_precise}] [{wide_bar}] {pos}/{len} planes {per_sec} ETA {eta}")
-            .expect("template"),
-    );
-    let batch = 16u64;
-    let mut z0 = 0;
-    while z0 < depth {
-        let planes: Vec<_> = (z0..(z0 + batch).min(depth))
-            .into_par_iter()
-            .map(|z| scene.plane(z))
-            .collect();
-        for (dz, (nuc, mem, fil)) in planes.into_iter().enumerate() {
-            let first = z0 == 0 && dz == 0;
-            let write = |e: &mut TiffEncoder<_, _>,
-                         name: &str,
-                         kind: &str,
-                         data: Plane<'_>|
-             -> Result<()> {
-                macro_rules! image {
-                    ($ct:ty, $d:expr) => {{
-                        let mut img = e.new_image::<$ct>(nx as u32, ny as u32)?;
-                        if first {
-                            img.encoder().write_tag(
-                                Tag::ImageDescription,
-                                ome_xml(shape, name, kind).as_str(),
-                            )?;
-                        }
-                        img.write_data($d)?;
-                    }};
-                }
-                match data {
-                    Plane::U16(d) => image!(colortype::Gray16, d),
-                    Plane::U8(d) => image!(colortype::Gray8, d),
-                }
-                Ok(())
-            };
-            write(&mut enc[0], SAMPLE_CHANNELS[0], "uint16", Plane::U16(&nuc))
-                .with_context(|| format!("{}: cannot write", paths[0].display()))?;
-            write(&mut enc[1], SAMPLE_CHANNELS[1], "uint8", Plane::U8(&mem))
-                .with_context(|| format!("{}: cannot write", paths[1].display()))?;
-            write(&mut enc[2], SAMPLE_CHANNELS[2], "uint8", Plane::U8(&fil))
-                .with_context(|| format!("{}: cannot write", paths[2].display()))?;
-            bar.inc(1);
-        }
-        z0 += batch;
+impl Scene for SampleScene {
+    fn shape(&self) -> [u64; 3] {
+        self.shape
     }
-    drop(enc);
-    for (p, f) in partial.iter().zip(&paths) {
-        std::fs::rename(p, f)
-            .with_context(|| format!("{}: cannot move into place", f.display()))?;
-    }
-    bar.finish_and_clear();
-    Ok(paths)
-}
 
-enum Plane<'a> {
-    U16(&'a [u16]),
-    U8(&'a [u8]),
+    fn voxel_size(&self) -> [f64; 3] {
+        SAMPLE_VOXEL_SIZE
+    }
+
+    fn channels(&self) -> Vec<ChannelSpec> {
+        let formats = [SampleFormat::U16, SampleFormat::U8, SampleFormat::U8];
+        SAMPLE_CHANNELS
+            .iter()
+            .zip(formats)
+            .map(|(name, format)| ChannelSpec {
+                file_stem: name.to_string(),
+                name: name.to_string(),
+                format,
+            })
+            .collect()
+    }
+
+    fn render_plane(&self, z: u64) -> Vec<PlaneData> {
+        let (nuclei, membranes, filaments) = self.plane(z);
+        vec![
+            PlaneData::U16(nuclei),
+            PlaneData::U8(membranes),
+            PlaneData::U8(filaments),
+        ]
+    }
 }
 
 #[cfg(test)]
