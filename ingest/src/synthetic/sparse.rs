@@ -5,9 +5,11 @@
 //! tube (a shell a few voxels thick around an empty canal) that spirals inwards and undulates
 //! in z, tapering towards the tail; pairs of thin curved ribs branch off it at regular
 //! intervals; a few small, very dense blobs (teeth, swallowed stones) sit near the head and
-//! along the coil. Bone has a mottled texture. Everything else, the air around the specimen
-//! and the canal inside the spine, is exactly 0, so whole bricks are empty: only a few percent
-//! of the voxels are not 0.
+//! along the coil. Bone has a mottled texture. Faint soft tissue (flesh) wraps the spine and
+//! fills its canal, as in a real CT: a bone window hides it, yet its bricks hold data. The air
+//! around the specimen, most of the volume, is the scanner's faint noise floor (never 0), so
+//! no brick is all fill value: a loader that does not know the transfer function fetches every
+//! brick, while a renderer culling by min/max under a bone window fetches only the bone's.
 //!
 //! Extra channels are the same scan through different CT windows, like the paper's
 //! "simulated channels" that duplicate one volume with different transfer functions: channel
@@ -18,7 +20,12 @@ use super::noise::{fbm3, hash, segment_distance, smoothstep, unit};
 use super::ome_tiff::{ChannelSpec, PlaneData, Scene};
 use crate::sample_format::SampleFormat;
 
-/// Values of the three materials (before any window): bone shell, ribs, dense blobs.
+/// Air: the scanner's noise floor, `1..AIR_MAX` (never 0, so no brick is all fill value).
+pub(crate) const AIR_MAX: u16 = 60;
+/// Soft tissue (flesh around the spine and the cord inside it): faint, below every bone value,
+/// so a bone window hides it although its bricks are not empty.
+const SOFT: (u16, u16) = (100, 400);
+/// Values of the three bone materials (before any window): bone shell, ribs, dense blobs.
 const SHELL: (u16, u16) = (1000, 2000);
 const RIB: (u16, u16) = (2000, 3000);
 const BLOB: (u16, u16) = (4000, 6000);
@@ -40,6 +47,8 @@ pub(crate) struct SparseScene {
     /// Spine centreline and the tube radius at each of its points.
     spine: Vec<([f64; 3], f64)>,
     wall: f64,
+    /// Thickness of the soft tissue around the bone.
+    flesh: f64,
     ribs: Vec<[[f64; 3]; RIB_POINTS]>,
     rib_radius: f64,
     blobs: Vec<Blob>,
@@ -77,6 +86,7 @@ impl SparseScene {
         let coil = 0.36 * m;
         let tube = (0.04 * m).max(1.5);
         let wall = (0.25 * tube).max(0.75);
+        let flesh = tube;
         let turns = 2.5;
         let r = |i: u64| unit(hash(seed ^ 0x5EA5_0000 ^ i));
         let phase = std::f64::consts::TAU * r(1);
@@ -156,6 +166,7 @@ impl SparseScene {
             seed,
             spine,
             wall,
+            flesh,
             ribs,
             rib_radius,
             blobs,
@@ -194,7 +205,7 @@ impl SparseScene {
         for w in self.spine.windows(2) {
             let ((a, ra), (b, rb)) = (w[0], w[1]);
             let r = 0.5 * (ra + rb);
-            let Some([y0, y1, x0, x1]) = self.bounds(wz, &[a, b], r + self.wall + 1.0) else {
+            let Some([y0, y1, x0, x1]) = self.bounds(wz, &[a, b], r + self.flesh + 1.0) else {
                 continue;
             };
             touched = true;
@@ -210,11 +221,12 @@ impl SparseScene {
             for y in 0..ny {
                 for x in 0..nx {
                     let i = (y * nx + x) as usize;
-                    if surface[i].abs() < self.wall {
+                    let d = surface[i];
+                    if d < self.flesh {
                         let p = [wz, y as f64 + 0.5, x as f64 + 0.5];
                         let texture = fbm3(self.seed ^ 0x7E47, p.map(|v| v / 4.0), 2);
-                        let span = f64::from(SHELL.1 - SHELL.0);
-                        value[i] = SHELL.0 + (span * texture) as u16;
+                        let (lo, hi) = if d.abs() < self.wall { SHELL } else { SOFT };
+                        value[i] = lo + (f64::from(hi - lo) * texture) as u16;
                     }
                 }
             }
@@ -260,6 +272,13 @@ impl SparseScene {
                         value[i] = value[i].max(v);
                     }
                 }
+            }
+        }
+        // Air: per-voxel noise, a function of the voxel's position and the seed alone.
+        for (i, v) in value.iter_mut().enumerate() {
+            if *v == 0 {
+                let h = hash(self.seed ^ 0xA1F0_0000_0000 ^ (z * ny * nx + i as u64));
+                *v = 1 + (unit(h) * f64::from(AIR_MAX - 1)) as u16;
             }
         }
         value
@@ -327,12 +346,13 @@ mod tests {
     #[test]
     fn scan_holds_every_material_and_is_mostly_empty() {
         let scene = SparseScene::new([48, 96, 96], 1, 3);
-        let (mut shell, mut rib, mut blob, mut zero, mut total) = (0, 0, 0, 0, 0);
+        let (mut soft, mut shell, mut rib, mut blob, mut air, mut total) = (0, 0, 0, 0, 0, 0);
         for z in 0..48 {
             for v in scene.scan_plane(z) {
                 total += 1;
                 match v {
-                    0 => zero += 1,
+                    v if v < AIR_MAX => air += 1,
+                    v if v < SOFT.1 => soft += 1,
                     v if v < SHELL.1 => shell += 1,
                     v if v <= RIB.1 => rib += 1,
                     v if v >= BLOB.0 => blob += 1,
@@ -340,7 +360,10 @@ mod tests {
                 }
             }
         }
-        assert!(shell > 0 && rib > 0 && blob > 0, "{shell} {rib} {blob}");
-        assert!(zero * 100 > total * 90, "{zero} of {total} voxels are 0");
+        assert!(
+            soft > shell && shell > 0 && rib > 0 && blob > 0,
+            "{soft} {shell} {rib} {blob}"
+        );
+        assert!(air * 100 > total * 80, "{air} of {total} voxels are air");
     }
 }
