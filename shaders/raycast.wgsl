@@ -466,6 +466,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let substitute = (P.brick.w & 2u) != 0u;
         var last_depth = P.tables.x + 1u;
         var iterations = 0u;
+        // Page-table baseline: the brick each channel's last sample was in, and whether it
+        // is empty under the channel's TF.
+        var pt_brick: array<u32, 8>;
+        var pt_empty = 0u;
+        for (var c = 0u; c < 8u; c++) {
+            pt_brick[c] = 0xffffffffu;
+        }
         loop {
             iterations++;
             if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
@@ -548,11 +555,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 for (var c = 0u; c < channels; c++) {
                     let l = chosen[c];
                     if METHOD == 1u {
-                        // Page table: is the brick at the sample empty under the TF?
+                        // Page table: is the brick at the sample empty under the TF? Judged
+                        // once per brick the ray enters, as a page-table renderer would.
                         let pos = level_pos(l, ray.cell, ray.local);
                         let b = point_brick(l, pos);
-                        let r = brick_ranges[brick_id(c, l, b)];
-                        if skipping && tf_transparent(c, r.x, r.y) {
+                        let pid = brick_id(c, l, b);
+                        if pid != pt_brick[c] {
+                            pt_brick[c] = pid;
+                            let r = brick_ranges[pid];
+                            let bit = 1u << c;
+                            pt_empty = select(pt_empty & ~bit, pt_empty | bit, skipping && tf_transparent(c, r.x, r.y));
+                        }
+                        if (pt_empty & (1u << c)) != 0u {
                             empty_bits |= 1u << c;
                             skip = min(skip, brick_exit(l, b, pos, dir));
                         } else {

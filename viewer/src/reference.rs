@@ -2,7 +2,7 @@
 //! trilinear sampling and a fine fixed step, following the conventions of [`crate::scene`]
 //! exactly (world space, projection, opacity correction and compositing).
 //!
-//! Each ray is clipped to the volume box `[0, extent]` and cut into segments of the step `Δ`
+//! Each ray is clipped to the volume box `[0, extent)` and cut into segments of the step `Δ`
 //! from the entry point, the last one shorter; each segment is sampled at its midpoint and
 //! composited with its own length. Level-0 bricks are read through any [`BrickSource`] on
 //! first use and kept, decoded, for the whole render. Pixels are rendered in parallel.
@@ -134,12 +134,16 @@ impl Level0<'_> {
     }
 }
 
-/// Where a ray meets the box `[0, extent]`: `(t_enter, t_exit)` with `t_enter ≥ 0`, or `None`.
+/// Where a ray meets the box `[0, extent)`: `(t_enter, t_exit)` with `t_enter ≥ 0`, or `None`.
+///
+/// The box is half-open like the cells the renderer indexes (`floor` of a coordinate: voxels,
+/// bricks, octree leaves): a ray parallel to an axis that lies exactly in the plane of a lower
+/// face (`0`) meets the volume, one in the plane of an upper face (`extent`) does not.
 pub fn clip_to_box(eye: [f64; 3], dir: [f64; 3], extent: [f64; 3]) -> Option<(f64, f64)> {
     let (mut t0, mut t1) = (0.0f64, f64::INFINITY);
     for a in 0..3 {
         if dir[a] == 0.0 {
-            if eye[a] < 0.0 || eye[a] > extent[a] {
+            if eye[a] < 0.0 || eye[a] >= extent[a] {
                 return None;
             }
             continue;
@@ -471,6 +475,15 @@ mod tests {
         );
         assert_eq!(
             clip_to_box([5.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]),
+            None
+        );
+        // In the plane of a face: the lower face is inside, the upper one outside.
+        assert_eq!(
+            clip_to_box([0.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]),
+            Some((6.0, 10.0))
+        );
+        assert_eq!(
+            clip_to_box([4.0, 2.0, 10.0], [0.0, 0.0, -1.0], [4.0; 3]),
             None
         );
         // Inside the volume: the ray starts at the eye.
