@@ -34,11 +34,33 @@ struct Params {
     brick: vec4<u32>, // brick edge in voxels, per axis; w: flags (1 skip empty/homogeneous
     // nodes, 2 substitute missing bricks from other levels)
     slots: vec4<u32>, // log2 of atlas slots per x, per y; slots per z
+    run: vec4<u32>, // x: steps a ray may take per pass (then it is suspended and resumed)
 }
+
+// A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan driver
+// ends every loop of an invocation after 65535 iterations in all, so long rays are marched a
+// bounded number of steps per pass and resumed from here.
+struct RayState {
+    cell: vec3<i32>,
+    status: u32, // RAY_FRESH (the buffer is cleared per frame), RAY_SUSPENDED, RAY_DONE
+    local: vec3<f32>,
+    t: f32,
+    color: vec3<f32>,
+    trans: f32,
+    last_depth: u32,
+    iterations: u32,
+    pad0: u32,
+    pad1: u32,
+}
+
+const RAY_FRESH: u32 = 0u;
+const RAY_SUSPENDED: u32 = 1u;
+const RAY_DONE: u32 = 2u;
 
 struct Requests {
     // 0 request count, 1 samples, 2 empty nodes skipped, 3 bricks substituted,
-    // 4 homogeneous nodes, 5 requests over the cap, 6 samples with no data, 7 reserved
+    // 4 homogeneous nodes, 5 requests over the cap, 6 samples with no data, 7 rays suspended
+    // by the latest pass
     header: array<atomic<u32>, 8>,
     entries: array<vec2<u32>>, // (page-table id, ray distance bits)
 }
@@ -56,6 +78,7 @@ struct Requests {
 @group(0) @binding(10) var atlas_f: texture_3d<f32>;
 // Per page-table id: (min, max) of the brick, for the baselines' brick-granular culling.
 @group(0) @binding(11) var<storage, read> brick_ranges: array<vec2<f32>>;
+@group(0) @binding(12) var<storage, read_write> rays: array<RayState>;
 
 // ---- tables ----
 
@@ -430,6 +453,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let pixel = gid.y * P.size.x + gid.x;
+    var st = rays[pixel];
+    if st.status == RAY_DONE {
+        return;
+    }
     let ndc = vec2<f32>(
         (f32(gid.x) + 0.5) / f32(P.size.x) * 2.0 - 1.0,
         1.0 - (f32(gid.y) + 0.5) / f32(P.size.y) * 2.0,
@@ -448,24 +475,42 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_enter = max(max(tmin.x, max(tmin.y, tmin.z)), 0.0);
     let t_exit = min(tmax.x, min(tmax.y, tmax.z));
 
-    var color = vec3<f32>(0.0);
-    var trans = 1.0;
+    var color = st.color;
+    var trans = st.trans;
+    if st.status == RAY_FRESH {
+        color = vec3<f32>(0.0);
+        trans = 1.0;
+    }
     var samples = 0u;
     var skipped = 0u;
     var homogeneous = 0u;
     var nodata = 0u;
     let nudge = 1e-4 / max(abs(dir.x), max(abs(dir.y), abs(dir.z)));
 
+    var suspended = false;
     if t_exit > t_enter {
-        var ray = Ray(P.eye_cell.xyz, P.eye_frac.xyz, 0.0);
-        advance(&ray, dir, t_enter + nudge);
         let depth = P.tree.x;
         let leaves = 1 << depth;
+        var ray = Ray(st.cell, st.local, st.t);
+        var last_depth = st.last_depth;
+        var iterations = st.iterations;
+        if st.status == RAY_FRESH {
+            last_depth = P.tables.x + 1u;
+            iterations = 0u;
+            ray = Ray(P.eye_cell.xyz, P.eye_frac.xyz, 0.0);
+            advance(&ray, dir, t_enter + nudge);
+            // Far from the volume the f32 entry point can round to just outside the octree's
+            // root: clamp it onto the face it entered through.
+            let top = vec3<i32>(leaves - 1);
+            let inside = clamp(ray.cell, vec3<i32>(0), top);
+            let moved = inside != ray.cell;
+            ray.local = select(ray.local, select(vec3<f32>(0.0), vec3<f32>(0.99999994), ray.cell > top), moved);
+            ray.cell = inside;
+        }
         let channels = P.size.w;
         let skipping = (P.brick.w & 1u) != 0u;
         let substitute = (P.brick.w & 2u) != 0u;
-        var last_depth = P.tables.x + 1u;
-        var iterations = 0u;
+        var budget = P.run.x;
         // Page-table baseline: the brick each channel's last sample was in, and whether it
         // is empty under the channel's TF.
         var pt_brick: array<u32, 8>;
@@ -481,6 +526,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= vec3<i32>(leaves)) {
                 break;
             }
+            if budget == 0u {
+                suspended = true;
+                break;
+            }
+            budget--;
             // Desired level per channel, and step: the finest over channels.
             var chosen: array<u32, 8>;
             var finest = P.tree.y - 1u;
@@ -723,8 +773,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             trans *= 1.0 - min(asum, 1.0);
             advance(&ray, dir, step);
         }
+        st.cell = ray.cell;
+        st.local = ray.local;
+        st.t = ray.t;
+        st.last_depth = last_depth;
+        st.iterations = iterations;
     }
-    out_color[pixel] = vec4<f32>(color + trans * P.background.xyz, 1.0 - trans);
+    st.color = color;
+    st.trans = trans;
+    st.status = select(RAY_DONE, RAY_SUSPENDED, suspended);
+    rays[pixel] = st;
+    if suspended {
+        atomicAdd(&requests.header[7], 1u);
+    } else {
+        out_color[pixel] = vec4<f32>(color + trans * P.background.xyz, 1.0 - trans);
+    }
     atomicAdd(&requests.header[1], samples);
     atomicAdd(&requests.header[2], skipped);
     atomicAdd(&requests.header[4], homogeneous);

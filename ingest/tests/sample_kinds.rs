@@ -213,8 +213,14 @@ fn sparse_is_bone_and_soft_tissue_in_noisy_air() {
     assert!((4000.0..=6000.0).contains(&max), "{max}");
     assert!(values.iter().any(|&v| (1000.0..2000.0).contains(&v)));
     // Soft tissue below every bone value, and more of it than bone shell.
-    let soft = values.iter().filter(|&&v| (100.0..400.0).contains(&v)).count();
-    let shell = values.iter().filter(|&&v| (1000.0..2000.0).contains(&v)).count();
+    let soft = values
+        .iter()
+        .filter(|&&v| (100.0..400.0).contains(&v))
+        .count();
+    let shell = values
+        .iter()
+        .filter(|&&v| (1000.0..2000.0).contains(&v))
+        .count();
     assert!(soft > shell, "{soft} soft-tissue voxels, {shell} bone");
     assert!(!values.iter().any(|&v| (400.0..1000.0).contains(&v)));
 }

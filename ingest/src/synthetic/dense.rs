@@ -115,29 +115,15 @@ impl Scene for DenseScene {
     }
 
     fn channels(&self) -> Vec<ChannelSpec> {
-        if self.channels == 1 {
-            return vec![ChannelSpec {
-                file_stem: "dense".into(),
-                name: "density".into(),
-                format: SampleFormat::F32,
-            }];
-        }
-        (0..self.channels)
-            .map(|k| {
-                let name = match k {
-                    0 => "density".to_string(),
-                    k => match transfer(k) {
-                        (kind, 0) => kind.to_string(),
-                        (kind, r) => format!("{kind}{}", r + 1),
-                    },
-                };
-                ChannelSpec {
-                    file_stem: format!("dense-{k:02}-{name}"),
-                    name,
-                    format: SampleFormat::F32,
-                }
-            })
-            .collect()
+        ChannelSpec::transfer_channels(
+            "dense",
+            SampleFormat::F32,
+            self.channels,
+            |k| match transfer(k) {
+                (kind, 0) => kind.to_string(),
+                (kind, r) => format!("{kind}{}", r + 1),
+            },
+        )
     }
 
     fn render_plane(&self, z: u64) -> Vec<PlaneData> {

@@ -57,13 +57,23 @@ pub(crate) fn value_noise2(seed: u64, p: [f64; 2]) -> f64 {
     lerp(row(y), row(y + 1), ty)
 }
 
-/// Fractal (multi-octave) 3-D value noise in `[0, 1)`: `octaves` layers, each at twice the
-/// frequency and half the amplitude of the previous one, normalised by the total amplitude.
-pub(crate) fn fbm3(seed: u64, p: [f64; 3], octaves: u32) -> f64 {
+/// The seed of octave `o` of fractal noise with `seed`.
+fn octave_seed(seed: u64, o: u32) -> u64 {
+    hash(seed ^ u64::from(o).wrapping_mul(0xA24B_AED4_963E_E407))
+}
+
+/// Fractal (multi-octave) value noise in `[0, 1)` over `N` dimensions: `octaves` layers of
+/// `noise`, each at twice the frequency and half the amplitude of the previous one, normalised
+/// by the total amplitude.
+fn fractal<const N: usize>(
+    seed: u64,
+    p: [f64; N],
+    octaves: u32,
+    noise: fn(u64, [f64; N]) -> f64,
+) -> f64 {
     let (mut sum, mut total, mut amp, mut freq) = (0.0, 0.0, 1.0, 1.0);
     for o in 0..octaves {
-        let s = hash(seed ^ u64::from(o).wrapping_mul(0xA24B_AED4_963E_E407));
-        sum += amp * value_noise3(s, p.map(|v| v * freq));
+        sum += amp * noise(octave_seed(seed, o), p.map(|v| v * freq));
         total += amp;
         amp *= 0.5;
         freq *= 2.0;
@@ -71,17 +81,14 @@ pub(crate) fn fbm3(seed: u64, p: [f64; 3], octaves: u32) -> f64 {
     sum / total
 }
 
+/// Fractal 3-D value noise in `[0, 1)`: [`fractal`] layers of [`value_noise3`].
+pub(crate) fn fbm3(seed: u64, p: [f64; 3], octaves: u32) -> f64 {
+    fractal(seed, p, octaves, value_noise3)
+}
+
 /// Fractal 2-D value noise in `[0, 1)`, as [`fbm3`].
 pub(crate) fn fbm2(seed: u64, p: [f64; 2], octaves: u32) -> f64 {
-    let (mut sum, mut total, mut amp, mut freq) = (0.0, 0.0, 1.0, 1.0);
-    for o in 0..octaves {
-        let s = hash(seed ^ u64::from(o).wrapping_mul(0xA24B_AED4_963E_E407));
-        sum += amp * value_noise2(s, p.map(|v| v * freq));
-        total += amp;
-        amp *= 0.5;
-        freq *= 2.0;
-    }
-    sum / total
+    fractal(seed, p, octaves, value_noise2)
 }
 
 /// Fractal value noise over one plane of constant z, with the lattice values the plane needs
@@ -112,7 +119,7 @@ impl NoisePlane {
         let (mut amp, mut freq, mut total) = (1.0, 1.0, 0.0);
         let octaves = (0..octaves)
             .map(|o| {
-                let s = hash(seed ^ u64::from(o).wrapping_mul(0xA24B_AED4_963E_E407));
+                let s = octave_seed(seed, o);
                 let (iz, tz) = match z {
                     Some(z) => {
                         let zf = z * freq;

@@ -48,6 +48,40 @@ pub(crate) struct ChannelSpec {
     pub format: SampleFormat,
 }
 
+impl ChannelSpec {
+    /// The channels of one volume seen through `count` transfer functions, all in `format`:
+    /// a lone channel is `density` in `STEM.ome.tif`; several are `density` then
+    /// `name(k)` for channel `k ≥ 1`, each in `STEM-KK-NAME.ome.tif`.
+    pub(crate) fn transfer_channels(
+        stem: &str,
+        format: SampleFormat,
+        count: usize,
+        name: impl Fn(usize) -> String,
+    ) -> Vec<Self> {
+        if count == 1 {
+            return vec![Self {
+                file_stem: stem.into(),
+                name: "density".into(),
+                format,
+            }];
+        }
+        (0..count)
+            .map(|k| {
+                let name = if k == 0 {
+                    "density".to_string()
+                } else {
+                    name(k)
+                };
+                Self {
+                    file_stem: format!("{stem}-{k:02}-{name}"),
+                    name,
+                    format,
+                }
+            })
+            .collect()
+    }
+}
+
 /// A synthetic volume that renders any z-plane of all its channels on its own.
 pub(crate) trait Scene: Sync {
     /// Extent `z, y, x` in voxels.

@@ -295,27 +295,9 @@ impl Scene for SparseScene {
     }
 
     fn channels(&self) -> Vec<ChannelSpec> {
-        if self.channels == 1 {
-            return vec![ChannelSpec {
-                file_stem: "sparse".into(),
-                name: "density".into(),
-                format: SampleFormat::U16,
-            }];
-        }
-        (0..self.channels)
-            .map(|k| {
-                let name = if k == 0 {
-                    "density".to_string()
-                } else {
-                    format!("above{}", window_threshold(k, self.channels))
-                };
-                ChannelSpec {
-                    file_stem: format!("sparse-{k:02}-{name}"),
-                    name,
-                    format: SampleFormat::U16,
-                }
-            })
-            .collect()
+        ChannelSpec::transfer_channels("sparse", SampleFormat::U16, self.channels, |k| {
+            format!("above{}", window_threshold(k, self.channels))
+        })
     }
 
     fn render_plane(&self, z: u64) -> Vec<PlaneData> {

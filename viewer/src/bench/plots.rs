@@ -44,6 +44,23 @@ fn png(
         .with_context(|| format!("{}: cannot write the plot", path.display()))
 }
 
+/// Draws the legend of `chart` at `position` in DejaVu at `size` px, on a translucent white
+/// box with a black border.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+    size: u32,
+) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .position(position)
+        .label_font((FAMILY, size))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(err)
+}
+
 /// One point of a time–error plot.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TradeoffPoint {
@@ -134,15 +151,7 @@ pub fn tradeoff(path: &Path, title: &str, x_desc: &str, points: &[TradeoffPoint]
                 )
             }))
             .map_err(err)?;
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .label_font((FAMILY, 13))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
-        Ok(())
+        legend(&mut chart, SeriesLabelPosition::LowerRight, 13)
     })
 }
 
@@ -190,14 +199,7 @@ macro_rules! draw_lines {
                 .draw_series(pts.into_iter().map(|p| Circle::new(p, 4, c.filled())))
                 .map_err(err)?;
         }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .label_font((FAMILY, 12))
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()
-            .map_err(err)?;
+        legend(&mut chart, SeriesLabelPosition::UpperLeft, 12)?;
     }};
 }
 

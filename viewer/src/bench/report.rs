@@ -23,38 +23,25 @@ pub struct PaperRow {
     pub gb: [f64; 3],
 }
 
+impl PaperRow {
+    /// A row: data set, channels, then ms and GB per frame of MRMCPT, Octree and Ours.
+    const fn new(dataset: &'static str, channels: usize, ms: [f64; 3], gb: [f64; 3]) -> Self {
+        Self {
+            dataset,
+            channels,
+            ms,
+            gb,
+        }
+    }
+}
+
 /// The rows of the paper's Table 1 that our synthetic kinds stand in for.
 pub const PAPER: [PaperRow; 5] = [
-    PaperRow {
-        dataset: "Kingsnake",
-        channels: 1,
-        ms: [15.0, 11.6, 5.1],
-        gb: [0.66, 0.23, 0.13],
-    },
-    PaperRow {
-        dataset: "Kingsnake",
-        channels: 4,
-        ms: [42.5, 60.7, 19.8],
-        gb: [1.88, 0.89, 0.48],
-    },
-    PaperRow {
-        dataset: "Rayleigh–Taylor",
-        channels: 1,
-        ms: [11.2, 13.8, 6.4],
-        gb: [0.13, 0.06, 0.04],
-    },
-    PaperRow {
-        dataset: "Rayleigh–Taylor",
-        channels: 4,
-        ms: [24.3, 54.9, 20.0],
-        gb: [0.31, 0.19, 0.14],
-    },
-    PaperRow {
-        dataset: "CyCIF Small",
-        channels: 16,
-        ms: [34.0, 122.8, 25.7],
-        gb: [0.95, 0.46, 0.29],
-    },
+    PaperRow::new("Kingsnake", 1, [15.0, 11.6, 5.1], [0.66, 0.23, 0.13]),
+    PaperRow::new("Kingsnake", 4, [42.5, 60.7, 19.8], [1.88, 0.89, 0.48]),
+    PaperRow::new("Rayleigh–Taylor", 1, [11.2, 13.8, 6.4], [0.13, 0.06, 0.04]),
+    PaperRow::new("Rayleigh–Taylor", 4, [24.3, 54.9, 20.0], [0.31, 0.19, 0.14]),
+    PaperRow::new("CyCIF Small", 16, [34.0, 122.8, 25.7], [0.95, 0.46, 0.29]),
 ];
 
 /// The paper row our dataset `kind` with `channels` visible channels stands in for: sparse →
@@ -93,6 +80,16 @@ fn opt(v: Option<f64>, digits: usize) -> String {
 
 fn psnr(v: Option<f64>) -> String {
     v.map_or_else(|| "∞".into(), |v| format!("{v:.1}"))
+}
+
+/// Whether a set of runs is timed in GPU ms (every run has it) or else in wall ms, and the
+/// unit's name.
+fn time_unit<'a>(mut runs: impl Iterator<Item = &'a RunRecord>) -> (bool, &'static str) {
+    if runs.all(|x| x.gpu_ms.is_some()) {
+        (true, "GPU ms")
+    } else {
+        (false, "wall ms")
+    }
 }
 
 /// The time of a run: GPU ms when every run of the set has it, else wall ms.
@@ -183,10 +180,7 @@ fn table1(out: &mut String, all: &[BenchResults], summary: bool) {
     if rows.is_empty() {
         return;
     }
-    let gpu = rows
-        .iter()
-        .all(|r| r.by.iter().flatten().all(|x| x.gpu_ms.is_some()));
-    let unit = if gpu { "GPU ms" } else { "wall ms" };
+    let (gpu, unit) = time_unit(rows.iter().flat_map(|r| r.by.iter().flatten().copied()));
     let t = |x: Option<&RunRecord>| x.map(|x| time_of(x, gpu));
     let m = |x: Option<&RunRecord>| x.map(|x| x.resident_bytes);
     if summary {
@@ -214,26 +208,32 @@ fn table1(out: &mut String, all: &[BenchResults], summary: bool) {
             |i: usize| paper.map_or_else(|| "–".into(), |p| format!("{:.2}×", p.gb[i] / p.gb[2]));
         let ms = |x: Option<&RunRecord>| opt(t(x), 1);
         let mbs = |x: Option<&RunRecord>| x.map_or_else(|| "–".into(), |x| mb(x.resident_bytes));
+        // The columns both tables start with; then the ratios, baselines over ours, of time and
+        // of memory, and the resident MB of the three methods.
+        let _ = write!(
+            out,
+            "| {} | {} | {} | {} | {} | {} |",
+            r.dataset.label,
+            r.dataset.visible_channels,
+            ms(pt),
+            ms(oc),
+            ms(ours),
+            ms(ns),
+        );
+        let time_ratio = [ratio(t(pt), t(ours)), ratio(t(oc), t(ours))];
+        let mem_ratio = [ratio(m(pt), m(ours)), ratio(m(oc), m(ours))];
+        let resident = format!("{} / {} / {}", mbs(pt), mbs(oc), mbs(ours));
         if summary {
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {} | {} ({}) | {} ({}) | {} / {} / {} | {} ({}), {} ({}) |",
-                r.dataset.label,
-                r.dataset.visible_channels,
-                ms(pt),
-                ms(oc),
-                ms(ours),
-                ms(ns),
-                ratio(t(pt), t(ours)),
+                " {} ({}) | {} ({}) | {resident} | {} ({}), {} ({}) |",
+                time_ratio[0],
                 pr(0).split(' ').next().unwrap_or("–"),
-                ratio(t(oc), t(ours)),
+                time_ratio[1],
                 pr(1).split(' ').next().unwrap_or("–"),
-                mbs(pt),
-                mbs(oc),
-                mbs(ours),
-                ratio(m(pt), m(ours)),
+                mem_ratio[0],
                 prm(0),
-                ratio(m(oc), m(ours)),
+                mem_ratio[1],
                 prm(1),
             );
         } else {
@@ -243,26 +243,17 @@ fn table1(out: &mut String, all: &[BenchResults], summary: bool) {
             let ps = |x: Option<&RunRecord>| x.map_or_else(|| "–".into(), |x| psnr(x.psnr_db));
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} / {} / {} | {} / {} / {} | {} | {} | {} | {} | {} / {} / {} / {} |",
-                r.dataset.label,
-                r.dataset.visible_channels,
-                ms(pt),
-                ms(oc),
-                ms(ours),
-                ms(ns),
-                ratio(t(pt), t(ours)),
+                " {} | {} | {} | {} | {} / {} / {} | {resident} | {} | {} | {} | {} | {} / {} / {} / {} |",
+                time_ratio[0],
                 pr(0),
-                ratio(t(oc), t(ours)),
+                time_ratio[1],
                 pr(1),
                 wall(pt),
                 wall(oc),
                 wall(ours),
-                mbs(pt),
-                mbs(oc),
-                mbs(ours),
-                ratio(m(pt), m(ours)),
+                mem_ratio[0],
                 prm(0),
-                ratio(m(oc), m(ours)),
+                mem_ratio[1],
                 prm(1),
                 ps(pt),
                 ps(oc),
@@ -299,8 +290,7 @@ fn sweep(
     if runs.is_empty() {
         return Ok(());
     }
-    let gpu = runs.iter().all(|x| x.gpu_ms.is_some());
-    let unit = if gpu { "GPU ms" } else { "wall ms" };
+    let (gpu, unit) = time_unit(runs.iter().copied());
     let points: Vec<(f64, f64)> = runs
         .iter()
         .map(|x| (time_of(x, gpu), x.psnr_db.unwrap_or(f64::INFINITY)))
@@ -419,20 +409,22 @@ fn sweep(
                 )
             });
         }
-        for l in &lines {
-            let _ = writeln!(
-                out,
-                "{}",
-                if l.starts_with("  -") {
-                    l.clone()
-                } else {
-                    format!("- {l}")
-                }
-            );
-        }
+        write_verdicts(out, &lines);
         written.verdicts.extend(lines);
     }
     Ok(())
+}
+
+/// Writes verdict lines as a markdown list: a dataset's line as an item, its per-parameter
+/// lines (already `  - …`) nested under it.
+fn write_verdicts(out: &mut String, lines: &[String]) {
+    for l in lines {
+        if l.starts_with("  -") {
+            let _ = writeln!(out, "{l}");
+        } else {
+            let _ = writeln!(out, "- {l}");
+        }
+    }
 }
 
 fn slug(s: &str) -> String {
@@ -514,6 +506,35 @@ pub fn skipped_ratio(r: &BenchResults) -> Option<f64> {
     (o > 0).then(|| n as f64 / o as f64)
 }
 
+/// The scaling series of `runs`: one per distinct `key` with more than one distinct `x`, its
+/// points `(x, value)` ascending in `x` (the first run of each `x` kept), labelled `label(key)`.
+fn scaling_series<K: Ord>(
+    runs: &[(&BenchResults, &RunRecord)],
+    key: impl Fn(&BenchResults, &RunRecord) -> K,
+    x: impl Fn(&BenchResults, &RunRecord) -> f64,
+    label: impl Fn(&K) -> String,
+    value: impl Fn(&RunRecord) -> [f64; 3],
+) -> Vec<ScalingSeries> {
+    let mut keys: Vec<K> = runs.iter().map(|&(r, run)| key(r, run)).collect();
+    keys.sort();
+    keys.dedup();
+    keys.into_iter()
+        .filter_map(|k| {
+            let mut pts: Vec<(f64, [f64; 3])> = runs
+                .iter()
+                .filter(|&&(r, run)| key(r, run) == k)
+                .map(|&(r, run)| (x(r, run), value(run)))
+                .collect();
+            pts.sort_by(|a, b| a.0.total_cmp(&b.0));
+            pts.dedup_by(|a, b| a.0 == b.0);
+            (pts.len() > 1).then(|| ScalingSeries {
+                label: label(&k),
+                points: pts,
+            })
+        })
+        .collect()
+}
+
 fn scaling(
     out: &mut String,
     all: &[BenchResults],
@@ -532,8 +553,7 @@ fn scaling(
     if runs.is_empty() {
         return Ok(());
     }
-    let gpu = runs.iter().all(|(_, x)| x.gpu_ms.is_some());
-    let unit = if gpu { "GPU ms" } else { "wall ms" };
+    let (gpu, unit) = time_unit(runs.iter().map(|&(_, x)| x));
     let _ = writeln!(out, "\n## Scaling\n");
     let _ = writeln!(
         out,
@@ -566,77 +586,52 @@ fn scaling(
             x.bytes_fetched as f64 / 1e6,
         ]
     };
-    // Size series: same kind and channel count, several sizes.
-    let mut size_series: Vec<ScalingSeries> = Vec::new();
-    let mut chan_series: Vec<ScalingSeries> = Vec::new();
-    let mut keys: Vec<(String, usize)> = runs
-        .iter()
-        .map(|(r, x)| (r.dataset.kind.clone(), x.channels))
-        .collect();
-    keys.sort();
-    keys.dedup();
-    for (kind, ch) in keys {
-        let mut pts: Vec<(f64, [f64; 3])> = runs
-            .iter()
-            .filter(|(r, x)| r.dataset.kind == kind && x.channels == ch)
-            .map(|(r, x)| (r.dataset.voxels as f64, value(x)))
-            .collect();
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        pts.dedup_by(|a, b| a.0 == b.0);
-        if pts.len() > 1 {
-            size_series.push(ScalingSeries {
-                label: format!("{kind}, {ch} ch"),
-                points: pts,
-            });
-        }
-    }
-    let mut keys: Vec<(String, u64)> = runs
-        .iter()
-        .map(|(r, _)| (r.dataset.kind.clone(), r.dataset.voxels))
-        .collect();
-    keys.sort();
-    keys.dedup();
-    for (kind, vox) in keys {
-        let mut pts: Vec<(f64, [f64; 3])> = runs
-            .iter()
-            .filter(|(r, _)| r.dataset.kind == kind && r.dataset.voxels == vox)
-            .map(|(_, x)| (x.channels as f64, value(x)))
-            .collect();
-        pts.sort_by(|a, b| a.0.total_cmp(&b.0));
-        pts.dedup_by(|a, b| a.0 == b.0);
-        if pts.len() > 1 {
-            chan_series.push(ScalingSeries {
-                label: format!("{kind}, {vox} voxels"),
-                points: pts,
-            });
-        }
-    }
+    // Size series: same kind and channel count, several sizes; channel series: same kind and
+    // size, several channel counts.
+    let size_series = scaling_series(
+        &runs,
+        |r, x| (r.dataset.kind.clone(), x.channels),
+        |r, _| r.dataset.voxels as f64,
+        |(kind, ch)| format!("{kind}, {ch} ch"),
+        value,
+    );
+    let chan_series = scaling_series(
+        &runs,
+        |r, _| (r.dataset.kind.clone(), r.dataset.voxels),
+        |_, x| x.channels as f64,
+        |(kind, vox)| format!("{kind}, {vox} voxels"),
+        value,
+    );
     let adapter = &runs[0].0.device.adapter;
-    if !size_series.is_empty() {
-        let p = dir.join("scaling-size.png");
-        plots::scaling(
-            &p,
-            &format!("Scaling with volume size ({adapter})"),
+    let figures = [
+        (
+            size_series,
+            "scaling-size.png",
+            "volume size",
             "level-0 voxels per channel",
             true,
-            &size_series,
-        )?;
-        let _ = writeln!(out, "\n![scaling with volume size](scaling-size.png)\n");
-        written.plots.push(p);
-    }
-    if !chan_series.is_empty() {
-        let p = dir.join("scaling-channels.png");
-        plots::scaling(
-            &p,
-            &format!("Scaling with channel count ({adapter})"),
+        ),
+        (
+            chan_series,
+            "scaling-channels.png",
+            "channel count",
             "visible channels",
             false,
-            &chan_series,
+        ),
+    ];
+    for (series, name, what, x_desc, log_x) in figures {
+        if series.is_empty() {
+            continue;
+        }
+        let p = dir.join(name);
+        plots::scaling(
+            &p,
+            &format!("Scaling with {what} ({adapter})"),
+            x_desc,
+            log_x,
+            &series,
         )?;
-        let _ = writeln!(
-            out,
-            "\n![scaling with channel count](scaling-channels.png)\n"
-        );
+        let _ = writeln!(out, "\n![scaling with {what}]({name})\n");
         written.plots.push(p);
     }
     Ok(())
@@ -722,17 +717,7 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
     }
     if !written.verdicts.is_empty() {
         let _ = writeln!(s, "\nDefaults against the time–error Pareto front:\n");
-        for v in &written.verdicts {
-            let _ = writeln!(
-                s,
-                "{}",
-                if v.starts_with("  -") {
-                    v.clone()
-                } else {
-                    format!("- {v}")
-                }
-            );
-        }
+        write_verdicts(&mut s, &written.verdicts);
     }
     let summary = dir.join("summary.md");
     std::fs::write(&summary, &s).with_context(|| format!("{}: cannot write", summary.display()))?;

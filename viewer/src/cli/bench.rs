@@ -155,6 +155,11 @@ fn parse_method(s: &str) -> Result<(Method, bool)> {
     })
 }
 
+/// The values of a sweep parameter: all of `values` when it is swept (`on`), else none.
+fn swept<T: Clone>(on: bool, values: &[T]) -> Vec<T> {
+    if on { values.to_vec() } else { Vec::new() }
+}
+
 /// Runs `viewer bench run`.
 pub fn run_bench(args: RunArgs) -> Result<()> {
     ensure!(
@@ -199,26 +204,10 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
             }
             let on = |p: &str| args.sweep_params.iter().any(|x| x == p);
             SweepValues {
-                steps: if on("step") {
-                    args.steps.clone()
-                } else {
-                    Vec::new()
-                },
-                lod_biases: if on("lod-bias") {
-                    args.lod_biases.clone()
-                } else {
-                    Vec::new()
-                },
-                cache_fractions: if on("cache") {
-                    args.cache_fractions.clone()
-                } else {
-                    Vec::new()
-                },
-                leaf_voxels: if on("leaf") {
-                    args.leaf_voxels.clone()
-                } else {
-                    Vec::new()
-                },
+                steps: swept(on("step"), &args.steps),
+                lod_biases: swept(on("lod-bias"), &args.lod_biases),
+                cache_fractions: swept(on("cache"), &args.cache_fractions),
+                leaf_voxels: swept(on("leaf"), &args.leaf_voxels),
             }
         },
         progress: !args.quiet,

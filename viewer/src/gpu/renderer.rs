@@ -22,6 +22,28 @@ pub const MAX_CHANNELS: usize = 8;
 
 const HEADER_WORDS: usize = 8;
 
+/// Header word counting the rays the latest pass suspended.
+const SUSPENDED_WORD: usize = 7;
+
+/// Bytes of one ray's state between passes (`RayState` in the shader).
+const RAY_STATE_BYTES: u64 = 64;
+
+/// Loop iterations a CPU Vulkan driver (Mesa's lavapipe/llvmpipe) allows one invocation in
+/// all, nested loops included; the shader ends a pass well before it.
+const DRIVER_LOOP_LIMIT: u32 = 65_535;
+
+/// Most passes of one frame before the renderer gives up (a ray of a million steps or more).
+const MAX_PASSES: u32 = 100_000;
+
+/// Steps one ray may take in a pass: the driver's loop limit divided by a bound on the loop
+/// iterations one step takes (levels chosen per channel, transfer-function points, the octree
+/// walk, the 8 voxels of a sample and the substitution candidates).
+fn steps_per_pass(channels: usize, levels: usize, tf_points: usize, depth: u32) -> u32 {
+    let c = channels.max(1);
+    let per_step = 8 + c * (3 * levels + 2 * tf_points + 24) + (depth as usize + 2) * (c + 1);
+    (DRIVER_LOOP_LIMIT as usize / per_step).clamp(16, 1 << 20) as u32
+}
+
 /// How the ray caster finds data and skips empty space: the residency octree, or one of the
 /// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
 /// functions so that their ratios are fair.
@@ -124,6 +146,7 @@ struct Params {
     leaf_shift: [i32; 4],
     brick: [u32; 4],
     slots: [u32; 4],
+    run: [u32; 4],
 }
 
 /// What the shader counted in one frame.
@@ -209,6 +232,8 @@ pub struct Renderer {
     image: wgpu::Buffer,
     readback: Readback,
     tables_words: usize,
+    rays: wgpu::Buffer,
+    steps_per_pass: u32,
     frame: u32,
 }
 
@@ -364,6 +389,22 @@ impl Renderer {
         let requests = storage("requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
         let pixels = options.width as u64 * options.height as u64;
         let image = storage("image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
+        too_big(
+            "the ray states",
+            pixels * RAY_STATE_BYTES,
+            "render a smaller image",
+        )?;
+        let rays = storage(
+            "ray states",
+            pixels * RAY_STATE_BYTES,
+            wgpu::BufferUsages::empty(),
+        );
+        let steps_per_pass = steps_per_pass(
+            visible.len(),
+            levels as usize,
+            visible.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
+            geometry.depth,
+        );
 
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast.wgsl"),
@@ -412,6 +453,7 @@ impl Renderer {
                 tex(8, wgpu::TextureSampleType::Uint),
                 tex(9, wgpu::TextureSampleType::Sint),
                 sb(11, true),
+                sb(12, false),
                 tex(10, wgpu::TextureSampleType::Float { filterable: false }),
             ],
         });
@@ -467,6 +509,10 @@ impl Renderer {
                 wgpu::BindGroupEntry {
                     binding: 11,
                     resource: brick_range_buf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 12,
+                    resource: rays.as_entire_binding(),
                 },
             ],
         });
@@ -535,6 +581,8 @@ impl Renderer {
             image,
             readback,
             tables_words: t.words.len(),
+            rays,
+            steps_per_pass,
             frame: 0,
         };
         renderer.flush(gpu);
@@ -707,6 +755,7 @@ impl Renderer {
                 let s = self.cache.slots_per_axis();
                 [s[0].trailing_zeros(), s[1].trailing_zeros(), s[2], 0]
             },
+            run: [self.steps_per_pass, 0, 0, 0],
         }
     }
 
@@ -732,62 +781,91 @@ impl Renderer {
             label: Some("raycast frame"),
         });
         encoder.clear_buffer(&self.requests, 0, Some(HEADER_WORDS as u64 * 4));
-        {
-            let timestamp_writes = self.readback.timestamps.as_ref().map(|(set, _, _)| {
-                wgpu::ComputePassTimestampWrites {
-                    query_set: set,
-                    beginning_of_pass_write_index: Some(0),
-                    end_of_pass_write_index: Some(1),
-                }
-            });
-            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                label: Some("raycast"),
-                timestamp_writes,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            pass.dispatch_workgroups(
-                self.options.width.div_ceil(8),
-                self.options.height.div_ceil(8),
-                1,
-            );
-        }
-        let rb = &self.readback;
-        encoder.copy_buffer_to_buffer(&self.requests, 0, &rb.requests, 0, rb.requests.size());
-        encoder.copy_buffer_to_buffer(
-            self.cache.usage_buffer(),
-            0,
-            &rb.usage,
-            0,
-            self.cache.capacity() as u64 * 4,
-        );
+        encoder.clear_buffer(&self.rays, 0, None);
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
-        encoder.copy_buffer_to_buffer(&self.image, 0, &rb.image, 0, image_bytes);
-        if let Some((set, resolve, staging)) = &rb.timestamps {
-            encoder.resolve_query_set(set, 0..2, resolve, 0);
-            encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
-        }
-        gpu.queue.submit([encoder.finish()]);
-
+        let rb = &self.readback;
         let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage, &rb.image];
         if let Some((_, _, staging)) = &rb.timestamps {
             maps.push(staging);
         }
-        let (tx, rx) = std::sync::mpsc::channel();
-        for (i, b) in maps.iter().enumerate() {
-            let tx = tx.clone();
-            b.map_async(wgpu::MapMode::Read, .., move |r| {
-                let _ = tx.send((i, r));
-            });
-        }
-        drop(tx);
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .context("waiting for the GPU")?;
-        for (i, r) in rx.iter() {
-            if r.is_err() {
-                bail!("cannot read back GPU buffer {i}");
+        // Passes until no ray is suspended: one round is a few passes plus the readback, whose
+        // header says how many rays the last pass suspended.
+        let mut passes = 0u32;
+        let mut batch = 1u32;
+        loop {
+            for _ in 0..batch {
+                encoder.clear_buffer(&self.requests, SUSPENDED_WORD as u64 * 4, Some(4));
+                let timestamp_writes =
+                    rb.timestamps
+                        .as_ref()
+                        .map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                            query_set: set,
+                            beginning_of_pass_write_index: (passes == 0).then_some(0),
+                            end_of_pass_write_index: Some(1),
+                        });
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("raycast"),
+                    timestamp_writes,
+                });
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.dispatch_workgroups(
+                    self.options.width.div_ceil(8),
+                    self.options.height.div_ceil(8),
+                    1,
+                );
+                drop(pass);
+                passes += 1;
             }
+            encoder.copy_buffer_to_buffer(&self.requests, 0, &rb.requests, 0, rb.requests.size());
+            encoder.copy_buffer_to_buffer(
+                self.cache.usage_buffer(),
+                0,
+                &rb.usage,
+                0,
+                self.cache.capacity() as u64 * 4,
+            );
+            encoder.copy_buffer_to_buffer(&self.image, 0, &rb.image, 0, image_bytes);
+            if let Some((set, resolve, staging)) = &rb.timestamps {
+                encoder.resolve_query_set(set, 0..2, resolve, 0);
+                encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
+            }
+            gpu.queue.submit([encoder.finish()]);
+            let (tx, rx) = std::sync::mpsc::channel();
+            for (i, b) in maps.iter().enumerate() {
+                let tx = tx.clone();
+                b.map_async(wgpu::MapMode::Read, .., move |r| {
+                    let _ = tx.send((i, r));
+                });
+            }
+            drop(tx);
+            device
+                .poll(wgpu::PollType::wait_indefinitely())
+                .context("waiting for the GPU")?;
+            for (i, r) in rx.iter() {
+                if r.is_err() {
+                    bail!("cannot read back GPU buffer {i}");
+                }
+            }
+            let suspended = {
+                let header = rb.requests.get_mapped_range(..HEADER_WORDS as u64 * 4)?;
+                bytemuck::cast_slice::<u8, u32>(&header)[SUSPENDED_WORD]
+            };
+            if suspended == 0 {
+                break;
+            }
+            for b in &maps {
+                b.unmap();
+            }
+            ensure!(
+                passes < MAX_PASSES,
+                "{suspended} rays still marching after {passes} passes of {} steps",
+                self.steps_per_pass
+            );
+            batch = (batch * 2).min(16);
+            encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("raycast resume"),
+            });
         }
 
         let words: Vec<u32> = bytemuck::cast_slice(&rb.requests.get_mapped_range(..)?).to_vec();
