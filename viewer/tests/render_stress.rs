@@ -961,8 +961,10 @@ fn lod_transition_has_no_seam() {
         [0.1, 0.1, 0.2],
     );
     let (w, h) = (48usize, 32usize);
+    // LOD bias 0 (a voxel per pixel footprint) puts the level-0/level-1 boundary mid-image.
     let with_levels = |lo: u32, hi: u32| RenderOptions {
         level_bounds: vec![(lo, hi)],
+        lod_bias: 0.0,
         ..RenderOptions {
             width: w as u32,
             height: h as u32,

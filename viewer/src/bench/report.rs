@@ -365,8 +365,10 @@ fn sweep(
         let on = front.contains(&d);
         let dp = points[d];
         let mut lines = vec![format!(
-            "{}: defaults (step 0.5, LOD bias 0, leaf {} voxels, full cache) at {:.1} {unit}, {} dB: {} the Pareto front of all {} points",
+            "{}: defaults (step {}, LOD bias {}, leaf {} voxels, full cache) at {:.1} {unit}, {} dB: {} the Pareto front of all {} points",
             r.dataset.label,
+            runs[d].options.step,
+            runs[d].options.lod_bias,
             runs[d].options.leaf_voxels,
             dp.0,
             psnr(runs[d].psnr_db),

@@ -111,7 +111,7 @@ pub struct RunArgs {
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "-1,0,1,2",
+        default_value = "-2,-1,0,1",
         allow_hyphen_values = true
     )]
     pub lod_biases: Vec<f32>,
