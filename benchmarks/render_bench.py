@@ -122,6 +122,8 @@ def plan(short: bool):
         (f"sparse {s[0]}³ ×4", "sparse", s, chunk, 4, None, None, "table1,scaling", ["--vary-tf"] + bone(4)),
         (f"dense {s[0]}³", "dense", s, chunk, 1, None, None, "table1,skipped,scaling", []),
         (f"dense {s[0]}³ ×4", "dense", s, chunk, 4, None, None, "table1", ["--vary-tf"]),
+        # Skipping behind opaque matter: the heavy fluid made nearly opaque.
+        (f"dense {s[0]}³ opaque", "dense", s, chunk, 1, None, None, "skipped", ["--tf", "0:0.3:0.8:0.9"]),
         (f"cycif {cy[0]}×{cy[1]}×{cy[2]}", "cycif", cy, chunk, None, 16, list(range(8)), "table1,skipped", []),
         (f"sparse {small[0]}³", "sparse", small, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {big[0]}³", "sparse", big, chunk, 1, None, None, "scaling", bone(1)),

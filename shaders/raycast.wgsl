@@ -722,7 +722,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         mask = node_word(node, c, 0u);
                     }
                 }
-                let l = chosen[c];
+                var l = chosen[c];
+                if METHOD == 0u && action == 3u && substitute {
+                    // Nothing of this channel is resident here: ask for its coarsest allowed
+                    // level first. Once that stands in, rays gather opacity and stop early, so
+                    // the finer bricks behind opaque matter are never requested.
+                    l = min(tables[channel_base(c) + 4u], P.tree.y - 1u);
+                }
                 var k = l;
                 var s = Sampled(0.0, false, 0u);
                 var first_missing = 0u;
