@@ -16,14 +16,6 @@ pub struct NaiveFetch {
     pub bricks: Vec<BrickKey>,
 }
 
-/// Edge of one voxel of `level` in world units: the smallest over the axes (as the shader's
-/// `level_voxel`).
-pub fn level_voxel(info: &VolumeInfo, level: usize) -> f64 {
-    (0..3)
-        .map(|a| info.levels[level].factor[a] as f64 * info.voxel_size[a])
-        .fold(f64::INFINITY, f64::min)
-}
-
 /// The level the shader's `choose_level` picks at distance `t` from the eye for a
 /// `height`-pixel image: the finest level (within `bounds`) whose voxel is at least the pixel
 /// footprint `t · 2 tan(fov/2) / height · 2^lod_bias`.
@@ -39,7 +31,7 @@ pub fn choose_level(
         t.max(0.0) * 2.0 * tan_half / options.height as f64 * (options.lod_bias as f64).exp2();
     let lmax = bounds.1.min(info.levels.len() as u32 - 1);
     let mut l = bounds.0.min(lmax);
-    while l < lmax && level_voxel(info, l as usize) < target {
+    while l < lmax && info.voxel_edge(l as usize) < target {
         l += 1;
     }
     l
@@ -47,19 +39,14 @@ pub fn choose_level(
 
 /// World box (`x, y, z` min and max) of brick `b` (`z, y, x`) of `level`, clipped to the volume.
 pub fn brick_box(info: &VolumeInfo, level: usize, b: [u64; 3]) -> ([f64; 3], [f64; 3]) {
-    let f = info.levels[level].factor;
-    let s0 = info.levels[0].shape;
-    let mut lo = [0.0; 3];
-    let mut hi = [0.0; 3];
-    for a in 0..3 {
-        let w = 2 - a; // world axis of zyx axis a
-        let step = info.brick_shape[a] * f[a];
-        let v0 = (b[a] * step).min(s0[a]);
-        let v1 = ((b[a] + 1) * step).min(s0[a]);
-        lo[w] = v0 as f64 * info.voxel_size[a];
-        hi[w] = v1 as f64 * info.voxel_size[a];
-    }
-    (lo, hi)
+    let key = BrickKey {
+        level: level as u32,
+        channel: 0,
+        brick: b,
+    };
+    let (v0, v1) = info.brick_box(&key, 0);
+    let world = |v: [u64; 3]| std::array::from_fn(|w| v[2 - w] as f64 * info.voxel_size[2 - w]);
+    (world(v0), world(v1))
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {

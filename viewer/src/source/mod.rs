@@ -225,9 +225,17 @@ impl VolumeInfo {
         })
     }
 
+    /// Smallest edge of a voxel of `level`, in world units (the level the renderer's LOD rule
+    /// compares with a pixel's footprint).
+    pub fn voxel_edge(&self, level: usize) -> f64 {
+        (0..3)
+            .map(|a| self.levels[level].factor[a] as f64 * self.voxel_size[a])
+            .fold(f64::INFINITY, f64::min)
+    }
+
     /// The voxel box `[lo, hi)` (`z, y, x`) of a brick, in voxels of level `at` (finer or
     /// equal), clipped to that level.
-    fn brick_box(&self, key: &BrickKey, at: usize) -> ([u64; 3], [u64; 3]) {
+    pub fn brick_box(&self, key: &BrickKey, at: usize) -> ([u64; 3], [u64; 3]) {
         let l = key.level as usize;
         let (f, g) = (self.levels[l].factor, self.levels[at].factor);
         let shape = self.levels[at].shape;
