@@ -7,6 +7,9 @@
 
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
 const ENTRY_EMPTY: u32 = 1u; // page-table entry: brick equals the fill value 0
+// Page-table entry: brick never needed, transparent under the TF by its haloed range, which
+// holds every voxel of any footprint that reaches it: such a sample is clear (opacity 0).
+const ENTRY_CLEAR: u32 = 0xffffffffu;
 const LEVEL_WORDS: u32 = 12u;
 const CHANNEL_WORDS: u32 = 16u;
 const MAX_ITERATIONS: u32 = 1000000u; // loop guard per ray (steps plus skips)
@@ -296,13 +299,15 @@ struct Sampled {
     value: f32,
     ok: bool,
     missing: u32, // page-table id + 1 of a missing brick, 0 when none
+    clear: bool, // a brick of the footprint is ENTRY_CLEAR: opacity exactly 0, no voxels read
 }
 
 // Trilinear sample of channel c at level l (voxel centres at i + ½, clamped to the edge
 // voxels). The 8 voxels lie in at most 8 bricks; each brick is looked up once per run of
 // corners in it, with one integer division per axis for the whole sample and a single
 // texel-fetch site (a CPU Vulkan driver runs every branch's code, so the shader keeps few).
-// With `want`, every missing brick is requested; without it the first miss returns.
+// With `want`, every missing brick is requested; without it the first miss returns. A clear
+// brick (ENTRY_CLEAR) in the footprint makes the sample clear.
 fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
     let pos = level_pos(l, cell, local);
     let fp = pos.fp - vec3<f32>(0.5);
@@ -319,7 +324,7 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     let wrap = r0n == bs;
     let b1 = b0 + select(vec3<u32>(0u), vec3<u32>(1u), wrap);
     let r1 = select(r0n, vec3<u32>(0u), wrap);
-    var result = Sampled(0.0, true, 0u);
+    var result = Sampled(0.0, true, 0u, false);
     // Fast path, the common case: all 8 voxels in one brick (one lookup, unrolled fetches;
     // 20% faster on lavapipe than the general loop below).
     if all(b0 == b1) {
@@ -334,6 +339,10 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
             return result;
         }
         if entry == ENTRY_EMPTY {
+            return result;
+        }
+        if entry == ENTRY_CLEAR {
+            result.clear = true;
             return result;
         }
         let o = slot_origin(entry);
@@ -363,6 +372,8 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
                     return result;
                 }
                 request(pid, t);
+            } else if entry == ENTRY_CLEAR {
+                return Sampled(0.0, true, 0u, true);
             } else if entry != ENTRY_EMPTY {
                 origin = slot_origin(entry);
             }
@@ -724,18 +735,33 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         mask = node_word(node, c, 0u);
                     }
                 }
-                var l = chosen[c];
-                if METHOD == 0u && action == 3u && substitute {
-                    // Nothing of this channel is resident here: ask for its coarsest allowed
-                    // level first. Once that stands in, rays gather opacity and stop early, so
-                    // the finer bricks behind opaque matter are never requested.
-                    l = min(tables[channel_base(c) + 4u], P.tree.y - 1u);
-                }
+                let l = chosen[c];
                 var k = l;
-                var s = Sampled(0.0, false, 0u);
+                // Coarse first: where nothing of this channel is resident (action 3), ask for
+                // its coarsest allowed level first. Once that stands in, rays gather opacity
+                // and stop early, so the finer bricks behind opaque matter are never
+                // requested. Where the coarsest level is clear (averaging can take thin bright
+                // structures below the TF), it says nothing of finer ones: then the wanted
+                // level is asked for. (One sample_level call site: on lavapipe every inlined
+                // copy costs every sample.)
+                var coarse_first = false;
+                if METHOD == 0u && action == 3u && substitute {
+                    k = min(tables[channel_base(c) + 4u], P.tree.y - 1u);
+                    coarse_first = k != l;
+                }
+                var s = Sampled(0.0, false, 0u, false);
                 var first_missing = 0u;
                 loop {
-                    s = sample_level(c, k, ray.cell, ray.local, k == l, ray.t);
+                    s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, ray.t);
+                    if coarse_first {
+                        coarse_first = false;
+                        if !s.clear {
+                            s.ok = false; // requested: nothing to sample in action 3
+                            break;
+                        }
+                        k = l;
+                        continue;
+                    }
                     if s.ok {
                         break;
                     }
@@ -751,8 +777,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if k != l {
                         note_substituted(first_missing - 1u);
                     }
-                    values[c] = s.value;
-                    have |= 1u << c;
+                    if !s.clear {
+                        values[c] = s.value;
+                        have |= 1u << c;
+                    }
                     used = min(used, k);
                     any_value = true;
                 }

@@ -157,8 +157,9 @@ fn page_table_skips_only_whole_empty_bricks() {
     assert_eq!(last.homogeneous_nodes, 0);
     assert!(pt.frames.iter().all(|f| f.shader.bricks_substituted == 0));
     // The page table samples the whole blob brick, and its samples near the brick's faces
-    // read (and so request) the neighbouring all-zero bricks; the residency octree samples
-    // only the blob's leaf, whose footprint reaches the neighbour across x = 16 alone.
+    // read (and so request) the neighbouring all-zero bricks. The residency octree samples
+    // only the blob's leaf, whose footprint reaches the neighbour across x = 16; that brick's
+    // haloed range is transparent, so those samples are clear and it is never fetched.
     let level0 = |p: &Progressive| -> HashSet<[u64; 3]> {
         p.request_log
             .iter()
@@ -166,7 +167,7 @@ fn page_table_skips_only_whole_empty_bricks() {
             .map(|k| k.brick)
             .collect()
     };
-    assert_eq!(level0(&ours), HashSet::from([[0, 0, 1], [0, 0, 0]]));
+    assert_eq!(level0(&ours), HashSet::from([[0, 0, 1]]));
     assert!(level0(&pt).is_superset(&level0(&ours)));
     assert!(level0(&pt).len() > 2, "{:?}", level0(&pt));
 }

@@ -233,6 +233,38 @@ fn a_store_without_region_metadata_has_no_minmax() {
     );
 }
 
+/// Min/max cells without a halo do not bound the trilinear samples inside them (a sample
+/// near a cell's face reads the next cell's voxels), so the renderer's culling would hide
+/// visible matter: such metadata is ignored, with a warning naming the store.
+#[test]
+fn region_metadata_without_a_halo_is_not_used_for_culling() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = make_store(dir.path(), "nohalo", Layout::V3);
+    let file = store.join("zarr.json");
+    let mut doc: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&file).unwrap()).unwrap();
+    assert_eq!(doc["attributes"]["residency"]["halo"], 1);
+    doc["attributes"]["residency"]["halo"] = 0.into();
+    std::fs::write(&file, serde_json::to_vec(&doc).unwrap()).unwrap();
+    let log = Log::default();
+    let subscriber = tracing_subscriber::fmt()
+        .with_writer(log.clone())
+        .with_ansi(false)
+        .finish();
+    let src = tracing::subscriber::with_default(subscriber, || LocalSource::open(&store)).unwrap();
+    let text = String::from_utf8(log.0.lock().unwrap().clone()).unwrap();
+    assert!(
+        text.contains(&format!(
+            "WARN residency_viewer::source::ome: {}: the region metadata's min/max cells have no \
+             halo, so they do not bound trilinear samples; culling falls back to computing \
+             min/max from bricks",
+            store.display()
+        )),
+        "{text}"
+    );
+    assert_eq!(src.info().minmax, None);
+}
+
 #[test]
 fn bad_stores_and_bricks_give_errors_naming_them() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,7 +1,8 @@
 //! Page tables per (channel, level) (paper Sec. 5.1), flattened into one `u32` buffer. The
 //! entry of a brick is `0` when it is not resident, `1` when it equals the fill value 0
-//! everywhere (it takes no cache slot), and `slot + 2` when it is in cache slot `slot`. A
-//! brick's *id* is its entry's index; the shader reports misses by id.
+//! everywhere (it takes no cache slot), [`ENTRY_CLEAR`] when it is never needed (it is
+//! transparent under the transfer function by its haloed range), and `slot + 2` when it is in
+//! cache slot `slot`. A brick's *id* is its entry's index; the shader reports misses by id.
 
 use anyhow::{Result, bail};
 
@@ -12,6 +13,11 @@ use crate::source::BrickKey;
 pub const ENTRY_MISSING: u32 = 0;
 /// Entry of a brick equal to the fill value 0 everywhere.
 pub const ENTRY_EMPTY: u32 = 1;
+/// Entry of a brick the residency method never fetches: its conservative (haloed) range is
+/// transparent under the channel's transfer function. That range holds every voxel of any
+/// trilinear footprint that reaches the brick, so such a sample has opacity exactly 0 and
+/// the shader takes it as clear without reading a voxel.
+pub const ENTRY_CLEAR: u32 = u32::MAX;
 
 /// The page tables of the rendered channels and all levels, with a CPU mirror.
 pub struct PageTables {

@@ -8,10 +8,10 @@ use serde::Serialize;
 
 use super::brick_cache::BrickCache;
 use super::device::Gpu;
-use super::page_table::{ENTRY_EMPTY, ENTRY_MISSING, PageTables};
+use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables};
 use super::tables::{self, ChannelTable};
 use crate::octree::{OctreeGeometry, ResidencyOctree};
-use crate::scene::{Camera, Scene};
+use crate::scene::{Camera, ChannelStyle, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
 /// The shader source, `shaders/raycast.wgsl`.
@@ -280,7 +280,10 @@ impl Renderer {
         let geometry = octree.geometry().clone();
         let levels = info.levels.len() as u32;
         let device = &gpu.device;
-        let pages = PageTables::new(device, &geometry, &channels)?;
+        let mut pages = PageTables::new(device, &geometry, &channels)?;
+        if options.method == Method::Residency && options.empty_space_skipping {
+            mark_clear_bricks(&mut pages, info, &visible);
+        }
         let brick = geometry.brick.map(|b| b as u32);
         let cache = BrickCache::new(
             device,
@@ -914,5 +917,26 @@ impl Renderer {
             },
             gpu_time_ms,
         })
+    }
+}
+
+/// Marks [`ENTRY_CLEAR`] every brick whose conservative (haloed) range, rounded outward to
+/// `f32` as the shader sees values, is transparent under its channel's transfer function:
+/// the residency method never fetches it, and a sample whose footprint reaches it is clear.
+/// `visible[slot]` is the style of page-table channel slot `slot`.
+fn mark_clear_bricks(pages: &mut PageTables, info: &VolumeInfo, visible: &[&ChannelStyle]) {
+    for id in 0..pages.len() as u32 {
+        let Some(key) = pages.key(id) else { continue };
+        let Some(style) = visible.iter().find(|s| s.channel == key.channel as usize) else {
+            continue;
+        };
+        let (lo, hi) = info.brick_range(&key);
+        let (lo, hi) = (
+            crate::octree::f32_down(lo) as f64,
+            crate::octree::f32_up(hi) as f64,
+        );
+        if lo <= hi && style.transparent_over(lo, hi) {
+            pages.set(id, ENTRY_CLEAR);
+        }
     }
 }

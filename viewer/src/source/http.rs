@@ -115,10 +115,9 @@ impl HttpSource {
             .collect::<Result<Vec<_>>>()?;
         let info = ome::volume_info(dataset, &group, &arrays, &source.base)?;
         source.info = info;
-        source.info.minmax = if group.regions.is_some() {
+        source.info.minmax = if ome::usable_region_metadata(group.regions.as_ref(), &source.base) {
             source.load_minmax()?
         } else {
-            ome::warn_no_region_metadata(&source.base);
             None
         };
         Ok(source)

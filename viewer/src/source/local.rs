@@ -92,12 +92,10 @@ impl LocalSource {
             });
         }
         let mut info = ome::volume_info(&dataset_name(path), &group, &descriptions, &shown)?;
-        info.minmax = match &group.regions {
-            Some(_) => Some(read_minmax(&store, &group, &info, &shown)?),
-            None => {
-                ome::warn_no_region_metadata(&shown);
-                None
-            }
+        info.minmax = if ome::usable_region_metadata(group.regions.as_ref(), &shown) {
+            Some(read_minmax(&store, &group, &info, &shown)?)
+        } else {
+            None
         };
         Ok(Self {
             path: path.to_path_buf(),
