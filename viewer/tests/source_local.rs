@@ -202,19 +202,25 @@ fn sharded_and_v2_stores_read_the_same_as_v3() {
     }
 }
 
+/// Opens `store`, returning the source and what it logged.
+fn open_logged(store: &std::path::Path) -> (LocalSource, String) {
+    let log = Log::default();
+    let subscriber = tracing_subscriber::fmt()
+        .with_writer(log.clone())
+        .with_ansi(false)
+        .finish();
+    let src = tracing::subscriber::with_default(subscriber, || LocalSource::open(store)).unwrap();
+    let text = String::from_utf8(log.0.lock().unwrap().clone()).unwrap();
+    (src, text)
+}
+
 #[test]
 fn a_store_without_region_metadata_has_no_minmax() {
     let dir = tempfile::tempdir().unwrap();
     let store = make_store(dir.path(), "bare", Layout::V3);
     strip_region_metadata(&store);
     // Opening says that culling falls back to the bricks.
-    let log = Log::default();
-    let subscriber = tracing_subscriber::fmt()
-        .with_writer(log.clone())
-        .with_ansi(false)
-        .finish();
-    let src = tracing::subscriber::with_default(subscriber, || LocalSource::open(&store)).unwrap();
-    let text = String::from_utf8(log.0.lock().unwrap().clone()).unwrap();
+    let (src, text) = open_logged(&store);
     assert!(
         text.contains(&format!(
             "WARN residency_viewer::source::ome: {}: no region metadata; culling falls back to \
@@ -246,13 +252,7 @@ fn region_metadata_without_a_halo_is_not_used_for_culling() {
     assert_eq!(doc["attributes"]["residency"]["halo"], 1);
     doc["attributes"]["residency"]["halo"] = 0.into();
     std::fs::write(&file, serde_json::to_vec(&doc).unwrap()).unwrap();
-    let log = Log::default();
-    let subscriber = tracing_subscriber::fmt()
-        .with_writer(log.clone())
-        .with_ansi(false)
-        .finish();
-    let src = tracing::subscriber::with_default(subscriber, || LocalSource::open(&store)).unwrap();
-    let text = String::from_utf8(log.0.lock().unwrap().clone()).unwrap();
+    let (src, text) = open_logged(&store);
     assert!(
         text.contains(&format!(
             "WARN residency_viewer::source::ome: {}: the region metadata's min/max cells have no \
