@@ -1,8 +1,11 @@
 // Residency-octree ray caster: Algorithm 1 of the residency octree paper, extended to
 // multi-channel traversal (Sec. 6.1). One thread per pixel.
 //
-// Positions are node-local: a ray's position is an integer leaf cell (i32, leaf units of the
-// octree) plus an f32 offset inside it, so precision does not depend on the volume's width.
+// Positions are cell-local: a ray's position is an integer cell (i32) plus an f32 offset in
+// [0, 1) inside it, so precision does not depend on the volume's width. Cells are "fine
+// units", 2^-F of an octree leaf per axis (F = P.fine.xyz): a level-0 voxel wherever leaves
+// are at least a voxel, so a step of a fraction of a voxel is resolved to f32 precision
+// however large the leaves are. The eye and the entry point are computed in leaf units.
 // Everything about layout (words per node, table offsets) is documented in viewer/src/gpu/.
 
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
@@ -38,6 +41,7 @@ struct Params {
     // nodes, 2 substitute missing bricks from other levels)
     slots: vec4<u32>, // log2 of atlas slots per x, per y; slots per z
     run: vec4<u32>, // x: steps a ray may take per pass (then it is suspended and resumed)
+    fine: vec4<i32>, // F: log2 of fine units per leaf, per axis (xyz)
 }
 
 // A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan driver
@@ -181,9 +185,13 @@ fn tf_transparent(c: u32, lo: f32, hi: f32) -> bool {
 
 // ---- octree ----
 
+fn fine_shift() -> vec3<u32> {
+    return vec3<u32>(P.fine.xyz);
+}
+
+// Node of depth d holding the fine cell `cell`.
 fn node_index(d: u32, cell: vec3<i32>) -> u32 {
-    let s = P.tree.x - d;
-    let n = vec3<u32>(cell >> vec3<u32>(s));
+    let n = vec3<u32>(cell >> (vec3<u32>(P.tree.x - d) + fine_shift()));
     let offset = ((1u << (3u * d)) - 1u) / 7u;
     return offset + (((n.z << d) + n.y) << d) + n.x;
 }
@@ -261,7 +269,7 @@ struct LevelPos {
 }
 
 fn level_pos(l: u32, cell: vec3<i32>, local: vec3<f32>) -> LevelPos {
-    let sh = P.leaf_shift.xyz - level_shift(l);
+    let sh = P.leaf_shift.xyz - P.fine.xyz - level_shift(l);
     return LevelPos(
         vec3<i32>(scaled_int(cell.x, sh.x), scaled_int(cell.y, sh.y), scaled_int(cell.z, sh.z)),
         vec3<f32>(
@@ -285,9 +293,9 @@ fn point_brick(l: u32, pos: LevelPos) -> vec3<u32> {
 }
 
 // World distance from a position to the exit of the box of brick b of level l, along a ray
-// of `dir` leaf units per world unit.
+// of `dir` fine units per world unit.
 fn brick_exit(l: u32, b: vec3<u32>, pos: LevelPos, dir: vec3<f32>) -> f32 {
-    let sh = P.leaf_shift.xyz - level_shift(l);
+    let sh = P.leaf_shift.xyz - P.fine.xyz - level_shift(l);
     let rel = vec3<f32>(pos.ip - vec3<i32>(b * P.brick.xyz)) + pos.fp;
     let d = dir * vec3<f32>(ldexp(1.0, sh.x), ldexp(1.0, sh.y), ldexp(1.0, sh.z));
     let far = select(-rel, vec3<f32>(P.brick.xyz) - rel, d > vec3<f32>(0.0));
@@ -449,13 +457,14 @@ fn advance(ray: ptr<function, Ray>, dir: vec3<f32>, dt: f32) {
     (*ray).t += dt;
 }
 
-// World distance from the ray's position to the exit of the node of depth d holding it.
+// World distance from the ray's position to the exit of the node of depth d holding it
+// (`dir`: fine units per world unit). The distance to the far face is taken in integers
+// first, so it stays exact near the face however large the node.
 fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
-    let s = P.tree.x - d;
-    let lo = (ray.cell >> vec3<u32>(s)) << vec3<u32>(s);
-    let size = f32(1u << s);
-    let rel = vec3<f32>(ray.cell - lo) + ray.local;
-    let far = select(-rel, vec3<f32>(size) - rel, dir > vec3<f32>(0.0));
+    let s = vec3<u32>(P.tree.x - d) + fine_shift();
+    let lo = (ray.cell >> s) << s;
+    let far_cells = select(lo - ray.cell, lo + (vec3<i32>(1) << s) - ray.cell, dir > vec3<f32>(0.0));
+    let far = vec3<f32>(far_cells) - ray.local;
     let tt = far / dir;
     return max(min(tt.x, min(tt.y, tt.z)), 0.0);
 }
@@ -475,14 +484,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         1.0 - (f32(gid.y) + 0.5) / f32(P.size.y) * 2.0,
     );
     let world_dir = normalize(P.forward.xyz + ndc.x * P.right.xyz + ndc.y * P.up.xyz);
-    var dir = world_dir * P.world_to_leaf.xyz; // leaf units per world unit
-    dir = select(dir, vec3<f32>(1e-20), abs(dir) < vec3<f32>(1e-20));
+    var dir_leaf = world_dir * P.world_to_leaf.xyz; // leaf units per world unit
+    dir_leaf = select(dir_leaf, vec3<f32>(1e-20), abs(dir_leaf) < vec3<f32>(1e-20));
+    let fine = vec3<f32>(ldexp(1.0, P.fine.x), ldexp(1.0, P.fine.y), ldexp(1.0, P.fine.z));
+    let dir = dir_leaf * fine; // fine units per world unit
 
     // Slab test against the volume box, relative to the eye (leaf units).
     let eye_rel_lo = -vec3<f32>(P.eye_cell.xyz) - P.eye_frac.xyz;
     let eye_rel_hi = P.volume_leaf.xyz + eye_rel_lo;
-    let ta = eye_rel_lo / dir;
-    let tb = eye_rel_hi / dir;
+    let ta = eye_rel_lo / dir_leaf;
+    let tb = eye_rel_hi / dir_leaf;
     let tmin = min(ta, tb);
     let tmax = max(ta, tb);
     let t_enter = max(max(tmin.x, max(tmin.y, tmin.z)), 0.0);
@@ -498,7 +509,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var skipped = 0u;
     var homogeneous = 0u;
     var nodata = 0u;
+    // A skip goes this far (1e-4 fine unit) past a node's face; the entry 1e-4 leaf.
     let nudge = 1e-4 / max(abs(dir.x), max(abs(dir.y), abs(dir.z)));
+    let entry_nudge = 1e-4 / max(abs(dir_leaf.x), max(abs(dir_leaf.y), abs(dir_leaf.z)));
 
     var suspended = false;
     if t_exit > t_enter {
@@ -511,7 +524,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             last_depth = P.tables.x + 1u;
             iterations = 0u;
             ray = Ray(P.eye_cell.xyz, P.eye_frac.xyz, 0.0);
-            advance(&ray, dir, t_enter + nudge);
+            advance(&ray, dir_leaf, t_enter + entry_nudge);
             // Far from the volume the f32 entry point can round to just outside the octree's
             // root: clamp it onto the face it entered through.
             let top = vec3<i32>(leaves - 1);
@@ -519,6 +532,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let moved = inside != ray.cell;
             ray.local = select(ray.local, select(vec3<f32>(0.0), vec3<f32>(0.99999994), ray.cell > top), moved);
             ray.cell = inside;
+            // From leaf units to fine units (scaling by 2^F is exact in f32).
+            let scaled = ray.local * fine;
+            let whole = floor(scaled);
+            ray.cell = (ray.cell << fine_shift()) + vec3<i32>(whole);
+            ray.local = scaled - whole;
         }
         let channels = P.size.w;
         let skipping = (P.brick.w & 1u) != 0u;
@@ -536,7 +554,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
                 break;
             }
-            if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= vec3<i32>(leaves)) {
+            if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= (vec3<i32>(leaves) << fine_shift())) {
                 break;
             }
             if budget == 0u {

@@ -860,14 +860,15 @@ fn region_1e7_voxels_from_the_origin_has_no_cracks_or_jitter() {
 /// 2⁻⁸ voxel times these stripes' slope), and the reference as well as the near render does:
 /// PSNR ≥ 50 dB (near: 52.7 dB).
 ///
-/// Fails: far from the origin PSNR 42 dB, max abs 0.040, max |far − near| 0.033, in the
-/// columns whose rays have |dir.x| in 0.02–0.08. The shader advances `local += dir·dt` in leaf
-/// units; with 2¹⁷-voxel leaves a ½-voxel step moves x by 0.5·|dir.x| voxel, a few ulps of
-/// `local`, rounded the same way at every step: x drifts by up to half its true travel (and
-/// does not move at all for |dir.x| < 2⁻⁷).
+/// Measured: far 51.7 dB (near 52.7 dB), max |far − near| 0.0040.
+///
+/// Regression: far from the origin this was 42 dB, max abs 0.040, max |far − near| 0.033, in
+/// the columns whose rays have |dir.x| in 0.02–0.08. The shader advanced `local += dir·dt` in
+/// leaf units; with 2¹⁷-voxel leaves a ½-voxel step moved x by 0.5·|dir.x| voxel, a few ulps of
+/// `local`, rounded the same way at every step: x drifted by up to half its true travel (and
+/// did not move at all for |dir.x| < 2⁻⁷). Ray positions are now integer level-0 voxels plus
+/// an f32 offset inside the voxel ("fine units").
 #[test]
-#[ignore = "known limit: in leaves of 2^17 voxels (volumes over 2^24 voxels wide) the f32 leaf \
-            offset rounds each step's x increment the same way, so positions drift (README)"]
 fn region_1e7_voxels_from_the_origin_steps_exactly_along_the_long_axis() {
     let x_far = 77 * (1 << 17) - 48;
     let far: Arc<dyn BrickSource> = Arc::new(FarRoi::new(FAR_EXTENT, vec![x_far], stripes_value));

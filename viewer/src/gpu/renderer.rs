@@ -148,6 +148,7 @@ struct Params {
     brick: [u32; 4],
     slots: [u32; 4],
     run: [u32; 4],
+    fine: [i32; 4],
 }
 
 /// What the shader counted in one frame.
@@ -760,6 +761,14 @@ impl Renderer {
                 [s[0].trailing_zeros(), s[1].trailing_zeros(), s[2], 0]
             },
             run: [self.steps_per_pass, 0, 0, 0],
+            fine: {
+                // The shader's fine units: a level-0 voxel where leaves are at least one,
+                // with at most 2^30 of them per axis (positions are i32).
+                let f = g
+                    .leaf_shift
+                    .map(|s| s.clamp(0, (30 - g.depth as i32).max(0)));
+                [f[0], f[1], f[2], 0]
+            },
         }
     }
 
