@@ -28,13 +28,16 @@ struct Params {
     size: vec4<u32>, // width, height, frame (>= 1), channel count
     tree: vec4<u32>, // leaf depth D, level count, sample kind (0 u, 1 i, 2 f), request cap
     tables: vec4<u32>, // start depth, TF bins, level table offset, channel table offset
-    eye_cell: vec4<i32>, // eye, leaf units: integer part
-    eye_frac: vec4<f32>, // eye, leaf units: fraction (xyz); w: reference step Δ0 (world)
+    // The view point V = eye + D·forward (D = volume_leaf.w), leaf units: integer part. Rays
+    // start from the plane through V facing the camera, so a far camera keeps voxel
+    // precision (D = 0, V the eye, for a camera near the volume).
+    view_cell: vec4<i32>,
+    view_frac: vec4<f32>, // V, leaf units: fraction (xyz); w: reference step Δ0 (world)
     right: vec4<f32>, // camera right · tan(fov/2) · aspect; w: LOD bias (log2)
     up: vec4<f32>, // camera up · tan(fov/2); w: pixel footprint per unit distance
     forward: vec4<f32>, // camera forward (unit); w: step as a fraction of a voxel
     world_to_leaf: vec4<f32>, // leaf units per world unit, per axis; w: leaf edge (world, min axis)
-    volume_leaf: vec4<f32>, // volume extent in leaf units
+    volume_leaf: vec4<f32>, // volume extent in leaf units; w: D, the view point's distance (world)
     background: vec4<f32>,
     leaf_shift: vec4<i32>, // log2 of a leaf edge in level-0 voxels, per axis
     brick: vec4<u32>, // brick edge in voxels, per axis; w: flags (1 skip empty/homogeneous
@@ -438,7 +441,7 @@ fn corrected(a: f32, step: f32) -> f32 {
     if a >= 1.0 {
         return 1.0;
     }
-    return 1.0 - pow(1.0 - max(a, 0.0), step / P.eye_frac.w);
+    return 1.0 - pow(1.0 - max(a, 0.0), step / P.view_frac.w);
 }
 
 // ---- ray state ----
@@ -483,20 +486,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         (f32(gid.x) + 0.5) / f32(P.size.x) * 2.0 - 1.0,
         1.0 - (f32(gid.y) + 0.5) / f32(P.size.y) * 2.0,
     );
-    let world_dir = normalize(P.forward.xyz + ndc.x * P.right.xyz + ndc.y * P.up.xyz);
+    let across = ndc.x * P.right.xyz + ndc.y * P.up.xyz;
+    let ray_forward = P.forward.xyz + across;
+    let world_dir = normalize(ray_forward);
+    // The ray meets the view plane at V + D·across (leaf units: `start`), at distance t_plane
+    // from the eye; `ray.t` counts from there, and t_plane is added back for the LOD rule.
+    let view_d = P.volume_leaf.w;
+    let t_plane = view_d * length(ray_forward);
+    let start = view_d * across * P.world_to_leaf.xyz;
     var dir_leaf = world_dir * P.world_to_leaf.xyz; // leaf units per world unit
     dir_leaf = select(dir_leaf, vec3<f32>(1e-20), abs(dir_leaf) < vec3<f32>(1e-20));
     let fine = vec3<f32>(ldexp(1.0, P.fine.x), ldexp(1.0, P.fine.y), ldexp(1.0, P.fine.z));
     let dir = dir_leaf * fine; // fine units per world unit
 
     // Slab test against the volume box, relative to the eye (leaf units).
-    let eye_rel_lo = -vec3<f32>(P.eye_cell.xyz) - P.eye_frac.xyz;
+    let eye_rel_lo = -vec3<f32>(P.view_cell.xyz) - P.view_frac.xyz - start;
     let eye_rel_hi = P.volume_leaf.xyz + eye_rel_lo;
     let ta = eye_rel_lo / dir_leaf;
     let tb = eye_rel_hi / dir_leaf;
     let tmin = min(ta, tb);
     let tmax = max(ta, tb);
-    let t_enter = max(max(tmin.x, max(tmin.y, tmin.z)), 0.0);
+    let t_enter = max(max(tmin.x, max(tmin.y, tmin.z)), -t_plane);
     let t_exit = min(tmax.x, min(tmax.y, tmax.z));
 
     var color = st.color;
@@ -523,8 +533,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if st.status == RAY_FRESH {
             last_depth = P.tables.x + 1u;
             iterations = 0u;
-            ray = Ray(P.eye_cell.xyz, P.eye_frac.xyz, 0.0);
-            advance(&ray, dir_leaf, t_enter + entry_nudge);
+            ray = Ray(P.view_cell.xyz, P.view_frac.xyz, 0.0);
+            advance(&ray, start + dir_leaf * (t_enter + entry_nudge), 1.0);
+            ray.t = t_enter + entry_nudge;
             // Far from the volume the f32 entry point can round to just outside the octree's
             // root: clamp it onto the face it entered through.
             let top = vec3<i32>(leaves - 1);
@@ -566,7 +577,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var chosen: array<u32, 8>;
             var finest = P.tree.y - 1u;
             for (var c = 0u; c < channels; c++) {
-                chosen[c] = choose_level(c, ray.t);
+                chosen[c] = choose_level(c, ray.t + t_plane);
                 finest = min(finest, chosen[c]);
             }
             let desired_step = P.forward.w * level_voxel(finest);
@@ -673,7 +684,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                             }
                             let entry = page_table[pid];
                             if entry == 0u {
-                                request(pid, ray.t);
+                                request(pid, ray.t + t_plane);
                                 missing = pid + 1u;
                                 break;
                             }
@@ -770,7 +781,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var s = Sampled(0.0, false, 0u, false);
                 var first_missing = 0u;
                 loop {
-                    s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, ray.t);
+                    s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, ray.t + t_plane);
                     if coarse_first {
                         coarse_first = false;
                         if !s.clear {

@@ -136,8 +136,8 @@ struct Params {
     size: [u32; 4],
     tree: [u32; 4],
     tables: [u32; 4],
-    eye_cell: [i32; 4],
-    eye_frac: [f32; 4],
+    view_cell: [i32; 4],
+    view_frac: [f32; 4],
     right: [f32; 4],
     up: [f32; 4],
     forward: [f32; 4],
@@ -693,8 +693,10 @@ impl Renderer {
         let spacing = xyz(self.info.voxel_size);
         let leaf_world: [f64; 3] =
             std::array::from_fn(|a| (g.leaf_shift[a] as f64).exp2() * spacing[a]);
-        let eye_leaf: [f64; 3] = std::array::from_fn(|a| cam.eye[a] / leaf_world[a]);
         let (forward, right, up) = cam.basis();
+        let view_d = view_distance(cam.eye, forward, g.volume_voxels, spacing);
+        let view_leaf: [f64; 3] =
+            std::array::from_fn(|a| (cam.eye[a] + view_d * forward[a]) / leaf_world[a]);
         let tan_half = (cam.fov_y_degrees.to_radians() / 2.0).tan();
         let aspect = self.options.width as f64 / self.options.height as f64;
         let v4 = |v: [f64; 3], w: f64| [v[0] as f32, v[1] as f32, v[2] as f32, w as f32];
@@ -720,12 +722,12 @@ impl Renderer {
                 0,
                 self.channels_offset(),
             ],
-            eye_cell: {
-                let c = eye_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
+            view_cell: {
+                let c = view_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
                 [c[0], c[1], c[2], 0]
             },
-            eye_frac: {
-                let f = eye_leaf.map(|e| e - e.floor());
+            view_frac: {
+                let f = view_leaf.map(|e| e - e.floor());
                 v4(f, reference_step)
             },
             right: v4(
@@ -745,7 +747,7 @@ impl Renderer {
                 std::array::from_fn(|a| {
                     g.volume_voxels[a] as f64 / (g.leaf_shift[a] as f64).exp2()
                 }),
-                0.0,
+                view_d,
             ),
             background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 1.0],
             leaf_shift: [g.leaf_shift[0], g.leaf_shift[1], g.leaf_shift[2], 0],
@@ -947,5 +949,22 @@ fn mark_clear_bricks(pages: &mut PageTables, info: &VolumeInfo, visible: &[&Chan
         if lo <= hi && style.transparent_over(lo, hi) {
             pages.set(id, ENTRY_CLEAR);
         }
+    }
+}
+
+/// Distance `D` (world) from the eye to the shader's view point `eye + D·forward`, from which
+/// rays start: 0 (the eye itself) unless the volume lies more than 4 of its diagonals ahead,
+/// then one diagonal short of the volume centre's depth. f32 ray arithmetic then stays
+/// relative to a point near the volume, so a camera 10⁶ diagonals away keeps voxel precision.
+fn view_distance(eye: [f64; 3], forward: [f64; 3], voxels: [u64; 3], spacing: [f64; 3]) -> f64 {
+    let extent: [f64; 3] = std::array::from_fn(|a| voxels[a] as f64 * spacing[a]);
+    let diagonal = crate::scene::box_diagonal(extent);
+    let depth: f64 = (0..3)
+        .map(|a| (0.5 * extent[a] - eye[a]) * forward[a])
+        .sum();
+    if depth > 4.0 * diagonal {
+        depth - diagonal
+    } else {
+        0.0
     }
 }
