@@ -39,7 +39,7 @@ struct Params {
     world_to_leaf: vec4<f32>, // leaf units per world unit, per axis; w: leaf edge (world, min axis)
     volume_leaf: vec4<f32>, // volume extent in leaf units; w: D, the view point's distance (world)
     background: vec4<f32>,
-    leaf_shift: vec4<i32>, // log2 of a leaf edge in level-0 voxels, per axis
+    unit_shift: vec4<i32>, // log2 of a fine unit's edge in level-0 voxels, per axis (leaf - F)
     brick: vec4<u32>, // brick edge in voxels, per axis; w: flags (1 skip empty/homogeneous
     // nodes, 2 substitute missing bricks from other levels)
     slots: vec4<u32>, // log2 of atlas slots per x, per y; slots per z
@@ -272,7 +272,7 @@ struct LevelPos {
 }
 
 fn level_pos(l: u32, cell: vec3<i32>, local: vec3<f32>) -> LevelPos {
-    let sh = P.leaf_shift.xyz - P.fine.xyz - level_shift(l);
+    let sh = P.unit_shift.xyz - level_shift(l);
     return LevelPos(
         vec3<i32>(scaled_int(cell.x, sh.x), scaled_int(cell.y, sh.y), scaled_int(cell.z, sh.z)),
         vec3<f32>(
@@ -298,7 +298,7 @@ fn point_brick(l: u32, pos: LevelPos) -> vec3<u32> {
 // World distance from a position to the exit of the box of brick b of level l, along a ray
 // of `dir` fine units per world unit.
 fn brick_exit(l: u32, b: vec3<u32>, pos: LevelPos, dir: vec3<f32>) -> f32 {
-    let sh = P.leaf_shift.xyz - P.fine.xyz - level_shift(l);
+    let sh = P.unit_shift.xyz - level_shift(l);
     let rel = vec3<f32>(pos.ip - vec3<i32>(b * P.brick.xyz)) + pos.fp;
     let d = dir * vec3<f32>(ldexp(1.0, sh.x), ldexp(1.0, sh.y), ldexp(1.0, sh.z));
     let far = select(-rel, vec3<f32>(P.brick.xyz) - rel, d > vec3<f32>(0.0));
@@ -527,6 +527,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if t_exit > t_enter {
         let depth = P.tree.x;
         let leaves = 1 << depth;
+        let end_cell = vec3<i32>(leaves) << fine_shift(); // the root's far faces, fine units
         var ray = Ray(st.cell, st.local, st.t);
         var last_depth = st.last_depth;
         var iterations = st.iterations;
@@ -565,7 +566,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
                 break;
             }
-            if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= (vec3<i32>(leaves) << fine_shift())) {
+            if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= end_cell) {
                 break;
             }
             if budget == 0u {

@@ -181,12 +181,7 @@ fn octree_needs_every_ancestor_resident() {
     let s = scene(2);
     let at_level_0 = |method| RenderOptions {
         method,
-        lod_bias: -20.0,
-        ..RenderOptions {
-            width: 48,
-            height: 48,
-            ..Default::default()
-        }
+        ..finest_wanted(48, 48)
     };
     let info = src.info().clone();
     let coarsest = info.levels.len() as u32 - 1;

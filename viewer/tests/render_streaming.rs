@@ -438,13 +438,7 @@ fn bricks_behind_opaque_matter_are_not_fetched() {
         channels: vec![ramp(0, [0.9, 0.7, 0.3], 100.0, 200.0, 1.0)],
         background: [0.0, 0.0, 0.0],
     };
-    let options = RenderOptions {
-        width: 32,
-        height: 32,
-        lod_bias: -20.0, // level 0 wherever a brick is resident
-        ..Default::default()
-    };
-    let (p, img) = render(&src, &scene, options, 20);
+    let (p, img) = render(&src, &scene, finest_wanted(32, 32), 20);
     assert!(p.converged, "{}", p.stop_reason);
     let coarsest = src.info().levels.len() as u32 - 1;
     let first: Vec<_> = p
@@ -504,13 +498,7 @@ fn structures_averaged_away_at_the_coarsest_level_still_render() {
         channels: vec![ramp(0, [0.9, 0.9, 0.9], 100.0, 255.0, 0.8)],
         background: [0.0, 0.0, 0.0],
     };
-    let options = RenderOptions {
-        width: 32,
-        height: 32,
-        lod_bias: -20.0, // level 0 wherever a brick is resident; every level allowed
-        ..Default::default()
-    };
-    let (p, img) = render(&src, &scene, options, 20);
+    let (p, img) = render(&src, &scene, finest_wanted(32, 32), 20);
     assert!(p.converged, "{}", p.stop_reason);
     assert!(
         p.request_log.iter().all(|k| k.level == 0),

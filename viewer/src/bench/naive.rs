@@ -123,19 +123,16 @@ pub fn naive_fetch(info: &VolumeInfo, scene: &Scene, options: &RenderOptions) ->
     NaiveFetch { level, bricks }
 }
 
-/// Whether `key` is transparent under `scene`'s transfer function for its channel, judged by
-/// the brick's conservative range from the region metadata of its level
-/// ([`VolumeInfo::brick_range`]), so a brick counted here is certainly empty.
+/// Whether `key` is transparent under `scene`'s transfer function for its channel: the
+/// renderer's rule for a brick it never fetches ([`crate::gpu::renderer::is_clear`]), judged
+/// by the brick's conservative range, so a brick counted here is certainly empty. A channel
+/// without a style shows nothing.
 pub fn transparent(info: &VolumeInfo, scene: &Scene, key: &BrickKey) -> bool {
-    let (lo, hi) = info.brick_range(key);
-    if lo > hi {
-        return true;
-    }
     scene
         .channels
         .iter()
         .find(|c| c.channel == key.channel as usize)
-        .is_none_or(|c| c.transparent_over(lo, hi))
+        .is_none_or(|c| crate::gpu::renderer::is_clear(info, c, key))
 }
 
 /// Whether `key` holds the fill value (0) everywhere by its range, so that the store has no

@@ -144,7 +144,7 @@ struct Params {
     world_to_leaf: [f32; 4],
     volume_leaf: [f32; 4],
     background: [f32; 4],
-    leaf_shift: [i32; 4],
+    unit_shift: [i32; 4],
     brick: [u32; 4],
     slots: [u32; 4],
     run: [u32; 4],
@@ -697,6 +697,11 @@ impl Renderer {
         let view_d = view_distance(cam.eye, forward, g.volume_voxels, spacing);
         let view_leaf: [f64; 3] =
             std::array::from_fn(|a| (cam.eye[a] + view_d * forward[a]) / leaf_world[a]);
+        // The shader's fine units: a level-0 voxel where leaves are at least one, with at
+        // most 2^30 of them per axis (positions are i32).
+        let fine = g
+            .leaf_shift
+            .map(|s| s.clamp(0, (30 - g.depth as i32).max(0)));
         let tan_half = (cam.fov_y_degrees.to_radians() / 2.0).tan();
         let aspect = self.options.width as f64 / self.options.height as f64;
         let v4 = |v: [f64; 3], w: f64| [v[0] as f32, v[1] as f32, v[2] as f32, w as f32];
@@ -750,7 +755,10 @@ impl Renderer {
                 view_d,
             ),
             background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 1.0],
-            leaf_shift: [g.leaf_shift[0], g.leaf_shift[1], g.leaf_shift[2], 0],
+            unit_shift: {
+                let u: [i32; 3] = std::array::from_fn(|a| g.leaf_shift[a] - fine[a]);
+                [u[0], u[1], u[2], 0]
+            },
             brick: [
                 g.brick[0] as u32,
                 g.brick[1] as u32,
@@ -763,14 +771,7 @@ impl Renderer {
                 [s[0].trailing_zeros(), s[1].trailing_zeros(), s[2], 0]
             },
             run: [self.steps_per_pass, 0, 0, 0],
-            fine: {
-                // The shader's fine units: a level-0 voxel where leaves are at least one,
-                // with at most 2^30 of them per axis (positions are i32).
-                let f = g
-                    .leaf_shift
-                    .map(|s| s.clamp(0, (30 - g.depth as i32).max(0)));
-                [f[0], f[1], f[2], 0]
-            },
+            fine: [fine[0], fine[1], fine[2], 0],
         }
     }
 
@@ -931,25 +932,31 @@ impl Renderer {
     }
 }
 
-/// Marks [`ENTRY_CLEAR`] every brick whose conservative (haloed) range, rounded outward to
-/// `f32` as the shader sees values, is transparent under its channel's transfer function:
-/// the residency method never fetches it, and a sample whose footprint reaches it is clear.
-/// `visible[slot]` is the style of page-table channel slot `slot`.
+/// Marks [`ENTRY_CLEAR`] every brick that [`is_clear`] under its channel's style: the
+/// residency method never fetches it, and a sample whose footprint reaches it is clear.
 fn mark_clear_bricks(pages: &mut PageTables, info: &VolumeInfo, visible: &[&ChannelStyle]) {
     for id in 0..pages.len() as u32 {
         let Some(key) = pages.key(id) else { continue };
         let Some(style) = visible.iter().find(|s| s.channel == key.channel as usize) else {
             continue;
         };
-        let (lo, hi) = info.brick_range(&key);
-        let (lo, hi) = (
-            crate::octree::f32_down(lo) as f64,
-            crate::octree::f32_up(hi) as f64,
-        );
-        if lo <= hi && style.transparent_over(lo, hi) {
+        if is_clear(info, style, &key) {
             pages.set(id, ENTRY_CLEAR);
         }
     }
+}
+
+/// Whether brick `key` is clear under `style`: its conservative (haloed) range, rounded
+/// outward to `f32` as the shader sees values, holds data and is transparent under the
+/// transfer function. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
+/// TF".
+pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey) -> bool {
+    let (lo, hi) = info.brick_range(key);
+    let (lo, hi) = (
+        crate::octree::f32_down(lo) as f64,
+        crate::octree::f32_up(hi) as f64,
+    );
+    lo <= hi && style.transparent_over(lo, hi)
 }
 
 /// Distance `D` (world) from the eye to the shader's view point `eye + D·forward`, from which

@@ -72,6 +72,17 @@ pub fn full_res(width: u32, height: u32) -> RenderOptions {
     }
 }
 
+/// Options wanting level 0 wherever a brick is resident (a LOD bias far below any pixel
+/// footprint), with every level allowed, so coarser levels may stand in while bricks stream.
+pub fn finest_wanted(width: u32, height: u32) -> RenderOptions {
+    RenderOptions {
+        width,
+        height,
+        lod_bias: -20.0,
+        ..Default::default()
+    }
+}
+
 /// Renders progressively and converts the last frame to an image.
 pub fn render(
     source: &Arc<SyntheticSource>,
