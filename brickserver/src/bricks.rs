@@ -11,20 +11,12 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::{Context, Result, bail};
 use axum::body::Bytes;
 use rayon::prelude::*;
-use residency_schemas::wire::{
-    BrickBatchHeader, BrickEncoding, BrickEntry, BrickStatus, sample_bytes,
-};
-use zarrs::array::{
-    Array, ArrayBytes, ArrayShardedExt, ArrayShardedReadableExt, ArrayShardedReadableExtCache,
-    CodecOptions,
-};
+use residency_schemas::SampleType;
+use residency_schemas::pyramid::{Pyramid, PyramidError};
+use residency_schemas::wire::{BrickBatchHeader, BrickEncoding, BrickEntry, BrickStatus};
 use zarrs::filesystem::FilesystemStore;
-
-use crate::datasets::read_attributes;
-use crate::regions::data_type_name;
 
 /// Caps on one batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,27 +36,95 @@ impl Default for BatchLimits {
     }
 }
 
-/// One requested brick.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct BrickAt {
-    /// Pyramid level.
-    pub level: u32,
-    /// Channel.
-    pub channel: u32,
-    /// Brick coordinates `z, y, x`.
-    pub brick: [u64; 3],
+impl BatchLimits {
+    /// Checks the decoded size of `bricks` bricks of `brick_bytes` bytes each.
+    ///
+    /// # Errors
+    /// [`BatchError::TooManyBytes`] when they exceed [`BatchLimits::max_bytes`].
+    pub fn check_bytes(&self, bricks: usize, brick_bytes: u64) -> Result<(), BatchError> {
+        let decoded = (bricks as u64).saturating_mul(brick_bytes);
+        if decoded > self.max_bytes {
+            return Err(BatchError::TooManyBytes {
+                bricks,
+                brick_bytes,
+                max_bytes: self.max_bytes,
+            });
+        }
+        Ok(())
+    }
 }
 
-/// Why a batch request was refused.
-#[derive(Debug, PartialEq, Eq)]
+/// One requested brick: level, channel and brick coordinates `z, y, x`.
+pub use residency_schemas::pyramid::BrickIndex as BrickAt;
+
+/// Why a batch request was refused: malformed (400) or over a cap (413, see
+/// [`BatchError::is_over_limit`]).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 pub enum BatchError {
-    /// Malformed (400).
-    Bad(String),
-    /// Over a cap (413).
-    TooLarge(String),
+    /// A parameter's value is not UTF-8 once percent-decoded.
+    #[error("parameter '{name}' is not UTF-8")]
+    NotUtf8 {
+        /// The parameter's name.
+        name: String,
+    },
+    /// A brick is not `L,C,z,y,x`.
+    #[error("brick '{brick}' is not five integers L,C,z,y,x")]
+    NotFiveIntegers {
+        /// The brick as given.
+        brick: String,
+    },
+    /// A brick's level or channel does not fit in 32 bits.
+    #[error("brick '{brick}': {value} too large")]
+    IndexTooLarge {
+        /// The brick as given.
+        brick: String,
+        /// The level or channel.
+        value: u64,
+    },
+    /// An `encoding` other than `stored` or `raw`.
+    #[error("encoding '{encoding}' is not 'stored' or 'raw'")]
+    UnknownEncoding {
+        /// The encoding as given.
+        encoding: String,
+    },
+    /// A parameter other than `b` and `encoding`.
+    #[error("unknown parameter '{name}'")]
+    UnknownParameter {
+        /// The parameter's name.
+        name: String,
+    },
+    /// No `b` parameter, or an empty one.
+    #[error("no brick requested: give b=L,C,z,y,x[;L,C,z,y,x...]")]
+    NoBrick,
+    /// More bricks than [`BatchLimits::max_bricks`].
+    #[error("more than {max_bricks} bricks in one batch")]
+    TooManyBricks {
+        /// The cap.
+        max_bricks: usize,
+    },
+    /// More decoded bytes than [`BatchLimits::max_bytes`].
+    #[error("{bricks} bricks of {brick_bytes} bytes exceed the batch limit of {max_bytes} bytes")]
+    TooManyBytes {
+        /// Bricks asked for.
+        bricks: usize,
+        /// Decoded bytes of one brick.
+        brick_bytes: u64,
+        /// The cap.
+        max_bytes: u64,
+    },
+}
+
+impl BatchError {
+    /// Whether the batch is well formed but over a cap (413 rather than 400).
+    pub fn is_over_limit(&self) -> bool {
+        matches!(self, Self::TooManyBricks { .. } | Self::TooManyBytes { .. })
+    }
 }
 
 /// Parses `b=L,C,z,y,x;...` and `encoding=...` from a query string, checking the count cap.
+///
+/// # Errors
+/// [`BatchError`] for a malformed query, or more bricks than [`BatchLimits::max_bricks`].
 pub fn parse_batch(
     query: &str,
     limits: &BatchLimits,
@@ -75,33 +135,33 @@ pub fn parse_batch(
         let (name, value) = pair.split_once('=').unwrap_or((pair, ""));
         let value = percent_encoding::percent_decode_str(value)
             .decode_utf8()
-            .map_err(|_| BatchError::Bad(format!("parameter '{name}' is not UTF-8")))?;
+            .map_err(|_| BatchError::NotUtf8 {
+                name: name.to_string(),
+            })?;
         match name {
             "b" => {
                 for item in value.split(';').filter(|s| !s.is_empty()) {
                     if bricks.len() == limits.max_bricks {
-                        return Err(BatchError::TooLarge(format!(
-                            "more than {} bricks in one batch",
-                            limits.max_bricks
-                        )));
+                        return Err(BatchError::TooManyBricks {
+                            max_bricks: limits.max_bricks,
+                        });
                     }
+                    let not_five = || BatchError::NotFiveIntegers {
+                        brick: item.to_string(),
+                    };
                     let n: Vec<u64> = item
                         .split(',')
                         .map(|v| v.trim().parse::<u64>())
                         .collect::<Result<_, _>>()
-                        .map_err(|_| {
-                            BatchError::Bad(format!(
-                                "brick '{item}' is not five integers L,C,z,y,x"
-                            ))
-                        })?;
+                        .map_err(|_| not_five())?;
                     let [l, c, z, y, x] = n[..] else {
-                        return Err(BatchError::Bad(format!(
-                            "brick '{item}' is not five integers L,C,z,y,x"
-                        )));
+                        return Err(not_five());
                     };
-                    let narrow = |v: u64| {
-                        u32::try_from(v)
-                            .map_err(|_| BatchError::Bad(format!("brick '{item}': {v} too large")))
+                    let narrow = |value: u64| {
+                        u32::try_from(value).map_err(|_| BatchError::IndexTooLarge {
+                            brick: item.to_string(),
+                            value,
+                        })
                     };
                     bricks.push(BrickAt {
                         level: narrow(l)?,
@@ -115,199 +175,88 @@ pub fn parse_batch(
                     "stored" => BrickEncoding::Stored,
                     "raw" => BrickEncoding::Raw,
                     other => {
-                        return Err(BatchError::Bad(format!(
-                            "encoding '{other}' is not 'stored' or 'raw'"
-                        )));
+                        return Err(BatchError::UnknownEncoding {
+                            encoding: other.to_string(),
+                        });
                     }
                 }
             }
-            other => return Err(BatchError::Bad(format!("unknown parameter '{other}'"))),
+            other => {
+                return Err(BatchError::UnknownParameter {
+                    name: other.to_string(),
+                });
+            }
         }
     }
     if bricks.is_empty() {
-        return Err(BatchError::Bad(
-            "no brick requested: give b=L,C,z,y,x[;L,C,z,y,x...]".into(),
-        ));
+        return Err(BatchError::NoBrick);
     }
     Ok((bricks, encoding))
 }
 
-struct Level {
-    path: String,
-    array: Array<FilesystemStore>,
-    shards: ArrayShardedReadableExtCache,
-    /// Bricks `z, y, x`.
-    grid: [u64; 3],
-}
+pub use residency_schemas::pyramid::NoSuchBrick;
 
-/// The image arrays of one dataset, opened once, for reading bricks.
+/// The image arrays of one dataset, opened once through the pyramid reader, for reading
+/// bricks.
 pub struct ImageArrays {
-    levels: Vec<Level>,
-    /// Zarr data type name of the samples.
-    pub data_type: String,
+    pyramid: Pyramid<FilesystemStore>,
+    /// Sample type of the bricks.
+    pub data_type: SampleType,
     /// Brick shape `z, y, x`.
     pub brick_shape: [u64; 3],
     /// Channels.
     pub channels: u64,
-    /// Leading (`t`) dimensions before `c`, read at index 0.
-    leading: usize,
-    has_channel_axis: bool,
-}
-
-/// The level array paths of an OME-Zarr image's first multiscale, finest first.
-fn level_paths(root: &Path) -> Result<Vec<String>> {
-    let (_, ome, file) = read_attributes(root)?;
-    let datasets = ome["multiscales"][0]["datasets"]
-        .as_array()
-        .with_context(|| format!("{}: no OME-Zarr multiscales", file.display()))?;
-    datasets
-        .iter()
-        .map(|d| {
-            d["path"]
-                .as_str()
-                .map(str::to_string)
-                .with_context(|| format!("{}: a multiscales dataset has no path", file.display()))
-        })
-        .collect()
 }
 
 impl ImageArrays {
     /// Opens the pyramid levels of the store at `root`.
-    pub fn open(root: &Path) -> Result<Self> {
+    ///
+    /// # Errors
+    /// When the store cannot be opened or its pyramid is unusable (see [`Pyramid::open`]).
+    pub fn open(root: &Path) -> Result<Self, PyramidError> {
+        let shown = root.display().to_string();
         let store = Arc::new(
-            FilesystemStore::new(root)
-                .with_context(|| format!("{}: cannot open the store", root.display()))?,
+            FilesystemStore::new(root).map_err(|e| PyramidError::Storage {
+                what: shown.clone(),
+                reason: format!("cannot open the store: {e}"),
+            })?,
         );
-        let mut levels = Vec::new();
-        let mut first: Option<(String, [u64; 3], u64, usize, bool)> = None;
-        for path in level_paths(root)? {
-            let array = Array::open(store.clone(), &format!("/{path}"))
-                .with_context(|| format!("cannot open image array '{path}'"))?;
-            let dims = array.dimensionality();
-            if !(3..=5).contains(&dims) {
-                bail!("image array '{path}' has {dims} dimensions; bricks need (t,)(c,)z,y,x");
-            }
-            let brick_full = array
-                .effective_subchunk_shape()
-                .map(|s| s.iter().map(|v| v.get()).collect::<Vec<u64>>())
-                .or_else(|| {
-                    array
-                        .chunk_shape(&vec![0; dims])
-                        .ok()
-                        .map(|s| s.iter().map(|v| v.get()).collect())
-                })
-                .with_context(|| format!("image array '{path}' has no regular chunk grid"))?;
-            let has_c = dims >= 4;
-            if has_c && brick_full[dims - 4] != 1 {
-                bail!("image array '{path}' chunks several channels together; bricks need one");
-            }
-            let brick = [
-                brick_full[dims - 3],
-                brick_full[dims - 2],
-                brick_full[dims - 1],
-            ];
-            let shape = array.shape().to_vec();
-            let channels = if has_c { shape[dims - 4] } else { 1 };
-            let grid = std::array::from_fn(|a| shape[dims - 3 + a].div_ceil(brick[a]));
-            match &first {
-                None => {
-                    first = Some((data_type_name(&array), brick, channels, dims, has_c));
-                }
-                Some((_, b, _, _, _)) if *b != brick => {
-                    bail!("image array '{path}' has bricks {brick:?}, unlike level 0's {b:?}")
-                }
-                Some(_) => {}
-            }
-            let shards = ArrayShardedReadableExtCache::new(&array);
-            levels.push(Level {
-                path,
-                array,
-                shards,
-                grid,
-            });
-        }
-        let (data_type, brick_shape, channels, dims, has_channel_axis) =
-            first.context("the store lists no pyramid level")?;
-        if sample_bytes(&data_type).is_none() {
-            bail!("data type '{data_type}' cannot be served as bricks");
-        }
+        let pyramid = Pyramid::open(store, &shown)?;
         Ok(Self {
-            levels,
-            data_type,
-            brick_shape,
-            channels,
-            leading: dims - 3 - has_channel_axis as usize,
-            has_channel_axis,
+            data_type: pyramid.sample_type,
+            brick_shape: pyramid.brick_shape,
+            channels: pyramid.channels,
+            pyramid,
         })
     }
 
     /// Decoded bytes of one full brick.
+    #[must_use]
     pub fn brick_bytes(&self) -> u64 {
-        self.brick_shape.iter().product::<u64>()
-            * sample_bytes(&self.data_type).expect("checked at open") as u64
+        self.pyramid.brick_bytes()
     }
 
     /// Checks a request against the dataset's levels, channels and brick grids.
-    pub fn check(&self, at: &BrickAt) -> Result<(), String> {
-        let level = self.levels.get(at.level as usize).ok_or_else(|| {
-            format!(
-                "level {} does not exist (the dataset has {})",
-                at.level,
-                self.levels.len()
-            )
-        })?;
-        if at.channel as u64 >= self.channels {
-            return Err(format!(
-                "channel {} does not exist (the dataset has {})",
-                at.channel, self.channels
-            ));
-        }
-        if (0..3).any(|a| at.brick[a] >= level.grid[a]) {
-            return Err(format!(
-                "brick {:?} lies outside level {} ({:?} bricks, z, y, x)",
-                at.brick, at.level, level.grid
-            ));
-        }
-        Ok(())
+    ///
+    /// # Errors
+    /// [`NoSuchBrick`] for a level, channel or brick the dataset does not have.
+    pub fn check(&self, at: &BrickAt) -> Result<(), NoSuchBrick> {
+        self.pyramid.check(at)
     }
 
     /// Reads one brick: `None` when empty, else its stored or decoded bytes.
-    pub fn read(&self, at: &BrickAt, encoding: BrickEncoding) -> Result<Option<Vec<u8>>, String> {
-        let level = &self.levels[at.level as usize];
-        let mut indices = vec![0u64; self.leading];
-        if self.has_channel_axis {
-            indices.push(at.channel as u64);
-        }
-        indices.extend(at.brick);
-        let named = |e: &dyn std::fmt::Display| {
-            let key = if level.shards.array_is_sharded() {
-                format!("an inner chunk of array '{}'", level.path)
-            } else {
-                format!("key '{}'", level.array.chunk_key(&indices))
-            };
-            format!(
-                "level {} channel {} brick {:?} ({key}): {e}",
-                at.level, at.channel, at.brick
-            )
-        };
-        if level.shards.len() > 4096 {
-            level.shards.clear();
-        }
+    ///
+    /// # Errors
+    /// [`PyramidError`] naming the brick and its key when it cannot be read or decoded.
+    pub fn read(
+        &self,
+        at: &BrickAt,
+        encoding: BrickEncoding,
+    ) -> Result<Option<Vec<u8>>, PyramidError> {
         match encoding {
-            BrickEncoding::Stored if level.shards.array_is_sharded() => level
-                .array
-                .retrieve_encoded_subchunk(&level.shards, &indices)
-                .map_err(|e| named(&e)),
-            BrickEncoding::Stored => level
-                .array
-                .retrieve_encoded_chunk(&indices)
-                .map_err(|e| named(&e)),
+            BrickEncoding::Stored => self.pyramid.read_brick_encoded(at),
             BrickEncoding::Raw => {
-                let bytes: ArrayBytes<'static> = level
-                    .array
-                    .retrieve_subchunk_opt(&level.shards, &indices, &CodecOptions::default())
-                    .map_err(|e| named(&e))?;
-                let raw = bytes.into_fixed().map_err(|e| named(&e))?.into_owned();
+                let raw = self.pyramid.read_brick_bytes(at)?;
                 Ok((!raw.iter().all(|&b| b == 0)).then_some(raw))
             }
         }
@@ -324,7 +273,12 @@ pub fn read_batch(
 ) -> (BrickBatchHeader, Vec<u8>) {
     let results: Vec<Result<Option<Bytes>, String>> = bricks
         .par_iter()
-        .map(|at| arrays.check(at).and_then(|()| read(at)))
+        .map(|at| {
+            arrays
+                .check(at)
+                .map_err(|e| e.to_string())
+                .and_then(|()| read(at))
+        })
         .collect();
     let mut payload = Vec::new();
     let entries = bricks
@@ -353,7 +307,7 @@ pub fn read_batch(
         .collect();
     let header = BrickBatchHeader {
         encoding,
-        data_type: arrays.data_type.clone(),
+        data_type: arrays.data_type,
         brick_shape: arrays.brick_shape,
         bricks: entries,
     };
@@ -387,22 +341,70 @@ mod tests {
                 }
             ]
         );
+        let refused = |query: &str| parse_batch(query, &limits).unwrap_err();
+        let too_many = refused("b=0,0,0,0,0;0,0,0,0,1;0,0,0,0,2");
+        assert_eq!(too_many, BatchError::TooManyBricks { max_bricks: 2 });
+        assert!(too_many.is_over_limit());
+        assert_eq!(too_many.to_string(), "more than 2 bricks in one batch");
+        for (query, message) in [
+            (
+                "b=0,0,0,0",
+                "brick '0,0,0,0' is not five integers L,C,z,y,x",
+            ),
+            ("b=0,0,x", "brick '0,0,x' is not five integers L,C,z,y,x"),
+            (
+                "b=4294967296,0,0,0,0",
+                "brick '4294967296,0,0,0,0': 4294967296 too large",
+            ),
+            ("b=%FF", "parameter 'b' is not UTF-8"),
+            (
+                "b=0,0,0,0,0&encoding=zip",
+                "encoding 'zip' is not 'stored' or 'raw'",
+            ),
+            ("b=0,0,0,0,0&x=1", "unknown parameter 'x'"),
+            ("", "no brick requested: give b=L,C,z,y,x[;L,C,z,y,x...]"),
+        ] {
+            let e = refused(query);
+            assert!(!e.is_over_limit(), "{query}");
+            assert_eq!(e.to_string(), message, "{query}");
+        }
+        let bytes = limits.check_bytes(3, 1 << 19).unwrap_err();
+        assert!(bytes.is_over_limit());
         assert_eq!(
-            parse_batch("b=0,0,0,0,0;0,0,0,0,1;0,0,0,0,2", &limits),
-            Err(BatchError::TooLarge(
-                "more than 2 bricks in one batch".into()
-            ))
+            bytes.to_string(),
+            "3 bricks of 524288 bytes exceed the batch limit of 1048576 bytes"
         );
-        assert_eq!(
-            parse_batch("b=0,0,0,0", &limits),
-            Err(BatchError::Bad(
-                "brick '0,0,0,0' is not five integers L,C,z,y,x".into()
-            ))
-        );
-        assert!(matches!(parse_batch("", &limits), Err(BatchError::Bad(_))));
-        assert!(matches!(
-            parse_batch("b=0,0,0,0,0&encoding=zip", &limits),
-            Err(BatchError::Bad(_))
-        ));
+        assert_eq!(limits.check_bytes(2, 1 << 19), Ok(()));
+    }
+
+    #[test]
+    fn missing_bricks_are_named() {
+        let cases = [
+            (
+                NoSuchBrick::Level {
+                    level: 4,
+                    levels: 2,
+                },
+                "level 4 does not exist (the dataset has 2)",
+            ),
+            (
+                NoSuchBrick::Channel {
+                    channel: 5,
+                    channels: 2,
+                },
+                "channel 5 does not exist (the dataset has 2)",
+            ),
+            (
+                NoSuchBrick::Brick {
+                    brick: [99, 0, 0],
+                    level: 0,
+                    grid: [3, 5, 4],
+                },
+                "brick [99, 0, 0] lies outside level 0 ([3, 5, 4] bricks, z, y, x)",
+            ),
+        ];
+        for (error, message) in cases {
+            assert_eq!(error.to_string(), message);
+        }
     }
 }

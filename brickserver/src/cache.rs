@@ -76,7 +76,7 @@ impl ByteCache {
 
     /// Bytes held now.
     pub fn weight(&self) -> u64 {
-        self.inner.as_ref().map_or(0, |c| c.weight())
+        self.inner.as_ref().map_or(0, Cache::weight)
     }
 }
 

@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
+use residency_schemas::dataset::dataset_name;
 
 /// One served store.
 #[derive(Clone, Debug, PartialEq)]
@@ -13,41 +13,9 @@ pub struct Dataset {
     pub root: PathBuf,
 }
 
-/// The group attributes of the store at `root` (from `zarr.json` in Zarr v3, `.zattrs` in v2),
-/// the OME block within them (`ome` in OME-Zarr 0.5, the attributes themselves in 0.4), and
-/// the file they came from, for messages.
-pub fn read_attributes(root: &Path) -> Result<(serde_json::Value, serde_json::Value, PathBuf)> {
-    let (file, v3) = if root.join("zarr.json").is_file() {
-        (root.join("zarr.json"), true)
-    } else {
-        (root.join(".zattrs"), false)
-    };
-    let text = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
-    let doc: serde_json::Value = serde_json::from_slice(&text)
-        .with_context(|| format!("{} is not valid JSON", file.display()))?;
-    let attrs = if v3 { doc["attributes"].clone() } else { doc };
-    let ome = if v3 {
-        attrs["ome"].clone()
-    } else {
-        attrs.clone()
-    };
-    Ok((attrs, ome, file))
-}
-
 /// All served datasets, in the order given.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Datasets(pub Vec<Dataset>);
-
-/// The default name of a store folder: its file name without `.ome.zarr` / `.zarr`.
-pub fn default_name(path: &Path) -> String {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    name.trim_end_matches(".ome.zarr")
-        .trim_end_matches(".zarr")
-        .to_string()
-}
 
 fn valid_name(name: &str) -> bool {
     !name.is_empty()
@@ -58,47 +26,91 @@ fn valid_name(name: &str) -> bool {
         && !name.starts_with('.')
 }
 
+/// Why the datasets given on the command line cannot be served.
+#[derive(Debug, thiserror::Error)]
+pub enum DatasetError {
+    /// A name that cannot be used in a URL.
+    #[error(
+        "{path}: dataset name '{name}' is not usable in a URL (letters, digits, '-', '_', '.'; not a reserved path)"
+    )]
+    BadName {
+        /// The store.
+        path: String,
+        /// The name.
+        name: String,
+    },
+    /// The store's folder cannot be opened.
+    #[error("{path}: cannot open dataset: {source}")]
+    CannotOpen {
+        /// The store.
+        path: String,
+        /// What the file system said.
+        source: std::io::Error,
+    },
+    /// The store is a file, not a folder.
+    #[error("{path}: a dataset must be a folder (an OME-Zarr store)")]
+    NotAFolder {
+        /// The store.
+        path: String,
+    },
+    /// Two datasets with one name.
+    #[error("{path}: dataset name '{name}' is used twice (use --name NAME=PATH)")]
+    Duplicate {
+        /// The second store of that name.
+        path: String,
+        /// The name.
+        name: String,
+    },
+    /// A `--name` argument without `=`.
+    #[error("--name {pair}: expected NAME=PATH")]
+    BadPair {
+        /// The argument.
+        pair: String,
+    },
+    /// Nothing to serve.
+    #[error("no dataset given")]
+    NoDataset,
+}
+
 impl Datasets {
-    /// Builds the set from positional paths and `NAME=PATH` pairs, checking that every path is
-    /// a folder and every name is unique and URL-safe.
-    pub fn from_args(paths: &[PathBuf], named: &[String]) -> Result<Self> {
+    /// Builds the set from positional paths (named by [`dataset_name`]) and `NAME=PATH` pairs,
+    /// checking that every path is a folder and every name is unique and URL-safe.
+    ///
+    /// # Errors
+    /// [`DatasetError`] naming the first path or argument at fault.
+    pub fn from_args(paths: &[PathBuf], named: &[String]) -> Result<Self, DatasetError> {
         let mut out = Vec::new();
-        let mut add = |name: String, path: &Path| -> Result<()> {
+        let mut add = |name: String, path: &Path| -> Result<(), DatasetError> {
+            let shown = path.display().to_string();
             if !valid_name(&name) {
-                bail!(
-                    "{}: dataset name '{name}' is not usable in a URL (letters, digits, '-', '_', '.'; not a reserved path)",
-                    path.display()
-                );
+                return Err(DatasetError::BadName { path: shown, name });
             }
             let root = path
                 .canonicalize()
-                .with_context(|| format!("{}: cannot open dataset", path.display()))?;
+                .map_err(|source| DatasetError::CannotOpen {
+                    path: shown.clone(),
+                    source,
+                })?;
             if !root.is_dir() {
-                bail!(
-                    "{}: a dataset must be a folder (an OME-Zarr store)",
-                    path.display()
-                );
+                return Err(DatasetError::NotAFolder { path: shown });
             }
             if out.iter().any(|d: &Dataset| d.name == name) {
-                bail!(
-                    "{}: dataset name '{name}' is used twice (use --name NAME=PATH)",
-                    path.display()
-                );
+                return Err(DatasetError::Duplicate { path: shown, name });
             }
             out.push(Dataset { name, root });
             Ok(())
         };
         for p in paths {
-            add(default_name(p), p)?;
+            add(dataset_name(p), p)?;
         }
         for pair in named {
             let (name, path) = pair
                 .split_once('=')
-                .with_context(|| format!("--name {pair}: expected NAME=PATH"))?;
+                .ok_or_else(|| DatasetError::BadPair { pair: pair.clone() })?;
             add(name.to_string(), Path::new(path))?;
         }
         if out.is_empty() {
-            bail!("no dataset given");
+            return Err(DatasetError::NoDataset);
         }
         Ok(Self(out))
     }
@@ -114,9 +126,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn names_default_to_the_folder_without_suffix() {
-        assert_eq!(default_name(Path::new("/data/brain.ome.zarr")), "brain");
-        assert_eq!(default_name(Path::new("scan.zarr")), "scan");
+    fn names_are_url_safe_and_not_reserved() {
         assert!(!valid_name("datasets"));
         assert!(!valid_name("a/b"));
         assert!(!valid_name(".."));

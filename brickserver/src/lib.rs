@@ -13,8 +13,6 @@
 //! - [`listener`]: connections, with a header timeout, a connection limit and graceful
 //!   shutdown.
 
-#![warn(missing_docs)]
-
 pub mod bricks;
 pub mod cache;
 pub mod datasets;

@@ -6,7 +6,6 @@ use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::Result;
 use axum::Router;
 use hyper_util::rt::{TokioIo, TokioTimer};
 use hyper_util::server::graceful::GracefulShutdown;
@@ -38,14 +37,15 @@ impl Default for ConnectionLimits {
 const TOO_MANY: &[u8] = b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\nContent-Type: text/plain\r\nContent-Length: 29\r\nConnection: close\r\n\r\ntoo many connections, retry\r\n";
 
 /// Serves `app` on `listener` until `shutdown` resolves, then lets open requests finish
-/// (for at most 10 s).
+/// (for at most 10 s). Failures of single connections (an `accept` that fails, a client that
+/// breaks off) are logged, and serving goes on.
 pub async fn serve(
     listener: TcpListener,
     app: Router,
     limits: ConnectionLimits,
     metrics: Arc<Metrics>,
     shutdown: impl Future<Output = ()>,
-) -> Result<()> {
+) {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
     let graceful = GracefulShutdown::new();
     let mut http = hyper::server::conn::http1::Builder::new();
@@ -96,5 +96,4 @@ pub async fn serve(
             tracing::warn!("connections still open after 10 s; closing them");
         }
     }
-    Ok(())
 }

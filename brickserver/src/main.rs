@@ -63,7 +63,7 @@ enum Command {
 
 /// Resolves on the first SIGINT or SIGTERM. The handlers are installed when this is
 /// called, before the server announces itself, so no early signal is missed.
-fn shutdown_signal() -> Result<impl std::future::Future<Output = ()>> {
+fn shutdown_signal() -> Result<impl Future<Output = ()>> {
     use tokio::signal::unix::{SignalKind, signal};
     let mut term = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
     let mut int = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
@@ -95,9 +95,9 @@ fn raise_file_limit() {
             rlim_cur: 0,
             rlim_max: 0,
         };
-        if libc::getrlimit(libc::RLIMIT_NOFILE, &mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
+        if libc::getrlimit(libc::RLIMIT_NOFILE, &raw mut lim) == 0 && lim.rlim_cur < lim.rlim_max {
             lim.rlim_cur = lim.rlim_max;
-            libc::setrlimit(libc::RLIMIT_NOFILE, &lim);
+            libc::setrlimit(libc::RLIMIT_NOFILE, &raw const lim);
         }
     }
 }
@@ -120,7 +120,8 @@ async fn run(
     std::io::stdout().flush()?;
     let state = Arc::new(AppState::new(datasets, &options)?);
     let metrics = state.metrics.clone();
-    serve(listener, router(state, &options), limits, metrics, shutdown).await
+    serve(listener, router(state, &options), limits, metrics, shutdown).await;
+    Ok(())
 }
 
 fn main() -> ExitCode {

@@ -103,9 +103,9 @@ impl Default for Metrics {
         });
         Self {
             registry,
-            by_class,
             bytes,
             latency,
+            by_class,
             cache_hits,
             cache_misses,
             cache_bytes,

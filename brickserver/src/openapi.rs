@@ -1,5 +1,8 @@
 //! The OpenAPI 3.1 document served at `/openapi.json`. Its component schemas are the JSON
-//! Schemas in `schemas/json/`, embedded at build time, so the two cannot drift apart.
+//! Schemas in `schemas/json/`, embedded at build time, so the two cannot drift apart; those
+//! are checked against the schemas `schemars` derives from the Rust types
+//! (`schemas/tests/json_schemas.rs`), and the query parameters of its paths against what the
+//! handlers read (the tests of [`crate::routes`]).
 
 use serde_json::{Value, json};
 

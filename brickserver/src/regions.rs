@@ -14,28 +14,27 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::{Context, Result, bail};
 use axum::body::Bytes;
+use residency_schemas::SampleType;
+use residency_schemas::ome::{ImageAttributes, OmeError, ZarrFormat};
+use residency_schemas::pyramid::{Pyramid, PyramidError, read_key};
 use residency_schemas::server::{RegionAnswer, RegionHistogram, VoxelBox};
 use residency_schemas::wire::{
     MINMAX_MAGIC, MinMaxGridBlock, MinMaxHierarchyHeader, MinMaxLevelBlock, encode_framed,
-    samples_to_f64,
 };
-use residency_schemas::{MinMaxGrid, REGIONS_KEY, RegionMetadata};
+use residency_schemas::{MinMaxGrid, RegionMetadata};
 use zarrs::array::{Array, ArrayBytes, ArraySubset};
 use zarrs::filesystem::FilesystemStore;
-
-use crate::datasets::read_attributes;
 
 /// A pyramid of grids: grid `k` has cells of `cell · 2^k` voxels; each cell of grid `k + 1`
 /// aggregates the (up to) 2×2×2 cells below it in grid `k`.
 #[derive(Clone, Debug)]
-struct Pyramid {
+struct GridPyramid {
     cell: [u64; 3],
     shapes: Vec<[u64; 3]>,
 }
 
-impl Pyramid {
+impl GridPyramid {
     /// Visits cells covering `[lo, hi)` (voxels `z, y, x` of a level of `shape`) as
     /// `(grid, linear index)`: every finest cell the box touches is covered exactly once, by
     /// itself or by a coarser cell made only of such cells. Returns the voxel box covered: the
@@ -108,10 +107,10 @@ impl Pyramid {
 /// pairs) and the histogram pyramid (`bins` counts per cell).
 struct LevelIndex {
     shape: [u64; 3],
-    ranges: Pyramid,
+    ranges: GridPyramid,
     range_values: Vec<Vec<Vec<[f64; 2]>>>,
     exact_ranges: bool,
-    bricks: Pyramid,
+    bricks: GridPyramid,
     histograms: Vec<Vec<Vec<u64>>>,
 }
 
@@ -123,52 +122,103 @@ pub struct RegionIndex {
     minmax_docs: Vec<Bytes>,
 }
 
-/// A bad region query (answered 400).
-#[derive(Debug, PartialEq, Eq)]
-pub struct QueryError(pub String);
-
-fn open_store(root: &Path) -> Result<Arc<FilesystemStore>> {
-    Ok(Arc::new(FilesystemStore::new(root).with_context(|| {
-        format!("{}: cannot open the store", root.display())
-    })?))
+/// A bad region or min/max query (answered 400).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum QueryError {
+    /// A coordinate parameter (`min`, `max`) is not `x,y,z`.
+    #[error("{parameter} '{text}' is not three integers x,y,z")]
+    NotXyz {
+        /// The parameter's name.
+        parameter: &'static str,
+        /// Its value as given.
+        text: String,
+    },
+    /// No such pyramid level.
+    #[error("level {level} does not exist (the dataset has {levels})")]
+    NoLevel {
+        /// The level asked for.
+        level: usize,
+        /// Levels of the dataset.
+        levels: usize,
+    },
+    /// No such channel.
+    #[error("channel {channel} does not exist (the dataset has {channels})")]
+    NoChannel {
+        /// The channel asked for.
+        channel: usize,
+        /// Channels of the dataset.
+        channels: usize,
+    },
+    /// The box holds no voxel.
+    #[error("empty box: min {min:?} must be below max {max:?} on every axis")]
+    EmptyBox {
+        /// First voxel asked for, `x, y, z`.
+        min: [u64; 3],
+        /// One past the last voxel asked for, `x, y, z`.
+        max: [u64; 3],
+    },
+    /// The box reaches past the level.
+    #[error("box max {max:?} lies outside level {level} (x, y, z size {size:?})")]
+    OutsideLevel {
+        /// One past the last voxel asked for, `x, y, z`.
+        max: [u64; 3],
+        /// The level.
+        level: usize,
+        /// The level's size, `x, y, z`.
+        size: [u64; 3],
+    },
 }
 
-/// The data type name of an array (`uint16`, `float32`, ...).
-pub fn data_type_name(array: &Array<FilesystemStore>) -> String {
-    // Display gives "v3 name" or "v3 name / v2 name".
-    let shown = array.data_type().to_string();
-    shown.split(" / ").next().unwrap_or(&shown).to_string()
+/// Why a dataset's region metadata could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum RegionsError {
+    /// The store or its pyramid could not be opened.
+    #[error(transparent)]
+    Store(#[from] PyramidError),
+    /// The region metadata lists no level.
+    #[error("region metadata lists no level")]
+    NoLevel,
+    /// A region array could not be opened or read.
+    #[error("cannot read region array '{path}': {reason}")]
+    ReadArray {
+        /// The array's path in the store.
+        path: String,
+        /// What zarrs said.
+        reason: String,
+    },
+    /// A region array holds another number of values than its description implies.
+    #[error("{kind} array '{path}' holds {found} {unit}, expected {expected}")]
+    ValueCount {
+        /// `region` or `histogram`.
+        kind: &'static str,
+        /// The array's path in the store.
+        path: String,
+        /// `values` or `counts`.
+        unit: &'static str,
+        /// Values found.
+        found: usize,
+        /// Values expected.
+        expected: usize,
+    },
 }
 
 /// Reads a whole array as little-endian bytes and as `f64` values.
 fn read_array(
     store: &Arc<FilesystemStore>,
     path: &str,
-    data_type: &str,
-) -> Result<(Vec<u8>, Vec<f64>)> {
-    let array = Array::open(store.clone(), &format!("/{path}"))
-        .with_context(|| format!("cannot open region array '{path}'"))?;
+    data_type: SampleType,
+) -> Result<(Vec<u8>, Vec<f64>), RegionsError> {
+    let failed = |e: &dyn std::fmt::Display| RegionsError::ReadArray {
+        path: path.to_string(),
+        reason: e.to_string(),
+    };
+    let array = Array::open(store.clone(), &format!("/{path}")).map_err(|e| failed(&e))?;
     let bytes: ArrayBytes<'static> = array
         .retrieve_array_subset(&ArraySubset::new_with_shape(array.shape().to_vec()))
-        .with_context(|| format!("cannot read region array '{path}'"))?;
-    let raw = bytes
-        .into_fixed()
-        .with_context(|| format!("region array '{path}' is not of a fixed-size type"))?
-        .into_owned();
-    let values = samples_to_f64(data_type, &raw).with_context(|| format!("array '{path}'"))?;
+        .map_err(|e| failed(&e))?;
+    let raw = bytes.into_fixed().map_err(|e| failed(&e))?.into_owned();
+    let values = data_type.decode_le_to_f64(&raw).map_err(|e| failed(&e))?;
     Ok((raw, values))
-}
-
-/// Reads the image attributes of a store (`zarr.json` or `.zattrs`) and returns its region
-/// metadata, or `None` for a store without.
-fn read_region_metadata(root: &Path) -> Result<Option<RegionMetadata>> {
-    let (attrs, _, file) = read_attributes(root)?;
-    let Some(value) = attrs.get(REGIONS_KEY) else {
-        return Ok(None);
-    };
-    let meta = serde_json::from_value(value.clone())
-        .with_context(|| format!("{}: malformed '{REGIONS_KEY}' metadata", file.display()))?;
-    Ok(Some(meta))
 }
 
 /// Splits a grid array `[c, 2, gz, gy, gx]` into per-channel `[min, max]` pairs.
@@ -208,18 +258,41 @@ fn coarser_histograms(fine: &[u64], shape: [u64; 3], bins: usize) -> ([u64; 3], 
 impl RegionIndex {
     /// Loads the region index of the store at `root`, or `None` for a store without region
     /// metadata.
-    pub fn load(root: &Path) -> Result<Option<Self>> {
-        let Some(meta) = read_region_metadata(root)? else {
+    ///
+    /// # Errors
+    /// [`RegionsError`] when the store, its pyramid or a region array cannot be read, or the
+    /// arrays disagree with the metadata.
+    pub fn load(root: &Path) -> Result<Option<Self>, RegionsError> {
+        let shown = root.display().to_string();
+        let store = Arc::new(
+            FilesystemStore::new(root).map_err(|e| PyramidError::Storage {
+                what: shown.clone(),
+                reason: format!("cannot open the store: {e}"),
+            })?,
+        );
+        // The image group's attributes first: a store that is no OME-Zarr image (a bare
+        // array, a plain group) or has no region metadata has nothing to load.
+        let group = [ZarrFormat::V3, ZarrFormat::V2].into_iter().find_map(|f| {
+            let key = f.group_key();
+            read_key(&*store, key, &format!("{shown}/{key}"))
+                .transpose()
+                .map(|doc| (f, key, doc))
+        });
+        let Some((format, key, doc)) = group else {
             return Ok(None);
         };
-        let store = open_store(root)?;
-        let first = meta
-            .levels
-            .first()
-            .context("region metadata lists no level")?;
-        let image = Array::open(store.clone(), &format!("/{}", first.image))
-            .with_context(|| format!("cannot open image array '{}'", first.image))?;
-        let data_type = data_type_name(&image);
+        let attributes = match ImageAttributes::parse(format, &doc?, &format!("{shown}/{key}")) {
+            Err(OmeError::NotAGroup { .. } | OmeError::NoMultiscales { .. }) => return Ok(None),
+            other => other.map_err(PyramidError::from)?,
+        };
+        let Some(meta) = attributes.regions else {
+            return Ok(None);
+        };
+        let pyramid = Pyramid::open(store.clone(), &shown)?;
+        if meta.levels.is_empty() {
+            return Err(RegionsError::NoLevel);
+        }
+        let data_type = pyramid.sample_type;
         let channels = meta.channels.len();
         let bins = meta.histogram_bins;
         let mut levels = Vec::new();
@@ -230,16 +303,17 @@ impl RegionIndex {
             let mut level_blocks: Vec<Vec<MinMaxGridBlock>> = vec![Vec::new(); channels];
             let mut haloed = Vec::new();
             for grid in &level.minmax {
-                let (raw, values) = read_array(&store, &grid.path, &data_type)?;
+                let (raw, values) = read_array(&store, &grid.path, data_type)?;
                 let cells = cells_of(grid.grid_shape);
                 let per_channel = raw.len() / channels.max(1);
                 if values.len() != channels * 2 * cells {
-                    bail!(
-                        "region array '{}' holds {} values, expected {}",
-                        grid.path,
-                        values.len(),
-                        channels * 2 * cells
-                    );
+                    return Err(RegionsError::ValueCount {
+                        kind: "region",
+                        path: grid.path.clone(),
+                        unit: "values",
+                        found: values.len(),
+                        expected: channels * 2 * cells,
+                    });
                 }
                 for c in 0..channels {
                     let payload = &mut payloads[c];
@@ -273,27 +347,28 @@ impl RegionIndex {
                 grids
                     .iter()
                     .map(|g| {
-                        let (_, values) = read_array(&store, &g.path, &data_type)?;
+                        let (_, values) = read_array(&store, &g.path, data_type)?;
                         Ok(pairs(&values, channels, cells_of(g.grid_shape)))
                     })
-                    .collect::<Result<_>>()?
+                    .collect::<Result<_, RegionsError>>()?
             } else {
                 haloed
             };
             let range_values = (0..channels)
                 .map(|c| range_grids.iter().map(|g| g[c].clone()).collect())
                 .collect();
-            let (_, counts) = read_array(&store, &level.histogram, "uint32")?;
+            let (_, counts) = read_array(&store, &level.histogram, SampleType::U32)?;
             let brick_grid: [u64; 3] =
                 std::array::from_fn(|a| level.shape[a].div_ceil(meta.brick_shape[a]));
             let per_channel = cells_of(brick_grid) * bins;
             if counts.len() != channels * per_channel {
-                bail!(
-                    "histogram array '{}' holds {} counts, expected {}",
-                    level.histogram,
-                    counts.len(),
-                    channels * per_channel
-                );
+                return Err(RegionsError::ValueCount {
+                    kind: "histogram",
+                    path: level.histogram.clone(),
+                    unit: "counts",
+                    found: counts.len(),
+                    expected: channels * per_channel,
+                });
             }
             let mut brick_shapes = vec![brick_grid];
             let mut histograms: Vec<Vec<Vec<u64>>> = (0..channels)
@@ -317,13 +392,13 @@ impl RegionIndex {
             }
             levels.push(LevelIndex {
                 shape: level.shape,
-                ranges: Pyramid {
+                ranges: GridPyramid {
                     cell: grids[0].cell_shape,
                     shapes: grids.iter().map(|g| g.grid_shape).collect(),
                 },
                 range_values,
                 exact_ranges,
-                bricks: Pyramid {
+                bricks: GridPyramid {
                     cell: meta.brick_shape,
                     shapes: brick_shapes,
                 },
@@ -337,7 +412,7 @@ impl RegionIndex {
             .map(|(channel, (levels, payload))| {
                 let header = MinMaxHierarchyHeader {
                     channel,
-                    data_type: data_type.clone(),
+                    data_type,
                     halo: meta.halo,
                     levels,
                 };
@@ -352,17 +427,25 @@ impl RegionIndex {
     }
 
     /// The framed min/max hierarchy document of `channel`.
+    ///
+    /// # Errors
+    /// [`QueryError::NoChannel`] for a channel the dataset does not have.
     pub fn minmax_document(&self, channel: usize) -> Result<Bytes, QueryError> {
-        self.minmax_docs.get(channel).cloned().ok_or_else(|| {
-            QueryError(format!(
-                "channel {channel} does not exist (the dataset has {})",
-                self.minmax_docs.len()
-            ))
-        })
+        self.minmax_docs
+            .get(channel)
+            .cloned()
+            .ok_or(QueryError::NoChannel {
+                channel,
+                channels: self.minmax_docs.len(),
+            })
     }
 
     /// Answers a region query; `min`/`max` are `x, y, z` voxel coordinates of the level,
     /// `max` exclusive.
+    ///
+    /// # Errors
+    /// [`QueryError`] for a level or channel the dataset does not have, an empty box, or a
+    /// box reaching past the level.
     pub fn query(
         &self,
         dataset: &str,
@@ -371,30 +454,27 @@ impl RegionIndex {
         min: [u64; 3],
         max: [u64; 3],
     ) -> Result<RegionAnswer, QueryError> {
-        let l = self.levels.get(level).ok_or_else(|| {
-            QueryError(format!(
-                "level {level} does not exist (the dataset has {})",
-                self.levels.len()
-            ))
+        let l = self.levels.get(level).ok_or(QueryError::NoLevel {
+            level,
+            levels: self.levels.len(),
         })?;
         if channel >= self.meta.channels.len() {
-            return Err(QueryError(format!(
-                "channel {channel} does not exist (the dataset has {})",
-                self.meta.channels.len()
-            )));
+            return Err(QueryError::NoChannel {
+                channel,
+                channels: self.meta.channels.len(),
+            });
         }
         let [nz, ny, nx] = l.shape;
         let (lo, hi) = ([min[2], min[1], min[0]], [max[2], max[1], max[0]]);
         if (0..3).any(|a| lo[a] >= hi[a]) {
-            return Err(QueryError(format!(
-                "empty box: min {min:?} must be below max {max:?} on every axis"
-            )));
+            return Err(QueryError::EmptyBox { min, max });
         }
         if (0..3).any(|a| hi[a] > l.shape[a]) {
-            return Err(QueryError(format!(
-                "box max {max:?} lies outside level {level} (x, y, z size {:?})",
-                [nx, ny, nz]
-            )));
+            return Err(QueryError::OutsideLevel {
+                max,
+                level,
+                size: [nx, ny, nz],
+            });
         }
         let to_xyz = |zyx: [u64; 3]| [zyx[2], zyx[1], zyx[0]];
         let query = VoxelBox { min, max };
@@ -458,21 +538,21 @@ mod tests {
 
     /// The cells `cover` visits, sorted, and the box it reports.
     fn visited(
-        p: &Pyramid,
+        p: &GridPyramid,
         shape: [u64; 3],
         lo: [u64; 3],
         hi: [u64; 3],
     ) -> (Vec<(usize, usize)>, [u64; 3], [u64; 3]) {
         let mut cells = Vec::new();
         let (a, b) = p.cover(shape, lo, hi, |k, i| cells.push((k, i)));
-        cells.sort();
+        cells.sort_unstable();
         (cells, a, b)
     }
 
     #[test]
     fn cover_takes_whole_cells_inside_and_splits_at_the_edges() {
         // A 20 × 20 × 20 level with 8³ cells: grids 3³, 2³, 1.
-        let p = Pyramid {
+        let p = GridPyramid {
             cell: [8; 3],
             shapes: vec![[3; 3], [2; 3], [1; 3]],
         };
@@ -501,7 +581,7 @@ mod tests {
             let s = *shapes.last().unwrap();
             shapes.push(s.map(|v| v.div_ceil(2)));
         }
-        let p = Pyramid { cell, shapes };
+        let p = GridPyramid { cell, shapes };
         let mut seed = 7u64;
         let mut next = |n: u64| {
             seed = seed
@@ -541,6 +621,51 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn query_errors_keep_their_messages() {
+        let cases = [
+            (
+                QueryError::NotXyz {
+                    parameter: "min",
+                    text: "0,0".into(),
+                },
+                "min '0,0' is not three integers x,y,z",
+            ),
+            (
+                QueryError::NoLevel {
+                    level: 9,
+                    levels: 3,
+                },
+                "level 9 does not exist (the dataset has 3)",
+            ),
+            (
+                QueryError::NoChannel {
+                    channel: 2,
+                    channels: 2,
+                },
+                "channel 2 does not exist (the dataset has 2)",
+            ),
+            (
+                QueryError::EmptyBox {
+                    min: [5, 0, 0],
+                    max: [5, 1, 1],
+                },
+                "empty box: min [5, 0, 0] must be below max [5, 1, 1] on every axis",
+            ),
+            (
+                QueryError::OutsideLevel {
+                    max: [31, 1, 1],
+                    level: 0,
+                    size: [30, 37, 21],
+                },
+                "box max [31, 1, 1] lies outside level 0 (x, y, z size [30, 37, 21])",
+            ),
+        ];
+        for (error, message) in cases {
+            assert_eq!(error.to_string(), message);
         }
     }
 

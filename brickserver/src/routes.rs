@@ -9,6 +9,8 @@
 //! The three API paths never collide with a Zarr key: a Zarr node at a store's root is a
 //! folder, so its keys are `regions/zarr.json` and the like, never `regions` itself.
 
+use std::fmt::Display;
+use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 use std::time::{Duration, Instant};
 
@@ -24,6 +26,7 @@ use residency_schemas::server::{ApiError, DatasetEntry, DatasetList};
 use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, MINMAX_MEDIA_TYPE, encode_framed};
 use serde::Deserialize;
 use serde_json::json;
+use subtle::ConstantTimeEq;
 use tower_http::cors::{Any, CorsLayer};
 
 use crate::bricks::{BatchError, BatchLimits, ImageArrays, parse_batch, read_batch};
@@ -55,11 +58,35 @@ impl Default for ServerOptions {
     }
 }
 
+/// Why the router's state could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum StateError {
+    /// A dataset folder cannot be opened.
+    #[error("{}: cannot open dataset folder", path.display())]
+    OpenDataset {
+        /// The dataset's root folder.
+        path: PathBuf,
+        /// Why it cannot be opened.
+        source: std::io::Error,
+    },
+}
+
+/// A part of a dataset (its region index or image arrays) that could not be loaded; kept, so
+/// every later request is answered the same (500) without trying again.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("dataset '{dataset}': {reason}")]
+pub struct LoadError {
+    /// The dataset's name.
+    pub dataset: String,
+    /// Why it could not be loaded, with every cause.
+    pub reason: String,
+}
+
 /// What is loaded once per dataset, on first use.
 #[derive(Default)]
 struct Loaded {
-    regions: OnceLock<Result<Option<Arc<RegionIndex>>, String>>,
-    arrays: OnceLock<Result<Arc<ImageArrays>, String>>,
+    regions: OnceLock<Result<Option<Arc<RegionIndex>>, LoadError>>,
+    arrays: OnceLock<Result<Arc<ImageArrays>, LoadError>>,
 }
 
 /// Shared state of the routes.
@@ -78,11 +105,14 @@ pub struct AppState {
 
 /// How long a remembered chunk `ETag` answers revalidations without a look at the file (as
 /// nginx's `open_file_cache_valid`): chunks are immutable, but a store may be replaced.
-const ETAG_VALID: Duration = Duration::from_secs(60);
+const ETAG_VALID: Duration = Duration::from_mins(1);
 
 impl AppState {
-    /// State for `datasets` under `options`; fails if a dataset folder cannot be opened.
-    pub fn new(datasets: Datasets, options: &ServerOptions) -> anyhow::Result<Self> {
+    /// State for `datasets` under `options`.
+    ///
+    /// # Errors
+    /// [`StateError::OpenDataset`] when a dataset folder cannot be opened.
+    pub fn new(datasets: Datasets, options: &ServerOptions) -> Result<Self, StateError> {
         let metrics = Arc::new(Metrics::default());
         let cache = ByteCache::new(
             options.cache_bytes,
@@ -95,11 +125,12 @@ impl AppState {
             .0
             .iter()
             .map(|d| {
-                RootDir::open(&d.root).map_err(|e| {
-                    anyhow::anyhow!("{}: cannot open dataset folder: {e}", d.root.display())
+                RootDir::open(&d.root).map_err(|source| StateError::OpenDataset {
+                    path: d.root.clone(),
+                    source,
                 })
             })
-            .collect::<anyhow::Result<_>>()?;
+            .collect::<Result<_, _>>()?;
         Ok(Self {
             datasets,
             cache,
@@ -135,14 +166,9 @@ async fn require_token(
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
-    // Compare in constant time so the token cannot be guessed byte by byte from timings.
-    let ok = given.is_some_and(|g| {
-        g.len() == token.len()
-            && g.bytes()
-                .zip(token.bytes())
-                .fold(0u8, |a, (x, y)| a | (x ^ y))
-                == 0
-    });
+    // Compare in constant time so the token cannot be guessed byte by byte from timings
+    // (only its length can be learnt).
+    let ok = given.is_some_and(|g| bool::from(g.as_bytes().ct_eq(token.as_bytes())));
     if ok {
         next.run(request).await
     } else {
@@ -167,7 +193,7 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
             header::CONTENT_LENGTH,
             header::ACCEPT_RANGES,
         ])
-        .max_age(Duration::from_secs(86400));
+        .max_age(Duration::from_hours(24));
     let metrics = state.metrics.clone();
     let router = Router::new()
         .route("/metrics", get(show_metrics))
@@ -258,13 +284,14 @@ fn no_dataset(name: &str) -> Response<Body> {
 }
 
 /// A once-loaded part of dataset `i` (`cell` picks which): read directly once loaded, else
-/// made by `load` on the blocking pool (the first caller loads, later ones wait for it).
-async fn loaded<T: Clone + Send + Sync + 'static>(
+/// made by `load` on the blocking pool (the first caller loads, later ones wait for it). A
+/// failure keeps the error's message with its causes (`{:#}`).
+async fn loaded<T: Clone + Send + Sync + 'static, E: Display + 'static>(
     state: &Arc<AppState>,
     i: usize,
-    cell: fn(&Loaded) -> &OnceLock<Result<T, String>>,
-    load: fn(&Dataset) -> anyhow::Result<T>,
-) -> Result<T, String> {
+    cell: fn(&Loaded) -> &OnceLock<Result<T, LoadError>>,
+    load: fn(&Dataset) -> Result<T, E>,
+) -> Result<T, LoadError> {
     if let Some(done) = cell(&state.loaded[i]).get() {
         return done.clone();
     }
@@ -272,7 +299,12 @@ async fn loaded<T: Clone + Send + Sync + 'static>(
     blocking(move || {
         let d = &st.datasets.0[i];
         cell(&st.loaded[i])
-            .get_or_init(|| load(d).map_err(|e| format!("dataset '{}': {e:#}", d.name)))
+            .get_or_init(|| {
+                load(d).map_err(|e| LoadError {
+                    dataset: d.name.clone(),
+                    reason: format!("{e:#}"),
+                })
+            })
             .clone()
     })
     .await
@@ -362,15 +394,18 @@ async fn serve_key(
     }
 }
 
-/// Parses `x,y,z`.
-fn parse_xyz(what: &str, text: &str) -> Result<[u64; 3], String> {
+/// Parses `x,y,z`, the value of query parameter `what`.
+fn parse_xyz(what: &'static str, text: &str) -> Result<[u64; 3], QueryError> {
+    let not_xyz = || QueryError::NotXyz {
+        parameter: what,
+        text: text.to_string(),
+    };
     let v: Vec<u64> = text
         .split(',')
         .map(|s| s.trim().parse::<u64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| format!("{what} '{text}' is not three integers x,y,z"))?;
-    v.try_into()
-        .map_err(|_| format!("{what} '{text}' is not three integers x,y,z"))
+        .map_err(|_| not_xyz())?;
+    v.try_into().map_err(|_| not_xyz())
 }
 
 /// Query of `/NAME/regions`.
@@ -392,7 +427,7 @@ async fn region_index(
         state,
         index,
         |l| &l.regions,
-        |d| Ok(RegionIndex::load(&d.root)?.map(Arc::new)),
+        |d| RegionIndex::load(&d.root).map(|r| r.map(Arc::new)),
     );
     match regions.await {
         Ok(Some(r)) => Ok(r),
@@ -403,7 +438,7 @@ async fn region_index(
                  min/max and histograms are unknown"
             ),
         )),
-        Err(e) => Err(api_error(StatusCode::INTERNAL_SERVER_ERROR, e)),
+        Err(e) => Err(api_error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string())),
     }
 }
 
@@ -442,11 +477,11 @@ async fn regions(
     let bounds = parse_xyz("min", &p.min).and_then(|a| Ok((a, parse_xyz("max", &p.max)?)));
     let (min, max) = match bounds {
         Ok(b) => b,
-        Err(e) => return api_error(StatusCode::BAD_REQUEST, e),
+        Err(e) => return api_error(StatusCode::BAD_REQUEST, e.to_string()),
     };
     match index.query(&name, p.level, p.channel, min, max) {
         Ok(answer) => Json(answer).into_response(),
-        Err(QueryError(e)) => api_error(StatusCode::BAD_REQUEST, e),
+        Err(e) => api_error(StatusCode::BAD_REQUEST, e.to_string()),
     }
 }
 
@@ -474,8 +509,18 @@ async fn minmax(
             doc,
         )
             .into_response(),
-        Err(QueryError(e)) => api_error(StatusCode::BAD_REQUEST, e),
+        Err(e) => api_error(StatusCode::BAD_REQUEST, e.to_string()),
     }
+}
+
+/// The answer to a refused batch: 413 over a cap, 400 otherwise.
+fn batch_error(e: &BatchError) -> Response<Body> {
+    let status = if e.is_over_limit() {
+        StatusCode::PAYLOAD_TOO_LARGE
+    } else {
+        StatusCode::BAD_REQUEST
+    };
+    api_error(status, e.to_string())
 }
 
 async fn bricks(
@@ -488,30 +533,20 @@ async fn bricks(
     };
     let (list, encoding) = match parse_batch(query.as_deref().unwrap_or(""), &state.batch) {
         Ok(b) => b,
-        Err(BatchError::Bad(e)) => return api_error(StatusCode::BAD_REQUEST, e),
-        Err(BatchError::TooLarge(e)) => return api_error(StatusCode::PAYLOAD_TOO_LARGE, e),
+        Err(e) => return batch_error(&e),
     };
     let arrays = loaded(
         &state,
         index,
         |l| &l.arrays,
-        |d| Ok(Arc::new(ImageArrays::open(&d.root)?)),
+        |d| ImageArrays::open(&d.root).map(Arc::new),
     );
     let arrays = match arrays.await {
         Ok(a) => a,
-        Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e),
+        Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
     };
-    let decoded = list.len() as u64 * arrays.brick_bytes();
-    if decoded > state.batch.max_bytes {
-        return api_error(
-            StatusCode::PAYLOAD_TOO_LARGE,
-            format!(
-                "{} bricks of {} bytes exceed the batch limit of {} bytes",
-                list.len(),
-                arrays.brick_bytes(),
-                state.batch.max_bytes
-            ),
-        );
+    if let Err(e) = state.batch.check_bytes(list.len(), arrays.brick_bytes()) {
+        return batch_error(&e);
     }
     let st = state.clone();
     let raw = encoding == residency_schemas::wire::BrickEncoding::Raw;
@@ -525,7 +560,7 @@ async fn bricks(
             if let Some(hit) = st.cache.get(&key) {
                 return Ok((!hit.is_empty()).then_some(hit));
             }
-            let read = arrays.read(at, encoding)?;
+            let read = arrays.read(at, encoding).map_err(|e| e.to_string())?;
             let bytes = read.map(Bytes::from).unwrap_or_default();
             st.cache.insert(key, bytes.clone());
             Ok((!bytes.is_empty()).then_some(bytes))
@@ -537,4 +572,87 @@ async fn bricks(
     })
     .await;
     ([(header::CONTENT_TYPE, BRICKS_MEDIA_TYPE)], body).into_response()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A value for each query parameter the OpenAPI document may name.
+    fn example(name: &str) -> &'static str {
+        match name {
+            "level" | "channel" => "0",
+            "min" => "0,0,0",
+            "max" => "1,1,1",
+            "b" => "0,0,0,0,0",
+            "encoding" => "raw",
+            other => panic!("no example for the documented query parameter '{other}'"),
+        }
+    }
+
+    /// The query parameters the OpenAPI document gives `path`: name and whether required.
+    fn documented(path: &str) -> Vec<(String, bool)> {
+        let doc = crate::openapi::document();
+        doc["paths"][path]["get"]["parameters"]
+            .as_array()
+            .expect("parameters")
+            .iter()
+            .filter(|p| p["in"] == "query")
+            .map(|p| {
+                let name = p["name"].as_str().expect("a name").to_string();
+                (name, p["required"] == true)
+            })
+            .collect()
+    }
+
+    /// The query string of the documented parameters of `path` but `without`.
+    fn query(path: &str, without: Option<&str>) -> String {
+        documented(path)
+            .iter()
+            .filter(|(name, _)| Some(name.as_str()) != without)
+            .map(|(name, _)| format!("{name}={}", example(name)))
+            .collect::<Vec<_>>()
+            .join("&")
+    }
+
+    /// Whether the documented query of `path` (but `without`) parses as `T`.
+    fn parses<T: serde::de::DeserializeOwned>(path: &str, without: Option<&str>) -> bool {
+        let uri: Uri = format!("/d/x?{}", query(path, without)).parse().unwrap();
+        Query::<T>::try_from_uri(&uri).is_ok()
+    }
+
+    /// The OpenAPI document names exactly the query parameters the handlers read, and marks
+    /// required exactly those they cannot do without.
+    #[test]
+    fn documented_query_parameters_are_the_ones_read() {
+        fn check<T: serde::de::DeserializeOwned>(path: &str) {
+            let params = documented(path);
+            assert!(!params.is_empty(), "{path}");
+            assert!(parses::<T>(path, None), "{path}: {}", query(path, None));
+            for (name, required) in params {
+                let ok = parses::<T>(path, Some(&name));
+                assert_eq!(ok, !required, "{path} parameter '{name}'");
+            }
+        }
+        check::<RegionParams>("/{name}/regions");
+        check::<MinMaxParams>("/{name}/minmax");
+        let limits = BatchLimits::default();
+        let path = "/{name}/bricks";
+        parse_batch(&query(path, None), &limits).expect("the documented batch parses");
+        for (name, required) in documented(path) {
+            let ok = parse_batch(&query(path, Some(&name)), &limits).is_ok();
+            assert_eq!(ok, !required, "{path} parameter '{name}'");
+        }
+    }
+
+    #[test]
+    fn coordinates_parse_or_say_what_is_wrong() {
+        assert_eq!(parse_xyz("min", "1, 2,3"), Ok([1, 2, 3]));
+        for text in ["0,0", "0,0,0,0", "a,b,c", "-1,0,0", ""] {
+            assert_eq!(
+                parse_xyz("max", text).unwrap_err().to_string(),
+                format!("max '{text}' is not three integers x,y,z")
+            );
+        }
+    }
 }

@@ -51,6 +51,9 @@ fn checked_key(raw_key: &str) -> Result<String, KeyError> {
 
 /// Resolves the raw (still percent-encoded) key part of a request path against `root`
 /// (canonical), returning the canonical path of an existing regular file inside `root`.
+///
+/// # Errors
+/// [`KeyError`] when the key is malformed, leaves the root, or names no readable file.
 pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
     let key = checked_key(raw_key)?;
     let joined = root.join(&key);
@@ -76,6 +79,9 @@ pub struct RootDir {
 
 impl RootDir {
     /// Opens the (canonical) root folder `path`.
+    ///
+    /// # Errors
+    /// When the folder cannot be opened.
     pub fn open(path: &Path) -> io::Result<Self> {
         Ok(Self {
             path: path.to_path_buf(),
@@ -87,17 +93,20 @@ impl RootDir {
     /// kernel refuses any resolution that leaves the root, through `..` or a symlink
     /// (`openat2` with `RESOLVE_BENEATH`); where `openat2` is unavailable the key is
     /// canonicalised and checked instead.
+    ///
+    /// # Errors
+    /// [`KeyError`] when the key is malformed, leaves the root, or names no readable file.
     pub fn open_key(&self, raw_key: &str) -> Result<(File, Metadata), KeyError> {
         let key = checked_key(raw_key)?;
         let unreadable = |e: io::Error| KeyError::Unreadable(e.to_string());
         let file = match self.openat2(&key) {
             Ok(f) => f,
             Err(e) => match e.raw_os_error() {
-                Some(libc::ENOENT) | Some(libc::ENOTDIR) => return Err(KeyError::NotFound),
+                Some(libc::ENOENT | libc::ENOTDIR) => return Err(KeyError::NotFound),
                 Some(libc::EXDEV) => {
                     return Err(KeyError::Refused("key leads outside the dataset"));
                 }
-                Some(libc::ENOSYS) | Some(libc::EPERM) => {
+                Some(libc::ENOSYS | libc::EPERM) => {
                     File::open(resolve(&self.path, raw_key)?).map_err(unreadable)?
                 }
                 _ => return Err(unreadable(e)),
@@ -122,8 +131,8 @@ impl RootDir {
                 libc::SYS_openat2,
                 self.dir.as_raw_fd(),
                 path.as_ptr(),
-                &how as *const libc::open_how,
-                std::mem::size_of::<libc::open_how>(),
+                &raw const how,
+                size_of::<libc::open_how>(),
             )
         };
         if fd < 0 {
@@ -149,7 +158,7 @@ pub fn read_cached(file: &File, len: usize) -> (Vec<u8>, bool) {
         let n = unsafe {
             libc::preadv2(
                 file.as_raw_fd(),
-                &iov,
+                &raw const iov,
                 1,
                 buf.len() as libc::off_t,
                 libc::RWF_NOWAIT,

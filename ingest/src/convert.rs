@@ -7,6 +7,7 @@
 //! means are rounded once and the same happens one level up. Memory is a few slabs per level
 //! and never depends on the depth of the stack.
 
+use std::fmt::Write;
 use std::path::PathBuf;
 use std::sync::Mutex;
 use std::sync::mpsc::sync_channel;
@@ -15,14 +16,14 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
-use residency_schemas::REGIONS_KEY;
+use residency_schemas::dataset::dataset_name;
 use zarrs::array::Array;
 
 use crate::ome::{image_attributes, multiscale, omero};
 use crate::pyramid::{LevelPlan, plan_levels};
 use crate::region_writer::{LevelRegions, write_region_metadata};
 use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
-use crate::sample_format::{Sample, SampleFormat};
+use crate::sample_format::{Sample, SampleType};
 use crate::source::{RawOptions, SourceInfo, VolumeSource, open_input};
 use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreWriter, directory_bytes};
 use crate::with_sample_type;
@@ -93,7 +94,7 @@ pub struct ConvertSummary {
     /// Path of the finished store.
     pub output: PathBuf,
     /// Sample format of the store.
-    pub format: SampleFormat,
+    pub format: SampleType,
     /// Per-level results, finest first.
     pub levels: Vec<LevelSummary>,
     /// Bytes of level-0 voxels (uncompressed).
@@ -113,22 +114,25 @@ impl ConvertSummary {
     pub fn report(&self) -> String {
         let mut s = format!("wrote {} ({})\n", self.output.display(), self.format);
         for (i, l) in self.levels.iter().enumerate() {
-            s += &format!(
-                "  level {i}: shape c,z,y,x = {:?}, bricks written {}, empty (not written) {}\n",
+            let _ = writeln!(
+                s,
+                "  level {i}: shape c,z,y,x = {:?}, bricks written {}, empty (not written) {}",
                 l.shape, l.bricks_written, l.bricks_empty
             );
         }
         let mb = self.input_bytes as f64 / 1e6;
-        s += &format!(
-            "  input {:.1} MB, stored {:.1} MB, level-0 compression ratio {:.2}, region metadata {:.3} MB ({:.2}% of the store)\n",
+        let _ = writeln!(
+            s,
+            "  input {:.1} MB, stored {:.1} MB, level-0 compression ratio {:.2}, region metadata {:.3} MB ({:.2}% of the store)",
             mb,
             self.stored_bytes as f64 / 1e6,
             self.input_bytes as f64 / self.level0_stored_bytes.max(1) as f64,
             self.metadata_bytes as f64 / 1e6,
             100.0 * self.metadata_bytes as f64 / self.stored_bytes.max(1) as f64
         );
-        s += &format!(
-            "  {:.2} s, {:.1} MB/s\n",
+        let _ = writeln!(
+            s,
+            "  {:.2} s, {:.1} MB/s",
             self.seconds,
             mb / self.seconds.max(1e-9)
         );
@@ -140,7 +144,7 @@ impl ConvertSummary {
 struct Inputs {
     sources: Vec<Box<dyn VolumeSource>>,
     shape: [u64; 3],
-    format: SampleFormat,
+    format: SampleType,
     channels: usize,
     voxel_size: Option<[f64; 3]>,
     unit: Option<String>,
@@ -169,7 +173,7 @@ fn open_inputs(options: &ConvertOptions) -> Result<Inputs> {
                 info.shape
             );
         }
-        format = SampleFormat::promote(format, info.format).with_context(|| {
+        format = SampleType::promote(format, info.format).with_context(|| {
             format!(
                 "{}: {} samples cannot be stored exactly beside {} samples of {}",
                 info.path.display(),
@@ -212,7 +216,7 @@ fn open_inputs(options: &ConvertOptions) -> Result<Inputs> {
         }
     }
     for (i, l) in options.channel_names.iter().enumerate().take(channels) {
-        labels[i] = l.clone();
+        labels[i].clone_from(l);
     }
     let voxel_size = options
         .voxel_size
@@ -522,7 +526,7 @@ fn check_slab_memory(
     channels: usize,
     depth: u64,
     [ny, nx]: [u64; 2],
-    format: SampleFormat,
+    format: SampleType,
     memory: Option<u64>,
 ) -> Result<()> {
     let Some(memory) = memory else {
@@ -677,7 +681,7 @@ fn convert_typed<T: Sample>(
             slab.resize(channels * nz as usize * plane, T::default());
             let mut rest: &mut [T] = &mut slab;
             let mut parts = Vec::new();
-            for s in sources.iter_mut() {
+            for s in &mut sources {
                 let len = s.info().channels * nz as usize * plane;
                 let (part, tail) = rest.split_at_mut(len);
                 parts.push((s, part));
@@ -693,7 +697,7 @@ fn convert_typed<T: Sample>(
                 Ok(())
             });
             let failed = result.is_err();
-            if tx.send(result.map(|_| (z0, nz, slab))).is_err() || failed {
+            if tx.send(result.map(|()| (z0, nz, slab))).is_err() || failed {
                 return;
             }
             z0 += nz;
@@ -701,7 +705,7 @@ fn convert_typed<T: Sample>(
     });
 
     let result = (|| -> Result<()> {
-        for message in rx.iter() {
+        for message in &rx {
             let (z0, nz, slab) = message?;
             process_level0(&mut levels, &stats, channels, brick, &slab, z0, nz)
                 .with_context(|| format!("{shown}: writing level 0"))?;
@@ -738,29 +742,20 @@ fn convert_typed<T: Sample>(
         .collect();
     let (regions, displays) =
         write_region_metadata(&writer, &region_levels, &stats, &inputs.labels, brick)?;
-    let name = options
-        .output
-        .file_name()
-        .map(|n| {
-            n.to_string_lossy()
-                .trim_end_matches(".ome.zarr")
-                .trim_end_matches(".zarr")
-                .to_string()
-        })
-        .unwrap_or_default();
+    let name = dataset_name(&options.output);
+    let metadata_bytes = serde_json::to_vec_pretty(&regions)?.len() as u64;
     let attributes = image_attributes(
         options.version,
         multiscale(options.version, &name, &plans, inputs.unit.as_deref()),
         omero(&displays, depth),
-        vec![(REGIONS_KEY, serde_json::to_value(&regions)?)],
+        regions,
     );
     // The root group metadata is the last write of the store.
-    writer.write_group("", attributes)?;
+    writer.write_image_group(&attributes)?;
     let partial = writer.partial.clone();
     let stored_bytes = directory_bytes(&partial);
     let level0_stored_bytes = directory_bytes(&partial.join("0"));
-    let metadata_bytes = directory_bytes(&partial.join("residency"))
-        + serde_json::to_vec_pretty(&regions)?.len() as u64;
+    let metadata_bytes = directory_bytes(&partial.join("residency")) + metadata_bytes;
     let output = writer.commit()?;
     Ok(ConvertSummary {
         output,
@@ -872,7 +867,7 @@ mod tests {
     #[test]
     fn slabs_that_do_not_fit_in_memory_are_refused() {
         let check =
-            |memory| check_slab_memory("o.ome.zarr", 3, 64, [1000, 500], SampleFormat::U16, memory);
+            |memory| check_slab_memory("o.ome.zarr", 3, 64, [1000, 500], SampleType::U16, memory);
         // 2 × 3 × 64 × 1000 × 500 × 2 bytes.
         check(Some(384_000_000)).unwrap();
         check(None).unwrap();

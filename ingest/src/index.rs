@@ -10,160 +10,72 @@ use std::sync::{Arc, Mutex};
 
 use anyhow::{Context, Result, bail};
 use residency_schemas::REGIONS_KEY;
-use serde_json::Value;
-use zarrs::array::{Array, ArraySubset};
+use residency_schemas::pyramid::Pyramid;
+use zarrs::array::ArraySubset;
 
 use crate::convert::SlabSink;
-use crate::inspect::read_image_attributes;
 use crate::region_writer::{LevelRegions, write_region_metadata};
 use crate::regions::{CellGrid, ChannelAccumulator, LevelHistograms};
-use crate::sample_format::{Sample, SampleFormat};
-use crate::store::{OmeZarrVersion, Store, StoreWriter};
+use crate::sample_format::Sample;
+use crate::store::{Store, StoreWriter};
 use crate::with_sample_type;
 
-/// One level of the existing store.
-struct ExistingLevel {
-    path: String,
-    array: Array<Store>,
-    /// Shape `z, y, x`.
-    shape: [u64; 3],
-}
-
-fn format_of(meta: &Value, shown: &str) -> Result<SampleFormat> {
-    let name = match meta["zarr_format"].as_u64() {
-        Some(3) => meta["data_type"].as_str().unwrap_or("").to_string(),
-        _ => {
-            let d = meta["dtype"].as_str().unwrap_or("");
-            match d.trim_start_matches(['<', '|', '=']) {
-                "u1" => "uint8",
-                "u2" => "uint16",
-                "i2" => "int16",
-                "u4" => "uint32",
-                "i4" => "int32",
-                "f4" => "float32",
-                _ => d,
-            }
-            .to_string()
-        }
-    };
-    SampleFormat::parse(&name).with_context(|| format!("{shown}: unsupported sample format"))
-}
-
-/// The brick shape (`z, y, x`): inner chunks when sharded, chunks otherwise.
-fn brick_of(meta: &Value) -> Option<[u64; 3]> {
-    let chunk = match meta["zarr_format"].as_u64() {
-        Some(3) => {
-            let sharded = meta["codecs"]
-                .as_array()
-                .and_then(|c| c.iter().find(|c| c["name"] == "sharding_indexed"));
-            match sharded {
-                Some(s) => s["configuration"]["chunk_shape"].clone(),
-                None => meta["chunk_grid"]["configuration"]["chunk_shape"].clone(),
-            }
-        }
-        _ => meta["chunks"].clone(),
-    };
-    let v: Vec<u64> = serde_json::from_value(chunk).ok()?;
-    let n = v.len();
-    (n >= 3).then(|| [v[n - 3], v[n - 2], v[n - 1]])
-}
-
 /// Indexes the image at `path` and returns a short report.
+///
+/// # Errors
+/// When the store is not an OME-Zarr image the pyramid reader accepts, has a leading axis
+/// other than `c` with several entries, or cannot be read or written.
 pub fn index(path: &Path) -> Result<String> {
     let shown = path.display().to_string();
-    let (_, version, ome) = read_image_attributes(path)?;
-    let version = if version == "0.4" {
-        OmeZarrVersion::V04
-    } else {
-        OmeZarrVersion::V05
-    };
-    let ms = &ome["multiscales"][0];
-    let axes: Vec<String> = ms["axes"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|a| a["name"].as_str().unwrap_or("").to_string())
-        .collect();
-    let n = axes.len();
-    if n < 3 || axes[n - 3..] != ["z", "y", "x"] {
-        bail!("{shown}: axes {axes:?} do not end in z, y, x");
+    if !path.is_dir() {
+        bail!("{shown}: not an OME-Zarr image (no zarr.json or .zattrs)");
     }
     let store = Arc::new(crate::store::StagingStore::new(path)?);
-    let mut levels = Vec::new();
-    let mut format = None;
-    let mut brick = None;
-    let mut channels = 1u64;
-    for ds in ms["datasets"].as_array().into_iter().flatten() {
-        let p = ds["path"]
-            .as_str()
-            .context("dataset without path")?
-            .to_string();
-        let array = Array::open(store.clone(), &format!("/{p}"))
-            .with_context(|| format!("{shown}: cannot open level {p}"))?;
-        let shape = array.shape().to_vec();
-        if shape.len() != n {
-            bail!(
-                "{shown}: level {p} has {} dimensions but {n} axes",
-                shape.len()
-            );
-        }
-        for (a, &s) in axes[..n - 3].iter().zip(&shape) {
-            match a.as_str() {
-                "c" => channels = s,
-                _ if s == 1 => {}
-                other => {
-                    bail!("{shown}: axis '{other}' has {s} entries; only c, z, y, x can be indexed")
-                }
+    let pyramid = Pyramid::open(store, &shown)?;
+    let n = pyramid.layout.axis_names.len();
+    for level in &pyramid.levels {
+        for (i, axis) in pyramid.layout.axis_names[..n - 3].iter().enumerate() {
+            let entries = level.description.shape[i];
+            if Some(i) != pyramid.layout.channel_axis && entries != 1 {
+                bail!(
+                    "{shown}: axis '{axis}' has {entries} entries; only c, z, y, x can be indexed"
+                );
             }
         }
-        let meta = serde_json::to_value(array.metadata())?;
-        let f = format_of(&meta, &shown)?;
-        if format.is_some_and(|g| g != f) {
-            bail!("{shown}: levels have different data types");
-        }
-        format = Some(f);
-        brick = brick.or_else(|| brick_of(&meta));
-        levels.push(ExistingLevel {
-            path: p,
-            shape: [shape[n - 3], shape[n - 2], shape[n - 1]],
-            array,
-        });
     }
-    let format = format.with_context(|| format!("{shown}: no levels"))?;
-    let brick = brick.with_context(|| format!("{shown}: cannot tell the chunk shape"))?;
-    let labels: Vec<String> = (0..channels as usize)
+    let omero = pyramid.attributes.omero.as_ref();
+    let labels: Vec<String> = (0..pyramid.channels as usize)
         .map(|c| {
-            ome["omero"]["channels"][c]["label"]
-                .as_str()
-                .map_or(format!("Channel {c}"), str::to_string)
+            omero
+                .and_then(|o| o.channels.get(c))
+                .and_then(|ch| ch.label.clone())
+                .unwrap_or_else(|| format!("Channel {c}"))
         })
         .collect();
-    with_sample_type!(format, T => index_typed::<T>(path, version, &levels, channels as usize, brick, &labels))
+    with_sample_type!(pyramid.sample_type, T => index_typed::<T>(path, &pyramid, &labels))
 }
 
 fn index_typed<T: Sample>(
     path: &Path,
-    version: OmeZarrVersion,
-    levels: &[ExistingLevel],
-    channels: usize,
-    brick: [u64; 3],
+    pyramid: &Pyramid<Store>,
     labels: &[String],
 ) -> Result<String> {
     let shown = path.display().to_string();
+    let channels = pyramid.channels as usize;
+    let brick = pyramid.brick_shape;
+    let levels = &pyramid.levels;
     let stats: Vec<Mutex<ChannelAccumulator>> = (0..channels)
         .map(|_| Mutex::new(ChannelAccumulator::default()))
         .collect();
     let mut gathered = Vec::new();
     for (i, level) in levels.iter().enumerate() {
-        let [depth, ny, nx] = level.shape;
-        let histograms = LevelHistograms::new(
-            channels,
-            std::array::from_fn(|a| level.shape[a].div_ceil(brick[a])),
-        );
-        let mut cells = CellGrid::<T>::for_shape(channels, level.shape);
+        let shape = level.description.zyx_shape();
+        let [depth, ny, nx] = shape;
+        let histograms = LevelHistograms::new(channels, level.grid);
+        let mut cells = CellGrid::<T>::for_shape(channels, shape);
         let sink = SlabSink {
             channels,
-            shape: level.shape,
+            shape,
             brick,
             outer: brick,
             array: None,
@@ -195,14 +107,16 @@ fn index_typed<T: Sample>(
         .into_iter()
         .map(|m| m.into_inner().expect("stats"))
         .collect();
-    let writer = StoreWriter::in_place(path, version)?;
+    let writer = StoreWriter::in_place(path, pyramid.attributes.version)?;
     let region_levels: Vec<LevelRegions<'_, T>> = levels
         .iter()
         .zip(&gathered)
         .map(|(l, (cells, histograms, written, empty))| LevelRegions {
             image: l.path.clone(),
-            shape: l.shape,
-            factor: std::array::from_fn(|a| levels[0].shape[a].div_ceil(l.shape[a].max(1))),
+            shape: l.description.zyx_shape(),
+            factor: std::array::from_fn(|a| {
+                levels[0].description.zyx_shape()[a].div_ceil(l.description.zyx_shape()[a].max(1))
+            }),
             cells,
             histograms,
             written: *written,

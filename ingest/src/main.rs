@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use residency_ingest::convert::{ConvertOptions, convert};
-use residency_ingest::sample_format::SampleFormat;
+use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
 use residency_ingest::store::OmeZarrVersion;
 use residency_ingest::synthetic::{SampleKind, SampleSpec, write_samples};
@@ -227,7 +227,7 @@ fn run(cli: Cli) -> Result<()> {
             let mut options = ConvertOptions::new(inputs, output);
             options.raw = RawOptions {
                 dims,
-                format: dtype.as_deref().map(SampleFormat::parse).transpose()?,
+                format: dtype.as_deref().map(str::parse::<SampleType>).transpose()?,
                 big_endian: matches!(endian, Endian::Big),
                 header_bytes,
             };

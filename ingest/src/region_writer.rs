@@ -5,12 +5,11 @@ use anyhow::{Context, Result};
 use residency_schemas::{
     ChannelStatistics, HISTOGRAM_BINS, MinMaxGrid, REGIONS_VERSION, RegionLevel, RegionMetadata,
 };
-use serde_json::json;
 use zarrs::array::ArraySubset;
 
 use crate::ome::ChannelDisplay;
 use crate::regions::{CELL, CellGrid, ChannelAccumulator, HALO, LevelHistograms};
-use crate::sample_format::{Sample, SampleFormat};
+use crate::sample_format::{Sample, SampleType};
 use crate::store::{ArrayLayout, StoreWriter};
 
 /// Percentiles recorded for every channel.
@@ -82,12 +81,12 @@ pub fn write_region_metadata<T: Sample>(
         binnings.push(binning);
     }
 
-    writer.write_group("residency", json!({}))?;
+    writer.write_group("residency")?;
     let mut region_levels = Vec::new();
     for (i, level) in levels.iter().enumerate() {
-        writer.write_group(&format!("residency/{i}"), json!({}))?;
-        writer.write_group(&format!("residency/{i}/minmax"), json!({}))?;
-        writer.write_group(&format!("residency/{i}/range"), json!({}))?;
+        writer.write_group(&format!("residency/{i}"))?;
+        writer.write_group(&format!("residency/{i}/minmax"))?;
+        writer.write_group(&format!("residency/{i}/range"))?;
         let (mut minmax, mut range) = (Vec::new(), Vec::new());
         let mut grid = level.cells.clone();
         let mut k = 0;
@@ -138,7 +137,7 @@ pub fn write_region_metadata<T: Sample>(
                     HISTOGRAM_BINS as u64,
                 ],
                 inner_chunk: None,
-                format: SampleFormat::U32,
+                format: SampleType::U32,
                 dimension_names: None,
             },
         )?;

@@ -1,105 +1,9 @@
-//! Voxel sample formats (data types) and the arithmetic the pyramid needs on each.
+//! The arithmetic the pyramid and statistics need on each voxel sample type ([`SampleType`],
+//! defined once in `residency-schemas`).
 
 use std::fmt;
 
-use anyhow::{Result, bail};
-
-/// The sample formats ingest reads and writes. Output keeps the source format.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum SampleFormat {
-    /// Unsigned 8-bit integer.
-    U8,
-    /// Unsigned 16-bit integer.
-    U16,
-    /// Signed 16-bit integer.
-    I16,
-    /// Unsigned 32-bit integer.
-    U32,
-    /// Signed 32-bit integer.
-    I32,
-    /// IEEE 754 32-bit float.
-    F32,
-}
-
-impl SampleFormat {
-    /// Bytes per sample.
-    pub fn bytes(self) -> usize {
-        match self {
-            Self::U8 => 1,
-            Self::U16 | Self::I16 => 2,
-            Self::U32 | Self::I32 | Self::F32 => 4,
-        }
-    }
-
-    /// Zarr v3 / NumPy data type name (`uint16`, `float32`, ...).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::U8 => "uint8",
-            Self::U16 => "uint16",
-            Self::I16 => "int16",
-            Self::U32 => "uint32",
-            Self::I32 => "int32",
-            Self::F32 => "float32",
-        }
-    }
-
-    /// Zarr v2 `dtype` string (little-endian NumPy type string).
-    pub fn zarr_v2_dtype(self) -> &'static str {
-        match self {
-            Self::U8 => "|u1",
-            Self::U16 => "<u2",
-            Self::I16 => "<i2",
-            Self::U32 => "<u4",
-            Self::I32 => "<i4",
-            Self::F32 => "<f4",
-        }
-    }
-
-    /// Whether this is a floating-point format.
-    pub fn is_float(self) -> bool {
-        self == Self::F32
-    }
-
-    /// Parses a data type name as used by `--dtype` and raw file names
-    /// (`uint8`, `u8`, `uint16`, `u16`, `int16`, `i16`, `uint32`, `u32`, `int32`, `i32`,
-    /// `float32`, `f32`, `float`).
-    pub fn parse(name: &str) -> Result<Self> {
-        Ok(match name.to_ascii_lowercase().as_str() {
-            "uint8" | "u8" | "ubyte" => Self::U8,
-            "uint16" | "u16" | "ushort" => Self::U16,
-            "int16" | "i16" | "short" => Self::I16,
-            "uint32" | "u32" | "uint" => Self::U32,
-            "int32" | "i32" | "int" => Self::I32,
-            "float32" | "f32" | "float" => Self::F32,
-            other => bail!(
-                "unsupported data type '{other}': expected one of uint8, uint16, int16, uint32, int32, float32"
-            ),
-        })
-    }
-
-    /// The narrowest format that holds every value of both formats exactly, if any.
-    pub fn promote(a: Self, b: Self) -> Option<Self> {
-        use SampleFormat::*;
-        if a == b {
-            return Some(a);
-        }
-        let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-        Some(match (lo, hi) {
-            (U8, x) => x,
-            (U16, I16) => I32,
-            (U16 | I16, U32) if lo == U16 => U32,
-            (U16 | I16, I32) => I32,
-            (U16 | I16, F32) => F32,
-            _ => return None,
-        })
-    }
-}
-
-impl fmt::Display for SampleFormat {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
+pub use residency_schemas::SampleType;
 
 /// Number of fine histogram keys. Every sample maps to a key in `0..FINE_KEYS`, monotone in
 /// its value; brick histograms are counted on keys and grouped into bins at the end of the pass.
@@ -119,7 +23,7 @@ pub trait Sample:
     + 'static
 {
     /// The format tag of this type.
-    const FORMAT: SampleFormat;
+    const FORMAT: SampleType;
     /// Smallest representable value (minus infinity for floats): the identity of `max`.
     const LOWEST: Self;
     /// Largest representable value (infinity for floats): the identity of `min`.
@@ -138,7 +42,7 @@ pub trait Sample:
     fn sum_to_f64(sum: Self::Sum) -> f64;
     /// The value as f64.
     fn to_f64(self) -> f64;
-    /// Converts a value of a narrower format exactly (see [`SampleFormat::promote`]).
+    /// Converts a value of a narrower format exactly (see [`SampleType::promote`]).
     fn from_f64(v: f64) -> Self;
     /// The fine histogram key of this value, in `0..FINE_KEYS`.
     fn key(self) -> usize;
@@ -194,7 +98,7 @@ macro_rules! int_sample {
                 let f: fn(usize) -> f64 = $exact_value;
                 f(index)
             }
-            const FORMAT: SampleFormat = SampleFormat::$fmt;
+            const FORMAT: SampleType = SampleType::$fmt;
             const LOWEST: Self = <$t>::MIN;
             const HIGHEST: Self = <$t>::MAX;
             type Sum = i64;
@@ -298,7 +202,7 @@ fn f32_order_key(v: f32) -> u32 {
 }
 
 impl Sample for f32 {
-    const FORMAT: SampleFormat = SampleFormat::F32;
+    const FORMAT: SampleType = SampleType::F32;
     fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_> {
         crate::source::PlaneOut::F32(out)
     }
@@ -382,27 +286,27 @@ impl Sample for f32 {
 macro_rules! with_sample_type {
     ($format:expr, $T:ident => $body:expr) => {
         match $format {
-            $crate::sample_format::SampleFormat::U8 => {
+            $crate::sample_format::SampleType::U8 => {
                 type $T = u8;
                 $body
             }
-            $crate::sample_format::SampleFormat::U16 => {
+            $crate::sample_format::SampleType::U16 => {
                 type $T = u16;
                 $body
             }
-            $crate::sample_format::SampleFormat::I16 => {
+            $crate::sample_format::SampleType::I16 => {
                 type $T = i16;
                 $body
             }
-            $crate::sample_format::SampleFormat::U32 => {
+            $crate::sample_format::SampleType::U32 => {
                 type $T = u32;
                 $body
             }
-            $crate::sample_format::SampleFormat::I32 => {
+            $crate::sample_format::SampleType::I32 => {
                 type $T = i32;
                 $body
             }
-            $crate::sample_format::SampleFormat::F32 => {
+            $crate::sample_format::SampleType::F32 => {
                 type $T = f32;
                 $body
             }
@@ -439,7 +343,7 @@ mod tests {
             f32::INFINITY,
         ];
         for w in vals.windows(2) {
-            assert!(w[0].key() <= w[1].key(), "{:?}", w);
+            assert!(w[0].key() <= w[1].key(), "{w:?}");
         }
         for v in vals {
             let k = v.key();
@@ -462,15 +366,5 @@ mod tests {
             let k = v.key();
             assert_eq!(u8::key_lower_edge(k), v as f64);
         }
-    }
-
-    #[test]
-    fn promotion_is_exact() {
-        use SampleFormat::*;
-        assert_eq!(SampleFormat::promote(U8, U16), Some(U16));
-        assert_eq!(SampleFormat::promote(U16, I16), Some(I32));
-        assert_eq!(SampleFormat::promote(U16, F32), Some(F32));
-        assert_eq!(SampleFormat::promote(U32, F32), None);
-        assert_eq!(SampleFormat::promote(I16, U32), None);
     }
 }

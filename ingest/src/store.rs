@@ -6,38 +6,34 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
-use serde_json::{Value, json};
-use zarrs::array::{Array, ArrayMetadata};
+use residency_schemas::SampleType;
+use residency_schemas::ome::ImageAttributes;
+use serde::Serialize;
+use serde_json::Value;
+use zarrs::array::codec::array_to_bytes::sharding::{
+    ShardingCodecBuilder, ShardingCodecOptions, SubchunkWriteOrder,
+};
+use zarrs::array::codec::{BloscCodec, BytesCodec, Crc32cCodec};
+use zarrs::array::{Array, ArrayBuilder, ArrayMetadata, CodecSpecificOptions};
 use zarrs::filesystem::FilesystemStore;
+use zarrs::metadata::ChunkKeySeparator;
+use zarrs::metadata::v2::GroupMetadataV2;
+use zarrs::metadata::v2::{ArrayMetadataV2, MetadataV2};
+use zarrs::metadata::v3::FillValueMetadataV3;
+use zarrs::metadata_ext::codec::blosc::{
+    BloscCodecConfigurationNumcodecs, BloscCompressionLevel, BloscCompressor, BloscShuffleMode,
+    BloscShuffleModeNumcodecs,
+};
 use zarrs::storage::byte_range::ByteRangeIterator;
 use zarrs::storage::{
     Bytes, MaybeBytesIterator, OffsetBytesIterator, ReadableStorageTraits, StorageError, StoreKey,
     StorePrefix, WritableStorageTraits,
 };
 
-use crate::sample_format::SampleFormat;
-
-/// OME-Zarr version to write.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OmeZarrVersion {
-    /// OME-Zarr 0.4 on Zarr v2.
-    V04,
-    /// OME-Zarr 0.5 on Zarr v3.
-    V05,
-}
-
-impl OmeZarrVersion {
-    /// The version string (`"0.4"` or `"0.5"`).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::V04 => "0.4",
-            Self::V05 => "0.5",
-        }
-    }
-}
+pub use residency_schemas::ome::OmeZarrVersion;
 
 /// Blosc compression level used for every array.
-pub const BLOSC_CLEVEL: u32 = 5;
+pub const BLOSC_CLEVEL: u8 = 5;
 
 /// Layout of one array: shape, chunking, data type.
 #[derive(Clone, Debug, PartialEq)]
@@ -49,7 +45,7 @@ pub struct ArrayLayout {
     /// Inner chunk (brick) shape when sharded.
     pub inner_chunk: Option<Vec<u64>>,
     /// Data type.
-    pub format: SampleFormat,
+    pub format: SampleType,
     /// Dimension names (Zarr v3 only).
     pub dimension_names: Option<Vec<&'static str>>,
 }
@@ -140,61 +136,112 @@ pub fn sync_file_system(path: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Builds the Zarr metadata document for an array.
-pub fn array_metadata(version: OmeZarrVersion, layout: &ArrayLayout) -> Result<Value> {
-    let typesize = layout.format.bytes();
+/// The Blosc codec every array uses: LZ4 with byte shuffle, level [`BLOSC_CLEVEL`], automatic
+/// block size.
+fn blosc(format: SampleType) -> Result<BloscCodec> {
+    let level = BloscCompressionLevel::try_from(BLOSC_CLEVEL)
+        .map_err(|e| anyhow::anyhow!("blosc level {BLOSC_CLEVEL}: {e:?}"))?;
+    BloscCodec::new(
+        BloscCompressor::LZ4,
+        level,
+        None,
+        BloscShuffleMode::Shuffle,
+        Some(format.bytes()),
+    )
+    .context("the blosc codec")
+}
+
+/// A Zarr v3 group document. zarrs' `GroupMetadataV3` leaves out empty attributes; the stores
+/// we have always written keep `"attributes": {}`, and must stay byte-identical.
+#[derive(Serialize)]
+struct GroupDocumentV3<'a> {
+    zarr_format: u8,
+    node_type: &'static str,
+    attributes: &'a serde_json::Map<String, Value>,
+}
+
+/// The Zarr v2 `compressor` of an array: numcodecs' Blosc with the same settings as [`blosc`].
+#[derive(Serialize)]
+struct NumcodecsBlosc {
+    id: &'static str,
+    #[serde(flatten)]
+    configuration: BloscCodecConfigurationNumcodecs,
+}
+
+/// Builds the Zarr metadata of an array, through zarrs' typed builders: v3 with the `bytes`
+/// and `blosc` codecs (inside `sharding_indexed`, with a little-endian, CRC32C-checked index at
+/// the end, when sharded), or v2 with the Blosc compressor.
+///
+/// # Errors
+/// When sharding is asked of Zarr v2, or zarrs refuses the layout.
+pub fn array_metadata(version: OmeZarrVersion, layout: &ArrayLayout) -> Result<ArrayMetadata> {
+    let nonzero = |v: &[u64]| -> Result<Vec<std::num::NonZeroU64>> {
+        v.iter()
+            .map(|&e| std::num::NonZeroU64::new(e).context("a chunk edge of 0"))
+            .collect()
+    };
     Ok(match version {
         OmeZarrVersion::V04 => {
             if layout.inner_chunk.is_some() {
                 bail!("sharding needs Zarr v3: use --ome-zarr-version 0.5");
             }
-            json!({
-                "zarr_format": 2,
-                "shape": layout.shape,
-                "chunks": layout.chunk,
-                "dtype": layout.format.zarr_v2_dtype(),
-                "compressor": {"id": "blosc", "cname": "lz4", "clevel": BLOSC_CLEVEL, "shuffle": 1, "blocksize": 0},
-                "fill_value": 0,
-                "order": "C",
-                "filters": null,
-                "dimension_separator": "/",
-            })
+            let compressor: MetadataV2 =
+                serde_json::from_value(serde_json::to_value(NumcodecsBlosc {
+                    id: "blosc",
+                    configuration: BloscCodecConfigurationNumcodecs {
+                        cname: BloscCompressor::LZ4,
+                        clevel: BloscCompressionLevel::try_from(BLOSC_CLEVEL)
+                            .map_err(|e| anyhow::anyhow!("blosc level {BLOSC_CLEVEL}: {e:?}"))?,
+                        shuffle: BloscShuffleModeNumcodecs::Shuffle,
+                        blocksize: 0,
+                    },
+                })?)?;
+            ArrayMetadata::V2(
+                ArrayMetadataV2::new(
+                    layout.shape.clone(),
+                    nonzero(&layout.chunk)?,
+                    layout.format.zarr_v2_dtype().into(),
+                    FillValueMetadataV3::from(0),
+                    Some(compressor),
+                    None,
+                )
+                .with_dimension_separator(ChunkKeySeparator::Slash),
+            )
         }
         OmeZarrVersion::V05 => {
-            let inner_codecs = json!([
-                {"name": "bytes", "configuration": {"endian": "little"}},
-                {"name": "blosc", "configuration": {"cname": "lz4", "clevel": BLOSC_CLEVEL, "shuffle": "shuffle", "typesize": typesize, "blocksize": 0}},
-            ]);
-            let codecs = match &layout.inner_chunk {
-                None => inner_codecs,
-                Some(inner) => json!([{
-                    "name": "sharding_indexed",
-                    "configuration": {
-                        "chunk_shape": inner,
-                        "codecs": inner_codecs,
-                        "index_codecs": [
-                            {"name": "bytes", "configuration": {"endian": "little"}},
-                            {"name": "crc32c"},
-                        ],
-                        "index_location": "end",
-                    }
-                }]),
-            };
-            let mut m = json!({
-                "zarr_format": 3,
-                "node_type": "array",
-                "shape": layout.shape,
-                "data_type": layout.format.name(),
-                "chunk_grid": {"name": "regular", "configuration": {"chunk_shape": layout.chunk}},
-                "chunk_key_encoding": {"name": "default", "configuration": {"separator": "/"}},
-                "fill_value": 0,
-                "codecs": codecs,
-                "attributes": {},
-            });
-            if let Some(names) = &layout.dimension_names {
-                m["dimension_names"] = json!(names);
+            let data_type = zarrs::array::DataType::from_metadata(
+                &zarrs::metadata::v3::MetadataV3::new(layout.format.zarr_name()),
+            )
+            .context("the data type")?;
+            let mut builder = ArrayBuilder::new(
+                layout.shape.clone(),
+                layout.chunk.as_slice(),
+                data_type.clone(),
+                FillValueMetadataV3::from(0),
+            );
+            builder.chunk_key_encoding_default_separator(ChunkKeySeparator::Slash);
+            match &layout.inner_chunk {
+                None => {
+                    builder
+                        .array_to_bytes_codec(Arc::new(BytesCodec::little()))
+                        .bytes_to_bytes_codecs(vec![Arc::new(blosc(layout.format)?)]);
+                }
+                Some(inner) => {
+                    let mut sharding = ShardingCodecBuilder::new(nonzero(inner)?, &data_type);
+                    sharding
+                        .array_to_bytes_codec(Arc::new(BytesCodec::little()))
+                        .bytes_to_bytes_codecs(vec![Arc::new(blosc(layout.format)?)])
+                        .index_array_to_bytes_codec(Arc::new(BytesCodec::little()))
+                        .index_bytes_to_bytes_codecs(vec![Arc::new(Crc32cCodec::new())]);
+                    builder.array_to_bytes_codec(sharding.build_arc());
+                }
             }
-            m
+            builder.dimension_names(layout.dimension_names.clone());
+            let mut metadata = builder.build_metadata().context("array metadata")?;
+            // zarrs writes a float fill value as `0.0`; our stores have always said `0` (the
+            // same number to every reader), and must stay byte-identical.
+            metadata.fill_value = FillValueMetadataV3::from(0);
+            ArrayMetadata::V3(metadata)
         }
     })
 }
@@ -215,8 +262,7 @@ pub struct StoreWriter {
 pub fn partial_path(output: &Path) -> PathBuf {
     let name = output
         .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "output".into());
+        .map_or_else(|| "output".into(), |n| n.to_string_lossy().into_owned());
     output.with_file_name(format!(".{name}.partial"))
 }
 
@@ -290,36 +336,66 @@ impl StoreWriter {
 
     /// Creates an array at `path` (e.g. `/0`) and writes its metadata.
     pub fn create_array(&self, path: &str, layout: &ArrayLayout) -> Result<Array<Store>> {
-        let meta: ArrayMetadata = serde_json::from_value(array_metadata(self.version, layout)?)
-            .context("array metadata")?;
+        let meta = array_metadata(self.version, layout)?;
+        // Inner chunks go into a shard in C order, so a store is byte-identical from run to
+        // run whatever the thread count (zarrs' default writes them as they finish encoding).
         let array = Array::new_with_metadata(self.store.clone(), path, meta)
-            .with_context(|| format!("{}: cannot create array {path}", self.output.display()))?;
+            .with_context(|| format!("{}: cannot create array {path}", self.output.display()))?
+            .with_codec_specific_options(&CodecSpecificOptions::default().with_option(
+                ShardingCodecOptions::default().with_subchunk_write_order(SubchunkWriteOrder::C),
+            ));
         array.store_metadata().with_context(|| {
             format!("{}: cannot write metadata of {path}", self.output.display())
         })?;
         Ok(array)
     }
 
-    /// Writes group metadata with `attributes` at `path` (relative, `""` for the root).
-    /// The root group's metadata is the last write: it is what makes the store a store.
-    pub fn write_group(&self, path: &str, attributes: Value) -> Result<()> {
+    /// Writes the metadata of a group at `path` (relative, `""` for the root) whose
+    /// attributes are `attributes`: zarrs' typed group metadata, pretty-printed.
+    fn write_group_metadata(
+        &self,
+        path: &str,
+        attributes: serde_json::Map<String, Value>,
+    ) -> Result<()> {
         let dir = self.partial.join(path);
-        std::fs::create_dir_all(&dir)?;
-        let write = |name: &str, v: &Value| -> Result<()> {
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("{}: cannot create", dir.display()))?;
+        let write = |name: &str, bytes: Vec<u8>| -> Result<()> {
             let file = dir.join(name);
-            std::fs::write(&file, serde_json::to_vec_pretty(v)?)
+            std::fs::write(&file, bytes)
                 .with_context(|| format!("{}: cannot write", file.display()))
         };
         match self.version {
             OmeZarrVersion::V04 => {
-                write(".zattrs", &attributes)?;
-                write(".zgroup", &json!({"zarr_format": 2}))
+                write(".zattrs", serde_json::to_vec_pretty(&attributes)?)?;
+                write(
+                    ".zgroup",
+                    serde_json::to_vec_pretty(&GroupMetadataV2::new())?,
+                )
             }
             OmeZarrVersion::V05 => write(
                 "zarr.json",
-                &json!({"zarr_format": 3, "node_type": "group", "attributes": attributes}),
+                serde_json::to_vec_pretty(&GroupDocumentV3 {
+                    zarr_format: 3,
+                    node_type: "group",
+                    attributes: &attributes,
+                })?,
             ),
         }
+    }
+
+    /// Writes a group without attributes at `path` (relative to the store).
+    pub fn write_group(&self, path: &str) -> Result<()> {
+        self.write_group_metadata(path, serde_json::Map::new())
+    }
+
+    /// Writes the root image group with its attributes. It is the last write of a store: what
+    /// makes the store a store.
+    pub fn write_image_group(&self, attributes: &ImageAttributes) -> Result<()> {
+        let Value::Object(map) = serde_json::to_value(attributes)? else {
+            bail!("image attributes are a JSON object");
+        };
+        self.write_group_metadata("", map)
     }
 
     /// Moves the finished store to its final path, replacing any previous output.
@@ -354,18 +430,16 @@ impl StoreWriter {
 /// Total size in bytes of the files under `dir`.
 pub fn directory_bytes(dir: &Path) -> u64 {
     fn walk(dir: &Path) -> u64 {
-        std::fs::read_dir(dir)
-            .map(|entries| {
-                entries
-                    .filter_map(Result::ok)
-                    .map(|e| match e.file_type() {
-                        Ok(t) if t.is_dir() => walk(&e.path()),
-                        Ok(_) => e.metadata().map(|m| m.len()).unwrap_or(0),
-                        Err(_) => 0,
-                    })
-                    .sum()
-            })
-            .unwrap_or(0)
+        std::fs::read_dir(dir).map_or(0, |entries| {
+            entries
+                .filter_map(Result::ok)
+                .map(|e| match e.file_type() {
+                    Ok(t) if t.is_dir() => walk(&e.path()),
+                    Ok(_) => e.metadata().map_or(0, |m| m.len()),
+                    Err(_) => 0,
+                })
+                .sum()
+        })
     }
     walk(dir)
 }

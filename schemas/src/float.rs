@@ -23,6 +23,9 @@ pub fn non_finite_name(v: f64) -> Option<&'static str> {
 }
 
 /// Writes `v` as a JSON number, or as `"Infinity"`, `"-Infinity"` or `"NaN"`.
+///
+/// # Errors
+/// Whatever the serializer reports.
 pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
     match non_finite_name(*v) {
         Some(name) => s.serialize_str(name),
@@ -31,8 +34,22 @@ pub fn serialize<S: Serializer>(v: &f64, s: S) -> Result<S::Ok, S::Error> {
 }
 
 /// Reads a JSON number, or one of the strings `"Infinity"`, `"-Infinity"`, `"NaN"`.
+///
+/// # Errors
+/// When the value is neither a number nor one of those strings.
 pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
     d.deserialize_any(FloatVisitor)
+}
+
+/// The JSON Schema of what [`serialize`] writes, for `#[schemars(schema_with = ...)]`: a
+/// number, or one of the strings `"Infinity"`, `"-Infinity"`, `"NaN"`.
+pub fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+    schemars::json_schema!({
+        "oneOf": [
+            {"type": "number"},
+            {"type": "string", "enum": ["Infinity", "-Infinity", "NaN"]}
+        ]
+    })
 }
 
 struct FloatVisitor;
@@ -68,9 +85,12 @@ impl Visitor<'_> for FloatVisitor {
 
 /// The same for `Option<f64>`, `None` being `null`.
 pub mod option {
-    use super::*;
+    use super::{Deserialize, Deserializer, Serializer};
 
     /// Writes `None` as `null`, a value as [`super::serialize`] does.
+    ///
+    /// # Errors
+    /// Whatever the serializer reports.
     pub fn serialize<S: Serializer>(v: &Option<f64>, s: S) -> Result<S::Ok, S::Error> {
         match v {
             Some(v) => super::serialize(v, s),
@@ -78,7 +98,22 @@ pub mod option {
         }
     }
 
+    /// The JSON Schema of what [`serialize`] writes: that of [`super::json_schema`], or
+    /// `null`.
+    pub fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "oneOf": [
+                {"type": "number"},
+                {"type": "string", "enum": ["Infinity", "-Infinity", "NaN"]},
+                {"type": "null"}
+            ]
+        })
+    }
+
     /// Reads `null` as `None`, anything else as [`super::deserialize`] does.
+    ///
+    /// # Errors
+    /// When the value is neither `null`, a number nor one of the strings.
     pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<f64>, D::Error> {
         #[derive(Deserialize)]
         struct Wrapped(#[serde(with = "super")] f64);

@@ -9,12 +9,19 @@
 //! [`server`] holds the JSON answers of `brickserver`'s API, and [`wire`] its binary
 //! documents (the min/max hierarchy and brick batches).
 
-#![warn(missing_docs)]
-
+pub mod dataset;
 pub mod float;
+pub mod ome;
+#[cfg(feature = "store")]
+pub mod pyramid;
+pub mod sample_type;
 pub mod server;
 pub mod wire;
+pub mod zarr;
 
+pub use sample_type::SampleType;
+
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// Attribute key of the region metadata in the image group's attributes.
@@ -28,7 +35,7 @@ pub const HISTOGRAM_BINS: usize = 64;
 
 /// Region metadata: where the min/max grids and histograms of every pyramid level live,
 /// and how to read them.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RegionMetadata {
     /// Layout version, [`REGIONS_VERSION`].
     pub version: String,
@@ -50,7 +57,7 @@ pub struct RegionMetadata {
 }
 
 /// Region metadata of one pyramid level.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RegionLevel {
     /// Path of the image array of this level (as in `multiscales.datasets[].path`).
     pub image: String,
@@ -77,7 +84,7 @@ pub struct RegionLevel {
 /// One min/max grid: a Zarr array of shape `[c, 2, gz, gy, gx]` in the image's data type.
 /// Index 0 of the second axis is the minimum, index 1 the maximum. For floating-point data,
 /// NaN voxels are excluded, and a cell whose voxels are all NaN holds NaN.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct MinMaxGrid {
     /// Path of the array, relative to the image group.
     pub path: String,
@@ -88,21 +95,24 @@ pub struct MinMaxGrid {
 }
 
 /// Whole-channel statistics over level 0.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ChannelStatistics {
     /// Channel label, as in `omero.channels[].label`.
     pub label: String,
     /// Smallest value (NaN excluded). `null` when every voxel is NaN; an infinity is written
     /// as a string (see [`float`]).
     #[serde(with = "float::option")]
+    #[schemars(schema_with = "float::option::json_schema")]
     pub min: Option<f64>,
     /// Largest value (NaN excluded). `null` when every voxel is NaN; an infinity is written
     /// as a string (see [`float`]).
     #[serde(with = "float::option")]
+    #[schemars(schema_with = "float::option::json_schema")]
     pub max: Option<f64>,
     /// Mean of the non-NaN voxels. `null` when every voxel is NaN. With infinities it is
     /// `"Infinity"` or `"-Infinity"` (one sign present) or `"NaN"` (both present).
     #[serde(with = "float::option")]
+    #[schemars(schema_with = "float::option::json_schema")]
     pub mean: Option<f64>,
     /// Number of voxels in the channel.
     pub voxels: u64,
@@ -116,15 +126,17 @@ pub struct ChannelStatistics {
     /// is `+inf` itself, is counted in that bin). The edges cover the channel's whole range;
     /// bins past the last edge hold zero. Infinite edges are written as JSON `null`.
     #[serde(deserialize_with = "server::edges_with_infinities")]
+    #[schemars(with = "Vec<Option<f64>>")]
     pub histogram_edges: Vec<f64>,
 }
 
 /// A percentile of a channel's values.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Percentile {
     /// Percent, in `[0, 100]`.
     pub percent: f64,
     /// Value at that percentile (an infinity is written as a string, see [`float`]).
     #[serde(with = "float")]
+    #[schemars(schema_with = "float::json_schema")]
     pub value: f64,
 }

@@ -1,17 +1,18 @@
 //! The JSON answers of `brickserver`'s own API (the Zarr keys it serves are the store's own
 //! documents). Each type is described by a JSON Schema in `schemas/json/`.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize};
 
 /// `GET /` and `GET /datasets`: the served datasets.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct DatasetList {
     /// One entry per dataset, in the order given on the command line.
     pub datasets: Vec<DatasetEntry>,
 }
 
 /// One served dataset.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct DatasetEntry {
     /// URL name: the store is served under `/NAME/`.
     pub name: String,
@@ -24,7 +25,7 @@ pub struct DatasetEntry {
 }
 
 /// An axis-aligned box of voxels of one level, `x, y, z` order, `max` exclusive.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 pub struct VoxelBox {
     /// First voxel, `x, y, z`.
     pub min: [u64; 3],
@@ -39,7 +40,7 @@ pub struct VoxelBox {
 /// bricks (for `histogram`) that contains the box, reported in `minmax_box` and
 /// `histogram.box`. It is never narrower than the truth, and exact (`*_exact: true`) when the
 /// box is aligned to that granularity (or ends at the level's edge).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RegionAnswer {
     /// Dataset name.
     pub dataset: String,
@@ -53,10 +54,12 @@ pub struct RegionAnswer {
     /// Smallest non-NaN value in `minmax_box`; `null` when there is none. An infinity is
     /// written as `"Infinity"` or `"-Infinity"` (see [`crate::float`]).
     #[serde(with = "crate::float::option")]
+    #[schemars(schema_with = "crate::float::option::json_schema")]
     pub min: Option<f64>,
     /// Largest non-NaN value in `minmax_box`; `null` when there is none. An infinity is
     /// written as `"Infinity"` or `"-Infinity"` (see [`crate::float`]).
     #[serde(with = "crate::float::option")]
+    #[schemars(schema_with = "crate::float::option::json_schema")]
     pub max: Option<f64>,
     /// The voxels `min` and `max` were taken over: the box widened to whole cells.
     pub minmax_box: VoxelBox,
@@ -68,11 +71,12 @@ pub struct RegionAnswer {
 }
 
 /// The histogram part of a [`RegionAnswer`].
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RegionHistogram {
     /// Bin edges of the channel (as in the region metadata): bin `i` counts values `v` with
     /// `edges[i] <= v < edges[i + 1]`. An infinite edge is written as `null`.
     #[serde(deserialize_with = "edges_with_infinities")]
+    #[schemars(with = "Vec<Option<f64>>")]
     pub edges: Vec<f64>,
     /// Counts per bin.
     pub counts: Vec<u64>,
@@ -86,7 +90,7 @@ pub struct RegionHistogram {
 }
 
 /// The error answer of the API endpoints.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ApiError {
     /// What went wrong, naming the dataset, key or parameter.
     pub error: String,
@@ -94,6 +98,9 @@ pub struct ApiError {
 
 /// Reads ascending bin edges where JSON `null` stands for an infinity (serde_json writes
 /// infinities as `null`): `-inf` first, `+inf` anywhere else.
+///
+/// # Errors
+/// When the value is not a list of numbers and `null`s.
 pub fn edges_with_infinities<'de, D: Deserializer<'de>>(d: D) -> Result<Vec<f64>, D::Error> {
     let raw = Vec::<Option<f64>>::deserialize(d)?;
     Ok(raw

@@ -8,8 +8,11 @@
 //!   one channel, every level and every grid, for a renderer to load once;
 //! - [`BRICKS_MAGIC`] / [`BrickBatchHeader`]: many bricks in one response.
 
+use schemars::JsonSchema;
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+
+use crate::SampleType;
 
 /// Magic of a min/max hierarchy document.
 pub const MINMAX_MAGIC: &[u8; 8] = b"RSMINMAX";
@@ -21,13 +24,13 @@ pub const MINMAX_MEDIA_TYPE: &str = "application/x-residency-minmax";
 pub const BRICKS_MEDIA_TYPE: &str = "application/x-residency-bricks";
 
 /// Header of a min/max hierarchy document (`GET /NAME/minmax?channel=C`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct MinMaxHierarchyHeader {
     /// Channel index.
     pub channel: usize,
-    /// Zarr data type name of the values (`uint8`, `uint16`, `int16`, `uint32`, `int32`,
-    /// `float32`).
-    pub data_type: String,
+    /// Sample type of the values, by its Zarr name (`uint8`, `uint16`, `int16`, `uint32`,
+    /// `int32`, `float32`).
+    pub data_type: SampleType,
     /// Voxels added around each cell when its range was taken (see the region metadata).
     pub halo: u64,
     /// Levels, finest first.
@@ -35,7 +38,7 @@ pub struct MinMaxHierarchyHeader {
 }
 
 /// The grids of one level in a min/max hierarchy document.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct MinMaxLevelBlock {
     /// Level index.
     pub level: usize,
@@ -47,7 +50,7 @@ pub struct MinMaxLevelBlock {
 
 /// Where one grid's values lie in the payload: `gz·gy·gx` minima, then as many maxima, each a
 /// sample of the header's data type, `z`-major. NaN marks a cell without a non-NaN voxel.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct MinMaxGridBlock {
     /// Cell edge in voxels of the level, `z, y, x`.
     pub cell_shape: [u64; 3],
@@ -60,7 +63,7 @@ pub struct MinMaxGridBlock {
 }
 
 /// How a batch carries brick bytes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum BrickEncoding {
     /// The brick's encoded bytes exactly as stored: the chunk file, or the inner chunk's bytes
@@ -72,7 +75,7 @@ pub enum BrickEncoding {
 }
 
 /// What a batch holds for one requested brick.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum BrickStatus {
     /// Bytes follow at `offset`.
@@ -84,12 +87,12 @@ pub enum BrickStatus {
 }
 
 /// Header of a brick batch document (`GET /NAME/bricks?b=...`).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct BrickBatchHeader {
     /// How bytes are carried.
     pub encoding: BrickEncoding,
-    /// Zarr data type name of the samples.
-    pub data_type: String,
+    /// Sample type, by its Zarr name.
+    pub data_type: SampleType,
     /// Brick shape `z, y, x`.
     pub brick_shape: [u64; 3],
     /// One entry per requested brick, in request order.
@@ -97,7 +100,7 @@ pub struct BrickBatchHeader {
 }
 
 /// One brick of a batch.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct BrickEntry {
     /// Pyramid level.
     pub level: u32,
@@ -112,89 +115,71 @@ pub struct BrickEntry {
     /// Payload bytes (0 unless `ok`).
     pub length: u64,
     /// Why the brick could not be read (only with `error`).
+    // Left out, never `null`, when there is none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "String")]
     pub error: Option<String>,
 }
 
 /// A malformed framed document.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct WireError(pub String);
-
-impl std::fmt::Display for WireError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum WireError {
+    /// The document does not start with the expected magic.
+    #[error("not a {} document (bad magic)", String::from_utf8_lossy(.expected))]
+    BadMagic {
+        /// The magic looked for.
+        expected: [u8; 8],
+    },
+    /// The header length points past the end of the document.
+    #[error("header of {length} bytes runs past the document")]
+    HeaderPastEnd {
+        /// Header length the document claims.
+        length: usize,
+    },
+    /// The header is not the expected JSON.
+    #[error("bad header: {reason}")]
+    BadHeader {
+        /// What the JSON parser said.
+        reason: String,
+    },
 }
 
-impl std::error::Error for WireError {}
-
 /// Frames `header` and `payload` behind `magic`.
+///
+/// # Panics
+/// If the header's JSON is 4 GiB or longer.
 pub fn encode_framed(magic: &[u8; 8], header: &impl Serialize, payload: &[u8]) -> Vec<u8> {
     let json = serde_json::to_vec(header).expect("headers always serialize");
+    let length = u32::try_from(json.len()).expect("a header under 4 GiB");
     let mut out = Vec::with_capacity(12 + json.len() + payload.len());
     out.extend_from_slice(magic);
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(&length.to_le_bytes());
     out.extend_from_slice(&json);
     out.extend_from_slice(payload);
     out
 }
 
 /// Splits a framed document into its header and payload, checking the magic.
+///
+/// # Errors
+/// [`WireError`] when the magic differs, the header runs past the document, or the header is
+/// not a valid `H`.
 pub fn decode_framed<'a, H: DeserializeOwned>(
     magic: &[u8; 8],
     bytes: &'a [u8],
 ) -> Result<(H, &'a [u8]), WireError> {
     if bytes.len() < 12 || &bytes[..8] != magic {
-        return Err(WireError(format!(
-            "not a {} document (bad magic)",
-            String::from_utf8_lossy(magic)
-        )));
+        return Err(WireError::BadMagic { expected: *magic });
     }
-    let len = u32::from_le_bytes(bytes[8..12].try_into().expect("4 bytes")) as usize;
+    let length = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
     let end = 12usize
-        .checked_add(len)
+        .checked_add(length)
         .filter(|&e| e <= bytes.len())
-        .ok_or_else(|| WireError(format!("header of {len} bytes runs past the document")))?;
-    let header = serde_json::from_slice(&bytes[12..end])
-        .map_err(|e| WireError(format!("bad header: {e}")))?;
+        .ok_or(WireError::HeaderPastEnd { length })?;
+    let header = serde_json::from_slice(&bytes[12..end]).map_err(|e| WireError::BadHeader {
+        reason: e.to_string(),
+    })?;
     Ok((header, &bytes[end..]))
-}
-
-/// Bytes per sample of a Zarr data type name, or `None` for one not served.
-pub fn sample_bytes(data_type: &str) -> Option<usize> {
-    match data_type {
-        "uint8" => Some(1),
-        "uint16" | "int16" => Some(2),
-        "uint32" | "int32" | "float32" => Some(4),
-        _ => None,
-    }
-}
-
-/// Little-endian samples of `data_type` as `f64` (exact for every type served).
-pub fn samples_to_f64(data_type: &str, bytes: &[u8]) -> Result<Vec<f64>, WireError> {
-    let size = sample_bytes(data_type)
-        .ok_or_else(|| WireError(format!("unsupported data type '{data_type}'")))?;
-    if !bytes.len().is_multiple_of(size) {
-        return Err(WireError(format!(
-            "{} bytes is not a whole number of {data_type} samples",
-            bytes.len()
-        )));
-    }
-    let c = bytes.chunks_exact(size);
-    Ok(match data_type {
-        "uint8" => bytes.iter().map(|&v| v as f64).collect(),
-        "uint16" => c.map(|b| u16::from_le_bytes([b[0], b[1]]) as f64).collect(),
-        "int16" => c.map(|b| i16::from_le_bytes([b[0], b[1]]) as f64).collect(),
-        "uint32" => c
-            .map(|b| u32::from_le_bytes(b.try_into().expect("4")) as f64)
-            .collect(),
-        "int32" => c
-            .map(|b| i32::from_le_bytes(b.try_into().expect("4")) as f64)
-            .collect(),
-        _ => c
-            .map(|b| f32::from_le_bytes(b.try_into().expect("4")) as f64)
-            .collect(),
-    })
 }
 
 #[cfg(test)]
@@ -205,7 +190,7 @@ mod tests {
     fn framing_round_trips_and_rejects_garbage() {
         let header = BrickBatchHeader {
             encoding: BrickEncoding::Raw,
-            data_type: "uint16".into(),
+            data_type: SampleType::U16,
             brick_shape: [2, 2, 2],
             bricks: vec![BrickEntry {
                 level: 0,
@@ -222,29 +207,23 @@ mod tests {
         assert_eq!((back, payload), (header, &[1u8, 2, 3][..]));
         assert_eq!(
             decode_framed::<BrickBatchHeader>(MINMAX_MAGIC, &doc).unwrap_err(),
-            WireError("not a RSMINMAX document (bad magic)".into())
+            WireError::BadMagic {
+                expected: *MINMAX_MAGIC
+            }
         );
         let mut cut = doc.clone();
         cut.truncate(20);
-        assert!(
+        assert_eq!(
             decode_framed::<BrickBatchHeader>(BRICKS_MAGIC, &cut)
                 .unwrap_err()
-                .0
-                .contains("runs past the document")
-        );
-    }
-
-    #[test]
-    fn samples_decode_exactly() {
-        assert_eq!(
-            samples_to_f64("int16", &(-3i16).to_le_bytes()).unwrap(),
-            [-3.0]
+                .to_string(),
+            format!("header of {} bytes runs past the document", doc.len() - 15)
         );
         assert_eq!(
-            samples_to_f64("float32", &f32::MAX.to_le_bytes()).unwrap(),
-            [f32::MAX as f64]
+            decode_framed::<BrickBatchHeader>(MINMAX_MAGIC, b"RSBRICKS")
+                .unwrap_err()
+                .to_string(),
+            "not a RSMINMAX document (bad magic)"
         );
-        assert!(samples_to_f64("uint16", &[1, 2, 3]).is_err());
-        assert!(samples_to_f64("float64", &[0; 8]).is_err());
     }
 }

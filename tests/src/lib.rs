@@ -8,9 +8,10 @@ use std::process::{Command, Output};
 
 /// Path of a workspace binary in `target/release`, or the folder in `RESIDENCY_BIN`.
 pub fn binary(name: &str) -> PathBuf {
-    let dir = std::env::var_os("RESIDENCY_BIN")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/release"));
+    let dir = std::env::var_os("RESIDENCY_BIN").map_or_else(
+        || PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../target/release"),
+        PathBuf::from,
+    );
     let path = dir.join(name);
     assert!(
         path.exists(),

@@ -13,7 +13,10 @@
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
 //! - [`bench`]: the renderer benchmark suite (`viewer bench`).
 
-#![warn(missing_docs)]
+// Fallible functions here return `anyhow` errors whose messages name the file, key or brick at
+// fault; they get `# Errors` sections as they move to typed errors (the format model, wire
+// decoding and the server's parsers already have both).
+#![allow(clippy::missing_errors_doc)]
 
 pub mod bench;
 pub mod cli;

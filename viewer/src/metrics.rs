@@ -107,7 +107,9 @@ pub fn gaussian_window() -> [f64; SSIM_WINDOW] {
         (-((i as f64 - r).powi(2)) / (2.0 * SSIM_SIGMA * SSIM_SIGMA)).exp()
     });
     let sum: f64 = w.iter().sum();
-    w.iter_mut().for_each(|v| *v /= sum);
+    for v in &mut w {
+        *v /= sum;
+    }
     w
 }
 

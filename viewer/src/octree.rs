@@ -130,7 +130,7 @@ impl OctreeGeometry {
                     level.factor
                 );
             }
-            level_shift.push(f.map(|f| f.trailing_zeros()));
+            level_shift.push(f.map(u64::trailing_zeros));
         }
         let leaf_shift = volume_voxels.map(|n| {
             let e = 64 - (n.max(1) - 1).leading_zeros() as i32; // ceil(log2 n)
@@ -157,7 +157,7 @@ impl OctreeGeometry {
             .unwrap_or(1)
             .max(1);
         let e = 64 - (longest - 1).leading_zeros();
-        let l = 63 - leaf_voxels.max(1).leading_zeros();
+        let l = leaf_voxels.max(1).ilog2();
         e.saturating_sub(l).min(max_depth)
     }
 
@@ -265,16 +265,15 @@ impl ResidencyOctree {
             dirty: Some(0..nodes),
             unknown_ranges: info.minmax.is_none(),
         };
-        match &info.minmax {
-            Some(grids) => tree.seed_ranges(info, grids)?,
-            None => {
-                tracing::warn!(
-                    "{}: no region metadata; octree value ranges are unknown, so no empty space \
-                     is skipped",
-                    info.name
-                );
-                tree.seed_unknown();
-            }
+        if let Some(grids) = &info.minmax {
+            tree.seed_ranges(info, grids)?;
+        } else {
+            tracing::warn!(
+                "{}: no region metadata; octree value ranges are unknown, so no empty space \
+                 is skipped",
+                info.name
+            );
+            tree.seed_unknown();
         }
         tree.propagate_ranges();
         Ok(tree)

@@ -343,7 +343,7 @@ mod tests {
                     name: "memory".into(),
                     sample_type: SampleType::F32,
                     channels: vec!["c0".into()],
-                    display: vec![Default::default()],
+                    display: vec![crate::source::ChannelDisplay::default()],
                     voxel_size: [1.0; 3],
                     brick_shape: brick,
                     levels: vec![LevelInfo {

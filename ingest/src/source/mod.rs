@@ -17,7 +17,7 @@ pub use self::raw::{RawOptions, RawSource, parse_raw_name};
 pub use self::slices::SliceFolderSource;
 pub use self::tiff::TiffSource;
 
-use crate::sample_format::{Sample, SampleFormat};
+use crate::sample_format::{Sample, SampleType};
 use crate::with_sample_type;
 
 /// What a source holds, known before any plane is read.
@@ -30,7 +30,7 @@ pub struct SourceInfo {
     /// Number of channels in this source.
     pub channels: usize,
     /// Sample format of every channel.
-    pub format: SampleFormat,
+    pub format: SampleType,
     /// Physical voxel size `z, y, x`, when the file's metadata gives it.
     pub voxel_size: Option<[f64; 3]>,
     /// Physical unit of `voxel_size` (an OME-Zarr / UDUNITS name such as `micrometer`).
@@ -76,11 +76,11 @@ impl PlaneOut<'_> {
 
     /// Fills the destination from packed samples of `format` in `bytes`: sample `sample` of
     /// every pixel of `samples` interleaved samples. Values are converted exactly (the
-    /// converter only asks for promotions that [`SampleFormat::promote`] allows).
+    /// converter only asks for promotions that [`SampleType::promote`] allows).
     pub fn fill_from_bytes(
         &mut self,
         bytes: &[u8],
-        format: SampleFormat,
+        format: SampleType,
         big_endian: bool,
         samples: usize,
         sample: usize,
@@ -144,11 +144,13 @@ pub fn open_input(input: &str, raw: &RawOptions) -> Result<Box<dyn VolumeSource>
     if path.is_dir() {
         return Ok(Box::new(SliceFolderSource::from_dir(path)?));
     }
-    let lower = input.to_ascii_lowercase();
-    if lower.ends_with(".tif") || lower.ends_with(".tiff") || lower.ends_with(".btf") {
+    let extension = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(extension.as_deref(), Some("tif" | "tiff" | "btf")) {
         return Ok(Box::new(TiffSource::open(path)?));
     }
-    if raw.is_given() || lower.ends_with(".raw") || parse_raw_name(path).is_some() {
+    if raw.is_given() || extension.as_deref() == Some("raw") || parse_raw_name(path).is_some() {
         return Ok(Box::new(RawSource::open(path, raw)?));
     }
     // Fall back on content: TIFF files start with II* / MM*.

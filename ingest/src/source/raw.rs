@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{Context, Result, bail};
 
 use super::{PlaneOut, SourceInfo, VolumeSource};
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// Layout options for raw inputs (`--dims`, `--dtype`, `--endian`, `--header-bytes`).
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -15,7 +15,7 @@ pub struct RawOptions {
     /// Extent `x, y, z` in voxels.
     pub dims: Option<[u64; 3]>,
     /// Sample format.
-    pub format: Option<SampleFormat>,
+    pub format: Option<SampleType>,
     /// Whether samples are big-endian (default little-endian).
     pub big_endian: bool,
     /// Bytes to skip at the start of the file.
@@ -31,10 +31,10 @@ impl RawOptions {
 
 /// Recognises the common `name_XxYxZ_dtype.raw` naming convention
 /// (e.g. `kingsnake_1024x1024x795_uint8.raw`) and returns `([x, y, z], format)`.
-pub fn parse_raw_name(path: &Path) -> Option<([u64; 3], SampleFormat)> {
+pub fn parse_raw_name(path: &Path) -> Option<([u64; 3], SampleType)> {
     let stem = path.file_stem()?.to_str()?;
     let mut parts = stem.rsplit('_');
-    let format = SampleFormat::parse(parts.next()?).ok()?;
+    let format = parts.next()?.parse::<SampleType>().ok()?;
     let dims: Vec<u64> = parts
         .next()?
         .split('x')
@@ -73,6 +73,9 @@ impl RawSource {
             .with_context(|| format!("{shown}: cannot stat"))?
             .len();
         let [x, y, z] = dims;
+        if dims.contains(&0) {
+            bail!("{shown}: --dims {x},{y},{z} has an empty axis; each needs at least one voxel");
+        }
         let Some(expected) = [x, y, z]
             .iter()
             .try_fold(format.bytes() as u64, |acc, &d| acc.checked_mul(d))
@@ -134,13 +137,36 @@ mod tests {
     fn recognises_the_naming_convention() {
         assert_eq!(
             parse_raw_name(Path::new("/d/kingsnake_1024x1024x795_uint8.raw")),
-            Some(([1024, 1024, 795], SampleFormat::U8))
+            Some(([1024, 1024, 795], SampleType::U8))
         );
         assert_eq!(
             parse_raw_name(Path::new("rayleigh_taylor_256x256x256_float32.raw")),
-            Some(([256, 256, 256], SampleFormat::F32))
+            Some(([256, 256, 256], SampleType::F32))
         );
         assert_eq!(parse_raw_name(Path::new("scan.raw")), None);
         assert_eq!(parse_raw_name(Path::new("a_10x10_uint8.raw")), None);
+    }
+
+    /// Found by fuzzing (tests/fuzz, target raw_name): an empty file matched `--dims` with a
+    /// zero axis (0 bytes), so the source was opened with 1.8e19 planes to read.
+    #[test]
+    fn an_empty_axis_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("empty.raw");
+        std::fs::write(&path, b"").unwrap();
+        let options = RawOptions {
+            dims: Some([128017563084139, 0, 18446742974197923840]),
+            format: Some(SampleType::U8),
+            ..RawOptions::default()
+        };
+        let error = RawSource::open(&path, &options).err().unwrap().to_string();
+        assert_eq!(
+            error,
+            format!(
+                "{}: --dims 128017563084139,0,18446742974197923840 has an empty axis; each needs \
+                 at least one voxel",
+                path.display()
+            )
+        );
     }
 }

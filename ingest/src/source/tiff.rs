@@ -12,7 +12,7 @@ use tiff::tags::Tag;
 use super::tiff_claims::PageClaims;
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
 use super::{PlaneOut, SourceInfo, VolumeSource};
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// A TIFF file holding a z-stack of one or more channels.
 pub struct TiffSource {
@@ -58,7 +58,7 @@ pub(super) fn open_decoder(path: &Path) -> Result<(Decoder<BufReader<File>>, Tif
         .len();
     let memory = crate::memory::physical_memory();
     let mut limits = Limits::unlimited();
-    let per_value = std::mem::size_of::<tiff::decoder::ifd::Value>() as u64;
+    let per_value = size_of::<tiff::decoder::ifd::Value>() as u64;
     let most = len
         .saturating_mul(per_value)
         .min(memory.map_or(u64::MAX, |m| m / 2));
@@ -77,7 +77,7 @@ pub(super) fn check_page(
     path: &Path,
     page: u64,
     file: TiffFile,
-    format: SampleFormat,
+    format: SampleType,
     samples: usize,
 ) -> Result<()> {
     PageClaims::read(decoder, format, samples)
@@ -95,7 +95,7 @@ pub(super) fn check_page(
 pub(super) fn page_format(
     decoder: &mut Decoder<BufReader<File>>,
     path: &Path,
-) -> Result<(SampleFormat, usize)> {
+) -> Result<(SampleType, usize)> {
     let color = decoder
         .colortype()
         .with_context(|| format!("{}: cannot read the pixel layout", path.display()))?;
@@ -119,12 +119,12 @@ pub(super) fn page_format(
         .flatten()
         .unwrap_or(1);
     let format = match (kind, bits) {
-        (1, 8) => SampleFormat::U8,
-        (1, 16) => SampleFormat::U16,
-        (2, 16) => SampleFormat::I16,
-        (1, 32) => SampleFormat::U32,
-        (2, 32) => SampleFormat::I32,
-        (3, 32) => SampleFormat::F32,
+        (1, 8) => SampleType::U8,
+        (1, 16) => SampleType::U16,
+        (2, 16) => SampleType::I16,
+        (1, 32) => SampleType::U32,
+        (2, 32) => SampleType::I32,
+        (3, 32) => SampleType::F32,
         (k, b) => {
             let kind = match k {
                 1 => "unsigned integer",
@@ -148,7 +148,7 @@ pub(super) fn decode_page(
     path: &Path,
     page: u64,
     file: TiffFile,
-    format: SampleFormat,
+    format: SampleType,
     samples: usize,
     buffer: &mut Vec<u8>,
 ) -> Result<()> {
@@ -248,8 +248,14 @@ impl TiffSource {
                 layout.time_points
             );
         }
-        let needed = layout.channel_planes as u64 * layout.depth;
-        if pages < needed {
+        // Found by fuzzing: ImageJ `slices=0` passed the page count with any channel count,
+        // whose product with the samples per pixel then overflowed.
+        if layout.depth == 0 {
+            bail!("{shown}: metadata describes 0 z planes (corrupt metadata)");
+        }
+        // In u128: metadata sizes may multiply past u64.
+        let needed = layout.channel_planes as u128 * u128::from(layout.depth);
+        if u128::from(pages) < needed {
             bail!(
                 "{shown}: metadata describes {needed} pages ({} channels x {} z) but the file has only {pages} (truncated?)",
                 layout.channel_planes,

@@ -57,7 +57,12 @@ pub fn parse_imagej(description: &str) -> Option<StackLayout> {
     let channels = num("channels").unwrap_or(1).max(1);
     let frames = num("frames").unwrap_or(1).max(1);
     let images = num("images").unwrap_or(1);
-    let slices = num("slices").unwrap_or((images / (channels * frames)).max(1));
+    // Found by fuzzing: `channels * frames` overflowed (and, wrapped to 0, divided by zero).
+    let slices = num("slices").unwrap_or_else(|| {
+        channels
+            .checked_mul(frames)
+            .map_or(1, |planes| (images / planes).max(1))
+    });
     Some(StackLayout {
         channel_planes: channels as usize,
         depth: slices,
@@ -103,18 +108,22 @@ pub fn parse_ome_xml(xml: &str) -> Result<StackLayout> {
         bail!("OME-XML DimensionOrder '{order}' is not one of XY[ZCT permutation]");
     }
     for axis in order[2..].chars() {
-        match axis {
+        let size = match axis {
             'Z' => {
                 z_stride = stride;
-                stride *= z;
+                z
             }
             'C' => {
                 c_stride = stride;
-                stride *= channel_planes;
+                channel_planes
             }
-            'T' => stride *= t,
+            'T' => t,
             _ => bail!("OME-XML DimensionOrder '{order}' has an unknown axis '{axis}'"),
-        }
+        };
+        // The product of the sizes may overflow (as ImageJ's did under fuzzing).
+        stride = stride.checked_mul(size).with_context(|| {
+            format!("OME-XML Pixels SizeZ {z} x SizeC {c} x SizeT {t} is more than 2^64 planes")
+        })?;
     }
     let physical = |axis: &str| -> Option<f64> {
         pixels
@@ -176,5 +185,28 @@ mod tests {
         let b = parse_ome_xml(&xml("XYCZT")).unwrap();
         assert_eq!((b.z_stride, b.channel_stride), (2, 1));
         assert!(parse_ome_xml(&xml("XYQZT")).is_err());
+    }
+
+    /// Found by fuzzing (tests/fuzz, target tiff_structured): `channels * frames` overflowed
+    /// (a debug panic; wrapped to 0 in release, then a division by zero).
+    #[test]
+    fn imagej_sizes_beyond_u64_do_not_overflow() {
+        let l = parse_imagej("ImageJ=1.54f\nimages=7\nchannels=4294967296\nframes=4294967296\n")
+            .unwrap();
+        assert_eq!(
+            (l.channel_planes, l.depth, l.time_points),
+            (1 << 32, 1, 1 << 32)
+        );
+    }
+
+    /// The overflow fuzzing found in ImageJ sizes, in OME sizes: the page strides are their
+    /// product.
+    #[test]
+    fn ome_sizes_beyond_u64_are_refused() {
+        let xml = r#"<OME><Image><Pixels DimensionOrder="XYZCT" SizeZ="4294967296" SizeC="1" SizeT="4294967296"/></Image></OME>"#;
+        assert_eq!(
+            format!("{:#}", parse_ome_xml(xml).unwrap_err()),
+            "OME-XML Pixels SizeZ 4294967296 x SizeC 1 x SizeT 4294967296 is more than 2^64 planes"
+        );
     }
 }

@@ -18,7 +18,7 @@
 
 use super::noise::{fbm2, hash, smoothstep, unit, value_noise3};
 use super::ome_tiff::{ChannelSpec, PlaneData, Scene};
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// Voxel size of the sample in micrometres, `z, y, x`.
 pub const CYCIF_VOXEL_SIZE: [f64; 3] = [1.0, 0.325, 0.325];
@@ -58,7 +58,7 @@ pub(crate) enum CellType {
     Macrophage,
 }
 
-use CellType::*;
+use CellType::{B, CytotoxicT, Endothelial, Epithelial, HelperT, Macrophage, Stromal};
 
 /// Where in the cell a marker binds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -71,7 +71,7 @@ pub(crate) enum Compartment {
     Cytoplasm,
 }
 
-use Compartment::*;
+use Compartment::{Cytoplasm, Membrane, Nucleus};
 
 /// One antibody of the panel.
 #[derive(Clone, Debug, PartialEq)]
@@ -394,7 +394,7 @@ impl Scene for CycifScene {
             .map(|(k, m)| ChannelSpec {
                 file_stem: format!("cycif-{k:02}-{}", m.name),
                 name: m.name.clone(),
-                format: SampleFormat::U16,
+                format: SampleType::U16,
             })
             .collect()
     }

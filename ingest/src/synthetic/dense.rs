@@ -18,7 +18,7 @@ use std::f64::consts::TAU;
 
 use super::noise::{NoisePlane, smoothstep};
 use super::ome_tiff::{ChannelSpec, PlaneData, Scene};
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// Densities are clamped to this range, so every channel stays positive.
 pub(crate) const DENSITY_RANGE: (f64, f64) = (0.05, 1.2);
@@ -115,15 +115,12 @@ impl Scene for DenseScene {
     }
 
     fn channels(&self) -> Vec<ChannelSpec> {
-        ChannelSpec::transfer_channels(
-            "dense",
-            SampleFormat::F32,
-            self.channels,
-            |k| match transfer(k) {
-                (kind, 0) => kind.to_string(),
-                (kind, r) => format!("{kind}{}", r + 1),
-            },
-        )
+        ChannelSpec::transfer_channels("dense", SampleType::F32, self.channels, |k| match transfer(
+            k,
+        ) {
+            (kind, 0) => kind.to_string(),
+            (kind, r) => format!("{kind}{}", r + 1),
+        })
     }
 
     fn render_plane(&self, z: u64) -> Vec<PlaneData> {

@@ -6,7 +6,7 @@
 
 use super::noise::{hash, unit};
 use super::ome_tiff::{ChannelSpec, PlaneData, Scene};
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// Voxel size of the sample in micrometres, `z, y, x`.
 pub const SAMPLE_VOXEL_SIZE: [f64; 3] = [2.0, 0.5, 0.5];
@@ -66,7 +66,7 @@ impl SampleScene {
                     std::array::from_fn(|k| (0.3 + 0.4 * unit(hash(h ^ k as u64))) * extent[k]);
                 let dir: [f64; 3] = std::array::from_fn(|k| unit(hash(h ^ (10 + k as u64))) - 0.5);
                 let len = (dir.iter().map(|d| d * d).sum::<f64>()).sqrt().max(1e-6);
-                let reach = 15.0 + 40.0 * unit(hash(h ^ 99));
+                let reach = 15.0 + 40.0 * unit(hash(h ^ 0x63));
                 Filament {
                     a,
                     b: std::array::from_fn(|k| a[k] + dir[k] / len * reach),
@@ -189,7 +189,7 @@ impl Scene for SampleScene {
     }
 
     fn channels(&self) -> Vec<ChannelSpec> {
-        let formats = [SampleFormat::U16, SampleFormat::U8, SampleFormat::U8];
+        let formats = [SampleType::U16, SampleType::U8, SampleType::U8];
         SAMPLE_CHANNELS
             .iter()
             .zip(formats)

@@ -76,8 +76,7 @@ impl SampleKind {
     pub fn default_shape(self) -> [u64; 3] {
         match self {
             Self::Fluorescence => [96, 256, 256],
-            Self::Sparse => [256, 256, 256],
-            Self::Dense => [256, 256, 256],
+            Self::Sparse | Self::Dense => [256, 256, 256],
             Self::Cycif => [24, 256, 256],
         }
     }

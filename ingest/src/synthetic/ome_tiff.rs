@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use tiff::encoder::{TiffEncoder, TiffKindBig, colortype};
 use tiff::tags::Tag;
 
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// One z-plane (`y, x` in C order) of one channel, in the channel's sample type.
 pub(crate) enum PlaneData {
@@ -28,11 +28,11 @@ pub(crate) enum PlaneData {
 }
 
 impl PlaneData {
-    fn format(&self) -> SampleFormat {
+    fn format(&self) -> SampleType {
         match self {
-            Self::U8(_) => SampleFormat::U8,
-            Self::U16(_) => SampleFormat::U16,
-            Self::F32(_) => SampleFormat::F32,
+            Self::U8(_) => SampleType::U8,
+            Self::U16(_) => SampleType::U16,
+            Self::F32(_) => SampleType::F32,
         }
     }
 }
@@ -45,7 +45,7 @@ pub(crate) struct ChannelSpec {
     /// Channel (and image) name in the OME-XML.
     pub name: String,
     /// Sample type of every plane.
-    pub format: SampleFormat,
+    pub format: SampleType,
 }
 
 impl ChannelSpec {
@@ -54,7 +54,7 @@ impl ChannelSpec {
     /// `name(k)` for channel `k ≥ 1`, each in `STEM-KK-NAME.ome.tif`.
     pub(crate) fn transfer_channels(
         stem: &str,
-        format: SampleFormat,
+        format: SampleType,
         count: usize,
         name: impl Fn(usize) -> String,
     ) -> Vec<Self> {
@@ -95,10 +95,10 @@ pub(crate) trait Scene: Sync {
 }
 
 /// OME data type name of a sample format.
-fn ome_type(format: SampleFormat) -> &'static str {
+fn ome_type(format: SampleType) -> &'static str {
     match format {
-        SampleFormat::F32 => "float",
-        other => other.name(),
+        SampleType::F32 => "float",
+        other => other.zarr_name(),
     }
 }
 
@@ -232,7 +232,7 @@ mod tests {
             [3, 4, 5],
             [1.0, 0.325, 0.325],
             "dapi",
-            ome_type(SampleFormat::F32),
+            ome_type(SampleType::F32),
         );
         assert!(xml.contains(r#"Name="dapi""#), "{xml}");
         assert!(

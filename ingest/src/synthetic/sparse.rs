@@ -18,7 +18,7 @@
 
 use super::noise::{fbm3, hash, segment_distance, smoothstep, unit};
 use super::ome_tiff::{ChannelSpec, PlaneData, Scene};
-use crate::sample_format::SampleFormat;
+use crate::sample_format::SampleType;
 
 /// Air: the scanner's noise floor, `1..AIR_MAX` (never 0, so no brick is all fill value).
 pub(crate) const AIR_MAX: u16 = 60;
@@ -295,7 +295,7 @@ impl Scene for SparseScene {
     }
 
     fn channels(&self) -> Vec<ChannelSpec> {
-        ChannelSpec::transfer_channels("sparse", SampleFormat::U16, self.channels, |k| {
+        ChannelSpec::transfer_channels("sparse", SampleType::U16, self.channels, |k| {
             format!("above{}", window_threshold(k, self.channels))
         })
     }

@@ -33,7 +33,7 @@ use crate::metrics;
 use crate::octree::OctreeGeometry;
 use crate::reference::{self, ReferenceOptions};
 use crate::scene::{Camera, Scene};
-use crate::source::{BrickSource, VolumeInfo};
+use crate::source::{BrickSource, SampleType, VolumeInfo};
 
 /// Format tag of a results file.
 pub const FORMAT: &str = "residency-render-bench/1";
@@ -75,7 +75,7 @@ impl DeviceInfo {
                 .trim()
                 .to_string(),
             cpu,
-            cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            cores: std::thread::available_parallelism().map_or(1, std::num::NonZero::get),
             timestamps: gpu.timestamps,
         }
     }
@@ -90,8 +90,8 @@ pub struct DatasetInfo {
     pub kind: String,
     /// Dataset name from the store.
     pub name: String,
-    /// Stored sample format (Zarr name).
-    pub sample_type: String,
+    /// Stored sample format, serialized as its Zarr v3 name (`uint16`, …).
+    pub sample_type: SampleType,
     /// Level-0 shape `z, y, x`.
     pub shape: [u64; 3],
     /// Brick shape `z, y, x`.
@@ -112,7 +112,7 @@ impl DatasetInfo {
             label: label.map_or_else(|| info.name.clone(), str::to_string),
             kind: kind.to_string(),
             name: info.name.clone(),
-            sample_type: info.sample_type.zarr_name().to_string(),
+            sample_type: info.sample_type,
             shape: info.levels[0].shape,
             brick_shape: info.brick_shape,
             levels: info.levels.len(),
@@ -208,11 +208,55 @@ pub struct ViewRecord {
     pub max_abs_error: f64,
 }
 
+/// A parameter a sweep varies, named in results files as `default`, `step`, `lod_bias`,
+/// `cache_fraction` or `leaf_voxels`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SweptParameter {
+    /// None: the run with the default options (value 0).
+    Default,
+    /// The step factor.
+    Step,
+    /// The LOD bias.
+    LodBias,
+    /// The cache budget, as a fraction of the default run's working set.
+    CacheFraction,
+    /// The octree leaf target, level-0 voxels.
+    LeafVoxels,
+}
+
+impl SweptParameter {
+    /// The parameters actually swept (all but [`Self::Default`]), in the order a sweep runs.
+    pub const SWEPT: [Self; 4] = [
+        Self::Step,
+        Self::LodBias,
+        Self::CacheFraction,
+        Self::LeafVoxels,
+    ];
+
+    /// The name in results files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Default => "default",
+            Self::Step => "step",
+            Self::LodBias => "lod_bias",
+            Self::CacheFraction => "cache_fraction",
+            Self::LeafVoxels => "leaf_voxels",
+        }
+    }
+}
+
+impl std::fmt::Display for SweptParameter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// A swept parameter and its value.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SweepParam {
-    /// `step`, `lod_bias`, `cache_fraction` or `leaf_voxels` (`default` for the defaults).
-    pub name: String,
+    /// The parameter ([`SweptParameter::Default`] for the defaults).
+    pub name: SweptParameter,
     /// The value.
     pub value: f64,
 }
@@ -220,12 +264,13 @@ pub struct SweepParam {
 /// One configuration measured over the whole orbit.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct RunRecord {
-    /// `table1`, `sweep` or `scaling`.
-    pub experiment: String,
+    /// [`Experiment::Table1`], [`Experiment::Sweep`] or [`Experiment::Scaling`].
+    pub experiment: Experiment,
     /// Short label (`residency`, `step 0.25`, …).
     pub label: String,
-    /// Traversal method (`residency`, `page-table`, `octree`).
-    pub method: String,
+    /// Traversal method, serialized as its name (`residency`, `page-table`, `octree`).
+    #[serde(deserialize_with = "method_from_name")]
+    pub method: Method,
     /// Rendered channels.
     pub channels: usize,
     /// The swept parameter, for sweep runs.
@@ -315,15 +360,17 @@ pub struct BenchResults {
     /// Settings.
     pub settings: Settings,
     /// Experiments run, in order.
-    pub experiments: Vec<String>,
+    pub experiments: Vec<Experiment>,
     /// Runs of `table1`, `sweep` and `scaling`.
     pub runs: Vec<RunRecord>,
     /// Views of `skipped`.
     pub skipped: Vec<SkippedRecord>,
 }
 
-/// An experiment of `viewer bench run`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+/// An experiment of `viewer bench run`, named `table1`, `sweep`, `skipped` or `scaling` on the
+/// command line and in results files.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
 pub enum Experiment {
     /// Table 1 of the paper: every method, GPU and wall ms per converged frame, resident bytes.
     Table1,
@@ -345,6 +392,25 @@ impl Experiment {
             Self::Scaling => "scaling",
         }
     }
+}
+
+impl std::fmt::Display for Experiment {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Deserializes a [`Method`] from its name ([`Method::name`], as it serializes).
+fn method_from_name<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Method, D::Error> {
+    use clap::ValueEnum;
+    let name = String::deserialize(d)?;
+    Method::value_variants()
+        .iter()
+        .copied()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            serde::de::Error::unknown_variant(&name, &["residency", "page-table", "octree"])
+        })
 }
 
 /// The values a sweep visits.
@@ -525,7 +591,7 @@ impl Bench {
         }
     }
 
-    fn options_record(&self, options: &RenderOptions, renderer: &Renderer) -> OptionsRecord {
+    fn options_record(options: &RenderOptions, renderer: &Renderer) -> OptionsRecord {
         let g = renderer.octree().geometry();
         let longest = (0..3).max_by_key(|&a| g.volume_voxels[a]).unwrap_or(0);
         OptionsRecord {
@@ -602,7 +668,7 @@ impl Bench {
     /// warm after).
     pub fn run(
         &self,
-        experiment: &str,
+        experiment: Experiment,
         label: String,
         options: RenderOptions,
         sweep: Option<SweepParam>,
@@ -611,7 +677,7 @@ impl Bench {
         let mut renderer = Renderer::new(&self.gpu, self.info(), &self.scene, options.clone())
             .with_context(|| format!("{}: {label}", self.info().name))?;
         let fetcher = Fetcher::new(Arc::clone(&self.source), self.plan.workers, 16);
-        let record = self.options_record(&options, &renderer);
+        let record = Self::options_record(&options, &renderer);
         let views = (0..self.cameras.len())
             .map(|k| self.measure_view(&mut renderer, &fetcher, k))
             .collect::<Result<Vec<_>>>()
@@ -629,9 +695,9 @@ impl Bench {
         };
         let is_default = options == defaults;
         Ok(RunRecord {
-            experiment: experiment.to_string(),
+            experiment,
             label,
-            method: options.method.name().to_string(),
+            method: options.method,
             channels: self.scene.channels.iter().filter(|c| c.visible).count(),
             sweep,
             is_default,
@@ -663,24 +729,24 @@ impl Bench {
                     empty_space_skipping: skipping,
                     ..self.base.clone()
                 };
-                self.run("table1", method_label(method, skipping), options, None)
+                self.run(
+                    Experiment::Table1,
+                    method_label(method, skipping),
+                    options,
+                    None,
+                )
             })
             .collect()
     }
 
     /// Time against error: the defaults, then each parameter swept alone.
     pub fn sweep(&self) -> Result<Vec<RunRecord>> {
-        let param = |name: &str, value: f64| {
-            Some(SweepParam {
-                name: name.to_string(),
-                value,
-            })
-        };
+        let param = |name: SweptParameter, value: f64| Some(SweepParam { name, value });
         let default = self.run(
-            "sweep",
+            Experiment::Sweep,
             "defaults".into(),
             self.base.clone(),
-            param("default", 0.0),
+            param(SweptParameter::Default, 0.0),
         )?;
         let working_set = default
             .views
@@ -700,7 +766,12 @@ impl Bench {
                 step_factor: s,
                 ..self.base.clone()
             };
-            runs.push(self.run("sweep", format!("step {s}"), o, param("step", s as f64))?);
+            runs.push(self.run(
+                Experiment::Sweep,
+                format!("step {s}"),
+                o,
+                param(SweptParameter::Step, s as f64),
+            )?);
         }
         for b in sv.lod_biases {
             if b == self.base.lod_bias {
@@ -711,10 +782,10 @@ impl Bench {
                 ..self.base.clone()
             };
             runs.push(self.run(
-                "sweep",
+                Experiment::Sweep,
                 format!("LOD bias {b}"),
                 o,
-                param("lod_bias", b as f64),
+                param(SweptParameter::LodBias, b as f64),
             )?);
         }
         for f in sv.cache_fractions {
@@ -724,10 +795,10 @@ impl Bench {
                 ..self.base.clone()
             };
             runs.push(self.run(
-                "sweep",
+                Experiment::Sweep,
                 format!("cache {f}× working set ({slots} bricks)"),
                 o,
-                param("cache_fraction", f),
+                param(SweptParameter::CacheFraction, f),
             )?);
         }
         let default_depth = OctreeGeometry::depth_for(self.info(), self.base.leaf_voxels, 7);
@@ -742,10 +813,10 @@ impl Bench {
                 ..self.base.clone()
             };
             runs.push(self.run(
-                "sweep",
+                Experiment::Sweep,
                 format!("leaf {l} voxels"),
                 o,
-                param("leaf_voxels", l as f64),
+                param(SweptParameter::LeafVoxels, l as f64),
             )?);
         }
         Ok(runs)
@@ -759,7 +830,7 @@ impl Bench {
     /// Scaling: one residency run with the base options.
     pub fn scaling(&self) -> Result<Vec<RunRecord>> {
         Ok(vec![self.run(
-            "scaling",
+            Experiment::Scaling,
             "residency".into(),
             self.base.clone(),
             None,
@@ -907,12 +978,7 @@ impl Bench {
                 reference_step: self.plan.reference_step,
                 reference_s: self.reference_s,
             },
-            experiments: self
-                .plan
-                .experiments
-                .iter()
-                .map(|e| e.name().to_string())
-                .collect(),
+            experiments: self.plan.experiments.clone(),
             runs,
             skipped,
         })
@@ -934,5 +1000,139 @@ pub fn vary_transfer_functions(scene: &mut Scene) {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::ValueEnum;
+
+    use super::*;
+
+    fn run_record(experiment: Experiment, method: Method, sweep: Option<SweepParam>) -> RunRecord {
+        RunRecord {
+            experiment,
+            label: "label".into(),
+            method,
+            channels: 1,
+            sweep,
+            is_default: false,
+            options: OptionsRecord {
+                step: 0.5,
+                lod_bias: -1.0,
+                cache_bytes: 1 << 20,
+                cache_capacity_bytes: 1 << 20,
+                leaf_voxels: 4096,
+                octree_depth: 3,
+                leaf_edge: 16.0,
+                skipping: true,
+                substitution: true,
+            },
+            converged_views: 0,
+            gpu_ms: None,
+            wall_ms: 1.0,
+            resident_bytes: 0.0,
+            bricks_used: 0.0,
+            cold_bytes_fetched: 0,
+            bytes_fetched: 0,
+            bricks_fetched: 0,
+            samples: 0.0,
+            psnr_db: None,
+            ssim: 1.0,
+            max_abs_error: 0.0,
+            views: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn enums_serialize_as_their_names_on_the_command_line_and_in_results() {
+        for &e in Experiment::value_variants() {
+            let json = serde_json::to_value(e).unwrap();
+            assert_eq!(json, e.name());
+            assert_eq!(serde_json::from_value::<Experiment>(json).unwrap(), e);
+            assert_eq!(e.to_possible_value().unwrap().get_name(), e.name());
+            assert_eq!(e.to_string(), e.name());
+        }
+        let names: Vec<_> = std::iter::once(SweptParameter::Default)
+            .chain(SweptParameter::SWEPT)
+            .map(|p| {
+                let json = serde_json::to_value(p).unwrap();
+                assert_eq!(
+                    serde_json::from_value::<SweptParameter>(json.clone()).unwrap(),
+                    p
+                );
+                assert_eq!(p.to_string(), p.name());
+                json
+            })
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "default",
+                "step",
+                "lod_bias",
+                "cache_fraction",
+                "leaf_voxels"
+            ]
+        );
+        for &m in Method::value_variants() {
+            let r = run_record(Experiment::Table1, m, None);
+            let json = serde_json::to_value(&r).unwrap();
+            assert_eq!(json["method"], m.name());
+            assert_eq!(serde_json::from_value::<RunRecord>(json).unwrap(), r);
+        }
+    }
+
+    #[test]
+    fn a_run_record_keeps_its_json_strings_and_refuses_unknown_names() {
+        let r = run_record(
+            Experiment::Sweep,
+            Method::PageTable,
+            Some(SweepParam {
+                name: SweptParameter::LodBias,
+                value: 0.5,
+            }),
+        );
+        let json = serde_json::to_value(&r).unwrap();
+        assert_eq!(json["experiment"], "sweep");
+        assert_eq!(json["method"], "page-table");
+        assert_eq!(json["sweep"]["name"], "lod_bias");
+        assert_eq!(
+            serde_json::from_value::<RunRecord>(json.clone()).unwrap(),
+            r
+        );
+        for (field, bad) in [("method", "page_table"), ("experiment", "Sweep")] {
+            let mut j = json.clone();
+            j[field] = bad.into();
+            let e = serde_json::from_value::<RunRecord>(j)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(bad), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_sample_type_is_its_zarr_name() {
+        let d = DatasetInfo {
+            label: "l".into(),
+            kind: "sparse".into(),
+            name: "n".into(),
+            sample_type: SampleType::U16,
+            shape: [1, 2, 3],
+            brick_shape: [1, 1, 1],
+            levels: 1,
+            channels: 1,
+            visible_channels: 1,
+            voxels: 6,
+        };
+        let json = serde_json::to_value(&d).unwrap();
+        assert_eq!(json["sample_type"], "uint16");
+        assert_eq!(
+            serde_json::from_value::<DatasetInfo>(json.clone()).unwrap(),
+            d
+        );
+        let mut j = json;
+        j["sample_type"] = "uint64".into();
+        assert!(serde_json::from_value::<DatasetInfo>(j).is_err());
     }
 }

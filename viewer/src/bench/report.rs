@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, ensure};
 
 use super::plots::{self, ScalingSeries, TradeoffPoint};
-use super::{BenchResults, FORMAT, RunRecord, pareto};
+use super::{BenchResults, Experiment, FORMAT, RunRecord, SweptParameter, pareto};
 
 /// Table 1 of the residency-octree paper: ms per frame and GPU memory (GB) per method.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -122,7 +122,7 @@ fn dataset_line(r: &BenchResults) -> String {
         "{} ({} {}, {}×{}×{} voxels z,y,x, bricks {}×{}×{}, {} levels, {} of {} channels rendered)",
         d.label,
         d.kind,
-        d.sample_type,
+        d.sample_type.zarr_name(),
         d.shape[0],
         d.shape[1],
         d.shape[2],
@@ -155,12 +155,12 @@ struct Table1Row<'a> {
 
 fn table1_rows(all: &[BenchResults]) -> Vec<Table1Row<'_>> {
     all.iter()
-        .filter(|r| r.runs.iter().any(|x| x.experiment == "table1"))
+        .filter(|r| r.runs.iter().any(|x| x.experiment == Experiment::Table1))
         .map(|r| {
             let find = |label: &str| {
                 r.runs
                     .iter()
-                    .find(|x| x.experiment == "table1" && x.label == label)
+                    .find(|x| x.experiment == Experiment::Table1 && x.label == label)
             };
             Table1Row {
                 results: r,
@@ -266,13 +266,12 @@ fn table1(out: &mut String, all: &[BenchResults], summary: bool) {
 
 fn short_label(r: &RunRecord) -> String {
     match &r.sweep {
-        Some(p) => match p.name.as_str() {
-            "default" => "default".into(),
-            "step" => format!("s{}", p.value),
-            "lod_bias" => format!("b{}", p.value),
-            "cache_fraction" => format!("c{}", p.value),
-            "leaf_voxels" => format!("l{}", p.value),
-            other => format!("{other}{}", p.value),
+        Some(p) => match p.name {
+            SweptParameter::Default => "default".into(),
+            SweptParameter::Step => format!("s{}", p.value),
+            SweptParameter::LodBias => format!("b{}", p.value),
+            SweptParameter::CacheFraction => format!("c{}", p.value),
+            SweptParameter::LeafVoxels => format!("l{}", p.value),
         },
         None => r.label.clone(),
     }
@@ -286,7 +285,11 @@ fn sweep(
     index: usize,
     written: &mut Written,
 ) -> Result<()> {
-    let runs: Vec<&RunRecord> = r.runs.iter().filter(|x| x.experiment == "sweep").collect();
+    let runs: Vec<&RunRecord> = r
+        .runs
+        .iter()
+        .filter(|x| x.experiment == Experiment::Sweep)
+        .collect();
     if runs.is_empty() {
         return Ok(());
     }
@@ -375,7 +378,7 @@ fn sweep(
             if on { "on" } else { "OFF" },
             runs.len()
         )];
-        for param in ["step", "lod_bias", "cache_fraction", "leaf_voxels"] {
+        for param in SweptParameter::SWEPT {
             let idx: Vec<usize> = (0..runs.len())
                 .filter(|&i| i == d || runs[i].sweep.as_ref().is_some_and(|p| p.name == param))
                 .collect();
@@ -548,7 +551,7 @@ fn scaling(
         .flat_map(|r| {
             r.runs
                 .iter()
-                .filter(|x| x.experiment == "scaling")
+                .filter(|x| x.experiment == Experiment::Scaling)
                 .map(move |x| (r, x))
         })
         .collect();
@@ -665,7 +668,11 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
             out,
             "- {}: experiments {}; {}×{} pixels, {} views (azimuth from {}° in equal steps, elevation {}°, {} diagonals), {} timed frames per view, reference {:.1} s",
             dataset_line(r),
-            r.experiments.join(", "),
+            r.experiments
+                .iter()
+                .map(|e| e.name())
+                .collect::<Vec<_>>()
+                .join(", "),
             r.settings.width,
             r.settings.height,
             r.settings.views,
@@ -686,7 +693,7 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
     }
     let sweeps: Vec<&BenchResults> = all
         .iter()
-        .filter(|r| r.runs.iter().any(|x| x.experiment == "sweep"))
+        .filter(|r| r.runs.iter().any(|x| x.experiment == Experiment::Sweep))
         .collect();
     if !sweeps.is_empty() {
         let _ = writeln!(out, "\n## Run time against error\n");

@@ -121,22 +121,21 @@ impl FromStr for CameraSpec {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, String> {
-        match s.split_once(':') {
-            Some((eye, target)) => Ok(Self::LookAt {
+        if let Some((eye, target)) = s.split_once(':') {
+            Ok(Self::LookAt {
                 eye: numbers(eye, "camera eye")?,
                 target: numbers(target, "camera target")?,
-            }),
-            None => {
-                let [azimuth, elevation, distance] = numbers(s, "camera")?;
-                if distance <= 0.0 {
-                    return Err(format!("camera '{s}': distance must be positive"));
-                }
-                Ok(Self::Orbit {
-                    azimuth,
-                    elevation,
-                    distance,
-                })
+            })
+        } else {
+            let [azimuth, elevation, distance] = numbers(s, "camera")?;
+            if distance <= 0.0 {
+                return Err(format!("camera '{s}': distance must be positive"));
             }
+            Ok(Self::Orbit {
+                azimuth,
+                elevation,
+                distance,
+            })
         }
     }
 }
@@ -427,18 +426,17 @@ impl SceneArgs {
         }
         // A channel named by a flag but absent from the scene file gets its default style.
         let style = |scene: &mut Scene, c: usize| -> usize {
-            match scene.channels.iter().position(|s| s.channel == c) {
-                Some(i) => i,
-                None => {
-                    scene.channels.push(default_channels(info).swap_remove(c));
-                    scene.channels.len() - 1
-                }
+            if let Some(i) = scene.channels.iter().position(|s| s.channel == c) {
+                i
+            } else {
+                scene.channels.push(default_channels(info).swap_remove(c));
+                scene.channels.len() - 1
             }
         };
         for tf in &self.tf {
             check(tf.channel, "--tf")?;
             let i = style(&mut scene, tf.channel);
-            scene.channels[i].opacity = tf.points.clone();
+            scene.channels[i].opacity.clone_from(&tf.points);
         }
         for col in &self.color {
             check(col.channel, "--color")?;

@@ -76,7 +76,7 @@ impl BrickCache {
         );
         // Slots per x and y axis are powers of two, so the shader finds a slot's atlas
         // position with shifts rather than integer division.
-        let pow2_floor = |v: u32| 1u32 << (31 - v.max(1).leading_zeros());
+        let pow2_floor = |v: u32| 1u32 << v.max(1).ilog2();
         let sx = pow2_floor(wanted.min(fit[0]));
         let sy = pow2_floor(wanted.div_ceil(sx).min(fit[1]));
         let sz = wanted.div_ceil(sx * sy).min(fit[2]);
@@ -201,17 +201,16 @@ impl BrickCache {
     /// `frame` or later, whose previous owner (a page-table id) is returned for eviction.
     /// `None` when every slot is in use by the current working set.
     pub fn allocate(&mut self, frame: u32) -> Option<(u32, Option<u32>)> {
-        let slot = match self.free.pop() {
-            Some(s) => s,
-            None => {
-                let (s, _) = self
-                    .last_used
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, u)| **u < frame)
-                    .min_by_key(|(_, u)| **u)?;
-                s as u32
-            }
+        let slot = if let Some(s) = self.free.pop() {
+            s
+        } else {
+            let (s, _) = self
+                .last_used
+                .iter()
+                .enumerate()
+                .filter(|(_, u)| **u < frame)
+                .min_by_key(|(_, u)| **u)?;
+            s as u32
         };
         let evicted = self.owner[slot as usize].take();
         self.last_used[slot as usize] = frame;

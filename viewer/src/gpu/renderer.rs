@@ -233,7 +233,6 @@ pub struct Renderer {
     requests: wgpu::Buffer,
     image: wgpu::Buffer,
     readback: Readback,
-    tables_words: usize,
     rays: wgpu::Buffer,
     steps_per_pass: u32,
     frame: u32,
@@ -265,8 +264,7 @@ impl Renderer {
             options.width,
             options.height
         );
-        let visible: Vec<&crate::scene::ChannelStyle> =
-            scene.channels.iter().filter(|c| c.visible).collect();
+        let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
         ensure!(
             visible.len() <= MAX_CHANNELS,
             "{} visible channels; at most {MAX_CHANNELS} render at once",
@@ -323,7 +321,7 @@ impl Renderer {
         };
         let params = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("raycast params"),
-            size: std::mem::size_of::<Params>() as u64,
+            size: size_of::<Params>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
@@ -368,12 +366,13 @@ impl Renderer {
                 .flat_map(|id| {
                     let (lo, hi) = pages
                         .key(id)
-                        .map(|k| match options.method {
-                            // Culling a brick of the octree culls its subtree.
-                            Method::Octree => info.subtree_range(&k),
-                            _ => info.brick_range(&k),
-                        })
-                        .unwrap_or((f64::INFINITY, f64::NEG_INFINITY));
+                        .map_or((f64::INFINITY, f64::NEG_INFINITY), |k| {
+                            match options.method {
+                                // Culling a brick of the octree culls its subtree.
+                                Method::Octree => info.subtree_range(&k),
+                                _ => info.brick_range(&k),
+                            }
+                        });
                     [crate::octree::f32_down(lo), crate::octree::f32_up(hi)]
                 })
                 .collect()
@@ -585,7 +584,6 @@ impl Renderer {
             requests,
             image,
             readback,
-            tables_words: t.words.len(),
             rays,
             steps_per_pass,
             frame: 0,
@@ -612,11 +610,6 @@ impl Renderer {
     /// Number of frames rendered so far.
     pub fn frames(&self) -> u32 {
         self.frame
-    }
-
-    /// Words of the shader's table buffer.
-    pub fn table_words(&self) -> usize {
-        self.tables_words
     }
 
     /// Replaces the camera (the transfer functions stay).
@@ -858,7 +851,7 @@ impl Renderer {
             device
                 .poll(wgpu::PollType::wait_indefinitely())
                 .context("waiting for the GPU")?;
-            for (i, r) in rx.iter() {
+            for (i, r) in &rx {
                 if r.is_err() {
                     bail!("cannot read back GPU buffer {i}");
                 }

@@ -125,15 +125,14 @@ pub fn style_mut<'a>(
     if channel >= info.channels.len() {
         return None;
     }
-    let i = match scene.channels.iter().position(|s| s.channel == channel) {
-        Some(i) => i,
-        None => {
-            let mut style = default_channels(info).swap_remove(channel);
-            style.visible = false;
-            scene.channels.push(style);
-            scene.channels.sort_by_key(|s| s.channel);
-            scene.channels.iter().position(|s| s.channel == channel)?
-        }
+    let i = if let Some(i) = scene.channels.iter().position(|s| s.channel == channel) {
+        i
+    } else {
+        let mut style = default_channels(info).swap_remove(channel);
+        style.visible = false;
+        scene.channels.push(style);
+        scene.channels.sort_by_key(|s| s.channel);
+        scene.channels.iter().position(|s| s.channel == channel)?
     };
     Some(&mut scene.channels[i])
 }

@@ -185,7 +185,13 @@ impl App {
                 f.gpu_time_ms,
                 f.wall_ms,
             ),
-            None => (0, Default::default(), 0, None, 0.0),
+            None => (
+                0,
+                crate::gpu::renderer::ShaderCounts::default(),
+                0,
+                None,
+                0.0,
+            ),
         };
         let gpu = gpu.map_or("n/a".to_string(), |g| format!("{g:.1} ms"));
         let name: String = info.name.chars().take(16).collect();
@@ -334,7 +340,7 @@ impl App {
                 if let Some(s) = controls::style_mut(scene, &info, selected) {
                     controls::move_end(&mut s.opacity, end, delta, min_width);
                 }
-            })
+            });
         };
         match key {
             Key::Named(NamedKey::Escape) => event_loop.exit(),
@@ -394,7 +400,7 @@ impl App {
         match mode {
             DragMode::Orbit => {
                 self.session
-                    .set_camera(orbit(&cam, dx, dy, std::f64::consts::PI / h))
+                    .set_camera(orbit(&cam, dx, dy, std::f64::consts::PI / h));
             }
             DragMode::Pan => self.session.set_camera(pan(&cam, dx, dy, h)),
             DragMode::WindowLevel => {

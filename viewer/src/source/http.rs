@@ -11,13 +11,16 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow, bail, ensure};
 use rayon::prelude::*;
+use residency_schemas::server::ApiError;
 use residency_schemas::wire::{
     BRICKS_MAGIC, BrickBatchHeader, BrickEncoding, BrickStatus, MINMAX_MAGIC,
-    MinMaxHierarchyHeader, decode_framed, samples_to_f64,
+    MinMaxHierarchyHeader, decode_framed,
 };
 
-use super::ome::{self, ZarrFormat};
+use super::ome;
 use super::{BrickKey, BrickSource, BrickVoxels, MinMaxGrid, SampleType, VolumeInfo};
+use residency_schemas::ome::{ImageAttributes, PyramidLayout, ZarrFormat};
+use residency_schemas::zarr::ArrayDescription;
 
 /// Most bricks asked for in one `/bricks` request; larger fetches are split.
 pub const MAX_BATCH: usize = 256;
@@ -27,7 +30,7 @@ pub const MAX_BATCH: usize = 256;
 pub const MAX_BATCH_BYTES: u64 = 64 << 20;
 
 /// Time allowed for one whole request, connection to last byte.
-pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(120);
+pub const REQUEST_TIMEOUT: Duration = Duration::from_mins(2);
 
 /// A dataset on a `brickserver`.
 pub struct HttpSource {
@@ -103,17 +106,18 @@ impl HttpSource {
                 Got::Status(s, msg) => bail!("{v3}: HTTP {s}: {msg}"),
             }
         };
-        let group = ome::parse_group(format, &group_doc, &group_url)?;
-        let arrays = group
+        let group = ImageAttributes::parse(format, &group_doc, &group_url)?;
+        let layout = PyramidLayout::of(group.image(), &group_url)?;
+        let arrays = layout
             .level_paths
             .iter()
             .map(|p| {
                 let url = source.url(&format!("{p}/{}", format.array_key()));
                 let body = source.get_ok(&url)?;
-                ome::parse_array(format, &body, &url)
+                Ok(ArrayDescription::parse(format, &body, &url)?)
             })
             .collect::<Result<Vec<_>>>()?;
-        let info = ome::volume_info(dataset, &group, &arrays, &source.base)?;
+        let info = ome::volume_info(dataset, &group, &layout, &arrays, &source.base)?;
         source.info = info;
         source.info.minmax = if ome::usable_region_metadata(group.regions.as_ref(), &source.base) {
             source.load_minmax()?
@@ -121,11 +125,6 @@ impl HttpSource {
             None
         };
         Ok(source)
-    }
-
-    /// The dataset's base URL, `{server}/{name}`.
-    pub fn base_url(&self) -> &str {
-        &self.base
     }
 
     fn url(&self, rest: &str) -> String {
@@ -160,10 +159,10 @@ impl HttpSource {
             )
         } else {
             // The API answers errors as `{"error": "..."}`; anything else is shown as text.
-            let text = serde_json::from_slice::<serde_json::Value>(&body)
-                .ok()
-                .and_then(|v| v["error"].as_str().map(str::to_string))
-                .unwrap_or_else(|| String::from_utf8_lossy(&body).trim().to_string());
+            let text = serde_json::from_slice::<ApiError>(&body).map_or_else(
+                |_| String::from_utf8_lossy(&body).trim().to_string(),
+                |e| e.error,
+            );
             Got::Status(status, text.chars().take(300).collect())
         })
     }
@@ -202,7 +201,7 @@ impl HttpSource {
             header.channel
         );
         ensure!(
-            header.data_type == info.sample_type.zarr_name(),
+            header.data_type == info.sample_type,
             "{url}: min/max values are {} but the image is {}",
             header.data_type,
             info.sample_type.zarr_name()
@@ -243,7 +242,9 @@ impl HttpSource {
                                     payload.len()
                                 )
                             })?;
-                        let values = samples_to_f64(&header.data_type, bytes)
+                        let values = header
+                            .data_type
+                            .decode_le_to_f64(bytes)
                             .with_context(|| format!("{url}: corrupt min/max grid"))?;
                         ome::minmax_grid(g.cell_shape, g.grid_shape, &values, url)
                     })
@@ -300,7 +301,7 @@ impl HttpSource {
             header.encoding
         );
         ensure!(
-            header.data_type == info.sample_type.zarr_name(),
+            header.data_type == info.sample_type,
             "{shown}: bricks are {} but the image is {}",
             header.data_type,
             info.sample_type.zarr_name()
@@ -429,7 +430,7 @@ mod tests {
                 name: "v".into(),
                 sample_type: SampleType::I16,
                 channels: vec!["a".into(), "b".into()],
-                display: vec![Default::default(); 2],
+                display: vec![crate::source::ChannelDisplay::default(); 2],
                 voxel_size: [1.0; 3],
                 brick_shape: [1, 1, 2],
                 levels: vec![LevelInfo {
@@ -464,7 +465,7 @@ mod tests {
     fn batch(bricks: Vec<BrickEntry>, payload: &[u8]) -> Vec<u8> {
         let header = BrickBatchHeader {
             encoding: BrickEncoding::Raw,
-            data_type: "int16".into(),
+            data_type: SampleType::I16,
             brick_shape: [1, 1, 2],
             bricks,
         };
@@ -539,7 +540,7 @@ mod tests {
         let src = source();
         let header = |channel: usize, length: u64| MinMaxHierarchyHeader {
             channel,
-            data_type: "int16".into(),
+            data_type: SampleType::I16,
             halo: 1,
             levels: vec![MinMaxLevelBlock {
                 level: 0,

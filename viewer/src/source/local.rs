@@ -6,27 +6,21 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use zarrs::array::{
-    Array, ArrayShardedReadableExt, ArrayShardedReadableExtCache, CodecOptions, ElementOwned,
-};
+use residency_schemas::pyramid::{BrickIndex, Pyramid};
+use zarrs::array::{Array, CodecOptions, ElementOwned};
 use zarrs::filesystem::FilesystemStore;
 
-use super::ome::{self, AxisLayout, OmeGroup, ZarrFormat};
+use super::ome;
 use super::{BrickKey, BrickSource, BrickVoxels, MinMaxGrid, SampleType, VolumeInfo};
 
-/// One level's array, with the cache of shard indices zarrs keeps for brick reads.
-struct LevelArray {
-    array: Array<FilesystemStore>,
-    cache: ArrayShardedReadableExtCache,
-    fill_value: f64,
-}
+pub use residency_schemas::dataset::dataset_name;
 
-/// A local OME-Zarr store written by `ingest` (or indexed by `ingest index`).
+/// A local OME-Zarr store written by `ingest` (or indexed by `ingest index`), read through
+/// the pyramid reader of `residency_schemas`.
 pub struct LocalSource {
     path: PathBuf,
     info: VolumeInfo,
-    axes: AxisLayout,
-    levels: Vec<LevelArray>,
+    pyramid: Pyramid<FilesystemStore>,
 }
 
 impl std::fmt::Debug for LocalSource {
@@ -38,70 +32,43 @@ impl std::fmt::Debug for LocalSource {
     }
 }
 
-/// The dataset name of a store path: its folder name without `.ome.zarr` / `.zarr`.
-pub fn dataset_name(path: &Path) -> String {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| path.display().to_string());
-    name.strip_suffix(".ome.zarr")
-        .or_else(|| name.strip_suffix(".zarr"))
-        .unwrap_or(&name)
-        .to_string()
-}
-
-fn read_file(path: &Path) -> Result<Vec<u8>> {
-    std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))
-}
-
 impl LocalSource {
     /// Opens the OME-Zarr image at `path`: its multiscales, region metadata and min/max grids.
     /// A store without region metadata opens with `minmax: None`, and a warning.
+    ///
+    /// # Errors
+    /// When the path is missing, is not an OME-Zarr image, or its levels or region metadata
+    /// are unusable; the message names the store.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
         let shown = path.display().to_string();
-        let format = if path.join("zarr.json").is_file() {
-            ZarrFormat::V3
-        } else if path.join(".zattrs").is_file() {
-            ZarrFormat::V2
-        } else if path.exists() {
-            bail!("{shown}: not an OME-Zarr image (no zarr.json or .zattrs)");
-        } else {
+        if !path.exists() {
             bail!("{shown}: no such store");
-        };
-        let group_file = path.join(format.group_key());
-        let group = ome::parse_group(
-            format,
-            &read_file(&group_file)?,
-            &group_file.display().to_string(),
-        )?;
+        }
         let store =
             Arc::new(FilesystemStore::new(path).with_context(|| format!("{shown}: cannot open"))?);
-        let mut descriptions = Vec::new();
-        let mut levels = Vec::new();
-        for p in &group.level_paths {
-            let file = path.join(p).join(format.array_key());
-            let shown_file = file.display().to_string();
-            descriptions.push(ome::parse_array(format, &read_file(&file)?, &shown_file)?);
-            let array = Array::open(store.clone(), &format!("/{p}"))
-                .with_context(|| format!("{shown_file}: cannot open the array"))?;
-            levels.push(LevelArray {
-                cache: ArrayShardedReadableExtCache::new(&array),
-                fill_value: descriptions.last().expect("pushed").fill_value,
-                array,
-            });
-        }
-        let mut info = ome::volume_info(&dataset_name(path), &group, &descriptions, &shown)?;
-        info.minmax = if ome::usable_region_metadata(group.regions.as_ref(), &shown) {
-            Some(read_minmax(&store, &group, &info, &shown)?)
+        let pyramid = Pyramid::open(store, &shown)?;
+        let descriptions: Vec<_> = pyramid
+            .levels
+            .iter()
+            .map(|l| l.description.clone())
+            .collect();
+        let mut info = ome::volume_info(
+            &dataset_name(path),
+            &pyramid.attributes,
+            &pyramid.layout,
+            &descriptions,
+            &shown,
+        )?;
+        info.minmax = if ome::usable_region_metadata(pyramid.attributes.regions.as_ref(), &shown) {
+            Some(read_minmax(&pyramid, &info, &shown)?)
         } else {
             None
         };
         Ok(Self {
             path: path.to_path_buf(),
             info,
-            axes: group.axes,
-            levels,
+            pyramid,
         })
     }
 
@@ -112,8 +79,14 @@ impl LocalSource {
 
     fn fetch_one(&self, key: &BrickKey) -> Result<BrickVoxels> {
         self.info.check_key(key)?;
-        let level = &self.levels[key.level as usize];
-        let indices = self.axes.chunk_indices(key.channel as u64, key.brick);
+        let at = BrickIndex {
+            level: key.level,
+            channel: key.channel,
+            brick: key.brick,
+        };
+        let fill = self.pyramid.levels[key.level as usize]
+            .description
+            .fill_value;
         let context = || {
             format!(
                 "{}: cannot read brick {:?} of channel {} at level {}",
@@ -124,16 +97,12 @@ impl LocalSource {
             )
         };
         fn decode<T: ElementOwned + Copy + Into<f64>>(
-            level: &LevelArray,
-            indices: &[u64],
+            pyramid: &Pyramid<FilesystemStore>,
+            at: &BrickIndex,
+            fill: f64,
             wrap: fn(Vec<T>) -> BrickVoxels,
         ) -> Result<BrickVoxels> {
-            let v: Vec<T> = level.array.retrieve_subchunk_opt(
-                &level.cache,
-                indices,
-                &CodecOptions::default(),
-            )?;
-            let fill = level.fill_value;
+            let v: Vec<T> = pyramid.read_brick(at)?;
             let is_fill = |x: &T| {
                 let x: f64 = (*x).into();
                 x == fill || (x.is_nan() && fill.is_nan())
@@ -144,13 +113,14 @@ impl LocalSource {
                 wrap(v)
             })
         }
+        let p = &self.pyramid;
         match self.info.sample_type {
-            SampleType::U8 => decode::<u8>(level, &indices, BrickVoxels::U8),
-            SampleType::U16 => decode::<u16>(level, &indices, BrickVoxels::U16),
-            SampleType::I16 => decode::<i16>(level, &indices, BrickVoxels::I16),
-            SampleType::U32 => decode::<u32>(level, &indices, BrickVoxels::U32),
-            SampleType::I32 => decode::<i32>(level, &indices, BrickVoxels::I32),
-            SampleType::F32 => decode::<f32>(level, &indices, BrickVoxels::F32),
+            SampleType::U8 => decode::<u8>(p, &at, fill, BrickVoxels::U8),
+            SampleType::U16 => decode::<u16>(p, &at, fill, BrickVoxels::U16),
+            SampleType::I16 => decode::<i16>(p, &at, fill, BrickVoxels::I16),
+            SampleType::U32 => decode::<u32>(p, &at, fill, BrickVoxels::U32),
+            SampleType::I32 => decode::<i32>(p, &at, fill, BrickVoxels::I32),
+            SampleType::F32 => decode::<f32>(p, &at, fill, BrickVoxels::F32),
         }
         .with_context(context)
     }
@@ -158,12 +128,16 @@ impl LocalSource {
 
 /// Reads every min/max grid of the region metadata into `minmax[channel][level][k]`.
 fn read_minmax(
-    store: &Arc<FilesystemStore>,
-    group: &OmeGroup,
+    pyramid: &Pyramid<FilesystemStore>,
     info: &VolumeInfo,
     shown: &str,
 ) -> Result<Vec<Vec<Vec<MinMaxGrid>>>> {
-    let regions = group.regions.as_ref().expect("called with region metadata");
+    let store = &pyramid.store;
+    let regions = pyramid
+        .attributes
+        .regions
+        .as_ref()
+        .expect("called with region metadata");
     let channels = info.channels.len();
     let mut out = vec![Vec::with_capacity(regions.levels.len()); channels];
     for level in &regions.levels {

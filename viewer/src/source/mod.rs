@@ -3,7 +3,7 @@
 //!
 //! - [`local`]: [`LocalSource`], a local OME-Zarr store read with zarrs;
 //! - [`http`]: [`HttpSource`], a `brickserver` over HTTP (batched bricks, framed min/max);
-//! - [`ome`]: the OME-Zarr and region-metadata parsing both share.
+//! - [`ome`]: the volume description both build from `residency_schemas`' format model.
 
 use anyhow::Result;
 
@@ -14,59 +14,7 @@ pub mod ome;
 pub use http::HttpSource;
 pub use local::LocalSource;
 
-/// Sample format of the stored voxels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SampleType {
-    /// Unsigned 8-bit.
-    U8,
-    /// Unsigned 16-bit.
-    U16,
-    /// Signed 16-bit.
-    I16,
-    /// Unsigned 32-bit.
-    U32,
-    /// Signed 32-bit.
-    I32,
-    /// 32-bit IEEE float.
-    F32,
-}
-
-impl SampleType {
-    /// The type of a Zarr v3 data type name (`uint8`, `uint16`, `int16`, `uint32`, `int32`,
-    /// `float32`), or `None` for one the viewer does not read.
-    pub fn from_zarr_name(name: &str) -> Option<Self> {
-        Some(match name {
-            "uint8" => Self::U8,
-            "uint16" => Self::U16,
-            "int16" => Self::I16,
-            "uint32" => Self::U32,
-            "int32" => Self::I32,
-            "float32" => Self::F32,
-            _ => return None,
-        })
-    }
-
-    /// The Zarr v3 data type name.
-    pub fn zarr_name(self) -> &'static str {
-        match self {
-            Self::U8 => "uint8",
-            Self::U16 => "uint16",
-            Self::I16 => "int16",
-            Self::U32 => "uint32",
-            Self::I32 => "int32",
-            Self::F32 => "float32",
-        }
-    }
-
-    /// Bytes per sample.
-    pub fn bytes(self) -> usize {
-        match self {
-            Self::U8 => 1,
-            Self::U16 | Self::I16 => 2,
-            Self::U32 | Self::I32 | Self::F32 => 4,
-        }
-    }
-}
+pub use residency_schemas::SampleType;
 
 /// One pyramid level.
 #[derive(Clone, Debug, PartialEq)]
@@ -268,9 +216,8 @@ impl VolumeInfo {
             for y in cells[1].clone() {
                 for x in cells[2].clone() {
                     let i = ((z * g.grid_shape[1] + y) * g.grid_shape[2] + x) as usize;
-                    let (lo, hi) = match (g.min.get(i), g.max.get(i)) {
-                        (Some(&lo), Some(&hi)) => (lo, hi),
-                        _ => return (f64::NEG_INFINITY, f64::INFINITY), // malformed: no culling
+                    let (Some(&lo), Some(&hi)) = (g.min.get(i), g.max.get(i)) else {
+                        return (f64::NEG_INFINITY, f64::INFINITY); // malformed: no culling
                     };
                     if !(lo.is_nan() || hi.is_nan()) {
                         r = (r.0.min(lo), r.1.max(hi));

@@ -1,201 +1,14 @@
-//! OME-Zarr metadata shared by every source: the image group's attributes (`multiscales`,
-//! `omero`, and the `residency` region metadata) and each level's array metadata (Zarr v3
-//! `zarr.json` or v2 `.zarray`), turned into a [`VolumeInfo`] whatever the transport.
+//! The viewer's description of a volume ([`VolumeInfo`]) from the format model of
+//! `residency_schemas`: the image group's attributes ([`ImageAttributes`]: `multiscales`,
+//! `omero`, region metadata) and each level's array metadata ([`ArrayDescription`]), whatever
+//! the transport.
 
-use anyhow::{Context, Result, bail, ensure};
-use residency_schemas::{REGIONS_KEY, RegionMetadata};
-use serde_json::Value;
+use anyhow::{Result, ensure};
+use residency_schemas::RegionMetadata;
+use residency_schemas::ome::{ImageAttributes, PyramidLayout};
+use residency_schemas::zarr::ArrayDescription;
 
-use super::{ChannelDisplay, LevelInfo, MinMaxGrid, SampleType, VolumeInfo};
-
-/// Zarr format of a store.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ZarrFormat {
-    /// Zarr v2 (OME-Zarr 0.4): `.zattrs`, `.zarray`.
-    V2,
-    /// Zarr v3 (OME-Zarr 0.5): `zarr.json`.
-    V3,
-}
-
-impl ZarrFormat {
-    /// Key of the image group's attributes document.
-    pub fn group_key(self) -> &'static str {
-        match self {
-            Self::V2 => ".zattrs",
-            Self::V3 => "zarr.json",
-        }
-    }
-
-    /// Key of an array's metadata document, relative to the array.
-    pub fn array_key(self) -> &'static str {
-        match self {
-            Self::V2 => ".zarray",
-            Self::V3 => "zarr.json",
-        }
-    }
-}
-
-/// Which axis of the arrays is which: the last three are always `z, y, x`; before them at most
-/// one `c` axis, and any other leading axis (such as `t`) must have a single entry.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct AxisLayout {
-    /// Axis names, in array order.
-    pub names: Vec<String>,
-    /// Index of the `c` axis, if any.
-    pub channel_axis: Option<usize>,
-}
-
-impl AxisLayout {
-    /// The chunk (or inner chunk) indices of brick `brick` (`z, y, x`) of channel `channel`.
-    pub fn chunk_indices(&self, channel: u64, brick: [u64; 3]) -> Vec<u64> {
-        let n = self.names.len();
-        let mut idx = vec![0; n];
-        if let Some(c) = self.channel_axis {
-            idx[c] = channel;
-        }
-        idx[n - 3..].copy_from_slice(&brick);
-        idx
-    }
-}
-
-/// The image group's OME metadata.
-#[derive(Clone, Debug, PartialEq)]
-pub struct OmeGroup {
-    /// Zarr format the attributes came from.
-    pub format: ZarrFormat,
-    /// Axes of every level.
-    pub axes: AxisLayout,
-    /// `multiscales[0].datasets[].path`, finest first.
-    pub level_paths: Vec<String>,
-    /// `scale` of each level, `z, y, x` (physical units per voxel).
-    pub level_scales: Vec<[f64; 3]>,
-    /// `omero.channels[]`: label and display hints, possibly fewer than the channels.
-    pub omero: Vec<(Option<String>, ChannelDisplay)>,
-    /// The `residency` region metadata, if the store has it.
-    pub regions: Option<RegionMetadata>,
-}
-
-/// What the viewer needs from one level's array metadata.
-#[derive(Clone, Debug, PartialEq)]
-pub struct ArrayDescription {
-    /// Full array shape, in the order of [`AxisLayout::names`].
-    pub shape: Vec<u64>,
-    /// Sample format.
-    pub sample_type: SampleType,
-    /// Brick shape `z, y, x`: the inner chunk when sharded, the chunk otherwise.
-    pub brick_shape: [u64; 3],
-    /// Chunk (or inner chunk) extent along the leading axes, which must all be 1.
-    pub leading_chunk: Vec<u64>,
-    /// Fill value.
-    pub fill_value: f64,
-}
-
-/// Parses the image group's attributes document (`zarr.json` of Zarr v3, whose `attributes`
-/// hold `ome` and `residency`; or `.zattrs` of Zarr v2). `source` names the document in
-/// errors.
-pub fn parse_group(format: ZarrFormat, document: &[u8], source: &str) -> Result<OmeGroup> {
-    let doc: Value =
-        serde_json::from_slice(document).with_context(|| format!("{source}: not valid JSON"))?;
-    let attrs = match format {
-        ZarrFormat::V3 => {
-            ensure!(
-                doc["node_type"] == "group",
-                "{source}: not a Zarr group (node_type {})",
-                doc["node_type"]
-            );
-            &doc["attributes"]
-        }
-        ZarrFormat::V2 => &doc,
-    };
-    let ome = if attrs["ome"].is_object() {
-        &attrs["ome"]
-    } else {
-        attrs
-    };
-    let ms = ome["multiscales"]
-        .get(0)
-        .with_context(|| format!("{source}: no OME-Zarr multiscales metadata"))?;
-    let names: Vec<String> = ms["axes"]
-        .as_array()
-        .with_context(|| format!("{source}: multiscales has no axes"))?
-        .iter()
-        .map(|a| {
-            a["name"]
-                .as_str()
-                .or_else(|| a.as_str())
-                .map(str::to_string)
-                .with_context(|| format!("{source}: axis without a name: {a}"))
-        })
-        .collect::<Result<_>>()?;
-    let n = names.len();
-    ensure!(
-        n >= 3 && names[n - 3..] == ["z", "y", "x"],
-        "{source}: axes {names:?} do not end in z, y, x"
-    );
-    let channel_axis = names[..n - 3].iter().position(|a| a == "c");
-    let datasets = ms["datasets"]
-        .as_array()
-        .filter(|d| !d.is_empty())
-        .with_context(|| format!("{source}: multiscales has no datasets"))?;
-    let mut level_paths = Vec::new();
-    let mut level_scales = Vec::new();
-    for ds in datasets {
-        let path = ds["path"]
-            .as_str()
-            .with_context(|| format!("{source}: dataset without a path: {ds}"))?;
-        let scale: Vec<f64> = ds["coordinateTransformations"]
-            .as_array()
-            .and_then(|t| t.iter().find(|t| t["type"] == "scale"))
-            .and_then(|t| serde_json::from_value(t["scale"].clone()).ok())
-            .with_context(|| format!("{source}: dataset '{path}' has no scale transformation"))?;
-        ensure!(
-            scale.len() == n,
-            "{source}: dataset '{path}' has a scale of {} entries for {n} axes",
-            scale.len()
-        );
-        let zyx = [scale[n - 3], scale[n - 2], scale[n - 1]];
-        ensure!(
-            zyx.iter().all(|s| s.is_finite() && *s > 0.0),
-            "{source}: dataset '{path}' has a non-positive scale {zyx:?}"
-        );
-        level_paths.push(path.to_string());
-        level_scales.push(zyx);
-    }
-    let omero = ome["omero"]["channels"]
-        .as_array()
-        .into_iter()
-        .flatten()
-        .map(|c| {
-            let w = &c["window"];
-            let pair = |a: &str, b: &str| Some([w[a].as_f64()?, w[b].as_f64()?]);
-            let display = ChannelDisplay {
-                color: c["color"].as_str().and_then(hex_colour),
-                window: pair("start", "end"),
-                range: pair("min", "max"),
-                median: None,
-            };
-            (c["label"].as_str().map(str::to_string), display)
-        })
-        .collect();
-    let regions = match attrs.get(REGIONS_KEY) {
-        None | Some(Value::Null) => None,
-        Some(r) => Some(
-            serde_json::from_value::<RegionMetadata>(r.clone())
-                .with_context(|| format!("{source}: malformed '{REGIONS_KEY}' region metadata"))?,
-        ),
-    };
-    Ok(OmeGroup {
-        format,
-        axes: AxisLayout {
-            names,
-            channel_axis,
-        },
-        level_paths,
-        level_scales,
-        omero,
-        regions,
-    })
-}
+use super::{ChannelDisplay, LevelInfo, MinMaxGrid, VolumeInfo};
 
 /// A `RRGGBB` hex colour (sRGB, as in `omero`) as linear RGB.
 fn hex_colour(hex: &str) -> Option<[f64; 3]> {
@@ -220,102 +33,34 @@ pub fn srgb_to_linear(v: f64) -> f64 {
     }
 }
 
-/// Parses one level's array metadata (`zarr.json` or `.zarray`). `source` names the
-/// document in errors.
-pub fn parse_array(format: ZarrFormat, document: &[u8], source: &str) -> Result<ArrayDescription> {
-    let meta: Value =
-        serde_json::from_slice(document).with_context(|| format!("{source}: not valid JSON"))?;
-    let shape: Vec<u64> = serde_json::from_value(meta["shape"].clone())
-        .with_context(|| format!("{source}: no valid array shape"))?;
-    let (type_name, chunk) = match format {
-        ZarrFormat::V3 => {
-            ensure!(
-                meta["node_type"] == "array",
-                "{source}: not a Zarr array (node_type {})",
-                meta["node_type"]
-            );
-            let sharding = meta["codecs"]
-                .as_array()
-                .and_then(|c| c.iter().find(|c| c["name"] == "sharding_indexed"));
-            let chunk = match sharding {
-                Some(s) => s["configuration"]["chunk_shape"].clone(),
-                None => meta["chunk_grid"]["configuration"]["chunk_shape"].clone(),
-            };
-            (
-                meta["data_type"].as_str().unwrap_or_default().to_string(),
-                chunk,
-            )
-        }
-        ZarrFormat::V2 => {
-            let d = meta["dtype"].as_str().unwrap_or_default();
-            let name = match d.trim_start_matches(['<', '>', '|', '=']) {
-                "u1" => "uint8",
-                "u2" => "uint16",
-                "i2" => "int16",
-                "u4" => "uint32",
-                "i4" => "int32",
-                "f4" => "float32",
-                _ => d,
-            };
-            (name.to_string(), meta["chunks"].clone())
-        }
-    };
-    let sample_type = SampleType::from_zarr_name(&type_name)
-        .with_context(|| format!("{source}: unsupported data type '{type_name}'"))?;
-    let chunk: Vec<u64> =
-        serde_json::from_value(chunk).with_context(|| format!("{source}: no valid chunk shape"))?;
-    let n = shape.len();
-    ensure!(
-        n >= 3 && chunk.len() == n,
-        "{source}: chunk shape {chunk:?} does not match array shape {shape:?}"
-    );
-    ensure!(
-        chunk.iter().all(|&c| c > 0),
-        "{source}: chunk shape {chunk:?} has a zero edge"
-    );
-    let fill_value = match &meta["fill_value"] {
-        Value::Null => 0.0,
-        Value::Number(v) => v.as_f64().unwrap_or(0.0),
-        Value::String(s) => match s.as_str() {
-            "NaN" => f64::NAN,
-            "Infinity" => f64::INFINITY,
-            "-Infinity" => f64::NEG_INFINITY,
-            other => bail!("{source}: unsupported fill value '{other}'"),
-        },
-        other => bail!("{source}: unsupported fill value {other}"),
-    };
-    Ok(ArrayDescription {
-        brick_shape: [chunk[n - 3], chunk[n - 2], chunk[n - 1]],
-        leading_chunk: chunk[..n - 3].to_vec(),
-        shape,
-        sample_type,
-        fill_value,
-    })
-}
-
-/// The description of a volume named `name` from its group metadata and the array metadata of
-/// each level (in `group.level_paths` order), with `minmax` left `None` for the source to fill.
-/// Checks that the levels agree with each other and with the region metadata.
+/// The description of a volume named `name` from its group attributes, its pyramid layout and
+/// the array metadata of each level (in `layout.level_paths` order), with `minmax` left `None`
+/// for the source to fill. Checks that the levels agree with each other and with the region
+/// metadata, and that every leading axis but `c` has one entry.
+///
+/// # Errors
+/// A message starting with `source` that names the first disagreement.
 pub fn volume_info(
     name: &str,
-    group: &OmeGroup,
+    attributes: &ImageAttributes,
+    layout: &PyramidLayout,
     arrays: &[ArrayDescription],
     source: &str,
 ) -> Result<VolumeInfo> {
     ensure!(
-        arrays.len() == group.level_paths.len(),
+        arrays.len() == layout.level_paths.len(),
         "{source}: {} level arrays for {} datasets",
         arrays.len(),
-        group.level_paths.len()
+        layout.level_paths.len()
     );
-    let n = group.axes.names.len();
+    let n = layout.axis_names.len();
     let first = &arrays[0];
     let mut channels = 1;
     let mut levels = Vec::new();
     for ((a, path), scale) in arrays
         .iter()
-        .zip(&group.level_paths)
-        .zip(&group.level_scales)
+        .zip(&layout.level_paths)
+        .zip(&layout.level_scales)
     {
         ensure!(
             a.shape.len() == n,
@@ -324,26 +69,26 @@ pub fn volume_info(
         );
         ensure!(
             a.sample_type == first.sample_type,
-            "{source}: level '{path}' is {:?} but level '{}' is {:?}",
+            "{source}: level '{path}' is {} but level '{}' is {}",
             a.sample_type,
-            group.level_paths[0],
+            layout.level_paths[0],
             first.sample_type
         );
         ensure!(
-            a.brick_shape == first.brick_shape,
+            a.brick_shape() == first.brick_shape(),
             "{source}: level '{path}' has bricks {:?} but level '{}' has {:?}",
-            a.brick_shape,
-            group.level_paths[0],
-            first.brick_shape
+            a.brick_shape(),
+            layout.level_paths[0],
+            first.brick_shape()
         );
-        for (i, axis) in group.axes.names[..n - 3].iter().enumerate() {
+        for (i, axis) in layout.axis_names[..n - 3].iter().enumerate() {
             ensure!(
-                a.leading_chunk[i] == 1,
+                a.leading_chunk()[i] == 1,
                 "{source}: level '{path}' has chunks of {} along axis '{axis}'; one brick must \
                  hold one channel",
-                a.leading_chunk[i]
+                a.leading_chunk()[i]
             );
-            if Some(i) == group.axes.channel_axis {
+            if Some(i) == layout.channel_axis {
                 channels = a.shape[i];
             } else {
                 ensure!(
@@ -353,18 +98,19 @@ pub fn volume_info(
                 );
             }
         }
-        let base = group.level_scales[0];
+        let base = layout.level_scales[0];
         levels.push(LevelInfo {
-            shape: [a.shape[n - 3], a.shape[n - 2], a.shape[n - 1]],
+            shape: a.zyx_shape(),
             factor: std::array::from_fn(|i| (scale[i] / base[i]).round().max(1.0) as u64),
         });
     }
-    if let Some(r) = &group.regions {
+    let regions = attributes.regions.as_ref();
+    if let Some(r) = regions {
         ensure!(
-            r.brick_shape == first.brick_shape,
+            r.brick_shape == first.brick_shape(),
             "{source}: region metadata bricks {:?} differ from the arrays' {:?}",
             r.brick_shape,
-            first.brick_shape
+            first.brick_shape()
         );
         ensure!(
             r.levels.len() == levels.len(),
@@ -372,7 +118,7 @@ pub fn volume_info(
             r.levels.len(),
             levels.len()
         );
-        for ((rl, l), path) in r.levels.iter().zip(&mut levels).zip(&group.level_paths) {
+        for ((rl, l), path) in r.levels.iter().zip(&mut levels).zip(&layout.level_paths) {
             ensure!(
                 rl.image == *path && rl.shape == l.shape,
                 "{source}: region metadata level '{}' {:?} does not match image level '{path}' {:?}",
@@ -383,10 +129,14 @@ pub fn volume_info(
             l.factor = rl.factor;
         }
     }
+    let omero: &[residency_schemas::ome::OmeroChannel] = attributes
+        .omero
+        .as_ref()
+        .map_or(&[], |o| o.channels.as_slice());
     let display = (0..channels as usize)
         .map(|c| {
-            let mut d = group.omero.get(c).map(|o| o.1.clone()).unwrap_or_default();
-            if let Some(s) = group.regions.as_ref().and_then(|r| r.channels.get(c)) {
+            let mut d = omero.get(c).map(channel_display).unwrap_or_default();
+            if let Some(s) = regions.and_then(|r| r.channels.get(c)) {
                 if let (Some(lo), Some(hi)) = (s.min, s.max) {
                     d.range = Some([lo, hi]);
                 }
@@ -401,16 +151,10 @@ pub fn volume_info(
         .collect();
     let labels = (0..channels as usize)
         .map(|c| {
-            group
-                .omero
+            omero
                 .get(c)
-                .and_then(|o| o.0.clone())
-                .or_else(|| {
-                    group
-                        .regions
-                        .as_ref()
-                        .and_then(|r| r.channels.get(c).map(|s| s.label.clone()))
-                })
+                .and_then(|o| o.label.clone())
+                .or_else(|| regions.and_then(|r| r.channels.get(c).map(|s| s.label.clone())))
                 .unwrap_or_else(|| format!("Channel {c}"))
         })
         .collect();
@@ -419,11 +163,24 @@ pub fn volume_info(
         sample_type: first.sample_type,
         channels: labels,
         display,
-        voxel_size: group.level_scales[0],
-        brick_shape: first.brick_shape,
+        voxel_size: layout.level_scales[0],
+        brick_shape: first.brick_shape(),
         levels,
         minmax: None,
     })
+}
+
+/// The display hints of one `omero` channel: its colour, and its window's `start`/`end` and
+/// `min`/`max` where both of a pair are given.
+fn channel_display(c: &residency_schemas::ome::OmeroChannel) -> ChannelDisplay {
+    let w = c.window.clone().unwrap_or_default();
+    let pair = |a: Option<f64>, b: Option<f64>| Some([a?, b?]);
+    ChannelDisplay {
+        color: c.color.as_deref().and_then(hex_colour),
+        window: pair(w.start, w.end),
+        range: pair(w.min, w.max),
+        median: None,
+    }
 }
 
 /// One channel's min/max grid from the region metadata's description and its values: `gz·gy·gx`
@@ -480,6 +237,9 @@ pub fn warn_no_region_metadata(source: &str) {
 
 #[cfg(test)]
 mod tests {
+    use residency_schemas::SampleType;
+    use residency_schemas::ome::ZarrFormat;
+
     use super::*;
 
     const GROUP_V2: &str = r#"{
@@ -494,25 +254,26 @@ mod tests {
                                 "window": {"min": 0, "max": 100, "start": 5, "end": 90}}]}
     }"#;
 
-    fn array_v2(shape: [u64; 4]) -> String {
-        format!(
+    fn array_v2(shape: [u64; 4]) -> ArrayDescription {
+        let doc = format!(
             r#"{{"zarr_format": 2, "shape": {shape:?}, "chunks": [1, 8, 8, 8], "dtype": "<u2",
                 "fill_value": 0, "order": "C", "compressor": null, "filters": null}}"#
-        )
+        );
+        ArrayDescription::parse(ZarrFormat::V2, doc.as_bytes(), "a").unwrap()
+    }
+
+    fn group() -> (ImageAttributes, PyramidLayout) {
+        let a = ImageAttributes::parse(ZarrFormat::V2, GROUP_V2.as_bytes(), "s/.zattrs").unwrap();
+        let layout = PyramidLayout::of(a.image(), "s/.zattrs").unwrap();
+        (a, layout)
     }
 
     #[test]
     fn v2_group_and_arrays_give_the_volume() {
-        let g = parse_group(ZarrFormat::V2, GROUP_V2.as_bytes(), "s/.zattrs").unwrap();
-        assert_eq!(g.axes.channel_axis, Some(0));
-        assert_eq!(g.level_paths, ["0", "1"]);
-        assert_eq!(g.level_scales, [[2.0, 0.5, 0.5], [2.0, 1.0, 1.0]]);
-        assert_eq!(g.regions, None);
-        let a0 = parse_array(ZarrFormat::V2, array_v2([2, 10, 20, 20]).as_bytes(), "a0").unwrap();
-        let a1 = parse_array(ZarrFormat::V2, array_v2([2, 10, 10, 10]).as_bytes(), "a1").unwrap();
-        assert_eq!(a0.sample_type, SampleType::U16);
-        assert_eq!(a0.brick_shape, [8, 8, 8]);
-        let info = volume_info("vol", &g, &[a0, a1], "s").unwrap();
+        let (g, layout) = group();
+        let arrays = [array_v2([2, 10, 20, 20]), array_v2([2, 10, 10, 10])];
+        let info = volume_info("vol", &g, &layout, &arrays, "s").unwrap();
+        assert_eq!(info.sample_type, SampleType::U16);
         assert_eq!(info.channels, ["dapi", "Channel 1"]);
         assert_eq!(info.voxel_size, [2.0, 0.5, 0.5]);
         assert_eq!(
@@ -535,36 +296,26 @@ mod tests {
         assert_eq!(info.display[0].window, Some([5.0, 90.0]));
         assert_eq!(info.display[0].range, Some([0.0, 100.0]));
         assert_eq!(info.display[1], ChannelDisplay::default());
-        assert_eq!(
-            AxisLayout::chunk_indices(&g.axes, 1, [2, 3, 4]),
-            [1, 2, 3, 4]
-        );
     }
 
     #[test]
-    fn bad_metadata_gives_errors_naming_the_document() {
-        let e = parse_group(ZarrFormat::V2, b"{}", "http://h/d/.zattrs").unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            "http://h/d/.zattrs: no OME-Zarr multiscales metadata"
-        );
-        let e = parse_group(ZarrFormat::V3, b"{", "d/zarr.json").unwrap_err();
-        assert_eq!(e.to_string(), "d/zarr.json: not valid JSON");
-        let bad_axes = GROUP_V2.replace(r#""name": "x""#, r#""name": "w""#);
-        let e = parse_group(ZarrFormat::V2, bad_axes.as_bytes(), "g").unwrap_err();
-        assert_eq!(
-            e.to_string(),
-            r#"g: axes ["c", "z", "y", "w"] do not end in z, y, x"#
-        );
-        let f8 = array_v2([1, 8, 8, 8]).replace("<u2", "<f8");
-        let e = parse_array(ZarrFormat::V2, f8.as_bytes(), "a").unwrap_err();
-        assert_eq!(e.to_string(), "a: unsupported data type '<f8'");
-        let g = parse_group(ZarrFormat::V2, GROUP_V2.as_bytes(), "g").unwrap();
-        let a0 = parse_array(ZarrFormat::V2, array_v2([2, 10, 20, 20]).as_bytes(), "a0").unwrap();
+    fn disagreeing_levels_give_errors_naming_the_store() {
+        let (g, layout) = group();
+        let a0 = array_v2([2, 10, 20, 20]);
         let mut a1 = a0.clone();
         a1.sample_type = SampleType::F32;
-        let e = volume_info("v", &g, &[a0, a1], "g").unwrap_err();
-        assert_eq!(e.to_string(), "g: level '1' is F32 but level '0' is U16");
+        let e = volume_info("v", &g, &layout, &[a0.clone(), a1], "g").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "g: level '1' is float32 but level '0' is uint16"
+        );
+        let mut t = a0.clone();
+        t.chunk[0] = 2;
+        let e = volume_info("v", &g, &layout, &[t, a0], "g").unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "g: level '0' has chunks of 2 along axis 'c'; one brick must hold one channel"
+        );
     }
 
     #[test]

@@ -1,0 +1,36 @@
+//! Scene files (`viewer/src/scene.rs`, read by `viewer::cli::scene_args::read_scene`) on any
+//! bytes, then what the renderer asks of a scene: the camera frame and some rays, and every
+//! channel's opacity at a few values and over a few ranges. A scene must serialise and parse
+//! back to itself.
+#![no_main]
+
+use libfuzzer_sys::fuzz_target;
+use residency_fuzz::scratch;
+use residency_viewer::cli::scene_args::read_scene;
+use residency_viewer::scene::{Scene, box_diagonal, corrected_opacity};
+
+fuzz_target!(|data: &[u8]| {
+    let path = scratch::file("scene.json", data);
+    let Ok(scene) = read_scene(&path) else {
+        return;
+    };
+    let cam = &scene.camera;
+    let _ = cam.basis();
+    for (px, py, w, h) in [(0, 0, 1, 1), (3, 1, 4, 2), (0, 9, 1, 10)] {
+        let _ = cam.ray_direction(px, py, w, h);
+    }
+    let probes = [f64::NEG_INFINITY, -1.0, 0.0, 0.5, 1.0, 255.0, 65535.0, f64::INFINITY, f64::NAN];
+    for ch in &scene.channels {
+        for &v in &probes {
+            let _ = ch.opacity_at(v);
+            let _ = corrected_opacity(ch.opacity_at(v), 0.5, 1.0);
+        }
+        for w in probes.windows(2) {
+            let _ = ch.transparent_over(w[0], w[1]);
+        }
+    }
+    let _ = box_diagonal(cam.eye);
+    let json = serde_json::to_vec(&scene).expect("a scene serialises");
+    let back: Scene = serde_json::from_slice(&json).expect("a serialised scene parses");
+    assert_eq!(back, scene, "{}", String::from_utf8_lossy(&json));
+});

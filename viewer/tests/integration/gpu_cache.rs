@@ -1,0 +1,222 @@
+//! GPU residency pieces on their own: LRU slot allocation driven by usage feedback, brick
+//! upload validation, page-table ids, and the transfer-function prefix tables.
+
+use crate::render_common::new_gpu as gpu;
+use residency_viewer::gpu::brick_cache::{AtlasKind, BrickCache};
+use residency_viewer::gpu::page_table::PageTables;
+use residency_viewer::gpu::synthetic::SyntheticSource;
+use residency_viewer::gpu::tables::{tf_domain, tf_prefix};
+use residency_viewer::octree::OctreeGeometry;
+use residency_viewer::scene::{ChannelStyle, OpacityPoint};
+use residency_viewer::source::{BrickKey, BrickSource, BrickVoxels, SampleType};
+
+#[test]
+fn lru_follows_usage_feedback_and_protects_the_current_frame() {
+    let gpu = gpu();
+    let mut cache = BrickCache::new(
+        &gpu.device,
+        &gpu.limits,
+        SampleType::U16,
+        [8, 8, 8],
+        3 * 1024,
+    )
+    .unwrap();
+    assert_eq!(cache.capacity(), 3);
+    assert_eq!(cache.kind(), AtlasKind::Uint);
+    // Fill at frame 1 (ids 10, 11, 12).
+    for id in 10..13 {
+        let (slot, evicted) = cache.allocate(1).unwrap();
+        assert_eq!(evicted, None);
+        cache.assign(slot, id);
+        let v = BrickVoxels::U16(vec![id as u16; 512]);
+        cache.upload(&gpu.queue, slot, &v).unwrap();
+    }
+    // The shader reports slot 1 used last in frame 2, slot 0 in frame 6, slot 2 in frame 7.
+    cache.note_usage(&[6, 2, 7]);
+    assert_eq!(cache.available(7), 2);
+    // Rendering frame 8 next: the least recently used slot goes first.
+    assert_eq!(cache.allocate(7), Some((1, Some(11))));
+    cache.assign(1, 20);
+    assert_eq!(cache.allocate(7), Some((0, Some(10))));
+    cache.assign(0, 21);
+    // Slot 2 was used in frame 7 and the others were just filled: nothing left to evict.
+    assert_eq!(cache.allocate(7), None);
+    // Wrong type or size is refused.
+    assert!(
+        cache
+            .upload(&gpu.queue, 0, &BrickVoxels::U8(vec![0; 512]))
+            .is_err()
+    );
+    assert!(
+        cache
+            .upload(&gpu.queue, 0, &BrickVoxels::U16(vec![0; 100]))
+            .is_err()
+    );
+    assert!(cache.upload(&gpu.queue, 0, &BrickVoxels::Empty).is_err());
+}
+
+#[test]
+fn page_table_ids_round_trip() {
+    let gpu = gpu();
+    let src = SyntheticSource::new(
+        SampleType::U8,
+        [13, 37, 50],
+        [1.0; 3],
+        [8; 3],
+        4,
+        3,
+        |_, _| 1.0,
+    );
+    let info = src.info();
+    let geometry = OctreeGeometry::new(info, 3).unwrap();
+    let pages = PageTables::new(&gpu.device, &geometry, &[2, 0]).unwrap();
+    let mut next = 0;
+    for slot_channel in [2u32, 0] {
+        for l in 0..info.levels.len() {
+            let g = info.brick_grid(l);
+            assert_eq!(
+                pages.offsets()[usize::from(slot_channel != 2) * info.levels.len() + l],
+                next
+            );
+            for z in 0..g[0] {
+                for y in 0..g[1] {
+                    for x in 0..g[2] {
+                        let key = BrickKey {
+                            level: l as u32,
+                            channel: slot_channel,
+                            brick: [z, y, x],
+                        };
+                        let id = pages.id(&key).unwrap();
+                        assert_eq!(id, next);
+                        assert_eq!(pages.key(id), Some(key));
+                        next += 1;
+                    }
+                }
+            }
+        }
+    }
+    // Channel 1 is not rendered; bricks outside the grid have no id.
+    assert_eq!(
+        pages.id(&BrickKey {
+            level: 0,
+            channel: 1,
+            brick: [0, 0, 0]
+        }),
+        None
+    );
+    assert_eq!(
+        pages.id(&BrickKey {
+            level: 0,
+            channel: 0,
+            brick: [9, 0, 0]
+        }),
+        None
+    );
+    assert_eq!(pages.key(next), None);
+}
+
+#[test]
+fn tf_prefix_marks_exactly_the_bins_with_opacity() {
+    let style = ChannelStyle {
+        channel: 0,
+        visible: true,
+        color: [1.0; 3],
+        opacity: vec![
+            OpacityPoint {
+                value: 0.0,
+                opacity: 0.0,
+            },
+            OpacityPoint {
+                value: 40.0,
+                opacity: 0.0,
+            },
+            OpacityPoint {
+                value: 60.0,
+                opacity: 0.5,
+            },
+            OpacityPoint {
+                value: 80.0,
+                opacity: 0.0,
+            },
+            OpacityPoint {
+                value: 100.0,
+                opacity: 0.0,
+            },
+        ],
+    };
+    assert_eq!(tf_domain(&style), (0.0, 100.0));
+    let p = tf_prefix(&style, 10);
+    // Bins of 10: opacity is non-zero inside (40, 80), so bins 4..=7.
+    assert_eq!(p, vec![0, 0, 0, 0, 0, 1, 2, 3, 4, 4, 4]);
+    // Agrees with the scene's exact test on every bin.
+    for i in 0..10 {
+        let (a, b) = (i as f64 * 10.0, (i + 1) as f64 * 10.0);
+        assert_eq!(
+            p[i + 1] - p[i] == 0,
+            style.transparent_over(a, b),
+            "bin {i}"
+        );
+    }
+}
+
+#[test]
+fn renderer_rejects_bad_setups_with_errors() {
+    use residency_viewer::gpu::renderer::{RenderOptions, Renderer};
+    use residency_viewer::scene::{Camera, Scene};
+    let gpu = gpu();
+    let src = SyntheticSource::new(SampleType::U8, [8, 8, 8], [1.0; 3], [8; 3], 4, 1, |_, _| {
+        1.0
+    });
+    let style = |channel| ChannelStyle {
+        channel,
+        visible: true,
+        color: [1.0; 3],
+        opacity: vec![OpacityPoint {
+            value: 0.0,
+            opacity: 0.1,
+        }],
+    };
+    let scene = |channels| Scene {
+        camera: Camera {
+            eye: [-9.0, 4.0, 4.0],
+            target: [4.0; 3],
+            up: [0.0, 0.0, 1.0],
+            fov_y_degrees: 30.0,
+        },
+        channels,
+        background: [0.0; 3],
+    };
+    let err = |s: &Scene, o: RenderOptions| {
+        format!("{:#}", Renderer::new(&gpu, src.info(), s, o).err().unwrap())
+    };
+    let ok = scene(vec![style(0)]);
+    assert!(
+        err(
+            &ok,
+            RenderOptions {
+                width: 0,
+                ..Default::default()
+            }
+        )
+        .contains("is empty")
+    );
+    assert!(err(&scene(vec![style(3)]), RenderOptions::default()).contains("no channel 3"));
+    assert!(
+        err(
+            &scene((0..9).map(|_| style(0)).collect()),
+            RenderOptions::default()
+        )
+        .contains("at most 8")
+    );
+    assert!(
+        err(
+            &ok,
+            RenderOptions {
+                cache_bytes: 10,
+                ..Default::default()
+            }
+        )
+        .contains("holds no brick")
+    );
+    assert!(Renderer::new(&gpu, src.info(), &ok, RenderOptions::default()).is_ok());
+}
