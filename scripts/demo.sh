@@ -1,12 +1,24 @@
 #!/usr/bin/env bash
 # The main job on the built-in sample: generates the synthetic stack, converts it to an
 # OME-Zarr pyramid with region metadata, serves it with brickserver, renders it with the
-# GPU viewer (lavapipe when there is no GPU), and prints where everything is.
+# GPU viewer (lavapipe when there is no GPU), builds the web viewer, and prints where
+# everything is, with the link that opens the sample in a WebGPU browser.
+#
+#   scripts/demo.sh [--serve] [OUT_DIR]
+#
+# --serve keeps brickserver running at the end (on 127.0.0.1:8000, or BIND=ADDR:PORT) so the
+# printed link works; stop it with Ctrl-C.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+serve=""
+if [ "${1:-}" = "--serve" ]; then
+  serve=1
+  shift
+fi
 bash scripts/setup.sh
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
 cargo build --release --bins
+bash scripts/build-web.sh
 out=${1:-demo}
 bin=target/release
 "$bin/ingest" sample -o "$out/sample" --size 96,256,256
@@ -35,8 +47,17 @@ cat <<TXT
 
 The OME-Zarr store is $abs/sample.ome.zarr
 The GPU render is     $abs/sample.png (frame statistics in $abs/sample-stats.json)
-Serve it to any OME-Zarr viewer (neuroglancer, vizarr, napari, zarr-python):
-  $bin/brickserver serve $out/sample.ome.zarr            # then open http://127.0.0.1:8000/datasets
+Serve it to any OME-Zarr viewer (neuroglancer, vizarr, napari, zarr-python), and to the
+Residency web viewer (any WebGPU browser: current Chrome or Edge):
+  $bin/brickserver serve $out/sample.ome.zarr            # then open http://127.0.0.1:8000/sample/view
+                                                         # (http://127.0.0.1:8000/ lists every dataset)
 Read it directly:
   .venv/bin/python -c "import zarr; g = zarr.open_group('$out/sample.ome.zarr', mode='r'); print(g['0'].shape)"
 TXT
+
+if [ -n "$serve" ]; then
+  bind=${BIND:-127.0.0.1:8000}
+  echo
+  echo "Serving on http://$bind: open http://$bind/sample/view in a WebGPU browser (Ctrl-C stops)."
+  exec "$bin/brickserver" serve "$out/sample.ome.zarr" --bind "$bind"
+fi

@@ -19,7 +19,10 @@ pub struct Datasets(pub Vec<Dataset>);
 
 fn valid_name(name: &str) -> bool {
     !name.is_empty()
-        && !matches!(name, "datasets" | "healthz" | "metrics" | "openapi.json")
+        && !matches!(
+            name,
+            "datasets" | "healthz" | "metrics" | "openapi.json" | "viewer"
+        )
         && name
             .chars()
             .all(|c| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '.'))
@@ -128,6 +131,7 @@ mod tests {
     #[test]
     fn names_are_url_safe_and_not_reserved() {
         assert!(!valid_name("datasets"));
+        assert!(!valid_name("viewer"));
         assert!(!valid_name("a/b"));
         assert!(!valid_name(".."));
         assert!(valid_name("brain-01_v2"));

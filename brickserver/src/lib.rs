@@ -9,6 +9,10 @@
 //! - [`bricks`]: batched bricks;
 //! - [`metrics`]: Prometheus metrics;
 //! - [`openapi`]: the OpenAPI document;
+//! - [`listing`]: the dataset listing (JSON, or an HTML page) and its links, built on the
+//!   server's public URL;
+//! - [`neuroglancer`]: the neuroglancer link's viewer state;
+//! - [`viewer_page`]: the Residency web viewer's page and files (`/NAME/view`, `/viewer/`);
 //! - [`routes`]: the axum router;
 //! - [`listener`]: connections, with a header timeout, a connection limit and graceful
 //!   shutdown.
@@ -17,13 +21,17 @@ pub mod bricks;
 pub mod cache;
 pub mod datasets;
 pub mod listener;
+pub mod listing;
 pub mod metrics;
+pub mod neuroglancer;
 pub mod openapi;
 pub mod regions;
 pub mod responses;
 pub mod routes;
 pub mod store_keys;
+pub mod viewer_page;
 
 pub use datasets::{Dataset, Datasets};
 pub use listener::{ConnectionLimits, serve};
+pub use listing::PublicUrl;
 pub use routes::{AppState, ServerOptions, router};

@@ -10,7 +10,9 @@ use std::time::Duration;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use residency_brickserver::bricks::BatchLimits;
-use residency_brickserver::{AppState, ConnectionLimits, Datasets, ServerOptions, router, serve};
+use residency_brickserver::{
+    AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, router, serve,
+};
 
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -42,6 +44,15 @@ enum Command {
         /// is the file's content without surrounding whitespace.
         #[arg(long)]
         token_file: Option<PathBuf>,
+        /// The web viewer's built files (scripts/build-web.sh) [default: the folder `web`
+        /// beside this binary].
+        #[arg(long, value_name = "DIR")]
+        viewer_dir: Option<PathBuf>,
+        /// The URL clients reach the server at (a reverse proxy's, path prefix included);
+        /// every link in the listing is built on it. Otherwise links follow the request's
+        /// X-Forwarded-Proto and X-Forwarded-Host, else its Host.
+        #[arg(long, value_name = "URL")]
+        public_url: Option<PublicUrl>,
         /// Memory cache budget in bytes, for chunks and decoded bricks (0: no cache).
         #[arg(long, default_value_t = 256 << 20)]
         cache_bytes: u64,
@@ -102,6 +113,13 @@ fn raise_file_limit() {
     }
 }
 
+/// The web viewer's default folder: `web` beside the running executable (where
+/// `scripts/build-web.sh` writes, e.g. `target/release/web`).
+fn default_viewer_dir() -> Option<PathBuf> {
+    let exe = std::env::current_exe().ok()?;
+    Some(exe.parent()?.join("web"))
+}
+
 async fn run(
     datasets: Datasets,
     bind: SocketAddr,
@@ -119,6 +137,16 @@ async fn run(
     println!("listening on http://{addr}");
     std::io::stdout().flush()?;
     let state = Arc::new(AppState::new(datasets, &options)?);
+    let viewer = state.viewer();
+    match (viewer.built(), viewer.looked_at()) {
+        (Some(dir), _) => tracing::info!("web viewer from {}", dir.display()),
+        (None, Some(dir)) => tracing::warn!(
+            "no web viewer in {} (run scripts/build-web.sh, or pass --viewer-dir): \
+             /NAME/view answers 503",
+            dir.display()
+        ),
+        (None, None) => tracing::warn!("no web viewer folder: /NAME/view answers 503"),
+    }
     let metrics = state.metrics.clone();
     serve(listener, router(state, &options), limits, metrics, shutdown).await;
     Ok(())
@@ -137,6 +165,8 @@ fn main() -> ExitCode {
             bind,
             named,
             token_file,
+            viewer_dir,
+            public_url,
             cache_bytes,
             max_connections,
             request_timeout,
@@ -158,6 +188,8 @@ fn main() -> ExitCode {
                     max_bricks: max_batch_bricks,
                     max_bytes: max_batch_bytes,
                 },
+                viewer_dir: viewer_dir.or_else(default_viewer_dir),
+                public_url,
             };
             let limits = ConnectionLimits {
                 max_connections,

@@ -59,19 +59,70 @@ pub fn document() -> Value {
     let name = json!({"name": "name", "in": "path", "required": true, "schema": {"type": "string"}, "description": "Dataset name."});
     let datasets = json!({
         "get": {
-            "summary": "List the served datasets, with neuroglancer and vizarr links",
+            "summary": "List the served datasets, with links that open each in the Residency web viewer, neuroglancer and vizarr",
+            "description": "Links are built on --public-url when given, else on the request's X-Forwarded-Proto and X-Forwarded-Host (first values), else http:// and its Host. The neuroglancer link names the store's Zarr version (zarr:// for v2, zarr3:// for v3) and carries each channel's omero window and colour.",
             "responses": {"200": {"description": "The datasets", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/DatasetList"}}}}}
         }
     });
+    let text = |description: &str| json!({"description": description, "content": {"text/plain": {"schema": {"type": "string"}}}});
+    let page = |description: &str| json!({"description": description, "content": {"text/html": {"schema": {"type": "string"}}}});
+    let not_built = text(
+        "The web viewer is not built: the message names the folder looked at and says how to build it (scripts/build-web.sh, or --viewer-dir)",
+    );
     json!({
         "openapi": "3.1.0",
         "info": {
             "title": "Residency brickserver",
             "version": env!("CARGO_PKG_VERSION"),
-            "description": "Serves OME-Zarr stores verbatim at their Zarr keys (for any viewer), plus region metadata queries, the binary min/max hierarchy and batched bricks (for renderers). Read-only: GET, HEAD and OPTIONS only. With --token-file, every path but /healthz needs `Authorization: Bearer <token>`."
+            "description": "Serves OME-Zarr stores verbatim at their Zarr keys (for any viewer), plus region metadata queries, the binary min/max hierarchy and batched bricks (for renderers), and the Residency web viewer. Read-only: GET, HEAD and OPTIONS only. With --token-file, every path but /healthz needs `Authorization: Bearer <token>`."
         },
         "paths": {
-            "/": datasets.clone(),
+            "/": {
+                "get": {
+                    "summary": "The datasets: for a browser (an Accept that prefers text/html) an HTML page with each dataset's size, levels, channels and links (the Residency viewer's relative, NAME/view); otherwise the JSON of /datasets",
+                    "responses": {"200": {"description": "The datasets (the answer varies with Accept)", "content": {
+                        "application/json": {"schema": {"$ref": "#/components/schemas/DatasetList"}},
+                        "text/html": {"schema": {"type": "string"}}
+                    }}}
+                }
+            },
+            "/{name}/view": {"get": {
+                "summary": "The Residency web viewer (WebAssembly + WebGPU) on dataset NAME",
+                "description": "The viewer's index.html, its %VIEWER_BASE% placeholders replaced with ../viewer/ (relative, so it works behind a path prefix). Wins over the Zarr key route: a store's root key 'view' is not served.",
+                "parameters": [name.clone()],
+                "responses": {
+                    "200": page("The viewer page"),
+                    "404": page("No such dataset: the same page, which says so"),
+                    "503": not_built.clone()
+                }
+            }},
+            "/viewer": {"get": {
+                "summary": "Redirects to viewer/ (relative, so a path prefix survives)",
+                "responses": {"308": {"description": "Location: viewer/"}}
+            }},
+            "/viewer/": {"get": {
+                "summary": "The Residency web viewer page, its %VIEWER_BASE% placeholders replaced with ./ (the page takes ?server=URL&dataset=NAME)",
+                "responses": {
+                    "200": page("The viewer page"),
+                    "503": not_built.clone()
+                }
+            }},
+            "/viewer/{file}": {"get": {
+                "summary": "A file of the web viewer: .wasm as application/wasm, .js as text/javascript, .html, .css; Last-Modified with If-Modified-Since, Range",
+                "parameters": [{"name": "file", "in": "path", "required": true, "schema": {"type": "string"}, "description": "Path of the file in the viewer's folder ('/'-separated); index.html is the page as at /viewer/."}],
+                "responses": {
+                    "200": {"description": "The file", "content": {
+                        "application/wasm": {"schema": {"type": "string", "contentMediaType": "application/wasm"}},
+                        "text/javascript": {"schema": {"type": "string"}},
+                        "text/html": {"schema": {"type": "string"}},
+                        "text/css": {"schema": {"type": "string"}}
+                    }},
+                    "206": {"description": "A byte range of the file"},
+                    "304": {"description": "Not modified (If-Modified-Since)"},
+                    "404": text("No such file (hidden files and paths leaving the folder included)"),
+                    "503": not_built
+                }
+            }},
             "/datasets": datasets,
             "/healthz": {"get": {"summary": "Liveness", "security": [], "responses": {"200": {"description": "ok", "content": {"text/plain": {"schema": {"type": "string"}}}}}}},
             "/metrics": {"get": {"summary": "Prometheus metrics: requests by status class, bytes, latency histogram, cache hits/misses/bytes, connections", "responses": {"200": {"description": "OpenMetrics text", "content": {"application/openmetrics-text": {"schema": {"type": "string"}}}}}}},

@@ -1,13 +1,15 @@
 //! The HTTP routes: Zarr keys under `/NAME/`, the region API (`/NAME/regions`,
-//! `/NAME/minmax`, `/NAME/bricks`), the dataset listing, health, metrics and the OpenAPI
-//! document.
+//! `/NAME/minmax`, `/NAME/bricks`), the Residency web viewer (`/NAME/view`, `/viewer/FILE`),
+//! the dataset listing, health, metrics and the OpenAPI document.
 //!
 //! Zarr keys are read from the page cache on each request (as nginx does), so nothing is
 //! copied twice; the memory cache holds what is costly to make: bricks decoded, or cut out of
 //! shards, for batches.
 //!
-//! The three API paths never collide with a Zarr key: a Zarr node at a store's root is a
-//! folder, so its keys are `regions/zarr.json` and the like, never `regions` itself.
+//! The three API paths and `view` never collide with a Zarr key: a Zarr node at a store's
+//! root is a folder, so its keys are `regions/zarr.json` and the like, never `regions` itself
+//! (a file named `view` at a store's root would be shadowed by the viewer page). `/viewer/`
+//! is no dataset's: the name `viewer` is reserved.
 
 use std::fmt::Display;
 use std::path::PathBuf;
@@ -20,22 +22,24 @@ use axum::extract::rejection::QueryRejection;
 use axum::extract::{Path, Query, RawQuery, Request, State};
 use axum::http::{HeaderMap, Method, Response, StatusCode, Uri, header};
 use axum::middleware::{self, Next};
+use axum::response::Redirect;
 use axum::response::{IntoResponse, Json};
 use axum::routing::get;
-use residency_schemas::server::{ApiError, DatasetEntry, DatasetList};
+use residency_schemas::server::{ApiError, DatasetList};
 use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, MINMAX_MEDIA_TYPE, encode_framed};
 use serde::Deserialize;
-use serde_json::json;
 use subtle::ConstantTimeEq;
 use tower_http::cors::{Any, CorsLayer};
 
 use crate::bricks::{BatchError, BatchLimits, ImageArrays, parse_batch, read_batch};
 use crate::cache::{ByteCache, CacheKey};
 use crate::datasets::{Dataset, Datasets};
+use crate::listing::{self, PublicUrl};
 use crate::metrics::{Metrics, track};
 use crate::regions::{QueryError, RegionIndex};
 use crate::responses::{etag_of, file_response, is_metadata, not_modified};
 use crate::store_keys::{KeyError, RootDir, read_cached};
+use crate::viewer_page::ViewerFiles;
 
 /// Server-wide options of the router.
 #[derive(Clone, Debug)]
@@ -46,6 +50,13 @@ pub struct ServerOptions {
     pub cache_bytes: u64,
     /// Caps on batched brick requests.
     pub batch: BatchLimits,
+    /// The web viewer's built files (`scripts/build-web.sh`); `None` or a folder without
+    /// `index.html` answers `/NAME/view` and `/viewer/...` with 503 and how to build it.
+    pub viewer_dir: Option<PathBuf>,
+    /// The URL the server is reached at from outside (a reverse proxy's, path prefix
+    /// included): every link in the listing is built on it. `None`: from the request's
+    /// `X-Forwarded-Proto`/`X-Forwarded-Host`, else its `Host`.
+    pub public_url: Option<PublicUrl>,
 }
 
 impl Default for ServerOptions {
@@ -54,6 +65,8 @@ impl Default for ServerOptions {
             token: None,
             cache_bytes: 256 << 20,
             batch: BatchLimits::default(),
+            viewer_dir: None,
+            public_url: None,
         }
     }
 }
@@ -98,6 +111,8 @@ pub struct AppState {
     /// The metrics.
     pub metrics: Arc<Metrics>,
     batch: BatchLimits,
+    viewer: ViewerFiles,
+    public_url: Option<PublicUrl>,
     loaded: Vec<Loaded>,
     roots: Vec<RootDir>,
     etags: quick_cache::sync::Cache<(usize, String), (Arc<str>, Instant)>,
@@ -136,10 +151,17 @@ impl AppState {
             cache,
             metrics,
             batch: options.batch,
+            viewer: ViewerFiles::new(options.viewer_dir.clone()),
+            public_url: options.public_url.clone(),
             loaded,
             roots,
             etags: quick_cache::sync::Cache::new(1 << 16),
         })
+    }
+
+    /// The web viewer's files.
+    pub fn viewer(&self) -> &ViewerFiles {
+        &self.viewer
     }
 
     fn index_of(&self, name: &str) -> Option<usize> {
@@ -195,10 +217,16 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
         ])
         .max_age(Duration::from_hours(24));
     let metrics = state.metrics.clone();
+    // Static segments win over captures, so `/{name}/view` wins over `/{name}/{*key}` and
+    // `/viewer/...` over both.
     let router = Router::new()
+        .route("/viewer", get(|| async { Redirect::permanent("viewer/") }))
+        .route("/viewer/", get(viewer_file))
+        .route("/viewer/{*file}", get(viewer_file))
+        .route("/{name}/view", get(view))
         .route("/metrics", get(show_metrics))
         .route("/openapi.json", get(openapi).options(allowed_methods))
-        .route("/", get(list).options(allowed_methods))
+        .route("/", get(home).options(allowed_methods))
         .route("/datasets", get(list).options(allowed_methods))
         .route(
             "/healthz",
@@ -243,32 +271,46 @@ async fn openapi() -> Json<serde_json::Value> {
     Json(crate::openapi::document())
 }
 
+/// `GET /viewer/...`: the web viewer's files.
+async fn viewer_file(State(state): State<Arc<AppState>>, request: Request) -> Response<Body> {
+    state.viewer.file(request).await
+}
+
+/// `GET /NAME/view`: the web viewer's page, 404 (with the page, which says so) for an unknown
+/// dataset.
+async fn view(State(state): State<Arc<AppState>>, Path(name): Path<String>) -> Response<Body> {
+    let status = if state.index_of(&name).is_some() {
+        StatusCode::OK
+    } else {
+        StatusCode::NOT_FOUND
+    };
+    state.viewer.page("../viewer/", status).await
+}
+
+/// The datasets with their links (reading each store's metadata on the blocking pool).
+async fn listed(state: &Arc<AppState>, headers: &HeaderMap) -> Vec<listing::Listed> {
+    let base = listing::base_url(headers, state.public_url.as_ref());
+    let st = state.clone();
+    blocking(move || listing::list(&st.datasets.0, &base)).await
+}
+
+/// `GET /`: the dataset list as an HTML page for a browser (an `Accept` that prefers
+/// `text/html`), else as JSON like `/datasets`.
+async fn home(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Response<Body> {
+    let html = listing::prefers_html(headers.get(header::ACCEPT).and_then(|h| h.to_str().ok()));
+    let datasets = listed(&state, &headers).await;
+    let vary = [(header::VARY, "Accept")];
+    if html {
+        let content_type = (header::CONTENT_TYPE, "text/html; charset=utf-8");
+        (vary, [content_type], listing::html(&datasets)).into_response()
+    } else {
+        (vary, Json(listing::json(datasets))).into_response()
+    }
+}
+
+/// `GET /datasets`: the dataset list as JSON.
 async fn list(State(state): State<Arc<AppState>>, headers: HeaderMap) -> Json<DatasetList> {
-    let host = headers
-        .get(header::HOST)
-        .and_then(|h| h.to_str().ok())
-        .unwrap_or("localhost");
-    let datasets = state
-        .datasets
-        .0
-        .iter()
-        .map(|d| {
-            let url = format!("http://{host}/{}/", d.name);
-            let layer = json!({"layers": [{"type": "image", "source": format!("zarr3://{url}"), "name": d.name}]});
-            let fragment = percent_encoding::utf8_percent_encode(
-                &layer.to_string(),
-                percent_encoding::NON_ALPHANUMERIC,
-            )
-            .to_string();
-            DatasetEntry {
-                name: d.name.clone(),
-                neuroglancer: format!("https://neuroglancer-demo.appspot.com/#!{fragment}"),
-                vizarr: format!("https://hms-dbmi.github.io/vizarr/?source={url}"),
-                url,
-            }
-        })
-        .collect();
-    Json(DatasetList { datasets })
+    Json(listing::json(listed(&state, &headers).await))
 }
 
 /// A JSON error answer.

@@ -58,7 +58,10 @@ pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
     let key = checked_key(raw_key)?;
     let joined = root.join(&key);
     let real = joined.canonicalize().map_err(|e| match e.kind() {
-        io::ErrorKind::NotFound | io::ErrorKind::NotADirectory => KeyError::NotFound,
+        // A name too long for the file system names no file either (found by fuzzing).
+        io::ErrorKind::NotFound | io::ErrorKind::NotADirectory | io::ErrorKind::InvalidFilename => {
+            KeyError::NotFound
+        }
         _ => KeyError::Unreadable(e.to_string()),
     })?;
     if !real.starts_with(root) {
@@ -102,7 +105,10 @@ impl RootDir {
         let file = match self.openat2(&key) {
             Ok(f) => f,
             Err(e) => match e.raw_os_error() {
-                Some(libc::ENOENT | libc::ENOTDIR) => return Err(KeyError::NotFound),
+                // A name too long for the file system names no file either (found by fuzzing).
+                Some(libc::ENOENT | libc::ENOTDIR | libc::ENAMETOOLONG) => {
+                    return Err(KeyError::NotFound);
+                }
                 Some(libc::EXDEV) => {
                     return Err(KeyError::Refused("key leads outside the dataset"));
                 }
@@ -201,6 +207,12 @@ mod tests {
             );
         }
         assert_eq!(resolve(&dir, "no-such-key-here"), Err(KeyError::NotFound));
+        // Fuzz target region_query: a segment longer than the file system's NAME_MAX was a
+        // 500 ("File name too long"); it names no key, so it is a 404.
+        let long = format!("m{}", "+D".repeat(200));
+        assert_eq!(resolve(&dir, &long), Err(KeyError::NotFound));
+        let root = RootDir::open(&dir).unwrap();
+        assert!(matches!(root.open_key(&long), Err(KeyError::NotFound)));
     }
 
     #[test]

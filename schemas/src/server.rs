@@ -4,7 +4,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Deserializer, Serialize};
 
-/// `GET /` and `GET /datasets`: the served datasets.
+/// `GET /datasets` (and `GET /` but for a browser): the served datasets.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct DatasetList {
     /// One entry per dataset, in the order given on the command line.
@@ -18,7 +18,9 @@ pub struct DatasetEntry {
     pub name: String,
     /// URL of the store's root.
     pub url: String,
-    /// Link opening the store in neuroglancer.
+    /// Link opening the dataset in the Residency web viewer (`{base}/NAME/view`).
+    pub view: String,
+    /// Link opening the store in neuroglancer, with each channel's display range and colour.
     pub neuroglancer: String,
     /// Link opening the store in vizarr.
     pub vizarr: String,

@@ -2,10 +2,12 @@
 requests for headers, and raw requests for path traversal."""
 
 import http.client
+import json
 import os
 import pathlib
 import signal
 import subprocess
+import urllib.parse
 
 import numpy as np
 import pytest
@@ -157,15 +159,64 @@ def test_nothing_outside_a_dataset_is_reachable(served, path):
     assert b"TOP SECRET" not in body and b"root:" not in body
 
 
+def neuroglancer_state(link):
+    """The viewer state in a neuroglancer link's fragment."""
+    prefix = "https://neuroglancer-demo.appspot.com/#!"
+    assert link.startswith(prefix), link
+    return json.loads(urllib.parse.unquote(link[len(prefix):]))
+
+
 def test_listing_links_open_each_dataset(served):
-    base, _, _ = served
+    base, store, _ = served
+    omero = json.loads((store / "zarr.json").read_text())["attributes"]["ome"]["omero"]["channels"]
     for path in ["/", "/datasets"]:
         items = requests.get(base + path).json()["datasets"]
         assert [d["name"] for d in items] == ["cells"]
         assert items[0]["url"] == f"{base}/cells/"
-        assert items[0]["vizarr"].endswith(f"source={base}/cells/")
-        assert "zarr3%3A%2F%2F" in items[0]["neuroglancer"]
+        assert items[0]["view"] == f"{base}/cells/view"
+        assert items[0]["vizarr"] == f"https://hms-dbmi.github.io/vizarr/?source={base}/cells/"
+        # OME-Zarr 0.5 (Zarr v3): zarr3://, one layer per channel with its omero window and
+        # colour, so 16-bit data does not open black.
+        state = neuroglancer_state(items[0]["neuroglancer"])
+        assert [layer["source"] for layer in state["layers"]] == [f"zarr3://{base}/cells/"] * 2
+        for i, (layer, channel) in enumerate(zip(state["layers"], omero)):
+            window = channel["window"]
+            assert layer["localDimensions"] == {"c'": [1, ""]}
+            assert layer["localPosition"] == [i + 0.5]
+            assert layer["shaderControls"]["normalized"]["range"] == [window["start"], window["end"]]
+            assert layer["shaderControls"]["color"] == "#" + channel["color"].lower()
     assert requests.get(base + "/healthz").text == "ok\n"
+
+
+def test_listing_links_of_a_zarr_v2_store_and_behind_a_proxy(tmp_path):
+    src = tmp_path / "a.tif"
+    tifffile.imwrite(src, np.arange(2 * 8 * 8, dtype=np.uint16).reshape(2, 8, 8) * 500, photometric="minisblack")
+    store = tmp_path / "old.ome.zarr"
+    run_ingest("convert", src, "-o", store, "--ome-zarr-version", "0.4", "--quiet")
+    proc, base = start_server(store)
+    try:
+        (item,) = requests.get(base + "/datasets").json()["datasets"]
+        state = neuroglancer_state(item["neuroglancer"])
+        # zarr3:// reads zarr.json only ("No zarr metadata found" on a v2 store).
+        assert [layer["source"] for layer in state["layers"]] == [f"zarr://{base}/old/"]
+        window = json.loads((store / ".zattrs").read_text())["omero"]["channels"][0]["window"]
+        assert state["layers"][0]["shaderControls"]["normalized"]["range"] == [window["start"], window["end"]]
+        # Behind a TLS reverse proxy: its scheme and host.
+        proxied = {"X-Forwarded-Proto": "https", "X-Forwarded-Host": "data.example.org"}
+        (item,) = requests.get(base + "/datasets", headers=proxied).json()["datasets"]
+        assert item["url"] == "https://data.example.org/old/"
+        assert item["view"] == "https://data.example.org/old/view"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=10)
+    proc, base = start_server(store, "--public-url", "https://example.org/residency/")
+    try:
+        (item,) = requests.get(base + "/", headers={"X-Forwarded-Host": "other"}).json()["datasets"]
+        assert item["url"] == "https://example.org/residency/old/"
+        assert neuroglancer_state(item["neuroglancer"])["layers"][0]["source"] == "zarr://https://example.org/residency/old/"
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=10)
 
 
 def test_graceful_shutdown_on_sigterm(tmp_path):
@@ -231,3 +282,48 @@ def test_metrics_count_requests_bytes_and_latency(served):
     assert metric(second, "brickserver_response_bytes_total") - metric(t1, "brickserver_response_bytes_total") == len(first.content) + chunk.stat().st_size + not_found
     assert metric(second, "brickserver_request_duration_seconds_count") - metric(t1, "brickserver_request_duration_seconds_count") == 3
     assert 'brickserver_request_duration_seconds_bucket{le="0.001"}' in second
+
+
+def test_web_viewer_pages_files_and_html_listing(tmp_path):
+    store = small_store(tmp_path)
+    web = tmp_path / "web"
+    web.mkdir()
+    (web / "index.html").write_text('<script src="%VIEWER_BASE%main.js"></script>')
+    (web / "residency_viewer_bg.wasm").write_bytes(b"\0asm\1\0\0\0")
+    (tmp_path / "secret.txt").write_text("TOP SECRET")
+    proc, base = start_server(store, "--viewer-dir", web)
+    try:
+        r = requests.get(f"{base}/a/view")
+        assert (r.status_code, r.headers["content-type"]) == (200, "text/html; charset=utf-8")
+        assert r.text == '<script src="../viewer/main.js"></script>'
+        r = requests.get(f"{base}/nope/view")
+        assert (r.status_code, r.text) == (404, '<script src="../viewer/main.js"></script>')
+        for path in ["/viewer/", "/viewer/index.html"]:
+            assert requests.get(base + path).text == '<script src="./main.js"></script>'
+        r = requests.get(f"{base}/viewer/residency_viewer_bg.wasm")
+        assert (r.status_code, r.headers["content-type"], r.content) == (200, "application/wasm", b"\0asm\1\0\0\0")
+        for bad in ["/viewer/..%2fsecret.txt", "/viewer/.hidden", "/viewer/missing.js"]:
+            r = requests.get(base + bad)
+            assert r.status_code == 404, bad
+        # A store key is still a store key.
+        assert requests.get(f"{base}/a/zarr.json").json()["zarr_format"] == 3
+        # For a browser, `/` is an HTML page linking each dataset's viewer; JSON otherwise.
+        r = requests.get(base + "/", headers={"Accept": "text/html,application/xhtml+xml"})
+        assert r.headers["content-type"] == "text/html; charset=utf-8"
+        assert '<a href="a/view">open in the Residency viewer</a>' in r.text
+        assert requests.get(base + "/").json()["datasets"][0]["name"] == "a"
+    finally:
+        proc.terminate()
+        proc.wait()
+    proc, base = start_server(store, "--viewer-dir", tmp_path / "not-built")
+    try:
+        r = requests.get(f"{base}/a/view")
+        assert r.status_code == 503
+        assert r.text == (
+            "the web viewer is not built: run scripts/build-web.sh, or pass --viewer-dir "
+            f"(looked for index.html in {tmp_path / 'not-built'})\n"
+        )
+        assert requests.get(f"{base}/viewer/main.js").status_code == 503
+    finally:
+        proc.terminate()
+        proc.wait()

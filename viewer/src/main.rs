@@ -3,7 +3,8 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use residency_viewer::cli;
+
+mod cli;
 
 #[derive(Parser)]
 #[command(

@@ -170,7 +170,6 @@ fn rational(value: tiff::decoder::ifd::Value) -> Option<f64> {
     use tiff::decoder::ifd::Value;
     match value {
         Value::Rational(n, d) if n > 0 && d > 0 => Some(d as f64 / n as f64),
-        Value::RationalBig(n, d) if n > 0 && d > 0 => Some(d as f64 / n as f64),
         _ => None,
     }
 }

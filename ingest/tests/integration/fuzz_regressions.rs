@@ -1,13 +1,11 @@
-//! Inputs found by fuzzing (tests/fuzz, `scripts/fuzz.sh`; see docs/fuzzing.md), minimised and
+//! Inputs found by fuzzing (tests/fuzz, `scripts/fuzz.sh`; see the README's "Fuzzing" section), minimised and
 //! kept as regressions, end to end through `TiffSource`. Findings fixed inside a parser also
 //! have a unit test beside it (`source::raw`, `source::tiff_claims`, `source::tiff_metadata`).
 //!
-//! Two TIFF files below make `tiff` 0.10.3 panic, so `ingest convert` dies with a panic
+//! Two TIFF files below made `tiff` 0.10.3 panic, so `ingest convert` died with a panic
 //! instead of naming the corrupt file. Both bugs are fixed in `tiff` 0.11
-//! (image-rs/image-tiff#305 and #306): those tests are ignored until the workspace upgrades,
-//! then must pass unchanged (`cargo test -p residency-ingest --test integration
-//! fuzz_regressions -- --include-ignored`). The fuzz targets tolerate exactly these two
-//! panics meanwhile (tests/fuzz/src/known.rs).
+//! (image-rs/image-tiff#305 and #306), which the workspace now uses; these tests keep them
+//! fixed.
 
 use std::path::Path;
 
@@ -65,7 +63,6 @@ fn write(dir: &Path, name: &str, bytes: &[u8]) -> std::path::PathBuf {
 
 /// Target tiff_file: a 1×1 page whose SampleFormat tag has no values.
 #[test]
-#[ignore = "tiff 0.10.3 panics (index out of bounds); fixed in tiff 0.11 (image-rs/image-tiff#305)"]
 fn an_empty_sample_format_tag_is_an_error() {
     let file = tiff(
         &[
@@ -94,7 +91,6 @@ fn an_empty_sample_format_tag_is_an_error() {
 /// Target tiff_structured: a 1×16 page in one LZW-compressed 16×16 tile of 256 zero bytes,
 /// which decode to fewer bytes than the tile without an end code.
 #[test]
-#[ignore = "tiff 0.10.3 panics (assert in LZWReader); fixed in tiff 0.11 (image-rs/image-tiff#306)"]
 fn an_lzw_tile_without_an_end_code_is_an_error() {
     let file = tiff(
         &[

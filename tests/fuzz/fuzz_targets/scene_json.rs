@@ -6,7 +6,7 @@
 
 use libfuzzer_sys::fuzz_target;
 use residency_fuzz::scratch;
-use residency_viewer::cli::scene_args::read_scene;
+use residency_viewer::defaults::read_scene;
 use residency_viewer::scene::{Scene, box_diagonal, corrected_opacity};
 
 fuzz_target!(|data: &[u8]| {

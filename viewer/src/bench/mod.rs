@@ -24,7 +24,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, ensure};
 use serde::{Deserialize, Serialize};
 
-use crate::cli::scene_args::CameraSpec;
+use crate::defaults::CameraSpec;
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{Method, RenderOptions, Renderer};
 use crate::gpu::streaming::{Budget, Fetcher, Progressive, converge};
@@ -269,7 +269,6 @@ pub struct RunRecord {
     /// Short label (`residency`, `step 0.25`, …).
     pub label: String,
     /// Traversal method, serialized as its name (`residency`, `page-table`, `octree`).
-    #[serde(deserialize_with = "method_from_name")]
     pub method: Method,
     /// Rendered channels.
     pub channels: usize,
@@ -369,7 +368,7 @@ pub struct BenchResults {
 
 /// An experiment of `viewer bench run`, named `table1`, `sweep`, `skipped` or `scaling` on the
 /// command line and in results files.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Experiment {
     /// Table 1 of the paper: every method, GPU and wall ms per converged frame, resident bytes.
@@ -383,6 +382,9 @@ pub enum Experiment {
 }
 
 impl Experiment {
+    /// Every experiment, in the order `viewer bench run` lists them.
+    pub const ALL: [Self; 4] = [Self::Table1, Self::Sweep, Self::Skipped, Self::Scaling];
+
     /// The name in results files.
     pub fn name(self) -> &'static str {
         match self {
@@ -394,23 +396,21 @@ impl Experiment {
     }
 }
 
+impl std::str::FromStr for Experiment {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|e| e.name() == s)
+            .ok_or_else(|| format!("unknown experiment '{s}' (table1, sweep, skipped or scaling)"))
+    }
+}
+
 impl std::fmt::Display for Experiment {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
     }
-}
-
-/// Deserializes a [`Method`] from its name ([`Method::name`], as it serializes).
-fn method_from_name<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Method, D::Error> {
-    use clap::ValueEnum;
-    let name = String::deserialize(d)?;
-    Method::value_variants()
-        .iter()
-        .copied()
-        .find(|m| m.name() == name)
-        .ok_or_else(|| {
-            serde::de::Error::unknown_variant(&name, &["residency", "page-table", "octree"])
-        })
 }
 
 /// The values a sweep visits.
@@ -1005,8 +1005,6 @@ pub fn vary_transfer_functions(scene: &mut Scene) {
 
 #[cfg(test)]
 mod tests {
-    use clap::ValueEnum;
-
     use super::*;
 
     fn run_record(experiment: Experiment, method: Method, sweep: Option<SweepParam>) -> RunRecord {
@@ -1046,11 +1044,11 @@ mod tests {
 
     #[test]
     fn enums_serialize_as_their_names_on_the_command_line_and_in_results() {
-        for &e in Experiment::value_variants() {
+        for e in Experiment::ALL {
             let json = serde_json::to_value(e).unwrap();
             assert_eq!(json, e.name());
             assert_eq!(serde_json::from_value::<Experiment>(json).unwrap(), e);
-            assert_eq!(e.to_possible_value().unwrap().get_name(), e.name());
+            assert_eq!(e.name().parse::<Experiment>(), Ok(e));
             assert_eq!(e.to_string(), e.name());
         }
         let names: Vec<_> = std::iter::once(SweptParameter::Default)
@@ -1075,7 +1073,7 @@ mod tests {
                 "leaf_voxels"
             ]
         );
-        for &m in Method::value_variants() {
+        for m in Method::ALL {
             let r = run_record(Experiment::Table1, m, None);
             let json = serde_json::to_value(&r).unwrap();
             assert_eq!(json["method"], m.name());

@@ -84,7 +84,7 @@ pub fn box_in_frustum(camera: &Camera, aspect: f64, lo: [f64; 3], hi: [f64; 3]) 
 /// of the volume centre, then every brick of it in the frustum, per visible channel.
 pub fn naive_fetch(info: &VolumeInfo, scene: &Scene, options: &RenderOptions) -> NaiveFetch {
     let cam = &scene.camera;
-    let centre = crate::cli::scene_args::volume_centre(info);
+    let centre = crate::defaults::volume_centre(info);
     let d: [f64; 3] = std::array::from_fn(|i| centre[i] - cam.eye[i]);
     let t = dot(d, d).sqrt();
     let bounds = options

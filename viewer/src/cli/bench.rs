@@ -1,4 +1,4 @@
-//! `viewer bench`: the renderer benchmark suite ([`crate::bench`]). `viewer bench run`
+//! `viewer bench`: the renderer benchmark suite ([`residency_viewer::bench`]). `viewer bench run`
 //! measures one dataset (Table-1 methods, time–error sweep, skipped work, scaling point) into a
 //! JSON results file (`schemas/json/render-bench.schema.json`); `viewer bench report` turns
 //! results files into markdown tables and PNG plots.
@@ -10,9 +10,9 @@ use anyhow::{Context, Result, ensure};
 
 use super::renderer_args::RendererArgs;
 use super::scene_args::{SceneArgs, SourceArgs};
-use crate::bench::{self, Bench, Experiment, Plan, SweepValues};
-use crate::gpu::renderer::Method;
-use crate::source::BrickSource;
+use residency_viewer::bench::{self, Bench, Experiment, Plan, SweepValues};
+use residency_viewer::gpu::renderer::Method;
+use residency_viewer::source::BrickSource;
 
 /// Arguments of `viewer bench`.
 #[derive(clap::Args, Debug)]
@@ -48,7 +48,7 @@ pub struct RunArgs {
     /// Experiments, comma-separated: table1, sweep, skipped, scaling.
     #[arg(
         long,
-        value_enum,
+        value_parser = experiment_parser(),
         value_delimiter = ',',
         default_value = "table1,skipped"
     )]
@@ -84,7 +84,7 @@ pub struct RunArgs {
     #[arg(long, default_value_t = 30.0, allow_hyphen_values = true)]
     pub first_azimuth: f64,
     /// Reference step as a fraction of the finest level-0 voxel.
-    #[arg(long, default_value_t = crate::reference::DEFAULT_STEP_FRACTION)]
+    #[arg(long, default_value_t = residency_viewer::reference::DEFAULT_STEP_FRACTION)]
     pub reference_step: f64,
     /// Table-1 methods, comma-separated: residency, page-table, octree, no-skipping.
     #[arg(
@@ -141,6 +141,13 @@ pub struct ReportArgs {
     /// The command line named in the report as how the numbers were made.
     #[arg(long, default_value = "viewer bench")]
     pub command: String,
+}
+
+/// Parses one `--experiment` value: one of the library's [`Experiment`] names.
+fn experiment_parser() -> impl clap::builder::TypedValueParser<Value = Experiment> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Experiment::ALL.map(Experiment::name))
+        .map(|s| s.parse::<Experiment>().expect("one of the possible values"))
 }
 
 fn parse_method(s: &str) -> Result<(Method, bool)> {

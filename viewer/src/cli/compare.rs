@@ -5,8 +5,8 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 
-use crate::image::RgbImage;
-use crate::metrics::{self, Metrics};
+use residency_viewer::image::RgbImage;
+use residency_viewer::metrics::{self, Metrics};
 
 /// Arguments of `viewer compare`.
 #[derive(clap::Args, Debug)]

@@ -1,5 +1,5 @@
 //! `viewer reference`: the scene's ground truth from the f64 CPU ray caster
-//! ([`crate::reference`]), written as PNG or EXR.
+//! ([`residency_viewer::reference`]), written as PNG or EXR.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::Result;
 
 use super::scene_args::{SceneArgs, SourceArgs};
-use crate::reference::{self, DEFAULT_STEP_FRACTION, ReferenceOptions};
+use residency_viewer::reference::{self, DEFAULT_STEP_FRACTION, ReferenceOptions};
 
 /// Arguments of `viewer reference`.
 #[derive(clap::Args, Debug)]
@@ -38,7 +38,7 @@ pub struct Args {
 /// Runs `viewer reference`.
 pub fn run(args: Args) -> Result<()> {
     // Refuse a bad output name before the render, not after.
-    crate::image::ImageFormat::of(&args.out)?;
+    residency_viewer::image::ImageFormat::of(&args.out)?;
     let source = args.source.open()?;
     let scene = args.scene.scene(source.info())?;
     let options = ReferenceOptions {

@@ -1,4 +1,4 @@
-//! `viewer render`: a progressive GPU render ([`crate::gpu::streaming`]) until no brick is
+//! `viewer render`: a progressive GPU render ([`residency_viewer::gpu::streaming`]) until no brick is
 //! outstanding or a frame/time budget runs out, written as PNG or EXR, with per-frame
 //! statistics as JSON.
 
@@ -11,11 +11,11 @@ use serde::Serialize;
 
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
-use crate::gpu::device::Gpu;
-use crate::gpu::renderer::Method;
-use crate::gpu::streaming::{Budget, FrameStats, render_progressive};
-use crate::image::{ImageFormat, RgbImage};
-use crate::source::BrickKey;
+use residency_viewer::gpu::device::Gpu;
+use residency_viewer::gpu::renderer::Method;
+use residency_viewer::gpu::streaming::{Budget, FrameStats, render_progressive};
+use residency_viewer::image::{ImageFormat, RgbImage};
+use residency_viewer::source::BrickKey;
 
 /// Arguments of `viewer render`.
 #[derive(clap::Args, Debug)]

@@ -6,9 +6,16 @@ use std::sync::Arc;
 use anyhow::{Result, ensure};
 
 use super::scene_args::{SceneArgs, SourceArgs};
-use crate::gpu::renderer::{Method, RenderOptions};
-use crate::scene::Scene;
-use crate::source::BrickSource;
+use residency_viewer::gpu::renderer::{Method, RenderOptions};
+use residency_viewer::scene::Scene;
+use residency_viewer::source::BrickSource;
+
+/// Parses `--method`: one of the library's [`Method`] names.
+pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Method::ALL.map(Method::name))
+        .map(|s| s.parse::<Method>().expect("one of the possible values"))
+}
 
 /// Renderer flags (flattened into `viewer render` and `viewer view`).
 #[derive(clap::Args, Debug)]
@@ -41,7 +48,7 @@ pub struct RendererArgs {
     pub no_substitution: bool,
     /// Traversal method: ours (`residency`), or a baseline: `page-table` (MRMCPT: whole-brick
     /// skipping, no substitution) or `octree` (one node per brick, GigaVoxels style).
-    #[arg(long, value_enum, default_value_t = Method::Residency)]
+    #[arg(long, default_value = Method::Residency.name(), value_parser = method_parser())]
     pub method: Method,
     /// Brick fetch worker threads.
     #[arg(long, default_value_t = 8)]

@@ -5,10 +5,13 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Context, Result, bail, ensure};
+use anyhow::{Result, bail, ensure};
 
-use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, box_diagonal};
-use crate::source::{BrickSource, HttpSource, LocalSource, SampleType, VolumeInfo};
+use residency_viewer::defaults::{
+    CameraSpec, default_channels, default_scene, numbers, read_scene,
+};
+use residency_viewer::scene::{OpacityPoint, Scene};
+use residency_viewer::source::{BrickSource, HttpSource, LocalSource, VolumeInfo, read_token_file};
 
 /// Where the volume comes from: a brick server and dataset name, or a local store.
 #[derive(clap::Args, Clone, Debug, Default)]
@@ -39,161 +42,17 @@ impl SourceArgs {
             (Some(url), Some(name), None) => {
                 let token = self
                     .token_file
-                    .as_ref()
-                    .map(|f| {
-                        std::fs::read_to_string(f)
-                            .with_context(|| format!("{}: cannot read the token", f.display()))
-                    })
+                    .as_deref()
+                    .map(read_token_file)
                     .transpose()?;
                 Ok(Box::new(HttpSource::open_with_token(
                     url,
                     name,
-                    token.as_deref().map(str::trim),
+                    token.as_deref(),
                 )?))
             }
             (None, None, Some(path)) => Ok(Box::new(LocalSource::open(path)?)),
             _ => bail!("give either --server URL --dataset NAME, or --store PATH"),
-        }
-    }
-}
-
-/// Default vertical field of view, degrees.
-pub const DEFAULT_FOV_DEGREES: f64 = 30.0;
-/// Default opacity (at the reference step) at the top of a default transfer-function ramp.
-pub const DEFAULT_OPACITY: f64 = 0.05;
-/// Default camera: azimuth 30°, elevation 20°, 1.5 volume diagonals from the centre.
-pub const DEFAULT_ORBIT: CameraSpec = CameraSpec::Orbit {
-    azimuth: 30.0,
-    elevation: 20.0,
-    distance: 1.5,
-};
-/// Colours cycled for channels whose store gives none (linear RGB).
-pub const DEFAULT_COLOURS: [[f64; 3]; 6] = [
-    [0.0, 1.0, 1.0],
-    [1.0, 0.0, 1.0],
-    [1.0, 1.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [1.0, 0.0, 0.0],
-    [0.0, 0.0, 1.0],
-];
-
-/// A camera given on the command line.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum CameraSpec {
-    /// `AZIMUTH,ELEVATION,DISTANCE`: orbit around the volume centre, in the microscope's
-    /// frame. Azimuth 0 and elevation 0 put the eye on the `−z` side looking toward `+z`
-    /// (slice 0 nearest) with `−y` up, so `x` runs right and `y` down, as a slice viewer
-    /// shows the stack; azimuth turns the eye toward `+x` about the `y` axis, elevation
-    /// toward `−y` (up). Angles in degrees, distance in volume diagonals from the centre.
-    Orbit {
-        /// Degrees.
-        azimuth: f64,
-        /// Degrees.
-        elevation: f64,
-        /// Volume diagonals.
-        distance: f64,
-    },
-    /// `EX,EY,EZ:TX,TY,TZ`: eye and target in world units (`x, y, z`), `−y` up.
-    LookAt {
-        /// Eye position.
-        eye: [f64; 3],
-        /// Point looked at.
-        target: [f64; 3],
-    },
-}
-
-fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], String> {
-    let v: Vec<f64> = s
-        .split(',')
-        .map(|p| p.trim().parse::<f64>())
-        .collect::<Result<_, _>>()
-        .map_err(|_| format!("{what} '{s}': expected {N} comma-separated numbers"))?;
-    let arr: [f64; N] = v
-        .try_into()
-        .map_err(|_| format!("{what} '{s}': expected {N} comma-separated numbers"))?;
-    if arr.iter().any(|x| !x.is_finite()) {
-        return Err(format!("{what} '{s}': numbers must be finite"));
-    }
-    Ok(arr)
-}
-
-impl FromStr for CameraSpec {
-    type Err = String;
-
-    fn from_str(s: &str) -> Result<Self, String> {
-        if let Some((eye, target)) = s.split_once(':') {
-            Ok(Self::LookAt {
-                eye: numbers(eye, "camera eye")?,
-                target: numbers(target, "camera target")?,
-            })
-        } else {
-            let [azimuth, elevation, distance] = numbers(s, "camera")?;
-            if distance <= 0.0 {
-                return Err(format!("camera '{s}': distance must be positive"));
-            }
-            Ok(Self::Orbit {
-                azimuth,
-                elevation,
-                distance,
-            })
-        }
-    }
-}
-
-/// Centre of the volume's box in world space (`x, y, z`; see the [`crate::scene`] module doc).
-pub fn volume_centre(info: &VolumeInfo) -> [f64; 3] {
-    let e = volume_extent(info);
-    [e[0] / 2.0, e[1] / 2.0, e[2] / 2.0]
-}
-
-/// Extent of the volume's box in world space (`x, y, z`).
-pub fn volume_extent(info: &VolumeInfo) -> [f64; 3] {
-    let s = info.levels[0].shape;
-    let v = info.voxel_size;
-    [s[2] as f64 * v[2], s[1] as f64 * v[1], s[0] as f64 * v[0]]
-}
-
-impl CameraSpec {
-    /// The camera for `info`'s volume.
-    pub fn camera(&self, info: &VolumeInfo, fov_y_degrees: f64) -> Camera {
-        let c = volume_centre(info);
-        match *self {
-            Self::Orbit {
-                azimuth,
-                elevation,
-                distance,
-            } => {
-                let e = volume_extent(info);
-                let diagonal = box_diagonal(e);
-                let (a, el) = (azimuth.to_radians(), elevation.to_radians());
-                let dir = [el.cos() * a.sin(), -el.sin(), -el.cos() * a.cos()];
-                // The derivative of the eye position with respect to the elevation: always
-                // orthogonal to the view direction, never zero, even looking straight down.
-                let up = [-el.sin() * a.sin(), -el.cos(), el.sin() * a.cos()];
-                let d = distance * diagonal;
-                Camera {
-                    eye: [c[0] + d * dir[0], c[1] + d * dir[1], c[2] + d * dir[2]],
-                    target: c,
-                    up,
-                    fov_y_degrees,
-                }
-            }
-            Self::LookAt { eye, target } => {
-                let d = [target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]];
-                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                // −y up (the scene default), unless the view is (nearly) along y.
-                let up = if len > 0.0 && (d[1] / len).abs() > 0.999 {
-                    [0.0, 0.0, 1.0]
-                } else {
-                    [0.0, -1.0, 0.0]
-                };
-                Camera {
-                    eye,
-                    target,
-                    up,
-                    fov_y_degrees,
-                }
-            }
         }
     }
 }
@@ -328,80 +187,13 @@ pub struct SceneArgs {
     pub background: Option<Rgb>,
 }
 
-/// The default transfer-function ramp of a channel, from opacity 0 at `lo` to
-/// [`DEFAULT_OPACITY`] at `hi`, so that the background is transparent and the brightest
-/// structures the most opaque:
-/// - `lo` is the display window's start, raised to the median when that is higher (the
-///   background of sparse fluorescence), else the range minimum, else 0;
-/// - `hi` is halfway between the window's end and the range maximum (a window that ends at
-///   the 99.9th percentile of a very sparse channel would otherwise make nearly all its signal
-///   opaque), else whichever of the two is known;
-/// - with neither above `lo`, the sample type's range (`[0, 1]` for float).
-pub fn default_opacity(info: &VolumeInfo, channel: usize) -> Vec<OpacityPoint> {
-    let d = info.display.get(channel).cloned().unwrap_or_default();
-    // Only finite hints count: a float channel holding ±Inf has an infinite range (and maybe
-    // median), and a ramp ending at infinity would give NaN opacities.
-    let finite = |v: &f64| v.is_finite();
-    let end = |pair: Option<[f64; 2]>, i: usize| pair.map(|p| p[i]).filter(finite);
-    let lo = end(d.window, 0)
-        .or(end(d.range, 0))
-        .unwrap_or(0.0)
-        .max(d.median.filter(finite).unwrap_or(f64::NEG_INFINITY));
-    let hi = match (end(d.window, 1), end(d.range, 1)) {
-        (Some(end), Some(max)) if max > end => 0.5 * (end + max),
-        (Some(end), _) => end,
-        (None, Some(max)) => max,
-        (None, None) => f64::NEG_INFINITY,
-    };
-    let [lo, hi] = if hi > lo {
-        [lo, hi]
-    } else {
-        match info.sample_type {
-            SampleType::U8 => [0.0, u8::MAX as f64],
-            SampleType::U16 => [0.0, u16::MAX as f64],
-            SampleType::I16 => [0.0, i16::MAX as f64],
-            SampleType::U32 => [0.0, u32::MAX as f64],
-            SampleType::I32 => [0.0, i32::MAX as f64],
-            SampleType::F32 => [0.0, 1.0],
-        }
-    };
-    OpacityPoint::ramp(lo, hi, DEFAULT_OPACITY)
-}
-
-/// The default style of every channel of `info`.
-pub fn default_channels(info: &VolumeInfo) -> Vec<ChannelStyle> {
-    (0..info.channels.len())
-        .map(|c| ChannelStyle {
-            channel: c,
-            visible: true,
-            color: info
-                .display
-                .get(c)
-                .and_then(|d| d.color)
-                .unwrap_or(DEFAULT_COLOURS[c % DEFAULT_COLOURS.len()]),
-            opacity: default_opacity(info, c),
-        })
-        .collect()
-}
-
-/// Reads a JSON scene file.
-pub fn read_scene(path: &std::path::Path) -> Result<Scene> {
-    let shown = path.display();
-    let bytes = std::fs::read(path).with_context(|| format!("{shown}: cannot read"))?;
-    serde_json::from_slice(&bytes).with_context(|| format!("{shown}: not a valid scene file"))
-}
-
 impl SceneArgs {
     /// The scene for `info`'s volume: the scene file (or the defaults), then the flags.
     pub fn scene(&self, info: &VolumeInfo) -> Result<Scene> {
         let n = info.channels.len();
         let mut scene = match &self.scene {
             Some(path) => read_scene(path)?,
-            None => Scene {
-                camera: DEFAULT_ORBIT.camera(info, DEFAULT_FOV_DEGREES),
-                channels: default_channels(info),
-                background: [0.0; 3],
-            },
+            None => default_scene(info),
         };
         let check = |c: usize, what: &str| {
             ensure!(
@@ -429,7 +221,9 @@ impl SceneArgs {
             if let Some(i) = scene.channels.iter().position(|s| s.channel == c) {
                 i
             } else {
-                scene.channels.push(default_channels(info).swap_remove(c));
+                let mut style = default_channels(info).swap_remove(c);
+                style.visible = true;
+                scene.channels.push(style);
                 scene.channels.len() - 1
             }
         };
@@ -464,8 +258,14 @@ impl SceneArgs {
 mod tests {
     use clap::Parser;
 
+    use residency_viewer::defaults::{
+        DEFAULT_COLOURS, DEFAULT_FOV_DEGREES, DEFAULT_OPACITY, DEFAULT_ORBIT, default_opacity,
+        volume_centre, volume_extent,
+    };
+    use residency_viewer::scene::{ChannelStyle, box_diagonal};
+    use residency_viewer::source::{ChannelDisplay, LevelInfo, SampleType};
+
     use super::*;
-    use crate::source::{ChannelDisplay, LevelInfo};
 
     #[derive(Parser)]
     struct Cli {

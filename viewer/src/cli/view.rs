@@ -1,4 +1,4 @@
-//! `viewer view`: the interactive window ([`crate::interactive`]).
+//! `viewer view`: the interactive window ([`residency_viewer::interactive`]).
 
 use std::time::Duration;
 
@@ -6,9 +6,9 @@ use anyhow::{Result, ensure};
 
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
-use crate::gpu::device::Gpu;
-use crate::interactive::session::Session;
-use crate::interactive::window::{self, ViewConfig};
+use residency_viewer::gpu::device::Gpu;
+use residency_viewer::interactive::session::Session;
+use residency_viewer::interactive::window::{self, ViewConfig};
 
 /// The mouse and key controls, shown by `viewer view --help`.
 pub const CONTROLS: &str = "\

@@ -27,23 +27,39 @@ impl std::fmt::Debug for Gpu {
     }
 }
 
+/// Why no adapter was found, and what to do.
+#[cfg(not(target_arch = "wasm32"))]
+const NO_ADAPTER: &str = "no GPU adapter found (without a GPU, install Mesa's lavapipe Vulkan \
+                          driver and set XDG_RUNTIME_DIR)";
+#[cfg(target_arch = "wasm32")]
+const NO_ADAPTER: &str = "this browser offers no WebGPU adapter (use a current Chrome, Edge or \
+                          Firefox with WebGPU enabled, on a machine whose GPU it supports)";
+
 impl Gpu {
     /// Opens the best adapter the environment offers (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` and
     /// the other `wgpu` environment variables apply) with the adapter's full limits and, when
     /// supported, `TIMESTAMP_QUERY`.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new() -> Result<Self> {
-        let instance =
-            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            ..Default::default()
-        }))
-        .context(
-            "no GPU adapter found (without a GPU, install Mesa's lavapipe Vulkan driver and set \
-             XDG_RUNTIME_DIR)",
-        )?;
+        pollster::block_on(Self::open())
+    }
+
+    /// [`Gpu::new`], awaited: the only way in the browser (WebGPU there).
+    pub async fn open() -> Result<Self> {
+        #[cfg(not(target_arch = "wasm32"))]
+        let descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        #[cfg(target_arch = "wasm32")]
+        let descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
+        let instance = wgpu::Instance::new(descriptor);
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions {
+                power_preference: wgpu::PowerPreference::HighPerformance,
+                force_fallback_adapter: false,
+                compatible_surface: None,
+                ..Default::default()
+            })
+            .await
+            .context(NO_ADAPTER)?;
         let adapter_info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         let required_features = if timestamps {
@@ -52,15 +68,17 @@ impl Gpu {
             wgpu::Features::empty()
         };
         let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("residency-viewer"),
-            required_features,
-            required_limits: limits.clone(),
-            experimental_features: wgpu::ExperimentalFeatures::disabled(),
-            memory_hints: wgpu::MemoryHints::Performance,
-            trace: wgpu::Trace::Off,
-        }))
-        .with_context(|| format!("cannot open a device on {}", adapter_info.name))?;
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("residency-viewer"),
+                required_features,
+                required_limits: limits.clone(),
+                experimental_features: wgpu::ExperimentalFeatures::disabled(),
+                memory_hints: wgpu::MemoryHints::Performance,
+                trace: wgpu::Trace::Off,
+            })
+            .await
+            .with_context(|| format!("cannot open a device on {}", adapter_info.name))?;
         tracing::debug!(
             "GPU: {} ({:?}), timestamps: {timestamps}",
             adapter_info.name,
@@ -77,12 +95,22 @@ impl Gpu {
 
     /// Runs `f`, turning any GPU validation or out-of-memory error it raises into an error
     /// naming `what` (instead of wgpu's default panic).
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn checked<T>(&self, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        pollster::block_on(self.checked_async(what, async { f() }))
+    }
+
+    /// [`Gpu::checked`] for work that awaits (the browser's buffer mapping).
+    pub async fn checked_async<T>(
+        &self,
+        what: &str,
+        work: impl Future<Output = Result<T>>,
+    ) -> Result<T> {
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let result = f();
-        let v = pollster::block_on(validation.pop());
-        let o = pollster::block_on(oom.pop());
+        let result = work.await;
+        let v = validation.pop().await;
+        let o = oom.pop().await;
         if let Some(e) = v.or(o) {
             bail!("{what}: GPU error: {e}");
         }

@@ -17,5 +17,6 @@ pub mod device;
 pub mod page_table;
 pub mod renderer;
 pub mod streaming;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod synthetic;
 pub mod tables;

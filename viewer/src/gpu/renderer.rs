@@ -4,14 +4,14 @@
 
 use anyhow::{Context, Result, bail, ensure};
 use bytemuck::{Pod, Zeroable};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use super::brick_cache::BrickCache;
 use super::device::Gpu;
 use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables};
 use super::tables::{self, ChannelTable};
 use crate::octree::{OctreeGeometry, ResidencyOctree};
-use crate::scene::{Camera, ChannelStyle, Scene};
+use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
 /// The shader source, `shaders/raycast.wgsl`.
@@ -21,6 +21,10 @@ pub const RAYCAST_WGSL: &str = include_str!("../../../shaders/raycast.wgsl");
 pub const MAX_CHANNELS: usize = 8;
 
 const HEADER_WORDS: usize = 8;
+
+/// Opacity control points per channel the table buffer has room for beyond the scene's own,
+/// so that [`Renderer::restyle`] rewrites it in place.
+const TABLE_HEADROOM_POINTS: usize = 64;
 
 /// Header word counting the rays the latest pass suspended.
 const SUSPENDED_WORD: usize = 7;
@@ -47,7 +51,7 @@ fn steps_per_pass(channels: usize, levels: usize, tf_points: usize, depth: u32) 
 /// How the ray caster finds data and skips empty space: the residency octree, or one of the
 /// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
 /// functions so that their ratios are fair.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
     /// The residency octree: per-channel residency masks and min/max per node, nodes finer
@@ -65,6 +69,9 @@ pub enum Method {
 }
 
 impl Method {
+    /// Every method, ours first.
+    pub const ALL: [Self; 3] = [Self::Residency, Self::PageTable, Self::Octree];
+
     /// The name used on the command line and in statistics.
     pub fn name(self) -> &'static str {
         match self {
@@ -72,6 +79,17 @@ impl Method {
             Self::PageTable => "page-table",
             Self::Octree => "octree",
         }
+    }
+}
+
+impl std::str::FromStr for Method {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|m| m.name() == s)
+            .ok_or_else(|| format!("unknown method '{s}' (residency, page-table or octree)"))
     }
 }
 
@@ -229,6 +247,9 @@ pub struct Renderer {
     pipeline: wgpu::ComputePipeline,
     bind_group: wgpu::BindGroup,
     params: wgpu::Buffer,
+    tables: wgpu::Buffer,
+    /// Capacity of `tables` in words.
+    table_words: usize,
     nodes: wgpu::Buffer,
     requests: wgpu::Buffer,
     image: wgpu::Buffer,
@@ -246,15 +267,27 @@ impl Renderer {
     /// Sets up the renderer of `scene` over the volume `info`: octree (ranges from the
     /// volume's region metadata), page tables, cache, tables and pipeline. Only visible
     /// channels are rendered (and ever fetched).
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new(
         gpu: &Gpu,
         info: &VolumeInfo,
         scene: &Scene,
         options: RenderOptions,
     ) -> Result<Self> {
-        gpu.checked("setting up the renderer", || {
+        pollster::block_on(Self::create(gpu, info, scene, options))
+    }
+
+    /// [`Renderer::new`], awaited (the browser).
+    pub async fn create(
+        gpu: &Gpu,
+        info: &VolumeInfo,
+        scene: &Scene,
+        options: RenderOptions,
+    ) -> Result<Self> {
+        gpu.checked_async("setting up the renderer", async {
             Self::build(gpu, info, scene, options)
         })
+        .await
     }
 
     fn build(gpu: &Gpu, info: &VolumeInfo, scene: &Scene, options: RenderOptions) -> Result<Self> {
@@ -293,24 +326,12 @@ impl Renderer {
         )?;
 
         let spacing = xyz(info.voxel_size);
-        let channel_tables: Vec<ChannelTable<'_>> = visible
-            .iter()
-            .enumerate()
-            .map(|(i, style)| {
-                let (lo, hi) = options
-                    .level_bounds
-                    .get(i)
-                    .copied()
-                    .unwrap_or((0, levels - 1));
-                ChannelTable {
-                    style,
-                    min_level: lo.min(levels - 1),
-                    max_level: hi.clamp(lo.min(levels - 1), levels - 1),
-                }
-            })
-            .collect();
-        let t = tables::build(&geometry, spacing, pages.offsets(), &channel_tables);
-
+        let t = tables::build(
+            &geometry,
+            spacing,
+            pages.offsets(),
+            &channel_tables(&options, levels, &visible),
+        );
         let storage = |label, size: u64, extra| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -350,9 +371,11 @@ impl Renderer {
             node_words as u64 * 4,
             wgpu::BufferUsages::empty(),
         );
+        // Room for more control points, so that a style change rewrites the table in place.
+        let table_words = t.words.len() + visible.len() * 2 * TABLE_HEADROOM_POINTS;
         let table_buf = storage(
             "tables",
-            t.words.len() as u64 * 4,
+            table_words as u64 * 4,
             wgpu::BufferUsages::empty(),
         );
         gpu.queue
@@ -580,6 +603,8 @@ impl Renderer {
             pipeline,
             bind_group,
             params,
+            tables: table_buf,
+            table_words,
             nodes,
             requests,
             image,
@@ -590,6 +615,11 @@ impl Renderer {
         };
         renderer.flush(gpu);
         Ok(renderer)
+    }
+
+    /// The volume rendered.
+    pub fn info(&self) -> &VolumeInfo {
+        &self.info
     }
 
     /// The residency octree.
@@ -615,6 +645,75 @@ impl Renderer {
     /// Replaces the camera (the transfer functions stay).
     pub fn set_camera(&mut self, camera: Camera) {
         self.scene.camera = camera;
+    }
+
+    /// The scene drawn.
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    /// Replaces the scene in place when every channel it shows is one this renderer was built
+    /// with: the camera, background, colours and transfer functions change, the table of
+    /// transfer functions is rewritten and the clear-brick marks redone, and the octree, page
+    /// tables and cache (every resident brick) stay. A channel hidden since construction is
+    /// drawn fully transparent, so its bricks are clear (never fetched) and showing it again
+    /// finds its resident bricks. Returns `false`, changing nothing, when the scene shows a
+    /// channel this renderer does not have or its transfer functions do not fit the table:
+    /// such a scene needs a new renderer.
+    pub fn restyle(&mut self, gpu: &Gpu, scene: &Scene) -> bool {
+        let shown = |c: usize| scene.channels.iter().find(|s| s.channel == c && s.visible);
+        if scene
+            .channels
+            .iter()
+            .any(|s| s.visible && !self.octree.channels().contains(&s.channel))
+        {
+            return false;
+        }
+        let styles: Vec<ChannelStyle> = self
+            .octree
+            .channels()
+            .iter()
+            .map(|&c| {
+                shown(c).cloned().unwrap_or(ChannelStyle {
+                    channel: c,
+                    visible: true,
+                    color: [0.0; 3],
+                    opacity: vec![OpacityPoint {
+                        value: 0.0,
+                        opacity: 0.0,
+                    }],
+                })
+            })
+            .collect();
+        let visible: Vec<&ChannelStyle> = styles.iter().collect();
+        let levels = self.info.levels.len() as u32;
+        let t = tables::build(
+            self.octree.geometry(),
+            xyz(self.info.voxel_size),
+            self.pages.offsets(),
+            &channel_tables(&self.options, levels, &visible),
+        );
+        if t.words.len() > self.table_words {
+            return false;
+        }
+        gpu.queue
+            .write_buffer(&self.tables, 0, bytemuck::cast_slice(&t.words));
+        if self.options.method == Method::Residency && self.options.empty_space_skipping {
+            for id in 0..self.pages.len() as u32 {
+                if self.pages.entry(id) == ENTRY_CLEAR {
+                    self.pages.set(id, ENTRY_MISSING);
+                }
+            }
+            mark_clear_bricks(&mut self.pages, &self.info, &visible);
+        }
+        self.steps_per_pass = steps_per_pass(
+            visible.len(),
+            levels as usize,
+            visible.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
+            self.octree.geometry().depth,
+        );
+        self.scene = scene.clone();
+        true
     }
 
     /// Whether `key` is resident (in a slot, or as a fill-value brick).
@@ -775,11 +874,19 @@ impl Renderer {
 
     /// Renders one frame and reads back its image, requests, usage feedback (folded into
     /// the cache's LRU order) and counters.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn render(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
-        gpu.checked("rendering a frame", || self.render_frame(gpu))
+        pollster::block_on(self.render_async(gpu))
     }
 
-    fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+    /// [`Renderer::render`], awaited: in the browser, buffer mapping completes on the event
+    /// loop.
+    pub async fn render_async(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+        gpu.checked_async("rendering a frame", self.render_frame(gpu))
+            .await
+    }
+
+    async fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
         self.flush(gpu);
         self.frame += 1;
         let params = self.params();
@@ -840,22 +947,7 @@ impl Renderer {
                 encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
             }
             gpu.queue.submit([encoder.finish()]);
-            let (tx, rx) = std::sync::mpsc::channel();
-            for (i, b) in maps.iter().enumerate() {
-                let tx = tx.clone();
-                b.map_async(wgpu::MapMode::Read, .., move |r| {
-                    let _ = tx.send((i, r));
-                });
-            }
-            drop(tx);
-            device
-                .poll(wgpu::PollType::wait_indefinitely())
-                .context("waiting for the GPU")?;
-            for (i, r) in &rx {
-                if r.is_err() {
-                    bail!("cannot read back GPU buffer {i}");
-                }
-            }
+            map_for_reading(device, &maps).await?;
             let suspended = {
                 let header = rb.requests.get_mapped_range(..HEADER_WORDS as u64 * 4)?;
                 bytemuck::cast_slice::<u8, u32>(&header)[SUSPENDED_WORD]
@@ -925,7 +1017,59 @@ impl Renderer {
     }
 }
 
-/// Marks [`ENTRY_CLEAR`] every brick that [`is_clear`] under its channel's style: the
+/// The table entries of the `visible` channels: style and level bounds (from
+/// `options.level_bounds`, every level where none is given).
+fn channel_tables<'a>(
+    options: &RenderOptions,
+    levels: u32,
+    visible: &[&'a ChannelStyle],
+) -> Vec<ChannelTable<'a>> {
+    visible
+        .iter()
+        .enumerate()
+        .map(|(i, style)| {
+            let (lo, hi) = options
+                .level_bounds
+                .get(i)
+                .copied()
+                .unwrap_or((0, levels - 1));
+            ChannelTable {
+                style,
+                min_level: lo.min(levels - 1),
+                max_level: hi.clamp(lo.min(levels - 1), levels - 1),
+            }
+        })
+        .collect()
+}
+
+/// Maps `buffers` for reading and waits until they are: natively by polling the device, in
+/// the browser by yielding to the event loop until WebGPU calls back.
+async fn map_for_reading(device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> Result<()> {
+    let mut mapped = Vec::with_capacity(buffers.len());
+    for b in buffers {
+        let (tx, rx) = futures_channel::oneshot::channel();
+        b.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        mapped.push(rx);
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .context("waiting for the GPU")?;
+    #[cfg(target_arch = "wasm32")]
+    let _ = device;
+    for (i, rx) in mapped.into_iter().enumerate() {
+        match rx.await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => bail!("cannot read back GPU buffer {i}: {e}"),
+            Err(_) => bail!("cannot read back GPU buffer {i}: the device was lost"),
+        }
+    }
+    Ok(())
+}
+
+/// Marks [`ENTRY_CLEAR`] every missing brick that [`is_clear`] under its channel's style: the
 /// residency method never fetches it, and a sample whose footprint reaches it is clear.
 fn mark_clear_bricks(pages: &mut PageTables, info: &VolumeInfo, visible: &[&ChannelStyle]) {
     for id in 0..pages.len() as u32 {
@@ -933,7 +1077,9 @@ fn mark_clear_bricks(pages: &mut PageTables, info: &VolumeInfo, visible: &[&Chan
         let Some(style) = visible.iter().find(|s| s.channel == key.channel as usize) else {
             continue;
         };
-        if is_clear(info, style, &key) {
+        // Only a missing brick becomes clear: a resident one keeps its slot (a restyle that
+        // makes it transparent still finds it when it is shown again).
+        if pages.entry(id) == ENTRY_MISSING && is_clear(info, style, &key) {
             pages.set(id, ENTRY_CLEAR);
         }
     }

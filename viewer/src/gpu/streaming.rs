@@ -1,26 +1,41 @@
 //! Brick streaming and the progressive loop.
 //!
-//! [`Fetcher`] runs worker threads that take batches of keys off a shared queue and call the
-//! blocking [`BrickSource::fetch`], so requests overlap. Submitting a new request list
-//! replaces whatever is still queued (stale requests are cancelled; fetches already under way
-//! complete). [`render_progressive`] drives render → read requests → fetch (coarse before
-//! fine, near before far, only what the cache can take) → upload → insert into the octree →
-//! repeat, until a frame requests nothing, or the frame or time budget runs out, or the cache
-//! cannot take any more bricks without evicting the current view's working set.
+//! The policy is shared by every driver: [`StreamState`] turns a frame's requests into the
+//! bricks to fetch next (coarse before fine, near before far, only what the cache can take,
+//! failed bricks replaced by their coarser brick) and files each arrival into the renderer.
+//! Natively, [`Fetcher`] runs worker threads that take batches of keys off a shared queue and
+//! call the blocking [`BrickSource::fetch`], so requests overlap; submitting a new request
+//! list replaces whatever is still queued (stale requests are cancelled; fetches already under
+//! way complete). [`render_progressive`] drives render → read requests → fetch → upload →
+//! insert into the octree → repeat, until a frame requests nothing, or the frame or time
+//! budget runs out, or the cache cannot take any more bricks without evicting the current
+//! view's working set. The web viewer drives the same [`StreamState`] from `fetch` and
+//! `requestAnimationFrame`.
 
-use std::collections::{HashMap, VecDeque};
+#[cfg(not(target_arch = "wasm32"))]
+use std::collections::VecDeque;
+use std::collections::{HashMap, HashSet};
+#[cfg(not(target_arch = "wasm32"))]
 use std::sync::{Arc, Condvar, Mutex};
+#[cfg(not(target_arch = "wasm32"))]
 use std::thread::JoinHandle;
+#[cfg(not(target_arch = "wasm32"))]
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use serde::Serialize;
 
 use super::device::Gpu;
-use super::renderer::{BrickRequest, Inserted, RenderOptions, Renderer, ShaderCounts};
+#[cfg(not(target_arch = "wasm32"))]
+use super::renderer::RenderOptions;
+use super::renderer::{BrickRequest, Inserted, Renderer, ShaderCounts};
+#[cfg(not(target_arch = "wasm32"))]
 use crate::scene::Scene;
-use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
+#[cfg(not(target_arch = "wasm32"))]
+use crate::source::BrickSource;
+use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
+#[cfg(not(target_arch = "wasm32"))]
 #[derive(Default)]
 struct Queue {
     pending: VecDeque<BrickKey>,
@@ -29,19 +44,19 @@ struct Queue {
     shutdown: bool,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// A pool of fetch workers over one [`BrickSource`].
 pub struct Fetcher {
-    info: VolumeInfo,
     shared: Arc<(Mutex<Queue>, Condvar)>,
     workers: Vec<JoinHandle<()>>,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 impl Fetcher {
     /// Starts `workers` threads fetching batches of up to `batch` keys from `source`.
     pub fn new(source: Arc<dyn BrickSource>, workers: usize, batch: usize) -> Self {
         let shared = Arc::new((Mutex::new(Queue::default()), Condvar::new()));
         let batch = batch.max(1);
-        let info = source.info().clone();
         let workers = (0..workers.max(1))
             .map(|_| {
                 let shared = Arc::clone(&shared);
@@ -73,11 +88,7 @@ impl Fetcher {
                 })
             })
             .collect();
-        Self {
-            info,
-            shared,
-            workers,
-        }
+        Self { shared, workers }
     }
 
     /// Replaces the queued (not yet started) requests with `keys`, in priority order.
@@ -112,6 +123,7 @@ impl Fetcher {
     }
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 impl Drop for Fetcher {
     fn drop(&mut self) {
         let (lock, cv) = &*self.shared;
@@ -123,6 +135,7 @@ impl Drop for Fetcher {
     }
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// Budgets of a progressive render.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Budget {
@@ -136,6 +149,7 @@ pub struct Budget {
     pub batch: usize,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 impl Default for Budget {
     fn default() -> Self {
         Self {
@@ -173,6 +187,7 @@ pub struct FrameStats {
     pub wall_ms: f64,
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// Result of a progressive render.
 #[derive(Clone, Debug)]
 pub struct Progressive {
@@ -218,6 +233,7 @@ pub fn prioritise(requests: &mut [BrickRequest]) {
     });
 }
 
+#[cfg(not(target_arch = "wasm32"))]
 /// Renders `scene` from `source` progressively until converged or out of budget.
 pub fn render_progressive(
     gpu: &Gpu,
@@ -275,11 +291,112 @@ pub fn insert_fetched(
     inserted
 }
 
+/// What the progressive loop remembers between frames, whatever drives it: bricks that
+/// failed (never requested again), the coarser bricks fetched in their place, and every brick
+/// the shader requested, in order of first request.
+#[derive(Debug, Default)]
+pub struct StreamState {
+    failed: HashMap<BrickKey, String>,
+    fallbacks: Vec<BrickKey>,
+    seen: HashSet<BrickKey>,
+    request_log: Vec<BrickKey>,
+}
+
+impl StreamState {
+    /// The bricks still wanted after a frame that asked for `requests`: those neither resident
+    /// nor failed, plus the coarser replacements of failed bricks. `None` when nothing is
+    /// wanted and no request went over the frame's cap: the view has converged.
+    pub fn wanted(
+        &mut self,
+        renderer: &Renderer,
+        requests: Vec<BrickRequest>,
+        requests_over_cap: u64,
+    ) -> Option<Vec<BrickRequest>> {
+        let mut wanted: Vec<BrickRequest> = requests
+            .into_iter()
+            .filter(|r| !self.failed.contains_key(&r.key) && !renderer.is_resident(&r.key))
+            .collect();
+        for r in &wanted {
+            if self.seen.insert(r.key) {
+                self.request_log.push(r.key);
+            }
+        }
+        let failed = &self.failed;
+        self.fallbacks
+            .retain(|k| !failed.contains_key(k) && !renderer.is_resident(k));
+        wanted.extend(
+            self.fallbacks
+                .drain(..)
+                .map(|key| BrickRequest { key, distance: 0.0 }),
+        );
+        (!wanted.is_empty() || requests_over_cap > 0).then_some(wanted)
+    }
+
+    /// The bricks to fetch now, in priority order ([`prioritise`]), as many as the cache can
+    /// take without evicting the current view's working set; the rest count as deferred in
+    /// `stats`. Empty when the cache can take none.
+    pub fn to_fetch(
+        renderer: &Renderer,
+        mut wanted: Vec<BrickRequest>,
+        stats: &mut FrameStats,
+    ) -> Vec<BrickKey> {
+        prioritise(&mut wanted);
+        wanted.dedup_by_key(|r| r.key);
+        let room = renderer.insertable();
+        stats.bricks_deferred = wanted.len().saturating_sub(room) as u64;
+        wanted.truncate(room);
+        wanted.into_iter().map(|r| r.key).collect()
+    }
+
+    /// Files a finished fetch of `key` ([`insert_fetched`]) and returns what the insert did
+    /// and the brick's decoded bytes; a failure (`None`) is remembered and the next coarser
+    /// brick over its region is wanted in its place.
+    pub fn arrived(
+        &mut self,
+        gpu: &Gpu,
+        renderer: &mut Renderer,
+        key: BrickKey,
+        result: Result<BrickVoxels>,
+        stats: &mut FrameStats,
+    ) -> Option<(Inserted, u64)> {
+        match insert_fetched(gpu, renderer, key, result, stats) {
+            Ok(done) => Some(done),
+            Err(e) => {
+                self.failed.insert(key, format!("{e:#}"));
+                let info = renderer.info();
+                self.fallbacks.extend(coarser_brick(info, &key));
+                None
+            }
+        }
+    }
+
+    /// Forgets the coarser replacements wanted for channels not in `channels` (a renderer
+    /// drawing other channels); failures are kept.
+    pub fn retain_channels(&mut self, channels: &[usize]) {
+        self.fallbacks
+            .retain(|k| channels.contains(&(k.channel as usize)));
+    }
+
+    /// Every brick the shader requested so far, in order of first request.
+    pub fn request_log(&self) -> &[BrickKey] {
+        &self.request_log
+    }
+
+    /// The bricks that could not be fetched or uploaded, with the error, in key order.
+    pub fn failed(&self) -> Vec<(BrickKey, String)> {
+        let mut failed: Vec<(BrickKey, String)> =
+            self.failed.iter().map(|(k, e)| (*k, e.clone())).collect();
+        failed.sort_by_key(|(k, _)| *k);
+        failed
+    }
+}
+
 /// Runs the progressive loop on an existing renderer (its cache and octree carry over, so a
 /// new camera reuses what is resident): render, read requests, fetch what the cache can take
 /// (coarse before fine, near before far), upload, insert, repeat. A brick that fails to fetch
 /// or upload is never requested again; the next coarser brick over its region is fetched in
 /// its place so the shader can substitute it.
+#[cfg(not(target_arch = "wasm32"))]
 pub fn converge(
     gpu: &Gpu,
     renderer: &mut Renderer,
@@ -288,12 +405,8 @@ pub fn converge(
 ) -> Result<Progressive> {
     let start = Instant::now();
     let deadline = budget.time.map(|t| start + t);
-    let info = fetcher.info.clone();
+    let mut state = StreamState::default();
     let mut frames = Vec::new();
-    let mut request_log = Vec::new();
-    let mut seen = std::collections::HashSet::new();
-    let mut failed: HashMap<BrickKey, String> = HashMap::new();
-    let mut fallbacks: Vec<BrickKey> = Vec::new();
     let mut pixels = Vec::new();
     let mut converged = false;
     let mut stop_reason = format!("frame budget of {} frames spent", budget.max_frames);
@@ -307,58 +420,35 @@ pub fn converge(
             gpu_time_ms: out.gpu_time_ms,
             ..Default::default()
         };
-        let mut wanted: Vec<BrickRequest> = out
-            .requests
-            .into_iter()
-            .filter(|r| !failed.contains_key(&r.key) && !renderer.is_resident(&r.key))
-            .collect();
-        for r in &wanted {
-            if seen.insert(r.key) {
-                request_log.push(r.key);
-            }
-        }
-        fallbacks.retain(|k| !failed.contains_key(k) && !renderer.is_resident(k));
-        wanted.extend(
-            fallbacks
-                .drain(..)
-                .map(|key| BrickRequest { key, distance: 0.0 }),
-        );
-        if wanted.is_empty() && stats.shader.requests_over_cap == 0 {
-            stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+        let wall_ms = |t: Instant| t.elapsed().as_secs_f64() * 1e3;
+        let Some(wanted) = state.wanted(renderer, out.requests, stats.shader.requests_over_cap)
+        else {
+            stats.wall_ms = wall_ms(frame_start);
             frames.push(stats);
             converged = true;
             stop_reason = "converged: no brick requested".into();
             break;
-        }
+        };
         if deadline.is_some_and(|d| Instant::now() >= d) {
-            stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+            stats.wall_ms = wall_ms(frame_start);
             frames.push(stats);
             stop_reason = "time budget spent".into();
             break;
         }
-        prioritise(&mut wanted);
-        wanted.dedup_by_key(|r| r.key);
-        let room = renderer.insertable();
-        stats.bricks_deferred = wanted.len().saturating_sub(room) as u64;
-        wanted.truncate(room);
-        if wanted.is_empty() {
-            stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+        let keys = StreamState::to_fetch(renderer, wanted, &mut stats);
+        if keys.is_empty() {
+            stats.wall_ms = wall_ms(frame_start);
             frames.push(stats);
             stop_reason = "cache full: every slot holds a brick the current view uses".into();
             break;
         }
-        stats.requests_cancelled = fetcher.submit(wanted.iter().map(|r| r.key).collect()) as u64;
+        stats.requests_cancelled = fetcher.submit(keys) as u64;
         for (key, result) in fetcher.wait(deadline) {
-            if let Err(e) = insert_fetched(gpu, renderer, key, result, &mut stats) {
-                failed.insert(key, format!("{e:#}"));
-                fallbacks.extend(coarser_brick(&info, &key));
-            }
+            state.arrived(gpu, renderer, key, result, &mut stats);
         }
-        stats.wall_ms = frame_start.elapsed().as_secs_f64() * 1e3;
+        stats.wall_ms = wall_ms(frame_start);
         frames.push(stats);
     }
-    let mut failed: Vec<(BrickKey, String)> = failed.into_iter().collect();
-    failed.sort_by_key(|(k, _)| *k);
     Ok(Progressive {
         width: renderer.options().width,
         height: renderer.options().height,
@@ -366,7 +456,7 @@ pub fn converge(
         frames,
         converged,
         stop_reason,
-        request_log,
-        failed,
+        request_log: state.request_log().to_vec(),
+        failed: state.failed(),
     })
 }

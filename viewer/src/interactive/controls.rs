@@ -7,7 +7,7 @@
 //! where it tops out). Moving an end remaps every control point linearly from the old
 //! window to the new one, so a multi-point transfer function keeps its shape.
 
-use crate::cli::scene_args::{DEFAULT_COLOURS, default_channels, default_opacity};
+use crate::defaults::{DEFAULT_COLOURS, default_channels, default_opacity};
 use crate::scene::{ChannelStyle, OpacityPoint, Scene};
 use crate::source::VolumeInfo;
 

@@ -2,14 +2,19 @@
 //! [`crate::gpu::streaming`] driven one step at a time behind a winit window, with orbit, pan
 //! and zoom, per-channel visibility, colour and window/level, and on-screen statistics.
 //!
-//! - [`camera_control`]: orbit, pan and zoom as pure functions of the camera;
-//! - [`controls`]: channel visibility, palette colours and opacity-ramp window/level;
+//! - [`camera_control`]: orbit, pan and zoom as pure functions of the camera (the web viewer
+//!   uses them too);
+//! - [`controls`]: channel visibility, palette colours and opacity-ramp window/level (also
+//!   the web viewer's);
 //! - [`overlay`]: sRGB conversion, scaling to the window and the bitmap-font statistics panel;
 //! - [`session`]: the non-blocking progressive loop (render, fetch, insert, repeat);
 //! - [`window`]: the winit event loop and `softbuffer` presentation.
 
 pub mod camera_control;
 pub mod controls;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod overlay;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod session;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod window;

@@ -5,19 +5,18 @@
 //! take) to the [`Fetcher`], which drops the queued requests of earlier views. This is the
 //! loop of [`crate::gpu::streaming::converge`] without its blocking wait.
 //!
-//! A camera change keeps the renderer (and its resident bricks). A change of channel styles
-//! or of the image size rebuilds the renderer, since the renderer takes both at
-//! construction: its cache starts empty and the bricks are fetched again.
+//! A camera change keeps the renderer (and its resident bricks), and so does a change of
+//! colours, transfer functions or background. Showing or hiding a channel, or a new image
+//! size, rebuilds the renderer: its cache starts empty and the bricks are fetched again.
 
-use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
 
 use crate::gpu::device::Gpu;
-use crate::gpu::renderer::{BrickRequest, Inserted, RenderOptions, Renderer};
-use crate::gpu::streaming::{Fetcher, FrameStats, coarser_brick, insert_fetched, prioritise};
+use crate::gpu::renderer::{Inserted, RenderOptions, Renderer};
+use crate::gpu::streaming::{Fetcher, FrameStats, StreamState};
 use crate::scene::{Camera, Scene};
 use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
 
@@ -59,8 +58,7 @@ pub struct Session {
     drawn: Vec<usize>,
     rebuild: bool,
     render_needed: bool,
-    failed: HashMap<BrickKey, String>,
-    fallbacks: Vec<BrickKey>,
+    stream: StreamState,
     /// Fetched since the last frame (reported with the next one).
     pending: FrameStats,
     last: Option<FrameStats>,
@@ -95,8 +93,7 @@ impl Session {
             drawn: Vec::new(),
             rebuild: true,
             render_needed: true,
-            failed: HashMap::new(),
-            fallbacks: Vec::new(),
+            stream: StreamState::default(),
             pending: FrameStats::default(),
             last: None,
             pixels: Vec::new(),
@@ -133,11 +130,21 @@ impl Session {
         }
     }
 
-    /// Replaces the whole scene (channel styles, background); the renderer is rebuilt at the
-    /// next step when anything but the camera changed.
+    /// Replaces the whole scene (channel styles, background). Colours, transfer functions
+    /// and the background change in place, keeping every resident brick
+    /// ([`Renderer::restyle`]); the renderer is rebuilt at the next step only when the set of
+    /// visible channels changed.
     pub fn set_scene(&mut self, scene: Scene) {
         if scene.channels != self.scene.channels || scene.background != self.scene.background {
-            self.rebuild = true;
+            // Nothing visible shows the background without a renderer.
+            let restyled = scene.channels.iter().any(|c| c.visible)
+                && self
+                    .renderer
+                    .as_mut()
+                    .is_some_and(|r| r.restyle(&self.gpu, &scene));
+            if !restyled {
+                self.rebuild = true;
+            }
         }
         self.set_camera(scene.camera.clone());
         self.scene = scene;
@@ -193,9 +200,7 @@ impl Session {
             .filter(|c| c.visible)
             .map(|c| c.channel)
             .collect();
-        let drawn = &self.drawn;
-        self.fallbacks
-            .retain(|k| drawn.contains(&(k.channel as usize)));
+        self.stream.retain_channels(&self.drawn);
         if self.drawn.is_empty() {
             let bg = self.scene.background.map(|v| v as f32);
             let (w, h) = self.size;
@@ -227,18 +232,16 @@ impl Session {
             if !self.drawn.contains(&(key.channel as usize)) {
                 continue; // fetched for an earlier set of channels
             }
-            match insert_fetched(&self.gpu, renderer, key, result, &mut self.pending) {
-                Ok((i, bytes)) => {
-                    self.totals.bricks_fetched += 1;
-                    self.totals.bytes_fetched += bytes;
-                    changed |= !matches!(i, Inserted::AlreadyResident | Inserted::CacheFull);
-                }
-                Err(e) => {
-                    self.totals.bricks_failed += 1;
-                    self.failed.insert(key, format!("{e:#}"));
-                    self.fallbacks.extend(coarser_brick(&self.info, &key));
-                    changed = true;
-                }
+            let arrived = self
+                .stream
+                .arrived(&self.gpu, renderer, key, result, &mut self.pending);
+            if let Some((i, bytes)) = arrived {
+                self.totals.bricks_fetched += 1;
+                self.totals.bytes_fetched += bytes;
+                changed |= !matches!(i, Inserted::AlreadyResident | Inserted::CacheFull);
+            } else {
+                self.totals.bricks_failed += 1;
+                changed = true;
             }
         }
         changed
@@ -286,38 +289,30 @@ impl Session {
             gpu_time_ms: out.gpu_time_ms,
             ..std::mem::take(&mut self.pending)
         };
-        let mut wanted: Vec<BrickRequest> = out
-            .requests
-            .into_iter()
-            .filter(|r| !self.failed.contains_key(&r.key) && !renderer.is_resident(&r.key))
-            .collect();
-        let failed = &self.failed;
-        self.fallbacks
-            .retain(|k| !failed.contains_key(k) && !renderer.is_resident(k));
-        wanted.extend(
-            self.fallbacks
-                .iter()
-                .map(|&key| BrickRequest { key, distance: 0.0 }),
-        );
-        prioritise(&mut wanted);
-        let mut seen = HashSet::new();
-        wanted.retain(|r| seen.insert(r.key));
         let over_cap = stats.shader.requests_over_cap > 0;
-        let room = renderer.insertable();
-        stats.bricks_deferred += wanted.len().saturating_sub(room) as u64;
-        let stalled = !wanted.is_empty() && room == 0;
-        wanted.truncate(room);
-        self.status = if wanted.is_empty() && !over_cap {
-            "converged".into()
-        } else if stalled {
-            "cache full".into()
-        } else {
-            format!("streaming {} bricks", wanted.len())
+        let keys = match self
+            .stream
+            .wanted(renderer, out.requests, stats.shader.requests_over_cap)
+        {
+            None => {
+                self.status = "converged".into();
+                Vec::new()
+            }
+            Some(wanted) => {
+                let any = !wanted.is_empty();
+                let keys = StreamState::to_fetch(renderer, wanted, &mut stats);
+                self.status = if any && keys.is_empty() {
+                    "cache full".into()
+                } else {
+                    format!("streaming {} bricks", keys.len())
+                };
+                keys
+            }
         };
-        stats.requests_cancelled =
-            self.fetcher.submit(wanted.iter().map(|r| r.key).collect()) as u64;
+        let fetching = !keys.is_empty();
+        stats.requests_cancelled = self.fetcher.submit(keys) as u64;
         // Requests over the shader's cap show up once the first ones are resident.
-        self.render_needed = over_cap && !wanted.is_empty();
+        self.render_needed = over_cap && fetching;
         stats.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         tracing::debug!("frame {}: {:?}", stats.frame, stats);
         self.last = Some(stats);

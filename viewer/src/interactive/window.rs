@@ -19,7 +19,7 @@ use super::camera_control::{orbit, pan, zoom};
 use super::controls::{self, End, KEY_STEP};
 use super::overlay::{Canvas, SrgbTable, text_colour};
 use super::session::{Session, Step};
-use crate::cli::scene_args::volume_extent;
+use crate::defaults::volume_extent;
 use crate::scene::{Camera, Scene};
 
 /// Window settings.

@@ -1,17 +1,25 @@
 //! Where a volume comes from: its description (levels, bricks, channels, region metadata) and
 //! its bricks, from a brick server over HTTP or from a local OME-Zarr store, behind one trait.
 //!
-//! - [`local`]: [`LocalSource`], a local OME-Zarr store read with zarrs;
-//! - [`http`]: [`HttpSource`], a `brickserver` over HTTP (batched bricks, framed min/max);
+//! - [`local`]: [`LocalSource`], a local OME-Zarr store read with zarrs (native);
+//! - [`server`]: the `brickserver` protocol (URLs, metadata, batched bricks, framed min/max),
+//!   with no I/O of its own;
+//! - [`http`]: [`HttpSource`], that protocol over blocking HTTP (native; the web viewer
+//!   speaks it through the browser's `fetch`);
 //! - [`ome`]: the volume description both build from `residency_schemas`' format model.
 
 use anyhow::Result;
 
+#[cfg(not(target_arch = "wasm32"))]
 pub mod http;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod local;
 pub mod ome;
+pub mod server;
 
-pub use http::HttpSource;
+#[cfg(not(target_arch = "wasm32"))]
+pub use http::{HttpSource, read_token_file};
+#[cfg(not(target_arch = "wasm32"))]
 pub use local::LocalSource;
 
 pub use residency_schemas::SampleType;

@@ -181,24 +181,9 @@ fn a_server_with_a_token_needs_it() {
             server.url
         )
     );
-    // Through the command-line flags, reading the token file as the server does.
-    use clap::Parser;
-    #[derive(Parser)]
-    struct Cli {
-        #[command(flatten)]
-        source: residency_viewer::cli::scene_args::SourceArgs,
-    }
-    let cli = Cli::try_parse_from([
-        "viewer",
-        "--server",
-        &server.url,
-        "--dataset",
-        "vol",
-        "--token-file",
-        token.to_str().unwrap(),
-    ])
-    .unwrap();
-    let http = cli.source.open().unwrap();
+    // Reading the token file as the server does (`--token-file`): its text, trimmed.
+    let token_text = residency_viewer::source::read_token_file(&token).unwrap();
+    let http = HttpSource::open_with_token(&server.url, "vol", Some(&token_text)).unwrap();
     let local = LocalSource::open(&store).unwrap();
     assert_eq!(http.info(), local.info());
     let keys = all_keys(&local);

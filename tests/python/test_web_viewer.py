@@ -1,0 +1,248 @@
+"""The Residency web viewer (viewer/src/web, viewer/web) in a real browser: Debian's Chromium,
+headless, WebGPU on its SwiftShader adapter, driven by playwright-core
+(tests/browser/web_viewer.mjs), against `brickserver serve` on loopback, which serves the page
+at /NAME/view. Images are compared with `viewer reference` of the same scene, as the native
+renderer's are.
+
+Needs the web build (scripts/build-web.sh writes target/release/web, which brickserver finds
+beside its binary)."""
+
+import json
+import pathlib
+import re
+import subprocess
+import urllib.parse
+import urllib.request
+
+import numpy as np
+import pytest
+
+from browser import require_browser, run_pausing
+from browser import read_png as read_png_channels
+from conftest import BIN, ROOT, run_ingest
+from test_server import start_server
+
+DRIVER = ROOT / "tests" / "browser" / "web_viewer.mjs"
+SIZE = 128
+
+
+
+@pytest.fixture(autouse=True)
+def browser_and_web_build():
+    """Fails (skips with RESIDENCY_SKIP_BROWSER=1) without Chromium and Node; fails without
+    the web build."""
+    require_browser()
+    assert (BIN / "web" / "index.html").exists(), f"{BIN}/web not built: run scripts/build-web.sh"
+
+
+def read_png(path):
+    """A PNG as a (height, width, 3) int array (alpha dropped)."""
+    return read_png_channels(path)[:, :, :3].astype(int)
+
+
+def drive(url, steps, on_pause=None, **spec):
+    """Runs the page driver; returns (results, console messages). At each `pause` step it
+    calls `on_pause(step index)`, then lets the page go on."""
+    spec = {"url": url, "steps": steps, **spec}
+    last, code, err = run_pausing(DRIVER, spec, on_pause, 600)
+    assert code == 0, f"browser driver failed:\n{last}\n{err}"
+    out = json.loads(last)
+    return out["results"], out["console"]
+
+
+def compare(image, reference):
+    """`viewer compare --json`: PSNR (dB) and SSIM."""
+    p = subprocess.run(
+        [str(BIN / "viewer"), "compare", "--json", str(image), str(reference)],
+        capture_output=True,
+        text=True,
+    )
+    assert p.returncode == 0, p.stderr
+    m = json.loads(p.stdout)
+    return m["psnr_db"], m["ssim"]
+
+
+def reference(store, scene, out):
+    """`viewer reference` of `scene` (a dict) on `store`, SIZE × SIZE, level 0."""
+    path = out.with_suffix(".scene.json")
+    path.write_text(json.dumps(scene))
+    p = subprocess.run(
+        [str(BIN / "viewer"), "reference", "--store", str(store), "--scene", str(path),
+         "--width", str(SIZE), "--height", str(SIZE), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env={"XDG_RUNTIME_DIR": "/tmp", "PATH": "/usr/bin:/bin"},
+    )
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+def scene_of(fragment):
+    """The scene JSON of a `#scene=...` fragment."""
+    assert fragment.startswith("#scene="), fragment
+    return json.loads(urllib.parse.unquote(fragment[len("#scene="):]))
+
+
+def metric(base, name):
+    """One counter of the server's /metrics."""
+    text = urllib.request.urlopen(f"{base}/metrics").read().decode()
+    m = re.search(rf"^{re.escape(name)} (\S+)$", text, re.M)
+    return float(m.group(1)) if m else 0.0
+
+
+def errors(console):
+    return [m for m in console if m.startswith("error") or m.startswith("pageerror")]
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory):
+    """Small stores: u8 and f32 with one channel, u16 with three, u16 with sixteen."""
+    d = tmp_path_factory.mktemp("web")
+    out = {}
+    run_ingest("sample", "-o", d / "fl", "--size", "24,40,40")
+    run_ingest("convert", d / "fl" / "membranes.ome.tif", "-o", d / "u8.ome.zarr")
+    run_ingest("convert", *(d / "fl" / f"{n}.ome.tif" for n in ("nuclei", "membranes", "filaments")),
+               "-o", d / "u16x3.ome.zarr")
+    run_ingest("sample", "--kind", "dense", "-o", d / "dense", "--size", "32,32,32")
+    dense = next((d / "dense").glob("*.tif"))
+    run_ingest("convert", dense, "-o", d / "f32.ome.zarr")
+    run_ingest("sample", "--kind", "cycif", "-o", d / "cycif", "--size", "8,48,48")
+    run_ingest("convert", *sorted((d / "cycif").glob("*.tif")), "-o", d / "u16x16.ome.zarr")
+    for name in ("u8", "f32", "u16x3", "u16x16"):
+        out[name] = d / f"{name}.ome.zarr"
+    return out
+
+
+@pytest.fixture(scope="module")
+def served(stores):
+    proc, base = start_server(*stores.values())
+    yield base
+    proc.terminate()
+    proc.wait()
+
+
+def view_url(base, name, fragment=""):
+    return f"{base}/{name}/view?width={SIZE}&height={SIZE}{fragment}"
+
+
+@pytest.mark.parametrize("name", ["u8", "f32", "u16x3"])
+def test_converged_page_equals_the_reference(served, stores, name, tmp_path):
+    results, console = drive(
+        view_url(served, name),
+        [{"do": "converge"}, {"do": "hash"}, {"do": "snapshot", "path": str(tmp_path / "page.png")}],
+    )
+    state, fragment, png = results
+    assert state["error"] is None and state["converged"], state
+    assert state["bricks_fetched"] > 0
+    assert errors(console) == []
+    ref = reference(stores[name], scene_of(fragment), tmp_path / "ref.exr")
+    psnr, ssim = compare(png, ref)
+    assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
+
+
+def test_sixteen_channels_render_eight_at_once(served, tmp_path):
+    results, console = drive(
+        view_url(served, "u16x16"),
+        [{"do": "converge"}, {"do": "hash"}, {"do": "snapshot", "path": str(tmp_path / "p.png")}],
+    )
+    state, fragment, png = results
+    assert state["error"] is None and state["converged"], state
+    scene = scene_of(fragment)
+    assert [c["visible"] for c in scene["channels"]] == [True] * 8 + [False] * 8
+    pixels = read_png(pathlib.Path(png))
+    assert (pixels.max(axis=2) > 16).mean() > 0.05  # not blank
+    assert errors(console) == []
+
+
+def test_a_drag_moves_the_camera_and_the_link_reopens_the_view(served, tmp_path):
+    results, _ = drive(view_url(served, "u16x3"), [{"do": "converge"}, {"do": "hash"}])
+    before = results[1]
+    results, _ = drive(
+        view_url(served, "u16x3"),
+        [
+            {"do": "converge"},
+            {"do": "drag", "dx": 40, "dy": 10},
+            {"do": "converge"},
+            {"do": "hash", "not": before},
+            {"do": "snapshot", "path": str(tmp_path / "dragged.png")},
+        ],
+    )
+    after = results[3]
+    assert scene_of(after)["camera"] != scene_of(before)["camera"]
+    reopened, _ = drive(
+        view_url(served, "u16x3", after),
+        [{"do": "converge"}, {"do": "snapshot", "path": str(tmp_path / "reopened.png")}],
+    )
+    a = read_png(tmp_path / "dragged.png")
+    b = read_png(tmp_path / "reopened.png")
+    assert np.array_equal(a, b)
+
+
+def test_hiding_a_channel_or_moving_a_window_fetches_no_brick(served, tmp_path):
+    results, _ = drive(view_url(served, "u16x3"), [{"do": "converge"}, {"do": "hash"}])
+    scene = scene_of(results[1])
+    hidden = json.loads(json.dumps(scene))
+    hidden["channels"][1]["visible"] = False
+    windowed = json.loads(json.dumps(hidden))
+    for p in windowed["channels"][0]["opacity"]:
+        p["value"] = p["value"] * 0.5
+    served_ok = []
+    results, console = drive(
+        view_url(served, "u16x3"),
+        [
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "a.png")},
+            {"do": "pause"},
+            {"do": "setScene", "scene": hidden},
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "hidden.png")},
+            {"do": "setScene", "scene": windowed},
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "windowed.png")},
+            {"do": "pause"},
+        ],
+        on_pause=lambda i: served_ok.append(metric(served, 'brickserver_requests_total{class="2xx"}')),
+    )
+    # At the server: between the two pauses, only the first /metrics request itself.
+    assert served_ok[1] - served_ok[0] == 1, served_ok
+    first, after_hide, after_window = results[0], results[4], results[7]
+    # In the page (cumulative counters): nothing more fetched, the renderer never rebuilt.
+    for s in (after_hide, after_window):
+        assert s["error"] is None and s["converged"], s
+        assert s["bricks_fetched"] == first["bricks_fetched"]
+        assert s["renderer_builds"] == 1
+    a = read_png(tmp_path / "a.png")
+    h = read_png(tmp_path / "hidden.png")
+    w = read_png(tmp_path / "windowed.png")
+    assert np.abs(a - h).max() > 8 and np.abs(h - w).max() > 8
+    assert errors(console) == []
+
+
+def test_missing_dataset_and_no_webgpu_show_their_messages(served):
+    (msg,), _ = drive(f"{served}/nope/view", [{"do": "waitMessage"}])
+    assert "Cannot open dataset 'nope'" in msg and "no such dataset on the server" in msg
+    (msg,), _ = drive(view_url(served, "u8"), [{"do": "waitMessage"}], noWebGPU=True)
+    assert msg.startswith("This browser has no WebGPU, which the Residency viewer needs.")
+
+
+def test_a_server_that_goes_away_shows_a_message(stores):
+    proc, base = start_server(stores["u16x3"])
+
+    def stop(_):
+        proc.terminate()
+        proc.wait()
+
+    try:
+        results, _ = drive(
+            view_url(base, "u16x3"),
+            # Stopped once the page has opened the dataset, before its first frame asks for
+            # bricks (a frame takes seconds on SwiftShader).
+            [{"do": "opened"}, {"do": "pause"}, {"do": "waitMessage"}],
+            on_pause=stop,
+        )
+    finally:
+        if proc.poll() is None:
+            stop(None)
+    msg = results[2]
+    assert "Is the brick server still running?" in msg, msg
+    assert "cannot reach the brick server" in msg, msg

@@ -1,0 +1,490 @@
+//! The browser driver: the same [`Renderer`], octree, page tables, streaming policy
+//! ([`StreamState`]) and compositing as `viewer render`, driven by `fetch` and the page's
+//! `requestAnimationFrame` loop instead of worker threads.
+//!
+//! JavaScript sees one class, [`Viewer`] (built by `wasm-bindgen`; the page's `main.js`
+//! drives it and defines `window.residency`). A [`Viewer::step`] files the bricks that
+//! arrived, renders a frame when the view or the resident data changed, and sends the frame's
+//! missing bricks to the server in batches, without waiting for them. Camera, style and
+//! visibility changes rewrite the scene tables in place ([`Renderer::restyle`]): nothing is
+//! rebuilt or fetched again.
+//!
+//! - [`fetch`]: the browser's `fetch` as the protocol's transport.
+
+pub mod fetch;
+
+use std::cell::RefCell;
+use std::collections::HashSet;
+use std::rc::Rc;
+
+use anyhow::{Result, ensure};
+use serde::Serialize;
+use wasm_bindgen::prelude::*;
+
+use self::fetch::BrowserFetch;
+use crate::defaults::{default_scene, parse_scene};
+use crate::gpu::device::Gpu;
+use crate::gpu::renderer::{RenderOptions, Renderer};
+use crate::gpu::streaming::{FrameStats, StreamState};
+use crate::image::linear_to_srgb;
+use crate::interactive::{camera_control, controls};
+use crate::scene::Scene;
+use crate::source::{BrickKey, BrickVoxels, VolumeInfo, server};
+
+/// Bricks per `/bricks` request from the page: small batches refine the image sooner.
+const PAGE_BATCH: usize = 32;
+
+/// Most `/bricks` requests in flight at once (a browser's connections per host).
+const MAX_REQUESTS_IN_FLIGHT: usize = 6;
+
+/// Orbit speed of a drag.
+const RADIANS_PER_PIXEL: f64 = 0.01;
+
+/// Largest canvas side the page renders.
+const MAX_SIDE: u32 = 4096;
+
+fn js_error(e: &anyhow::Error) -> JsValue {
+    JsValue::from_str(&format!("{e:#}"))
+}
+
+/// Totals over the page's life, and the last frame's counters, as `state()` reports them.
+#[derive(Clone, Debug, Default, Serialize)]
+struct Totals {
+    frame: u32,
+    converged: bool,
+    bricks_requested: u64,
+    bricks_fetched: u64,
+    bytes_fetched: u64,
+    bricks_failed: u64,
+    bricks_resident: u64,
+    requests_in_flight: usize,
+    gpu_time_ms: Option<f64>,
+    renderer_builds: u32,
+    error: Option<String>,
+}
+
+/// What the viewer of one dataset holds between steps.
+struct Inner {
+    gpu: Rc<Gpu>,
+    base: String,
+    info: Rc<VolumeInfo>,
+    options: RenderOptions,
+    /// The scene wanted; the renderer catches up at the next step.
+    scene: Scene,
+    scene_changed: bool,
+    /// `None` before the first step and while a step holds it.
+    renderer: Option<Renderer>,
+    stepping: bool,
+    stream: StreamState,
+    /// Fetches finished since the last step.
+    arrived: Vec<(BrickKey, Result<BrickVoxels>)>,
+    in_flight: HashSet<BrickKey>,
+    requests_in_flight: usize,
+    /// Fetch results filed since the last frame (reported with the next one).
+    pending: FrameStats,
+    render_needed: bool,
+    /// The last frame as 8-bit sRGB RGBA (alpha 255), ready for `putImageData`.
+    rgba: Vec<u8>,
+    totals: Totals,
+}
+
+/// The residency-octree viewer of one brickserver dataset, drawn by the page.
+#[wasm_bindgen]
+pub struct Viewer {
+    inner: Rc<RefCell<Inner>>,
+}
+
+/// Installs the panic hook (panics show in the console with their message).
+#[wasm_bindgen(start)]
+pub fn start() {
+    console_error_panic_hook::set_once();
+}
+
+#[wasm_bindgen]
+impl Viewer {
+    /// Opens dataset `dataset` on the brickserver at `server` (`""`: this page's origin),
+    /// rendering `width × height` pixels: WebGPU device, then the dataset's metadata and
+    /// region metadata. Rejects with a message for people (no WebGPU, no such dataset, server
+    /// unreachable).
+    pub async fn open(
+        server: String,
+        dataset: String,
+        width: u32,
+        height: u32,
+    ) -> Result<Viewer, JsValue> {
+        Self::try_open(&server, &dataset, width, height)
+            .await
+            .map_err(|e| js_error(&e))
+    }
+
+    async fn try_open(server: &str, dataset: &str, width: u32, height: u32) -> Result<Viewer> {
+        ensure!(
+            (1..=MAX_SIDE).contains(&width) && (1..=MAX_SIDE).contains(&height),
+            "image size {width}×{height}: each side must lie in 1..={MAX_SIDE}"
+        );
+        let gpu = Gpu::open().await?;
+        let base = server::dataset_url(server, dataset);
+        let info = server::open(&BrowserFetch, &base, dataset).await?;
+        let scene = default_scene(&info);
+        let options = RenderOptions {
+            width,
+            height,
+            // A share of what the device can hold, as `viewer render` sizes its default.
+            cache_bytes: RenderOptions::default()
+                .cache_bytes
+                .min(gpu.limits.max_buffer_size / 2),
+            ..RenderOptions::default()
+        };
+        Ok(Viewer {
+            inner: Rc::new(RefCell::new(Inner {
+                gpu: Rc::new(gpu),
+                base,
+                info: Rc::new(info),
+                options,
+                scene,
+                scene_changed: false,
+                renderer: None,
+                stepping: false,
+                stream: StreamState::default(),
+                arrived: Vec::new(),
+                in_flight: HashSet::new(),
+                requests_in_flight: 0,
+                pending: FrameStats::default(),
+                render_needed: true,
+                rgba: Vec::new(),
+                totals: Totals::default(),
+            })),
+        })
+    }
+
+    /// The image width in pixels.
+    pub fn width(&self) -> u32 {
+        self.inner.borrow().options.width
+    }
+
+    /// The image height in pixels.
+    pub fn height(&self) -> u32 {
+        self.inner.borrow().options.height
+    }
+
+    /// The dataset as the page's controls need it, JSON: name, sample type, channel names
+    /// and display hints (`omero` window, range, colour), levels and adapter.
+    pub fn info_json(&self) -> String {
+        let inner = self.inner.borrow();
+        let info = &inner.info;
+        serde_json::json!({
+            "name": info.name,
+            "data_type": info.sample_type.zarr_name(),
+            "channels": info.channels,
+            "display": info.display.iter().map(|d| serde_json::json!({
+                "window": d.window, "range": d.range, "color": d.color,
+            })).collect::<Vec<_>>(),
+            "levels": info.levels.iter().map(|l| l.shape).collect::<Vec<_>>(),
+            "brick_shape": info.brick_shape,
+            "region_metadata": info.minmax.is_some(),
+            "adapter": inner.gpu.adapter_info.name,
+            "timestamps": inner.gpu.timestamps,
+        })
+        .to_string()
+    }
+
+    /// The scene drawn (or about to be), as scene-file JSON.
+    pub fn scene_json(&self) -> String {
+        serde_json::to_string(&self.inner.borrow().scene).expect("scenes serialize")
+    }
+
+    /// Replaces the scene with scene-file JSON (`schemas/json/scene.schema.json`).
+    pub fn set_scene_json(&self, json: &str) -> Result<(), JsValue> {
+        let scene = parse_scene(json.as_bytes(), "scene").map_err(|e| js_error(&e))?;
+        let mut inner = self.inner.borrow_mut();
+        let n = inner.info.channels.len();
+        if let Some(s) = scene.channels.iter().find(|s| s.channel >= n) {
+            return Err(JsValue::from_str(&format!(
+                "scene: channel {} does not exist ({} has {n} channels)",
+                s.channel, inner.info.name
+            )));
+        }
+        inner.set_scene(scene);
+        Ok(())
+    }
+
+    /// Orbits the camera by a drag of `(dx, dy)` pixels.
+    pub fn orbit(&self, dx: f64, dy: f64) {
+        self.inner.borrow_mut().edit(|scene, _, _| {
+            scene.camera = camera_control::orbit(&scene.camera, dx, dy, RADIANS_PER_PIXEL);
+        });
+    }
+
+    /// Pans the camera by a drag of `(dx, dy)` pixels.
+    pub fn pan(&self, dx: f64, dy: f64) {
+        self.inner.borrow_mut().edit(|scene, _, height| {
+            scene.camera = camera_control::pan(&scene.camera, dx, dy, f64::from(height));
+        });
+    }
+
+    /// Zooms by `steps` wheel steps (positive: closer; four halve the distance).
+    pub fn zoom(&self, steps: f64) {
+        self.inner.borrow_mut().edit(|scene, info, _| {
+            let min = info
+                .voxel_size
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min);
+            scene.camera = camera_control::zoom(&scene.camera, steps, min);
+        });
+    }
+
+    /// Back to the default view of the dataset.
+    pub fn reset(&self) {
+        self.inner.borrow_mut().edit(|scene, info, _| {
+            *scene = default_scene(info);
+        });
+    }
+
+    /// Shows or hides channel `channel`.
+    pub fn set_visible(&self, channel: usize, visible: bool) {
+        self.inner.borrow_mut().edit(|scene, info, _| {
+            if let Some(s) = controls::style_mut(scene, info, channel) {
+                s.visible = visible;
+            }
+        });
+    }
+
+    /// Sets channel `channel`'s colour (linear RGB in `[0, 1]`).
+    pub fn set_color(&self, channel: usize, r: f64, g: f64, b: f64) {
+        self.inner.borrow_mut().edit(|scene, info, _| {
+            if let Some(s) = controls::style_mut(scene, info, channel) {
+                s.color = [r, g, b].map(|v| v.clamp(0.0, 1.0));
+            }
+        });
+    }
+
+    /// Moves channel `channel`'s window (the span of its opacity ramp) to `[lo, hi]`.
+    pub fn set_window(&self, channel: usize, lo: f64, hi: f64) {
+        if !(lo.is_finite() && hi.is_finite() && hi > lo) {
+            return;
+        }
+        self.inner.borrow_mut().edit(|scene, info, _| {
+            if let Some(s) = controls::style_mut(scene, info, channel) {
+                controls::set_window(&mut s.opacity, lo, hi);
+            }
+        });
+    }
+
+    /// Scales channel `channel`'s opacity ramp so that its highest point is `opacity`.
+    pub fn set_opacity(&self, channel: usize, opacity: f64) {
+        let opacity = opacity.clamp(0.0, 1.0);
+        self.inner.borrow_mut().edit(|scene, info, _| {
+            if let Some(s) = controls::style_mut(scene, info, channel) {
+                let top = s.opacity.iter().map(|p| p.opacity).fold(0.0, f64::max);
+                for p in &mut s.opacity {
+                    p.opacity = if top > 0.0 {
+                        p.opacity / top * opacity
+                    } else {
+                        opacity
+                    };
+                }
+            }
+        });
+    }
+
+    /// One step of the progressive loop; resolves to whether a new frame is ready
+    /// ([`Viewer::rgba`]). Never runs two at once (a second call resolves to `false`).
+    pub fn step(&self) -> js_sys::Promise {
+        let inner = Rc::clone(&self.inner);
+        wasm_bindgen_futures::future_to_promise(async move {
+            let rendered = step(&inner).await;
+            let mut i = inner.borrow_mut();
+            i.stepping = false;
+            match rendered {
+                Ok(r) => Ok(JsValue::from_bool(r)),
+                Err(e) => {
+                    let message = format!("{e:#}");
+                    i.totals.error = Some(message.clone());
+                    Err(JsValue::from_str(&message))
+                }
+            }
+        })
+    }
+
+    /// The last frame as 8-bit sRGB RGBA, row-major from the top, as `viewer render`'s PNG
+    /// encodes it (alpha 255).
+    pub fn rgba(&self) -> Vec<u8> {
+        self.inner.borrow().rgba.clone()
+    }
+
+    /// `{frame, converged, bricks_requested, bricks_fetched, bytes_fetched, bricks_failed,
+    /// bricks_resident, requests_in_flight, gpu_time_ms, renderer_builds, error}` as JSON.
+    /// `converged`: the last frame requested no brick and none is on its way, as
+    /// `viewer render` means it.
+    pub fn state_json(&self) -> String {
+        serde_json::to_string(&self.inner.borrow().totals).expect("totals serialize")
+    }
+}
+
+impl Inner {
+    /// Edits the wanted scene with `f(scene, info, image height)`.
+    fn edit(&mut self, f: impl FnOnce(&mut Scene, &VolumeInfo, u32)) {
+        let mut scene = self.scene.clone();
+        f(&mut scene, &self.info, self.options.height);
+        self.set_scene(scene);
+    }
+
+    fn set_scene(&mut self, scene: Scene) {
+        if scene != self.scene {
+            self.scene = scene;
+            self.scene_changed = true;
+            self.render_needed = true;
+            self.totals.converged = false;
+        }
+    }
+
+    /// Files the fetches that arrived into `renderer`.
+    fn file_arrivals(&mut self, renderer: &mut Renderer) {
+        let arrived = std::mem::take(&mut self.arrived);
+        for (key, result) in arrived {
+            self.in_flight.remove(&key);
+            if !renderer
+                .octree()
+                .channels()
+                .contains(&(key.channel as usize))
+            {
+                continue; // fetched for an earlier renderer
+            }
+            if let Err(e) = &result {
+                self.totals.error = Some(format!("{e:#}"));
+            }
+            if let Some((_, bytes)) =
+                self.stream
+                    .arrived(&self.gpu, renderer, key, result, &mut self.pending)
+            {
+                self.totals.bricks_fetched += 1;
+                self.totals.bytes_fetched += bytes;
+            }
+            self.render_needed = true;
+        }
+        self.totals.bricks_failed = self.stream.failed().len() as u64;
+    }
+}
+
+/// The renderer for `inner`'s wanted scene: the current one restyled in place when it can
+/// be, else a new one.
+async fn renderer_for(inner: &Rc<RefCell<Inner>>, current: Option<Renderer>) -> Result<Renderer> {
+    let (gpu, info, scene, options) = {
+        let i = inner.borrow();
+        (
+            Rc::clone(&i.gpu),
+            Rc::clone(&i.info),
+            i.scene.clone(),
+            i.options.clone(),
+        )
+    };
+    if let Some(mut r) = current {
+        let same_style =
+            r.scene().channels == scene.channels && r.scene().background == scene.background;
+        if same_style || r.restyle(&gpu, &scene) {
+            return Ok(r);
+        }
+    }
+    let renderer = Renderer::create(&gpu, &info, &scene, options).await?;
+    let mut i = inner.borrow_mut();
+    i.totals.renderer_builds += 1;
+    // Fetches under way were for the old renderer's channels; they are filed only if drawn.
+    i.stream = StreamState::default();
+    Ok(renderer)
+}
+
+async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool> {
+    let (current, rebuild) = {
+        let mut i = inner.borrow_mut();
+        if i.stepping {
+            return Ok(false);
+        }
+        i.stepping = true;
+        let rebuild = i.renderer.is_none() || std::mem::take(&mut i.scene_changed);
+        (i.renderer.take(), rebuild)
+    };
+    let mut renderer = match (current, rebuild) {
+        (Some(r), false) => r,
+        (current, _) => renderer_for(inner, current).await?,
+    };
+    let result = render_and_request(inner, &mut renderer).await;
+    inner.borrow_mut().renderer = Some(renderer);
+    result
+}
+
+/// Files arrivals, renders when needed, and sends the frame's missing bricks.
+async fn render_and_request(inner: &Rc<RefCell<Inner>>, renderer: &mut Renderer) -> Result<bool> {
+    let gpu = {
+        let mut i = inner.borrow_mut();
+        i.file_arrivals(renderer);
+        if !std::mem::take(&mut i.render_needed) {
+            i.totals.requests_in_flight = i.requests_in_flight;
+            return Ok(false);
+        }
+        Rc::clone(&i.gpu)
+    };
+    let camera = inner.borrow().scene.camera.clone();
+    renderer.set_camera(camera);
+    let out = renderer.render_async(&gpu).await?;
+    let mut i = inner.borrow_mut();
+    i.rgba = out
+        .pixels
+        .iter()
+        .flat_map(|p| {
+            let c = |v: f32| (linear_to_srgb(v) * 255.0).round() as u8;
+            [c(p[0]), c(p[1]), c(p[2]), 255]
+        })
+        .collect();
+    let mut stats = FrameStats {
+        frame: renderer.frames(),
+        shader: out.counts,
+        gpu_time_ms: out.gpu_time_ms,
+        ..std::mem::take(&mut i.pending)
+    };
+    i.totals.frame = stats.frame;
+    i.totals.gpu_time_ms = out.gpu_time_ms;
+    i.totals.bricks_resident = renderer.octree().resident_count() as u64;
+    let over_cap = stats.shader.requests_over_cap;
+    let wanted = i.stream.wanted(renderer, out.requests, over_cap);
+    i.totals.bricks_requested = i.stream.request_log().len() as u64;
+    let Some(mut wanted) = wanted else {
+        // Bricks of an earlier view may still be arriving, and the view may have changed while
+        // this frame rendered: then the next frame decides.
+        i.totals.converged = i.in_flight.is_empty() && !i.render_needed && !i.scene_changed;
+        i.totals.requests_in_flight = i.requests_in_flight;
+        return Ok(true);
+    };
+    i.totals.converged = false;
+    // Bricks already on their way are not asked for twice.
+    let in_flight = i.in_flight.clone();
+    wanted.retain(|r| !in_flight.contains(&r.key));
+    let keys = StreamState::to_fetch(renderer, wanted, &mut stats);
+    let room = MAX_REQUESTS_IN_FLIGHT.saturating_sub(i.requests_in_flight) * PAGE_BATCH;
+    let batch = PAGE_BATCH.min(server::batch_size(&i.info));
+    for chunk in keys[..keys.len().min(room)].chunks(batch) {
+        send(inner, &mut i, chunk.to_vec());
+    }
+    if keys.len() > room || over_cap > 0 {
+        // More to ask for once these arrive: the next frame asks again.
+        i.render_needed = i.requests_in_flight == 0;
+    }
+    i.totals.requests_in_flight = i.requests_in_flight;
+    Ok(true)
+}
+
+/// Sends one `/bricks` request; its answer lands in `arrived` and asks for a frame.
+fn send(inner: &Rc<RefCell<Inner>>, i: &mut Inner, keys: Vec<BrickKey>) {
+    i.in_flight.extend(keys.iter().copied());
+    i.requests_in_flight += 1;
+    let base = i.base.clone();
+    let info = Rc::clone(&i.info);
+    let inner = Rc::clone(inner);
+    wasm_bindgen_futures::spawn_local(async move {
+        let results = server::fetch_batch(&BrowserFetch, &base, &info, &keys).await;
+        let mut i = inner.borrow_mut();
+        i.requests_in_flight -= 1;
+        i.arrived.extend(keys.into_iter().zip(results));
+        i.render_needed = true;
+    });
+}

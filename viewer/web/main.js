@@ -1,0 +1,280 @@
+// The Residency web viewer page: drives the WebAssembly `Viewer` (viewer/src/web) from
+// requestAnimationFrame, draws its frames into the canvas, and defines `window.residency`.
+//
+// Which dataset: `/NAME/view` on a brickserver opens dataset NAME there; `?server=URL&dataset=NAME`
+// opens one on another brickserver. `?width=W&height=H` fixes the image size in pixels (else
+// the canvas fills the window when the page opens). `#scene=` followed by URI-encoded scene
+// JSON (schemas/json/scene.schema.json) sets the view; the page keeps it up to date.
+
+import init, { Viewer } from "./residency_viewer.js";
+
+const canvas = document.getElementById("canvas");
+const message = document.getElementById("message");
+const stats = document.getElementById("stats");
+
+/** Shows a message over the view (null hides it). */
+function show(text) {
+  message.hidden = text == null;
+  message.textContent = text ?? "";
+}
+
+/** Where the dataset is: {server, dataset}. */
+function target() {
+  const params = new URLSearchParams(location.search);
+  if (params.has("dataset")) {
+    return { server: params.get("server") ?? location.origin, dataset: params.get("dataset") };
+  }
+  const m = location.pathname.match(/^(.*)\/([^/]+)\/view\/?$/);
+  if (m) return { server: location.origin + m[1], dataset: decodeURIComponent(m[2]) };
+  return null;
+}
+
+/** The image size: ?width=&height=, else what the view area offers. */
+function size() {
+  const params = new URLSearchParams(location.search);
+  const area = document.getElementById("view").getBoundingClientRect();
+  const w = parseInt(params.get("width") ?? "", 10) || Math.max(64, Math.floor(area.width));
+  const h = parseInt(params.get("height") ?? "", 10) || Math.max(64, Math.floor(area.height));
+  return [Math.min(w, 4096), Math.min(h, 4096)];
+}
+
+// Linear RGB (scene colours) <-> sRGB hex (colour inputs).
+const toSrgb = (v) => (v <= 0.0031308 ? 12.92 * v : 1.055 * Math.pow(v, 1 / 2.4) - 0.055);
+const toLinear = (v) => (v <= 0.04045 ? v / 12.92 : Math.pow((v + 0.055) / 1.055, 2.4));
+const hex = (rgb) =>
+  "#" + rgb.map((v) => Math.round(toSrgb(Math.min(1, Math.max(0, v))) * 255).toString(16).padStart(2, "0")).join("");
+const fromHex = (h) => [1, 3, 5].map((i) => toLinear(parseInt(h.slice(i, i + 2), 16) / 255));
+
+let viewer = null;
+let lastScene = "";
+let failure = null;
+
+function draw() {
+  const w = viewer.width(), h = viewer.height();
+  const rgba = viewer.rgba();
+  if (rgba.length !== w * h * 4) return;
+  const ctx = canvas.getContext("2d");
+  ctx.putImageData(new ImageData(new Uint8ClampedArray(rgba.buffer, rgba.byteOffset, rgba.length), w, h), 0, 0);
+}
+
+function state() {
+  if (!viewer) {
+    return { frame: 0, converged: false, bricks_fetched: 0, bytes_fetched: 0, error: failure };
+  }
+  const s = JSON.parse(viewer.state_json());
+  if (failure && !s.error) s.error = failure;
+  return s;
+}
+
+function showStats() {
+  const s = state();
+  const mib = (s.bytes_fetched / (1 << 20)).toFixed(1);
+  stats.textContent =
+    `frame ${s.frame}${s.converged ? " (converged)" : ""}\n` +
+    `bricks requested ${s.bricks_requested} · fetched ${s.bricks_fetched} · resident ${s.bricks_resident}\n` +
+    `in flight ${s.requests_in_flight} requests · failed ${s.bricks_failed}\n` +
+    `fetched ${mib} MiB\n` +
+    (s.gpu_time_ms != null ? `GPU ${s.gpu_time_ms.toFixed(2)} ms/frame\n` : "GPU time: no timestamp queries\n");
+  if (s.error) {
+    show(`Error: ${s.error}\n\nIs the brick server still running? Reload the page to try again.`);
+  }
+}
+
+function keepSceneInUrl() {
+  const json = viewer.scene_json();
+  if (json !== lastScene) {
+    lastScene = json;
+    history.replaceState(null, "", location.pathname + location.search + "#scene=" + encodeURIComponent(json));
+  }
+}
+
+/** Draws channel `c`'s histogram (log counts) with its window [lo, hi] shaded. */
+function drawHistogram(canvasEl, hist, lo, hi) {
+  const ctx = canvasEl.getContext("2d");
+  const w = canvasEl.width, h = canvasEl.height;
+  ctx.clearRect(0, 0, w, h);
+  if (!hist) return;
+  const finite = hist.edges.filter((e) => e != null && Number.isFinite(e));
+  if (finite.length < 2) return;
+  const x0 = finite[0], x1 = finite[finite.length - 1];
+  const x = (v) => ((Math.min(x1, Math.max(x0, v)) - x0) / (x1 - x0 || 1)) * w;
+  ctx.fillStyle = "#2a3a4a";
+  ctx.fillRect(x(lo), 0, Math.max(1, x(hi) - x(lo)), h);
+  const top = Math.log1p(Math.max(...hist.counts, 1));
+  ctx.fillStyle = "#9ab";
+  hist.counts.forEach((n, i) => {
+    const a = hist.edges[i] ?? x0, b = hist.edges[i + 1] ?? x1;
+    const bh = (Math.log1p(n) / top) * h;
+    ctx.fillRect(x(a), h - bh, Math.max(1, x(b) - x(a)), bh);
+  });
+}
+
+/** Channel `c`'s histogram over the whole volume, from the server's region metadata. */
+async function fetchHistogram(where, info, c) {
+  if (!info.region_metadata) return null;
+  const level = info.levels.length - 1;
+  const [z, y, x] = info.levels[level];
+  const url = `${where.server}/${encodeURIComponent(where.dataset)}/regions?level=${level}&channel=${c}&min=0,0,0&max=${x},${y},${z}`;
+  try {
+    const r = await fetch(url);
+    return r.ok ? (await r.json()).histogram : null;
+  } catch {
+    return null;
+  }
+}
+
+const histograms = new Map();
+
+function buildControls(info) {
+  const panel = document.getElementById("channels");
+  panel.textContent = "";
+  const scene = JSON.parse(viewer.scene_json());
+  info.channels.forEach((name, c) => {
+    const style = scene.channels.find((s) => s.channel === c);
+    const display = info.display[c] ?? {};
+    const pts = style?.opacity ?? [];
+    const lo0 = pts.length ? pts[0].value : 0;
+    const hi0 = pts.length ? pts[pts.length - 1].value : 1;
+    const range = display.range ?? display.window ?? [Math.min(lo0, 0), hi0];
+    const top = pts.reduce((m, p) => Math.max(m, p.opacity), 0);
+    const box = document.createElement("div");
+    box.className = "channel";
+    box.innerHTML = `
+      <label><input type="checkbox" class="visible"><span class="name"></span><input type="color" class="color"></label>
+      <label>low <input type="range" class="lo"><input type="number" class="lo-n"></label>
+      <label>high <input type="range" class="hi"><input type="number" class="hi-n"></label>
+      <canvas class="histogram" width="240" height="40" title="histogram (log counts) and window"></canvas>
+      <label>opacity <input type="range" class="opacity" min="0" max="1" step="0.001"></label>`;
+    const q = (sel) => box.querySelector(sel);
+    q(".name").textContent = name;
+    q(".name").title = name;
+    q(".visible").checked = style ? style.visible !== false : false;
+    q(".visible").dataset.channel = c;
+    q(".color").value = hex(style?.color ?? [1, 1, 1]);
+    for (const cls of [".lo", ".hi"]) {
+      q(cls).min = range[0];
+      q(cls).max = range[1] > range[0] ? range[1] : range[0] + 1;
+      q(cls).step = info.data_type.startsWith("float") ? (range[1] - range[0]) / 1000 || 0.001 : 1;
+    }
+    q(".lo").value = q(".lo-n").value = lo0;
+    q(".hi").value = q(".hi-n").value = hi0;
+    q(".opacity").value = top;
+    q(".visible").addEventListener("change", (e) => viewer.set_visible(c, e.target.checked));
+    q(".color").addEventListener("input", (e) => viewer.set_color(c, ...fromHex(e.target.value)));
+    const redraw = () => drawHistogram(q(".histogram"), histograms.get(c), +q(".lo").value, +q(".hi").value);
+    const setWindow = (lo, hi) => {
+      if (hi > lo) viewer.set_window(c, lo, hi);
+      redraw();
+    };
+    if (histograms.has(c)) redraw();
+    else fetchHistogram(target(), info, c).then((hist) => { histograms.set(c, hist); redraw(); });
+    q(".lo").addEventListener("input", (e) => { q(".lo-n").value = e.target.value; setWindow(+e.target.value, +q(".hi").value); });
+    q(".hi").addEventListener("input", (e) => { q(".hi-n").value = e.target.value; setWindow(+q(".lo").value, +e.target.value); });
+    q(".lo-n").addEventListener("change", (e) => { q(".lo").value = e.target.value; setWindow(+e.target.value, +q(".hi-n").value); });
+    q(".hi-n").addEventListener("change", (e) => { q(".hi").value = e.target.value; setWindow(+q(".lo-n").value, +e.target.value); });
+    q(".opacity").addEventListener("input", (e) => viewer.set_opacity(c, +e.target.value));
+    panel.appendChild(box);
+  });
+}
+
+function listen() {
+  let drag = null;
+  canvas.addEventListener("pointerdown", (e) => {
+    canvas.setPointerCapture(e.pointerId);
+    drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 };
+  });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+    drag.x = e.clientX;
+    drag.y = e.clientY;
+    if (drag.pan) viewer.pan(dx, dy);
+    else viewer.orbit(dx, dy);
+  });
+  const end = () => { drag = null; };
+  canvas.addEventListener("pointerup", end);
+  canvas.addEventListener("pointercancel", end);
+  canvas.addEventListener("contextmenu", (e) => e.preventDefault());
+  canvas.addEventListener("wheel", (e) => {
+    e.preventDefault();
+    viewer.zoom(-Math.sign(e.deltaY) * Math.min(4, Math.abs(e.deltaY) / 100 || 1));
+  }, { passive: false });
+  const reset = () => { viewer.reset(); buildControls(JSON.parse(viewer.info_json())); };
+  document.getElementById("reset").addEventListener("click", reset);
+  window.addEventListener("keydown", (e) => {
+    if ((e.key === "r" || e.key === "R") && e.target.tagName !== "INPUT") reset();
+  });
+}
+
+async function loop() {
+  try {
+    if (await viewer.step()) {
+      draw();
+      keepSceneInUrl();
+    }
+  } catch (e) {
+    failure = String(e);
+  }
+  showStats();
+  requestAnimationFrame(loop);
+}
+
+window.residency = {
+  /** Replaces the scene (the same JSON as scene files). */
+  setScene(scene) {
+    if (!viewer) throw new Error(failure ?? "the viewer is not open yet");
+    viewer.set_scene_json(JSON.stringify(scene));
+    buildControls(JSON.parse(viewer.info_json()));
+  },
+  /** {frame, converged, bricks_fetched, bytes_fetched, error, ...}. */
+  state,
+  /** The current frame as a PNG data URL (8-bit sRGB, like `viewer render`'s PNG). */
+  async snapshot() {
+    return canvas.toDataURL("image/png");
+  },
+  /** The dataset's description (channels, display hints, levels, adapter). */
+  info() {
+    return viewer ? JSON.parse(viewer.info_json()) : null;
+  },
+};
+
+async function main() {
+  const where = target();
+  if (!where) {
+    failure = "no dataset: open /NAME/view on a brickserver, or add ?server=URL&dataset=NAME";
+    show(failure);
+    return;
+  }
+  document.getElementById("title").textContent = where.dataset;
+  document.title = `${where.dataset} · Residency viewer`;
+  if (!navigator.gpu) {
+    failure =
+      "This browser has no WebGPU, which the Residency viewer needs.\n" +
+      "Use a current Chrome or Edge (or Firefox with WebGPU enabled), over https or on localhost.";
+    show(failure);
+    return;
+  }
+  await init();
+  const [w, h] = size();
+  canvas.width = w;
+  canvas.height = h;
+  try {
+    viewer = await Viewer.open(where.server, where.dataset, w, h);
+  } catch (e) {
+    failure = String(e);
+    show(`Cannot open dataset '${where.dataset}' on ${where.server}:\n${failure}`);
+    return;
+  }
+  if (location.hash.startsWith("#scene=")) {
+    try {
+      viewer.set_scene_json(decodeURIComponent(location.hash.slice("#scene=".length)));
+    } catch (e) {
+      show(`The link's #scene is not a valid scene (${e}); showing the default view.`);
+    }
+  }
+  buildControls(JSON.parse(viewer.info_json()));
+  listen();
+  requestAnimationFrame(loop);
+}
+
+main();
