@@ -3,6 +3,8 @@
 
 use anyhow::{Context, Result, bail};
 
+use super::pipeline::PipelineCache;
+
 /// A device, its queue and what the adapter supports.
 pub struct Gpu {
     /// The logical device.
@@ -15,6 +17,8 @@ pub struct Gpu {
     pub limits: wgpu::Limits,
     /// Whether compute-pass timestamp queries are available (GPU time in frame statistics).
     pub timestamps: bool,
+    /// The ray-casting pipelines built on this device, shared by every renderer.
+    pub pipelines: PipelineCache,
 }
 
 impl std::fmt::Debug for Gpu {
@@ -23,6 +27,7 @@ impl std::fmt::Debug for Gpu {
             .field("adapter", &self.adapter_info.name)
             .field("backend", &self.adapter_info.backend)
             .field("timestamps", &self.timestamps)
+            .field("pipelines", &self.pipelines)
             .finish_non_exhaustive()
     }
 }
@@ -90,6 +95,7 @@ impl Gpu {
             adapter_info,
             limits,
             timestamps,
+            pipelines: PipelineCache::default(),
         })
     }
 

@@ -4,10 +4,16 @@
 //! - [`page_table`]: page tables per (channel, level) and the brick ids the shader reports;
 //! - [`brick_cache`]: the brick cache atlas per sample format, with LRU eviction driven by the
 //!   shader's usage feedback;
-//! - [`tables`]: the read-only tables the shader consults (levels, channels, transfer
-//!   functions with their prefix tables for O(1) emptiness tests);
-//! - [`renderer`]: the `raycast.wgsl` compute pass, its buffers and one frame's readback
-//!   (image, capped request list, usage, statistics);
+//! - [`tables`]: the scene tables the shader consults (levels, channels, transfer
+//!   functions with their prefix tables for O(1) emptiness tests), rewritten in place when the
+//!   style changes;
+//! - [`pipeline`]: the long-lived part, `raycast.wgsl` compiled for one atlas format and one
+//!   method, shared by every renderer on the device;
+//! - [`residency`]: the residency state of one volume (octree, page tables, cache), which
+//!   changes as bricks arrive and are evicted;
+//! - [`renderer`]: one volume and scene: pipeline, residency state, scene tables and the
+//!   per-frame buffers, with one frame's dispatch and readback (image, capped request list,
+//!   usage, statistics);
 //! - [`streaming`]: worker threads fetching bricks, and the progressive loop
 //!   render → read requests → fetch → upload → insert into the octree → repeat;
 //! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
@@ -15,7 +21,9 @@
 pub mod brick_cache;
 pub mod device;
 pub mod page_table;
+pub mod pipeline;
 pub mod renderer;
+pub mod residency;
 pub mod streaming;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod synthetic;

@@ -1,16 +1,21 @@
-//! The `raycast.wgsl` compute pass: its buffers, its per-frame parameters, and one frame's
-//! dispatch and readback (image, capped request list, slot usage, statistics, GPU time).
-//! Also owns the residency state that changes between frames: octree, page tables and cache.
+//! The renderer of one volume and one scene: the shared [`RaycastPipeline`], the
+//! [`ResidencyState`] (octree, page tables, cache), the [`SceneTables`], and the per-frame
+//! buffers, with one frame's parameters, dispatch and readback (image, capped request list,
+//! slot usage, statistics, GPU time).
 
 use anyhow::{Context, Result, bail, ensure};
 use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
+use std::sync::Arc;
+
 use super::brick_cache::BrickCache;
 use super::device::Gpu;
-use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables};
-use super::tables::{self, ChannelTable};
-use crate::octree::{OctreeGeometry, ResidencyOctree};
+use super::pipeline::{Bindings, RaycastPipeline};
+pub use super::residency::is_clear;
+use super::residency::{ResidencyState, check_binding, storage_buffer};
+use super::tables::{self, SceneTables};
+use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
@@ -22,31 +27,14 @@ pub const MAX_CHANNELS: usize = 8;
 
 const HEADER_WORDS: usize = 8;
 
-/// Opacity control points per channel the table buffer has room for beyond the scene's own,
-/// so that [`Renderer::restyle`] rewrites it in place.
-const TABLE_HEADROOM_POINTS: usize = 64;
-
 /// Header word counting the rays the latest pass suspended.
 const SUSPENDED_WORD: usize = 7;
 
 /// Bytes of one ray's state between passes (`RayState` in the shader).
 const RAY_STATE_BYTES: u64 = 64;
 
-/// Loop iterations a CPU Vulkan driver (Mesa's lavapipe/llvmpipe) allows one invocation in
-/// all, nested loops included; the shader ends a pass well before it.
-const DRIVER_LOOP_LIMIT: u32 = 65_535;
-
 /// Most passes of one frame before the renderer gives up (a ray of a million steps or more).
 const MAX_PASSES: u32 = 100_000;
-
-/// Steps one ray may take in a pass: the driver's loop limit divided by a bound on the loop
-/// iterations one step takes (levels chosen per channel, transfer-function points, the octree
-/// walk, the 8 voxels of a sample and the substitution candidates).
-fn steps_per_pass(channels: usize, levels: usize, tf_points: usize, depth: u32) -> u32 {
-    let c = channels.max(1);
-    let per_step = 8 + c * (3 * levels + 2 * tf_points + 24) + (depth as usize + 2) * (c + 1);
-    (DRIVER_LOOP_LIMIT as usize / per_step).clamp(16, 1 << 20) as u32
-}
 
 /// How the ray caster finds data and skips empty space: the residency octree, or one of the
 /// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
@@ -229,6 +217,7 @@ pub enum Inserted {
     CacheFull,
 }
 
+/// The staging buffers one frame's results are read back through.
 struct Readback {
     requests: wgpu::Buffer,
     usage: wgpu::Buffer,
@@ -236,26 +225,95 @@ struct Readback {
     timestamps: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
 }
 
-/// The renderer of one volume and one scene.
-pub struct Renderer {
-    options: RenderOptions,
-    info: VolumeInfo,
-    scene: Scene,
-    octree: ResidencyOctree,
-    pages: PageTables,
-    cache: BrickCache,
-    pipeline: wgpu::ComputePipeline,
-    bind_group: wgpu::BindGroup,
+/// The per-frame data: the uniforms, the image, the request list, the suspended rays' states
+/// between passes, and their readback.
+struct FrameBuffers {
     params: wgpu::Buffer,
-    tables: wgpu::Buffer,
-    /// Capacity of `tables` in words.
-    table_words: usize,
-    nodes: wgpu::Buffer,
     requests: wgpu::Buffer,
     image: wgpu::Buffer,
-    readback: Readback,
     rays: wgpu::Buffer,
-    steps_per_pass: u32,
+    readback: Readback,
+}
+
+impl FrameBuffers {
+    /// Buffers for `width × height` pixels, `max_requests` requests and a cache of
+    /// `cache_slots` slots.
+    fn new(gpu: &Gpu, options: &RenderOptions, cache_slots: u32) -> Result<Self> {
+        let device = &gpu.device;
+        let pixels = u64::from(options.width) * u64::from(options.height);
+        check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
+        check_binding(
+            gpu,
+            "the ray states",
+            pixels * RAY_STATE_BYTES,
+            "render a smaller image",
+        )?;
+        let params = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("raycast params"),
+            size: size_of::<Params>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let request_bytes = (HEADER_WORDS as u64 + 2 * u64::from(options.max_requests)) * 4;
+        let requests = storage_buffer(gpu, "requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
+        let image = storage_buffer(gpu, "image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
+        let rays = storage_buffer(
+            gpu,
+            "ray states",
+            pixels * RAY_STATE_BYTES,
+            wgpu::BufferUsages::empty(),
+        );
+        let staging = |label, size: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let timestamps = gpu.timestamps.then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("raycast time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size: 16,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            (set, resolve, staging("timestamps readback", 16))
+        });
+        let readback = Readback {
+            requests: staging("requests readback", request_bytes),
+            usage: staging("usage readback", u64::from(cache_slots) * 4),
+            image: staging("image readback", pixels * 16),
+            timestamps,
+        };
+        Ok(Self {
+            params,
+            requests,
+            image,
+            rays,
+            readback,
+        })
+    }
+}
+
+/// The renderer of one volume and one scene, in three parts that live as long as what they
+/// depend on: the compiled pipeline (shared by every renderer of the same format and method
+/// on the device), the residency state (octree, page tables, cache: as long as the channels
+/// drawn), and the scene tables (rewritten in place when the style changes), plus the
+/// per-frame buffers.
+pub struct Renderer {
+    options: RenderOptions,
+    scene: Scene,
+    pipeline: Arc<RaycastPipeline>,
+    residency: ResidencyState,
+    tables: SceneTables,
+    buffers: FrameBuffers,
+    bind_group: wgpu::BindGroup,
     frame: u32,
 }
 
@@ -304,313 +362,36 @@ impl Renderer {
             visible.len()
         );
         let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
-        let depth = match options.octree_depth {
-            Some(d) => d,
-            None => OctreeGeometry::depth_for(info, options.leaf_voxels, 7),
-        };
-        let octree = ResidencyOctree::new(info, &channels, depth)?;
-        let geometry = octree.geometry().clone();
-        let levels = info.levels.len() as u32;
-        let device = &gpu.device;
-        let mut pages = PageTables::new(device, &geometry, &channels)?;
-        if options.method == Method::Residency && options.empty_space_skipping {
-            mark_clear_bricks(&mut pages, info, &visible);
-        }
-        let brick = geometry.brick.map(|b| b as u32);
-        let cache = BrickCache::new(
-            device,
-            &gpu.limits,
-            info.sample_type,
-            brick,
-            options.cache_bytes,
-        )?;
-
-        let spacing = xyz(info.voxel_size);
-        let t = tables::build(
-            &geometry,
-            spacing,
-            pages.offsets(),
-            &channel_tables(&options, levels, &visible),
-        );
-        let storage = |label, size: u64, extra| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-                mapped_at_creation: false,
-            })
-        };
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("raycast params"),
-            size: size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let node_words = geometry.node_count() * octree.words_per_node();
-        let max_binding = gpu.limits.max_storage_buffer_binding_size;
-        let too_big = |what: &str, bytes: u64, hint: &str| -> Result<()> {
-            ensure!(
-                bytes <= max_binding && bytes <= gpu.limits.max_buffer_size,
-                "{what} needs {bytes} bytes, over the device's storage-buffer limit of \
-                 {max_binding} bytes; {hint}"
-            );
-            Ok(())
-        };
-        too_big(
-            "the octree",
-            node_words as u64 * 4,
-            "use a smaller --octree-depth",
-        )?;
-        too_big(
-            "the image",
-            options.width as u64 * options.height as u64 * 16,
-            "render a smaller image",
-        )?;
-        let nodes = storage(
-            "octree nodes",
-            node_words as u64 * 4,
-            wgpu::BufferUsages::empty(),
-        );
-        // Room for more control points, so that a style change rewrites the table in place.
-        let table_words = t.words.len() + visible.len() * 2 * TABLE_HEADROOM_POINTS;
-        let table_buf = storage(
-            "tables",
-            table_words as u64 * 4,
-            wgpu::BufferUsages::empty(),
-        );
-        gpu.queue
-            .write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
-        // Per-brick value ranges (two f32 per page-table id), read by the baselines only:
-        // the page table culls the brick it samples, the octree a brick and its subtree.
-        let brick_ranges: Vec<f32> = if options.method == Method::Residency {
-            vec![0.0; 2]
-        } else {
-            (0..pages.len() as u32)
-                .flat_map(|id| {
-                    let (lo, hi) = pages
-                        .key(id)
-                        .map_or((f64::INFINITY, f64::NEG_INFINITY), |k| {
-                            match options.method {
-                                // Culling a brick of the octree culls its subtree.
-                                Method::Octree => info.subtree_range(&k),
-                                _ => info.brick_range(&k),
-                            }
-                        });
-                    [crate::octree::f32_down(lo), crate::octree::f32_up(hi)]
-                })
-                .collect()
-        };
-        too_big(
-            "the per-brick ranges",
-            brick_ranges.len() as u64 * 4,
-            "use the residency method",
-        )?;
-        let brick_range_buf = storage(
-            "brick ranges",
-            brick_ranges.len() as u64 * 4,
-            wgpu::BufferUsages::empty(),
-        );
-        gpu.queue
-            .write_buffer(&brick_range_buf, 0, bytemuck::cast_slice(&brick_ranges));
-        let request_bytes = (HEADER_WORDS as u64 + 2 * options.max_requests as u64) * 4;
-        let requests = storage("requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
-        let pixels = options.width as u64 * options.height as u64;
-        let image = storage("image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
-        too_big(
-            "the ray states",
-            pixels * RAY_STATE_BYTES,
-            "render a smaller image",
-        )?;
-        let rays = storage(
-            "ray states",
-            pixels * RAY_STATE_BYTES,
-            wgpu::BufferUsages::empty(),
-        );
-        let steps_per_pass = steps_per_pass(
-            visible.len(),
-            levels as usize,
-            visible.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
-            geometry.depth,
-        );
-
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("raycast.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(RAYCAST_WGSL.into()),
-        });
-        let sb = |binding, read_only| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Storage { read_only },
-                has_dynamic_offset: false,
-                min_binding_size: None,
+        let mut residency = ResidencyState::new(gpu, info, &channels, &options)?;
+        residency.mark_clear(&visible);
+        let tables = SceneTables::new(gpu, &residency, &options, &visible)?;
+        let buffers = FrameBuffers::new(gpu, &options, residency.cache().capacity())?;
+        let pipeline = RaycastPipeline::shared(gpu, residency.cache().kind(), options.method);
+        let atlas = residency.cache().views();
+        let bind_group = pipeline.bind_group(
+            &gpu.device,
+            &Bindings {
+                params: &buffers.params,
+                nodes: residency.nodes(),
+                tables: tables.buffer(),
+                pages: residency.pages().buffer(),
+                page_flags: residency.pages().flags(),
+                requests: &buffers.requests,
+                usage: residency.cache().usage_buffer(),
+                image: &buffers.image,
+                atlas: &atlas,
+                brick_ranges: residency.brick_ranges(),
+                rays: &buffers.rays,
             },
-            count: None,
-        };
-        let tex = |binding, sample_type| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Texture {
-                sample_type,
-                view_dimension: wgpu::TextureViewDimension::D3,
-                multisampled: false,
-            },
-            count: None,
-        };
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("raycast"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty: wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                    count: None,
-                },
-                sb(1, true),
-                sb(2, true),
-                sb(3, true),
-                sb(4, false),
-                sb(5, false),
-                sb(6, false),
-                sb(7, false),
-                tex(8, wgpu::TextureSampleType::Uint),
-                tex(9, wgpu::TextureSampleType::Sint),
-                sb(11, true),
-                sb(12, false),
-                tex(10, wgpu::TextureSampleType::Float { filterable: false }),
-            ],
-        });
-        let views = cache.views();
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("raycast"),
-            layout: &layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: nodes.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: table_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: pages.buffer().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: pages.flags().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: requests.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: cache.usage_buffer().as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: image.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 8,
-                    resource: wgpu::BindingResource::TextureView(&views[0]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 9,
-                    resource: wgpu::BindingResource::TextureView(&views[1]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 10,
-                    resource: wgpu::BindingResource::TextureView(&views[2]),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 11,
-                    resource: brick_range_buf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 12,
-                    resource: rays.as_entire_binding(),
-                },
-            ],
-        });
-        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("raycast"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("raycast"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                // Fixed per pipeline so that the driver compiles only the code this renderer
-                // runs: one atlas format, one traversal method.
-                constants: &[
-                    ("SAMPLE_KIND", f64::from(cache.kind() as u32)),
-                    ("METHOD", f64::from(options.method as u32)),
-                ],
-                ..Default::default()
-            },
-            cache: None,
-        });
-
-        let staging = |label, size: u64| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
-        let timestamps = gpu.timestamps.then(|| {
-            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("raycast time"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2,
-            });
-            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("timestamps"),
-                size: 16,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            (set, resolve, staging("timestamps readback", 16))
-        });
-        let readback = Readback {
-            requests: staging("requests readback", request_bytes),
-            usage: staging("usage readback", cache.capacity() as u64 * 4),
-            image: staging("image readback", pixels * 16),
-            timestamps,
-        };
+        );
         let mut renderer = Self {
             options,
-            info: info.clone(),
             scene: scene.clone(),
-            octree,
-            pages,
-            cache,
             pipeline,
+            residency,
+            tables,
+            buffers,
             bind_group,
-            params,
-            tables: table_buf,
-            table_words,
-            nodes,
-            requests,
-            image,
-            readback,
-            rays,
-            steps_per_pass,
             frame: 0,
         };
         renderer.flush(gpu);
@@ -619,17 +400,22 @@ impl Renderer {
 
     /// The volume rendered.
     pub fn info(&self) -> &VolumeInfo {
-        &self.info
+        self.residency.info()
     }
 
     /// The residency octree.
     pub fn octree(&self) -> &ResidencyOctree {
-        &self.octree
+        self.residency.octree()
     }
 
     /// The brick cache.
     pub fn cache(&self) -> &BrickCache {
-        &self.cache
+        self.residency.cache()
+    }
+
+    /// The compiled pipeline (shared with every renderer of its format and method).
+    pub fn pipeline(&self) -> &Arc<RaycastPipeline> {
+        &self.pipeline
     }
 
     /// The options in use.
@@ -653,136 +439,82 @@ impl Renderer {
     }
 
     /// Replaces the scene in place when every channel it shows is one this renderer was built
-    /// with: the camera, background, colours and transfer functions change, the table of
-    /// transfer functions is rewritten and the clear-brick marks redone, and the octree, page
-    /// tables and cache (every resident brick) stay. A channel hidden since construction is
-    /// drawn fully transparent, so its bricks are clear (never fetched) and showing it again
-    /// finds its resident bricks. Returns `false`, changing nothing, when the scene shows a
-    /// channel this renderer does not have or its transfer functions do not fit the table:
-    /// such a scene needs a new renderer.
+    /// with: the camera, background, colours and transfer functions change, the scene tables
+    /// are rewritten and the clear-brick marks redone, and the residency state (octree, page
+    /// tables, cache: every resident brick) and the pipeline stay. A channel hidden since
+    /// construction is drawn fully transparent, so its bricks are clear (never fetched) and
+    /// showing it again finds its resident bricks. Returns `false`, changing nothing, when the
+    /// scene shows a channel this renderer does not have or its transfer functions do not fit
+    /// the table: such a scene needs a new renderer.
     pub fn restyle(&mut self, gpu: &Gpu, scene: &Scene) -> bool {
-        let shown = |c: usize| scene.channels.iter().find(|s| s.channel == c && s.visible);
+        let drawn = self.residency.octree().channels();
         if scene
             .channels
             .iter()
-            .any(|s| s.visible && !self.octree.channels().contains(&s.channel))
+            .any(|s| s.visible && !drawn.contains(&s.channel))
         {
             return false;
         }
-        let styles: Vec<ChannelStyle> = self
-            .octree
-            .channels()
+        let styles: Vec<ChannelStyle> = drawn
             .iter()
             .map(|&c| {
-                shown(c).cloned().unwrap_or(ChannelStyle {
-                    channel: c,
-                    visible: true,
-                    color: [0.0; 3],
-                    opacity: vec![OpacityPoint {
-                        value: 0.0,
-                        opacity: 0.0,
-                    }],
-                })
+                scene
+                    .channels
+                    .iter()
+                    .find(|s| s.channel == c && s.visible)
+                    .cloned()
+                    .unwrap_or(ChannelStyle {
+                        channel: c,
+                        visible: true,
+                        color: [0.0; 3],
+                        opacity: vec![OpacityPoint {
+                            value: 0.0,
+                            opacity: 0.0,
+                        }],
+                    })
             })
             .collect();
-        let visible: Vec<&ChannelStyle> = styles.iter().collect();
-        let levels = self.info.levels.len() as u32;
-        let t = tables::build(
-            self.octree.geometry(),
-            xyz(self.info.voxel_size),
-            self.pages.offsets(),
-            &channel_tables(&self.options, levels, &visible),
-        );
-        if t.words.len() > self.table_words {
+        let styles: Vec<&ChannelStyle> = styles.iter().collect();
+        if !self
+            .tables
+            .rewrite(gpu, &self.residency, &self.options, &styles)
+        {
             return false;
         }
-        gpu.queue
-            .write_buffer(&self.tables, 0, bytemuck::cast_slice(&t.words));
-        if self.options.method == Method::Residency && self.options.empty_space_skipping {
-            for id in 0..self.pages.len() as u32 {
-                if self.pages.entry(id) == ENTRY_CLEAR {
-                    self.pages.set(id, ENTRY_MISSING);
-                }
-            }
-            mark_clear_bricks(&mut self.pages, &self.info, &visible);
-        }
-        self.steps_per_pass = steps_per_pass(
-            visible.len(),
-            levels as usize,
-            visible.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
-            self.octree.geometry().depth,
-        );
+        self.residency.mark_clear(&styles);
         self.scene = scene.clone();
         true
     }
 
     /// Whether `key` is resident (in a slot, or as a fill-value brick).
     pub fn is_resident(&self, key: &BrickKey) -> bool {
-        self.octree.is_resident(key)
+        self.residency.is_resident(key)
     }
 
     /// Cache slots free or not used by the last frame: how many bricks can be inserted now
     /// without evicting the current working set.
     pub fn insertable(&self) -> usize {
-        self.cache.available(self.frame)
+        self.residency.cache().available(self.frame)
     }
 
     /// Inserts a fetched brick: takes a slot (evicting the least recently used brick not used
     /// by the last frame), uploads it, and updates the page table and the octree. A brick of
     /// the wrong size or type is an error and changes nothing.
     pub fn insert(&mut self, gpu: &Gpu, key: BrickKey, voxels: &BrickVoxels) -> Result<Inserted> {
-        let id = self
-            .pages
-            .id(&key)
-            .with_context(|| format!("brick {key:?} is not part of the rendered volume"))?;
-        if self.pages.entry(id) != ENTRY_MISSING {
-            return Ok(Inserted::AlreadyResident);
-        }
-        if let BrickVoxels::Empty = voxels {
-            self.pages.set(id, ENTRY_EMPTY);
-            self.octree.insert(key)?;
-            self.octree.refine_ranges(&key, voxels);
-            return Ok(Inserted::Empty);
-        }
-        let Some((slot, evicted_id)) = self.cache.allocate(self.frame) else {
-            return Ok(Inserted::CacheFull);
-        };
-        let evicted = match evicted_id {
-            Some(old) => {
-                let old_key = self.pages.key(old).context("cache slot owner has no key")?;
-                self.pages.set(old, ENTRY_MISSING);
-                self.octree.evict(old_key)?;
-                Some(old_key)
-            }
-            None => None,
-        };
-        if let Err(e) = self.cache.upload(&gpu.queue, slot, voxels) {
-            self.cache.release(slot);
-            return Err(e.context(format!("brick {key:?}")));
-        }
-        self.cache.assign(slot, id);
-        self.pages.set(id, slot + 2);
-        self.octree.insert(key)?;
-        // Without region metadata, level-0 bricks give ranges (the fallback).
-        self.octree.refine_ranges(&key, voxels);
-        Ok(Inserted::Uploaded { evicted })
+        self.residency.insert(gpu, key, voxels, self.frame)
     }
 
     /// Uploads changed page-table entries and octree nodes.
     pub fn flush(&mut self, gpu: &Gpu) {
-        self.pages.flush(&gpu.queue);
-        if let Some(range) = self.octree.take_dirty() {
-            let words = self.octree.gpu_words(range.clone());
-            let offset = (range.start * self.octree.words_per_node() * 4) as u64;
-            gpu.queue
-                .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
-        }
+        self.residency.flush(gpu);
     }
 
     fn params(&self) -> Params {
-        let g = self.octree.geometry();
+        let info = self.residency.info();
+        let cache = self.residency.cache();
+        let g = self.residency.octree().geometry();
         let cam = &self.scene.camera;
-        let spacing = xyz(self.info.voxel_size);
+        let spacing = xyz(info.voxel_size);
         let leaf_world: [f64; 3] =
             std::array::from_fn(|a| (g.leaf_shift[a] as f64).exp2() * spacing[a]);
         let (forward, right, up) = cam.basis();
@@ -798,26 +530,26 @@ impl Renderer {
         let aspect = self.options.width as f64 / self.options.height as f64;
         let v4 = |v: [f64; 3], w: f64| [v[0] as f32, v[1] as f32, v[2] as f32, w as f32];
         let reference_step = spacing.iter().copied().fold(f64::INFINITY, f64::min);
-        let levels = self.info.levels.len() as u32;
+        let levels = info.levels.len() as u32;
         let bg = self.scene.background;
         Params {
             size: [
                 self.options.width,
                 self.options.height,
                 self.frame,
-                self.octree.channels().len() as u32,
+                self.residency.octree().channels().len() as u32,
             ],
             tree: [
                 g.depth,
                 levels,
-                self.cache.kind() as u32,
+                cache.kind() as u32,
                 self.options.max_requests,
             ],
             tables: [
                 self.options.start_depth.min(g.depth),
                 tables::TF_BINS as u32,
                 0,
-                self.channels_offset(),
+                self.tables.channels_offset(),
             ],
             view_cell: {
                 let c = view_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
@@ -859,17 +591,12 @@ impl Renderer {
             ],
             slots: {
                 // Slots per x and y are powers of two: the shader takes their log2.
-                let s = self.cache.slots_per_axis();
+                let s = cache.slots_per_axis();
                 [s[0].trailing_zeros(), s[1].trailing_zeros(), s[2], 0]
             },
-            run: [self.steps_per_pass, 0, 0, 0],
+            run: [self.tables.steps_per_pass(), 0, 0, 0],
             fine: [fine[0], fine[1], fine[2], 0],
         }
-    }
-
-    fn channels_offset(&self) -> u32 {
-        let levels = self.info.levels.len();
-        (levels * tables::LEVEL_WORDS + self.pages.offsets().len()) as u32
     }
 
     /// Renders one frame and reads back its image, requests, usage feedback (folded into
@@ -891,15 +618,16 @@ impl Renderer {
         self.frame += 1;
         let params = self.params();
         gpu.queue
-            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+            .write_buffer(&self.buffers.params, 0, bytemuck::bytes_of(&params));
         let device = &gpu.device;
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("raycast frame"),
         });
-        encoder.clear_buffer(&self.requests, 0, Some(HEADER_WORDS as u64 * 4));
-        encoder.clear_buffer(&self.rays, 0, None);
+        let buffers = &self.buffers;
+        encoder.clear_buffer(&buffers.requests, 0, Some(HEADER_WORDS as u64 * 4));
+        encoder.clear_buffer(&buffers.rays, 0, None);
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
-        let rb = &self.readback;
+        let rb = &buffers.readback;
         let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage, &rb.image];
         if let Some((_, _, staging)) = &rb.timestamps {
             maps.push(staging);
@@ -910,7 +638,7 @@ impl Renderer {
         let mut batch = 1u32;
         loop {
             for _ in 0..batch {
-                encoder.clear_buffer(&self.requests, SUSPENDED_WORD as u64 * 4, Some(4));
+                encoder.clear_buffer(&buffers.requests, SUSPENDED_WORD as u64 * 4, Some(4));
                 let timestamp_writes =
                     rb.timestamps
                         .as_ref()
@@ -923,7 +651,7 @@ impl Renderer {
                     label: Some("raycast"),
                     timestamp_writes,
                 });
-                pass.set_pipeline(&self.pipeline);
+                pass.set_pipeline(self.pipeline.pipeline());
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.dispatch_workgroups(
                     self.options.width.div_ceil(8),
@@ -933,15 +661,21 @@ impl Renderer {
                 drop(pass);
                 passes += 1;
             }
-            encoder.copy_buffer_to_buffer(&self.requests, 0, &rb.requests, 0, rb.requests.size());
             encoder.copy_buffer_to_buffer(
-                self.cache.usage_buffer(),
+                &buffers.requests,
+                0,
+                &rb.requests,
+                0,
+                rb.requests.size(),
+            );
+            encoder.copy_buffer_to_buffer(
+                self.residency.cache().usage_buffer(),
                 0,
                 &rb.usage,
                 0,
-                self.cache.capacity() as u64 * 4,
+                u64::from(self.residency.cache().capacity()) * 4,
             );
-            encoder.copy_buffer_to_buffer(&self.image, 0, &rb.image, 0, image_bytes);
+            encoder.copy_buffer_to_buffer(&buffers.image, 0, &rb.image, 0, image_bytes);
             if let Some((set, resolve, staging)) = &rb.timestamps {
                 encoder.resolve_query_set(set, 0..2, resolve, 0);
                 encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
@@ -961,7 +695,7 @@ impl Renderer {
             ensure!(
                 passes < MAX_PASSES,
                 "{suspended} rays still marching after {passes} passes of {} steps",
-                self.steps_per_pass
+                self.tables.steps_per_pass()
             );
             batch = (batch * 2).min(16);
             encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -984,7 +718,7 @@ impl Renderer {
         for b in maps {
             b.unmap();
         }
-        self.cache.note_usage(&usage);
+        self.residency.cache_mut().note_usage(&usage);
         let bricks_used = usage.iter().filter(|&&u| u == self.frame).count() as u64;
 
         let requested = words[0] as usize;
@@ -994,7 +728,8 @@ impl Renderer {
             let id = words[HEADER_WORDS + 2 * i];
             let distance = f32::from_bits(words[HEADER_WORDS + 2 * i + 1]);
             let key = self
-                .pages
+                .residency
+                .pages()
                 .key(id)
                 .with_context(|| format!("shader reported an unknown brick id {id}"))?;
             requests.push(BrickRequest { key, distance });
@@ -1015,31 +750,6 @@ impl Renderer {
             gpu_time_ms,
         })
     }
-}
-
-/// The table entries of the `visible` channels: style and level bounds (from
-/// `options.level_bounds`, every level where none is given).
-fn channel_tables<'a>(
-    options: &RenderOptions,
-    levels: u32,
-    visible: &[&'a ChannelStyle],
-) -> Vec<ChannelTable<'a>> {
-    visible
-        .iter()
-        .enumerate()
-        .map(|(i, style)| {
-            let (lo, hi) = options
-                .level_bounds
-                .get(i)
-                .copied()
-                .unwrap_or((0, levels - 1));
-            ChannelTable {
-                style,
-                min_level: lo.min(levels - 1),
-                max_level: hi.clamp(lo.min(levels - 1), levels - 1),
-            }
-        })
-        .collect()
 }
 
 /// Maps `buffers` for reading and waits until they are: natively by polling the device, in
@@ -1067,35 +777,6 @@ async fn map_for_reading(device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> Re
         }
     }
     Ok(())
-}
-
-/// Marks [`ENTRY_CLEAR`] every missing brick that [`is_clear`] under its channel's style: the
-/// residency method never fetches it, and a sample whose footprint reaches it is clear.
-fn mark_clear_bricks(pages: &mut PageTables, info: &VolumeInfo, visible: &[&ChannelStyle]) {
-    for id in 0..pages.len() as u32 {
-        let Some(key) = pages.key(id) else { continue };
-        let Some(style) = visible.iter().find(|s| s.channel == key.channel as usize) else {
-            continue;
-        };
-        // Only a missing brick becomes clear: a resident one keeps its slot (a restyle that
-        // makes it transparent still finds it when it is shown again).
-        if pages.entry(id) == ENTRY_MISSING && is_clear(info, style, &key) {
-            pages.set(id, ENTRY_CLEAR);
-        }
-    }
-}
-
-/// Whether brick `key` is clear under `style`: its conservative (haloed) range, rounded
-/// outward to `f32` as the shader sees values, holds data and is transparent under the
-/// transfer function. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
-/// TF".
-pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey) -> bool {
-    let (lo, hi) = info.brick_range(key);
-    let (lo, hi) = (
-        crate::octree::f32_down(lo) as f64,
-        crate::octree::f32_up(hi) as f64,
-    );
-    lo <= hi && style.transparent_over(lo, hi)
 }
 
 /// Distance `D` (world) from the eye to the shader's view point `eye + D·forward`, from which

@@ -10,8 +10,21 @@
 //!   `prefix[i + 1] − prefix[i]` is 1 when the opacity is non-zero somewhere in bin `i`, so
 //!   "transparent over `[lo, hi]`" is one subtraction (Octree Rasterization Sec. 4.1).
 
+use anyhow::Result;
+
+use super::device::Gpu;
+use super::renderer::RenderOptions;
+use super::residency::{ResidencyState, check_binding, storage_buffer};
 use crate::octree::{OctreeGeometry, f32_down, f32_up};
 use crate::scene::ChannelStyle;
+
+/// Opacity control points per channel the table buffer has room for beyond the scene's own,
+/// so that [`SceneTables::rewrite`] writes a new style in place.
+const HEADROOM_POINTS: usize = 64;
+
+/// Loop iterations a CPU Vulkan driver (Mesa's lavapipe/llvmpipe) allows one invocation in
+/// all, nested loops included; the shader ends a pass well before it.
+const DRIVER_LOOP_LIMIT: u32 = 65_535;
 
 /// Words per level entry.
 pub const LEVEL_WORDS: usize = 12;
@@ -132,4 +145,140 @@ pub fn build(
         levels_offset,
         channels_offset,
     }
+}
+
+/// The scene tables on the GPU: the table buffer of the channels drawn, with room for styles
+/// of more control points, and what the frame parameters take from it. A style change
+/// rewrites it in place ([`SceneTables::rewrite`]); the residency state is not touched.
+pub struct SceneTables {
+    buffer: wgpu::Buffer,
+    /// Capacity of `buffer` in words.
+    capacity: usize,
+    channels_offset: u32,
+    steps_per_pass: u32,
+}
+
+impl SceneTables {
+    /// The tables of `styles` (one per channel of `residency`, in its order) under `options`'
+    /// level bounds. Errors where the buffer exceeds the device's limits.
+    pub fn new(
+        gpu: &Gpu,
+        residency: &ResidencyState,
+        options: &RenderOptions,
+        styles: &[&ChannelStyle],
+    ) -> Result<Self> {
+        let t = residency_tables(residency, options, styles);
+        let capacity = t.words.len() + styles.len() * 2 * HEADROOM_POINTS;
+        check_binding(
+            gpu,
+            "the scene tables",
+            capacity as u64 * 4,
+            "use transfer functions of fewer points",
+        )?;
+        let buffer = storage_buffer(
+            gpu,
+            "tables",
+            capacity as u64 * 4,
+            wgpu::BufferUsages::empty(),
+        );
+        let mut tables = Self {
+            buffer,
+            capacity,
+            channels_offset: 0,
+            steps_per_pass: 0,
+        };
+        let written = tables.rewrite(gpu, residency, options, styles);
+        debug_assert!(written, "a new table buffer holds its own tables");
+        Ok(tables)
+    }
+
+    /// Writes the tables of `styles` in place. Returns `false`, writing nothing, when they do
+    /// not fit the buffer (transfer functions of many more points): that needs new tables.
+    pub fn rewrite(
+        &mut self,
+        gpu: &Gpu,
+        residency: &ResidencyState,
+        options: &RenderOptions,
+        styles: &[&ChannelStyle],
+    ) -> bool {
+        let t = residency_tables(residency, options, styles);
+        if t.words.len() > self.capacity {
+            return false;
+        }
+        gpu.queue
+            .write_buffer(&self.buffer, 0, bytemuck::cast_slice(&t.words));
+        self.channels_offset = t.channels_offset;
+        self.steps_per_pass = steps_per_pass(
+            styles.len(),
+            residency.info().levels.len(),
+            styles.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
+            residency.octree().geometry().depth,
+        );
+        true
+    }
+
+    /// The table buffer.
+    pub fn buffer(&self) -> &wgpu::Buffer {
+        &self.buffer
+    }
+
+    /// Word offset of the channel section.
+    pub fn channels_offset(&self) -> u32 {
+        self.channels_offset
+    }
+
+    /// Steps one ray may take in a pass (see [`steps_per_pass`]).
+    pub fn steps_per_pass(&self) -> u32 {
+        self.steps_per_pass
+    }
+}
+
+/// The tables of `styles` over `residency`'s volume, octree and page tables.
+fn residency_tables(
+    residency: &ResidencyState,
+    options: &RenderOptions,
+    styles: &[&ChannelStyle],
+) -> Tables {
+    let info = residency.info();
+    let spacing = [info.voxel_size[2], info.voxel_size[1], info.voxel_size[0]];
+    build(
+        residency.octree().geometry(),
+        spacing,
+        residency.pages().offsets(),
+        &channel_tables(options, info.levels.len() as u32, styles),
+    )
+}
+
+/// The table entries of `styles`: style and level bounds (from `options.level_bounds`, every
+/// level where none is given).
+fn channel_tables<'a>(
+    options: &RenderOptions,
+    levels: u32,
+    styles: &[&'a ChannelStyle],
+) -> Vec<ChannelTable<'a>> {
+    styles
+        .iter()
+        .enumerate()
+        .map(|(i, style)| {
+            let (lo, hi) = options
+                .level_bounds
+                .get(i)
+                .copied()
+                .unwrap_or((0, levels - 1));
+            ChannelTable {
+                style,
+                min_level: lo.min(levels - 1),
+                max_level: hi.clamp(lo.min(levels - 1), levels - 1),
+            }
+        })
+        .collect()
+}
+
+/// Steps one ray may take in a pass: the driver's loop limit divided by a bound on the loop
+/// iterations one step takes (levels chosen per channel, transfer-function points, the octree
+/// walk, the 8 voxels of a sample and the substitution candidates).
+pub fn steps_per_pass(channels: usize, levels: usize, tf_points: usize, depth: u32) -> u32 {
+    let c = channels.max(1);
+    let per_step = 8 + c * (3 * levels + 2 * tf_points + 24) + (depth as usize + 2) * (c + 1);
+    (DRIVER_LOOP_LIMIT as usize / per_step).clamp(16, 1 << 20) as u32
 }

@@ -149,6 +149,9 @@ fn session_converges_and_keeps_its_bricks_through_camera_and_style_changes() {
     s.set_size(24, 20);
     settle(&mut s);
     assert_eq!(s.totals().rebuilds, 2);
+    // Every renderer on the device (the session's two, the blocking loop's) shares one
+    // compiled pipeline: the format and method did not change.
+    assert_eq!(s.gpu().pipelines.len(), 1);
     let (w, h, pixels) = s.image();
     assert_eq!((w, h, pixels.len()), (24, 20, 480));
 

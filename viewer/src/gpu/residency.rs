@@ -1,0 +1,276 @@
+//! The residency state of one volume on the GPU: which bricks are where. The residency octree
+//! (partial-residency masks and value ranges per node) and its node buffer, the page tables,
+//! the brick cache, and the per-brick ranges the baselines cull with. It changes as bricks
+//! arrive and are evicted, never with the style: a restyle only redoes the clear-brick marks
+//! ([`ResidencyState::mark_clear`]), so every resident brick stays.
+
+use anyhow::{Context, Result, ensure};
+
+use super::brick_cache::BrickCache;
+use super::device::Gpu;
+use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables};
+use super::renderer::{Inserted, Method, RenderOptions};
+use crate::octree::{OctreeGeometry, ResidencyOctree, f32_down, f32_up};
+use crate::scene::ChannelStyle;
+use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
+
+/// Errors unless a buffer of `bytes` fits one storage binding and one buffer of `gpu`;
+/// `what` and `hint` say which buffer and what to do.
+pub(super) fn check_binding(gpu: &Gpu, what: &str, bytes: u64, hint: &str) -> Result<()> {
+    let max_binding = gpu.limits.max_storage_buffer_binding_size;
+    ensure!(
+        bytes <= max_binding && bytes <= gpu.limits.max_buffer_size,
+        "{what} needs {bytes} bytes, over the device's storage-buffer limit of \
+         {max_binding} bytes; {hint}"
+    );
+    Ok(())
+}
+
+/// A storage buffer of at least 16 bytes that can be written from the CPU.
+pub(super) fn storage_buffer(
+    gpu: &Gpu,
+    label: &str,
+    size: u64,
+    extra: wgpu::BufferUsages,
+) -> wgpu::Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some(label),
+        size: size.max(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
+        mapped_at_creation: false,
+    })
+}
+
+/// Octree, page tables, cache and their GPU buffers for the channels one renderer draws.
+pub struct ResidencyState {
+    info: VolumeInfo,
+    method: Method,
+    empty_space_skipping: bool,
+    octree: ResidencyOctree,
+    pages: PageTables,
+    cache: BrickCache,
+    nodes: wgpu::Buffer,
+    brick_ranges: wgpu::Buffer,
+}
+
+impl ResidencyState {
+    /// Empty residency for `channels` of `info`: the octree (ranges from the volume's region
+    /// metadata), page tables with every brick missing, a cache of `options.cache_bytes`, and
+    /// (for the baselines) each brick's value range. Errors where a buffer exceeds the device's
+    /// limits.
+    pub fn new(
+        gpu: &Gpu,
+        info: &VolumeInfo,
+        channels: &[usize],
+        options: &RenderOptions,
+    ) -> Result<Self> {
+        let depth = match options.octree_depth {
+            Some(d) => d,
+            None => OctreeGeometry::depth_for(info, options.leaf_voxels, 7),
+        };
+        let octree = ResidencyOctree::new(info, channels, depth)?;
+        let geometry = octree.geometry();
+        let pages = PageTables::new(&gpu.device, geometry, channels)?;
+        let cache = BrickCache::new(
+            &gpu.device,
+            &gpu.limits,
+            info.sample_type,
+            geometry.brick.map(|b| b as u32),
+            options.cache_bytes,
+        )?;
+        let node_words = geometry.node_count() * octree.words_per_node();
+        check_binding(
+            gpu,
+            "the octree",
+            node_words as u64 * 4,
+            "use a smaller --octree-depth",
+        )?;
+        let nodes = storage_buffer(
+            gpu,
+            "octree nodes",
+            node_words as u64 * 4,
+            wgpu::BufferUsages::empty(),
+        );
+        // Per-brick value ranges (two f32 per page-table id), read by the baselines only:
+        // the page table culls the brick it samples, the octree a brick and its subtree.
+        let brick_ranges: Vec<f32> = if options.method == Method::Residency {
+            vec![0.0; 2]
+        } else {
+            (0..pages.len() as u32)
+                .flat_map(|id| {
+                    let (lo, hi) = pages
+                        .key(id)
+                        .map_or((f64::INFINITY, f64::NEG_INFINITY), |k| {
+                            match options.method {
+                                // Culling a brick of the octree culls its subtree.
+                                Method::Octree => info.subtree_range(&k),
+                                _ => info.brick_range(&k),
+                            }
+                        });
+                    [f32_down(lo), f32_up(hi)]
+                })
+                .collect()
+        };
+        check_binding(
+            gpu,
+            "the per-brick ranges",
+            brick_ranges.len() as u64 * 4,
+            "use the residency method",
+        )?;
+        let brick_range_buf = storage_buffer(
+            gpu,
+            "brick ranges",
+            brick_ranges.len() as u64 * 4,
+            wgpu::BufferUsages::empty(),
+        );
+        gpu.queue
+            .write_buffer(&brick_range_buf, 0, bytemuck::cast_slice(&brick_ranges));
+        Ok(Self {
+            info: info.clone(),
+            method: options.method,
+            empty_space_skipping: options.empty_space_skipping,
+            octree,
+            pages,
+            cache,
+            nodes,
+            brick_ranges: brick_range_buf,
+        })
+    }
+
+    /// The volume.
+    pub fn info(&self) -> &VolumeInfo {
+        &self.info
+    }
+
+    /// The residency octree.
+    pub fn octree(&self) -> &ResidencyOctree {
+        &self.octree
+    }
+
+    /// The page tables.
+    pub fn pages(&self) -> &PageTables {
+        &self.pages
+    }
+
+    /// The brick cache.
+    pub fn cache(&self) -> &BrickCache {
+        &self.cache
+    }
+
+    /// The cache, for folding in the shader's usage feedback.
+    pub fn cache_mut(&mut self) -> &mut BrickCache {
+        &mut self.cache
+    }
+
+    /// The octree's node buffer.
+    pub fn nodes(&self) -> &wgpu::Buffer {
+        &self.nodes
+    }
+
+    /// The per-brick ranges buffer (the baselines').
+    pub fn brick_ranges(&self) -> &wgpu::Buffer {
+        &self.brick_ranges
+    }
+
+    /// Redoes the [`ENTRY_CLEAR`] marks for the channel `styles` (one per channel drawn): a
+    /// missing brick that [`is_clear`] under its channel's style is never fetched, and a sample
+    /// whose footprint reaches it is clear. Only the residency method with empty-space skipping
+    /// marks bricks clear.
+    pub fn mark_clear(&mut self, styles: &[&ChannelStyle]) {
+        if self.method != Method::Residency || !self.empty_space_skipping {
+            return;
+        }
+        for id in 0..self.pages.len() as u32 {
+            let Some(key) = self.pages.key(id) else {
+                continue;
+            };
+            let entry = self.pages.entry(id);
+            if entry != ENTRY_MISSING && entry != ENTRY_CLEAR {
+                // A resident brick keeps its slot: a restyle that makes it transparent still
+                // finds it when it is shown again.
+                continue;
+            }
+            let clear = styles
+                .iter()
+                .find(|s| s.channel == key.channel as usize)
+                .is_some_and(|style| is_clear(&self.info, style, &key));
+            let wanted = if clear { ENTRY_CLEAR } else { ENTRY_MISSING };
+            if entry != wanted {
+                self.pages.set(id, wanted);
+            }
+        }
+    }
+
+    /// Whether `key` is resident (in a slot, or as a fill-value brick).
+    pub fn is_resident(&self, key: &BrickKey) -> bool {
+        self.octree.is_resident(key)
+    }
+
+    /// Inserts a fetched brick at frame `frame`: takes a slot (evicting the least recently
+    /// used brick not used by that frame), uploads it, and updates the page table and the
+    /// octree. A brick of the wrong size or type is an error and changes nothing.
+    pub fn insert(
+        &mut self,
+        gpu: &Gpu,
+        key: BrickKey,
+        voxels: &BrickVoxels,
+        frame: u32,
+    ) -> Result<Inserted> {
+        let id = self
+            .pages
+            .id(&key)
+            .with_context(|| format!("brick {key:?} is not part of the rendered volume"))?;
+        if self.pages.entry(id) != ENTRY_MISSING {
+            return Ok(Inserted::AlreadyResident);
+        }
+        if let BrickVoxels::Empty = voxels {
+            self.pages.set(id, ENTRY_EMPTY);
+            self.octree.insert(key)?;
+            self.octree.refine_ranges(&key, voxels);
+            return Ok(Inserted::Empty);
+        }
+        let Some((slot, evicted_id)) = self.cache.allocate(frame) else {
+            return Ok(Inserted::CacheFull);
+        };
+        let evicted = match evicted_id {
+            Some(old) => {
+                let old_key = self.pages.key(old).context("cache slot owner has no key")?;
+                self.pages.set(old, ENTRY_MISSING);
+                self.octree.evict(old_key)?;
+                Some(old_key)
+            }
+            None => None,
+        };
+        if let Err(e) = self.cache.upload(&gpu.queue, slot, voxels) {
+            self.cache.release(slot);
+            return Err(e.context(format!("brick {key:?}")));
+        }
+        self.cache.assign(slot, id);
+        self.pages.set(id, slot + 2);
+        self.octree.insert(key)?;
+        // Without region metadata, level-0 bricks give ranges (the fallback).
+        self.octree.refine_ranges(&key, voxels);
+        Ok(Inserted::Uploaded { evicted })
+    }
+
+    /// Uploads changed page-table entries and octree nodes.
+    pub fn flush(&mut self, gpu: &Gpu) {
+        self.pages.flush(&gpu.queue);
+        if let Some(range) = self.octree.take_dirty() {
+            let words = self.octree.gpu_words(range.clone());
+            let offset = (range.start * self.octree.words_per_node() * 4) as u64;
+            gpu.queue
+                .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
+        }
+    }
+}
+
+/// Whether brick `key` is clear under `style`: its conservative (haloed) range, rounded
+/// outward to `f32` as the shader sees values, holds data and is transparent under the
+/// transfer function. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
+/// TF".
+pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey) -> bool {
+    let (lo, hi) = info.brick_range(key);
+    let (lo, hi) = (f64::from(f32_down(lo)), f64::from(f32_up(hi)));
+    lo <= hi && style.transparent_over(lo, hi)
+}
