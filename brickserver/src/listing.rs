@@ -295,7 +295,8 @@ pub fn html(listed: &[Listed]) -> String {
     let mut page = String::from(
         "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <title>Residency datasets</title>\n<style>\n\
+         <title>Residency datasets</title>\n\
+         <link rel=\"icon\" href=\"data:,\">\n<style>\n\
          body { font-family: system-ui, sans-serif; margin: 2em; }\n\
          table { border-collapse: collapse; }\n\
          th, td { text-align: left; padding: 0.3em 0.8em; border-bottom: 1px solid #ccc; }\n\

@@ -3,14 +3,20 @@
 //
 //   node tests/browser/web_viewer.mjs '<JSON spec>'
 //
-// The spec: {"url": PAGE_URL, "noWebGPU": false, "timeout_s": 240, "steps": [STEP...]}, where
-// a STEP is one of
+// The spec: {"url": PAGE_URL, "noWebGPU": false, "timeout_s": 240, "viewport": {"width": W,
+// "height": H} (default 1024×768), "steps": [STEP...]}, where a STEP is one of
 //   {"do": "converge"}                 wait until state().converged or state().error
 //   {"do": "opened"}                   wait until the page has opened its dataset (info())
 //   {"do": "state"}                    window.residency.state()
 //   {"do": "snapshot", "path": P}      window.residency.snapshot() written to P as PNG
 //   {"do": "setScene", "scene": S}     window.residency.setScene(S)
 //   {"do": "drag", "dx": X, "dy": Y}   a left-button mouse drag across the canvas
+//   {"do": "pinch", "scale": S}        a two-finger touch pinch on the canvas (pointer events
+//                                      of type touch), the fingers' distance times S
+//   {"do": "clickLink", "row": NAME, "text": T}
+//                                      on brickserver's dataset list, click the link T in the
+//                                      row of dataset NAME, and wait for the page it opens
+//   {"do": "location"}                 location.pathname + location.search
 //   {"do": "hash", "not": H}           location.hash, once it differs from H (if given)
 //   {"do": "goto", "url": U}           open another URL in the same page
 //   {"do": "message"}                  the on-page message (null when hidden)
@@ -25,7 +31,7 @@ import { launch } from "./browser.mjs";
 
 const spec = JSON.parse(process.argv[2]);
 const deadline = Date.now() + (spec.timeout_s ?? 240) * 1000;
-const { browser, page, consoleMessages } = await launch();
+const { browser, page, consoleMessages } = await launch(spec.viewport ?? {});
 if (spec.noWebGPU) {
   await page.addInitScript(() => Object.defineProperty(Navigator.prototype, "gpu", { get: () => undefined }));
 }
@@ -77,6 +83,45 @@ try {
         results.push(null);
         break;
       }
+      case "pinch":
+        await page.evaluate((scale) => {
+          const c = document.getElementById("canvas");
+          const r = c.getBoundingClientRect();
+          const cx = r.x + r.width / 2, cy = r.y + r.height / 2, d0 = r.width / 8;
+          const send = (type, id, x) =>
+            c.dispatchEvent(new PointerEvent(type, {
+              pointerId: id, pointerType: "touch", isPrimary: id === 1, bubbles: true,
+              clientX: x, clientY: cy, buttons: type === "pointerup" ? 0 : 1,
+            }));
+          send("pointerdown", 1, cx - d0);
+          send("pointerdown", 2, cx + d0);
+          let d = d0;
+          for (let i = 1; i <= 5; i++) {
+            d = d0 * (1 + ((scale - 1) * i) / 5);
+            send("pointermove", 1, cx - d);
+            send("pointermove", 2, cx + d);
+          }
+          // Lift the fingers after a frame, as a person does.
+          return new Promise((done) => requestAnimationFrame(() => {
+            send("pointerup", 1, cx - d);
+            send("pointerup", 2, cx + d);
+            done();
+          }));
+        }, step.scale);
+        results.push(null);
+        break;
+      case "clickLink": {
+        const row = page.locator("tbody tr").filter({
+          has: page.locator("td:first-child", { hasText: new RegExp(`^${step.row}$`) }),
+        });
+        const from = page.url();
+        await Promise.all([page.waitForURL((u) => u.href !== from), row.getByText(step.text, { exact: true }).click()]);
+        results.push(null);
+        break;
+      }
+      case "location":
+        results.push(await page.evaluate(() => location.pathname + location.search));
+        break;
       case "hash":
         // The fragment follows the view once the next frame renders.
         results.push(await until(() => page.evaluate((old) => (location.hash && location.hash !== old ? location.hash : null), step.not ?? null)));

@@ -178,6 +178,39 @@ def test_a_drag_moves_the_camera_and_the_link_reopens_the_view(served, tmp_path)
     assert np.array_equal(a, b)
 
 
+def test_a_two_finger_pinch_zooms(served):
+    """Touch: two fingers moving twice as far apart halve the camera's distance to its target
+    and, pinching about the canvas centre, keep the target."""
+    results, console = drive(
+        view_url(served, "u8"),
+        [{"do": "converge"}, {"do": "hash"}, {"do": "pinch", "scale": 2.0}, {"do": "converge"}, {"do": "hash"}],
+    )
+    before, after = scene_of(results[1])["camera"], scene_of(results[4])["camera"]
+    distance = lambda c: float(np.linalg.norm(np.subtract(c["eye"], c["target"])))
+    assert distance(after) / distance(before) == pytest.approx(0.5, rel=1e-9)
+    assert after["target"] == pytest.approx(before["target"], abs=1e-9)
+    assert results[3]["error"] is None and results[3]["converged"]
+    assert errors(console) == []
+
+
+def test_the_dataset_list_link_opens_the_viewer_as_a_click_would(served):
+    """`GET /` in a browser is the HTML list of datasets; clicking a row's viewer link opens that
+    dataset in the viewer, sized to the window (no ?width/height), and it converges."""
+    results, console = drive(
+        f"{served}/",
+        [
+            {"do": "clickLink", "row": "u8", "text": "open in the Residency viewer"},
+            {"do": "location"},
+            {"do": "converge"},
+        ],
+        viewport={"width": 560, "height": 300},
+    )
+    location, state = results[1], results[2]
+    assert location == "/u8/view"
+    assert state["error"] is None and state["converged"] and state["bricks_fetched"] > 0, state
+    assert errors(console) == []
+
+
 def test_hiding_a_channel_or_moving_a_window_fetches_no_brick(served, tmp_path):
     results, _ = drive(view_url(served, "u16x3"), [{"do": "converge"}, {"do": "hash"}])
     scene = scene_of(results[1])

@@ -178,12 +178,51 @@ function buildControls(info) {
 }
 
 function listen() {
+  // Pointers down on the canvas (mouse, pen or fingers). One drags: orbit, or pan with shift
+  // or the right button. Two (a pinch) zoom by the change of their distance and pan with
+  // their midpoint.
+  const pointers = new Map();
   let drag = null;
+  let pinch = null;
+  const pinchState = () => {
+    const [a, b] = [...pointers.values()];
+    return { d: Math.hypot(a.x - b.x, a.y - b.y), x: (a.x + b.x) / 2, y: (a.y + b.y) / 2 };
+  };
+  let pinchScheduled = false;
+  const applyPinch = () => {
+    pinchScheduled = false;
+    if (!pinch || pointers.size !== 2) return;
+    const now = pinchState();
+    // Four zoom steps halve the distance: fingers twice as far apart, half the distance.
+    if (pinch.d > 0 && now.d > 0) viewer.zoom(4 * Math.log2(now.d / pinch.d));
+    viewer.pan(now.x - pinch.x, now.y - pinch.y);
+    pinch = now;
+  };
   canvas.addEventListener("pointerdown", (e) => {
-    canvas.setPointerCapture(e.pointerId);
-    drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 };
+    try {
+      canvas.setPointerCapture(e.pointerId);
+    } catch {
+      // a pointer the browser does not track (synthetic events): nothing to capture
+    }
+    pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
+    if (pointers.size === 1) {
+      drag = { x: e.clientX, y: e.clientY, pan: e.shiftKey || e.button === 2 };
+    } else if (pointers.size === 2) {
+      drag = null;
+      pinch = pinchState();
+    }
   });
   canvas.addEventListener("pointermove", (e) => {
+    if (!pointers.has(e.pointerId)) return;
+    pointers.set(e.pointerId, { x: e.clientX, y: e.clientY });
+    if (pinch && pointers.size === 2) {
+      // Applied once per animation frame, so that both fingers' moves count together.
+      if (!pinchScheduled) {
+        pinchScheduled = true;
+        requestAnimationFrame(applyPinch);
+      }
+      return;
+    }
     if (!drag) return;
     const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
     drag.x = e.clientX;
@@ -191,7 +230,17 @@ function listen() {
     if (drag.pan) viewer.pan(dx, dy);
     else viewer.orbit(dx, dy);
   });
-  const end = () => { drag = null; };
+  const end = (e) => {
+    if (pinch && pointers.size === 2) applyPinch();
+    pointers.delete(e.pointerId);
+    if (pointers.size < 2) pinch = null;
+    drag = null;
+    if (pointers.size === 1) {
+      // The finger left on the glass goes on orbiting from where it is.
+      const [p] = pointers.values();
+      drag = { x: p.x, y: p.y, pan: false };
+    }
+  };
   canvas.addEventListener("pointerup", end);
   canvas.addEventListener("pointercancel", end);
   canvas.addEventListener("contextmenu", (e) => e.preventDefault());
