@@ -3,48 +3,93 @@
 //
 // Positions are cell-local: a ray's position is an integer cell (i32) plus an f32 offset in
 // [0, 1) inside it, so precision does not depend on the volume's width. Cells are "fine
-// units", 2^-F of an octree leaf per axis (F = P.fine.xyz): a level-0 voxel wherever leaves
+// units", 2^-F of an octree leaf per axis (F = P.fine): a level-0 voxel wherever leaves
 // are at least a voxel, so a step of a fraction of a voxel is resolved to f32 precision
 // however large the leaves are. The eye and the entry point are computed in leaf units.
 // Everything about layout (words per node, table offsets) is documented in viewer/src/gpu/.
 
+// The constants shared with Rust (ENTRY_EMPTY, ENTRY_CLEAR, MAX_LEVELS, MAX_CHANNELS, TF_BINS,
+// the METHOD_* and ATLAS_* numbers, the FLAG_* bits) come from the prelude that
+// viewer/src/gpu/contract.rs generates and puts before this file. Every struct below that the
+// CPU also reads or writes (Params, LevelEntry, ChannelEntry, SceneUniforms, FrameCounters,
+// RayState) has a #[repr(C)] twin of the same name and fields there; the viewer's test
+// `gpu_contract` checks that naga lays each out as Rust does.
+
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
-const ENTRY_EMPTY: u32 = 1u; // page-table entry: brick equals the fill value 0
-// Page-table entry: brick never needed, transparent under the TF by its haloed range, which
-// holds every voxel of any footprint that reaches it: such a sample is clear (opacity 0).
-const ENTRY_CLEAR: u32 = 0xffffffffu;
-const LEVEL_WORDS: u32 = 12u;
-const CHANNEL_WORDS: u32 = 16u;
 const MAX_ITERATIONS: u32 = 1000000u; // loop guard per ray (steps plus skips)
-// Sample format of the atlas (0 unsigned, 1 signed, 2 float), fixed when the pipeline is
-// built so that only one atlas is read.
+// Sample format of the atlas (ATLAS_UINT, ATLAS_SINT or ATLAS_FLOAT), fixed when the pipeline
+// is built so that only one atlas is read.
 override SAMPLE_KIND: u32 = 0u;
-// Traversal method (`Method` in viewer/src/gpu/renderer.rs): 0 residency octree, 1 page table
-// only (MRMCPT), 2 octree of one node per brick (GigaVoxels style).
+// Traversal method: METHOD_RESIDENCY (the residency octree), METHOD_PAGE_TABLE (MRMCPT) or
+// METHOD_OCTREE (one node per brick, GigaVoxels style).
 override METHOD: u32 = 0u;
 const NO_LEVEL: u32 = 0xffffffffu;
 
+// Per frame. Positions are in leaf units (octree leaves) or fine units; axes x, y, z.
 struct Params {
-    size: vec4<u32>, // width, height, frame (>= 1), channel count
-    tree: vec4<u32>, // leaf depth D, level count, sample kind (0 u, 1 i, 2 f), request cap
-    tables: vec4<u32>, // start depth, TF bins, level table offset, channel table offset
-    // The view point V = eye + D·forward (D = volume_leaf.w), leaf units: integer part. Rays
+    width: u32,
+    height: u32,
+    frame: u32, // >= 1: the mark of usage feedback and request flags
+    channel_count: u32,
+    leaf_depth: u32,
+    level_count: u32,
+    request_cap: u32,
+    start_depth: u32,
+    brick_ranges_offset: u32, // word offset of the baselines' brick ranges in `nodes`
+    steps_per_pass: u32, // then the ray is suspended and resumed by the next pass
+    flags: u32, // FLAG_SKIPPING, FLAG_SUBSTITUTION
+    pad0: u32,
+    // The view point V = eye + D·forward (D = view_distance), leaf units: integer part. Rays
     // start from the plane through V facing the camera, so a far camera keeps voxel
     // precision (D = 0, V the eye, for a camera near the volume).
-    view_cell: vec4<i32>,
-    view_frac: vec4<f32>, // V, leaf units: fraction (xyz); w: reference step Δ0 (world)
-    right: vec4<f32>, // camera right · tan(fov/2) · aspect; w: LOD bias (log2)
-    up: vec4<f32>, // camera up · tan(fov/2); w: pixel footprint per unit distance
-    forward: vec4<f32>, // camera forward (unit); w: step as a fraction of a voxel
-    world_to_leaf: vec4<f32>, // leaf units per world unit, per axis; w: leaf edge (world, min axis)
-    volume_leaf: vec4<f32>, // volume extent in leaf units; w: D, the view point's distance (world)
-    background: vec4<f32>,
-    unit_shift: vec4<i32>, // log2 of a fine unit's edge in level-0 voxels, per axis (leaf - F)
-    brick: vec4<u32>, // brick edge in voxels, per axis; w: flags (1 skip empty/homogeneous
-    // nodes, 2 substitute missing bricks from other levels)
-    slots: vec4<u32>, // log2 of atlas slots per x, per y; slots per z
-    run: vec4<u32>, // x: steps a ray may take per pass (then it is suspended and resumed)
-    fine: vec4<i32>, // F: log2 of fine units per leaf, per axis (xyz)
+    view_cell: vec3<i32>,
+    slots_z: u32, // atlas slots per z
+    view_frac: vec3<f32>, // V, leaf units: fraction
+    reference_step: f32, // Δ0 of the opacity correction (world)
+    right: vec3<f32>, // camera right · tan(fov/2) · aspect
+    lod_bias: f32, // log2
+    up: vec3<f32>, // camera up · tan(fov/2)
+    pixel_footprint: f32, // per unit distance (world)
+    forward: vec3<f32>, // camera forward (unit)
+    step_fraction: f32, // step as a fraction of a voxel of the level in use
+    world_to_leaf: vec3<f32>, // leaf units per world unit
+    leaf_edge: f32, // world, smallest axis
+    volume_leaf: vec3<f32>, // volume extent in leaf units
+    view_distance: f32, // D (world)
+    background: vec3<f32>,
+    slots_x_log2: u32, // log2 of atlas slots per x
+    unit_shift: vec3<i32>, // log2 of a fine unit's edge in level-0 voxels (leaf shift - fine)
+    slots_y_log2: u32, // log2 of atlas slots per y
+    fine: vec3<i32>, // F: log2 of fine units per leaf
+    pad1: u32,
+    brick: vec3<u32>, // brick edge in voxels
+    pad2: u32,
+}
+
+struct LevelEntry {
+    shift: vec3<i32>, // log2 of the downsampling factor relative to level 0
+    voxel_edge: f32, // smallest edge of a voxel of this level (world)
+    shape: vec3<i32>, // voxels
+    pad0: u32,
+    bricks: vec3<u32>, // bricks per axis
+    pad1: u32,
+}
+
+struct ChannelEntry {
+    color: vec3<f32>, // linear RGB
+    point_count: u32, // opacity control points
+    min_level: u32, // level bounds of the LOD choice
+    max_level: u32,
+    points_offset: u32, // (value, opacity) pairs in `tables`
+    prefix_offset: u32, // TF_BINS + 1 counts in `tables`
+    domain: vec2<f32>, // first and last control point, rounded outward to f32
+    opacity_below: f32,
+    opacity_above: f32,
+}
+
+struct SceneUniforms {
+    levels: array<LevelEntry, MAX_LEVELS>,
+    channels: array<ChannelEntry, MAX_CHANNELS>,
 }
 
 // A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan driver
@@ -67,16 +112,27 @@ const RAY_FRESH: u32 = 0u;
 const RAY_SUSPENDED: u32 = 1u;
 const RAY_DONE: u32 = 2u;
 
+struct FrameCounters {
+    requests: atomic<u32>, // distinct missing bricks (before the cap)
+    samples: atomic<u32>,
+    empty_nodes_skipped: atomic<u32>,
+    bricks_substituted: atomic<u32>,
+    homogeneous_nodes: atomic<u32>,
+    requests_over_cap: atomic<u32>,
+    samples_without_data: atomic<u32>,
+    rays_suspended: atomic<u32>, // by the latest pass
+}
+
 struct Requests {
-    // 0 request count, 1 samples, 2 empty nodes skipped, 3 bricks substituted,
-    // 4 homogeneous nodes, 5 requests over the cap, 6 samples with no data, 7 rays suspended
-    // by the latest pass
-    header: array<atomic<u32>, 8>,
+    counters: FrameCounters,
     entries: array<vec2<u32>>, // (page-table id, ray distance bits)
 }
 
 @group(0) @binding(0) var<uniform> P: Params;
+// The octree's nodes, then (the baselines') per-brick ranges from P.brick_ranges_offset.
 @group(0) @binding(1) var<storage, read> nodes: array<u32>;
+// Page-table offsets (channel · levels + level), then each channel's control points and
+// prefix table.
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> page_table: array<u32>;
 @group(0) @binding(4) var<storage, read_write> flags: array<atomic<u32>>;
@@ -86,9 +142,8 @@ struct Requests {
 @group(0) @binding(8) var atlas_u: texture_3d<u32>;
 @group(0) @binding(9) var atlas_i: texture_3d<i32>;
 @group(0) @binding(10) var atlas_f: texture_3d<f32>;
-// Per page-table id: (min, max) of the brick, for the baselines' brick-granular culling.
-@group(0) @binding(11) var<storage, read> brick_ranges: array<vec2<f32>>;
-@group(0) @binding(12) var<storage, read_write> rays: array<RayState>;
+@group(0) @binding(11) var<storage, read_write> rays: array<RayState>;
+@group(0) @binding(12) var<uniform> S: SceneUniforms;
 
 // ---- tables ----
 
@@ -96,43 +151,37 @@ fn tf32(i: u32) -> f32 {
     return bitcast<f32>(tables[i]);
 }
 
-fn level_base(l: u32) -> u32 {
-    return P.tables.z + l * LEVEL_WORDS;
-}
-
 fn level_shift(l: u32) -> vec3<i32> {
-    let b = level_base(l);
-    return vec3<i32>(i32(tables[b]), i32(tables[b + 1u]), i32(tables[b + 2u]));
+    return S.levels[l].shift;
 }
 
 fn level_shape(l: u32) -> vec3<i32> {
-    let b = level_base(l);
-    return vec3<i32>(i32(tables[b + 3u]), i32(tables[b + 4u]), i32(tables[b + 5u]));
+    return S.levels[l].shape;
 }
 
 fn level_bricks(l: u32) -> vec3<u32> {
-    let b = level_base(l);
-    return vec3<u32>(tables[b + 6u], tables[b + 7u], tables[b + 8u]);
+    return S.levels[l].bricks;
 }
 
 // Smallest edge of a voxel of level l, world units.
 fn level_voxel(l: u32) -> f32 {
-    return tf32(level_base(l) + 9u);
+    return S.levels[l].voxel_edge;
 }
 
 fn page_offset(c: u32, l: u32) -> u32 {
-    return tables[P.tables.z + P.tree.y * LEVEL_WORDS + c * P.tree.y + l];
+    return tables[c * P.level_count + l];
 }
 
-fn channel_base(c: u32) -> u32 {
-    return P.tables.w + c * CHANNEL_WORDS;
+// (min, max) of a brick, for the baselines' brick-granular culling.
+fn brick_range(pid: u32) -> vec2<f32> {
+    let i = P.brick_ranges_offset + 2u * pid;
+    return vec2<f32>(bitcast<f32>(nodes[i]), bitcast<f32>(nodes[i + 1u]));
 }
 
 // Opacity at the reference step (piecewise linear, end values held; NaN is transparent).
 fn tf_opacity(c: u32, v: f32) -> f32 {
-    let cb = channel_base(c);
-    let off = tables[cb + 5u];
-    let n = tables[cb + 6u];
+    let off = S.channels[c].points_offset;
+    let n = S.channels[c].point_count;
     if n == 0u || v != v {
         return 0.0;
     }
@@ -158,49 +207,47 @@ fn tf_transparent(c: u32, lo: f32, hi: f32) -> bool {
     if !(lo <= hi) {
         return true; // no data in the node
     }
-    let cb = channel_base(c);
-    if tables[cb + 6u] == 0u {
+    let ch = S.channels[c];
+    if ch.point_count == 0u {
         return true;
     }
     if lo == hi {
         return tf_opacity(c, lo) == 0.0; // homogeneous: exact
     }
-    // The domain is the first and last control points, rounded outward to f32.
-    let d0 = tf32(cb + 8u);
-    let d1 = tf32(cb + 9u);
-    if lo <= d0 && tf32(cb + 10u) > 0.0 {
+    let d0 = ch.domain.x;
+    let d1 = ch.domain.y;
+    if lo <= d0 && ch.opacity_below > 0.0 {
         return false;
     }
-    if hi >= d1 && tf32(cb + 11u) > 0.0 {
+    if hi >= d1 && ch.opacity_above > 0.0 {
         return false;
     }
     if hi <= d0 || lo >= d1 {
         return true;
     }
-    let bins = P.tables.y;
-    let scale = f32(bins) / (d1 - d0);
-    let fb = f32(bins) - 1.0;
+    let scale = f32(TF_BINS) / (d1 - d0);
+    let fb = f32(TF_BINS) - 1.0;
     let b0 = u32(clamp(floor((lo - d0) * scale) - 1.0, 0.0, fb));
     let b1 = u32(clamp(floor((hi - d0) * scale) + 1.0, 0.0, fb));
-    let pre = tables[cb + 7u];
+    let pre = ch.prefix_offset;
     return tables[pre + b1 + 1u] == tables[pre + b0];
 }
 
 // ---- octree ----
 
 fn fine_shift() -> vec3<u32> {
-    return vec3<u32>(P.fine.xyz);
+    return vec3<u32>(P.fine);
 }
 
 // Node of depth d holding the fine cell `cell`.
 fn node_index(d: u32, cell: vec3<i32>) -> u32 {
-    let n = vec3<u32>(cell >> (vec3<u32>(P.tree.x - d) + fine_shift()));
+    let n = vec3<u32>(cell >> (vec3<u32>(P.leaf_depth - d) + fine_shift()));
     let offset = ((1u << (3u * d)) - 1u) / 7u;
     return offset + (((n.z << d) + n.y) << d) + n.x;
 }
 
 fn node_word(node: u32, c: u32, k: u32) -> u32 {
-    return nodes[(node * P.size.w + c) * 3u + k];
+    return nodes[(node * P.channel_count + c) * 3u + k];
 }
 
 // ---- sampling ----
@@ -223,10 +270,10 @@ fn scaled_frac(cell: i32, local: f32, sh: i32) -> f32 {
 // Atlas texel at p, in whichever atlas holds the sample format.
 fn texel(p: vec3<i32>) -> f32 {
     switch SAMPLE_KIND {
-        case 0u: {
+        case ATLAS_UINT: {
             return f32(textureLoad(atlas_u, p, 0).x);
         }
-        case 1u: {
+        case ATLAS_SINT: {
             return f32(textureLoad(atlas_i, p, 0).x);
         }
         default: {
@@ -236,32 +283,32 @@ fn texel(p: vec3<i32>) -> f32 {
 }
 
 // Atlas origin of the slot of a resident page-table entry; records the slot's use (LRU, and
-// the bricks a frame needs resident). Slots per x and y are powers of two (P.slots.xy: log2).
+// the bricks a frame needs resident). Slots per x and y are powers of two (P.slots_x_log2y: log2).
 fn slot_origin(entry: u32) -> vec3<i32> {
     let slot = entry - 2u;
-    usage[slot] = P.size.z;
-    let lx = P.slots.x;
-    let ly = P.slots.y;
+    usage[slot] = P.frame;
+    let lx = P.slots_x_log2;
+    let ly = P.slots_y_log2;
     let sc = vec3<u32>(slot & ((1u << lx) - 1u), (slot >> lx) & ((1u << ly) - 1u), slot >> (lx + ly));
-    return vec3<i32>(sc * P.brick.xyz);
+    return vec3<i32>(sc * P.brick);
 }
 
 fn request(pid: u32, t: f32) {
-    let old = atomicExchange(&flags[2u * pid], P.size.z);
-    if old != P.size.z {
-        let i = atomicAdd(&requests.header[0], 1u);
-        if i < P.tree.w {
+    let old = atomicExchange(&flags[2u * pid], P.frame);
+    if old != P.frame {
+        let i = atomicAdd(&requests.counters.requests, 1u);
+        if i < P.request_cap {
             requests.entries[i] = vec2<u32>(pid, bitcast<u32>(t));
         } else {
-            atomicAdd(&requests.header[5], 1u);
+            atomicAdd(&requests.counters.requests_over_cap, 1u);
         }
     }
 }
 
 fn note_substituted(pid: u32) {
-    let old = atomicExchange(&flags[2u * pid + 1u], P.size.z);
-    if old != P.size.z {
-        atomicAdd(&requests.header[3], 1u);
+    let old = atomicExchange(&flags[2u * pid + 1u], P.frame);
+    if old != P.frame {
+        atomicAdd(&requests.counters.bricks_substituted, 1u);
     }
 }
 
@@ -272,7 +319,7 @@ struct LevelPos {
 }
 
 fn level_pos(l: u32, cell: vec3<i32>, local: vec3<f32>) -> LevelPos {
-    let sh = P.unit_shift.xyz - level_shift(l);
+    let sh = P.unit_shift - level_shift(l);
     return LevelPos(
         vec3<i32>(scaled_int(cell.x, sh.x), scaled_int(cell.y, sh.y), scaled_int(cell.z, sh.z)),
         vec3<f32>(
@@ -292,16 +339,16 @@ fn brick_id(c: u32, l: u32, b: vec3<u32>) -> u32 {
 // The brick of level l holding a position (not its trilinear footprint).
 fn point_brick(l: u32, pos: LevelPos) -> vec3<u32> {
     let v = clamp(pos.ip + vec3<i32>(floor(pos.fp)), vec3<i32>(0), level_shape(l) - vec3<i32>(1));
-    return vec3<u32>(v) / P.brick.xyz;
+    return vec3<u32>(v) / P.brick;
 }
 
 // World distance from a position to the exit of the box of brick b of level l, along a ray
 // of `dir` fine units per world unit.
 fn brick_exit(l: u32, b: vec3<u32>, pos: LevelPos, dir: vec3<f32>) -> f32 {
-    let sh = P.unit_shift.xyz - level_shift(l);
-    let rel = vec3<f32>(pos.ip - vec3<i32>(b * P.brick.xyz)) + pos.fp;
+    let sh = P.unit_shift - level_shift(l);
+    let rel = vec3<f32>(pos.ip - vec3<i32>(b * P.brick)) + pos.fp;
     let d = dir * vec3<f32>(ldexp(1.0, sh.x), ldexp(1.0, sh.y), ldexp(1.0, sh.z));
-    let far = select(-rel, vec3<f32>(P.brick.xyz) - rel, d > vec3<f32>(0.0));
+    let far = select(-rel, vec3<f32>(P.brick) - rel, d > vec3<f32>(0.0));
     let tt = far / d;
     return max(min(tt.x, min(tt.y, tt.z)), 0.0);
 }
@@ -328,7 +375,7 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     let hi = level_shape(l) - vec3<i32>(1);
     let c0 = vec3<u32>(clamp(i0, vec3<i32>(0), hi));
     let c1 = vec3<u32>(clamp(i0 + vec3<i32>(1), vec3<i32>(0), hi));
-    let bs = P.brick.xyz;
+    let bs = P.brick;
     let b0 = c0 / bs;
     let r0 = c0 - b0 * bs;
     let r0n = r0 + (c1 - c0);
@@ -424,10 +471,9 @@ fn next_candidate(mask: u32, first: u32, k: u32) -> u32 {
 // Finest level whose voxel is at least the pixel footprint at distance t (scaled by the LOD
 // bias), within the channel's level bounds.
 fn choose_level(c: u32, t: f32) -> u32 {
-    let cb = channel_base(c);
-    let target_size = max(t, 0.0) * P.up.w * exp2(P.right.w);
-    var l = tables[cb + 3u];
-    let lmax = min(tables[cb + 4u], P.tree.y - 1u);
+    let target_size = max(t, 0.0) * P.pixel_footprint * exp2(P.lod_bias);
+    var l = S.channels[c].min_level;
+    let lmax = min(S.channels[c].max_level, P.level_count - 1u);
     loop {
         if l >= lmax || level_voxel(l) >= target_size {
             break;
@@ -441,7 +487,7 @@ fn corrected(a: f32, step: f32) -> f32 {
     if a >= 1.0 {
         return 1.0;
     }
-    return 1.0 - pow(1.0 - max(a, 0.0), step / P.view_frac.w);
+    return 1.0 - pow(1.0 - max(a, 0.0), step / P.reference_step);
 }
 
 // ---- ray state ----
@@ -464,7 +510,7 @@ fn advance(ray: ptr<function, Ray>, dir: vec3<f32>, dt: f32) {
 // (`dir`: fine units per world unit). The distance to the far face is taken in integers
 // first, so it stays exact near the face however large the node.
 fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
-    let s = vec3<u32>(P.tree.x - d) + fine_shift();
+    let s = vec3<u32>(P.leaf_depth - d) + fine_shift();
     let lo = (ray.cell >> s) << s;
     let far_cells = select(lo - ray.cell, lo + (vec3<i32>(1) << s) - ray.cell, dir > vec3<f32>(0.0));
     let far = vec3<f32>(far_cells) - ray.local;
@@ -474,34 +520,34 @@ fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
 
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
-    if gid.x >= P.size.x || gid.y >= P.size.y {
+    if gid.x >= P.width || gid.y >= P.height {
         return;
     }
-    let pixel = gid.y * P.size.x + gid.x;
+    let pixel = gid.y * P.width + gid.x;
     var st = rays[pixel];
     if st.status == RAY_DONE {
         return;
     }
     let ndc = vec2<f32>(
-        (f32(gid.x) + 0.5) / f32(P.size.x) * 2.0 - 1.0,
-        1.0 - (f32(gid.y) + 0.5) / f32(P.size.y) * 2.0,
+        (f32(gid.x) + 0.5) / f32(P.width) * 2.0 - 1.0,
+        1.0 - (f32(gid.y) + 0.5) / f32(P.height) * 2.0,
     );
-    let across = ndc.x * P.right.xyz + ndc.y * P.up.xyz;
-    let ray_forward = P.forward.xyz + across;
+    let across = ndc.x * P.right + ndc.y * P.up;
+    let ray_forward = P.forward + across;
     let world_dir = normalize(ray_forward);
     // The ray meets the view plane at V + D·across (leaf units: `start`), at distance t_plane
     // from the eye; `ray.t` counts from there, and t_plane is added back for the LOD rule.
-    let view_d = P.volume_leaf.w;
+    let view_d = P.view_distance;
     let t_plane = view_d * length(ray_forward);
-    let start = view_d * across * P.world_to_leaf.xyz;
-    var dir_leaf = world_dir * P.world_to_leaf.xyz; // leaf units per world unit
+    let start = view_d * across * P.world_to_leaf;
+    var dir_leaf = world_dir * P.world_to_leaf; // leaf units per world unit
     dir_leaf = select(dir_leaf, vec3<f32>(1e-20), abs(dir_leaf) < vec3<f32>(1e-20));
     let fine = vec3<f32>(ldexp(1.0, P.fine.x), ldexp(1.0, P.fine.y), ldexp(1.0, P.fine.z));
     let dir = dir_leaf * fine; // fine units per world unit
 
     // Slab test against the volume box, relative to the eye (leaf units).
-    let eye_rel_lo = -vec3<f32>(P.view_cell.xyz) - P.view_frac.xyz - start;
-    let eye_rel_hi = P.volume_leaf.xyz + eye_rel_lo;
+    let eye_rel_lo = -vec3<f32>(P.view_cell) - P.view_frac - start;
+    let eye_rel_hi = P.volume_leaf + eye_rel_lo;
     let ta = eye_rel_lo / dir_leaf;
     let tb = eye_rel_hi / dir_leaf;
     let tmin = min(ta, tb);
@@ -525,16 +571,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     var suspended = false;
     if t_exit > t_enter {
-        let depth = P.tree.x;
+        let depth = P.leaf_depth;
         let leaves = 1 << depth;
         let end_cell = vec3<i32>(leaves) << fine_shift(); // the root's far faces, fine units
         var ray = Ray(st.cell, st.local, st.t);
         var last_depth = st.last_depth;
         var iterations = st.iterations;
         if st.status == RAY_FRESH {
-            last_depth = P.tables.x + 1u;
+            last_depth = P.start_depth + 1u;
             iterations = 0u;
-            ray = Ray(P.view_cell.xyz, P.view_frac.xyz, 0.0);
+            ray = Ray(P.view_cell, P.view_frac, 0.0);
             advance(&ray, start + dir_leaf * (t_enter + entry_nudge), 1.0);
             ray.t = t_enter + entry_nudge;
             // Far from the volume the f32 entry point can round to just outside the octree's
@@ -550,10 +596,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             ray.cell = (ray.cell << fine_shift()) + vec3<i32>(whole);
             ray.local = scaled - whole;
         }
-        let channels = P.size.w;
-        let skipping = (P.brick.w & 1u) != 0u;
-        let substitute = (P.brick.w & 2u) != 0u;
-        var budget = P.run.x;
+        let channels = P.channel_count;
+        let skipping = (P.flags & FLAG_SKIPPING) != 0u;
+        let substitute = (P.flags & FLAG_SUBSTITUTION) != 0u;
+        var budget = P.steps_per_pass;
         // Page-table baseline: the brick each channel's last sample was in, and whether it
         // is empty under the channel's TF.
         var pt_brick: array<u32, 8>;
@@ -576,20 +622,20 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             budget--;
             // Desired level per channel, and step: the finest over channels.
             var chosen: array<u32, 8>;
-            var finest = P.tree.y - 1u;
+            var finest = P.level_count - 1u;
             for (var c = 0u; c < channels; c++) {
                 chosen[c] = choose_level(c, ray.t + t_plane);
                 finest = min(finest, chosen[c]);
             }
-            let desired_step = P.forward.w * level_voxel(finest);
+            let desired_step = P.step_fraction * level_voxel(finest);
             var empty_bits = 0u;
             var action = 0u; // 0 sample, 1 skip empty, 2 homogeneous, 3 request and skip
             var node = 0u;
             var skip = 0.0;
-            if METHOD == 0u {
+            if METHOD == METHOD_RESIDENCY {
                 // Traversal depth: deepest node whose edge is at least the step.
                 var max_depth = depth;
-                var edge = P.world_to_leaf.w;
+                var edge = P.leaf_edge;
                 loop {
                     if max_depth == 0u || edge >= desired_step {
                         break;
@@ -597,7 +643,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     max_depth--;
                     edge *= 2.0;
                 }
-                var d = clamp(last_depth, P.tables.x + 1u, depth + 1u) - 1u;
+                var d = clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u;
                 d = min(d, max_depth);
                 // Walk down (Algorithm 1, multi-channel): per channel, whether it is empty.
                 loop {
@@ -647,7 +693,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 var all_empty = true;
                 for (var c = 0u; c < channels; c++) {
                     let l = chosen[c];
-                    if METHOD == 1u {
+                    if METHOD == METHOD_PAGE_TABLE {
                         // Page table: is the brick at the sample empty under the TF? Judged
                         // once per brick the ray enters, as a page-table renderer would.
                         let pos = level_pos(l, ray.cell, ray.local);
@@ -655,7 +701,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         let pid = brick_id(c, l, b);
                         if pid != pt_brick[c] {
                             pt_brick[c] = pid;
-                            let r = brick_ranges[pid];
+                            let r = brick_range(pid);
                             let bit = 1u << c;
                             pt_empty = select(pt_empty & ~bit, pt_empty | bit, skipping && tf_transparent(c, r.x, r.y));
                         }
@@ -669,7 +715,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         // Octree of bricks: descend from the coarsest level; every ancestor
                         // must be resident, the first missing one is requested, and the
                         // finest resident one is sampled.
-                        let top = min(tables[channel_base(c) + 4u], P.tree.y - 1u);
+                        let top = min(S.channels[c].max_level, P.level_count - 1u);
                         var k = top;
                         var resident = NO_LEVEL;
                         var missing = 0u;
@@ -677,7 +723,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                             let pos = level_pos(k, ray.cell, ray.local);
                             let b = point_brick(k, pos);
                             let pid = brick_id(c, k, b);
-                            let r = brick_ranges[pid];
+                            let r = brick_range(pid);
                             if skipping && tf_transparent(c, r.x, r.y) {
                                 empty_bits |= 1u << c;
                                 skip = min(skip, brick_exit(k, b, pos, dir));
@@ -726,8 +772,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if (empty_bits & (1u << c)) == 0u {
                         let v = bitcast<f32>(node_word(node, c, 1u));
                         let a = corrected(tf_opacity(c, v), desired_step);
-                        let cb = channel_base(c);
-                        col += a * vec3<f32>(tf32(cb), tf32(cb + 1u), tf32(cb + 2u));
+                        col += a * S.channels[c].color;
                         asum += a;
                     }
                 }
@@ -744,7 +789,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             // Sample every non-empty channel at its level, substituting missing bricks. For a
             // node no needed channel maps (action 3), this only requests the bricks.
-            var used = P.tree.y - 1u;
+            var used = P.level_count - 1u;
             var any_value = false;
             var values: array<f32, 8>;
             var have = 0u;
@@ -753,7 +798,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     continue;
                 }
                 var mask = 0u;
-                if METHOD == 0u {
+                if METHOD == METHOD_RESIDENCY {
                     if action == 3u && skipping {
                         let lo = bitcast<f32>(node_word(node, c, 1u));
                         let hi = bitcast<f32>(node_word(node, c, 2u));
@@ -775,8 +820,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 // level is asked for. (One sample_level call site: on lavapipe every inlined
                 // copy costs every sample.)
                 var coarse_first = false;
-                if METHOD == 0u && action == 3u && substitute {
-                    k = min(tables[channel_base(c) + 4u], P.tree.y - 1u);
+                if METHOD == METHOD_RESIDENCY && action == 3u && substitute {
+                    k = min(S.channels[c].max_level, P.level_count - 1u);
                     coarse_first = k != l;
                 }
                 var s = Sampled(0.0, false, 0u, false);
@@ -820,14 +865,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 advance(&ray, dir, skip + nudge);
                 continue;
             }
-            let step = select(desired_step, P.forward.w * level_voxel(used), any_value);
+            let step = select(desired_step, P.step_fraction * level_voxel(used), any_value);
             var col = vec3<f32>(0.0);
             var asum = 0.0;
             for (var c = 0u; c < channels; c++) {
                 if (have & (1u << c)) != 0u {
                     let a = corrected(tf_opacity(c, values[c]), step);
-                    let cb = channel_base(c);
-                    col += a * vec3<f32>(tf32(cb), tf32(cb + 1u), tf32(cb + 2u));
+                    col += a * S.channels[c].color;
                     asum += a;
                 }
             }
@@ -850,12 +894,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     st.status = select(RAY_DONE, RAY_SUSPENDED, suspended);
     rays[pixel] = st;
     if suspended {
-        atomicAdd(&requests.header[7], 1u);
+        atomicAdd(&requests.counters.rays_suspended, 1u);
     } else {
-        out_color[pixel] = vec4<f32>(color + trans * P.background.xyz, 1.0 - trans);
+        out_color[pixel] = vec4<f32>(color + trans * P.background, 1.0 - trans);
     }
-    atomicAdd(&requests.header[1], samples);
-    atomicAdd(&requests.header[2], skipped);
-    atomicAdd(&requests.header[4], homogeneous);
-    atomicAdd(&requests.header[6], nodata);
+    atomicAdd(&requests.counters.samples, samples);
+    atomicAdd(&requests.counters.empty_nodes_skipped, skipped);
+    atomicAdd(&requests.counters.homogeneous_nodes, homogeneous);
+    atomicAdd(&requests.counters.samples_without_data, nodata);
 }

@@ -1,5 +1,8 @@
 //! The GPU side of the renderer, one concept per module:
 //!
+//! - [`contract`]: every struct and constant the renderer shares with `raycast.wgsl`, written
+//!   once (`#[repr(C)]` types with WGSL twins checked against naga's layout; a generated WGSL
+//!   prelude of constants; the binding numbers);
 //! - [`device`]: adapter and device creation (lavapipe works), timestamp-query support;
 //! - [`page_table`]: page tables per (channel, level) and the brick ids the shader reports;
 //! - [`brick_cache`]: the brick cache atlas per sample format, with LRU eviction driven by the
@@ -19,6 +22,7 @@
 //! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
 
 pub mod brick_cache;
+pub mod contract;
 pub mod device;
 pub mod page_table;
 pub mod pipeline;

@@ -7,33 +7,19 @@
 use std::sync::{Arc, Mutex};
 
 use super::brick_cache::AtlasKind;
+use super::contract::{binding, raycast_source};
 use super::device::Gpu;
-use super::renderer::{Method, RAYCAST_WGSL};
-
-/// Binding numbers of `raycast.wgsl`'s group 0, in one place.
-mod binding {
-    pub const PARAMS: u32 = 0;
-    pub const NODES: u32 = 1;
-    pub const TABLES: u32 = 2;
-    pub const PAGES: u32 = 3;
-    pub const PAGE_FLAGS: u32 = 4;
-    pub const REQUESTS: u32 = 5;
-    pub const USAGE: u32 = 6;
-    pub const IMAGE: u32 = 7;
-    pub const ATLAS_UINT: u32 = 8;
-    pub const ATLAS_SINT: u32 = 9;
-    pub const ATLAS_FLOAT: u32 = 10;
-    pub const BRICK_RANGES: u32 = 11;
-    pub const RAYS: u32 = 12;
-}
+use super::renderer::Method;
 
 /// The buffers and atlas views one renderer binds to the pipeline.
 pub struct Bindings<'a> {
     /// The per-frame uniforms.
     pub params: &'a wgpu::Buffer,
-    /// The residency octree's nodes.
+    /// The residency octree's nodes, then the baselines' per-brick ranges.
     pub nodes: &'a wgpu::Buffer,
-    /// The scene tables (levels, channels, transfer functions).
+    /// The scene uniforms (levels, channels).
+    pub scene: &'a wgpu::Buffer,
+    /// The table buffer (page-table offsets, transfer functions).
     pub tables: &'a wgpu::Buffer,
     /// The page tables.
     pub pages: &'a wgpu::Buffer,
@@ -47,8 +33,6 @@ pub struct Bindings<'a> {
     pub image: &'a wgpu::Buffer,
     /// The atlas views: unsigned, signed and float (the unused two are 1-texel dummies).
     pub atlas: &'a [wgpu::TextureView; 3],
-    /// Per-brick value ranges, read by the baselines only.
-    pub brick_ranges: &'a wgpu::Buffer,
     /// The suspended rays' states, between passes.
     pub rays: &'a wgpu::Buffer,
 }
@@ -67,7 +51,7 @@ impl RaycastPipeline {
     pub fn new(device: &wgpu::Device, kind: AtlasKind, method: Method) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast.wgsl"),
-            source: wgpu::ShaderSource::Wgsl(RAYCAST_WGSL.into()),
+            source: wgpu::ShaderSource::Wgsl(raycast_source().into()),
         });
         let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
             binding,
@@ -95,17 +79,21 @@ impl RaycastPipeline {
                 },
             )
         };
+        let uniform = |binding| {
+            entry(
+                binding,
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+            )
+        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("raycast"),
             entries: &[
-                entry(
-                    binding::PARAMS,
-                    wgpu::BindingType::Buffer {
-                        ty: wgpu::BufferBindingType::Uniform,
-                        has_dynamic_offset: false,
-                        min_binding_size: None,
-                    },
-                ),
+                uniform(binding::PARAMS),
+                uniform(binding::SCENE),
                 storage(binding::NODES, true),
                 storage(binding::TABLES, true),
                 storage(binding::PAGES, true),
@@ -119,7 +107,6 @@ impl RaycastPipeline {
                     binding::ATLAS_FLOAT,
                     wgpu::TextureSampleType::Float { filterable: false },
                 ),
-                storage(binding::BRICK_RANGES, true),
                 storage(binding::RAYS, false),
             ],
         });
@@ -199,7 +186,7 @@ impl RaycastPipeline {
                 view(binding::ATLAS_UINT, &b.atlas[0]),
                 view(binding::ATLAS_SINT, &b.atlas[1]),
                 view(binding::ATLAS_FLOAT, &b.atlas[2]),
-                buffer(binding::BRICK_RANGES, b.brick_ranges),
+                buffer(binding::SCENE, b.scene),
                 buffer(binding::RAYS, b.rays),
             ],
         })

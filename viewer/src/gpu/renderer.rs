@@ -4,34 +4,28 @@
 //! slot usage, statistics, GPU time).
 
 use anyhow::{Context, Result, bail, ensure};
-use bytemuck::{Pod, Zeroable};
 use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
 use super::brick_cache::BrickCache;
+use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
 use super::device::Gpu;
 use super::pipeline::{Bindings, RaycastPipeline};
 pub use super::residency::is_clear;
 use super::residency::{ResidencyState, check_binding, storage_buffer};
-use super::tables::{self, SceneTables};
+use super::tables::SceneTables;
 use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
-/// The shader source, `shaders/raycast.wgsl`.
-pub const RAYCAST_WGSL: &str = include_str!("../../../shaders/raycast.wgsl");
+pub use super::contract::MAX_CHANNELS;
 
-/// Most channels rendered at once (the shader keeps one value per channel in registers).
-pub const MAX_CHANNELS: usize = 8;
+/// Bytes of the counters at the head of the request buffer.
+const COUNTER_BYTES: u64 = size_of::<FrameCounters>() as u64;
 
-const HEADER_WORDS: usize = 8;
-
-/// Header word counting the rays the latest pass suspended.
-const SUSPENDED_WORD: usize = 7;
-
-/// Bytes of one ray's state between passes (`RayState` in the shader).
-const RAY_STATE_BYTES: u64 = 64;
+/// Bytes of one ray's state between passes.
+const RAY_STATE_BYTES: u64 = size_of::<RayState>() as u64;
 
 /// Most passes of one frame before the renderer gives up (a ray of a million steps or more).
 const MAX_PASSES: u32 = 100_000;
@@ -136,27 +130,6 @@ impl Default for RenderOptions {
     }
 }
 
-#[repr(C)]
-#[derive(Clone, Copy, Pod, Zeroable)]
-struct Params {
-    size: [u32; 4],
-    tree: [u32; 4],
-    tables: [u32; 4],
-    view_cell: [i32; 4],
-    view_frac: [f32; 4],
-    right: [f32; 4],
-    up: [f32; 4],
-    forward: [f32; 4],
-    world_to_leaf: [f32; 4],
-    volume_leaf: [f32; 4],
-    background: [f32; 4],
-    unit_shift: [i32; 4],
-    brick: [u32; 4],
-    slots: [u32; 4],
-    run: [u32; 4],
-    fine: [i32; 4],
-}
-
 /// What the shader counted in one frame.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct ShaderCounts {
@@ -254,7 +227,7 @@ impl FrameBuffers {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let request_bytes = (HEADER_WORDS as u64 + 2 * u64::from(options.max_requests)) * 4;
+        let request_bytes = COUNTER_BYTES + 8 * u64::from(options.max_requests);
         let requests = storage_buffer(gpu, "requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
         let image = storage_buffer(gpu, "image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
         let rays = storage_buffer(
@@ -373,6 +346,7 @@ impl Renderer {
             &Bindings {
                 params: &buffers.params,
                 nodes: residency.nodes(),
+                scene: tables.uniforms(),
                 tables: tables.buffer(),
                 pages: residency.pages().buffer(),
                 page_flags: residency.pages().flags(),
@@ -380,7 +354,6 @@ impl Renderer {
                 usage: residency.cache().usage_buffer(),
                 image: &buffers.image,
                 atlas: &atlas,
-                brick_ranges: residency.brick_ranges(),
                 rays: &buffers.rays,
             },
         );
@@ -528,74 +501,53 @@ impl Renderer {
             .map(|s| s.clamp(0, (30 - g.depth as i32).max(0)));
         let tan_half = (cam.fov_y_degrees.to_radians() / 2.0).tan();
         let aspect = self.options.width as f64 / self.options.height as f64;
-        let v4 = |v: [f64; 3], w: f64| [v[0] as f32, v[1] as f32, v[2] as f32, w as f32];
+        let f3 = |v: [f64; 3]| v.map(|x| x as f32);
         let reference_step = spacing.iter().copied().fold(f64::INFINITY, f64::min);
-        let levels = info.levels.len() as u32;
         let bg = self.scene.background;
+        // Slots per x and y are powers of two: the shader takes their log2.
+        let slots = cache.slots_per_axis();
+        let mut flags = 0;
+        if self.options.empty_space_skipping {
+            flags |= FLAG_SKIPPING;
+        }
+        if self.options.substitution {
+            flags |= FLAG_SUBSTITUTION;
+        }
         Params {
-            size: [
-                self.options.width,
-                self.options.height,
-                self.frame,
-                self.residency.octree().channels().len() as u32,
-            ],
-            tree: [
-                g.depth,
-                levels,
-                cache.kind() as u32,
-                self.options.max_requests,
-            ],
-            tables: [
-                self.options.start_depth.min(g.depth),
-                tables::TF_BINS as u32,
-                0,
-                self.tables.channels_offset(),
-            ],
-            view_cell: {
-                let c = view_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32);
-                [c[0], c[1], c[2], 0]
-            },
-            view_frac: {
-                let f = view_leaf.map(|e| e - e.floor());
-                v4(f, reference_step)
-            },
-            right: v4(
-                right.map(|x| x * tan_half * aspect),
-                self.options.lod_bias as f64,
-            ),
-            up: v4(
-                up.map(|x| x * tan_half),
-                2.0 * tan_half / self.options.height as f64,
-            ),
-            forward: v4(forward, self.options.step_factor as f64),
-            world_to_leaf: v4(
-                leaf_world.map(|w| 1.0 / w),
-                leaf_world.iter().copied().fold(f64::INFINITY, f64::min),
-            ),
-            volume_leaf: v4(
-                std::array::from_fn(|a| {
-                    g.volume_voxels[a] as f64 / (g.leaf_shift[a] as f64).exp2()
-                }),
-                view_d,
-            ),
-            background: [bg[0] as f32, bg[1] as f32, bg[2] as f32, 1.0],
-            unit_shift: {
-                let u: [i32; 3] = std::array::from_fn(|a| g.leaf_shift[a] - fine[a]);
-                [u[0], u[1], u[2], 0]
-            },
-            brick: [
-                g.brick[0] as u32,
-                g.brick[1] as u32,
-                g.brick[2] as u32,
-                self.options.empty_space_skipping as u32 | (self.options.substitution as u32) << 1,
-            ],
-            slots: {
-                // Slots per x and y are powers of two: the shader takes their log2.
-                let s = cache.slots_per_axis();
-                [s[0].trailing_zeros(), s[1].trailing_zeros(), s[2], 0]
-            },
-            run: [self.tables.steps_per_pass(), 0, 0, 0],
-            fine: [fine[0], fine[1], fine[2], 0],
+            width: self.options.width,
+            height: self.options.height,
+            frame: self.frame,
+            channel_count: self.residency.octree().channels().len() as u32,
+            leaf_depth: g.depth,
+            level_count: info.levels.len() as u32,
+            request_cap: self.options.max_requests,
+            start_depth: self.options.start_depth.min(g.depth),
+            brick_ranges_offset: self.residency.brick_ranges_offset(),
+            steps_per_pass: self.tables.steps_per_pass(),
+            flags,
+            view_cell: view_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32),
+            slots_z: slots[2],
+            view_frac: f3(view_leaf.map(|e| e - e.floor())),
+            reference_step: reference_step as f32,
+            right: f3(right.map(|x| x * tan_half * aspect)),
+            lod_bias: self.options.lod_bias,
+            up: f3(up.map(|x| x * tan_half)),
+            pixel_footprint: (2.0 * tan_half / f64::from(self.options.height)) as f32,
+            forward: f3(forward),
+            step_fraction: self.options.step_factor,
+            world_to_leaf: f3(leaf_world.map(|w| 1.0 / w)),
+            leaf_edge: leaf_world.iter().copied().fold(f64::INFINITY, f64::min) as f32,
+            volume_leaf: f3(std::array::from_fn(|a| {
+                g.volume_voxels[a] as f64 / (g.leaf_shift[a] as f64).exp2()
+            })),
+            view_distance: view_d as f32,
+            background: f3(bg),
+            slots_x_log2: slots[0].trailing_zeros(),
+            unit_shift: std::array::from_fn(|a| g.leaf_shift[a] - fine[a]),
+            slots_y_log2: slots[1].trailing_zeros(),
+            fine,
+            brick: g.brick.map(|b| b as u32),
+            ..Params::default()
         }
     }
 
@@ -624,7 +576,7 @@ impl Renderer {
             label: Some("raycast frame"),
         });
         let buffers = &self.buffers;
-        encoder.clear_buffer(&buffers.requests, 0, Some(HEADER_WORDS as u64 * 4));
+        encoder.clear_buffer(&buffers.requests, 0, Some(COUNTER_BYTES));
         encoder.clear_buffer(&buffers.rays, 0, None);
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
         let rb = &buffers.readback;
@@ -638,7 +590,11 @@ impl Renderer {
         let mut batch = 1u32;
         loop {
             for _ in 0..batch {
-                encoder.clear_buffer(&buffers.requests, SUSPENDED_WORD as u64 * 4, Some(4));
+                encoder.clear_buffer(
+                    &buffers.requests,
+                    std::mem::offset_of!(FrameCounters, rays_suspended) as u64,
+                    Some(4),
+                );
                 let timestamp_writes =
                     rb.timestamps
                         .as_ref()
@@ -683,8 +639,8 @@ impl Renderer {
             gpu.queue.submit([encoder.finish()]);
             map_for_reading(device, &maps).await?;
             let suspended = {
-                let header = rb.requests.get_mapped_range(..HEADER_WORDS as u64 * 4)?;
-                bytemuck::cast_slice::<u8, u32>(&header)[SUSPENDED_WORD]
+                let header = rb.requests.get_mapped_range(..COUNTER_BYTES)?;
+                bytemuck::pod_read_unaligned::<FrameCounters>(&header).rays_suspended
             };
             if suspended == 0 {
                 break;
@@ -721,29 +677,34 @@ impl Renderer {
         self.residency.cache_mut().note_usage(&usage);
         let bricks_used = usage.iter().filter(|&&u| u == self.frame).count() as u64;
 
-        let requested = words[0] as usize;
+        let (head, tail) = words.split_at(COUNTER_BYTES as usize / 4);
+        let counters: FrameCounters = bytemuck::pod_read_unaligned(bytemuck::cast_slice(head));
+        // (page-table id, ray distance bits) after the counters.
+        let entries: &[[u32; 2]] = bytemuck::cast_slice(tail);
+        let requested = counters.requests as usize;
         let n = requested.min(self.options.max_requests as usize);
         let mut requests = Vec::with_capacity(n);
-        for i in 0..n {
-            let id = words[HEADER_WORDS + 2 * i];
-            let distance = f32::from_bits(words[HEADER_WORDS + 2 * i + 1]);
+        for &[id, distance] in &entries[..n] {
             let key = self
                 .residency
                 .pages()
                 .key(id)
                 .with_context(|| format!("shader reported an unknown brick id {id}"))?;
-            requests.push(BrickRequest { key, distance });
+            requests.push(BrickRequest {
+                key,
+                distance: f32::from_bits(distance),
+            });
         }
         Ok(FrameOutput {
             pixels,
             requests,
             counts: ShaderCounts {
-                samples: words[1] as u64,
-                empty_nodes_skipped: words[2] as u64,
-                bricks_substituted: words[3] as u64,
-                homogeneous_nodes: words[4] as u64,
-                requests_over_cap: words[5] as u64,
-                samples_without_data: words[6] as u64,
+                samples: u64::from(counters.samples),
+                empty_nodes_skipped: u64::from(counters.empty_nodes_skipped),
+                bricks_substituted: u64::from(counters.bricks_substituted),
+                homogeneous_nodes: u64::from(counters.homogeneous_nodes),
+                requests_over_cap: u64::from(counters.requests_over_cap),
+                samples_without_data: u64::from(counters.samples_without_data),
                 bricks_requested: requested as u64,
                 bricks_used,
             },

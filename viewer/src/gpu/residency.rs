@@ -1,6 +1,6 @@
 //! The residency state of one volume on the GPU: which bricks are where. The residency octree
 //! (partial-residency masks and value ranges per node) and its node buffer, the page tables,
-//! the brick cache, and the per-brick ranges the baselines cull with. It changes as bricks
+//! the brick cache, and the per-brick ranges the baselines cull with (after the nodes). It changes as bricks
 //! arrive and are evicted, never with the style: a restyle only redoes the clear-brick marks
 //! ([`ResidencyState::mark_clear`]), so every resident brick stays.
 
@@ -49,8 +49,9 @@ pub struct ResidencyState {
     octree: ResidencyOctree,
     pages: PageTables,
     cache: BrickCache,
+    /// The octree's nodes, then (the baselines') per-brick ranges.
     nodes: wgpu::Buffer,
-    brick_ranges: wgpu::Buffer,
+    brick_ranges_offset: u32,
 }
 
 impl ResidencyState {
@@ -79,22 +80,11 @@ impl ResidencyState {
             options.cache_bytes,
         )?;
         let node_words = geometry.node_count() * octree.words_per_node();
-        check_binding(
-            gpu,
-            "the octree",
-            node_words as u64 * 4,
-            "use a smaller --octree-depth",
-        )?;
-        let nodes = storage_buffer(
-            gpu,
-            "octree nodes",
-            node_words as u64 * 4,
-            wgpu::BufferUsages::empty(),
-        );
-        // Per-brick value ranges (two f32 per page-table id), read by the baselines only:
-        // the page table culls the brick it samples, the octree a brick and its subtree.
+        // Per-brick value ranges (two f32 per page-table id) after the nodes, read by the
+        // baselines only: the page table culls the brick it samples, the octree a brick and
+        // its subtree.
         let brick_ranges: Vec<f32> = if options.method == Method::Residency {
-            vec![0.0; 2]
+            Vec::new()
         } else {
             (0..pages.len() as u32)
                 .flat_map(|id| {
@@ -111,20 +101,21 @@ impl ResidencyState {
                 })
                 .collect()
         };
-        check_binding(
-            gpu,
-            "the per-brick ranges",
-            brick_ranges.len() as u64 * 4,
-            "use the residency method",
-        )?;
-        let brick_range_buf = storage_buffer(
-            gpu,
-            "brick ranges",
-            brick_ranges.len() as u64 * 4,
-            wgpu::BufferUsages::empty(),
-        );
-        gpu.queue
-            .write_buffer(&brick_range_buf, 0, bytemuck::cast_slice(&brick_ranges));
+        let bytes = (node_words + brick_ranges.len()) as u64 * 4;
+        let hint = if brick_ranges.is_empty() {
+            "use a smaller --octree-depth"
+        } else {
+            "use a smaller --octree-depth, or the residency method"
+        };
+        check_binding(gpu, "the octree", bytes, hint)?;
+        let nodes = storage_buffer(gpu, "octree nodes", bytes, wgpu::BufferUsages::empty());
+        if !brick_ranges.is_empty() {
+            gpu.queue.write_buffer(
+                &nodes,
+                node_words as u64 * 4,
+                bytemuck::cast_slice(&brick_ranges),
+            );
+        }
         Ok(Self {
             info: info.clone(),
             method: options.method,
@@ -133,7 +124,7 @@ impl ResidencyState {
             pages,
             cache,
             nodes,
-            brick_ranges: brick_range_buf,
+            brick_ranges_offset: node_words as u32,
         })
     }
 
@@ -162,14 +153,15 @@ impl ResidencyState {
         &mut self.cache
     }
 
-    /// The octree's node buffer.
+    /// The octree's node buffer; the baselines' per-brick ranges (two `f32` per page-table
+    /// id) follow the nodes.
     pub fn nodes(&self) -> &wgpu::Buffer {
         &self.nodes
     }
 
-    /// The per-brick ranges buffer (the baselines').
-    pub fn brick_ranges(&self) -> &wgpu::Buffer {
-        &self.brick_ranges
+    /// Word offset of the per-brick ranges in [`ResidencyState::nodes`].
+    pub fn brick_ranges_offset(&self) -> u32 {
+        self.brick_ranges_offset
     }
 
     /// Redoes the [`ENTRY_CLEAR`] marks for the channel `styles` (one per channel drawn): a

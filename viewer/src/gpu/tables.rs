@@ -1,17 +1,19 @@
-//! The read-only `u32` table buffer of `raycast.wgsl` (floats stored as bits):
+//! The scene tables `raycast.wgsl` consults, in two buffers:
 //!
-//! - per level (12 words): `log2` downsampling factor `x, y, z`; shape `x, y, z`; bricks per
-//!   axis `x, y, z`; smallest voxel edge in world units; two reserved words;
-//! - page-table offsets, `slot · levels + level`;
-//! - per channel slot (16 words): colour `r, g, b`; level bounds `min, max`; offset and count
-//!   of its opacity control points; offset of its prefix table; TF domain `lo, hi`; opacity
-//!   below and above the domain; four reserved words;
-//! - control points `(value, opacity)` pairs and prefix tables of `bins + 1` counts, where
-//!   `prefix[i + 1] − prefix[i]` is 1 when the opacity is non-zero somewhere in bin `i`, so
-//!   "transparent over `[lo, hi]`" is one subtraction (Octree Rasterization Sec. 4.1).
+//! - the scene uniforms ([`SceneUniforms`]): per level, its downsampling shift, shape, bricks
+//!   per axis and smallest voxel edge; per drawn channel, its colour, level bounds, transfer
+//!   function domain and opacities outside it, and where its control points and prefix table
+//!   lie in the table buffer;
+//! - the read-only `u32` table buffer (floats stored as bits): page-table offsets,
+//!   `channel · levels + level`, then each channel's control points `(value, opacity)` and its
+//!   prefix table of `TF_BINS + 1` counts, where `prefix[i + 1] − prefix[i]` is 1 when the
+//!   opacity is non-zero somewhere in bin `i`, so "transparent over `[lo, hi]`" is one
+//!   subtraction (Octree Rasterization Sec. 4.1).
 
-use anyhow::Result;
+use anyhow::{Result, ensure};
 
+pub use super::contract::TF_BINS;
+use super::contract::{ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms};
 use super::device::Gpu;
 use super::renderer::RenderOptions;
 use super::residency::{ResidencyState, check_binding, storage_buffer};
@@ -26,13 +28,6 @@ const HEADROOM_POINTS: usize = 64;
 /// all, nested loops included; the shader ends a pass well before it.
 const DRIVER_LOOP_LIMIT: u32 = 65_535;
 
-/// Words per level entry.
-pub const LEVEL_WORDS: usize = 12;
-/// Words per channel entry.
-pub const CHANNEL_WORDS: usize = 16;
-/// Bins of each transfer function's prefix table.
-pub const TF_BINS: usize = 1024;
-
 /// One rendered channel: its style and level bounds.
 #[derive(Clone, Debug)]
 pub struct ChannelTable<'a> {
@@ -44,15 +39,13 @@ pub struct ChannelTable<'a> {
     pub max_level: u32,
 }
 
-/// The built table and where its sections start.
+/// The built tables: the scene uniforms and the table buffer's words.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Tables {
-    /// The words.
+    /// Per level and per channel.
+    pub uniforms: SceneUniforms,
+    /// Page-table offsets, then control points and prefix tables.
     pub words: Vec<u32>,
-    /// Offset of the level section.
-    pub levels_offset: u32,
-    /// Offset of the channel section.
-    pub channels_offset: u32,
 }
 
 /// The transfer function's domain `[lo, hi]` (widened to `[v, v + 1]` for a single point).
@@ -84,89 +77,90 @@ pub fn tf_prefix(style: &ChannelStyle, bins: usize) -> Vec<u32> {
     prefix
 }
 
-/// Builds the table for `geometry` (with voxel spacing `spacing`, `x, y, z`), page-table
-/// `offsets` and `channels`.
+/// Builds the tables for `geometry` (with voxel spacing `spacing`, `x, y, z`), page-table
+/// `offsets` and `channels` (at most [`MAX_CHANNELS`]; the levels at most [`MAX_LEVELS`]).
 pub fn build(
     geometry: &OctreeGeometry,
     spacing: [f64; 3],
     page_offsets: &[u32],
     channels: &[ChannelTable<'_>],
 ) -> Tables {
-    let mut w: Vec<u32> = Vec::new();
-    let f = |v: f64| (v as f32).to_bits();
-    let levels_offset = 0u32;
+    assert!(
+        geometry.level_shift.len() <= MAX_LEVELS && channels.len() <= MAX_CHANNELS,
+        "checked by SceneTables::new"
+    );
+    let mut uniforms = SceneUniforms::default();
     for (l, shift) in geometry.level_shift.iter().enumerate() {
         let shape = geometry.level_shape[l];
-        w.extend(shift.iter().copied());
-        w.extend(shape.iter().map(|&s| s as u32));
-        w.extend((0..3).map(|a| shape[a].div_ceil(geometry.brick[a]) as u32));
-        let voxel = (0..3)
-            .map(|a| (1u64 << shift[a]) as f64 * spacing[a])
-            .fold(f64::INFINITY, f64::min);
-        w.push(f(voxel));
-        w.extend([0, 0]);
+        uniforms.levels[l] = LevelEntry {
+            shift: shift.map(|s| s as i32),
+            voxel_edge: (0..3)
+                .map(|a| (1u64 << shift[a]) as f64 * spacing[a])
+                .fold(f64::INFINITY, f64::min) as f32,
+            shape: shape.map(|s| s as i32),
+            bricks: std::array::from_fn(|a| shape[a].div_ceil(geometry.brick[a]) as u32),
+            ..LevelEntry::default()
+        };
     }
-    w.extend_from_slice(page_offsets);
-    let channels_offset = w.len() as u32;
-    let tail_start = channels_offset as usize + channels.len() * CHANNEL_WORDS;
-    let mut tail: Vec<u32> = Vec::new();
+    let mut words = page_offsets.to_vec();
     for (i, ch) in channels.iter().enumerate() {
         let s = ch.style;
-        let points_offset = (tail_start + tail.len()) as u32;
+        let points_offset = words.len() as u32;
         for p in &s.opacity {
-            tail.push(f(p.value));
-            tail.push(f(p.opacity));
+            words.push((p.value as f32).to_bits());
+            words.push((p.opacity as f32).to_bits());
         }
-        let prefix_offset = (tail_start + tail.len()) as u32;
-        tail.extend(tf_prefix(s, TF_BINS));
+        let prefix_offset = words.len() as u32;
+        words.extend(tf_prefix(s, TF_BINS));
         let (lo, hi) = tf_domain(s);
-        let below = s.opacity.first().map_or(0.0, |p| p.opacity);
-        let above = s.opacity.last().map_or(0.0, |p| p.opacity);
-        w.extend(s.color.map(f));
-        w.extend([
-            ch.min_level,
-            ch.max_level,
+        uniforms.channels[i] = ChannelEntry {
+            color: s.color.map(|c| c as f32),
+            point_count: s.opacity.len() as u32,
+            min_level: ch.min_level,
+            max_level: ch.max_level,
             points_offset,
-            s.opacity.len() as u32,
-        ]);
-        w.push(prefix_offset);
-        // Round the domain outward to f32 (exact when representable).
-        w.push(f32_down(lo).to_bits());
-        w.push(f32_up(hi).to_bits());
-        w.extend([f(below), f(above), 0, 0, 0, 0]);
-        debug_assert_eq!(
-            w.len(),
-            tail_start - (channels.len() - 1 - i) * CHANNEL_WORDS
-        );
+            prefix_offset,
+            // Rounded outward to f32 (exact when representable).
+            domain: [f32_down(lo), f32_up(hi)],
+            opacity_below: s.opacity.first().map_or(0.0, |p| p.opacity as f32),
+            opacity_above: s.opacity.last().map_or(0.0, |p| p.opacity as f32),
+        };
     }
-    w.extend(tail);
-    Tables {
-        words: w,
-        levels_offset,
-        channels_offset,
-    }
+    Tables { uniforms, words }
 }
 
 /// The scene tables on the GPU: the table buffer of the channels drawn, with room for styles
 /// of more control points, and what the frame parameters take from it. A style change
 /// rewrites it in place ([`SceneTables::rewrite`]); the residency state is not touched.
 pub struct SceneTables {
+    uniforms: wgpu::Buffer,
     buffer: wgpu::Buffer,
     /// Capacity of `buffer` in words.
     capacity: usize,
-    channels_offset: u32,
     steps_per_pass: u32,
 }
 
 impl SceneTables {
     /// The tables of `styles` (one per channel of `residency`, in its order) under `options`'
-    /// level bounds. Errors where the buffer exceeds the device's limits.
+    /// level bounds. Errors where the volume has more than [`MAX_LEVELS`] levels, or the
+    /// buffer exceeds the device's limits.
     pub fn new(
         gpu: &Gpu,
         residency: &ResidencyState,
         options: &RenderOptions,
         styles: &[&ChannelStyle],
     ) -> Result<Self> {
+        let levels = residency.info().levels.len();
+        ensure!(
+            levels <= MAX_LEVELS,
+            "{}: {levels} pyramid levels; the renderer draws volumes of at most {MAX_LEVELS}",
+            residency.info().name
+        );
+        ensure!(
+            styles.len() <= MAX_CHANNELS,
+            "{} channels drawn; at most {MAX_CHANNELS} render at once",
+            styles.len()
+        );
         let t = residency_tables(residency, options, styles);
         let capacity = t.words.len() + styles.len() * 2 * HEADROOM_POINTS;
         check_binding(
@@ -181,10 +175,16 @@ impl SceneTables {
             capacity as u64 * 4,
             wgpu::BufferUsages::empty(),
         );
+        let uniforms = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("scene uniforms"),
+            size: size_of::<SceneUniforms>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         let mut tables = Self {
+            uniforms,
             buffer,
             capacity,
-            channels_offset: 0,
             steps_per_pass: 0,
         };
         let written = tables.rewrite(gpu, residency, options, styles);
@@ -207,7 +207,8 @@ impl SceneTables {
         }
         gpu.queue
             .write_buffer(&self.buffer, 0, bytemuck::cast_slice(&t.words));
-        self.channels_offset = t.channels_offset;
+        gpu.queue
+            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&t.uniforms));
         self.steps_per_pass = steps_per_pass(
             styles.len(),
             residency.info().levels.len(),
@@ -222,9 +223,9 @@ impl SceneTables {
         &self.buffer
     }
 
-    /// Word offset of the channel section.
-    pub fn channels_offset(&self) -> u32 {
-        self.channels_offset
+    /// The scene uniforms.
+    pub fn uniforms(&self) -> &wgpu::Buffer {
+        &self.uniforms
     }
 
     /// Steps one ray may take in a pass (see [`steps_per_pass`]).

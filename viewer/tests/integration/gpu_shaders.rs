@@ -1,4 +1,5 @@
-//! Every WGSL file in `shaders/` parses and validates with naga.
+//! Every WGSL file in `shaders/` parses and validates with naga, as compiled: `raycast.wgsl`
+//! after the prelude of constants that `gpu::contract` generates.
 
 #[test]
 fn every_wgsl_file_validates() {
@@ -7,7 +8,10 @@ fn every_wgsl_file_validates() {
     for entry in std::fs::read_dir(&dir).unwrap() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "wgsl") {
-            let src = std::fs::read_to_string(&path).unwrap();
+            let mut src = std::fs::read_to_string(&path).unwrap();
+            if path.file_name().is_some_and(|n| n == "raycast.wgsl") {
+                src = residency_viewer::gpu::contract::wgsl_prelude() + &src;
+            }
             let module = naga::front::wgsl::parse_str(&src).unwrap_or_else(|e| {
                 panic!(
                     "{}",

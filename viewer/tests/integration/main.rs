@@ -13,6 +13,7 @@ mod source_common;
 
 mod compare_cli;
 mod gpu_cache;
+mod gpu_contract;
 mod gpu_octree;
 mod gpu_shaders;
 mod reference_cli;

@@ -1,0 +1,311 @@
+//! The contract between the renderer and `shaders/raycast.wgsl`, written once:
+//!
+//! - every struct the CPU and the shader share, as a `#[repr(C)]` [`bytemuck`] type here with a
+//!   WGSL struct of the same name and fields in the shader ([`GpuStruct`]; the viewer's
+//!   integration test `gpu_contract` compares naga's layout of each WGSL struct with the Rust
+//!   offsets and sizes, so a disagreement fails the build's tests);
+//! - the constants both sides use, which the shader gets as a generated prelude
+//!   ([`wgsl_prelude`]), so the shader has no copy of them;
+//! - the bindings of its bind group ([`binding`]).
+
+use bytemuck::{Pod, Zeroable};
+
+use super::brick_cache::AtlasKind;
+use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY};
+use super::renderer::Method;
+
+/// Most channels rendered at once (the shader keeps one value per channel in registers).
+pub const MAX_CHANNELS: usize = 8;
+
+/// Most pyramid levels a volume may have (the scene uniforms hold one entry per level).
+pub const MAX_LEVELS: usize = 32;
+
+/// Bins of each transfer function's prefix table.
+pub const TF_BINS: usize = 1024;
+
+/// The shader's source as written, without the prelude.
+const RAYCAST_BODY: &str = include_str!("../../../shaders/raycast.wgsl");
+
+/// Binding numbers of `raycast.wgsl`'s group 0.
+pub mod binding {
+    /// [`super::Params`], uniform.
+    pub const PARAMS: u32 = 0;
+    /// The residency octree's nodes, then the per-brick ranges of the baselines.
+    pub const NODES: u32 = 1;
+    /// Page-table offsets, transfer-function control points and prefix tables.
+    pub const TABLES: u32 = 2;
+    /// The page tables.
+    pub const PAGES: u32 = 3;
+    /// Per-brick request and substitution flags.
+    pub const PAGE_FLAGS: u32 = 4;
+    /// [`super::FrameCounters`], then the capped request list.
+    pub const REQUESTS: u32 = 5;
+    /// Per-slot usage feedback.
+    pub const USAGE: u32 = 6;
+    /// The image, linear RGBA `f32` per pixel.
+    pub const IMAGE: u32 = 7;
+    /// The atlas of unsigned samples.
+    pub const ATLAS_UINT: u32 = 8;
+    /// The atlas of signed samples.
+    pub const ATLAS_SINT: u32 = 9;
+    /// The atlas of float samples.
+    pub const ATLAS_FLOAT: u32 = 10;
+    /// [`super::RayState`] per pixel.
+    pub const RAYS: u32 = 11;
+    /// [`super::SceneUniforms`], uniform.
+    pub const SCENE: u32 = 12;
+}
+
+/// A struct shared with the shader: its WGSL name and each field's name, byte offset and
+/// size, as Rust lays it out.
+pub trait GpuStruct: Pod {
+    /// The name of the WGSL twin.
+    const WGSL_NAME: &'static str;
+    /// `(name, offset, size)` of every field, in order.
+    fn fields() -> Vec<(&'static str, usize, usize)>;
+}
+
+/// Defines a `#[repr(C)]` `Pod` struct and its [`GpuStruct`] description.
+macro_rules! gpu_struct {
+    (
+        $(#[$meta:meta])*
+        pub struct $name:ident {
+            $( $(#[$field_meta:meta])* pub $field:ident : $ty:ty ),* $(,)?
+        }
+    ) => {
+        $(#[$meta])*
+        #[repr(C)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+        pub struct $name {
+            $( $(#[$field_meta])* pub $field: $ty ),*
+        }
+
+        impl GpuStruct for $name {
+            const WGSL_NAME: &'static str = stringify!($name);
+            fn fields() -> Vec<(&'static str, usize, usize)> {
+                vec![$(
+                    (
+                        stringify!($field),
+                        std::mem::offset_of!($name, $field),
+                        size_of::<$ty>(),
+                    )
+                ),*]
+            }
+        }
+    };
+}
+
+gpu_struct! {
+    /// The per-frame uniforms. Positions are in "leaf units" (octree leaves) or fine units
+    /// (`2^-fine` of a leaf per axis); axes are `x, y, z`.
+    pub struct Params {
+        /// Image width in pixels.
+        pub width: u32,
+        /// Image height in pixels.
+        pub height: u32,
+        /// Frame number (from 1): the mark of usage feedback and request flags.
+        pub frame: u32,
+        /// Channels drawn.
+        pub channel_count: u32,
+        /// Depth of the octree's leaves.
+        pub leaf_depth: u32,
+        /// Pyramid levels.
+        pub level_count: u32,
+        /// Most requests the list holds.
+        pub request_cap: u32,
+        /// Depth traversal starts at.
+        pub start_depth: u32,
+        /// Word offset of the per-brick ranges in the node buffer (the baselines').
+        pub brick_ranges_offset: u32,
+        /// Steps a ray may take per pass (then it is suspended and resumed).
+        pub steps_per_pass: u32,
+        /// 1: skip empty and homogeneous nodes; 2: substitute missing bricks from other levels.
+        pub flags: u32,
+        /// Unused (alignment).
+        pub pad0: u32,
+        /// The view point `V = eye + D·forward` (`D = view_distance`), leaf units: integer
+        /// part. Rays start from the plane through V facing the camera, so a far camera keeps
+        /// voxel precision (`D = 0`, V the eye, for a camera near the volume).
+        pub view_cell: [i32; 3],
+        /// Atlas slots per z (any count; per x and y they are powers of two).
+        pub slots_z: u32,
+        /// V, leaf units: fraction.
+        pub view_frac: [f32; 3],
+        /// The reference step `Δ0` of the opacity correction (world units).
+        pub reference_step: f32,
+        /// Camera right · tan(fov/2) · aspect.
+        pub right: [f32; 3],
+        /// Level-of-detail bias (`log2`).
+        pub lod_bias: f32,
+        /// Camera up · tan(fov/2).
+        pub up: [f32; 3],
+        /// Pixel footprint per unit distance (world).
+        pub pixel_footprint: f32,
+        /// Camera forward (unit).
+        pub forward: [f32; 3],
+        /// Step as a fraction of a voxel of the level in use.
+        pub step_fraction: f32,
+        /// Leaf units per world unit, per axis.
+        pub world_to_leaf: [f32; 3],
+        /// A leaf's edge (world, smallest axis).
+        pub leaf_edge: f32,
+        /// Volume extent in leaf units.
+        pub volume_leaf: [f32; 3],
+        /// `D`, the view point's distance from the eye (world).
+        pub view_distance: f32,
+        /// Background colour, linear RGB.
+        pub background: [f32; 3],
+        /// `log2` of atlas slots per x.
+        pub slots_x_log2: u32,
+        /// `log2` of a fine unit's edge in level-0 voxels, per axis (leaf shift − fine).
+        pub unit_shift: [i32; 3],
+        /// `log2` of atlas slots per y.
+        pub slots_y_log2: u32,
+        /// `log2` of fine units per leaf, per axis.
+        pub fine: [i32; 3],
+        /// Unused (alignment).
+        pub pad1: u32,
+        /// Brick edge in voxels, per axis.
+        pub brick: [u32; 3],
+        /// Unused (alignment).
+        pub pad2: u32,
+    }
+}
+
+gpu_struct! {
+    /// One pyramid level in the scene uniforms.
+    pub struct LevelEntry {
+        /// `log2` of the downsampling factor relative to level 0, per axis.
+        pub shift: [i32; 3],
+        /// Smallest edge of a voxel of this level (world units).
+        pub voxel_edge: f32,
+        /// Shape in voxels.
+        pub shape: [i32; 3],
+        /// Unused (alignment).
+        pub pad0: u32,
+        /// Bricks per axis.
+        pub bricks: [u32; 3],
+        /// Unused (alignment).
+        pub pad1: u32,
+    }
+}
+
+gpu_struct! {
+    /// One drawn channel in the scene uniforms: colour, level bounds and where its transfer
+    /// function lies in the table buffer.
+    pub struct ChannelEntry {
+        /// Colour, linear RGB.
+        pub color: [f32; 3],
+        /// Opacity control points.
+        pub point_count: u32,
+        /// Finest level the LOD choice may pick.
+        pub min_level: u32,
+        /// Coarsest level the LOD choice may pick.
+        pub max_level: u32,
+        /// Word offset of the control points `(value, opacity)` in the table buffer.
+        pub points_offset: u32,
+        /// Word offset of the prefix table (`TF_BINS + 1` counts) in the table buffer.
+        pub prefix_offset: u32,
+        /// The transfer function's domain `[lo, hi]`, rounded outward to `f32`.
+        pub domain: [f32; 2],
+        /// Opacity below the domain.
+        pub opacity_below: f32,
+        /// Opacity above the domain.
+        pub opacity_above: f32,
+    }
+}
+
+gpu_struct! {
+    /// The scene uniforms: one entry per level and per drawn channel. Rewritten in place
+    /// when the style changes.
+    pub struct SceneUniforms {
+        /// Per level (the first `level_count`).
+        pub levels: [LevelEntry; MAX_LEVELS],
+        /// Per drawn channel (the first `channel_count`).
+        pub channels: [ChannelEntry; MAX_CHANNELS],
+    }
+}
+
+gpu_struct! {
+    /// The counters at the head of the request buffer (atomics in the shader), then the
+    /// capped request list of `(page-table id, ray distance bits)` pairs.
+    pub struct FrameCounters {
+        /// Distinct missing bricks requested (before the cap).
+        pub requests: u32,
+        /// Samples taken.
+        pub samples: u32,
+        /// Octree nodes skipped as empty in every channel.
+        pub empty_nodes_skipped: u32,
+        /// Distinct missing bricks for which another level was substituted.
+        pub bricks_substituted: u32,
+        /// Homogeneous nodes integrated analytically.
+        pub homogeneous_nodes: u32,
+        /// Requests over the cap.
+        pub requests_over_cap: u32,
+        /// Samples with no resident data in any channel.
+        pub samples_without_data: u32,
+        /// Rays the latest pass suspended.
+        pub rays_suspended: u32,
+    }
+}
+
+gpu_struct! {
+    /// A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan
+    /// driver ends every loop of an invocation after 65535 iterations in all, so long rays
+    /// are marched a bounded number of steps per pass and resumed from here.
+    pub struct RayState {
+        /// Fine cell.
+        pub cell: [i32; 3],
+        /// Fresh (the buffer is cleared per frame), suspended or done.
+        pub status: u32,
+        /// Offset in the cell, `[0, 1)`.
+        pub local: [f32; 3],
+        /// Distance travelled (world).
+        pub t: f32,
+        /// Colour so far.
+        pub color: [f32; 3],
+        /// Transmittance so far.
+        pub trans: f32,
+        /// Depth of the last node visited.
+        pub last_depth: u32,
+        /// Loop iterations so far.
+        pub iterations: u32,
+        /// Unused (alignment).
+        pub pad0: u32,
+        /// Unused (alignment).
+        pub pad1: u32,
+    }
+}
+
+/// The constants the shader shares with Rust, as WGSL: page-table entries, limits, the
+/// method and atlas numbers of its pipeline constants.
+pub fn wgsl_prelude() -> String {
+    let u = |name: &str, v: u32| format!("const {name}: u32 = {v}u;\n");
+    [
+        "// Generated by viewer/src/gpu/contract.rs: the constants shared with Rust.\n".into(),
+        u("ENTRY_EMPTY", ENTRY_EMPTY),
+        u("ENTRY_CLEAR", ENTRY_CLEAR),
+        u("MAX_LEVELS", MAX_LEVELS as u32),
+        u("MAX_CHANNELS", MAX_CHANNELS as u32),
+        u("TF_BINS", TF_BINS as u32),
+        u("METHOD_RESIDENCY", Method::Residency as u32),
+        u("METHOD_PAGE_TABLE", Method::PageTable as u32),
+        u("METHOD_OCTREE", Method::Octree as u32),
+        u("ATLAS_UINT", AtlasKind::Uint as u32),
+        u("ATLAS_SINT", AtlasKind::Sint as u32),
+        u("ATLAS_FLOAT", AtlasKind::Float as u32),
+        u("FLAG_SKIPPING", FLAG_SKIPPING),
+        u("FLAG_SUBSTITUTION", FLAG_SUBSTITUTION),
+    ]
+    .concat()
+}
+
+/// [`Params::flags`] bit: skip empty and homogeneous nodes.
+pub const FLAG_SKIPPING: u32 = 1;
+/// [`Params::flags`] bit: substitute missing bricks from other levels.
+pub const FLAG_SUBSTITUTION: u32 = 2;
+
+/// The shader as compiled: [`wgsl_prelude`], then `shaders/raycast.wgsl`.
+pub fn raycast_source() -> String {
+    wgsl_prelude() + RAYCAST_BODY
+}

@@ -1,0 +1,170 @@
+//! The Rust ↔ WGSL contract (`residency_viewer::gpu::contract`): naga's layout of each WGSL
+//! struct the renderer shares with the shader equals the Rust twin's, field by field, and the
+//! shader binds no more buffers than WebGPU's default limits allow.
+
+use residency_viewer::gpu::contract::{
+    self, ChannelEntry, FrameCounters, GpuStruct, LevelEntry, Params, RayState, SceneUniforms,
+};
+
+fn parse(source: &str) -> naga::Module {
+    naga::front::wgsl::parse_str(source)
+        .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(source, "raycast.wgsl")))
+}
+
+/// `(name, offset, size)` of one struct member.
+type Member = (String, usize, usize);
+
+/// The members of WGSL struct `name`, and its size.
+fn wgsl_layout(module: &naga::Module, name: &str) -> Option<(Vec<Member>, usize)> {
+    let mut layouter = naga::proc::Layouter::default();
+    layouter.update(module.to_ctx()).expect("layout");
+    let (_, ty) = module
+        .types
+        .iter()
+        .find(|(_, t)| t.name.as_deref() == Some(name))?;
+    let naga::TypeInner::Struct { members, span } = &ty.inner else {
+        return None;
+    };
+    let fields = members
+        .iter()
+        .map(|m| {
+            (
+                m.name.clone().unwrap_or_default(),
+                m.offset as usize,
+                layouter[m.ty].size as usize,
+            )
+        })
+        .collect();
+    Some((fields, *span as usize))
+}
+
+/// Where `T` and its WGSL twin in `module` disagree, one line each.
+fn disagreements<T: GpuStruct>(module: &naga::Module) -> Vec<String> {
+    let name = T::WGSL_NAME;
+    let Some((wgsl, span)) = wgsl_layout(module, name) else {
+        return vec![format!("{name}: no such struct in the shader")];
+    };
+    let rust = T::fields();
+    let mut out = Vec::new();
+    for (i, &(field, offset, size)) in rust.iter().enumerate() {
+        match wgsl.get(i) {
+            Some((w, wo, ws)) if w == field && *wo == offset && *ws == size => {}
+            Some((w, wo, ws)) => out.push(format!(
+                "{name} member {i}: Rust {field} at {offset} ({size} bytes), WGSL {w} at {wo} \
+                 ({ws} bytes)"
+            )),
+            None => out.push(format!("{name}.{field}: not in the shader")),
+        }
+    }
+    for (w, _, _) in wgsl.iter().skip(rust.len()) {
+        out.push(format!("{name}.{w}: not in Rust"));
+    }
+    if span != size_of::<T>() {
+        out.push(format!(
+            "{name}: {span} bytes in WGSL, {} in Rust",
+            size_of::<T>()
+        ));
+    }
+    out
+}
+
+fn all_disagreements(module: &naga::Module) -> Vec<String> {
+    [
+        disagreements::<Params>(module),
+        disagreements::<LevelEntry>(module),
+        disagreements::<ChannelEntry>(module),
+        disagreements::<SceneUniforms>(module),
+        disagreements::<FrameCounters>(module),
+        disagreements::<RayState>(module),
+    ]
+    .concat()
+}
+
+#[test]
+fn every_shared_struct_matches_its_wgsl_twin() {
+    let module = parse(&contract::raycast_source());
+    assert_eq!(all_disagreements(&module), Vec::<String>::new());
+    // The uniform structs fit the default uniform binding size.
+    let limit = wgpu::Limits::default().max_uniform_buffer_binding_size as usize;
+    assert!(size_of::<Params>() + size_of::<SceneUniforms>() <= limit);
+}
+
+#[test]
+fn a_disagreement_fails_the_contract() {
+    let source = contract::raycast_source();
+    // Two fields swapped in the shader's Params.
+    let swapped = source.replacen(
+        "    width: u32,\n    height: u32,",
+        "    height: u32,\n    width: u32,",
+        1,
+    );
+    assert_ne!(swapped, source);
+    assert_eq!(
+        disagreements::<Params>(&parse(&swapped)),
+        [
+            "Params member 0: Rust width at 0 (4 bytes), WGSL height at 0 (4 bytes)",
+            "Params member 1: Rust height at 4 (4 bytes), WGSL width at 4 (4 bytes)",
+        ]
+    );
+    // A field the shader lacks.
+    let dropped = source.replacen("    pad2: u32,\n}", "}", 1);
+    assert_eq!(
+        disagreements::<Params>(&parse(&dropped)),
+        ["Params.pad2: not in the shader"]
+    );
+    // A wider type in the shader moves everything after it.
+    let wider = source.replacen("    voxel_edge: f32,", "    voxel_edge: vec2<f32>,", 1);
+    let found = disagreements::<LevelEntry>(&parse(&wider));
+    assert_eq!(
+        found.first().map(String::as_str),
+        Some(
+            "LevelEntry member 1: Rust voxel_edge at 12 (4 bytes), WGSL voxel_edge at 16 (8 bytes)"
+        )
+    );
+}
+
+#[test]
+fn the_shader_binds_within_webgpu_default_limits() {
+    let module = parse(&contract::raycast_source());
+    let limits = wgpu::Limits::default();
+    let count = |space: fn(&naga::AddressSpace) -> bool| {
+        module
+            .global_variables
+            .iter()
+            .filter(|(_, g)| space(&g.space))
+            .count() as u32
+    };
+    let storage = count(|s| matches!(s, naga::AddressSpace::Storage { .. }));
+    let uniform = count(|s| matches!(s, naga::AddressSpace::Uniform));
+    let textures = module
+        .global_variables
+        .iter()
+        .filter(|(_, g)| matches!(module.types[g.ty].inner, naga::TypeInner::Image { .. }))
+        .count() as u32;
+    assert_eq!((storage, uniform, textures), (8, 2, 3));
+    assert!(storage <= limits.max_storage_buffers_per_shader_stage);
+    assert!(uniform <= limits.max_uniform_buffers_per_shader_stage);
+    assert!(textures <= limits.max_sampled_textures_per_shader_stage);
+}
+
+#[test]
+fn the_prelude_carries_the_rust_constants() {
+    let prelude = contract::wgsl_prelude();
+    for line in [
+        "const ENTRY_EMPTY: u32 = 1u;",
+        "const ENTRY_CLEAR: u32 = 4294967295u;",
+        "const MAX_LEVELS: u32 = 32u;",
+        "const MAX_CHANNELS: u32 = 8u;",
+        "const TF_BINS: u32 = 1024u;",
+        "const METHOD_RESIDENCY: u32 = 0u;",
+        "const METHOD_PAGE_TABLE: u32 = 1u;",
+        "const METHOD_OCTREE: u32 = 2u;",
+        "const ATLAS_FLOAT: u32 = 2u;",
+        "const FLAG_SUBSTITUTION: u32 = 2u;",
+    ] {
+        assert!(
+            prelude.lines().any(|l| l == line),
+            "{line} not in\n{prelude}"
+        );
+    }
+}
