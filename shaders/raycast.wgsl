@@ -518,6 +518,308 @@ fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
     return max(min(tt.x, min(tt.y, tt.z)), 0.0);
 }
 
+// ---- traversal: what a step does where the ray is ----
+
+const ACTION_SAMPLE: u32 = 0u; // sample the channels not empty here
+const ACTION_SKIP: u32 = 1u; // every channel empty under its TF: skip `skip`
+const ACTION_HOMOGENEOUS: u32 = 2u; // every channel constant over the node: integrate it
+const ACTION_REQUEST: u32 = 3u; // no needed channel mapped: request its bricks and skip
+
+struct Visit {
+    action: u32,
+    node: u32, // the node reached (residency method)
+    depth: u32, // its depth
+    empty: u32, // bits: the channels empty under their TF here
+    skip: f32, // world distance to the exit of the node or brick (ACTION_SKIP, ACTION_REQUEST)
+}
+
+// The residency octree (Algorithm 1, multi-channel): from just above the depth of the last
+// node visited, down to the deepest node whose edge is at least the step, stopping where every
+// channel is empty, or constant, under its TF.
+fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, skipping: bool) -> Visit {
+    let depth = P.leaf_depth;
+    var max_depth = depth;
+    var edge = P.leaf_edge;
+    loop {
+        if max_depth == 0u || edge >= desired_step {
+            break;
+        }
+        max_depth--;
+        edge *= 2.0;
+    }
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
+    var d = min(clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u, max_depth);
+    loop {
+        v.node = node_index(d, ray.cell);
+        var all_empty = true;
+        var all_homog = true;
+        var all_unmapped = true;
+        v.empty = 0u;
+        for (var c = 0u; c < P.channel_count; c++) {
+            let lo = bitcast<f32>(node_word(v.node, c, 1u));
+            let hi = bitcast<f32>(node_word(v.node, c, 2u));
+            if skipping && tf_transparent(c, lo, hi) {
+                v.empty |= 1u << c;
+            } else {
+                all_empty = false;
+                if !(lo == hi) || !skipping {
+                    all_homog = false;
+                    if node_word(v.node, c, 0u) != 0u {
+                        all_unmapped = false;
+                    }
+                }
+            }
+        }
+        if all_empty {
+            v.action = ACTION_SKIP;
+            break;
+        }
+        if all_homog && skipping {
+            v.action = ACTION_HOMOGENEOUS;
+            break;
+        }
+        if d >= max_depth {
+            if all_unmapped {
+                v.action = ACTION_REQUEST;
+            }
+            break;
+        }
+        d++;
+    }
+    v.depth = d;
+    if v.action == ACTION_SKIP || v.action == ACTION_REQUEST {
+        v.skip = node_exit(ray, d, dir);
+    }
+    return v;
+}
+
+// The page-table baseline (MRMCPT): per channel, whether the brick of its chosen level at the
+// sample is empty under its TF, judged once per brick the ray enters, as a page-table
+// renderer would (`seen`: the brick of each channel's last sample; `seen_empty`: its bits).
+fn visit_page_table(
+    ray: Ray,
+    chosen: array<u32, MAX_CHANNELS>,
+    seen: ptr<function, array<u32, MAX_CHANNELS>>,
+    seen_empty: ptr<function, u32>,
+    dir: vec3<f32>,
+    skipping: bool,
+) -> Visit {
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
+    var all_empty = true;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let l = chosen[c];
+        let pos = level_pos(l, ray.cell, ray.local);
+        let b = point_brick(l, pos);
+        let pid = brick_id(c, l, b);
+        let bit = 1u << c;
+        if pid != (*seen)[c] {
+            (*seen)[c] = pid;
+            let r = brick_range(pid);
+            *seen_empty = select(*seen_empty & ~bit, *seen_empty | bit, skipping && tf_transparent(c, r.x, r.y));
+        }
+        if (*seen_empty & bit) != 0u {
+            v.empty |= bit;
+            v.skip = min(v.skip, brick_exit(l, b, pos, dir));
+        } else {
+            all_empty = false;
+        }
+    }
+    if all_empty {
+        v.action = ACTION_SKIP;
+    }
+    return v;
+}
+
+// The octree-of-bricks baseline (GigaVoxels style): per channel, descend from the coarsest
+// level; every ancestor must be resident, the first missing one is requested, and the finest
+// resident one is sampled (`chosen` becomes that level, or NO_LEVEL).
+fn visit_brick_octree(
+    ray: Ray,
+    chosen: ptr<function, array<u32, MAX_CHANNELS>>,
+    dir: vec3<f32>,
+    skipping: bool,
+    t: f32,
+) -> Visit {
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
+    var all_empty = true;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let l = (*chosen)[c];
+        var k = min(S.channels[c].max_level, P.level_count - 1u);
+        var resident = NO_LEVEL;
+        var missing = 0u;
+        loop {
+            let pos = level_pos(k, ray.cell, ray.local);
+            let b = point_brick(k, pos);
+            let pid = brick_id(c, k, b);
+            let r = brick_range(pid);
+            if skipping && tf_transparent(c, r.x, r.y) {
+                v.empty |= 1u << c;
+                v.skip = min(v.skip, brick_exit(k, b, pos, dir));
+                break;
+            }
+            let entry = page_table[pid];
+            if entry == 0u {
+                request(pid, t);
+                missing = pid + 1u;
+                break;
+            }
+            if entry != ENTRY_EMPTY {
+                _ = slot_origin(entry);
+            }
+            resident = k;
+            if k <= l {
+                break;
+            }
+            k--;
+        }
+        if (v.empty & (1u << c)) == 0u {
+            all_empty = false;
+            (*chosen)[c] = resident;
+            if missing != 0u && resident != NO_LEVEL {
+                note_substituted(missing - 1u);
+            }
+        }
+    }
+    if all_empty {
+        v.action = ACTION_SKIP;
+    }
+    return v;
+}
+
+// ---- sampling every channel ----
+
+struct ChannelSamples {
+    values: array<f32, MAX_CHANNELS>,
+    have: u32, // bits: the channels with a value (not clear)
+    used: u32, // finest level sampled
+    any_value: bool, // some channel had data (a clear sample counts)
+}
+
+// Samples every channel not empty here at its chosen level, substituting missing bricks from
+// the levels the node maps. For ACTION_REQUEST this only requests the bricks.
+fn sample_channels(
+    ray: Ray,
+    v: Visit,
+    chosen: array<u32, MAX_CHANNELS>,
+    t: f32,
+    skipping: bool,
+    substitute: bool,
+) -> ChannelSamples {
+    var out: ChannelSamples;
+    out.have = 0u;
+    out.used = P.level_count - 1u;
+    out.any_value = false;
+    for (var c = 0u; c < P.channel_count; c++) {
+        if (v.empty & (1u << c)) != 0u || chosen[c] == NO_LEVEL {
+            continue;
+        }
+        var mask = 0u;
+        if METHOD == METHOD_RESIDENCY {
+            if v.action == ACTION_REQUEST && skipping {
+                let lo = bitcast<f32>(node_word(v.node, c, 1u));
+                let hi = bitcast<f32>(node_word(v.node, c, 2u));
+                if lo == hi {
+                    continue; // homogeneous: known without its bricks
+                }
+            }
+            if substitute && v.action == ACTION_SAMPLE {
+                mask = node_word(v.node, c, 0u);
+            }
+        }
+        let l = chosen[c];
+        var k = l;
+        // Coarse first: where nothing of this channel is resident (ACTION_REQUEST), ask for
+        // its coarsest allowed level first. Once that stands in, rays gather opacity and
+        // stop early, so the finer bricks behind opaque matter are never requested. Where
+        // the coarsest level is clear (averaging can take thin bright structures below the
+        // TF), it says nothing of finer ones: then the wanted level is asked for. (One
+        // sample_level call site: on lavapipe every inlined copy costs every sample.)
+        var coarse_first = false;
+        if METHOD == METHOD_RESIDENCY && v.action == ACTION_REQUEST && substitute {
+            k = min(S.channels[c].max_level, P.level_count - 1u);
+            coarse_first = k != l;
+        }
+        var s = Sampled(0.0, false, 0u, false);
+        var first_missing = 0u;
+        loop {
+            s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, t);
+            if coarse_first {
+                coarse_first = false;
+                if !s.clear {
+                    s.ok = false; // requested: nothing to sample in ACTION_REQUEST
+                    break;
+                }
+                k = l;
+                continue;
+            }
+            if s.ok {
+                break;
+            }
+            if k == l {
+                first_missing = s.missing;
+            }
+            k = next_candidate(mask, l, k);
+            if k == NO_LEVEL {
+                break;
+            }
+        }
+        if s.ok {
+            if k != l {
+                note_substituted(first_missing - 1u);
+            }
+            if !s.clear {
+                out.values[c] = s.value;
+                out.have |= 1u << c;
+            }
+            out.used = min(out.used, k);
+            out.any_value = true;
+        }
+    }
+    return out;
+}
+
+// ---- compositing ----
+
+// One step's mixture of the channels: opacity-weighted colour and summed opacity.
+struct Mixture {
+    color: vec3<f32>,
+    alpha: f32,
+}
+
+// The mixture of the channels in `have` with `values`, each opacity corrected to `step`.
+// Channels mix additively (DESIGN.md: colours weighted by opacity, opacities summed).
+fn mixture(have: u32, values: array<f32, MAX_CHANNELS>, step: f32) -> Mixture {
+    var m = Mixture(vec3<f32>(0.0), 0.0);
+    for (var c = 0u; c < P.channel_count; c++) {
+        if (have & (1u << c)) != 0u {
+            let a = corrected(tf_opacity(c, values[c]), step);
+            m.color += a * S.channels[c].color;
+            m.alpha += a;
+        }
+    }
+    return m;
+}
+
+// Front-to-back emission–absorption of `steps` steps of mixture `m` (its opacity clamped to
+// 1): one step for a sample; seg/Δ steps for a homogeneous node, integrated in closed form.
+// The only place colour and transmittance change.
+fn composite(color: ptr<function, vec3<f32>>, trans: ptr<function, f32>, m: Mixture, steps: f32) {
+    let alpha = min(m.alpha, 1.0);
+    if alpha <= 0.0 {
+        return;
+    }
+    if steps == 1.0 {
+        *color += *trans * m.color;
+        *trans *= 1.0 - alpha;
+        return;
+    }
+    let keep = pow(1.0 - alpha, steps);
+    *color += *trans * m.color / alpha * (1.0 - keep);
+    *trans *= keep;
+}
+
+// ---- the ray ----
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= P.width || gid.y >= P.height {
@@ -571,8 +873,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     var suspended = false;
     if t_exit > t_enter {
-        let depth = P.leaf_depth;
-        let leaves = 1 << depth;
+        let leaves = 1 << P.leaf_depth;
         let end_cell = vec3<i32>(leaves) << fine_shift(); // the root's far faces, fine units
         var ray = Ray(st.cell, st.local, st.t);
         var last_depth = st.last_depth;
@@ -596,15 +897,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             ray.cell = (ray.cell << fine_shift()) + vec3<i32>(whole);
             ray.local = scaled - whole;
         }
-        let channels = P.channel_count;
         let skipping = (P.flags & FLAG_SKIPPING) != 0u;
         let substitute = (P.flags & FLAG_SUBSTITUTION) != 0u;
         var budget = P.steps_per_pass;
         // Page-table baseline: the brick each channel's last sample was in, and whether it
         // is empty under the channel's TF.
-        var pt_brick: array<u32, 8>;
+        var pt_brick: array<u32, MAX_CHANNELS>;
         var pt_empty = 0u;
-        for (var c = 0u; c < 8u; c++) {
+        for (var c = 0u; c < MAX_CHANNELS; c++) {
             pt_brick[c] = 0xffffffffu;
         }
         loop {
@@ -621,266 +921,54 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             budget--;
             // Desired level per channel, and step: the finest over channels.
-            var chosen: array<u32, 8>;
+            var chosen: array<u32, MAX_CHANNELS>;
             var finest = P.level_count - 1u;
-            for (var c = 0u; c < channels; c++) {
+            for (var c = 0u; c < P.channel_count; c++) {
                 chosen[c] = choose_level(c, ray.t + t_plane);
                 finest = min(finest, chosen[c]);
             }
             let desired_step = P.step_fraction * level_voxel(finest);
-            var empty_bits = 0u;
-            var action = 0u; // 0 sample, 1 skip empty, 2 homogeneous, 3 request and skip
-            var node = 0u;
-            var skip = 0.0;
+            var v: Visit;
             if METHOD == METHOD_RESIDENCY {
-                // Traversal depth: deepest node whose edge is at least the step.
-                var max_depth = depth;
-                var edge = P.leaf_edge;
-                loop {
-                    if max_depth == 0u || edge >= desired_step {
-                        break;
-                    }
-                    max_depth--;
-                    edge *= 2.0;
-                }
-                var d = clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u;
-                d = min(d, max_depth);
-                // Walk down (Algorithm 1, multi-channel): per channel, whether it is empty.
-                loop {
-                    node = node_index(d, ray.cell);
-                    var all_empty = true;
-                    var all_homog = true;
-                    var all_unmapped = true;
-                    empty_bits = 0u;
-                    for (var c = 0u; c < channels; c++) {
-                        let lo = bitcast<f32>(node_word(node, c, 1u));
-                        let hi = bitcast<f32>(node_word(node, c, 2u));
-                        if skipping && tf_transparent(c, lo, hi) {
-                            empty_bits |= 1u << c;
-                        } else {
-                            all_empty = false;
-                            if !(lo == hi) || !skipping {
-                                all_homog = false;
-                                if node_word(node, c, 0u) != 0u {
-                                    all_unmapped = false;
-                                }
-                            }
-                        }
-                    }
-                    if all_empty {
-                        action = 1u;
-                        break;
-                    }
-                    if all_homog && skipping {
-                        action = 2u;
-                        break;
-                    }
-                    if d >= max_depth {
-                        if all_unmapped {
-                            action = 3u;
-                        }
-                        break;
-                    }
-                    d++;
-                }
-                last_depth = d;
-                if action == 1u || action == 3u {
-                    skip = node_exit(ray, d, dir);
-                }
+                v = visit_octree(ray, last_depth, desired_step, dir, skipping);
+                last_depth = v.depth;
+            } else if METHOD == METHOD_PAGE_TABLE {
+                v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
             } else {
-                // Baselines: culling and residency per brick of the level each channel wants.
-                skip = 3.0e38;
-                var all_empty = true;
-                for (var c = 0u; c < channels; c++) {
-                    let l = chosen[c];
-                    if METHOD == METHOD_PAGE_TABLE {
-                        // Page table: is the brick at the sample empty under the TF? Judged
-                        // once per brick the ray enters, as a page-table renderer would.
-                        let pos = level_pos(l, ray.cell, ray.local);
-                        let b = point_brick(l, pos);
-                        let pid = brick_id(c, l, b);
-                        if pid != pt_brick[c] {
-                            pt_brick[c] = pid;
-                            let r = brick_range(pid);
-                            let bit = 1u << c;
-                            pt_empty = select(pt_empty & ~bit, pt_empty | bit, skipping && tf_transparent(c, r.x, r.y));
-                        }
-                        if (pt_empty & (1u << c)) != 0u {
-                            empty_bits |= 1u << c;
-                            skip = min(skip, brick_exit(l, b, pos, dir));
-                        } else {
-                            all_empty = false;
-                        }
-                    } else {
-                        // Octree of bricks: descend from the coarsest level; every ancestor
-                        // must be resident, the first missing one is requested, and the
-                        // finest resident one is sampled.
-                        let top = min(S.channels[c].max_level, P.level_count - 1u);
-                        var k = top;
-                        var resident = NO_LEVEL;
-                        var missing = 0u;
-                        loop {
-                            let pos = level_pos(k, ray.cell, ray.local);
-                            let b = point_brick(k, pos);
-                            let pid = brick_id(c, k, b);
-                            let r = brick_range(pid);
-                            if skipping && tf_transparent(c, r.x, r.y) {
-                                empty_bits |= 1u << c;
-                                skip = min(skip, brick_exit(k, b, pos, dir));
-                                break;
-                            }
-                            let entry = page_table[pid];
-                            if entry == 0u {
-                                request(pid, ray.t + t_plane);
-                                missing = pid + 1u;
-                                break;
-                            }
-                            if entry != ENTRY_EMPTY {
-                                _ = slot_origin(entry);
-                            }
-                            resident = k;
-                            if k <= l {
-                                break;
-                            }
-                            k--;
-                        }
-                        if (empty_bits & (1u << c)) == 0u {
-                            all_empty = false;
-                            chosen[c] = resident;
-                            if missing != 0u && resident != NO_LEVEL {
-                                note_substituted(missing - 1u);
-                            }
-                        }
-                    }
-                }
-                if all_empty {
-                    action = 1u;
-                }
+                v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
             }
-            if action == 1u {
+            if v.action == ACTION_SKIP {
                 skipped++;
-                advance(&ray, dir, skip + nudge);
+                advance(&ray, dir, v.skip + nudge);
                 continue;
             }
-            if action == 2u {
-                // Homogeneous in every channel: integrate analytically over the node as
-                // seg/Δ steps of the per-step opacity.
-                let seg = min(node_exit(ray, last_depth, dir) + nudge, t_exit - ray.t);
-                var col = vec3<f32>(0.0);
-                var asum = 0.0;
-                for (var c = 0u; c < channels; c++) {
-                    if (empty_bits & (1u << c)) == 0u {
-                        let v = bitcast<f32>(node_word(node, c, 1u));
-                        let a = corrected(tf_opacity(c, v), desired_step);
-                        col += a * S.channels[c].color;
-                        asum += a;
-                    }
+            if v.action == ACTION_HOMOGENEOUS {
+                // Constant in every channel over the node: seg/Δ steps of the per-step
+                // opacity, in closed form.
+                let seg = min(node_exit(ray, v.depth, dir) + nudge, t_exit - ray.t);
+                var values: array<f32, MAX_CHANNELS>;
+                for (var c = 0u; c < P.channel_count; c++) {
+                    values[c] = bitcast<f32>(node_word(v.node, c, 1u));
                 }
+                let have = ~v.empty & ((1u << P.channel_count) - 1u);
                 homogeneous++;
                 samples++;
-                let alpha = min(asum, 1.0);
-                if alpha > 0.0 {
-                    let keep = pow(1.0 - alpha, seg / desired_step);
-                    color += trans * col / alpha * (1.0 - keep);
-                    trans *= keep;
-                }
+                composite(&color, &trans, mixture(have, values, desired_step), seg / desired_step);
                 advance(&ray, dir, seg + nudge);
                 continue;
             }
-            // Sample every non-empty channel at its level, substituting missing bricks. For a
-            // node no needed channel maps (action 3), this only requests the bricks.
-            var used = P.level_count - 1u;
-            var any_value = false;
-            var values: array<f32, 8>;
-            var have = 0u;
-            for (var c = 0u; c < channels; c++) {
-                if (empty_bits & (1u << c)) != 0u || chosen[c] == NO_LEVEL {
-                    continue;
-                }
-                var mask = 0u;
-                if METHOD == METHOD_RESIDENCY {
-                    if action == 3u && skipping {
-                        let lo = bitcast<f32>(node_word(node, c, 1u));
-                        let hi = bitcast<f32>(node_word(node, c, 2u));
-                        if lo == hi {
-                            continue; // homogeneous: known without its bricks
-                        }
-                    }
-                    if substitute && action == 0u {
-                        mask = node_word(node, c, 0u);
-                    }
-                }
-                let l = chosen[c];
-                var k = l;
-                // Coarse first: where nothing of this channel is resident (action 3), ask for
-                // its coarsest allowed level first. Once that stands in, rays gather opacity
-                // and stop early, so the finer bricks behind opaque matter are never
-                // requested. Where the coarsest level is clear (averaging can take thin bright
-                // structures below the TF), it says nothing of finer ones: then the wanted
-                // level is asked for. (One sample_level call site: on lavapipe every inlined
-                // copy costs every sample.)
-                var coarse_first = false;
-                if METHOD == METHOD_RESIDENCY && action == 3u && substitute {
-                    k = min(S.channels[c].max_level, P.level_count - 1u);
-                    coarse_first = k != l;
-                }
-                var s = Sampled(0.0, false, 0u, false);
-                var first_missing = 0u;
-                loop {
-                    s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, ray.t + t_plane);
-                    if coarse_first {
-                        coarse_first = false;
-                        if !s.clear {
-                            s.ok = false; // requested: nothing to sample in action 3
-                            break;
-                        }
-                        k = l;
-                        continue;
-                    }
-                    if s.ok {
-                        break;
-                    }
-                    if k == l {
-                        first_missing = s.missing;
-                    }
-                    k = next_candidate(mask, l, k);
-                    if k == NO_LEVEL {
-                        break;
-                    }
-                }
-                if s.ok {
-                    if k != l {
-                        note_substituted(first_missing - 1u);
-                    }
-                    if !s.clear {
-                        values[c] = s.value;
-                        have |= 1u << c;
-                    }
-                    used = min(used, k);
-                    any_value = true;
-                }
-            }
-            if action == 3u {
+            let s = sample_channels(ray, v, chosen, ray.t + t_plane, skipping, substitute);
+            if v.action == ACTION_REQUEST {
                 nodata++;
-                advance(&ray, dir, skip + nudge);
+                advance(&ray, dir, v.skip + nudge);
                 continue;
             }
-            let step = select(desired_step, P.step_fraction * level_voxel(used), any_value);
-            var col = vec3<f32>(0.0);
-            var asum = 0.0;
-            for (var c = 0u; c < channels; c++) {
-                if (have & (1u << c)) != 0u {
-                    let a = corrected(tf_opacity(c, values[c]), step);
-                    col += a * S.channels[c].color;
-                    asum += a;
-                }
-            }
-            if !any_value {
+            let step = select(desired_step, P.step_fraction * level_voxel(s.used), s.any_value);
+            if !s.any_value {
                 nodata++;
             }
             samples++;
-            color += trans * col;
-            trans *= 1.0 - min(asum, 1.0);
+            composite(&color, &trans, mixture(s.have, s.values, step), 1.0);
             advance(&ray, dir, step);
         }
         st.cell = ray.cell;
