@@ -66,32 +66,6 @@ struct Params {
     pad2: u32,
 }
 
-struct LevelEntry {
-    shift: vec3<i32>, // log2 of the downsampling factor relative to level 0
-    voxel_edge: f32, // smallest edge of a voxel of this level (world)
-    shape: vec3<i32>, // voxels
-    pad0: u32,
-    bricks: vec3<u32>, // bricks per axis
-    pad1: u32,
-}
-
-struct ChannelEntry {
-    color: vec3<f32>, // linear RGB
-    point_count: u32, // opacity control points
-    min_level: u32, // level bounds of the LOD choice
-    max_level: u32,
-    points_offset: u32, // (value, opacity) pairs in `tables`
-    prefix_offset: u32, // TF_BINS + 1 counts in `tables`
-    domain: vec2<f32>, // first and last control point, rounded outward to f32
-    opacity_below: f32,
-    opacity_above: f32,
-}
-
-struct SceneUniforms {
-    levels: array<LevelEntry, MAX_LEVELS>,
-    channels: array<ChannelEntry, MAX_CHANNELS>,
-}
-
 // A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan driver
 // ends every loop of an invocation after 65535 iterations in all, so long rays are marched a
 // bounded number of steps per pass and resumed from here.
@@ -147,10 +121,6 @@ struct Requests {
 
 // ---- tables ----
 
-fn tf32(i: u32) -> f32 {
-    return bitcast<f32>(tables[i]);
-}
-
 fn level_shift(l: u32) -> vec3<i32> {
     return S.levels[l].shift;
 }
@@ -176,29 +146,6 @@ fn page_offset(c: u32, l: u32) -> u32 {
 fn brick_range(pid: u32) -> vec2<f32> {
     let i = P.brick_ranges_offset + 2u * pid;
     return vec2<f32>(bitcast<f32>(nodes[i]), bitcast<f32>(nodes[i + 1u]));
-}
-
-// Opacity at the reference step (piecewise linear, end values held; NaN is transparent).
-fn tf_opacity(c: u32, v: f32) -> f32 {
-    let off = S.channels[c].points_offset;
-    let n = S.channels[c].point_count;
-    if n == 0u || v != v {
-        return 0.0;
-    }
-    if v <= tf32(off) {
-        return tf32(off + 1u);
-    }
-    for (var i = 1u; i < n; i++) {
-        let a = vec2<f32>(tf32(off + 2u * (i - 1u)), tf32(off + 2u * (i - 1u) + 1u));
-        let b = vec2<f32>(tf32(off + 2u * i), tf32(off + 2u * i + 1u));
-        if v <= b.x {
-            if b.x == a.x {
-                return b.y;
-            }
-            return a.y + (v - a.x) / (b.x - a.x) * (b.y - a.y);
-        }
-    }
-    return tf32(off + 2u * (n - 1u) + 1u);
 }
 
 // Whether channel c's opacity is zero over [lo, hi]: O(1) with the prefix count of bins of
@@ -481,13 +428,6 @@ fn choose_level(c: u32, t: f32) -> u32 {
         l++;
     }
     return min(l, lmax);
-}
-
-fn corrected(a: f32, step: f32) -> f32 {
-    if a >= 1.0 {
-        return 1.0;
-    }
-    return 1.0 - pow(1.0 - max(a, 0.0), step / P.reference_step);
 }
 
 // ---- ray state ----
@@ -776,46 +716,6 @@ fn sample_channels(
         }
     }
     return out;
-}
-
-// ---- compositing ----
-
-// One step's mixture of the channels: opacity-weighted colour and summed opacity.
-struct Mixture {
-    color: vec3<f32>,
-    alpha: f32,
-}
-
-// The mixture of the channels in `have` with `values`, each opacity corrected to `step`.
-// Channels mix additively (DESIGN.md: colours weighted by opacity, opacities summed).
-fn mixture(have: u32, values: array<f32, MAX_CHANNELS>, step: f32) -> Mixture {
-    var m = Mixture(vec3<f32>(0.0), 0.0);
-    for (var c = 0u; c < P.channel_count; c++) {
-        if (have & (1u << c)) != 0u {
-            let a = corrected(tf_opacity(c, values[c]), step);
-            m.color += a * S.channels[c].color;
-            m.alpha += a;
-        }
-    }
-    return m;
-}
-
-// Front-to-back emission–absorption of `steps` steps of mixture `m` (its opacity clamped to
-// 1): one step for a sample; seg/Δ steps for a homogeneous node, integrated in closed form.
-// The only place colour and transmittance change.
-fn composite(color: ptr<function, vec3<f32>>, trans: ptr<function, f32>, m: Mixture, steps: f32) {
-    let alpha = min(m.alpha, 1.0);
-    if alpha <= 0.0 {
-        return;
-    }
-    if steps == 1.0 {
-        *color += *trans * m.color;
-        *trans *= 1.0 - alpha;
-        return;
-    }
-    let keep = pow(1.0 - alpha, steps);
-    *color += *trans * m.color / alpha * (1.0 - keep);
-    *trans *= keep;
 }
 
 // ---- the ray ----

@@ -45,6 +45,7 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
     assert len(files) >= 5
     methods = set()
     sweeps = 0
+    probes = 0
     for f in files:
         r = json.loads(f.read_text())
         validator.validate(r)
@@ -63,10 +64,21 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
         for s in r["skipped"]:
             assert s["naive_bricks"] >= s["naive_fill_bricks"] and s["naive_bricks"] >= 1
             assert s["ours_bricks_fetched"] >= 1 and 0 < s["ours_ssim"] <= 1
+        if any(run["experiment"] == "table1" for run in r["runs"]):
+            # The limit probe ran beside Table 1, by hand and (lavapipe filters R32Float) by
+            # the texture unit, and its image matches the reference as the renderer's does.
+            assert r["probe_error"] is None, r["probe_error"]
+            assert [p["filter"] for p in r["probe"]] == ["manual", "hardware"], f.name
+            for p in r["probe"]:
+                assert p["samples"] > 0 and p["samples_per_s"] > 0, (f.name, p)
+                assert p["psnr_db"] is None or p["psnr_db"] >= 30, (f.name, p)
+            probes += 1
         if any(run["experiment"] == "sweep" for run in r["runs"]):
             sweeps += 1
             assert sum(run["is_default"] for run in r["runs"] if run["experiment"] == "sweep") == 1
     assert {"page-table", "octree", "residency", "residency (no skipping)"} <= methods
     assert sweeps >= 1
+    assert probes >= 1 and "### Ours against the limit probe" in report
+    assert "| Ours / manual |" in (out / "summary.md").read_text()
     # The report marks a non-empty Pareto front for every sweep.
     assert report.count("| on front |") >= sweeps

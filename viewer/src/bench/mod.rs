@@ -26,6 +26,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::defaults::CameraSpec;
 use crate::gpu::device::Gpu;
+use crate::gpu::probe::LimitProbe;
 use crate::gpu::renderer::{Method, RenderOptions, Renderer};
 use crate::gpu::streaming::{Budget, Fetcher, Progressive, converge};
 use crate::image::RgbImage;
@@ -345,6 +346,24 @@ pub struct SkippedRecord {
     pub bytes_ratio: Option<f64>,
 }
 
+/// The limit probe with one filter over the orbit (`gpu::probe`): the same rays and step as
+/// the renderer at level 0, through one resident texture, no traversal.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ProbeRecord {
+    /// `manual` (8 texel loads, as the renderer) or `hardware` (the texture unit filters).
+    pub filter: String,
+    /// Samples per frame (each of every drawn channel), mean over views.
+    pub samples: f64,
+    /// GPU ms per frame, mean over views of the median per view (`null`: no timestamps).
+    pub gpu_ms: Option<f64>,
+    /// Wall ms per frame (submit to readback), mean over views of the median per view.
+    pub wall_ms: f64,
+    /// `samples / time` per second, GPU time where there is one.
+    pub samples_per_s: f64,
+    /// PSNR of the probe's image against the reference, mean over views (`null`: identical).
+    pub psnr_db: Option<f64>,
+}
+
 /// A results file: one dataset, one device, any experiments.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct BenchResults {
@@ -364,6 +383,12 @@ pub struct BenchResults {
     pub runs: Vec<RunRecord>,
     /// Views of `skipped`.
     pub skipped: Vec<SkippedRecord>,
+    /// The limit probe, run with `table1`, one record per filter the device has.
+    #[serde(default)]
+    pub probe: Vec<ProbeRecord>,
+    /// Why the probe did not run with `table1` (say, a volume over one 3D texture), if so.
+    #[serde(default)]
+    pub probe_error: Option<String>,
 }
 
 /// An experiment of `viewer bench run`, named `table1`, `sweep`, `skipped` or `scaling` on the
@@ -916,6 +941,64 @@ impl Bench {
             .collect()
     }
 
+    /// The limit probe over the orbit, with every filter the device has: per view one frame
+    /// to warm up, then the timed frames.
+    pub fn probe(&self) -> Result<Vec<ProbeRecord>> {
+        let probe = LimitProbe::new(
+            &self.gpu,
+            self.source.as_ref(),
+            &self.scene,
+            self.base.width,
+            self.base.height,
+            self.base.step_factor,
+        )?;
+        let mut records = Vec::new();
+        for filter in probe.filters() {
+            self.bar
+                .set_message(format!("limit probe, {} filtering", filter.name()));
+            let mut samples = 0.0;
+            let mut gpu = Vec::new();
+            let mut wall = Vec::new();
+            let mut psnr = Vec::new();
+            for (k, (_, camera)) in self.cameras.iter().enumerate() {
+                let frame = probe.render(&self.gpu, camera, filter)?;
+                let o = &self.base;
+                let m = metrics::compare(
+                    &to_image(o.width, o.height, &frame.pixels),
+                    &self.references[k],
+                )
+                .with_context(|| format!("{}: probe of view {k}", self.info().name))?;
+                psnr.extend(finite_psnr(&m));
+                let mut g = Vec::new();
+                let mut w = Vec::new();
+                for _ in 0..self.plan.timed_frames {
+                    let t = Instant::now();
+                    let frame = probe.render(&self.gpu, camera, filter)?;
+                    w.push(t.elapsed().as_secs_f64() * 1e3);
+                    g.extend(frame.gpu_time_ms);
+                    samples += frame.samples as f64;
+                }
+                wall.push(median(&mut w));
+                if !g.is_empty() {
+                    gpu.push(median(&mut g));
+                }
+            }
+            let views = self.cameras.len() as f64;
+            let samples = samples / views / self.plan.timed_frames as f64;
+            let gpu_ms = (gpu.len() == self.cameras.len()).then(|| gpu.iter().sum::<f64>() / views);
+            let wall_ms = wall.iter().sum::<f64>() / views;
+            records.push(ProbeRecord {
+                filter: filter.name().to_string(),
+                samples,
+                gpu_ms,
+                wall_ms,
+                samples_per_s: samples / gpu_ms.unwrap_or(wall_ms) * 1e3,
+                psnr_db: (!psnr.is_empty()).then(|| psnr.iter().sum::<f64>() / psnr.len() as f64),
+            });
+        }
+        Ok(records)
+    }
+
     /// Runs every experiment of the plan and gathers the results.
     pub fn run_all(&self) -> Result<BenchResults> {
         let views = self.cameras.len() as u64;
@@ -938,10 +1021,21 @@ impl Bench {
         self.bar.set_length(total);
         let mut runs = Vec::new();
         let mut skipped = Vec::new();
+        let mut probe = Vec::new();
+        let mut probe_error = None;
         for e in &self.plan.experiments {
             let t = Instant::now();
             match e {
-                Experiment::Table1 => runs.extend(self.table1()?),
+                Experiment::Table1 => {
+                    runs.extend(self.table1()?);
+                    match self.probe() {
+                        Ok(p) => probe = p,
+                        Err(e) => {
+                            tracing::warn!("{}: no limit probe: {e:#}", self.info().name);
+                            probe_error = Some(format!("{e:#}"));
+                        }
+                    }
+                }
                 Experiment::Sweep => runs.extend(self.sweep()?),
                 Experiment::Skipped => skipped.extend(self.skipped()?),
                 Experiment::Scaling => runs.extend(self.scaling()?),
@@ -981,6 +1075,8 @@ impl Bench {
             experiments: self.plan.experiments.clone(),
             runs,
             skipped,
+            probe,
+            probe_error,
         })
     }
 }

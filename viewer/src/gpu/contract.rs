@@ -17,14 +17,21 @@ use super::renderer::Method;
 /// Most channels rendered at once (the shader keeps one value per channel in registers).
 pub const MAX_CHANNELS: usize = 8;
 
-/// Most pyramid levels a volume may have (the scene uniforms hold one entry per level).
-pub const MAX_LEVELS: usize = 32;
+/// Most pyramid levels a volume may have: the octree's 16-bit residency masks hold one bit
+/// per level, and the scene uniforms one entry.
+pub use crate::octree::MAX_LEVELS;
 
 /// Bins of each transfer function's prefix table.
 pub const TF_BINS: usize = 1024;
 
-/// The shader's source as written, without the prelude.
+/// What the shaders share: transfer functions, opacity correction, compositing.
+const TRANSFER: &str = include_str!("../../../shaders/transfer.wgsl");
+
+/// The ray caster as written.
 const RAYCAST_BODY: &str = include_str!("../../../shaders/raycast.wgsl");
+
+/// The limit probe as written.
+const PROBE_BODY: &str = include_str!("../../../shaders/probe.wgsl");
 
 /// Binding numbers of `raycast.wgsl`'s group 0.
 pub mod binding {
@@ -277,6 +284,48 @@ gpu_struct! {
     }
 }
 
+gpu_struct! {
+    /// The limit probe's uniforms (`shaders/probe.wgsl`), world units unless said.
+    pub struct ProbeParams {
+        /// Image width in pixels.
+        pub width: u32,
+        /// Image height in pixels.
+        pub height: u32,
+        /// Channels drawn.
+        pub channel_count: u32,
+        /// Depth (z voxels) of one channel's slab in the texture.
+        pub slab_depth: u32,
+        /// The eye.
+        pub eye: [f32; 3],
+        /// The reference step `Δ0` of the opacity correction.
+        pub reference_step: f32,
+        /// Camera right · tan(fov/2) · aspect.
+        pub right: [f32; 3],
+        /// The step, as the renderer's at level 0.
+        pub step: f32,
+        /// Camera up · tan(fov/2).
+        pub up: [f32; 3],
+        /// Unused (alignment).
+        pub pad0: u32,
+        /// Camera forward (unit).
+        pub forward: [f32; 3],
+        /// Unused (alignment).
+        pub pad1: u32,
+        /// Level-0 voxels per world unit, per axis.
+        pub world_to_voxel: [f32; 3],
+        /// Unused (alignment).
+        pub pad2: u32,
+        /// Level-0 extent in voxels.
+        pub volume: [f32; 3],
+        /// Unused (alignment).
+        pub pad3: u32,
+        /// Background colour, linear RGB.
+        pub background: [f32; 3],
+        /// Unused (alignment).
+        pub pad4: u32,
+    }
+}
+
 /// The constants the shader shares with Rust, as WGSL: page-table entries, limits, the
 /// method and atlas numbers of its pipeline constants.
 pub fn wgsl_prelude() -> String {
@@ -296,16 +345,38 @@ pub fn wgsl_prelude() -> String {
         u("ATLAS_FLOAT", AtlasKind::Float as u32),
         u("FLAG_SKIPPING", FLAG_SKIPPING),
         u("FLAG_SUBSTITUTION", FLAG_SUBSTITUTION),
+        u("FILTER_MANUAL", FILTER_MANUAL),
+        u("FILTER_HARDWARE", FILTER_HARDWARE),
     ]
     .concat()
 }
+
+/// The limit probe's pipeline constant `FILTER`: 8 texel loads and manual weights.
+pub const FILTER_MANUAL: u32 = 0;
+/// The limit probe's pipeline constant `FILTER`: one hardware-filtered sample.
+pub const FILTER_HARDWARE: u32 = 1;
 
 /// [`Params::flags`] bit: skip empty and homogeneous nodes.
 pub const FLAG_SKIPPING: u32 = 1;
 /// [`Params::flags`] bit: substitute missing bricks from other levels.
 pub const FLAG_SUBSTITUTION: u32 = 2;
 
-/// The shader as compiled: [`wgsl_prelude`], then `shaders/raycast.wgsl`.
+/// The ray caster as compiled: [`wgsl_prelude`], `shaders/transfer.wgsl`, then
+/// `shaders/raycast.wgsl`.
 pub fn raycast_source() -> String {
-    wgsl_prelude() + RAYCAST_BODY
+    [wgsl_prelude().as_str(), TRANSFER, RAYCAST_BODY].concat()
+}
+
+/// The limit probe as compiled: [`wgsl_prelude`], `shaders/transfer.wgsl`, then
+/// `shaders/probe.wgsl`.
+pub fn probe_source() -> String {
+    [wgsl_prelude().as_str(), TRANSFER, PROBE_BODY].concat()
+}
+
+/// The WGSL files of `shaders/` as compiled, by file name: every file is part of at least one.
+pub fn sources() -> [(&'static str, String); 2] {
+    [
+        ("raycast.wgsl", raycast_source()),
+        ("probe.wgsl", probe_source()),
+    ]
 }

@@ -43,7 +43,7 @@ const NO_ADAPTER: &str = "this browser offers no WebGPU adapter (use a current C
 impl Gpu {
     /// Opens the best adapter the environment offers (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` and
     /// the other `wgpu` environment variables apply) with the adapter's full limits and, when
-    /// supported, `TIMESTAMP_QUERY`.
+    /// supported, `TIMESTAMP_QUERY` and `FLOAT32_FILTERABLE`.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn new() -> Result<Self> {
         pollster::block_on(Self::open())
@@ -67,11 +67,10 @@ impl Gpu {
             .context(NO_ADAPTER)?;
         let adapter_info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
-        let required_features = if timestamps {
-            wgpu::Features::TIMESTAMP_QUERY
-        } else {
-            wgpu::Features::empty()
-        };
+        // Timestamps for frame statistics; filterable f32 textures for the limit probe's
+        // hardware-filtered path. Each only where the adapter has it.
+        let required_features = adapter.features()
+            & (wgpu::Features::TIMESTAMP_QUERY | wgpu::Features::FLOAT32_FILTERABLE);
         let limits = adapter.limits();
         let (device, queue) = adapter
             .request_device(&wgpu::DeviceDescriptor {

@@ -14,6 +14,8 @@
 //!   method, shared by every renderer on the device;
 //! - [`residency`]: the residency state of one volume (octree, page tables, cache), which
 //!   changes as bricks arrive and are evicted;
+//! - [`probe`] (native): the limit probe of `viewer bench`, the same rays through one resident
+//!   level-0 texture with no traversal, for the renderer's fraction of what sampling costs;
 //! - [`renderer`]: one volume and scene: pipeline, residency state, scene tables and the
 //!   per-frame buffers, with one frame's dispatch and readback (image, capped request list,
 //!   usage, statistics);
@@ -26,6 +28,8 @@ pub mod contract;
 pub mod device;
 pub mod page_table;
 pub mod pipeline;
+#[cfg(not(target_arch = "wasm32"))]
+pub mod probe;
 pub mod renderer;
 pub mod residency;
 pub mod streaming;

@@ -715,7 +715,10 @@ impl Renderer {
 
 /// Maps `buffers` for reading and waits until they are: natively by polling the device, in
 /// the browser by yielding to the event loop until WebGPU calls back.
-async fn map_for_reading(device: &wgpu::Device, buffers: &[&wgpu::Buffer]) -> Result<()> {
+pub(super) async fn map_for_reading(
+    device: &wgpu::Device,
+    buffers: &[&wgpu::Buffer],
+) -> Result<()> {
     let mut mapped = Vec::with_capacity(buffers.len());
     for b in buffers {
         let (tx, rx) = futures_channel::oneshot::channel();

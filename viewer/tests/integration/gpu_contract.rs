@@ -3,7 +3,8 @@
 //! shader binds no more buffers than WebGPU's default limits allow.
 
 use residency_viewer::gpu::contract::{
-    self, ChannelEntry, FrameCounters, GpuStruct, LevelEntry, Params, RayState, SceneUniforms,
+    self, ChannelEntry, FrameCounters, GpuStruct, LevelEntry, Params, ProbeParams, RayState,
+    SceneUniforms,
 };
 
 fn parse(source: &str) -> naga::Module {
@@ -84,6 +85,16 @@ fn all_disagreements(module: &naga::Module) -> Vec<String> {
 fn every_shared_struct_matches_its_wgsl_twin() {
     let module = parse(&contract::raycast_source());
     assert_eq!(all_disagreements(&module), Vec::<String>::new());
+    let probe = parse(&contract::probe_source());
+    assert_eq!(
+        [
+            disagreements::<ProbeParams>(&probe),
+            disagreements::<SceneUniforms>(&probe),
+            disagreements::<ChannelEntry>(&probe),
+        ]
+        .concat(),
+        Vec::<String>::new()
+    );
     // The uniform structs fit the default uniform binding size.
     let limit = wgpu::Limits::default().max_uniform_buffer_binding_size as usize;
     assert!(size_of::<Params>() + size_of::<SceneUniforms>() <= limit);
@@ -153,7 +164,7 @@ fn the_prelude_carries_the_rust_constants() {
     for line in [
         "const ENTRY_EMPTY: u32 = 1u;",
         "const ENTRY_CLEAR: u32 = 4294967295u;",
-        "const MAX_LEVELS: u32 = 32u;",
+        "const MAX_LEVELS: u32 = 16u;",
         "const MAX_CHANNELS: u32 = 8u;",
         "const TF_BINS: u32 = 1024u;",
         "const METHOD_RESIDENCY: u32 = 0u;",
@@ -161,6 +172,7 @@ fn the_prelude_carries_the_rust_constants() {
         "const METHOD_OCTREE: u32 = 2u;",
         "const ATLAS_FLOAT: u32 = 2u;",
         "const FLAG_SUBSTITUTION: u32 = 2u;",
+        "const FILTER_HARDWARE: u32 = 1u;",
     ] {
         assert!(
             prelude.lines().any(|l| l == line),

@@ -15,6 +15,7 @@ mod compare_cli;
 mod gpu_cache;
 mod gpu_contract;
 mod gpu_octree;
+mod gpu_probe;
 mod gpu_shaders;
 mod reference_cli;
 mod render_baselines;

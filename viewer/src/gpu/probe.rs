@@ -1,0 +1,505 @@
+//! The limit probe: what sampling alone costs on the device. `shaders/probe.wgsl` casts the
+//! same rays as the renderer, with its step at level 0, transfer functions, opacity
+//! correction and compositing, through one resident 3D texture holding level 0 of every drawn
+//! channel: no traversal, no page tables, no residency, no substitution. `viewer bench`
+//! reports the renderer's samples per second as a fraction of the probe's, with trilinear
+//! filtering done by hand (8 texel loads, as the renderer does) and, where the device can
+//! filter `R32Float` textures, by the texture unit.
+
+use anyhow::{Context, Result, ensure};
+
+use super::contract::{FILTER_HARDWARE, FILTER_MANUAL, ProbeParams, SceneUniforms, probe_source};
+use super::device::Gpu;
+use super::renderer::map_for_reading;
+use super::tables::{self, ChannelTable};
+use crate::octree::OctreeGeometry;
+use crate::scene::{Camera, ChannelStyle, Scene};
+use crate::source::{BrickKey, BrickSource, VolumeInfo};
+
+/// How the probe filters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProbeFilter {
+    /// 8 texel loads and trilinear weights in the shader (the renderer's way).
+    Manual,
+    /// One filtered sample by the texture unit.
+    Hardware,
+}
+
+impl ProbeFilter {
+    /// The name in results files.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Manual => "manual",
+            Self::Hardware => "hardware",
+        }
+    }
+}
+
+/// One probe frame, read back.
+#[derive(Clone, Debug)]
+pub struct ProbeFrame {
+    /// Linear RGBA per pixel, row-major from the top; alpha is `1 − T`.
+    pub pixels: Vec<[f32; 4]>,
+    /// Samples taken (each of every drawn channel).
+    pub samples: u64,
+    /// GPU time of the pass in ms, when timestamp queries are supported.
+    pub gpu_time_ms: Option<f64>,
+}
+
+struct ProbePipeline {
+    filter: ProbeFilter,
+    pipeline: wgpu::ComputePipeline,
+    bind_group: wgpu::BindGroup,
+}
+
+/// The probe of one volume and scene: the level-0 texture, the scene tables and a pipeline per
+/// filter the device supports.
+pub struct LimitProbe {
+    width: u32,
+    height: u32,
+    info: VolumeInfo,
+    scene: Scene,
+    step_fraction: f32,
+    params: wgpu::Buffer,
+    image: wgpu::Buffer,
+    counter: wgpu::Buffer,
+    image_readback: wgpu::Buffer,
+    counter_readback: wgpu::Buffer,
+    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+    pipelines: Vec<ProbePipeline>,
+}
+
+/// Level 0 of `channels` as one `f32` volume, the channels stacked along z (`x` fastest).
+fn level0_slabs(source: &dyn BrickSource, channels: &[usize]) -> Result<Vec<f32>> {
+    let info = source.info();
+    let [sz, sy, sx] = info.levels[0].shape.map(|s| s as usize);
+    let brick = info.brick_shape.map(|b| b as usize);
+    let mut out = vec![0.0f32; sx * sy * sz * channels.len()];
+    for (slab, &channel) in channels.iter().enumerate() {
+        let counts: [usize; 3] = std::array::from_fn(|a| [sz, sy, sx][a].div_ceil(brick[a]));
+        let keys: Vec<BrickKey> = (0..counts[0])
+            .flat_map(|z| (0..counts[1]).flat_map(move |y| (0..counts[2]).map(move |x| [z, y, x])))
+            .map(|b| BrickKey {
+                level: 0,
+                channel: channel as u32,
+                brick: b.map(|v| v as u64),
+            })
+            .collect();
+        for (key, voxels) in keys.iter().zip(source.fetch(&keys)) {
+            let voxels = voxels.with_context(|| format!("{}: the probe's level 0", info.name))?;
+            let (lo, hi) = info.brick_box(key, 0);
+            let [oz, oy, ox] = lo.map(|v| v as usize);
+            let [ez, ey, ex] = std::array::from_fn(|a| (hi[a] - lo[a]) as usize);
+            for z in 0..ez {
+                for y in 0..ey {
+                    let row = ((slab * sz + oz + z) * sy + oy + y) * sx + ox;
+                    for x in 0..ex {
+                        let index = (z * brick[1] + y) * brick[2] + x;
+                        out[row + x] = voxels.value(index) as f32;
+                    }
+                }
+            }
+        }
+    }
+    Ok(out)
+}
+
+impl LimitProbe {
+    /// Loads level 0 of `scene`'s visible channels from `source` into one texture and builds
+    /// the probe's pipelines for `width × height` pixels and the renderer's step
+    /// `step_fraction`. Errors where the volume does not fit one 3D texture of the device.
+    pub fn new(
+        gpu: &Gpu,
+        source: &dyn BrickSource,
+        scene: &Scene,
+        width: u32,
+        height: u32,
+        step_fraction: f32,
+    ) -> Result<Self> {
+        gpu.checked("setting up the limit probe", || {
+            Self::build(gpu, source, scene, width, height, step_fraction)
+        })
+    }
+
+    fn build(
+        gpu: &Gpu,
+        source: &dyn BrickSource,
+        scene: &Scene,
+        width: u32,
+        height: u32,
+        step_fraction: f32,
+    ) -> Result<Self> {
+        let info = source.info().clone();
+        let device = &gpu.device;
+        let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
+        ensure!(
+            !visible.is_empty() && visible.len() <= super::contract::MAX_CHANNELS,
+            "the limit probe draws 1 to {} channels, not {}",
+            super::contract::MAX_CHANNELS,
+            visible.len()
+        );
+        let [sz, sy, sx] = info.levels[0].shape.map(|s| s as u32);
+        let depth = sz * visible.len() as u32;
+        let max = gpu.limits.max_texture_dimension_3d;
+        ensure!(
+            sx <= max && sy <= max && depth <= max,
+            "{}: the limit probe needs one 3D texture of {sx}×{sy}×{depth} voxels (level 0 of \
+             {} channels stacked in z), over the device's limit of {max} per axis",
+            info.name,
+            visible.len()
+        );
+        let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
+        let voxels = level0_slabs(source, &channels)?;
+        let size = wgpu::Extent3d {
+            width: sx,
+            height: sy,
+            depth_or_array_layers: depth,
+        };
+        let texture = device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("probe level 0"),
+            size,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::R32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        gpu.queue.write_texture(
+            texture.as_image_copy(),
+            bytemuck::cast_slice(&voxels),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(sx * 4),
+                rows_per_image: Some(sy),
+            },
+            size,
+        );
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+
+        let geometry = OctreeGeometry::new(&info, 0)?;
+        let channel_tables: Vec<ChannelTable<'_>> = visible
+            .iter()
+            .map(|style| ChannelTable {
+                style,
+                min_level: 0,
+                max_level: 0,
+            })
+            .collect();
+        let spacing = [info.voxel_size[2], info.voxel_size[1], info.voxel_size[0]];
+        let t = tables::build(&geometry, spacing, &[], &channel_tables);
+        let buffer = |label, size: u64, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size.max(16),
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        use wgpu::BufferUsages as U;
+        let table_buf = buffer(
+            "probe tables",
+            t.words.len() as u64 * 4,
+            U::STORAGE | U::COPY_DST,
+        );
+        gpu.queue
+            .write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
+        let scene_buf = buffer(
+            "probe scene",
+            size_of::<SceneUniforms>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        gpu.queue
+            .write_buffer(&scene_buf, 0, bytemuck::bytes_of(&t.uniforms));
+        let params = buffer(
+            "probe params",
+            size_of::<ProbeParams>() as u64,
+            U::UNIFORM | U::COPY_DST,
+        );
+        let pixels = u64::from(width) * u64::from(height);
+        let image = buffer("probe image", pixels * 16, U::STORAGE | U::COPY_SRC);
+        let counter = buffer("probe samples", 4, U::STORAGE | U::COPY_SRC | U::COPY_DST);
+        let image_readback = buffer(
+            "probe image readback",
+            pixels * 16,
+            U::MAP_READ | U::COPY_DST,
+        );
+        let counter_readback = buffer("probe samples readback", 4, U::MAP_READ | U::COPY_DST);
+        let timestamps = gpu.timestamps.then(|| {
+            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("probe time"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            });
+            (
+                set,
+                buffer("probe timestamps", 16, U::QUERY_RESOLVE | U::COPY_SRC),
+                buffer("probe timestamps readback", 16, U::MAP_READ | U::COPY_DST),
+            )
+        });
+
+        let hardware = device
+            .features()
+            .contains(wgpu::Features::FLOAT32_FILTERABLE);
+        let filters: &[ProbeFilter] = if hardware {
+            &[ProbeFilter::Manual, ProbeFilter::Hardware]
+        } else {
+            &[ProbeFilter::Manual]
+        };
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("probe.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(probe_source().into()),
+        });
+        let pipelines = filters
+            .iter()
+            .map(|&filter| {
+                let filtering = filter == ProbeFilter::Hardware;
+                let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
+                    binding,
+                    visibility: wgpu::ShaderStages::COMPUTE,
+                    ty,
+                    count: None,
+                };
+                let buffer_entry = |binding, ty| {
+                    entry(
+                        binding,
+                        wgpu::BindingType::Buffer {
+                            ty,
+                            has_dynamic_offset: false,
+                            min_binding_size: None,
+                        },
+                    )
+                };
+                let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
+                let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                    label: Some("probe"),
+                    entries: &[
+                        buffer_entry(0, wgpu::BufferBindingType::Uniform),
+                        buffer_entry(1, storage(true)),
+                        buffer_entry(2, wgpu::BufferBindingType::Uniform),
+                        entry(
+                            3,
+                            wgpu::BindingType::Texture {
+                                sample_type: wgpu::TextureSampleType::Float {
+                                    filterable: filtering,
+                                },
+                                view_dimension: wgpu::TextureViewDimension::D3,
+                                multisampled: false,
+                            },
+                        ),
+                        entry(
+                            4,
+                            wgpu::BindingType::Sampler(if filtering {
+                                wgpu::SamplerBindingType::Filtering
+                            } else {
+                                wgpu::SamplerBindingType::NonFiltering
+                            }),
+                        ),
+                        buffer_entry(5, storage(false)),
+                        buffer_entry(6, storage(false)),
+                    ],
+                });
+                let filter_mode = if filtering {
+                    wgpu::FilterMode::Linear
+                } else {
+                    wgpu::FilterMode::Nearest
+                };
+                let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+                    label: Some("probe"),
+                    mag_filter: filter_mode,
+                    min_filter: filter_mode,
+                    ..Default::default()
+                });
+                let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("probe"),
+                    layout: &layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: params.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: table_buf.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: scene_buf.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::TextureView(&view),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 4,
+                            resource: wgpu::BindingResource::Sampler(&sampler),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 5,
+                            resource: image.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 6,
+                            resource: counter.as_entire_binding(),
+                        },
+                    ],
+                });
+                let pipeline_layout =
+                    device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                        label: Some("probe"),
+                        bind_group_layouts: &[Some(&layout)],
+                        immediate_size: 0,
+                    });
+                let constant = if filtering {
+                    FILTER_HARDWARE
+                } else {
+                    FILTER_MANUAL
+                };
+                let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("probe"),
+                    layout: Some(&pipeline_layout),
+                    module: &module,
+                    entry_point: Some("main"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants: &[("FILTER", f64::from(constant))],
+                        ..Default::default()
+                    },
+                    cache: None,
+                });
+                ProbePipeline {
+                    filter,
+                    pipeline,
+                    bind_group,
+                }
+            })
+            .collect();
+        Ok(Self {
+            width,
+            height,
+            info,
+            scene: scene.clone(),
+            step_fraction,
+            params,
+            image,
+            counter,
+            image_readback,
+            counter_readback,
+            timestamps,
+            pipelines,
+        })
+    }
+
+    /// The filters this device runs the probe with (manual always; hardware where `R32Float`
+    /// is filterable).
+    pub fn filters(&self) -> Vec<ProbeFilter> {
+        self.pipelines.iter().map(|p| p.filter).collect()
+    }
+
+    fn params(&self, camera: &Camera) -> ProbeParams {
+        let spacing = [
+            self.info.voxel_size[2],
+            self.info.voxel_size[1],
+            self.info.voxel_size[0],
+        ];
+        let shape = self.info.levels[0].shape;
+        let (forward, right, up) = camera.basis();
+        let tan_half = (camera.fov_y_degrees.to_radians() / 2.0).tan();
+        let aspect = f64::from(self.width) / f64::from(self.height);
+        let f3 = |v: [f64; 3]| v.map(|x| x as f32);
+        let min_edge = spacing.iter().copied().fold(f64::INFINITY, f64::min);
+        ProbeParams {
+            width: self.width,
+            height: self.height,
+            channel_count: self.scene.channels.iter().filter(|c| c.visible).count() as u32,
+            slab_depth: shape[0] as u32,
+            eye: f3(camera.eye),
+            reference_step: min_edge as f32,
+            right: f3(right.map(|x| x * tan_half * aspect)),
+            step: (f64::from(self.step_fraction) * min_edge) as f32,
+            up: f3(up.map(|x| x * tan_half)),
+            forward: f3(forward),
+            world_to_voxel: f3(spacing.map(|s| 1.0 / s)),
+            volume: [shape[2] as f32, shape[1] as f32, shape[0] as f32],
+            background: f3(self.scene.background),
+            ..ProbeParams::default()
+        }
+    }
+
+    /// Renders one frame from `camera` with `filter` and reads back its image, sample count
+    /// and GPU time.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn render(&self, gpu: &Gpu, camera: &Camera, filter: ProbeFilter) -> Result<ProbeFrame> {
+        pollster::block_on(gpu.checked_async("a limit-probe frame", async {
+            self.render_frame(gpu, camera, filter).await
+        }))
+    }
+
+    async fn render_frame(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        filter: ProbeFilter,
+    ) -> Result<ProbeFrame> {
+        let p = self
+            .pipelines
+            .iter()
+            .find(|p| p.filter == filter)
+            .with_context(|| format!("this device has no {} probe", filter.name()))?;
+        gpu.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params(camera)));
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("probe frame"),
+            });
+        encoder.clear_buffer(&self.counter, 0, None);
+        {
+            let timestamp_writes =
+                self.timestamps
+                    .as_ref()
+                    .map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
+                        query_set: set,
+                        beginning_of_pass_write_index: Some(0),
+                        end_of_pass_write_index: Some(1),
+                    });
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("probe"),
+                timestamp_writes,
+            });
+            pass.set_pipeline(&p.pipeline);
+            pass.set_bind_group(0, &p.bind_group, &[]);
+            pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+        }
+        let image_bytes = u64::from(self.width) * u64::from(self.height) * 16;
+        encoder.copy_buffer_to_buffer(&self.image, 0, &self.image_readback, 0, image_bytes);
+        encoder.copy_buffer_to_buffer(&self.counter, 0, &self.counter_readback, 0, 4);
+        let mut maps = vec![&self.image_readback, &self.counter_readback];
+        if let Some((set, resolve, staging)) = &self.timestamps {
+            encoder.resolve_query_set(set, 0..2, resolve, 0);
+            encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
+            maps.push(staging);
+        }
+        gpu.queue.submit([encoder.finish()]);
+        map_for_reading(&gpu.device, &maps).await?;
+        let pixels: Vec<[f32; 4]> =
+            bytemuck::cast_slice(&self.image_readback.get_mapped_range(0..image_bytes)?).to_vec();
+        let samples =
+            bytemuck::pod_read_unaligned::<u32>(&self.counter_readback.get_mapped_range(..4)?);
+        let gpu_time_ms = match &self.timestamps {
+            Some((_, _, staging)) => {
+                let t: Vec<u64> = bytemuck::cast_slice(&staging.get_mapped_range(..)?).to_vec();
+                let period = f64::from(gpu.queue.get_timestamp_period());
+                Some(t[1].saturating_sub(t[0]) as f64 * period / 1e6)
+            }
+            None => None,
+        };
+        for b in maps {
+            b.unmap();
+        }
+        Ok(ProbeFrame {
+            pixels,
+            samples: u64::from(samples),
+            gpu_time_ms,
+        })
+    }
+}
