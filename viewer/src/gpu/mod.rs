@@ -21,6 +21,7 @@
 //!   usage, statistics);
 //! - [`streaming`]: worker threads fetching bricks, and the progressive loop
 //!   render → read requests → fetch → upload → insert into the octree → repeat;
+//! - [`timer`]: GPU time of compute passes from timestamp queries;
 //! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
 
 pub mod brick_cache;
@@ -36,3 +37,4 @@ pub mod streaming;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod synthetic;
 pub mod tables;
+pub mod timer;

@@ -12,6 +12,7 @@ use super::contract::{FILTER_HARDWARE, FILTER_MANUAL, ProbeParams, SceneUniforms
 use super::device::Gpu;
 use super::renderer::map_for_reading;
 use super::tables::{self, ChannelTable};
+use super::timer::PassTimer;
 use crate::octree::OctreeGeometry;
 use crate::scene::{Camera, ChannelStyle, Scene};
 use crate::source::{BrickKey, BrickSource, VolumeInfo};
@@ -65,7 +66,7 @@ pub struct LimitProbe {
     counter: wgpu::Buffer,
     image_readback: wgpu::Buffer,
     counter_readback: wgpu::Buffer,
-    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+    timer: Option<PassTimer>,
     pipelines: Vec<ProbePipeline>,
 }
 
@@ -225,18 +226,6 @@ impl LimitProbe {
             U::MAP_READ | U::COPY_DST,
         );
         let counter_readback = buffer("probe samples readback", 4, U::MAP_READ | U::COPY_DST);
-        let timestamps = gpu.timestamps.then(|| {
-            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("probe time"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2,
-            });
-            (
-                set,
-                buffer("probe timestamps", 16, U::QUERY_RESOLVE | U::COPY_SRC),
-                buffer("probe timestamps readback", 16, U::MAP_READ | U::COPY_DST),
-            )
-        });
 
         let hardware = device
             .features()
@@ -384,7 +373,7 @@ impl LimitProbe {
             counter,
             image_readback,
             counter_readback,
-            timestamps,
+            timer: PassTimer::new(gpu, "probe"),
             pipelines,
         })
     }
@@ -454,14 +443,7 @@ impl LimitProbe {
             });
         encoder.clear_buffer(&self.counter, 0, None);
         {
-            let timestamp_writes =
-                self.timestamps
-                    .as_ref()
-                    .map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
-                        query_set: set,
-                        beginning_of_pass_write_index: Some(0),
-                        end_of_pass_write_index: Some(1),
-                    });
+            let timestamp_writes = self.timer.as_ref().map(|t| t.writes(true));
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("probe"),
                 timestamp_writes,
@@ -474,10 +456,9 @@ impl LimitProbe {
         encoder.copy_buffer_to_buffer(&self.image, 0, &self.image_readback, 0, image_bytes);
         encoder.copy_buffer_to_buffer(&self.counter, 0, &self.counter_readback, 0, 4);
         let mut maps = vec![&self.image_readback, &self.counter_readback];
-        if let Some((set, resolve, staging)) = &self.timestamps {
-            encoder.resolve_query_set(set, 0..2, resolve, 0);
-            encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
-            maps.push(staging);
+        if let Some(timer) = &self.timer {
+            timer.resolve(&mut encoder);
+            maps.push(timer.staging());
         }
         gpu.queue.submit([encoder.finish()]);
         map_for_reading(&gpu.device, &maps).await?;
@@ -485,14 +466,7 @@ impl LimitProbe {
             bytemuck::cast_slice(&self.image_readback.get_mapped_range(0..image_bytes)?).to_vec();
         let samples =
             bytemuck::pod_read_unaligned::<u32>(&self.counter_readback.get_mapped_range(..4)?);
-        let gpu_time_ms = match &self.timestamps {
-            Some((_, _, staging)) => {
-                let t: Vec<u64> = bytemuck::cast_slice(&staging.get_mapped_range(..)?).to_vec();
-                let period = f64::from(gpu.queue.get_timestamp_period());
-                Some(t[1].saturating_sub(t[0]) as f64 * period / 1e6)
-            }
-            None => None,
-        };
+        let gpu_time_ms = self.timer.as_ref().map(|t| t.read_ms(gpu)).transpose()?;
         for b in maps {
             b.unmap();
         }

@@ -15,6 +15,7 @@ use super::pipeline::{Bindings, RaycastPipeline};
 pub use super::residency::is_clear;
 use super::residency::{ResidencyState, check_binding, storage_buffer};
 use super::tables::SceneTables;
+use super::timer::PassTimer;
 use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
@@ -195,7 +196,7 @@ struct Readback {
     requests: wgpu::Buffer,
     usage: wgpu::Buffer,
     image: wgpu::Buffer,
-    timestamps: Option<(wgpu::QuerySet, wgpu::Buffer, wgpu::Buffer)>,
+    timer: Option<PassTimer>,
 }
 
 /// The per-frame data: the uniforms, the image, the request list, the suspended rays' states
@@ -244,25 +245,11 @@ impl FrameBuffers {
                 mapped_at_creation: false,
             })
         };
-        let timestamps = gpu.timestamps.then(|| {
-            let set = device.create_query_set(&wgpu::QuerySetDescriptor {
-                label: Some("raycast time"),
-                ty: wgpu::QueryType::Timestamp,
-                count: 2,
-            });
-            let resolve = device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("timestamps"),
-                size: 16,
-                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
-                mapped_at_creation: false,
-            });
-            (set, resolve, staging("timestamps readback", 16))
-        });
         let readback = Readback {
             requests: staging("requests readback", request_bytes),
             usage: staging("usage readback", u64::from(cache_slots) * 4),
             image: staging("image readback", pixels * 16),
-            timestamps,
+            timer: PassTimer::new(gpu, "raycast"),
         };
         Ok(Self {
             params,
@@ -581,8 +568,8 @@ impl Renderer {
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
         let rb = &buffers.readback;
         let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage, &rb.image];
-        if let Some((_, _, staging)) = &rb.timestamps {
-            maps.push(staging);
+        if let Some(timer) = &rb.timer {
+            maps.push(timer.staging());
         }
         // Passes until no ray is suspended: one round is a few passes plus the readback, whose
         // header says how many rays the last pass suspended.
@@ -595,14 +582,7 @@ impl Renderer {
                     std::mem::offset_of!(FrameCounters, rays_suspended) as u64,
                     Some(4),
                 );
-                let timestamp_writes =
-                    rb.timestamps
-                        .as_ref()
-                        .map(|(set, _, _)| wgpu::ComputePassTimestampWrites {
-                            query_set: set,
-                            beginning_of_pass_write_index: (passes == 0).then_some(0),
-                            end_of_pass_write_index: Some(1),
-                        });
+                let timestamp_writes = rb.timer.as_ref().map(|t| t.writes(passes == 0));
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("raycast"),
                     timestamp_writes,
@@ -632,9 +612,8 @@ impl Renderer {
                 u64::from(self.residency.cache().capacity()) * 4,
             );
             encoder.copy_buffer_to_buffer(&buffers.image, 0, &rb.image, 0, image_bytes);
-            if let Some((set, resolve, staging)) = &rb.timestamps {
-                encoder.resolve_query_set(set, 0..2, resolve, 0);
-                encoder.copy_buffer_to_buffer(resolve, 0, staging, 0, 16);
+            if let Some(timer) = &rb.timer {
+                timer.resolve(&mut encoder);
             }
             gpu.queue.submit([encoder.finish()]);
             map_for_reading(device, &maps).await?;
@@ -663,14 +642,7 @@ impl Renderer {
         let usage: Vec<u32> = bytemuck::cast_slice(&rb.usage.get_mapped_range(..)?).to_vec();
         let pixels: Vec<[f32; 4]> =
             bytemuck::cast_slice(&rb.image.get_mapped_range(0..image_bytes)?).to_vec();
-        let gpu_time_ms = match &rb.timestamps {
-            Some((_, _, staging)) => {
-                let t: Vec<u64> = bytemuck::cast_slice(&staging.get_mapped_range(..)?).to_vec();
-                let period = gpu.queue.get_timestamp_period() as f64;
-                Some(t[1].saturating_sub(t[0]) as f64 * period / 1e6)
-            }
-            None => None,
-        };
+        let gpu_time_ms = rb.timer.as_ref().map(|t| t.read_ms(gpu)).transpose()?;
         for b in maps {
             b.unmap();
         }
