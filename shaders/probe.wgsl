@@ -36,7 +36,8 @@ struct ProbeParams {
 @group(0) @binding(3) var level0: texture_3d<f32>;
 @group(0) @binding(4) var volume_sampler: sampler;
 @group(0) @binding(5) var<storage, read_write> out_color: array<vec4<f32>>;
-@group(0) @binding(6) var<storage, read_write> sample_count: atomic<u32>;
+// Samples per image row (a frame's total can pass 2^32 at 1080p; a row's cannot).
+@group(0) @binding(6) var<storage, read_write> row_samples: array<atomic<u32>>;
 
 // Trilinear sample of channel c at voxel coordinates p (voxel centres at i + ½), clamped to
 // the edge voxels as raycast.wgsl and the reference do.
@@ -101,5 +102,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         t += P.step;
     }
     out_color[gid.y * P.width + gid.x] = vec4<f32>(color + trans * P.background, 1.0 - trans);
-    atomicAdd(&sample_count, samples);
+    atomicAdd(&row_samples[gid.y], samples);
 }

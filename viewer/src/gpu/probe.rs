@@ -219,13 +219,19 @@ impl LimitProbe {
         );
         let pixels = u64::from(width) * u64::from(height);
         let image = buffer("probe image", pixels * 16, U::STORAGE | U::COPY_SRC);
-        let counter = buffer("probe samples", 4, U::STORAGE | U::COPY_SRC | U::COPY_DST);
+        // Samples per image row, summed in u64 on the CPU.
+        let rows = u64::from(height) * 4;
+        let counter = buffer(
+            "probe samples",
+            rows,
+            U::STORAGE | U::COPY_SRC | U::COPY_DST,
+        );
         let image_readback = buffer(
             "probe image readback",
             pixels * 16,
             U::MAP_READ | U::COPY_DST,
         );
-        let counter_readback = buffer("probe samples readback", 4, U::MAP_READ | U::COPY_DST);
+        let counter_readback = buffer("probe samples readback", rows, U::MAP_READ | U::COPY_DST);
 
         let hardware = device
             .features()
@@ -454,7 +460,8 @@ impl LimitProbe {
         }
         let image_bytes = u64::from(self.width) * u64::from(self.height) * 16;
         encoder.copy_buffer_to_buffer(&self.image, 0, &self.image_readback, 0, image_bytes);
-        encoder.copy_buffer_to_buffer(&self.counter, 0, &self.counter_readback, 0, 4);
+        let rows = u64::from(self.height) * 4;
+        encoder.copy_buffer_to_buffer(&self.counter, 0, &self.counter_readback, 0, rows);
         let mut maps = vec![&self.image_readback, &self.counter_readback];
         if let Some(timer) = &self.timer {
             timer.resolve(&mut encoder);
@@ -464,15 +471,18 @@ impl LimitProbe {
         map_for_reading(&gpu.device, &maps).await?;
         let pixels: Vec<[f32; 4]> =
             bytemuck::cast_slice(&self.image_readback.get_mapped_range(0..image_bytes)?).to_vec();
-        let samples =
-            bytemuck::pod_read_unaligned::<u32>(&self.counter_readback.get_mapped_range(..4)?);
+        let samples: u64 =
+            bytemuck::cast_slice::<u8, u32>(&self.counter_readback.get_mapped_range(..rows)?)
+                .iter()
+                .map(|&n| u64::from(n))
+                .sum();
         let gpu_time_ms = self.timer.as_ref().map(|t| t.read_ms(gpu)).transpose()?;
         for b in maps {
             b.unmap();
         }
         Ok(ProbeFrame {
             pixels,
-            samples: u64::from(samples),
+            samples,
             gpu_time_ms,
         })
     }
