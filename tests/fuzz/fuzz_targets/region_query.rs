@@ -6,7 +6,8 @@
 //!   by `parse_xyz` and checked and answered by `RegionIndex::query` in `regions.rs`);
 //! - `/d/minmax?...`: the min/max hierarchy's `channel`;
 //! - `/d/bricks?...`: the batch query (`parse_batch`, `bricks.rs`), then the batch read;
-//! - `/d/KEY` with an optional `Range` header: store key resolution and range parsing.
+//! - `/d/KEY` with an optional `Range` header: store key resolution and range parsing (and,
+//!   for `KEY` = `view`, the web viewer's page).
 //!
 //! Any URI that `http` accepts is sent. The server must never answer 5xx for a store it reads
 //! well, and what it answers 200 must be well-formed: a region answer covers the box asked
@@ -52,7 +53,20 @@ fn server() -> &'static Server {
         options.brick = [8, 8, 8];
         convert(&options).expect("ingest converts the fuzz store");
         let datasets = Datasets::from_args(&[store], &[]).expect("the store is a dataset");
-        let server_options = ServerOptions::default();
+        // A built web viewer, as `scripts/build-web.sh` leaves one: `/d/view` and `/viewer/...`
+        // then answer as they do for users (without one they answer 503 by design, saying how
+        // to build it; brickserver's own tests check that).
+        let viewer = dir.join("web");
+        std::fs::create_dir_all(&viewer).unwrap();
+        std::fs::write(
+            viewer.join("index.html"),
+            "<!doctype html><link rel=\"stylesheet\" href=\"%VIEWER_BASE%style.css\">",
+        )
+        .unwrap();
+        let server_options = ServerOptions {
+            viewer_dir: Some(viewer),
+            ..ServerOptions::default()
+        };
         let state = AppState::new(datasets, &server_options).expect("the server state");
         let router = router(std::sync::Arc::new(state), &server_options);
         let runtime = tokio::runtime::Builder::new_current_thread()
