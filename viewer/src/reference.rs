@@ -194,7 +194,7 @@ pub fn render(
             cache: RwLock::new(HashMap::new()),
         })
         .collect();
-    let spacing_xyz = [info.voxel_size[2], info.voxel_size[1], info.voxel_size[0]];
+    let spacing_xyz = info.spacing_xyz();
     let reference_step = spacing_xyz.iter().copied().fold(f64::INFINITY, f64::min);
     let step = options.step_fraction * reference_step;
     let extent = extent_xyz(info);

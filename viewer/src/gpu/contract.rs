@@ -380,3 +380,21 @@ pub fn sources() -> [(&'static str, String); 2] {
         ("probe.wgsl", probe_source()),
     ]
 }
+
+/// Binding numbers of `probe.wgsl`'s group 0.
+pub mod probe_binding {
+    /// [`super::ProbeParams`], uniform.
+    pub const PARAMS: u32 = 0;
+    /// Control points and prefix tables of the transfer functions.
+    pub const TABLES: u32 = 1;
+    /// [`super::SceneUniforms`], uniform.
+    pub const SCENE: u32 = 2;
+    /// Level 0 of every drawn channel, stacked in z.
+    pub const LEVEL0: u32 = 3;
+    /// The sampler of the hardware-filtered path.
+    pub const SAMPLER: u32 = 4;
+    /// The image, linear RGBA `f32` per pixel.
+    pub const IMAGE: u32 = 5;
+    /// Samples per image row.
+    pub const ROW_SAMPLES: u32 = 6;
+}

@@ -1,5 +1,7 @@
 //! The GPU side of the renderer, one concept per module:
 //!
+//! - [`buffers`]: storage, uniform and readback buffers made one way, and the storage-binding
+//!   limit check;
 //! - [`contract`]: every struct and constant the renderer shares with `raycast.wgsl`, written
 //!   once (`#[repr(C)]` types with WGSL twins checked against naga's layout; a generated WGSL
 //!   prelude of constants; the binding numbers);
@@ -25,6 +27,7 @@
 //! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
 
 pub mod brick_cache;
+pub mod buffers;
 pub mod contract;
 pub mod device;
 pub mod page_table;

@@ -11,6 +11,68 @@ use super::contract::{binding, raycast_source};
 use super::device::Gpu;
 use super::renderer::Method;
 
+/// A compute-stage layout entry of binding `binding`.
+pub(super) fn compute_layout(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::COMPUTE,
+        ty,
+        count: None,
+    }
+}
+
+fn buffer_layout(binding: u32, ty: wgpu::BufferBindingType) -> wgpu::BindGroupLayoutEntry {
+    compute_layout(
+        binding,
+        wgpu::BindingType::Buffer {
+            ty,
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+    )
+}
+
+/// A uniform buffer's layout entry.
+pub(super) fn uniform_layout(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    buffer_layout(binding, wgpu::BufferBindingType::Uniform)
+}
+
+/// A storage buffer's layout entry.
+pub(super) fn storage_layout(binding: u32, read_only: bool) -> wgpu::BindGroupLayoutEntry {
+    buffer_layout(binding, wgpu::BufferBindingType::Storage { read_only })
+}
+
+/// A 3D texture's layout entry.
+pub(super) fn texture_3d_layout(
+    binding: u32,
+    sample_type: wgpu::TextureSampleType,
+) -> wgpu::BindGroupLayoutEntry {
+    compute_layout(
+        binding,
+        wgpu::BindingType::Texture {
+            sample_type,
+            view_dimension: wgpu::TextureViewDimension::D3,
+            multisampled: false,
+        },
+    )
+}
+
+/// A whole buffer bound at `binding`.
+pub(super) fn buffer_entry(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: buffer.as_entire_binding(),
+    }
+}
+
+/// A texture view bound at `binding`.
+pub(super) fn view_entry(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
+    wgpu::BindGroupEntry {
+        binding,
+        resource: wgpu::BindingResource::TextureView(view),
+    }
+}
+
 /// The buffers and atlas views one renderer binds to the pipeline.
 pub struct Bindings<'a> {
     /// The per-frame uniforms.
@@ -53,61 +115,25 @@ impl RaycastPipeline {
             label: Some("raycast.wgsl"),
             source: wgpu::ShaderSource::Wgsl(raycast_source().into()),
         });
-        let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty,
-            count: None,
-        };
-        let storage = |binding, read_only| {
-            entry(
-                binding,
-                wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Storage { read_only },
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-            )
-        };
-        let atlas = |binding, sample_type| {
-            entry(
-                binding,
-                wgpu::BindingType::Texture {
-                    sample_type,
-                    view_dimension: wgpu::TextureViewDimension::D3,
-                    multisampled: false,
-                },
-            )
-        };
-        let uniform = |binding| {
-            entry(
-                binding,
-                wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-            )
-        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("raycast"),
             entries: &[
-                uniform(binding::PARAMS),
-                uniform(binding::SCENE),
-                storage(binding::NODES, true),
-                storage(binding::TABLES, true),
-                storage(binding::PAGES, true),
-                storage(binding::PAGE_FLAGS, false),
-                storage(binding::REQUESTS, false),
-                storage(binding::USAGE, false),
-                storage(binding::IMAGE, false),
-                atlas(binding::ATLAS_UINT, wgpu::TextureSampleType::Uint),
-                atlas(binding::ATLAS_SINT, wgpu::TextureSampleType::Sint),
-                atlas(
+                uniform_layout(binding::PARAMS),
+                uniform_layout(binding::SCENE),
+                storage_layout(binding::NODES, true),
+                storage_layout(binding::TABLES, true),
+                storage_layout(binding::PAGES, true),
+                storage_layout(binding::PAGE_FLAGS, false),
+                storage_layout(binding::REQUESTS, false),
+                storage_layout(binding::USAGE, false),
+                storage_layout(binding::IMAGE, false),
+                texture_3d_layout(binding::ATLAS_UINT, wgpu::TextureSampleType::Uint),
+                texture_3d_layout(binding::ATLAS_SINT, wgpu::TextureSampleType::Sint),
+                texture_3d_layout(
                     binding::ATLAS_FLOAT,
                     wgpu::TextureSampleType::Float { filterable: false },
                 ),
-                storage(binding::RAYS, false),
+                storage_layout(binding::RAYS, false),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -147,47 +173,25 @@ impl RaycastPipeline {
         &self.pipeline
     }
 
-    /// The atlas format it reads.
-    pub fn kind(&self) -> AtlasKind {
-        self.kind
-    }
-
-    /// The method it runs.
-    pub fn method(&self) -> Method {
-        self.method
-    }
-
     /// Binds one renderer's buffers and atlas.
     pub fn bind_group(&self, device: &wgpu::Device, b: &Bindings<'_>) -> wgpu::BindGroup {
-        fn buffer(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding,
-                resource: buffer.as_entire_binding(),
-            }
-        }
-        fn view(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGroupEntry<'_> {
-            wgpu::BindGroupEntry {
-                binding,
-                resource: wgpu::BindingResource::TextureView(view),
-            }
-        }
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("raycast"),
             layout: &self.layout,
             entries: &[
-                buffer(binding::PARAMS, b.params),
-                buffer(binding::NODES, b.nodes),
-                buffer(binding::TABLES, b.tables),
-                buffer(binding::PAGES, b.pages),
-                buffer(binding::PAGE_FLAGS, b.page_flags),
-                buffer(binding::REQUESTS, b.requests),
-                buffer(binding::USAGE, b.usage),
-                buffer(binding::IMAGE, b.image),
-                view(binding::ATLAS_UINT, &b.atlas[0]),
-                view(binding::ATLAS_SINT, &b.atlas[1]),
-                view(binding::ATLAS_FLOAT, &b.atlas[2]),
-                buffer(binding::SCENE, b.scene),
-                buffer(binding::RAYS, b.rays),
+                buffer_entry(binding::PARAMS, b.params),
+                buffer_entry(binding::NODES, b.nodes),
+                buffer_entry(binding::TABLES, b.tables),
+                buffer_entry(binding::PAGES, b.pages),
+                buffer_entry(binding::PAGE_FLAGS, b.page_flags),
+                buffer_entry(binding::REQUESTS, b.requests),
+                buffer_entry(binding::USAGE, b.usage),
+                buffer_entry(binding::IMAGE, b.image),
+                view_entry(binding::ATLAS_UINT, &b.atlas[0]),
+                view_entry(binding::ATLAS_SINT, &b.atlas[1]),
+                view_entry(binding::ATLAS_FLOAT, &b.atlas[2]),
+                buffer_entry(binding::SCENE, b.scene),
+                buffer_entry(binding::RAYS, b.rays),
             ],
         })
     }

@@ -8,12 +8,15 @@
 
 use anyhow::{Context, Result, ensure};
 
-use super::contract::{FILTER_HARDWARE, FILTER_MANUAL, ProbeParams, SceneUniforms, probe_source};
+use super::buffers::{readback_buffer, storage_buffer, uniform_buffer};
+use super::contract::{FILTER_HARDWARE, FILTER_MANUAL, ProbeParams, probe_binding, probe_source};
 use super::device::Gpu;
+use super::pipeline::{
+    buffer_entry, compute_layout, storage_layout, texture_3d_layout, uniform_layout, view_entry,
+};
 use super::renderer::map_for_reading;
-use super::tables::{self, ChannelTable};
+use super::tables::SceneTables;
 use super::timer::PassTimer;
-use crate::octree::OctreeGeometry;
 use crate::scene::{Camera, ChannelStyle, Scene};
 use crate::source::{BrickKey, BrickSource, VolumeInfo};
 
@@ -66,6 +69,8 @@ pub struct LimitProbe {
     counter: wgpu::Buffer,
     image_readback: wgpu::Buffer,
     counter_readback: wgpu::Buffer,
+    /// Bound by the pipelines; kept alive with them.
+    _tables: SceneTables,
     timer: Option<PassTimer>,
     pipelines: Vec<ProbePipeline>,
 }
@@ -77,13 +82,13 @@ fn level0_slabs(source: &dyn BrickSource, channels: &[usize]) -> Result<Vec<f32>
     let brick = info.brick_shape.map(|b| b as usize);
     let mut out = vec![0.0f32; sx * sy * sz * channels.len()];
     for (slab, &channel) in channels.iter().enumerate() {
-        let counts: [usize; 3] = std::array::from_fn(|a| [sz, sy, sx][a].div_ceil(brick[a]));
-        let keys: Vec<BrickKey> = (0..counts[0])
-            .flat_map(|z| (0..counts[1]).flat_map(move |y| (0..counts[2]).map(move |x| [z, y, x])))
-            .map(|b| BrickKey {
+        let [gz, gy, gx] = info.brick_grid(0);
+        let keys: Vec<BrickKey> = (0..gz)
+            .flat_map(|z| (0..gy).flat_map(move |y| (0..gx).map(move |x| [z, y, x])))
+            .map(|brick| BrickKey {
                 level: 0,
                 channel: channel as u32,
-                brick: b.map(|v| v as u64),
+                brick,
             })
             .collect();
         for (key, voxels) in keys.iter().zip(source.fetch(&keys)) {
@@ -178,65 +183,25 @@ impl LimitProbe {
         );
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
 
-        let geometry = OctreeGeometry::new(&info, 0)?;
-        let channel_tables: Vec<ChannelTable<'_>> = visible
-            .iter()
-            .map(|style| ChannelTable {
-                style,
-                min_level: 0,
-                max_level: 0,
-            })
-            .collect();
-        let spacing = [info.voxel_size[2], info.voxel_size[1], info.voxel_size[0]];
-        let t = tables::build(&geometry, spacing, &[], &channel_tables);
-        let buffer = |label, size: u64, usage| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        use wgpu::BufferUsages as U;
-        let table_buf = buffer(
-            "probe tables",
-            t.words.len() as u64 * 4,
-            U::STORAGE | U::COPY_DST,
-        );
-        gpu.queue
-            .write_buffer(&table_buf, 0, bytemuck::cast_slice(&t.words));
-        let scene_buf = buffer(
-            "probe scene",
-            size_of::<SceneUniforms>() as u64,
-            U::UNIFORM | U::COPY_DST,
-        );
-        gpu.queue
-            .write_buffer(&scene_buf, 0, bytemuck::bytes_of(&t.uniforms));
-        let params = buffer(
-            "probe params",
-            size_of::<ProbeParams>() as u64,
-            U::UNIFORM | U::COPY_DST,
-        );
+        let tables = SceneTables::level0(gpu, &info, &visible)?;
+        let params = uniform_buffer(gpu, "probe params", size_of::<ProbeParams>() as u64);
         let pixels = u64::from(width) * u64::from(height);
-        let image = buffer("probe image", pixels * 16, U::STORAGE | U::COPY_SRC);
+        let image = storage_buffer(
+            gpu,
+            "probe image",
+            pixels * 16,
+            wgpu::BufferUsages::COPY_SRC,
+        );
         // Samples per image row, summed in u64 on the CPU.
         let rows = u64::from(height) * 4;
-        let counter = buffer(
-            "probe samples",
-            rows,
-            U::STORAGE | U::COPY_SRC | U::COPY_DST,
-        );
-        let image_readback = buffer(
-            "probe image readback",
-            pixels * 16,
-            U::MAP_READ | U::COPY_DST,
-        );
-        let counter_readback = buffer("probe samples readback", rows, U::MAP_READ | U::COPY_DST);
+        let counter = storage_buffer(gpu, "probe samples", rows, wgpu::BufferUsages::COPY_SRC);
+        let image_readback = readback_buffer(gpu, "probe image readback", pixels * 16);
+        let counter_readback = readback_buffer(gpu, "probe samples readback", rows);
 
-        let hardware = device
+        let filters: &[ProbeFilter] = if device
             .features()
-            .contains(wgpu::Features::FLOAT32_FILTERABLE);
-        let filters: &[ProbeFilter] = if hardware {
+            .contains(wgpu::Features::FLOAT32_FILTERABLE)
+        {
             &[ProbeFilter::Manual, ProbeFilter::Hardware]
         } else {
             &[ProbeFilter::Manual]
@@ -249,49 +214,28 @@ impl LimitProbe {
             .iter()
             .map(|&filter| {
                 let filtering = filter == ProbeFilter::Hardware;
-                let entry = |binding, ty| wgpu::BindGroupLayoutEntry {
-                    binding,
-                    visibility: wgpu::ShaderStages::COMPUTE,
-                    ty,
-                    count: None,
-                };
-                let buffer_entry = |binding, ty| {
-                    entry(
-                        binding,
-                        wgpu::BindingType::Buffer {
-                            ty,
-                            has_dynamic_offset: false,
-                            min_binding_size: None,
-                        },
-                    )
-                };
-                let storage = |read_only| wgpu::BufferBindingType::Storage { read_only };
                 let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
                     label: Some("probe"),
                     entries: &[
-                        buffer_entry(0, wgpu::BufferBindingType::Uniform),
-                        buffer_entry(1, storage(true)),
-                        buffer_entry(2, wgpu::BufferBindingType::Uniform),
-                        entry(
-                            3,
-                            wgpu::BindingType::Texture {
-                                sample_type: wgpu::TextureSampleType::Float {
-                                    filterable: filtering,
-                                },
-                                view_dimension: wgpu::TextureViewDimension::D3,
-                                multisampled: false,
+                        uniform_layout(probe_binding::PARAMS),
+                        storage_layout(probe_binding::TABLES, true),
+                        uniform_layout(probe_binding::SCENE),
+                        texture_3d_layout(
+                            probe_binding::LEVEL0,
+                            wgpu::TextureSampleType::Float {
+                                filterable: filtering,
                             },
                         ),
-                        entry(
-                            4,
+                        compute_layout(
+                            probe_binding::SAMPLER,
                             wgpu::BindingType::Sampler(if filtering {
                                 wgpu::SamplerBindingType::Filtering
                             } else {
                                 wgpu::SamplerBindingType::NonFiltering
                             }),
                         ),
-                        buffer_entry(5, storage(false)),
-                        buffer_entry(6, storage(false)),
+                        storage_layout(probe_binding::IMAGE, false),
+                        storage_layout(probe_binding::ROW_SAMPLES, false),
                     ],
                 });
                 let filter_mode = if filtering {
@@ -309,34 +253,16 @@ impl LimitProbe {
                     label: Some("probe"),
                     layout: &layout,
                     entries: &[
+                        buffer_entry(probe_binding::PARAMS, &params),
+                        buffer_entry(probe_binding::TABLES, tables.buffer()),
+                        buffer_entry(probe_binding::SCENE, tables.uniforms()),
+                        view_entry(probe_binding::LEVEL0, &view),
                         wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: params.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: table_buf.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: scene_buf.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::TextureView(&view),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 4,
+                            binding: probe_binding::SAMPLER,
                             resource: wgpu::BindingResource::Sampler(&sampler),
                         },
-                        wgpu::BindGroupEntry {
-                            binding: 5,
-                            resource: image.as_entire_binding(),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 6,
-                            resource: counter.as_entire_binding(),
-                        },
+                        buffer_entry(probe_binding::IMAGE, &image),
+                        buffer_entry(probe_binding::ROW_SAMPLES, &counter),
                     ],
                 });
                 let pipeline_layout =
@@ -379,6 +305,7 @@ impl LimitProbe {
             counter,
             image_readback,
             counter_readback,
+            _tables: tables,
             timer: PassTimer::new(gpu, "probe"),
             pipelines,
         })
@@ -391,17 +318,13 @@ impl LimitProbe {
     }
 
     fn params(&self, camera: &Camera) -> ProbeParams {
-        let spacing = [
-            self.info.voxel_size[2],
-            self.info.voxel_size[1],
-            self.info.voxel_size[0],
-        ];
+        let spacing = self.info.spacing_xyz();
         let shape = self.info.levels[0].shape;
         let (forward, right, up) = camera.basis();
         let tan_half = (camera.fov_y_degrees.to_radians() / 2.0).tan();
         let aspect = f64::from(self.width) / f64::from(self.height);
         let f3 = |v: [f64; 3]| v.map(|x| x as f32);
-        let min_edge = spacing.iter().copied().fold(f64::INFINITY, f64::min);
+        let min_edge = self.info.voxel_edge(0);
         ProbeParams {
             width: self.width,
             height: self.height,

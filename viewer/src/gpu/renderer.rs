@@ -9,11 +9,12 @@ use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 use super::brick_cache::BrickCache;
+use super::buffers::{check_binding, readback_buffer, storage_buffer, uniform_buffer};
 use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
 use super::device::Gpu;
 use super::pipeline::{Bindings, RaycastPipeline};
+use super::residency::ResidencyState;
 pub use super::residency::is_clear;
-use super::residency::{ResidencyState, check_binding, storage_buffer};
 use super::tables::SceneTables;
 use super::timer::PassTimer;
 use crate::octree::ResidencyOctree;
@@ -213,7 +214,6 @@ impl FrameBuffers {
     /// Buffers for `width × height` pixels, `max_requests` requests and a cache of
     /// `cache_slots` slots.
     fn new(gpu: &Gpu, options: &RenderOptions, cache_slots: u32) -> Result<Self> {
-        let device = &gpu.device;
         let pixels = u64::from(options.width) * u64::from(options.height);
         check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
         check_binding(
@@ -222,12 +222,7 @@ impl FrameBuffers {
             pixels * RAY_STATE_BYTES,
             "render a smaller image",
         )?;
-        let params = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("raycast params"),
-            size: size_of::<Params>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
+        let params = uniform_buffer(gpu, "raycast params", size_of::<Params>() as u64);
         let request_bytes = COUNTER_BYTES + 8 * u64::from(options.max_requests);
         let requests = storage_buffer(gpu, "requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
         let image = storage_buffer(gpu, "image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
@@ -237,18 +232,10 @@ impl FrameBuffers {
             pixels * RAY_STATE_BYTES,
             wgpu::BufferUsages::empty(),
         );
-        let staging = |label, size: u64| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size: size.max(16),
-                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            })
-        };
         let readback = Readback {
-            requests: staging("requests readback", request_bytes),
-            usage: staging("usage readback", u64::from(cache_slots) * 4),
-            image: staging("image readback", pixels * 16),
+            requests: readback_buffer(gpu, "requests readback", request_bytes),
+            usage: readback_buffer(gpu, "usage readback", u64::from(cache_slots) * 4),
+            image: readback_buffer(gpu, "image readback", pixels * 16),
             timer: PassTimer::new(gpu, "raycast"),
         };
         Ok(Self {
@@ -275,10 +262,6 @@ pub struct Renderer {
     buffers: FrameBuffers,
     bind_group: wgpu::BindGroup,
     frame: u32,
-}
-
-fn xyz<T: Copy>(a: [T; 3]) -> [T; 3] {
-    [a[2], a[1], a[0]]
 }
 
 impl Renderer {
@@ -474,7 +457,7 @@ impl Renderer {
         let cache = self.residency.cache();
         let g = self.residency.octree().geometry();
         let cam = &self.scene.camera;
-        let spacing = xyz(info.voxel_size);
+        let spacing = info.spacing_xyz();
         let leaf_world: [f64; 3] =
             std::array::from_fn(|a| (g.leaf_shift[a] as f64).exp2() * spacing[a]);
         let (forward, right, up) = cam.basis();

@@ -4,42 +4,16 @@
 //! arrive and are evicted, never with the style: a restyle only redoes the clear-brick marks
 //! ([`ResidencyState::mark_clear`]), so every resident brick stays.
 
-use anyhow::{Context, Result, ensure};
+use anyhow::{Context, Result};
 
 use super::brick_cache::BrickCache;
+use super::buffers::{check_binding, storage_buffer};
 use super::device::Gpu;
 use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables};
 use super::renderer::{Inserted, Method, RenderOptions};
 use crate::octree::{OctreeGeometry, ResidencyOctree, f32_down, f32_up};
 use crate::scene::ChannelStyle;
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
-
-/// Errors unless a buffer of `bytes` fits one storage binding and one buffer of `gpu`;
-/// `what` and `hint` say which buffer and what to do.
-pub(super) fn check_binding(gpu: &Gpu, what: &str, bytes: u64, hint: &str) -> Result<()> {
-    let max_binding = gpu.limits.max_storage_buffer_binding_size;
-    ensure!(
-        bytes <= max_binding && bytes <= gpu.limits.max_buffer_size,
-        "{what} needs {bytes} bytes, over the device's storage-buffer limit of \
-         {max_binding} bytes; {hint}"
-    );
-    Ok(())
-}
-
-/// A storage buffer of at least 16 bytes that can be written from the CPU.
-pub(super) fn storage_buffer(
-    gpu: &Gpu,
-    label: &str,
-    size: u64,
-    extra: wgpu::BufferUsages,
-) -> wgpu::Buffer {
-    gpu.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some(label),
-        size: size.max(16),
-        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | extra,
-        mapped_at_creation: false,
-    })
-}
 
 /// Octree, page tables, cache and their GPU buffers for the channels one renderer draws.
 pub struct ResidencyState {

@@ -12,13 +12,15 @@
 
 use anyhow::{Result, ensure};
 
+use super::buffers::{check_binding, storage_buffer, uniform_buffer};
 pub use super::contract::TF_BINS;
 use super::contract::{ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms};
 use super::device::Gpu;
 use super::renderer::RenderOptions;
-use super::residency::{ResidencyState, check_binding, storage_buffer};
+use super::residency::ResidencyState;
 use crate::octree::{OctreeGeometry, f32_down, f32_up};
 use crate::scene::ChannelStyle;
+use crate::source::VolumeInfo;
 
 /// Opacity control points per channel the table buffer has room for beyond the scene's own,
 /// so that [`SceneTables::rewrite`] writes a new style in place.
@@ -162,34 +164,63 @@ impl SceneTables {
             styles.len()
         );
         let t = residency_tables(residency, options, styles);
-        let capacity = t.words.len() + styles.len() * 2 * HEADROOM_POINTS;
+        let mut tables = Self::allocate(gpu, t.words.len() + styles.len() * 2 * HEADROOM_POINTS)?;
+        tables.write(gpu, &t, residency_steps(residency, styles));
+        Ok(tables)
+    }
+
+    /// The fixed tables of `styles` drawn at level 0 only, with no page tables and no room
+    /// to restyle: the limit probe's.
+    pub fn level0(gpu: &Gpu, info: &VolumeInfo, styles: &[&ChannelStyle]) -> Result<Self> {
+        ensure!(
+            styles.len() <= MAX_CHANNELS,
+            "{} channels drawn; at most {MAX_CHANNELS} render at once",
+            styles.len()
+        );
+        let geometry = OctreeGeometry::new(info, 0)?;
+        let channels: Vec<ChannelTable<'_>> = styles
+            .iter()
+            .map(|style| ChannelTable {
+                style,
+                min_level: 0,
+                max_level: 0,
+            })
+            .collect();
+        let t = build(&geometry, info.spacing_xyz(), &[], &channels);
+        let mut tables = Self::allocate(gpu, t.words.len())?;
+        let max_points = styles.iter().map(|c| c.opacity.len()).max().unwrap_or(0);
+        tables.write(gpu, &t, steps_per_pass(styles.len(), 1, max_points, 0));
+        Ok(tables)
+    }
+
+    /// Buffers for a table of up to `capacity` words and the scene uniforms.
+    fn allocate(gpu: &Gpu, capacity: usize) -> Result<Self> {
         check_binding(
             gpu,
             "the scene tables",
             capacity as u64 * 4,
             "use transfer functions of fewer points",
         )?;
-        let buffer = storage_buffer(
-            gpu,
-            "tables",
-            capacity as u64 * 4,
-            wgpu::BufferUsages::empty(),
-        );
-        let uniforms = gpu.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("scene uniforms"),
-            size: size_of::<SceneUniforms>() as u64,
-            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut tables = Self {
-            uniforms,
-            buffer,
+        Ok(Self {
+            uniforms: uniform_buffer(gpu, "scene uniforms", size_of::<SceneUniforms>() as u64),
+            buffer: storage_buffer(
+                gpu,
+                "tables",
+                capacity as u64 * 4,
+                wgpu::BufferUsages::empty(),
+            ),
             capacity,
             steps_per_pass: 0,
-        };
-        let written = tables.rewrite(gpu, residency, options, styles);
-        debug_assert!(written, "a new table buffer holds its own tables");
-        Ok(tables)
+        })
+    }
+
+    /// Uploads `t`, which fits.
+    fn write(&mut self, gpu: &Gpu, t: &Tables, steps_per_pass: u32) {
+        gpu.queue
+            .write_buffer(&self.buffer, 0, bytemuck::cast_slice(&t.words));
+        gpu.queue
+            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&t.uniforms));
+        self.steps_per_pass = steps_per_pass;
     }
 
     /// Writes the tables of `styles` in place. Returns `false`, writing nothing, when they do
@@ -205,16 +236,7 @@ impl SceneTables {
         if t.words.len() > self.capacity {
             return false;
         }
-        gpu.queue
-            .write_buffer(&self.buffer, 0, bytemuck::cast_slice(&t.words));
-        gpu.queue
-            .write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&t.uniforms));
-        self.steps_per_pass = steps_per_pass(
-            styles.len(),
-            residency.info().levels.len(),
-            styles.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
-            residency.octree().geometry().depth,
-        );
+        self.write(gpu, &t, residency_steps(residency, styles));
         true
     }
 
@@ -234,6 +256,16 @@ impl SceneTables {
     }
 }
 
+/// [`steps_per_pass`] of `styles` over `residency`'s levels and octree.
+fn residency_steps(residency: &ResidencyState, styles: &[&ChannelStyle]) -> u32 {
+    steps_per_pass(
+        styles.len(),
+        residency.info().levels.len(),
+        styles.iter().map(|c| c.opacity.len()).max().unwrap_or(0),
+        residency.octree().geometry().depth,
+    )
+}
+
 /// The tables of `styles` over `residency`'s volume, octree and page tables.
 fn residency_tables(
     residency: &ResidencyState,
@@ -241,10 +273,9 @@ fn residency_tables(
     styles: &[&ChannelStyle],
 ) -> Tables {
     let info = residency.info();
-    let spacing = [info.voxel_size[2], info.voxel_size[1], info.voxel_size[0]];
     build(
         residency.octree().geometry(),
-        spacing,
+        info.spacing_xyz(),
         residency.pages().offsets(),
         &channel_tables(options, info.levels.len() as u32, styles),
     )

@@ -181,6 +181,12 @@ impl VolumeInfo {
         })
     }
 
+    /// The level-0 voxel size in the GPU's axis order, `x, y, z` (world units).
+    pub fn spacing_xyz(&self) -> [f64; 3] {
+        let [z, y, x] = self.voxel_size;
+        [x, y, z]
+    }
+
     /// Smallest edge of a voxel of `level`, in world units (the level the renderer's LOD rule
     /// compares with a pixel's footprint).
     pub fn voxel_edge(&self, level: usize) -> f64 {
