@@ -4,7 +4,7 @@
 
 use std::str::FromStr;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, ensure};
 
 use crate::gpu::renderer::MAX_CHANNELS;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, box_diagonal};
@@ -221,6 +221,18 @@ pub fn default_scene(info: &VolumeInfo) -> Scene {
         channels: default_channels(info),
         background: [0.0; 3],
     }
+}
+
+/// Errors unless `info`'s volume has channel `channel`; `what` names where it was asked for
+/// (`scene file`, `--tf`, ...).
+pub fn check_channel(info: &VolumeInfo, channel: usize, what: &str) -> Result<()> {
+    let n = info.channels.len();
+    ensure!(
+        channel < n,
+        "{what}: channel {channel} does not exist ({} has {n} channels)",
+        info.name
+    );
+    Ok(())
 }
 
 /// Parses a JSON scene (`schemas/json/scene.schema.json`); `source` names the document in the

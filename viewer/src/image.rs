@@ -52,6 +52,11 @@ pub fn linear_to_srgb(v: f32) -> f32 {
     }
 }
 
+/// Linear light to an 8-bit sRGB value, rounded to nearest (PNG's encoding).
+pub fn linear_to_srgb8(v: f32) -> u8 {
+    (linear_to_srgb(v) * 255.0).round() as u8
+}
+
 /// The sRGB encoding in `[0, 1]` to linear light.
 pub fn srgb_to_linear(v: f32) -> f32 {
     if v <= 0.040_45 {
@@ -91,7 +96,7 @@ impl RgbImage {
                 let bytes: Vec<u8> = self
                     .pixels
                     .iter()
-                    .flat_map(|p| p.map(|v| (linear_to_srgb(v) * 255.0).round() as u8))
+                    .flat_map(|p| p.map(linear_to_srgb8))
                     .collect();
                 image::save_buffer_with_format(
                     path,

@@ -8,7 +8,7 @@ use std::str::FromStr;
 use anyhow::{Result, bail, ensure};
 
 use residency_viewer::defaults::{
-    CameraSpec, default_channels, default_scene, numbers, read_scene,
+    CameraSpec, check_channel, default_channels, default_scene, numbers, read_scene,
 };
 use residency_viewer::scene::{OpacityPoint, Scene};
 use residency_viewer::source::{BrickSource, HttpSource, LocalSource, VolumeInfo, read_token_file};
@@ -190,19 +190,11 @@ pub struct SceneArgs {
 impl SceneArgs {
     /// The scene for `info`'s volume: the scene file (or the defaults), then the flags.
     pub fn scene(&self, info: &VolumeInfo) -> Result<Scene> {
-        let n = info.channels.len();
         let mut scene = match &self.scene {
             Some(path) => read_scene(path)?,
             None => default_scene(info),
         };
-        let check = |c: usize, what: &str| {
-            ensure!(
-                c < n,
-                "{what}: channel {c} does not exist ({} has {n} channels)",
-                info.name
-            );
-            Ok(())
-        };
+        let check = |c: usize, what: &str| check_channel(info, c, what);
         for s in &scene.channels {
             check(s.channel, "scene file")?;
         }

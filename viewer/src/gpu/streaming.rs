@@ -382,6 +382,11 @@ impl StreamState {
         &self.request_log
     }
 
+    /// How many bricks could not be fetched or uploaded.
+    pub fn failed_count(&self) -> usize {
+        self.failed.len()
+    }
+
     /// The bricks that could not be fetched or uploaded, with the error, in key order.
     pub fn failed(&self) -> Vec<(BrickKey, String)> {
         let mut failed: Vec<(BrickKey, String)> =

@@ -115,6 +115,19 @@ pub fn reference_width(info: &VolumeInfo, channel: usize) -> f64 {
     }
 }
 
+/// Scales the opacity ramp `points` so that its highest point is `opacity` (every point set
+/// to `opacity` where the ramp is zero everywhere).
+pub fn set_top_opacity(points: &mut [OpacityPoint], opacity: f64) {
+    let top = points.iter().map(|p| p.opacity).fold(0.0, f64::max);
+    for p in points {
+        p.opacity = if top > 0.0 {
+            p.opacity / top * opacity
+        } else {
+            opacity
+        };
+    }
+}
+
 /// The style of `channel` in `scene`, added with its default (hidden) style when the scene
 /// does not list it. `None` when the volume has no such channel.
 pub fn style_mut<'a>(

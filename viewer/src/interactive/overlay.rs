@@ -4,7 +4,7 @@
 
 use font8x8::UnicodeFonts;
 
-use crate::image::linear_to_srgb;
+use crate::image::linear_to_srgb8;
 
 /// Linear light to 8-bit sRGB through a table (4096 entries: under one 8-bit step of error).
 pub struct SrgbTable(Vec<u8>);
@@ -15,7 +15,7 @@ impl Default for SrgbTable {
     fn default() -> Self {
         Self(
             (0..TABLE)
-                .map(|i| (linear_to_srgb(i as f32 / (TABLE - 1) as f32) * 255.0).round() as u8)
+                .map(|i| linear_to_srgb8(i as f32 / (TABLE - 1) as f32))
                 .collect(),
         )
     }
@@ -149,7 +149,7 @@ mod tests {
         assert_eq!(t.encode(0.5), 188);
         for i in 0..=1000 {
             let v = i as f32 / 1000.0;
-            let exact = linear_to_srgb(v) * 255.0;
+            let exact = crate::image::linear_to_srgb(v) * 255.0;
             assert!((t.encode(v) as f32 - exact).abs() <= 1.0, "{v}");
         }
         assert_eq!(t.pixel(&[1.0, 0.0, 0.5, 1.0]), 0x00ff_00bc);

@@ -66,6 +66,14 @@ impl Reply {
             Self::Status(s, msg) => bail!("{url}: HTTP {s}: {msg}"),
         }
     }
+
+    /// The body of a 200, `None` for a 404; any other status is an error naming `url`.
+    pub fn found(self, url: &str) -> Result<Option<Vec<u8>>> {
+        match self {
+            Self::Status(404, _) => Ok(None),
+            other => other.ok(url).map(Some),
+        }
+    }
 }
 
 /// An HTTP GET: blocking natively, awaited in the browser. Errors are transport failures
@@ -93,20 +101,13 @@ pub async fn open<G: Get>(http: &G, base: &str, dataset: &str) -> Result<VolumeI
     let url = |rest: &str| format!("{base}/{rest}");
     let (format, group_url, group_doc) = {
         let v3 = url("zarr.json");
-        match http.get(&v3).await? {
-            Reply::Ok(body) => (ZarrFormat::V3, v3, body),
-            Reply::Status(404, _) => {
-                let v2 = url(".zattrs");
-                match http.get(&v2).await? {
-                    Reply::Ok(body) => (ZarrFormat::V2, v2, body),
-                    Reply::Status(404, _) => bail!(
-                        "{base}: no such dataset on the server (neither zarr.json nor .zattrs \
-                         found)"
-                    ),
-                    Reply::Status(s, msg) => bail!("{v2}: HTTP {s}: {msg}"),
-                }
-            }
-            Reply::Status(s, msg) => bail!("{v3}: HTTP {s}: {msg}"),
+        let v2 = url(".zattrs");
+        if let Some(body) = http.get(&v3).await?.found(&v3)? {
+            (ZarrFormat::V3, v3, body)
+        } else if let Some(body) = http.get(&v2).await?.found(&v2)? {
+            (ZarrFormat::V2, v2, body)
+        } else {
+            bail!("{base}: no such dataset on the server (neither zarr.json nor .zattrs found)")
         }
     };
     let group = ImageAttributes::parse(format, &group_doc, &group_url)?;
@@ -133,14 +134,11 @@ async fn load_minmax<G: Get>(
     let mut all = Vec::new();
     for c in 0..info.channels.len() {
         let url = format!("{base}/minmax?channel={c}");
-        match http.get(&url).await? {
-            Reply::Ok(body) => all.push(parse_minmax(info, c, &body, &url)?),
-            Reply::Status(404, _) => {
-                ome::warn_no_region_metadata(base);
-                return Ok(None);
-            }
-            Reply::Status(s, msg) => bail!("{url}: HTTP {s}: {msg}"),
-        }
+        let Some(body) = http.get(&url).await?.found(&url)? else {
+            ome::warn_no_region_metadata(base);
+            return Ok(None);
+        };
+        all.push(parse_minmax(info, c, &body, &url)?);
     }
     Ok(Some(all))
 }
@@ -239,10 +237,7 @@ pub async fn fetch_batch<G: Get>(
     keys: &[BrickKey],
 ) -> Vec<Result<BrickVoxels>> {
     let url = batch_url(base, keys);
-    let answer = match http.get(&url).await {
-        Ok(reply) => reply.ok(&url),
-        Err(e) => Err(e),
-    };
+    let answer = http.get(&url).await.and_then(|reply| reply.ok(&url));
     match answer.and_then(|body| parse_batch(info, keys, &body, &url)) {
         Ok(results) => results,
         Err(e) => {

@@ -22,11 +22,11 @@ use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
 use self::fetch::BrowserFetch;
-use crate::defaults::{default_scene, parse_scene};
+use crate::defaults::{check_channel, default_scene, parse_scene};
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{FrameStats, StreamState};
-use crate::image::linear_to_srgb;
+use crate::image::linear_to_srgb8;
 use crate::interactive::{camera_control, controls};
 use crate::scene::Scene;
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo, server};
@@ -197,12 +197,8 @@ impl Viewer {
     pub fn set_scene_json(&self, json: &str) -> Result<(), JsValue> {
         let scene = parse_scene(json.as_bytes(), "scene").map_err(|e| js_error(&e))?;
         let mut inner = self.inner.borrow_mut();
-        let n = inner.info.channels.len();
-        if let Some(s) = scene.channels.iter().find(|s| s.channel >= n) {
-            return Err(JsValue::from_str(&format!(
-                "scene: channel {} does not exist ({} has {n} channels)",
-                s.channel, inner.info.name
-            )));
+        for s in &scene.channels {
+            check_channel(&inner.info, s.channel, "scene").map_err(|e| js_error(&e))?;
         }
         inner.set_scene(scene);
         Ok(())
@@ -276,14 +272,7 @@ impl Viewer {
         let opacity = opacity.clamp(0.0, 1.0);
         self.inner.borrow_mut().edit(|scene, info, _| {
             if let Some(s) = controls::style_mut(scene, info, channel) {
-                let top = s.opacity.iter().map(|p| p.opacity).fold(0.0, f64::max);
-                for p in &mut s.opacity {
-                    p.opacity = if top > 0.0 {
-                        p.opacity / top * opacity
-                    } else {
-                        opacity
-                    };
-                }
+                controls::set_top_opacity(&mut s.opacity, opacity);
             }
         });
     }
@@ -309,8 +298,8 @@ impl Viewer {
 
     /// The last frame as 8-bit sRGB RGBA, row-major from the top, as `viewer render`'s PNG
     /// encodes it (alpha 255).
-    pub fn rgba(&self) -> Vec<u8> {
-        self.inner.borrow().rgba.clone()
+    pub fn rgba(&self) -> js_sys::Uint8Array {
+        js_sys::Uint8Array::from(&self.inner.borrow().rgba[..])
     }
 
     /// `{frame, converged, bricks_requested, bricks_fetched, bytes_fetched, bricks_failed,
@@ -363,7 +352,7 @@ impl Inner {
             }
             self.render_needed = true;
         }
-        self.totals.bricks_failed = self.stream.failed().len() as u64;
+        self.totals.bricks_failed = self.stream.failed_count() as u64;
     }
 }
 
@@ -428,14 +417,15 @@ async fn render_and_request(inner: &Rc<RefCell<Inner>>, renderer: &mut Renderer)
     renderer.set_camera(camera);
     let out = renderer.render_async(&gpu).await?;
     let mut i = inner.borrow_mut();
-    i.rgba = out
-        .pixels
-        .iter()
-        .flat_map(|p| {
-            let c = |v: f32| (linear_to_srgb(v) * 255.0).round() as u8;
-            [c(p[0]), c(p[1]), c(p[2]), 255]
-        })
-        .collect();
+    i.rgba.clear();
+    i.rgba.extend(out.pixels.iter().flat_map(|p| {
+        [
+            linear_to_srgb8(p[0]),
+            linear_to_srgb8(p[1]),
+            linear_to_srgb8(p[2]),
+            255,
+        ]
+    }));
     let mut stats = FrameStats {
         frame: renderer.frames(),
         shader: out.counts,
@@ -457,8 +447,7 @@ async fn render_and_request(inner: &Rc<RefCell<Inner>>, renderer: &mut Renderer)
     };
     i.totals.converged = false;
     // Bricks already on their way are not asked for twice.
-    let in_flight = i.in_flight.clone();
-    wanted.retain(|r| !in_flight.contains(&r.key));
+    wanted.retain(|r| !i.in_flight.contains(&r.key));
     let keys = StreamState::to_fetch(renderer, wanted, &mut stats);
     let room = MAX_REQUESTS_IN_FLIGHT.saturating_sub(i.requests_in_flight) * PAGE_BATCH;
     let batch = PAGE_BATCH.min(server::batch_size(&i.info));
