@@ -449,8 +449,10 @@ async fn render_and_request(inner: &Rc<RefCell<Inner>>, renderer: &mut Renderer)
     // Bricks already on their way are not asked for twice.
     wanted.retain(|r| !i.in_flight.contains(&r.key));
     let keys = StreamState::to_fetch(renderer, wanted, &mut stats);
-    let room = MAX_REQUESTS_IN_FLIGHT.saturating_sub(i.requests_in_flight) * PAGE_BATCH;
+    // Requests of `batch` bricks each, at most MAX_REQUESTS_IN_FLIGHT at once (a store of
+    // large bricks has smaller batches, so room counts in its batches).
     let batch = PAGE_BATCH.min(server::batch_size(&i.info));
+    let room = MAX_REQUESTS_IN_FLIGHT.saturating_sub(i.requests_in_flight) * batch;
     for chunk in keys[..keys.len().min(room)].chunks(batch) {
         send(inner, &mut i, chunk.to_vec());
     }
