@@ -9,6 +9,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 use std::str::FromStr;
+use std::sync::Arc;
 
 use axum::http::{HeaderMap, header};
 use residency_schemas::SampleType;
@@ -199,20 +200,24 @@ impl StoreSummary {
 pub struct Listed {
     /// The JSON entry.
     pub entry: DatasetEntry,
-    /// The store's summary (or why there is none).
-    pub summary: Result<StoreSummary, SummaryError>,
+    /// The store's summary, when its metadata could be read.
+    pub summary: Option<Arc<StoreSummary>>,
 }
 
-/// Lists `datasets` with links built on `base` (see [`base_url`]). Reads each store's group
-/// and level-0 metadata (blocking file reads).
-pub fn list(datasets: &[Dataset], base: &str) -> Vec<Listed> {
+/// Lists `datasets`, with their `summaries` (one per dataset, read once by the caller:
+/// [`StoreSummary::read`]), with links built on `base` (see [`base_url`]).
+pub fn list(
+    datasets: &[Dataset],
+    summaries: &[Option<Arc<StoreSummary>>],
+    base: &str,
+) -> Vec<Listed> {
     datasets
         .iter()
-        .map(|d| {
+        .zip(summaries)
+        .map(|(d, summary)| {
             let url = format!("{base}/{}/", d.name);
-            let summary = StoreSummary::read(&d.root);
-            let state = match &summary {
-                Ok(s) => neuroglancer::state(
+            let state = match summary {
+                Some(s) => neuroglancer::state(
                     &d.name,
                     &url,
                     s.format,
@@ -220,7 +225,7 @@ pub fn list(datasets: &[Dataset], base: &str) -> Vec<Listed> {
                     &s.layout,
                     s.channels().unwrap_or(1),
                 ),
-                Err(_) => neuroglancer::fallback_state(&d.name, &url),
+                None => neuroglancer::fallback_state(&d.name, &url),
             };
             let entry = DatasetEntry {
                 name: d.name.clone(),
@@ -229,7 +234,10 @@ pub fn list(datasets: &[Dataset], base: &str) -> Vec<Listed> {
                 vizarr: format!("https://hms-dbmi.github.io/vizarr/?source={url}"),
                 url,
             };
-            Listed { entry, summary }
+            Listed {
+                entry,
+                summary: summary.clone(),
+            }
         })
         .collect()
 }
@@ -315,7 +323,7 @@ pub fn html(listed: &[Listed]) -> String {
         let name = escape_html(&e.name);
         let path =
             percent_encoding::utf8_percent_encode(&e.name, percent_encoding::NON_ALPHANUMERIC);
-        let s = l.summary.as_ref().ok();
+        let s = l.summary.as_deref();
         let unknown = || "?".to_string();
         let size = s
             .and_then(StoreSummary::size_xyz)

@@ -291,24 +291,7 @@ pub fn state(
                 (Some(_), true) => format!("{name} {label}"),
                 (Some(_), false) => format!("{name} c{i} {label}"),
             };
-            ImageLayer {
-                kind: LayerKind::Image,
-                name,
-                source: source.clone(),
-                local_dimensions: local
-                    .iter()
-                    .map(|l| (l.clone(), Dimension(1.0, String::new())))
-                    .collect(),
-                local_position: local.iter().map(|_| i as f64 + 0.5).collect(),
-                shader: SHADER.to_string(),
-                shader_controls: ShaderControls {
-                    normalized: display_range(c),
-                    color: colour(c),
-                },
-                opacity: 1.0,
-                blend: Blend::Additive,
-                visible: c.and_then(|c| c.active).unwrap_or(true),
-            }
+            layer(name, source.clone(), local.as_deref().map(|l| (l, i)), c)
         })
         .collect();
     State {
@@ -322,21 +305,35 @@ pub fn state(
 pub fn fallback_state(name: &str, store_url: &str) -> State {
     State {
         dimensions: None,
-        layers: vec![ImageLayer {
-            kind: LayerKind::Image,
-            name: name.to_string(),
-            source: source(store_url, None),
-            local_dimensions: BTreeMap::new(),
-            local_position: Vec::new(),
-            shader: SHADER.to_string(),
-            shader_controls: ShaderControls {
-                normalized: None,
-                color: colour(None),
-            },
-            opacity: 1.0,
-            blend: Blend::Additive,
-            visible: true,
-        }],
+        layers: vec![layer(name.to_string(), source(store_url, None), None, None)],
+    }
+}
+
+/// One image layer of channel `channel` (its `omero` entry: colour, window, active), on the
+/// local dimension `local` at index `i` when the store has a channel axis.
+fn layer(
+    name: String,
+    source: String,
+    local: Option<(&str, usize)>,
+    channel: Option<&OmeroChannel>,
+) -> ImageLayer {
+    ImageLayer {
+        kind: LayerKind::Image,
+        name,
+        source,
+        local_dimensions: local
+            .iter()
+            .map(|(l, _)| ((*l).to_string(), Dimension(1.0, String::new())))
+            .collect(),
+        local_position: local.iter().map(|&(_, i)| i as f64 + 0.5).collect(),
+        shader: SHADER.to_string(),
+        shader_controls: ShaderControls {
+            normalized: display_range(channel),
+            color: colour(channel),
+        },
+        opacity: 1.0,
+        blend: Blend::Additive,
+        visible: channel.and_then(|c| c.active).unwrap_or(true),
     }
 }
 

@@ -100,6 +100,8 @@ pub struct LoadError {
 struct Loaded {
     regions: OnceLock<Result<Option<Arc<RegionIndex>>, LoadError>>,
     arrays: OnceLock<Result<Arc<ImageArrays>, LoadError>>,
+    /// What the listing says of the store (`None`: its metadata could not be read).
+    summary: OnceLock<Option<Arc<listing::StoreSummary>>>,
 }
 
 /// Shared state of the routes.
@@ -287,11 +289,32 @@ async fn view(State(state): State<Arc<AppState>>, Path(name): Path<String>) -> R
     state.viewer.page("../viewer/", status).await
 }
 
-/// The datasets with their links (reading each store's metadata on the blocking pool).
+/// The datasets with their links. Each store's summary is read once, on the blocking pool, at
+/// the first listing (a store that cannot be summarized is said so once, in the log).
 async fn listed(state: &Arc<AppState>, headers: &HeaderMap) -> Vec<listing::Listed> {
     let base = listing::base_url(headers, state.public_url.as_ref());
     let st = state.clone();
-    blocking(move || listing::list(&st.datasets.0, &base)).await
+    blocking(move || {
+        let summaries: Vec<_> = st
+            .datasets
+            .0
+            .iter()
+            .zip(&st.loaded)
+            .map(|(d, l)| {
+                l.summary
+                    .get_or_init(|| match listing::StoreSummary::read(&d.root) {
+                        Ok(s) => Some(Arc::new(s)),
+                        Err(e) => {
+                            tracing::warn!("{}: not summarized in the listing: {e}", d.name);
+                            None
+                        }
+                    })
+                    .clone()
+            })
+            .collect();
+        listing::list(&st.datasets.0, &summaries, &base)
+    })
+    .await
 }
 
 /// `GET /`: the dataset list as an HTML page for a browser (an `Accept` that prefers

@@ -75,7 +75,8 @@ impl ViewerFiles {
     /// The page, its file references relative to `base`, with `status` (200, or 404 for an
     /// unknown dataset: the page then says so itself); 503 when the viewer is not built.
     pub async fn page(&self, base: &str, status: StatusCode) -> Response<Body> {
-        let Some(dir) = self.built() else {
+        // A missing folder or index.html is a failed read: not built.
+        let Some(dir) = self.dir.as_deref() else {
             return self.not_built();
         };
         match tokio::fs::read_to_string(dir.join("index.html")).await {
