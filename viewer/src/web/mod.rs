@@ -71,6 +71,7 @@ struct Inner {
     options: RenderOptions,
     /// The scene wanted; the renderer catches up at the next step.
     scene: Scene,
+    /// The wanted style differs from the renderer's: restyle or rebuild at the next step.
     scene_changed: bool,
     /// `None` before the first step and while a step holds it.
     renderer: Option<Renderer>,
@@ -319,10 +320,14 @@ impl Inner {
         self.set_scene(scene);
     }
 
+    /// Wants `scene`. Only a change of style (channels, background) goes through the renderer
+    /// at the next step; the camera is set on every frame anyway.
     fn set_scene(&mut self, scene: Scene) {
         if scene != self.scene {
+            if scene.channels != self.scene.channels || scene.background != self.scene.background {
+                self.scene_changed = true;
+            }
             self.scene = scene;
-            self.scene_changed = true;
             self.render_needed = true;
             self.totals.converged = false;
         }
