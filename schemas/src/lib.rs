@@ -10,6 +10,8 @@
 //! documents (the min/max hierarchy and brick batches).
 
 pub mod dataset;
+#[cfg(feature = "drift")]
+pub mod drift;
 pub mod float;
 pub mod ome;
 #[cfg(feature = "store")]

@@ -10,6 +10,7 @@
 //! - **Max abs error**: the largest `|a − b|` over pixels and channels.
 
 use anyhow::{Result, ensure};
+use schemars::JsonSchema;
 use serde::Serialize;
 
 use crate::image::RgbImage;
@@ -24,9 +25,10 @@ pub const SSIM_K1: f64 = 0.01;
 pub const SSIM_K2: f64 = 0.03;
 
 /// The metrics of one comparison.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, JsonSchema)]
 pub struct Metrics {
     /// Peak signal-to-noise ratio in dB (`+∞` for identical images; `null` in JSON).
+    #[schemars(with = "Option<f64>")]
     pub psnr_db: f64,
     /// Mean structural similarity on luminance, in `[-1, 1]`.
     pub ssim: f64,

@@ -23,10 +23,11 @@
 //! **Scene files** are these types as JSON (`schemas/json/scene.schema.json`); `up` defaults
 //! to `−y` (so that, looking toward `+z`, `x` runs right and `y` down as in a slice viewer), `fov_y_degrees` to 30, `visible` to true and `background` to black.
 
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 /// A pinhole camera in world space.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Camera {
     /// Eye position.
@@ -102,7 +103,7 @@ impl Camera {
 }
 
 /// One control point of a piecewise-linear opacity transfer function.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OpacityPoint {
     /// Data value (in the channel's own units, as stored).
@@ -125,7 +126,7 @@ impl OpacityPoint {
 }
 
 /// How one channel is drawn.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ChannelStyle {
     /// Channel index in the volume.
@@ -179,7 +180,7 @@ impl ChannelStyle {
 }
 
 /// A whole scene: camera, channel styles and background.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scene {
     /// The camera.

@@ -22,6 +22,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result, ensure};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::defaults::CameraSpec;
@@ -40,7 +41,7 @@ use crate::source::{BrickSource, SampleType, VolumeInfo};
 pub const FORMAT: &str = "residency-render-bench/1";
 
 /// The machine a result was measured on.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct DeviceInfo {
     /// GPU adapter name (`llvmpipe (LLVM …)` for Mesa's lavapipe).
     pub adapter: String,
@@ -83,7 +84,7 @@ impl DeviceInfo {
 }
 
 /// The dataset measured.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct DatasetInfo {
     /// Label given on the command line (e.g. `sparse 128³`), else the dataset name.
     pub label: String,
@@ -125,7 +126,7 @@ impl DatasetInfo {
 }
 
 /// How the suite ran.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct Settings {
     /// Image width.
     pub width: u32,
@@ -150,7 +151,7 @@ pub struct Settings {
 }
 
 /// The renderer options of one run.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct OptionsRecord {
     /// Step as a fraction of the voxel of the level in use.
     pub step: f64,
@@ -173,7 +174,7 @@ pub struct OptionsRecord {
 }
 
 /// One view of one run.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ViewRecord {
     /// Camera azimuth, degrees.
     pub azimuth: f64,
@@ -211,7 +212,7 @@ pub struct ViewRecord {
 
 /// A parameter a sweep varies, named in results files as `default`, `step`, `lod_bias`,
 /// `cache_fraction` or `leaf_voxels`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum SweptParameter {
     /// None: the run with the default options (value 0).
@@ -254,7 +255,7 @@ impl std::fmt::Display for SweptParameter {
 }
 
 /// A swept parameter and its value.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SweepParam {
     /// The parameter ([`SweptParameter::Default`] for the defaults).
     pub name: SweptParameter,
@@ -263,7 +264,7 @@ pub struct SweepParam {
 }
 
 /// One configuration measured over the whole orbit.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct RunRecord {
     /// [`Experiment::Table1`], [`Experiment::Sweep`] or [`Experiment::Scaling`].
     pub experiment: Experiment,
@@ -308,7 +309,7 @@ pub struct RunRecord {
 }
 
 /// Skipped work for one view: the naive frustum loader against ours, each from a cold cache.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct SkippedRecord {
     /// Camera azimuth, degrees.
     pub azimuth: f64,
@@ -348,7 +349,7 @@ pub struct SkippedRecord {
 
 /// The limit probe with one filter over the orbit (`gpu::probe`): the same rays and step as
 /// the renderer at level 0, through one resident texture, no traversal.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ProbeRecord {
     /// `manual` (8 texel loads, as the renderer) or `hardware` (the texture unit filters).
     pub filter: String,
@@ -365,7 +366,7 @@ pub struct ProbeRecord {
 }
 
 /// A results file: one dataset, one device, any experiments.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct BenchResults {
     /// [`FORMAT`].
     pub format: String,
@@ -393,7 +394,7 @@ pub struct BenchResults {
 
 /// An experiment of `viewer bench run`, named `table1`, `sweep`, `skipped` or `scaling` on the
 /// command line and in results files.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum Experiment {
     /// Table 1 of the paper: every method, GPU and wall ms per converged frame, resident bytes.

@@ -7,15 +7,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
-use serde::Serialize;
 
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
-use residency_viewer::gpu::renderer::Method;
-use residency_viewer::gpu::streaming::{Budget, FrameStats, render_progressive};
+use residency_viewer::gpu::streaming::{Budget, RenderStats, render_progressive};
 use residency_viewer::image::{ImageFormat, RgbImage};
-use residency_viewer::source::BrickKey;
 
 /// Arguments of `viewer render`.
 #[derive(clap::Args, Debug)]
@@ -47,37 +44,6 @@ pub struct Args {
     /// Renderer settings.
     #[command(flatten)]
     pub renderer: RendererArgs,
-}
-
-#[derive(Serialize)]
-struct FailedBrick {
-    brick: String,
-    error: String,
-}
-
-#[derive(Serialize)]
-struct Stats<'a> {
-    dataset: &'a str,
-    method: Method,
-    empty_space_skipping: bool,
-    adapter: String,
-    backend: String,
-    width: u32,
-    height: u32,
-    converged: bool,
-    stop_reason: &'a str,
-    wall_s: f64,
-    bricks_fetched: u64,
-    bytes_fetched: u64,
-    bricks_failed: Vec<FailedBrick>,
-    frames: &'a [FrameStats],
-}
-
-fn key_name(k: &BrickKey) -> String {
-    format!(
-        "level {} channel {} brick z{} y{} x{}",
-        k.level, k.channel, k.brick[0], k.brick[1], k.brick[2]
-    )
 }
 
 /// Runs `viewer render`.
@@ -116,29 +82,13 @@ pub fn run(args: Args) -> Result<()> {
         result.stop_reason
     );
     if let Some(path) = &args.stats {
-        let stats = Stats {
-            dataset: &source.info().name,
-            method,
-            empty_space_skipping,
-            adapter: gpu.adapter_info.name.clone(),
-            backend: format!("{:?}", gpu.adapter_info.backend),
-            width: result.width,
-            height: result.height,
-            converged: result.converged,
-            stop_reason: &result.stop_reason,
+        let stats = RenderStats::new(
+            &source.info().name,
+            &gpu,
+            (method, empty_space_skipping),
+            &result,
             wall_s,
-            bricks_fetched: result.frames.iter().map(|f| f.bricks_fetched).sum(),
-            bytes_fetched: result.frames.iter().map(|f| f.bytes_fetched).sum(),
-            bricks_failed: result
-                .failed
-                .iter()
-                .map(|(k, e)| FailedBrick {
-                    brick: key_name(k),
-                    error: e.clone(),
-                })
-                .collect(),
-            frames: &result.frames,
-        };
+        );
         let json = serde_json::to_string_pretty(&stats)?;
         std::fs::write(path, json + "\n")
             .with_context(|| format!("{}: cannot write statistics", path.display()))?;

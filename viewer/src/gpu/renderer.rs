@@ -4,6 +4,7 @@
 //! slot usage, statistics, GPU time).
 
 use anyhow::{Context, Result, bail, ensure};
+use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
@@ -35,7 +36,7 @@ const MAX_PASSES: u32 = 100_000;
 /// How the ray caster finds data and skips empty space: the residency octree, or one of the
 /// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
 /// functions so that their ratios are fair.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum Method {
     /// The residency octree: per-channel residency masks and min/max per node, nodes finer
@@ -133,7 +134,7 @@ impl Default for RenderOptions {
 }
 
 /// What the shader counted in one frame.
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, JsonSchema)]
 pub struct ShaderCounts {
     /// Samples taken (a homogeneous node integrated analytically counts as one).
     pub samples: u64,

@@ -23,12 +23,13 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
+use schemars::JsonSchema;
 use serde::Serialize;
 
 use super::device::Gpu;
-#[cfg(not(target_arch = "wasm32"))]
-use super::renderer::RenderOptions;
 use super::renderer::{BrickRequest, Inserted, Renderer, ShaderCounts};
+#[cfg(not(target_arch = "wasm32"))]
+use super::renderer::{Method, RenderOptions};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::scene::Scene;
 #[cfg(not(target_arch = "wasm32"))]
@@ -162,7 +163,7 @@ impl Default for Budget {
 }
 
 /// Statistics of one frame (the shader's counters plus what streaming did after it).
-#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, JsonSchema)]
 pub struct FrameStats {
     /// Frame number, from 1.
     pub frame: u32,
@@ -207,6 +208,92 @@ pub struct Progressive {
     pub request_log: Vec<BrickKey>,
     /// Bricks that could not be fetched or uploaded, with the error.
     pub failed: Vec<(BrickKey, String)>,
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// A brick that could not be fetched or uploaded, in the statistics document.
+#[derive(Clone, Debug, PartialEq, Serialize, JsonSchema)]
+pub struct FailedBrick {
+    /// Which brick: `level L channel C brick zZ yY xX`.
+    pub brick: String,
+    /// Why it failed.
+    pub error: String,
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+/// The statistics document of one progressive render, as `viewer render --stats` writes it
+/// (`schemas/json/render-stats.schema.json`).
+#[derive(Clone, Debug, PartialEq, Serialize, JsonSchema)]
+pub struct RenderStats {
+    /// The dataset's name.
+    pub dataset: String,
+    /// How the ray caster found data.
+    pub method: Method,
+    /// Whether empty space was skipped.
+    pub empty_space_skipping: bool,
+    /// The GPU adapter's name.
+    pub adapter: String,
+    /// The graphics backend (`Vulkan`, `Gl`, ...).
+    pub backend: String,
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Whether the last frame requested nothing (beyond bricks that failed).
+    pub converged: bool,
+    /// Why the loop stopped.
+    pub stop_reason: String,
+    /// Wall time of the whole render, seconds.
+    pub wall_s: f64,
+    /// Bricks fetched, over all frames.
+    pub bricks_fetched: u64,
+    /// Decoded bytes fetched, over all frames.
+    pub bytes_fetched: u64,
+    /// Bricks that could not be fetched or uploaded.
+    pub bricks_failed: Vec<FailedBrick>,
+    /// Per-frame statistics.
+    pub frames: Vec<FrameStats>,
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+impl RenderStats {
+    /// The statistics of `result`, a render of `dataset` on `gpu` with `method` (and empty
+    /// space skipping on or off) that took `wall_s` seconds.
+    #[must_use]
+    pub fn new(
+        dataset: &str,
+        gpu: &Gpu,
+        (method, empty_space_skipping): (Method, bool),
+        result: &Progressive,
+        wall_s: f64,
+    ) -> Self {
+        Self {
+            dataset: dataset.to_string(),
+            method,
+            empty_space_skipping,
+            adapter: gpu.adapter_info.name.clone(),
+            backend: format!("{:?}", gpu.adapter_info.backend),
+            width: result.width,
+            height: result.height,
+            converged: result.converged,
+            stop_reason: result.stop_reason.clone(),
+            wall_s,
+            bricks_fetched: result.frames.iter().map(|f| f.bricks_fetched).sum(),
+            bytes_fetched: result.frames.iter().map(|f| f.bytes_fetched).sum(),
+            bricks_failed: result
+                .failed
+                .iter()
+                .map(|(k, e)| FailedBrick {
+                    brick: format!(
+                        "level {} channel {} brick z{} y{} x{}",
+                        k.level, k.channel, k.brick[0], k.brick[1], k.brick[2]
+                    ),
+                    error: e.clone(),
+                })
+                .collect(),
+            frames: result.frames.clone(),
+        }
+    }
 }
 
 /// Decoded size of a brick's samples in bytes (0 for an empty brick).

@@ -17,6 +17,7 @@ mod gpu_contract;
 mod gpu_octree;
 mod gpu_probe;
 mod gpu_shaders;
+mod json_schemas;
 mod reference_cli;
 mod render_baselines;
 mod render_cli;

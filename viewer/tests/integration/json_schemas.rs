@@ -1,0 +1,72 @@
+//! The viewer's hand-written JSON Schemas cannot drift from the Rust types that write (or, for
+//! scenes, read) the documents: each is compared with the schema `schemars` derives from its
+//! type (`residency_schemas::drift` says what is compared).
+
+use std::path::Path;
+
+use residency_schemas::drift::{Node, derived, derived_for_reading, drift};
+use residency_viewer::bench::BenchResults;
+use residency_viewer::gpu::streaming::RenderStats;
+use residency_viewer::metrics::Metrics;
+use residency_viewer::scene::Scene;
+use serde_json::{Value, json};
+
+/// A hand-written schema of `schemas/json/`.
+fn hand_written(file: &str) -> Value {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../schemas/json")
+        .join(file);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Every viewer document's schema file, with the schema derived from its type.
+fn pairs() -> Vec<(&'static str, Value)> {
+    vec![
+        ("scene.schema.json", derived_for_reading::<Scene>()),
+        ("render-stats.schema.json", derived::<RenderStats>()),
+        ("compare.schema.json", derived::<Metrics>()),
+        ("render-bench.schema.json", derived::<BenchResults>()),
+    ]
+}
+
+#[test]
+fn viewer_schemas_match_the_rust_types() {
+    let mut failures = Vec::new();
+    for (file, rust) in pairs() {
+        for d in drift(&hand_written(file), &rust) {
+            failures.push(format!("{file} {d}"));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "the viewer's JSON Schemas drifted from its Rust types (fix the file or the type):\n{}",
+        failures.join("\n")
+    );
+}
+
+/// Scenes are documents the viewer reads: what the derived schema requires is exactly what
+/// serde cannot default, and a field the file lacks is reported.
+#[test]
+fn scene_schema_is_checked_as_read() {
+    let rust = derived_for_reading::<Scene>();
+    let (props, required) = Node::document(&rust).object().unwrap();
+    assert_eq!(required, ["camera", "channels"].map(String::from).into());
+    let (_, camera_required) = props["camera"].object().unwrap();
+    assert_eq!(camera_required, ["eye", "target"].map(String::from).into());
+
+    let mut file = hand_written("scene.schema.json");
+    file["properties"]
+        .as_object_mut()
+        .unwrap()
+        .remove("background");
+    file["properties"]["camera"]["required"] = json!(["eye", "target", "up"]);
+    assert_eq!(
+        drift(&file, &rust),
+        [
+            "#: property 'background' is in the Rust type, not in the file",
+            "#/camera: the file requires {\"eye\", \"target\", \"up\"}, Rust always writes \
+             {\"eye\", \"target\"}",
+        ]
+    );
+}
