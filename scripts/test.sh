@@ -8,6 +8,8 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
 cargo fmt --all --check
+# The fuzz targets are a cargo project of their own (outside the workspace).
+cargo fmt --manifest-path tests/fuzz/Cargo.toml --check
 cargo clippy --workspace --all-targets -- -D warnings
 cargo build --release --workspace --bins
 # The web viewer (WebAssembly + WebGPU) into target/release/web, where brickserver finds it.

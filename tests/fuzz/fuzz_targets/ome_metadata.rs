@@ -19,7 +19,11 @@ fuzz_target!(|data: &[u8]| {
     let Some((&first, rest)) = data.split_first() else {
         return;
     };
-    let format = if first % 2 == 0 { ZarrFormat::V2 } else { ZarrFormat::V3 };
+    let format = if first % 2 == 0 {
+        ZarrFormat::V2
+    } else {
+        ZarrFormat::V3
+    };
     let mut docs = rest.split(|&b| b == 0);
     let group_doc = docs.next().unwrap_or_default();
     let array_docs: Vec<&[u8]> = docs.collect();
@@ -47,7 +51,10 @@ fuzz_target!(|data: &[u8]| {
     // The region grids, with as many values as they claim when that is small, or none.
     for level in group.regions.iter().flat_map(|r| &r.levels) {
         for grid in level.minmax.iter().chain(&level.range) {
-            let cells = grid.grid_shape.iter().try_fold(1u64, |a, &g| a.checked_mul(g));
+            let cells = grid
+                .grid_shape
+                .iter()
+                .try_fold(1u64, |a, &g| a.checked_mul(g));
             let values = match cells {
                 Some(c) if c <= 1 << 12 => vec![0.5; 2 * c as usize],
                 _ => Vec::new(),

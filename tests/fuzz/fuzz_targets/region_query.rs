@@ -140,14 +140,19 @@ fuzz_target!(|input: Input| {
             assert_eq!(a.histogram.counts.iter().sum::<u64>(), a.histogram.voxels);
         }
         Endpoint::MinMax => {
-            decode_framed::<MinMaxHierarchyHeader>(MINMAX_MAGIC, &body).expect("a min/max document");
+            decode_framed::<MinMaxHierarchyHeader>(MINMAX_MAGIC, &body)
+                .expect("a min/max document");
         }
         Endpoint::Bricks => {
             let (h, payload) =
                 decode_framed::<BrickBatchHeader>(BRICKS_MAGIC, &body).expect("a brick batch");
             assert!(!h.bricks.is_empty());
             for b in &h.bricks {
-                assert!(b.offset.checked_add(b.length).is_some_and(|e| e <= payload.len() as u64));
+                assert!(
+                    b.offset
+                        .checked_add(b.length)
+                        .is_some_and(|e| e <= payload.len() as u64)
+                );
             }
         }
         Endpoint::Key { .. } => {
@@ -158,8 +163,11 @@ fuzz_target!(|input: Input| {
                     .and_then(|r| r.split_once('/'))
                     .expect("Content-Range: bytes a-b/n");
                 let (a, b) = span.split_once('-').unwrap();
-                let (a, b, total): (u64, u64, u64) =
-                    (a.parse().unwrap(), b.parse().unwrap(), total.parse().unwrap());
+                let (a, b, total): (u64, u64, u64) = (
+                    a.parse().unwrap(),
+                    b.parse().unwrap(),
+                    total.parse().unwrap(),
+                );
                 assert!(a <= b && b < total, "{range}");
                 assert_eq!(body.len() as u64, b - a + 1, "{range}");
             }

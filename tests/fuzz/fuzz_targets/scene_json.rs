@@ -19,7 +19,17 @@ fuzz_target!(|data: &[u8]| {
     for (px, py, w, h) in [(0, 0, 1, 1), (3, 1, 4, 2), (0, 9, 1, 10)] {
         let _ = cam.ray_direction(px, py, w, h);
     }
-    let probes = [f64::NEG_INFINITY, -1.0, 0.0, 0.5, 1.0, 255.0, 65535.0, f64::INFINITY, f64::NAN];
+    let probes = [
+        f64::NEG_INFINITY,
+        -1.0,
+        0.0,
+        0.5,
+        1.0,
+        255.0,
+        65535.0,
+        f64::INFINITY,
+        f64::NAN,
+    ];
     for ch in &scene.channels {
         for &v in &probes {
             let _ = ch.opacity_at(v);

@@ -76,7 +76,11 @@ fuzz_target!(|names: Vec<Vec<u8>>| {
     assert_eq!(seen.len(), order.len(), "a slice was read twice: {order:?}");
     let shown: Vec<String> = order
         .iter()
-        .map(|&i| OsStr::from_bytes(&written[i]).to_string_lossy().into_owned())
+        .map(|&i| {
+            OsStr::from_bytes(&written[i])
+                .to_string_lossy()
+                .into_owned()
+        })
         .collect();
     for i in 0..shown.len() {
         for j in i + 1..shown.len() {

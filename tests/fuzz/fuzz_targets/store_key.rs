@@ -50,6 +50,9 @@ fuzz_target!(|key: &str| {
     if let Ok((file, meta)) = dir.open_key(key) {
         use std::os::fd::AsRawFd;
         let real = std::fs::read_link(format!("/proc/self/fd/{}", file.as_raw_fd())).unwrap();
-        assert!(meta.is_file() && inside(root, &real), "open_key({key:?}) opened {real:?}");
+        assert!(
+            meta.is_file() && inside(root, &real),
+            "open_key({key:?}) opened {real:?}"
+        );
     }
 });

@@ -133,7 +133,11 @@ impl Description {
                     };
                     xml_attr(&mut s, "DimensionOrder", &v, e);
                 }
-                for (name, v) in [("SizeZ", &o.size_z), ("SizeC", &o.size_c), ("SizeT", &o.size_t)] {
+                for (name, v) in [
+                    ("SizeZ", &o.size_z),
+                    ("SizeC", &o.size_c),
+                    ("SizeT", &o.size_t),
+                ] {
                     if let Some(v) = v {
                         xml_attr(&mut s, name, &v.text(), e);
                     }
@@ -294,7 +298,9 @@ fn build(input: &Input) -> Vec<u8> {
         };
         // (chunk rows, chunk columns, chunks) of true data.
         let mut chunk_bytes = Vec::new();
-        let tiled = p.tiles.map(|(a, b)| (16 * (1 + a as u32 % 4), 16 * (1 + b as u32 % 4)));
+        let tiled = p
+            .tiles
+            .map(|(a, b)| (16 * (1 + a as u32 % 4), 16 * (1 + b as u32 % 4)));
         match tiled {
             Some((tw, th)) => {
                 let n = w.div_ceil(tw) * h.div_ceil(th);
@@ -316,7 +322,11 @@ fn build(input: &Input) -> Vec<u8> {
         let mut offsets = Vec::new();
         let mut counts = Vec::new();
         for raw in &chunk_bytes {
-            let enc = if p.encode { p.codec.encode(raw) } else { raw.clone() };
+            let enc = if p.encode {
+                p.codec.encode(raw)
+            } else {
+                raw.clone()
+            };
             offsets.push(t.blob(&enc));
             counts.push(enc.len() as u64);
         }
@@ -330,7 +340,10 @@ fn build(input: &Input) -> Vec<u8> {
             t.longs(tag::IMAGE_LENGTH, &[h]),
             t.shorts(tag::BITS_PER_SAMPLE, &vec![bits; spp as usize]),
             t.shorts(tag::COMPRESSION, &[p.codec.code()]),
-            t.shorts(tag::PHOTOMETRIC, &[p.photometric.unwrap_or(if spp >= 3 { 2 } else { 1 })]),
+            t.shorts(
+                tag::PHOTOMETRIC,
+                &[p.photometric.unwrap_or(if spp >= 3 { 2 } else { 1 })],
+            ),
             t.shorts(tag::SAMPLES_PER_PIXEL, &[spp as u16]),
         ];
         if (i == 0 || p.describe)

@@ -91,7 +91,8 @@ impl Tiff {
             out: Vec::new(),
             ifds: Vec::new(),
         };
-        t.out.extend_from_slice(if big_endian { b"MM" } else { b"II" });
+        t.out
+            .extend_from_slice(if big_endian { b"MM" } else { b"II" });
         if bigtiff {
             t.put16(43);
             t.put16(8);
@@ -105,22 +106,38 @@ impl Tiff {
     }
 
     fn put16(&mut self, v: u16) {
-        let b = if self.big_endian { v.to_be_bytes() } else { v.to_le_bytes() };
+        let b = if self.big_endian {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        };
         self.out.extend_from_slice(&b);
     }
 
     fn put32(&mut self, v: u32) {
-        let b = if self.big_endian { v.to_be_bytes() } else { v.to_le_bytes() };
+        let b = if self.big_endian {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        };
         self.out.extend_from_slice(&b);
     }
 
     fn put64(&mut self, v: u64) {
-        let b = if self.big_endian { v.to_be_bytes() } else { v.to_le_bytes() };
+        let b = if self.big_endian {
+            v.to_be_bytes()
+        } else {
+            v.to_le_bytes()
+        };
         self.out.extend_from_slice(&b);
     }
 
     fn put_offset(&mut self, v: u64) {
-        if self.bigtiff { self.put64(v) } else { self.put32(v as u32) }
+        if self.bigtiff {
+            self.put64(v)
+        } else {
+            self.put32(v as u32)
+        }
     }
 
     fn patch_offset(&mut self, at: usize, v: u64) {
@@ -159,18 +176,36 @@ impl Tiff {
     pub fn shorts(&self, tag: u16, values: &[u16]) -> Entry {
         let mut bytes = Vec::new();
         for v in values {
-            bytes.extend(if self.big_endian { v.to_be_bytes() } else { v.to_le_bytes() });
+            bytes.extend(if self.big_endian {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            });
         }
-        Entry { tag, ty: ty::SHORT, count: values.len() as u64, bytes }
+        Entry {
+            tag,
+            ty: ty::SHORT,
+            count: values.len() as u64,
+            bytes,
+        }
     }
 
     /// An entry of LONG values.
     pub fn longs(&self, tag: u16, values: &[u32]) -> Entry {
         let mut bytes = Vec::new();
         for v in values {
-            bytes.extend(if self.big_endian { v.to_be_bytes() } else { v.to_le_bytes() });
+            bytes.extend(if self.big_endian {
+                v.to_be_bytes()
+            } else {
+                v.to_le_bytes()
+            });
         }
-        Entry { tag, ty: ty::LONG, count: values.len() as u64, bytes }
+        Entry {
+            tag,
+            ty: ty::LONG,
+            count: values.len() as u64,
+            bytes,
+        }
     }
 
     /// An entry of offsets or byte counts: LONG8 in a BigTIFF, LONG (truncated) otherwise.
@@ -178,9 +213,18 @@ impl Tiff {
         if self.bigtiff {
             let mut bytes = Vec::new();
             for v in values {
-                bytes.extend(if self.big_endian { v.to_be_bytes() } else { v.to_le_bytes() });
+                bytes.extend(if self.big_endian {
+                    v.to_be_bytes()
+                } else {
+                    v.to_le_bytes()
+                });
             }
-            Entry { tag, ty: ty::LONG8, count: values.len() as u64, bytes }
+            Entry {
+                tag,
+                ty: ty::LONG8,
+                count: values.len() as u64,
+                bytes,
+            }
         } else {
             let v: Vec<u32> = values.iter().map(|&v| v as u32).collect();
             self.longs(tag, &v)
@@ -199,7 +243,12 @@ impl Tiff {
     pub fn ascii(&self, tag: u16, text: &[u8]) -> Entry {
         let mut bytes = text.to_vec();
         bytes.push(0);
-        Entry { tag, ty: ty::ASCII, count: bytes.len() as u64, bytes }
+        Entry {
+            tag,
+            ty: ty::ASCII,
+            count: bytes.len() as u64,
+            bytes,
+        }
     }
 
     /// Adds a directory (written in the order added, each linked to the next).
@@ -228,7 +277,11 @@ impl Tiff {
             for e in &entries {
                 self.put16(e.tag);
                 self.put16(e.ty);
-                if self.bigtiff { self.put64(e.count) } else { self.put32(e.count as u32) }
+                if self.bigtiff {
+                    self.put64(e.count)
+                } else {
+                    self.put32(e.count as u32)
+                }
                 if e.bytes.len() <= inline {
                     let mut b = e.bytes.clone();
                     b.resize(inline, 0);
