@@ -113,9 +113,40 @@ pub enum SummaryError {
     Ome(#[from] OmeError),
 }
 
+/// Why level 0's array metadata could not be read (the listing then gives no size, channels or
+/// sample type for the store).
+#[derive(Debug, thiserror::Error)]
+pub enum Level0Error {
+    /// No such key in the store.
+    #[error("{key}: missing")]
+    Missing {
+        /// The array metadata's key, under the store's root.
+        key: String,
+    },
+    /// The key, from the store's own metadata, tries to leave the store.
+    #[error("{key}: refused: {why}")]
+    Refused {
+        /// The array metadata's key, under the store's root.
+        key: String,
+        /// Why the key was refused.
+        why: &'static str,
+    },
+    /// The key exists but cannot be read.
+    #[error("{key}: {why}")]
+    Unreadable {
+        /// The array metadata's key, under the store's root.
+        key: String,
+        /// The I/O error.
+        why: String,
+    },
+    /// The array metadata is unusable.
+    #[error(transparent)]
+    Metadata(#[from] ArrayMetadataError),
+}
+
 /// What the listing says about a store, from its image group's metadata and level 0's array
 /// metadata (two small documents).
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct StoreSummary {
     /// Zarr format.
     pub format: ZarrFormat,
@@ -123,8 +154,8 @@ pub struct StoreSummary {
     pub attributes: ImageAttributes,
     /// Its levels and axes.
     pub layout: PyramidLayout,
-    /// Level 0's array metadata, when readable.
-    pub level0: Result<ArrayDescription, String>,
+    /// Level 0's array metadata, or why it is unreadable.
+    pub level0: Result<ArrayDescription, Level0Error>,
 }
 
 /// Reads key `key` of the store at `root` (canonical), refusing keys that leave it.
@@ -162,12 +193,18 @@ impl StoreSummary {
         let attributes = ImageAttributes::parse(format, &group, &source)?;
         let layout = PyramidLayout::of(attributes.image(), &source)?;
         let key = format!("{}/{}", layout.level_paths[0], format.array_key());
+        let shown_key = format!("{shown}/{key}");
         let level0 = match read_key(root, &key) {
-            Ok(Some(doc)) => ArrayDescription::parse(format, &doc, &format!("{shown}/{key}"))
-                .map_err(|e: ArrayMetadataError| e.to_string()),
-            Ok(None) | Err(KeyError::NotFound) => Err(format!("{shown}/{key}: missing")),
-            Err(KeyError::Refused(why)) => Err(format!("{shown}/{key}: refused: {why}")),
-            Err(KeyError::Unreadable(why)) => Err(format!("{shown}/{key}: {why}")),
+            Ok(Some(doc)) => ArrayDescription::parse(format, &doc, &shown_key).map_err(Into::into),
+            Ok(None) | Err(KeyError::NotFound) => Err(Level0Error::Missing { key: shown_key }),
+            Err(KeyError::Refused(why)) => Err(Level0Error::Refused {
+                key: shown_key,
+                why,
+            }),
+            Err(KeyError::Unreadable(why)) => Err(Level0Error::Unreadable {
+                key: shown_key,
+                why,
+            }),
         };
         Ok(Self {
             format,

@@ -344,19 +344,39 @@ pub fn link(state: &State) -> String {
     format!("{APP_URL}#!{fragment}")
 }
 
+/// Why a link could not be parsed back into a [`State`].
+#[derive(Debug, thiserror::Error)]
+pub enum LinkError {
+    /// The link does not start with [`APP_URL`] and `#!`.
+    #[error("not a neuroglancer link: {0}")]
+    NotALink(String),
+    /// The fragment's percent-decoded bytes are not UTF-8.
+    #[error(transparent)]
+    NotUtf8(#[from] std::str::Utf8Error),
+    /// The fragment is not a [`State`].
+    #[error("{source}: {json}")]
+    NotAState {
+        /// The decoded fragment.
+        json: String,
+        /// What serde found.
+        source: serde_json::Error,
+    },
+}
+
 /// The state in a link made by [`link`], parsed back (for tests and tools).
 ///
 /// # Errors
-/// When `link` is not an [`APP_URL`] link or its fragment is not a [`State`].
-pub fn parse_link(link: &str) -> Result<State, String> {
+/// [`LinkError`] when `link` is not an [`APP_URL`] link or its fragment is not a [`State`].
+pub fn parse_link(link: &str) -> Result<State, LinkError> {
     let fragment = link
         .strip_prefix(APP_URL)
         .and_then(|rest| rest.strip_prefix("#!"))
-        .ok_or_else(|| format!("not a neuroglancer link: {link}"))?;
-    let json = percent_encoding::percent_decode_str(fragment)
-        .decode_utf8()
-        .map_err(|e| e.to_string())?;
-    serde_json::from_str(&json).map_err(|e| format!("{e}: {json}"))
+        .ok_or_else(|| LinkError::NotALink(link.to_string()))?;
+    let json = percent_encoding::percent_decode_str(fragment).decode_utf8()?;
+    serde_json::from_str(&json).map_err(|source| LinkError::NotAState {
+        json: json.to_string(),
+        source,
+    })
 }
 
 #[cfg(test)]

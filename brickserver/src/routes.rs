@@ -303,7 +303,15 @@ async fn listed(state: &Arc<AppState>, headers: &HeaderMap) -> Vec<listing::List
             .map(|(d, l)| {
                 l.summary
                     .get_or_init(|| match listing::StoreSummary::read(&d.root) {
-                        Ok(s) => Some(Arc::new(s)),
+                        Ok(s) => {
+                            if let Err(e) = &s.level0 {
+                                tracing::warn!(
+                                    "{}: listed without size, channels or sample type: {e}",
+                                    d.name
+                                );
+                            }
+                            Some(Arc::new(s))
+                        }
                         Err(e) => {
                             tracing::warn!("{}: not summarized in the listing: {e}", d.name);
                             None

@@ -314,3 +314,39 @@ async fn a_store_without_readable_metadata_is_still_listed() {
         "{page}"
     );
 }
+
+#[test]
+fn why_level_0_or_a_link_is_unreadable_is_said() {
+    use residency_brickserver::listing::StoreSummary;
+    let dir = tempfile::tempdir().unwrap();
+    let cells = v3_store(dir.path(), "cells");
+    std::fs::remove_file(cells.join("0/zarr.json")).unwrap();
+    let summary = StoreSummary::read(&cells).unwrap();
+    assert_eq!(
+        summary.level0.unwrap_err().to_string(),
+        format!("{}/0/zarr.json: missing", cells.display())
+    );
+    std::fs::write(cells.join("0/zarr.json"), "{").unwrap();
+    let summary = StoreSummary::read(&cells).unwrap();
+    assert!(
+        summary
+            .level0
+            .unwrap_err()
+            .to_string()
+            .starts_with(&format!("{}/0/zarr.json: ", cells.display())),
+    );
+
+    assert_eq!(
+        neuroglancer::parse_link("https://example.org/#!{}")
+            .unwrap_err()
+            .to_string(),
+        "not a neuroglancer link: https://example.org/#!{}"
+    );
+    let not_a_state = format!("{}#!%7B%22layers%22%3A1%7D", neuroglancer::APP_URL);
+    assert_eq!(
+        neuroglancer::parse_link(&not_a_state)
+            .unwrap_err()
+            .to_string(),
+        "invalid type: integer `1`, expected a sequence at line 1 column 11: {\"layers\":1}"
+    );
+}
