@@ -7,8 +7,9 @@
 //! would abort the process. So every page is checked first against what its file can hold:
 //!
 //! - every strip or tile must lie inside the file;
-//! - the decoder must have the page's codec (none, LZW, Deflate, PackBits, JPEG or CCITT
-//!   Group 4), or it would fail only after the plane was allocated;
+//! - the decoder must have the page's codec (none, LZW, Deflate, PackBits or JPEG), or it
+//!   would fail only after the plane was allocated; CCITT Group 4, which encodes only 1-bit
+//!   images (no sample type here), is refused;
 //! - uncompressed, the plane must fit in the file;
 //! - compressed, the plane must fit in what its strips or tiles can decode to: each codec has
 //!   a largest expansion (PackBits 64×: two bytes give at most 128; Deflate 1032×, zlib's
@@ -125,12 +126,23 @@ impl PageClaims {
                 );
             }
         }
+        // CCITT Group 4 encodes 1-bit (bilevel) images only, and no sample type here is
+        // 1-bit: a page claiming it decodes to noise, and its bytes have no bound on what they
+        // expand to (found by fuzzing: 417 bytes claiming 65,280 16-bit samples per pixel
+        // took seconds to decode).
+        if self.compression == 4 {
+            bail!(
+                "{shown}: page {page}: CCITT Group 4 compression encodes 1-bit (bilevel) images, \
+                 and {}-bit samples are not 1-bit (unsupported)",
+                self.format.bytes() * 8
+            );
+        }
         // A codec the decoder lacks fails only after the plane's buffer is allocated: refuse it
         // first, whatever the plane claims (found by fuzzing: 349 bytes claiming 6.7 GB).
-        if !matches!(self.compression, 1 | 4 | 5 | 7 | 8 | 32773 | 32946) {
+        if !matches!(self.compression, 1 | 5 | 7 | 8 | 32773 | 32946) {
             bail!(
                 "{shown}: page {page}: unsupported compression {} (supported: none, LZW, \
-                 Deflate, PackBits, JPEG, CCITT Group 4)",
+                 Deflate, PackBits, JPEG)",
                 self.compression
             );
         }
@@ -260,7 +272,20 @@ mod tests {
         assert_eq!(
             error(&c, 349, Some(24 << 30)),
             "f.tif: page 3: unsupported compression 43779 (supported: none, LZW, Deflate, \
-             PackBits, JPEG, CCITT Group 4)"
+             PackBits, JPEG)"
+        );
+    }
+
+    /// Found by fuzzing (target tiff_file): 417 bytes claiming a 7×5 plane of 65,280 16-bit
+    /// samples per pixel, CCITT Group 4 compressed, took seconds to decode into noise.
+    #[test]
+    fn ccitt_group_4_is_refused_as_it_encodes_only_bilevel_images() {
+        let mut c = claims(7, 5, 4, vec![(256, 82)]);
+        c.samples = 65_280;
+        assert_eq!(
+            error(&c, 417, Some(24 << 30)),
+            "f.tif: page 3: CCITT Group 4 compression encodes 1-bit (bilevel) images, and 16-bit \
+             samples are not 1-bit (unsupported)"
         );
     }
 

@@ -7,12 +7,12 @@ use residency_ingest::with_sample_type;
 /// Planes above this size are not read.
 ///
 /// The TIFF claims checks (`ingest/src/source/tiff_claims.rs`) bound a compressed plane by
-/// what its codec can expand its bytes to, except for JPEG and CCITT Group 4, which have no
-/// such bound: for them the limit is the machine's physical memory, by design. For inputs of
-/// at most 64 KiB (the targets' `-max_len`) the bounded codecs allow at most 239 MB (LZW,
-/// 4096 bytes per 9-bit code), so only those two codecs can give a larger plane, and
+/// what its codec can expand its bytes to, except for JPEG, which has no such bound: for it
+/// the limit is the machine's physical memory, by design. For inputs of at most 64 KiB (the
+/// targets' `-max_len`) the bounded codecs allow at most 239 MB (LZW, 4096 bytes per 9-bit
+/// code), so only JPEG can give a larger plane, and
 /// allocating it would trip the fuzzer's allocation limit on every such input. The harness
-/// skips them; the README's "Fuzzing" section records this as a known, accepted limit.
+/// skips such planes; the README's "Fuzzing" section records this as a known, accepted limit.
 pub const UNBOUNDED_CODEC_PLANE_BYTES: u64 = 256 << 20;
 
 /// Reads every plane of every channel of `source` into one plane buffer sized from its
