@@ -13,20 +13,157 @@ use std::sync::Mutex;
 use std::sync::mpsc::sync_channel;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use residency_schemas::dataset::dataset_name;
-use zarrs::array::Array;
+use zarrs::array::{Array, ArrayError};
 
 use crate::ome::{image_attributes, multiscale, omero};
 use crate::pyramid::{LevelPlan, plan_levels};
-use crate::region_writer::{LevelRegions, write_region_metadata};
+use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
 use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
 use crate::sample_format::{Sample, SampleType};
-use crate::source::{RawOptions, SourceInfo, VolumeSource, open_input};
-use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreWriter, directory_bytes};
+use crate::source::{RawOptions, SourceError, SourceInfo, VolumeSource, open_input};
+use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreError, StoreWriter, directory_bytes};
 use crate::with_sample_type;
+
+/// Why a conversion failed: options that do not fit the inputs, inputs that cannot be read or
+/// do not go together, or a store that cannot be written. Messages name the option, input or
+/// output at fault; errors of the inputs and the store are theirs, unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    /// No input.
+    #[error("no input given")]
+    NoInput,
+    /// An input cannot be opened or read.
+    #[error(transparent)]
+    Source(#[from] SourceError),
+    /// Two inputs of different shapes.
+    #[error(
+        "channels of different shapes: {} is {first_shape:?} (z,y,x) but {} is {shape:?}",
+        first.display(), path.display()
+    )]
+    ShapeMismatch {
+        /// The first input.
+        first: PathBuf,
+        /// Its shape `z, y, x`.
+        first_shape: [u64; 3],
+        /// The input that differs.
+        path: PathBuf,
+        /// Its shape `z, y, x`.
+        shape: [u64; 3],
+    },
+    /// An input whose samples no sample type holds exactly together with the others'.
+    #[error(
+        "{}: {format} samples cannot be stored exactly beside {others} samples of {}",
+        path.display(), first.display()
+    )]
+    IncompatibleSamples {
+        /// The input.
+        path: PathBuf,
+        /// Its sample type.
+        format: SampleType,
+        /// The sample type of the inputs before it.
+        others: SampleType,
+        /// The first input.
+        first: PathBuf,
+    },
+    /// A volume without voxels.
+    #[error("{}: volume is empty ({shape:?})", path.display())]
+    EmptyVolume {
+        /// The first input.
+        path: PathBuf,
+        /// Its shape `z, y, x`.
+        shape: [u64; 3],
+    },
+    /// A `--chunk` edge of 0.
+    #[error("--chunk must be positive")]
+    ChunkNotPositive,
+    /// A `--shard` that is not a whole number of chunks.
+    #[error("--shard {shard:?} must be a positive multiple of --chunk {chunk:?}")]
+    ShardNotMultiple {
+        /// `--shard`, `z, y, x`.
+        shard: [u64; 3],
+        /// `--chunk`, `z, y, x`.
+        chunk: [u64; 3],
+    },
+    /// `--shard` with OME-Zarr 0.4.
+    #[error("--shard needs Zarr v3: use --ome-zarr-version 0.5")]
+    ShardNeedsV3,
+    /// A brick larger than Blosc compresses.
+    #[error(
+        "--chunk {requested:?}: a brick of {brick:?} {format} voxels is {bytes} bytes, more than the 2 GiB a Blosc chunk can hold"
+    )]
+    BrickTooLarge {
+        /// `--chunk`, `z, y, x`.
+        requested: [u64; 3],
+        /// The brick, clamped to the volume.
+        brick: [u64; 3],
+        /// The sample type.
+        format: SampleType,
+        /// Bytes of one brick.
+        bytes: u64,
+    },
+    /// A voxel size that is zero, negative or not finite.
+    #[error("voxel size {voxel_size:?} must be positive and finite")]
+    BadVoxelSize {
+        /// The voxel size `z, y, x`.
+        voxel_size: [f64; 3],
+    },
+    /// Slabs that cannot fit in the machine's memory.
+    #[error(
+        "{output}: converting needs at least {needed} bytes of memory (2 slabs of {channels} channel(s) × {depth} planes of {}×{} {format} voxels), more than this machine's memory ({memory} bytes); a smaller z edge of --chunk (and --shard) needs less",
+        plane[0], plane[1]
+    )]
+    SlabMemory {
+        /// The output, as given.
+        output: String,
+        /// Bytes two slabs need.
+        needed: u128,
+        /// Channels.
+        channels: usize,
+        /// Planes per slab.
+        depth: u64,
+        /// Plane size `y, x`.
+        plane: [u64; 2],
+        /// The sample type.
+        format: SampleType,
+        /// Physical memory in bytes.
+        memory: u64,
+    },
+    /// The output store cannot be created or written.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// The region metadata cannot be written.
+    #[error(transparent)]
+    Regions(#[from] RegionWriteError),
+    /// A chunk of level 0 cannot be written.
+    #[error("{}: writing level 0", path.display())]
+    WriteLevel0 {
+        /// The output.
+        path: PathBuf,
+        /// The chunk and why.
+        #[source]
+        source: ChunkWriteError,
+    },
+    /// The thread reading the inputs panicked.
+    #[error("reader thread panicked")]
+    ReaderPanicked,
+    /// A value that cannot be serialised as JSON.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+}
+
+/// A chunk of an image array that cannot be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write chunk {}/{}/{}/{}", chunk[0], chunk[1], chunk[2], chunk[3])]
+pub struct ChunkWriteError {
+    /// Chunk indices `c, z, y, x`.
+    pub chunk: [u64; 4],
+    /// What zarrs said.
+    #[source]
+    pub source: Box<ArrayError>,
+}
 
 /// Everything `ingest convert` needs to know.
 #[derive(Clone, Debug)]
@@ -151,44 +288,41 @@ struct Inputs {
     labels: Vec<String>,
 }
 
-fn open_inputs(options: &ConvertOptions) -> Result<Inputs> {
+fn open_inputs(options: &ConvertOptions) -> Result<Inputs, ConvertError> {
     if options.inputs.is_empty() {
-        bail!("no input given");
+        return Err(ConvertError::NoInput);
     }
     let sources: Vec<Box<dyn VolumeSource>> = options
         .inputs
         .iter()
         .map(|i| open_input(i, &options.raw))
-        .collect::<Result<_>>()?;
+        .collect::<Result<_, _>>()?;
     let first: &SourceInfo = sources[0].info();
     let mut format = first.format;
     for s in &sources[1..] {
         let info = s.info();
         if info.shape != first.shape {
-            bail!(
-                "channels of different shapes: {} is {:?} (z,y,x) but {} is {:?}",
-                first.path.display(),
-                first.shape,
-                info.path.display(),
-                info.shape
-            );
+            return Err(ConvertError::ShapeMismatch {
+                first: first.path.clone(),
+                first_shape: first.shape,
+                path: info.path.clone(),
+                shape: info.shape,
+            });
         }
-        format = SampleType::promote(format, info.format).with_context(|| {
-            format!(
-                "{}: {} samples cannot be stored exactly beside {} samples of {}",
-                info.path.display(),
-                info.format,
-                format,
-                first.path.display()
-            )
+        format = SampleType::promote(format, info.format).ok_or_else(|| {
+            ConvertError::IncompatibleSamples {
+                path: info.path.clone(),
+                format: info.format,
+                others: format,
+                first: first.path.clone(),
+            }
         })?;
     }
     if first.shape.contains(&0) {
-        bail!(
-            "{}: volume is empty ({:?})",
-            first.path.display(),
-            first.shape
-        );
+        return Err(ConvertError::EmptyVolume {
+            path: first.path.clone(),
+            shape: first.shape,
+        });
     }
     let channels: usize = sources.iter().map(|s| s.info().channels).sum();
     let mut labels: Vec<String> = Vec::new();
@@ -237,7 +371,12 @@ fn open_inputs(options: &ConvertOptions) -> Result<Inputs> {
 }
 
 /// Converts the inputs to an OME-Zarr store, as `ingest convert` does.
-pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary> {
+///
+/// # Errors
+/// When the options do not fit the inputs (chunk, shard, voxel size, memory), an input cannot
+/// be opened or read or does not go with the others, or the store cannot be written. A failed
+/// run leaves no output behind.
+pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary, ConvertError> {
     let inputs = open_inputs(options)?;
     let result = with_sample_type!(inputs.format, T => convert_typed::<T>(options, inputs));
     if result.is_err() {
@@ -295,7 +434,7 @@ impl SlabSink<'_> {
         z0: u64,
         nz: u64,
         cells: &mut CellGrid<T>,
-    ) -> Result<(u64, u64)> {
+    ) -> Result<(u64, u64), ChunkWriteError> {
         let [_, ny, nx] = self.shape;
         let [oz, oy, ox] = self.outer;
         let tasks: Vec<(usize, u64, u64)> = (0..self.channels)
@@ -309,7 +448,7 @@ impl SlabSink<'_> {
             .into_par_iter()
             .map_init(
                 || (StatsScratch::default(), Vec::<T>::new()),
-                |(scratch, chunk), (c, cy, cx)| -> Result<(u64, u64)> {
+                |(scratch, chunk), (c, cy, cx)| -> Result<(u64, u64), ChunkWriteError> {
                     // Gather the outer chunk, padded with the fill value (0).
                     chunk.clear();
                     chunk.resize(chunk_len, T::default());
@@ -362,16 +501,18 @@ impl SlabSink<'_> {
                     if let Some(array) = self.array
                         && any_data
                     {
+                        let indices = [c as u64, z0 / oz, cy, cx];
                         array
-                            .store_chunk(&[c as u64, z0 / oz, cy, cx], chunk.as_slice())
-                            .with_context(|| {
-                                format!("cannot write chunk {c}/{}/{cy}/{cx}", z0 / oz)
+                            .store_chunk(&indices, chunk.as_slice())
+                            .map_err(|source| ChunkWriteError {
+                                chunk: indices,
+                                source: Box::new(source),
                             })?;
                     }
                     Ok((written, empty))
                 },
             )
-            .collect::<Result<Vec<_>>>()?;
+            .collect::<Result<Vec<_>, _>>()?;
         cells.add_slab(slab, z0, nz, self.shape);
         Ok(counts
             .into_iter()
@@ -389,7 +530,7 @@ impl<T: Sample> Level<T> {
         channels: usize,
         brick: [u64; 3],
         stats: Option<&[Mutex<ChannelAccumulator>]>,
-    ) -> Result<()> {
+    ) -> Result<(), ChunkWriteError> {
         let sink = SlabSink {
             channels,
             shape: self.plan.shape,
@@ -528,7 +669,7 @@ fn check_slab_memory(
     [ny, nx]: [u64; 2],
     format: SampleType,
     memory: Option<u64>,
-) -> Result<()> {
+) -> Result<(), ConvertError> {
     let Some(memory) = memory else {
         return Ok(());
     };
@@ -539,11 +680,15 @@ fn check_slab_memory(
         * u128::from(nx)
         * format.bytes() as u128;
     if needed > u128::from(memory) {
-        bail!(
-            "{output}: converting needs at least {needed} bytes of memory (2 slabs of {channels} \
-             channel(s) × {depth} planes of {ny}×{nx} {format} voxels), more than this machine's \
-             memory ({memory} bytes); a smaller z edge of --chunk (and --shard) needs less"
-        );
+        return Err(ConvertError::SlabMemory {
+            output: output.to_string(),
+            needed,
+            channels,
+            depth,
+            plane: [ny, nx],
+            format,
+            memory,
+        });
     }
     Ok(())
 }
@@ -551,19 +696,22 @@ fn check_slab_memory(
 fn convert_typed<T: Sample>(
     options: &ConvertOptions,
     mut inputs: Inputs,
-) -> Result<ConvertSummary> {
+) -> Result<ConvertSummary, ConvertError> {
     let started = Instant::now();
     let shown = options.output.display().to_string();
     let requested = options.brick;
     if requested.contains(&0) {
-        bail!("--chunk must be positive");
+        return Err(ConvertError::ChunkNotPositive);
     }
     if let Some(s) = options.shard {
         if (0..3).any(|i| s[i] == 0 || s[i] % requested[i] != 0) {
-            bail!("--shard {s:?} must be a positive multiple of --chunk {requested:?}");
+            return Err(ConvertError::ShardNotMultiple {
+                shard: s,
+                chunk: requested,
+            });
         }
         if options.version == OmeZarrVersion::V04 {
-            bail!("--shard needs Zarr v3: use --ome-zarr-version 0.5");
+            return Err(ConvertError::ShardNeedsV3);
         }
     }
     // A brick edge longer than the volume would hold only fill value past it: clamp it to the
@@ -580,15 +728,16 @@ fn convert_typed<T: Sample>(
         .unwrap_or(u64::MAX);
     // Blosc compresses at most 2 GiB (less its 16-byte header) in one chunk.
     if brick_bytes > i32::MAX as u64 - 16 {
-        bail!(
-            "--chunk {requested:?}: a brick of {brick:?} {} voxels is {brick_bytes} bytes, more \
-             than the 2 GiB a Blosc chunk can hold",
-            T::FORMAT
-        );
+        return Err(ConvertError::BrickTooLarge {
+            requested,
+            brick,
+            format: T::FORMAT,
+            bytes: brick_bytes,
+        });
     }
     let voxel_size = inputs.voxel_size.unwrap_or([1.0; 3]);
     if voxel_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
-        bail!("voxel size {voxel_size:?} must be positive and finite");
+        return Err(ConvertError::BadVoxelSize { voxel_size });
     }
     check_slab_memory(
         &shown,
@@ -658,7 +807,7 @@ fn convert_typed<T: Sample>(
     );
 
     // Reader thread: decodes slab k+1 while slab k is processed.
-    let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>)>>(0);
+    let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);
     // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
     let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
     let oz = outer[0];
@@ -687,15 +836,20 @@ fn convert_typed<T: Sample>(
                 parts.push((s, part));
                 rest = tail;
             }
-            let result: Result<()> = parts.into_par_iter().try_for_each(|(s, part)| {
-                for c in 0..s.info().channels {
-                    for dz in 0..nz {
-                        let start = (c * nz as usize + dz as usize) * plane;
-                        s.read_plane(c, z0 + dz, T::plane_out(&mut part[start..start + plane]))?;
+            let result: Result<(), SourceError> =
+                parts.into_par_iter().try_for_each(|(s, part)| {
+                    for c in 0..s.info().channels {
+                        for dz in 0..nz {
+                            let start = (c * nz as usize + dz as usize) * plane;
+                            s.read_plane(
+                                c,
+                                z0 + dz,
+                                T::plane_out(&mut part[start..start + plane]),
+                            )?;
+                        }
                     }
-                }
-                Ok(())
-            });
+                    Ok(())
+                });
             let failed = result.is_err();
             if tx.send(result.map(|()| (z0, nz, slab))).is_err() || failed {
                 return;
@@ -704,11 +858,15 @@ fn convert_typed<T: Sample>(
         }
     });
 
-    let result = (|| -> Result<()> {
+    let result = (|| -> Result<(), ConvertError> {
         for message in &rx {
             let (z0, nz, slab) = message?;
-            process_level0(&mut levels, &stats, channels, brick, &slab, z0, nz)
-                .with_context(|| format!("{shown}: writing level 0"))?;
+            process_level0(&mut levels, &stats, channels, brick, &slab, z0, nz).map_err(
+                |source| ConvertError::WriteLevel0 {
+                    path: options.output.clone(),
+                    source,
+                },
+            )?;
             bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
             let _ = recycle_tx.send(slab);
         }
@@ -717,9 +875,7 @@ fn convert_typed<T: Sample>(
     // Unblock the reader whether it waits to send a slab or to get one back.
     drop(rx);
     drop(recycle_tx);
-    reader
-        .join()
-        .map_err(|_| anyhow::anyhow!("reader thread panicked"))?;
+    reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
     result?;
     bar.finish_and_clear();
 
@@ -790,7 +946,7 @@ fn process_level0<T: Sample>(
     slab: &[T],
     z0: u64,
     nz: u64,
-) -> Result<()> {
+) -> Result<(), ChunkWriteError> {
     levels[0].write_slab(slab, z0, nz, channels, brick, Some(stats))?;
     let shape = levels[0].plan.shape;
     if levels.len() > 1 {
@@ -808,7 +964,7 @@ fn flush_if_full<T: Sample>(
     channels: usize,
     brick: [u64; 3],
     below_end: u64,
-) -> Result<()> {
+) -> Result<(), ChunkWriteError> {
     let below_depth = levels[l - 1].plan.shape[0];
     let level = &levels[l];
     let [depth, ny, nx] = level.plan.shape;

@@ -5,30 +5,84 @@
 //! written first; the image group's attributes are replaced last, through a temporary file
 //! and a rename, so an interrupted run leaves the store as it was.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use anyhow::{Context, Result, bail};
 use residency_schemas::REGIONS_KEY;
-use residency_schemas::pyramid::Pyramid;
-use zarrs::array::ArraySubset;
+use residency_schemas::pyramid::{Pyramid, PyramidError};
+use zarrs::array::{ArrayError, ArraySubset};
 
-use crate::convert::SlabSink;
-use crate::region_writer::{LevelRegions, write_region_metadata};
+use crate::convert::{ChunkWriteError, SlabSink};
+use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
 use crate::regions::{CellGrid, ChannelAccumulator, LevelHistograms};
 use crate::sample_format::Sample;
-use crate::store::{Store, StoreWriter};
+use crate::store::{Store, StoreError, StoreWriter};
 use crate::with_sample_type;
+
+/// Why a store cannot be indexed. Messages name the store (and the level or axis) at fault;
+/// errors of the pyramid reader and of writing the store are theirs, unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum IndexError {
+    /// The path is not a folder.
+    #[error("{}: not an OME-Zarr image (no zarr.json or .zattrs)", path.display())]
+    NotAnImage {
+        /// The path.
+        path: PathBuf,
+    },
+    /// The pyramid reader refuses the store.
+    #[error(transparent)]
+    Pyramid(#[from] PyramidError),
+    /// A leading axis other than `c` with several entries.
+    #[error(
+        "{}: axis '{axis}' has {entries} entries; only c, z, y, x can be indexed",
+        path.display()
+    )]
+    ExtraAxis {
+        /// The store.
+        path: PathBuf,
+        /// The axis.
+        axis: String,
+        /// Its entries.
+        entries: u64,
+    },
+    /// A slab of a level cannot be read.
+    #[error("{}: cannot read level {level} at z {z}", path.display())]
+    ReadLevel {
+        /// The store.
+        path: PathBuf,
+        /// The level's path in the store.
+        level: String,
+        /// First z of the slab.
+        z: u64,
+        /// What zarrs said.
+        #[source]
+        source: Box<ArrayError>,
+    },
+    /// A chunk cannot be written (indexing writes no image chunk, so never in practice).
+    #[error(transparent)]
+    Chunk(#[from] ChunkWriteError),
+    /// The store cannot be opened, synced or its attributes replaced.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// The region metadata cannot be written.
+    #[error(transparent)]
+    Regions(#[from] RegionWriteError),
+    /// A value that cannot be serialised as JSON.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
+}
 
 /// Indexes the image at `path` and returns a short report.
 ///
 /// # Errors
 /// When the store is not an OME-Zarr image the pyramid reader accepts, has a leading axis
 /// other than `c` with several entries, or cannot be read or written.
-pub fn index(path: &Path) -> Result<String> {
+pub fn index(path: &Path) -> Result<String, IndexError> {
     let shown = path.display().to_string();
     if !path.is_dir() {
-        bail!("{shown}: not an OME-Zarr image (no zarr.json or .zattrs)");
+        return Err(IndexError::NotAnImage {
+            path: path.to_path_buf(),
+        });
     }
     let store = Arc::new(crate::store::StagingStore::new(path)?);
     let pyramid = Pyramid::open(store, &shown)?;
@@ -37,9 +91,11 @@ pub fn index(path: &Path) -> Result<String> {
         for (i, axis) in pyramid.layout.axis_names[..n - 3].iter().enumerate() {
             let entries = level.description.shape[i];
             if Some(i) != pyramid.layout.channel_axis && entries != 1 {
-                bail!(
-                    "{shown}: axis '{axis}' has {entries} entries; only c, z, y, x can be indexed"
-                );
+                return Err(IndexError::ExtraAxis {
+                    path: path.to_path_buf(),
+                    axis: axis.clone(),
+                    entries,
+                });
             }
         }
     }
@@ -59,7 +115,7 @@ fn index_typed<T: Sample>(
     path: &Path,
     pyramid: &Pyramid<Store>,
     labels: &[String],
-) -> Result<String> {
+) -> Result<String, IndexError> {
     let shown = path.display().to_string();
     let channels = pyramid.channels as usize;
     let brick = pyramid.brick_shape;
@@ -95,7 +151,12 @@ fn index_typed<T: Sample>(
             let slab: Vec<T> = level
                 .array
                 .retrieve_array_subset(&ArraySubset::new_with_ranges(&ranges))
-                .with_context(|| format!("{shown}: cannot read level {} at z {z0}", level.path))?;
+                .map_err(|source| IndexError::ReadLevel {
+                    path: path.to_path_buf(),
+                    level: level.path.clone(),
+                    z: z0,
+                    source: Box::new(source),
+                })?;
             let (w, e) = sink.process(&slab, z0, nz, &mut cells)?;
             written += w;
             empty += e;

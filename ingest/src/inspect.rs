@@ -1,18 +1,41 @@
 //! `ingest inspect`: a human-readable report of an OME-Zarr store.
 
 use std::fmt::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
-use residency_schemas::pyramid::Pyramid;
+use residency_schemas::pyramid::{Pyramid, PyramidError};
 use residency_schemas::zarr::SHARDING_CODEC;
 use zarrs::array::ArrayMetadata;
-use zarrs::filesystem::FilesystemStore;
+use zarrs::filesystem::{FilesystemStore, FilesystemStoreCreateError};
 use zarrs::metadata::v3::MetadataV3;
 use zarrs::metadata_ext::chunk_grid::regular::RegularChunkGridConfiguration;
 use zarrs::metadata_ext::codec::blosc::BloscCodecConfiguration;
 use zarrs::metadata_ext::codec::sharding::ShardingCodecConfiguration;
+
+/// Why a store cannot be inspected. Messages name the store; errors of the pyramid reader
+/// are its own, unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum InspectError {
+    /// The path is not a folder.
+    #[error("{}: not an OME-Zarr image (no zarr.json or .zattrs)", path.display())]
+    NotAnImage {
+        /// The path.
+        path: PathBuf,
+    },
+    /// zarrs cannot open the folder as a store.
+    #[error("{}: cannot open", path.display())]
+    Open {
+        /// The folder.
+        path: PathBuf,
+        /// What zarrs said.
+        #[source]
+        source: FilesystemStoreCreateError,
+    },
+    /// The pyramid reader refuses the store.
+    #[error(transparent)]
+    Pyramid(#[from] PyramidError),
+}
 
 /// A list of numbers as compact JSON (`[1,64,64,64]`).
 fn json_list(v: &[impl serde::Serialize]) -> String {
@@ -91,13 +114,19 @@ fn chunks_and_codecs(metadata: &ArrayMetadata) -> (String, String) {
 ///
 /// # Errors
 /// When the store is not an OME-Zarr image the pyramid reader accepts.
-pub fn inspect(path: &Path) -> Result<String> {
+pub fn inspect(path: &Path) -> Result<String, InspectError> {
     let shown = path.display();
     if !path.is_dir() {
-        anyhow::bail!("{shown}: not an OME-Zarr image (no zarr.json or .zattrs)");
+        return Err(InspectError::NotAnImage {
+            path: path.to_path_buf(),
+        });
     }
-    let store =
-        Arc::new(FilesystemStore::new(path).with_context(|| format!("{shown}: cannot open"))?);
+    let store = Arc::new(
+        FilesystemStore::new(path).map_err(|source| InspectError::Open {
+            path: path.to_path_buf(),
+            source,
+        })?,
+    );
     let pyramid = Pyramid::open(store, &shown.to_string())?;
     let attributes = &pyramid.attributes;
     let image = attributes.image();
@@ -106,7 +135,7 @@ pub fn inspect(path: &Path) -> Result<String> {
         .clone()
         .unwrap_or_else(|| attributes.version.as_str().to_string());
     let mut out = String::new();
-    writeln!(out, "{shown}: OME-Zarr {version}")?;
+    let _ = writeln!(out, "{shown}: OME-Zarr {version}");
     let axes: Vec<String> = image
         .axes
         .iter()
@@ -115,17 +144,17 @@ pub fn inspect(path: &Path) -> Result<String> {
             None => a.name.clone(),
         })
         .collect();
-    writeln!(out, "axes: {}", axes.join(", "))?;
+    let _ = writeln!(out, "axes: {}", axes.join(", "));
     for (level, dataset) in pyramid.levels.iter().zip(&image.datasets) {
         let (chunks, codecs) = chunks_and_codecs(level.array.metadata());
         let scale = dataset.scale().map(json_list).unwrap_or_default();
-        writeln!(
+        let _ = writeln!(
             out,
             "level {}: shape {:?} {} chunks {chunks} codecs {codecs} scale {scale}",
             level.path,
             level.array.shape(),
             level.description.sample_type
-        )?;
+        );
     }
     if let Some(regions) = &attributes.regions {
         let datasets = image.datasets.len();
@@ -134,7 +163,7 @@ pub fn inspect(path: &Path) -> Result<String> {
             .iter()
             .filter(|d| regions.levels.iter().any(|l| d.path == l.image))
             .count();
-        writeln!(
+        let _ = writeln!(
             out,
             "region metadata: {} levels (covers {covered} of {datasets} image levels), cells {:?} (+{} halo), bricks {:?}, {} histogram bins",
             regions.levels.len(),
@@ -142,9 +171,9 @@ pub fn inspect(path: &Path) -> Result<String> {
             regions.halo,
             regions.brick_shape,
             regions.histogram_bins
-        )?;
+        );
         for l in &regions.levels {
-            writeln!(
+            let _ = writeln!(
                 out,
                 "  level {}: {} min/max grids (finest {:?}), bricks written {}, empty {}",
                 l.image,
@@ -152,7 +181,7 @@ pub fn inspect(path: &Path) -> Result<String> {
                 l.minmax.first().map(|g| g.grid_shape).unwrap_or_default(),
                 l.bricks_written,
                 l.bricks_empty
-            )?;
+            );
         }
         for c in &regions.channels {
             let p = |x: f64| {
@@ -161,7 +190,7 @@ pub fn inspect(path: &Path) -> Result<String> {
                     .find(|q| q.percent == x)
                     .map_or("-".into(), |q| format!("{}", q.value))
             };
-            writeln!(
+            let _ = writeln!(
                 out,
                 "channel '{}': min {} max {} mean {} nan {} p1 {} p50 {} p99.9 {}",
                 c.label,
@@ -172,23 +201,23 @@ pub fn inspect(path: &Path) -> Result<String> {
                 p(1.0),
                 p(50.0),
                 p(99.9)
-            )?;
+            );
         }
     } else {
         for c in attributes.omero.iter().flat_map(|o| &o.channels) {
             let window = c.window.as_ref().map_or("null".into(), |w| {
                 serde_json::to_string(w).unwrap_or_default()
             });
-            writeln!(
+            let _ = writeln!(
                 out,
                 "channel '{}': window {window}",
                 c.label.as_deref().unwrap_or("?"),
-            )?;
+            );
         }
-        writeln!(
+        let _ = writeln!(
             out,
             "region metadata: none (run `ingest index {shown}` to add it)"
-        )?;
+        );
     }
     Ok(out)
 }

@@ -14,11 +14,12 @@
 //!   dense simulation, multiplexed immunofluorescence);
 //! - [`inspect`]: the `ingest inspect` report;
 //! - [`memory`]: the machine's memory, for refusing work that cannot fit before allocating.
-
-// Fallible functions here return `anyhow` errors whose messages name the file, key or brick at
-// fault; they get `# Errors` sections as they move to typed errors (the format model, wire
-// decoding and the server's parsers already have both).
-#![allow(clippy::missing_errors_doc)]
+//!
+//! Errors are `thiserror` enums, one per module ([`source::SourceError`],
+//! [`store::StoreError`], [`region_writer::RegionWriteError`], [`convert::ConvertError`],
+//! [`index::IndexError`], [`inspect::InspectError`], [`synthetic::SampleError`]): each message
+//! names the file, option or array at fault, and the underlying error is its `source()`, so
+//! the binary's `error: {e:#}` prints the whole chain once.
 
 pub mod convert;
 pub mod index;

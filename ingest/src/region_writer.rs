@@ -1,16 +1,36 @@
 //! Writing region metadata into a store: the min/max grid hierarchy and the brick histograms
 //! of every level as Zarr arrays under `residency/`, and the [`RegionMetadata`] document.
 
-use anyhow::{Context, Result};
+use std::path::PathBuf;
+
 use residency_schemas::{
     ChannelStatistics, HISTOGRAM_BINS, MinMaxGrid, REGIONS_VERSION, RegionLevel, RegionMetadata,
 };
-use zarrs::array::ArraySubset;
+use zarrs::array::{ArrayError, ArraySubset};
 
 use crate::ome::ChannelDisplay;
 use crate::regions::{CELL, CellGrid, ChannelAccumulator, HALO, LevelHistograms};
 use crate::sample_format::{Sample, SampleType};
-use crate::store::{ArrayLayout, StoreWriter};
+use crate::store::{ArrayLayout, StoreError, StoreWriter};
+
+/// Region metadata that cannot be written into a store.
+#[derive(Debug, thiserror::Error)]
+pub enum RegionWriteError {
+    /// A group or an array cannot be created.
+    #[error(transparent)]
+    Store(#[from] StoreError),
+    /// An array's values cannot be written.
+    #[error("{}: cannot write {array}", path.display())]
+    WriteArray {
+        /// The store.
+        path: PathBuf,
+        /// The array's path in the store (`residency/0/minmax/0`).
+        array: String,
+        /// What zarrs said.
+        #[source]
+        source: Box<ArrayError>,
+    },
+}
 
 /// Percentiles recorded for every channel.
 pub const PERCENTS: [f64; 5] = [0.1, 1.0, 50.0, 99.0, 99.9];
@@ -35,14 +55,24 @@ pub struct LevelRegions<'a, T: Sample> {
 
 /// Writes the region arrays and returns the metadata document and the channels' display
 /// windows (for `omero`).
+///
+/// # Errors
+/// When a group or an array cannot be created or written.
 pub fn write_region_metadata<T: Sample>(
     writer: &StoreWriter,
     levels: &[LevelRegions<'_, T>],
     stats: &[ChannelAccumulator],
     labels: &[String],
     brick: [u64; 3],
-) -> Result<(RegionMetadata, Vec<ChannelDisplay>)> {
-    let shown = writer.output.display();
+) -> Result<(RegionMetadata, Vec<ChannelDisplay>), RegionWriteError> {
+    let cannot_write = |array: &str| {
+        let array = array.to_string();
+        move |source: ArrayError| RegionWriteError::WriteArray {
+            path: writer.output.clone(),
+            array,
+            source: Box::new(source),
+        }
+    };
     let channels = stats.len();
     let mut channel_stats = Vec::new();
     let mut displays = Vec::new();
@@ -110,7 +140,7 @@ pub fn write_region_metadata<T: Sample>(
                         &ArraySubset::new_with_shape(array.shape().to_vec()),
                         grid.to_min_max_array(exact).as_slice(),
                     )
-                    .with_context(|| format!("{shown}: cannot write {path}"))?;
+                    .map_err(cannot_write(&path))?;
                 out.push(MinMaxGrid {
                     path,
                     cell_shape: [CELL << k; 3],
@@ -145,7 +175,7 @@ pub fn write_region_metadata<T: Sample>(
             &ArraySubset::new_with_shape(hist.shape().to_vec()),
             level.histograms.binned(&binnings).as_slice(),
         )
-        .with_context(|| format!("{shown}: cannot write {hist_path}"))?;
+        .map_err(cannot_write(&hist_path))?;
         region_levels.push(RegionLevel {
             image: level.image.clone(),
             shape: level.shape,

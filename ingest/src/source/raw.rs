@@ -4,9 +4,7 @@ use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
-use anyhow::{Context, Result, bail};
-
-use super::{PlaneOut, SourceInfo, VolumeSource};
+use super::{PlaneOut, SourceError, SourceInfo, VolumeSource};
 use crate::sample_format::SampleType;
 
 /// Layout options for raw inputs (`--dims`, `--dtype`, `--endian`, `--header-bytes`).
@@ -58,39 +56,66 @@ pub struct RawSource {
 impl RawSource {
     /// Opens a raw file, taking its layout from `options` or, failing that, its name,
     /// and checks that the file size matches the layout exactly.
-    pub fn open(path: &Path, options: &RawOptions) -> Result<Self> {
-        let shown = path.display();
+    ///
+    /// # Errors
+    /// When the layout is neither given nor in the name, has an empty axis, or does not match
+    /// the file's size, or the file cannot be opened.
+    pub fn open(path: &Path, options: &RawOptions) -> Result<Self, SourceError> {
         let from_name = parse_raw_name(path);
-        let dims = options.dims.or(from_name.map(|n| n.0)).with_context(|| {
-            format!("{shown}: raw input needs --dims X,Y,Z (or a name like name_XxYxZ_uint8.raw)")
+        let dims =
+            options
+                .dims
+                .or(from_name.map(|n| n.0))
+                .ok_or_else(|| SourceError::RawNeedsDims {
+                    path: path.to_path_buf(),
+                })?;
+        let format =
+            options
+                .format
+                .or(from_name.map(|n| n.1))
+                .ok_or_else(|| SourceError::RawNeedsType {
+                    path: path.to_path_buf(),
+                })?;
+        let file = File::open(path).map_err(|source| SourceError::Open {
+            path: path.to_path_buf(),
+            source,
         })?;
-        let format = options.format.or(from_name.map(|n| n.1)).with_context(|| {
-            format!("{shown}: raw input needs --dtype (or a name like name_XxYxZ_uint8.raw)")
-        })?;
-        let file = File::open(path).with_context(|| format!("{shown}: cannot open"))?;
         let actual = file
             .metadata()
-            .with_context(|| format!("{shown}: cannot stat"))?
+            .map_err(|source| SourceError::Stat {
+                path: path.to_path_buf(),
+                source,
+            })?
             .len();
         let [x, y, z] = dims;
         if dims.contains(&0) {
-            bail!("{shown}: --dims {x},{y},{z} has an empty axis; each needs at least one voxel");
+            return Err(SourceError::RawEmptyAxis {
+                path: path.to_path_buf(),
+                dims,
+            });
         }
+        let header_bytes = options.header_bytes;
         let Some(expected) = [x, y, z]
             .iter()
             .try_fold(format.bytes() as u64, |acc, &d| acc.checked_mul(d))
-            .and_then(|data| data.checked_add(options.header_bytes))
+            .and_then(|data| data.checked_add(header_bytes))
         else {
-            bail!(
-                "{shown}: --dims {x},{y},{z} of {format} with a {}-byte header is more than 2^64 bytes",
-                options.header_bytes
-            );
+            return Err(SourceError::RawTooLarge {
+                path: path.to_path_buf(),
+                dims,
+                format,
+                header_bytes,
+            });
         };
         if actual != expected {
-            bail!(
-                "{shown}: raw file is {actual} bytes, but --dims {x},{y},{z} of {format} with a {}-byte header need {expected} bytes",
-                options.header_bytes
-            );
+            return Err(SourceError::RawSize {
+                path: path.to_path_buf(),
+                actual,
+                dims,
+                format,
+                header_bytes,
+                expected,
+            });
         }
         Ok(Self {
             info: SourceInfo {
@@ -115,15 +140,23 @@ impl VolumeSource for RawSource {
         &self.info
     }
 
-    fn read_plane(&mut self, _channel: usize, z: u64, mut out: PlaneOut<'_>) -> Result<()> {
+    fn read_plane(
+        &mut self,
+        _channel: usize,
+        z: u64,
+        mut out: PlaneOut<'_>,
+    ) -> Result<(), SourceError> {
         let [_, y, x] = self.info.shape;
         let plane_bytes = y * x * self.info.format.bytes() as u64;
         self.buffer.resize(plane_bytes as usize, 0);
-        let shown = self.info.path.display();
         self.file
             .seek(SeekFrom::Start(self.header_bytes + z * plane_bytes))
             .and_then(|_| self.file.read_exact(&mut self.buffer))
-            .with_context(|| format!("{shown}: cannot read plane z={z}"))?;
+            .map_err(|source| SourceError::ReadPlane {
+                path: self.info.path.clone(),
+                z,
+                source,
+            })?;
         out.fill_from_bytes(&self.buffer, self.info.format, self.big_endian, 1, 0);
         Ok(())
     }

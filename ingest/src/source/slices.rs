@@ -2,10 +2,8 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail};
-
 use super::tiff::{NATIVE_BIG_ENDIAN, check_page, decode_page, open_decoder, page_format};
-use super::{PlaneOut, SourceInfo, VolumeSource};
+use super::{PlaneOut, SourceError, SourceInfo, VolumeSource};
 
 /// A folder or glob of single-slice TIFF files.
 pub struct SliceFolderSource {
@@ -25,9 +23,16 @@ fn is_tiff(path: &Path) -> bool {
 
 impl SliceFolderSource {
     /// Every `.tif`/`.tiff` file in `dir`, in natural order (`z2` before `z10`).
-    pub fn from_dir(dir: &Path) -> Result<Self> {
+    ///
+    /// # Errors
+    /// When the folder cannot be listed or holds no TIFF file, or the first slice cannot be
+    /// opened or claims more than its file or the machine can hold.
+    pub fn from_dir(dir: &Path) -> Result<Self, SourceError> {
         let files = std::fs::read_dir(dir)
-            .with_context(|| format!("{}: cannot list folder", dir.display()))?
+            .map_err(|source| SourceError::ListFolder {
+                path: dir.to_path_buf(),
+                source,
+            })?
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.is_file() && is_tiff(p))
             .collect();
@@ -35,24 +40,34 @@ impl SliceFolderSource {
     }
 
     /// Every file matching a glob pattern, in natural order.
-    pub fn from_glob(pattern: &str) -> Result<Self> {
+    ///
+    /// # Errors
+    /// When the pattern is invalid or matches no file, or the first slice cannot be opened or
+    /// claims more than its file or the machine can hold.
+    pub fn from_glob(pattern: &str) -> Result<Self, SourceError> {
         let files = glob::glob(pattern)
-            .with_context(|| format!("{pattern}: invalid glob pattern"))?
+            .map_err(|source| SourceError::BadGlob {
+                pattern: pattern.to_string(),
+                source,
+            })?
             .filter_map(Result::ok)
             .filter(|p| p.is_file())
             .collect();
         Self::from_files(Path::new(pattern), files)
     }
 
-    fn from_files(origin: &Path, mut files: Vec<PathBuf>) -> Result<Self> {
+    fn from_files(origin: &Path, mut files: Vec<PathBuf>) -> Result<Self, SourceError> {
         files.sort_by(|a, b| natord::compare(&a.to_string_lossy(), &b.to_string_lossy()));
-        let first = files
-            .first()
-            .with_context(|| format!("{}: no TIFF slices found", origin.display()))?;
+        let first = files.first().ok_or_else(|| SourceError::NoSlices {
+            path: origin.to_path_buf(),
+        })?;
         let (mut decoder, tiff) = open_decoder(first)?;
         let (w, h) = decoder
             .dimensions()
-            .with_context(|| format!("{}: cannot read the image size", first.display()))?;
+            .map_err(|source| SourceError::ImageSize {
+                path: first.clone(),
+                source,
+            })?;
         let (format, samples_per_pixel) = page_format(&mut decoder, first)?;
         // The shape comes from the first slice: check it can hold the plane it claims.
         check_page(&mut decoder, first, 0, tiff, format, samples_per_pixel)?;
@@ -79,29 +94,37 @@ impl VolumeSource for SliceFolderSource {
         &self.info
     }
 
-    fn read_plane(&mut self, channel: usize, z: u64, mut out: PlaneOut<'_>) -> Result<()> {
+    fn read_plane(
+        &mut self,
+        channel: usize,
+        z: u64,
+        mut out: PlaneOut<'_>,
+    ) -> Result<(), SourceError> {
         let file = &self.files[z as usize];
         if self.cached != Some(z) {
             self.cached = None;
             let (mut decoder, tiff) = open_decoder(file)?;
-            let (w, h) = decoder.dimensions()?;
+            let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
             let [_, ey, ex] = self.info.shape;
             if (h as u64, w as u64) != (ey, ex) {
-                bail!(
-                    "{}: slice is {w}x{h} pixels but {} is {ex}x{ey}",
-                    file.display(),
-                    self.files[0].display()
-                );
+                return Err(SourceError::SliceSize {
+                    path: file.clone(),
+                    width: w,
+                    height: h,
+                    first: self.files[0].clone(),
+                    expected: [ey, ex],
+                });
             }
             let (format, spp) = page_format(&mut decoder, file)?;
             if (format, spp) != (self.info.format, self.samples_per_pixel) {
-                bail!(
-                    "{}: slice holds {spp} x {format} samples but {} holds {} x {}",
-                    file.display(),
-                    self.files[0].display(),
-                    self.samples_per_pixel,
-                    self.info.format
-                );
+                return Err(SourceError::SliceFormat {
+                    path: file.clone(),
+                    samples: spp,
+                    format,
+                    first: self.files[0].clone(),
+                    expected_samples: self.samples_per_pixel,
+                    expected_format: self.info.format,
+                });
             }
             decode_page(&mut decoder, file, 0, tiff, format, spp, &mut self.page)?;
             self.cached = Some(z);

@@ -5,13 +5,12 @@ use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
 
-use anyhow::{Context, Result, bail};
 use tiff::decoder::{Decoder, Limits};
 use tiff::tags::Tag;
 
 use super::tiff_claims::PageClaims;
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
-use super::{PlaneOut, SourceInfo, VolumeSource};
+use super::{PlaneOut, SourceError, SourceInfo, VolumeSource};
 use crate::sample_format::SampleType;
 
 /// A TIFF file holding a z-stack of one or more channels.
@@ -35,14 +34,25 @@ pub(super) struct TiffFile {
     pub memory: Option<u64>,
 }
 
-/// Why the decoder refused a value list: the `tiff` crate's own words ("decoder limits
-/// exceeded") do not say what was wrong with the file.
-fn explain(error: tiff::TiffError) -> anyhow::Error {
-    match error {
-        tiff::TiffError::LimitsExceeded => anyhow::anyhow!(
-            "a directory entry claims more values than the file holds (corrupt TIFF)"
-        ),
-        other => other.into(),
+/// Why the decoder could not read a page's directory (its tags): its own words, except for a
+/// refused value list, where the `tiff` crate's ("decoder limits exceeded") do not say what
+/// was wrong with the file.
+#[derive(Debug, thiserror::Error)]
+pub enum TiffDirectoryError {
+    /// A value list longer than the file could hold (the decoder's limits).
+    #[error("a directory entry claims more values than the file holds (corrupt TIFF)")]
+    TooManyValues,
+    /// Anything else the decoder refused.
+    #[error(transparent)]
+    Decoder(tiff::TiffError),
+}
+
+impl From<tiff::TiffError> for TiffDirectoryError {
+    fn from(error: tiff::TiffError) -> Self {
+        match error {
+            tiff::TiffError::LimitsExceeded => Self::TooManyValues,
+            other => Self::Decoder(other),
+        }
     }
 }
 
@@ -50,12 +60,15 @@ fn explain(error: tiff::TiffError) -> anyhow::Error {
 /// (one value per byte) and no longer, nor take more than half the machine's memory once
 /// decoded, so a directory entry claiming billions of values is an error and not an
 /// allocation; planes are checked separately ([`PageClaims`]) before they are decoded.
-pub(super) fn open_decoder(path: &Path) -> Result<(Decoder<BufReader<File>>, TiffFile)> {
-    let file = File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
-    let len = file
-        .metadata()
-        .with_context(|| format!("{}: cannot open", path.display()))?
-        .len();
+pub(super) fn open_decoder(
+    path: &Path,
+) -> Result<(Decoder<BufReader<File>>, TiffFile), SourceError> {
+    let cannot_open = |source| SourceError::Open {
+        path: path.to_path_buf(),
+        source,
+    };
+    let file = File::open(path).map_err(cannot_open)?;
+    let len = file.metadata().map_err(cannot_open)?.len();
     let memory = crate::memory::physical_memory();
     let mut limits = Limits::unlimited();
     let per_value = size_of::<tiff::decoder::ifd::Value>() as u64;
@@ -64,8 +77,10 @@ pub(super) fn open_decoder(path: &Path) -> Result<(Decoder<BufReader<File>>, Tif
         .min(memory.map_or(u64::MAX, |m| m / 2));
     limits.decoding_buffer_size = usize::try_from(most).unwrap_or(usize::MAX);
     let decoder = Decoder::new(BufReader::new(file))
-        .map_err(explain)
-        .with_context(|| format!("{}: not a readable TIFF file", path.display()))?
+        .map_err(|e| SourceError::NotTiff {
+            path: path.to_path_buf(),
+            source: e.into(),
+        })?
         .with_limits(limits);
     Ok((decoder, TiffFile { len, memory }))
 }
@@ -79,14 +94,12 @@ pub(super) fn check_page(
     file: TiffFile,
     format: SampleType,
     samples: usize,
-) -> Result<()> {
+) -> Result<(), SourceError> {
     PageClaims::read(decoder, format, samples)
-        .map_err(explain)
-        .with_context(|| {
-            format!(
-                "{}: cannot read the strips of page {page} (truncated or corrupt TIFF)",
-                path.display()
-            )
+        .map_err(|e| SourceError::Strips {
+            path: path.to_path_buf(),
+            page,
+            source: e.into(),
         })?
         .check(path, page, file.len, file.memory)
 }
@@ -95,10 +108,13 @@ pub(super) fn check_page(
 pub(super) fn page_format(
     decoder: &mut Decoder<BufReader<File>>,
     path: &Path,
-) -> Result<(SampleType, usize)> {
+) -> Result<(SampleType, usize), SourceError> {
     let color = decoder
         .colortype()
-        .with_context(|| format!("{}: cannot read the pixel layout", path.display()))?;
+        .map_err(|source| SourceError::PixelLayout {
+            path: path.to_path_buf(),
+            source,
+        })?;
     let (bits, samples) = match color {
         tiff::ColorType::Gray(b) => (b, 1),
         tiff::ColorType::GrayA(b) => (b, 2),
@@ -108,10 +124,12 @@ pub(super) fn page_format(
             bit_depth,
             num_samples,
         } => (bit_depth, num_samples as usize),
-        other => bail!(
-            "{}: unsupported sample format: colour type {other:?}",
-            path.display()
-        ),
+        colour => {
+            return Err(SourceError::UnsupportedColour {
+                path: path.to_path_buf(),
+                colour,
+            });
+        }
     };
     let kind = decoder
         .find_tag_unsigned::<u16>(Tag::SampleFormat)
@@ -132,10 +150,11 @@ pub(super) fn page_format(
                 3 => "floating point",
                 _ => "unknown",
             };
-            bail!(
-                "{}: unsupported sample format: {b}-bit {kind} (supported: 8/16/32-bit unsigned, 16/32-bit signed, 32-bit float)",
-                path.display()
-            )
+            return Err(SourceError::UnsupportedSamples {
+                path: path.to_path_buf(),
+                bits: b,
+                kind,
+            });
         }
     };
     Ok((format, samples))
@@ -151,16 +170,17 @@ pub(super) fn decode_page(
     format: SampleType,
     samples: usize,
     buffer: &mut Vec<u8>,
-) -> Result<()> {
+) -> Result<(), SourceError> {
     check_page(decoder, path, page, file, format, samples)?;
-    let (w, h) = decoder.dimensions()?;
+    let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
     buffer.resize(w as usize * h as usize * samples * format.bytes(), 0);
-    decoder.read_image_bytes(buffer).with_context(|| {
-        format!(
-            "{}: cannot decode page {page} (truncated or corrupt TIFF)",
-            path.display()
-        )
-    })
+    decoder
+        .read_image_bytes(buffer)
+        .map_err(|source| SourceError::Decode {
+            path: path.to_path_buf(),
+            page,
+            source,
+        })
 }
 
 /// Whether decoded pages are big-endian (they are in native byte order).
@@ -176,12 +196,19 @@ fn rational(value: tiff::decoder::ifd::Value) -> Option<f64> {
 
 impl TiffSource {
     /// Opens a TIFF file and works out its channel and z layout from its metadata.
-    pub fn open(path: &Path) -> Result<Self> {
-        let shown = path.display().to_string();
+    ///
+    /// # Errors
+    /// When the file cannot be opened or decoded, its sample format is not supported, a page
+    /// claims more than the file or the machine can hold, or its ImageJ or OME metadata is
+    /// unusable, describes several time points or more pages than the file has.
+    pub fn open(path: &Path) -> Result<Self, SourceError> {
         let (mut decoder, file) = open_decoder(path)?;
         let (width, height) = decoder
             .dimensions()
-            .with_context(|| format!("{shown}: cannot read the image size"))?;
+            .map_err(|source| SourceError::ImageSize {
+                path: path.to_path_buf(),
+                source,
+            })?;
         let (format, samples_per_pixel) = page_format(&mut decoder, path)?;
         let planar = decoder
             .find_tag_unsigned::<u16>(Tag::PlanarConfiguration)
@@ -189,9 +216,10 @@ impl TiffSource {
             .flatten()
             .unwrap_or(1);
         if planar == 2 && samples_per_pixel > 1 {
-            bail!(
-                "{shown}: unsupported sample format: planar-separate pages with {samples_per_pixel} samples per pixel"
-            );
+            return Err(SourceError::PlanarSeparate {
+                path: path.to_path_buf(),
+                samples: samples_per_pixel,
+            });
         }
         let description = decoder
             .get_tag_ascii_string(Tag::ImageDescription)
@@ -210,10 +238,10 @@ impl TiffSource {
         check_page(&mut decoder, path, 0, file, format, samples_per_pixel)?;
         let mut pages = 1u64;
         while decoder.more_images() {
-            decoder.next_image().map_err(explain).with_context(|| {
-                format!(
-                    "{shown}: cannot read the directory of page {pages} (truncated or corrupt TIFF)"
-                )
+            decoder.next_image().map_err(|e| SourceError::Directory {
+                path: path.to_path_buf(),
+                page: pages,
+                source: e.into(),
             })?;
             // Pages of another size or format are refused when read; check what they claim.
             if let Ok((format, samples)) = page_format(&mut decoder, path) {
@@ -223,8 +251,10 @@ impl TiffSource {
         }
 
         let (layout, xy_from_resolution) = if description.contains("<OME") {
-            let layout =
-                parse_ome_xml(&description).with_context(|| format!("{shown}: OME-TIFF"))?;
+            let layout = parse_ome_xml(&description).map_err(|source| SourceError::OmeTiff {
+                path: path.to_path_buf(),
+                source,
+            })?;
             (layout, false)
         } else if let Some(layout) = parse_imagej(&description) {
             (layout, true)
@@ -242,24 +272,28 @@ impl TiffSource {
             (layout, false)
         };
         if layout.time_points > 1 {
-            bail!(
-                "{shown}: has {} time points; ingest converts one time point per store (split the series first)",
-                layout.time_points
-            );
+            return Err(SourceError::TimePoints {
+                path: path.to_path_buf(),
+                time_points: layout.time_points,
+            });
         }
         // Found by fuzzing: ImageJ `slices=0` passed the page count with any channel count,
         // whose product with the samples per pixel then overflowed.
         if layout.depth == 0 {
-            bail!("{shown}: metadata describes 0 z planes (corrupt metadata)");
+            return Err(SourceError::NoPlanes {
+                path: path.to_path_buf(),
+            });
         }
         // In u128: metadata sizes may multiply past u64.
         let needed = layout.channel_planes as u128 * u128::from(layout.depth);
         if u128::from(pages) < needed {
-            bail!(
-                "{shown}: metadata describes {needed} pages ({} channels x {} z) but the file has only {pages} (truncated?)",
-                layout.channel_planes,
-                layout.depth
-            );
+            return Err(SourceError::MissingPages {
+                path: path.to_path_buf(),
+                needed,
+                channels: layout.channel_planes,
+                depth: layout.depth,
+                pages,
+            });
         }
         let mut voxel_size = layout.voxel_size;
         if xy_from_resolution {
@@ -303,27 +337,45 @@ impl VolumeSource for TiffSource {
         &self.info
     }
 
-    fn read_plane(&mut self, channel: usize, z: u64, mut out: PlaneOut<'_>) -> Result<()> {
+    fn read_plane(
+        &mut self,
+        channel: usize,
+        z: u64,
+        mut out: PlaneOut<'_>,
+    ) -> Result<(), SourceError> {
         let spp = self.samples_per_pixel;
         let page = (channel / spp) as u64 * self.layout.channel_stride + z * self.layout.z_stride;
         let path = self.info.path.clone();
-        let shown = path.display();
         if self.cached != Some(page) {
             self.cached = None;
-            self.decoder.seek_to_image(page as usize).with_context(|| {
-                format!("{shown}: cannot find page {page} (truncated or corrupt TIFF)")
-            })?;
-            let (w, h) = self.decoder.dimensions()?;
+            self.decoder
+                .seek_to_image(page as usize)
+                .map_err(|source| SourceError::Seek {
+                    path: path.clone(),
+                    page,
+                    source,
+                })?;
+            let (w, h) = self.decoder.dimensions().map_err(SourceError::Tiff)?;
             let [_, ey, ex] = self.info.shape;
             if (h as u64, w as u64) != (ey, ex) {
-                bail!("{shown}: page {page} is {w}x{h} pixels but page 0 is {ex}x{ey}");
+                return Err(SourceError::PageSize {
+                    path,
+                    page,
+                    width: w,
+                    height: h,
+                    expected: [ey, ex],
+                });
             }
             let (format, samples) = page_format(&mut self.decoder, &path)?;
             if (format, samples) != (self.info.format, spp) {
-                bail!(
-                    "{shown}: page {page} holds {samples} x {format} samples per pixel but page 0 holds {spp} x {}",
-                    self.info.format
-                );
+                return Err(SourceError::PageFormat {
+                    path,
+                    page,
+                    samples,
+                    format,
+                    expected_samples: spp,
+                    expected_format: self.info.format,
+                });
             }
             decode_page(
                 &mut self.decoder,

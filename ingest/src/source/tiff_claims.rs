@@ -18,15 +18,53 @@
 //! - and in every case the plane must fit in this machine's physical memory (the only bound
 //!   for codecs without one, such as JPEG).
 
+use std::fmt;
 use std::fs::File;
 use std::io::BufReader;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Result, bail};
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
+use super::SourceError;
 use crate::sample_format::SampleType;
+
+/// The plane a page claims, as the messages of [`SourceError`] name it:
+/// `f.tif: page 3: plane 100×10 of uint16 needs 2000 bytes`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlaneClaim {
+    /// The TIFF file.
+    pub path: PathBuf,
+    /// The page, from 0.
+    pub page: u64,
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Samples per pixel.
+    pub samples: usize,
+    /// Sample format.
+    pub format: SampleType,
+    /// Bytes of the decoded plane.
+    pub bytes: u128,
+}
+
+impl fmt::Display for PlaneClaim {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "{}: page {}: plane {}×{}",
+            self.path.display(),
+            self.page,
+            self.width,
+            self.height
+        )?;
+        if self.samples > 1 {
+            write!(f, "×{}", self.samples)?;
+        }
+        write!(f, " of {} needs {} bytes", self.format, self.bytes)
+    }
+}
 
 /// What one page claims: its plane and its strips or tiles.
 #[derive(Clone, Debug, PartialEq)]
@@ -115,15 +153,18 @@ impl PageClaims {
         page: u64,
         file_len: u64,
         memory: Option<u64>,
-    ) -> Result<()> {
-        let shown = path.display();
+    ) -> Result<(), SourceError> {
         for (i, &(offset, count)) in self.chunks.iter().enumerate() {
             if u128::from(offset) + u128::from(count) > u128::from(file_len) {
-                bail!(
-                    "{shown}: page {page}: {} {i} claims {count} bytes at offset {offset} but \
-                     the file has only {file_len} bytes (truncated or corrupt TIFF)",
-                    self.chunk
-                );
+                return Err(SourceError::ChunkOutsideFile {
+                    path: path.to_path_buf(),
+                    page,
+                    chunk: self.chunk,
+                    index: i,
+                    count,
+                    offset,
+                    file_len,
+                });
             }
         }
         // CCITT Group 4 encodes 1-bit (bilevel) images only, and no sample type here is
@@ -131,57 +172,62 @@ impl PageClaims {
         // expand to (found by fuzzing: 417 bytes claiming 65,280 16-bit samples per pixel
         // took seconds to decode).
         if self.compression == 4 {
-            bail!(
-                "{shown}: page {page}: CCITT Group 4 compression encodes 1-bit (bilevel) images, \
-                 and {}-bit samples are not 1-bit (unsupported)",
-                self.format.bytes() * 8
-            );
+            return Err(SourceError::BilevelCodec {
+                path: path.to_path_buf(),
+                page,
+                bits: self.format.bytes() * 8,
+            });
         }
         // A codec the decoder lacks fails only after the plane's buffer is allocated: refuse it
         // first, whatever the plane claims (found by fuzzing: 349 bytes claiming 6.7 GB).
         if !matches!(self.compression, 1 | 5 | 7 | 8 | 32773 | 32946) {
-            bail!(
-                "{shown}: page {page}: unsupported compression {} (supported: none, LZW, \
-                 Deflate, PackBits, JPEG)",
-                self.compression
-            );
+            return Err(SourceError::UnsupportedCompression {
+                path: path.to_path_buf(),
+                page,
+                compression: self.compression,
+            });
         }
         let needed = self.plane_bytes();
-        let samples = if self.samples > 1 {
-            format!("×{}", self.samples)
-        } else {
-            String::new()
+        let plane = || {
+            Box::new(PlaneClaim {
+                path: path.to_path_buf(),
+                page,
+                width: self.width,
+                height: self.height,
+                samples: self.samples,
+                format: self.format,
+                bytes: needed,
+            })
         };
-        let plane = format!(
-            "{shown}: page {page}: plane {}×{}{samples} of {} needs {needed} bytes",
-            self.width, self.height, self.format
-        );
         if self.compression == 1 {
             if needed > u128::from(file_len) {
-                bail!(
-                    "{plane}, more than the whole file ({file_len} bytes) although it is stored \
-                     uncompressed (corrupt TIFF)"
-                );
+                return Err(SourceError::PlaneOverFile {
+                    plane: plane(),
+                    file_len,
+                });
             }
         } else {
             let compressed: u128 = self.chunks.iter().map(|&(_, c)| u128::from(c)).sum();
             if let Some(most) = max_decoded(self.compression, compressed)
                 && needed > most
             {
-                let n = self.chunks.len();
-                bail!(
-                    "{plane}, more than its {n} {}-compressed {}{} of {compressed} bytes can \
-                     decode to (at most {most} bytes; corrupt TIFF)",
-                    codec_name(self.compression),
-                    self.chunk,
-                    if n == 1 { "" } else { "s" }
-                );
+                return Err(SourceError::PlaneOverCodec {
+                    plane: plane(),
+                    chunks: self.chunks.len(),
+                    codec: codec_name(self.compression),
+                    chunk: self.chunk,
+                    compressed,
+                    most,
+                });
             }
         }
         if let Some(memory) = memory
             && needed > u128::from(memory)
         {
-            bail!("{plane}, more than this machine's memory ({memory} bytes)");
+            return Err(SourceError::PlaneOverMemory {
+                plane: plane(),
+                memory,
+            });
         }
         Ok(())
     }

@@ -1,6 +1,57 @@
 //! Stack metadata embedded in TIFF files: ImageJ hyperstack descriptions and OME-XML.
 
-use anyhow::{Context, Result, bail};
+use std::num::ParseIntError;
+
+/// OME-XML that does not describe a stack ingest can read. The messages name the element or
+/// attribute at fault; the file is named by the [`SourceError`](super::SourceError) around it.
+#[derive(Debug, thiserror::Error)]
+pub enum OmeXmlError {
+    /// Not well-formed XML.
+    #[error("invalid OME-XML")]
+    Invalid(#[source] roxmltree::Error),
+    /// No `Pixels` element anywhere in the document.
+    #[error("OME-XML has no Pixels element")]
+    NoPixels,
+    /// A size attribute of `Pixels` is missing.
+    #[error("OME-XML Pixels has no {name}")]
+    MissingSize {
+        /// The attribute (`SizeZ`, `SizeC` or `SizeT`).
+        name: &'static str,
+    },
+    /// A size attribute of `Pixels` is not a whole number.
+    #[error("OME-XML Pixels {name} is not a number")]
+    BadSize {
+        /// The attribute (`SizeZ`, `SizeC` or `SizeT`).
+        name: &'static str,
+        /// Why it does not parse.
+        #[source]
+        source: ParseIntError,
+    },
+    /// A `DimensionOrder` that is not `XY` followed by three axes.
+    #[error("OME-XML DimensionOrder '{order}' is not one of XY[ZCT permutation]")]
+    BadOrder {
+        /// The order as given.
+        order: String,
+    },
+    /// A `DimensionOrder` naming an axis other than `Z`, `C` or `T`.
+    #[error("OME-XML DimensionOrder '{order}' has an unknown axis '{axis}'")]
+    UnknownAxis {
+        /// The order as given.
+        order: String,
+        /// The unknown axis.
+        axis: char,
+    },
+    /// Sizes whose product, the page count, passes 2^64.
+    #[error("OME-XML Pixels SizeZ {z} x SizeC {c} x SizeT {t} is more than 2^64 planes")]
+    TooManyPlanes {
+        /// `SizeZ`.
+        z: u64,
+        /// `SizeC`.
+        c: u64,
+        /// `SizeT`.
+        t: u64,
+    },
+}
 
 /// How a multi-page TIFF maps (channel, z) to pages, plus physical metadata.
 #[derive(Clone, Debug, PartialEq)]
@@ -76,18 +127,23 @@ pub fn parse_imagej(description: &str) -> Option<StackLayout> {
 }
 
 /// Parses OME-XML (the `ImageDescription` of the first page of an OME-TIFF).
-pub fn parse_ome_xml(xml: &str) -> Result<StackLayout> {
-    let doc = roxmltree::Document::parse(xml).context("invalid OME-XML")?;
+///
+/// # Errors
+/// When the XML is not well-formed, has no `Pixels` element or no numeric `SizeZ`, `SizeC`
+/// and `SizeT`, its `DimensionOrder` is not an `XY[ZCT]` permutation, or the sizes multiply
+/// past 2^64 pages.
+pub fn parse_ome_xml(xml: &str) -> Result<StackLayout, OmeXmlError> {
+    let doc = roxmltree::Document::parse(xml).map_err(OmeXmlError::Invalid)?;
     let pixels = doc
         .descendants()
         .find(|n| n.has_tag_name("Pixels") || n.tag_name().name() == "Pixels")
-        .context("OME-XML has no Pixels element")?;
-    let size = |name: &str| -> Result<u64> {
+        .ok_or(OmeXmlError::NoPixels)?;
+    let size = |name: &'static str| -> Result<u64, OmeXmlError> {
         pixels
             .attribute(name)
-            .with_context(|| format!("OME-XML Pixels has no {name}"))?
+            .ok_or(OmeXmlError::MissingSize { name })?
             .parse()
-            .with_context(|| format!("OME-XML Pixels {name} is not a number"))
+            .map_err(|source| OmeXmlError::BadSize { name, source })
     };
     let (z, c, t) = (size("SizeZ")?, size("SizeC")?, size("SizeT")?);
     let order = pixels.attribute("DimensionOrder").unwrap_or("XYZCT");
@@ -105,7 +161,9 @@ pub fn parse_ome_xml(xml: &str) -> Result<StackLayout> {
     let mut stride = 1u64;
     let (mut z_stride, mut c_stride) = (0, 0);
     if !order.starts_with("XY") || order.len() != 5 {
-        bail!("OME-XML DimensionOrder '{order}' is not one of XY[ZCT permutation]");
+        return Err(OmeXmlError::BadOrder {
+            order: order.to_string(),
+        });
     }
     for axis in order[2..].chars() {
         let size = match axis {
@@ -118,12 +176,17 @@ pub fn parse_ome_xml(xml: &str) -> Result<StackLayout> {
                 channel_planes
             }
             'T' => t,
-            _ => bail!("OME-XML DimensionOrder '{order}' has an unknown axis '{axis}'"),
+            _ => {
+                return Err(OmeXmlError::UnknownAxis {
+                    order: order.to_string(),
+                    axis,
+                });
+            }
         };
         // The product of the sizes may overflow (as ImageJ's did under fuzzing).
-        stride = stride.checked_mul(size).with_context(|| {
-            format!("OME-XML Pixels SizeZ {z} x SizeC {c} x SizeT {t} is more than 2^64 planes")
-        })?;
+        stride = stride
+            .checked_mul(size)
+            .ok_or(OmeXmlError::TooManyPlanes { z, c, t })?;
     }
     let physical = |axis: &str| -> Option<f64> {
         pixels

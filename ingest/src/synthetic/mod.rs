@@ -34,9 +34,8 @@ mod ome_tiff;
 mod sparse;
 
 use std::fmt;
+use std::io;
 use std::path::{Path, PathBuf};
-
-use anyhow::{Result, bail};
 
 pub use self::cycif::CYCIF_VOXEL_SIZE;
 pub use self::fluorescence::{SAMPLE_CHANNELS, SAMPLE_VOXEL_SIZE, SampleScene};
@@ -44,6 +43,100 @@ use self::ome_tiff::{Scene, write_scene};
 
 /// Most channels a sample may have (each is one open file while it is written).
 pub const MAX_SAMPLE_CHANNELS: usize = 64;
+
+/// Why a sample cannot be written: a [`SampleSpec`] out of range (the message names the
+/// option, `--size` or `--channels`), or a file that cannot be written (it names the file).
+#[derive(Debug, thiserror::Error)]
+pub enum SampleError {
+    /// An extent of 0.
+    #[error(
+        "--size {},{},{}: every extent must be at least 1 voxel",
+        shape[0], shape[1], shape[2]
+    )]
+    EmptyExtent {
+        /// Extent `z, y, x`.
+        shape: [u64; 3],
+    },
+    /// A plane wider or higher than a TIFF page can be.
+    #[error(
+        "--size {},{},{}: a TIFF page holds at most {} pixels per side",
+        shape[0], shape[1], shape[2], u32::MAX
+    )]
+    PageTooLarge {
+        /// Extent `z, y, x`.
+        shape: [u64; 3],
+    },
+    /// A channel count other than 3 for the fluorescence sample.
+    #[error(
+        "--channels {channels}: the fluorescence sample has exactly 3 channels (nuclei, membranes, filaments); use --kind cycif for many channels"
+    )]
+    FluorescenceChannels {
+        /// The count asked for.
+        channels: usize,
+    },
+    /// A channel count outside `1..=MAX_SAMPLE_CHANNELS`.
+    #[error("--channels {channels}: must be between 1 and {MAX_SAMPLE_CHANNELS}")]
+    ChannelCount {
+        /// The count asked for.
+        channels: usize,
+    },
+    /// Planes too large to hold a few of every channel in memory.
+    #[error(
+        "--size {},{},{}: planes of {}×{} pixels × {channels} channels do not fit in memory",
+        shape[0], shape[1], shape[2], shape[1], shape[2]
+    )]
+    PlanesTooLarge {
+        /// Extent `z, y, x`.
+        shape: [u64; 3],
+        /// Channels.
+        channels: usize,
+    },
+    /// The output folder cannot be created.
+    #[error("{}: cannot create folder", path.display())]
+    CreateFolder {
+        /// The folder.
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: io::Error,
+    },
+    /// A channel file cannot be created.
+    #[error("{}: cannot create", path.display())]
+    CreateFile {
+        /// The file (its temporary name).
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: io::Error,
+    },
+    /// The TIFF encoder cannot start a channel file.
+    #[error("{}: cannot start TIFF", path.display())]
+    StartTiff {
+        /// The file (its temporary name).
+        path: PathBuf,
+        /// What the encoder said.
+        #[source]
+        source: tiff::TiffError,
+    },
+    /// A page cannot be written.
+    #[error("{}: cannot write", path.display())]
+    WritePage {
+        /// The file.
+        path: PathBuf,
+        /// What the encoder said.
+        #[source]
+        source: tiff::TiffError,
+    },
+    /// A finished channel file cannot be renamed to its final name.
+    #[error("{}: cannot move into place", path.display())]
+    MoveIntoPlace {
+        /// The file's final name.
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: io::Error,
+    },
+}
 
 /// Which synthetic specimen `ingest sample` writes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -131,26 +224,25 @@ impl SampleSpec {
     }
 
     /// Checks the extent and channel count, with an error saying what is allowed.
-    pub fn validate(&self) -> Result<()> {
-        let [z, y, x] = self.shape;
-        if self.shape.contains(&0) {
-            bail!("--size {z},{y},{x}: every extent must be at least 1 voxel");
+    ///
+    /// # Errors
+    /// When an extent is 0, a plane is wider or higher than a TIFF page can be, the channel
+    /// count does not suit the kind, or planes of every channel would not fit in memory.
+    pub fn validate(&self) -> Result<(), SampleError> {
+        let shape = self.shape;
+        let [_, y, x] = shape;
+        if shape.contains(&0) {
+            return Err(SampleError::EmptyExtent { shape });
         }
         if y > u64::from(u32::MAX) || x > u64::from(u32::MAX) {
-            bail!(
-                "--size {z},{y},{x}: a TIFF page holds at most {} pixels per side",
-                u32::MAX
-            );
+            return Err(SampleError::PageTooLarge { shape });
         }
         let n = self.channels;
         if self.kind == SampleKind::Fluorescence && n != 3 {
-            bail!(
-                "--channels {n}: the fluorescence sample has exactly 3 channels (nuclei, \
-                 membranes, filaments); use --kind cycif for many channels"
-            );
+            return Err(SampleError::FluorescenceChannels { channels: n });
         }
         if !(1..=MAX_SAMPLE_CHANNELS).contains(&n) {
-            bail!("--channels {n}: must be between 1 and {MAX_SAMPLE_CHANNELS}");
+            return Err(SampleError::ChannelCount { channels: n });
         }
         // A few planes of every channel are held at once (4 bytes per sample at most).
         let plane_bytes = y
@@ -158,9 +250,7 @@ impl SampleSpec {
             .and_then(|p| p.checked_mul(4 * n as u64))
             .filter(|&b| b <= isize::MAX as u64 / 16);
         if plane_bytes.is_none() {
-            bail!(
-                "--size {z},{y},{x}: planes of {y}×{x} pixels × {n} channels do not fit in memory"
-            );
+            return Err(SampleError::PlanesTooLarge { shape, channels: n });
         }
         Ok(())
     }
@@ -168,7 +258,14 @@ impl SampleSpec {
 
 /// Writes the sample described by `spec` into `dir`, one OME-TIFF per channel, and returns the
 /// file paths in channel order.
-pub fn write_samples(dir: &Path, spec: &SampleSpec, progress: bool) -> Result<Vec<PathBuf>> {
+///
+/// # Errors
+/// When `spec` is out of range ([`SampleSpec::validate`]), or a file cannot be written.
+pub fn write_samples(
+    dir: &Path,
+    spec: &SampleSpec,
+    progress: bool,
+) -> Result<Vec<PathBuf>, SampleError> {
     spec.validate()?;
     let SampleSpec {
         kind,
@@ -188,12 +285,15 @@ pub fn write_samples(dir: &Path, spec: &SampleSpec, progress: bool) -> Result<Ve
 
 /// Writes the fluorescence sample stack of `shape` into `dir`, one OME-TIFF per channel, and
 /// returns the file paths in channel order.
+///
+/// # Errors
+/// As [`write_samples`].
 pub fn write_sample(
     dir: &Path,
     shape: [u64; 3],
     seed: u64,
     progress: bool,
-) -> Result<Vec<PathBuf>> {
+) -> Result<Vec<PathBuf>, SampleError> {
     let spec = SampleSpec {
         shape,
         seed,

@@ -9,12 +9,12 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use tiff::encoder::{TiffEncoder, TiffKindBig, colortype};
 use tiff::tags::Tag;
 
+use super::SampleError;
 use crate::sample_format::SampleType;
 
 /// One z-plane (`y, x` in C order) of one channel, in the channel's sample type.
@@ -123,9 +123,15 @@ fn batch_planes(bytes_per_z: u64) -> u64 {
 
 /// Writes `scene` into `dir`, one `STEM.ome.tif` per channel, and returns the file paths in
 /// channel order.
-pub(crate) fn write_scene(dir: &Path, scene: &dyn Scene, progress: bool) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("{}: cannot create folder", dir.display()))?;
+pub(crate) fn write_scene(
+    dir: &Path,
+    scene: &dyn Scene,
+    progress: bool,
+) -> Result<Vec<PathBuf>, SampleError> {
+    std::fs::create_dir_all(dir).map_err(|source| SampleError::CreateFolder {
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let shape = scene.shape();
     let voxel_size = scene.voxel_size();
     let channels = scene.channels();
@@ -137,12 +143,19 @@ pub(crate) fn write_scene(dir: &Path, scene: &dyn Scene, progress: bool) -> Resu
         .iter()
         .map(|p| p.with_extension("tif.partial"))
         .collect();
-    let open = |p: &PathBuf| -> Result<TiffEncoder<BufWriter<File>, TiffKindBig>> {
-        let f = File::create(p).with_context(|| format!("{}: cannot create", p.display()))?;
-        TiffEncoder::new_big(BufWriter::with_capacity(1 << 20, f))
-            .with_context(|| format!("{}: cannot start TIFF", p.display()))
+    let open = |p: &PathBuf| -> Result<TiffEncoder<BufWriter<File>, TiffKindBig>, SampleError> {
+        let f = File::create(p).map_err(|source| SampleError::CreateFile {
+            path: p.clone(),
+            source,
+        })?;
+        TiffEncoder::new_big(BufWriter::with_capacity(1 << 20, f)).map_err(|source| {
+            SampleError::StartTiff {
+                path: p.clone(),
+                source,
+            }
+        })
     };
-    let mut encoders: Vec<_> = partial.iter().map(open).collect::<Result<_>>()?;
+    let mut encoders: Vec<_> = partial.iter().map(open).collect::<Result<_, _>>()?;
     let [depth, ny, nx] = shape;
     let bar = if progress {
         ProgressBar::with_draw_target(Some(depth), ProgressDrawTarget::stderr())
@@ -173,8 +186,12 @@ pub(crate) fn write_scene(dir: &Path, scene: &dyn Scene, progress: bool) -> Resu
             for (c, data) in plane.iter().enumerate() {
                 debug_assert_eq!(data.format(), channels[c].format);
                 let description = first.then_some(descriptions[c].as_str());
-                write_page(&mut encoders[c], [ny, nx], description, data)
-                    .with_context(|| format!("{}: cannot write", paths[c].display()))?;
+                write_page(&mut encoders[c], [ny, nx], description, data).map_err(|source| {
+                    SampleError::WritePage {
+                        path: paths[c].clone(),
+                        source,
+                    }
+                })?;
             }
             bar.inc(1);
         }
@@ -182,8 +199,10 @@ pub(crate) fn write_scene(dir: &Path, scene: &dyn Scene, progress: bool) -> Resu
     }
     drop(encoders);
     for (p, f) in partial.iter().zip(&paths) {
-        std::fs::rename(p, f)
-            .with_context(|| format!("{}: cannot move into place", f.display()))?;
+        std::fs::rename(p, f).map_err(|source| SampleError::MoveIntoPlace {
+            path: f.clone(),
+            source,
+        })?;
     }
     bar.finish_and_clear();
     Ok(paths)
@@ -195,7 +214,7 @@ fn write_page(
     [ny, nx]: [u64; 2],
     description: Option<&str>,
     data: &PlaneData,
-) -> Result<()> {
+) -> tiff::TiffResult<()> {
     macro_rules! image {
         ($ct:ty, $d:expr) => {{
             let mut img = encoder.new_image::<$ct>(nx as u32, ny as u32)?;
