@@ -25,22 +25,49 @@ use serde_json::{Value, json};
 /// Rust writes.
 #[must_use]
 pub fn derived<T: JsonSchema>() -> Value {
-    SchemaSettings::draft2020_12()
-        .for_serialize()
-        .into_generator()
-        .into_root_schema_for::<T>()
-        .to_value()
+    root_schema::<T>(SchemaSettings::draft2020_12().for_serialize())
 }
 
 /// The schema `schemars` derives for `T` as it deserializes (fields with a serde default are
 /// not required): for documents Rust reads, such as scene files.
 #[must_use]
 pub fn derived_for_reading<T: JsonSchema>() -> Value {
-    SchemaSettings::draft2020_12()
-        .for_deserialize()
+    root_schema::<T>(SchemaSettings::draft2020_12().for_deserialize())
+}
+
+fn root_schema<T: JsonSchema>(settings: SchemaSettings) -> Value {
+    settings
         .into_generator()
         .into_root_schema_for::<T>()
         .to_value()
+}
+
+/// The hand-written schema `schemas/json/NAME`.
+///
+/// # Panics
+///
+/// When the file cannot be read or is not JSON.
+#[must_use]
+pub fn hand_written(name: &str) -> Value {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("json")
+        .join(name);
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+/// Every drift between each named schema file and the schema derived from its Rust type, each
+/// line prefixed with the file's name.
+#[must_use]
+pub fn drift_of_files(pairs: &[(&str, Value)]) -> Vec<String> {
+    pairs
+        .iter()
+        .flat_map(|(file, rust)| {
+            drift(&hand_written(file), rust)
+                .into_iter()
+                .map(move |d| format!("{file} {d}"))
+        })
+        .collect()
 }
 
 /// A schema node inside the document `root` it belongs to (for its `$ref`s).
@@ -222,6 +249,11 @@ fn json_type(v: &Value) -> String {
     .into()
 }
 
+/// Which side of a comparison has what the other lacks.
+fn side(in_file: bool) -> &'static str {
+    if in_file { "the file" } else { "the Rust type" }
+}
+
 /// Every way the hand-written node `file` (at `path`) differs from the derived node `rust`.
 fn differences(path: &str, file: Node, rust: Node, out: &mut Vec<String>) {
     let (ft, rt) = (file.types(), rust.types());
@@ -277,11 +309,7 @@ fn differences(path: &str, file: Node, rust: Node, out: &mut Vec<String>) {
         (None, None) => {}
         (f, _) => out.push(format!(
             "{path}: {} has properties, the other does not",
-            if f.is_some() {
-                "the file"
-            } else {
-                "the Rust type"
-            }
+            side(f.is_some())
         )),
     }
     match (file.array(), rust.array()) {
@@ -300,11 +328,7 @@ fn differences(path: &str, file: Node, rust: Node, out: &mut Vec<String>) {
         (None, None) => {}
         (f, _) => out.push(format!(
             "{path}: {} is an array, the other is not",
-            if f.is_some() {
-                "the file"
-            } else {
-                "the Rust type"
-            }
+            side(f.is_some())
         )),
     }
 }

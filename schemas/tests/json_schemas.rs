@@ -4,22 +4,11 @@
 //! `schemars` derives from its type, as the type serializes (`residency_schemas::drift` says
 //! what is compared). The viewer's documents are checked the same way in its own tests.
 
-use std::path::Path;
-
 use residency_schemas::RegionMetadata;
-use residency_schemas::drift::{Node, derived, drift};
+use residency_schemas::drift::{Node, derived, drift, drift_of_files, hand_written};
 use residency_schemas::server::{ApiError, DatasetList, RegionAnswer};
 use residency_schemas::wire::{BrickBatchHeader, MinMaxHierarchyHeader};
 use serde_json::{Value, json};
-
-/// A hand-written schema of `schemas/json/`.
-fn hand_written(file: &str) -> Value {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("json")
-        .join(file);
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 /// Every hand-written schema of a Rust type, with the schema derived from that type.
 fn pairs() -> Vec<(&'static str, Value)> {
@@ -38,12 +27,7 @@ fn pairs() -> Vec<(&'static str, Value)> {
 
 #[test]
 fn hand_written_schemas_match_the_rust_types() {
-    let mut failures = Vec::new();
-    for (file, rust) in pairs() {
-        for d in drift(&hand_written(file), &rust) {
-            failures.push(format!("{file} {d}"));
-        }
-    }
+    let failures = drift_of_files(&pairs());
     assert!(
         failures.is_empty(),
         "the JSON Schemas drifted from the Rust types (fix the file or the type):\n{}",

@@ -2,23 +2,14 @@
 //! scenes, read) the documents: each is compared with the schema `schemars` derives from its
 //! type (`residency_schemas::drift` says what is compared).
 
-use std::path::Path;
-
-use residency_schemas::drift::{Node, derived, derived_for_reading, drift};
+use residency_schemas::drift::{
+    Node, derived, derived_for_reading, drift, drift_of_files, hand_written,
+};
 use residency_viewer::bench::BenchResults;
 use residency_viewer::gpu::streaming::RenderStats;
 use residency_viewer::metrics::Metrics;
 use residency_viewer::scene::Scene;
 use serde_json::{Value, json};
-
-/// A hand-written schema of `schemas/json/`.
-fn hand_written(file: &str) -> Value {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../schemas/json")
-        .join(file);
-    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-}
 
 /// Every viewer document's schema file, with the schema derived from its type.
 fn pairs() -> Vec<(&'static str, Value)> {
@@ -32,12 +23,7 @@ fn pairs() -> Vec<(&'static str, Value)> {
 
 #[test]
 fn viewer_schemas_match_the_rust_types() {
-    let mut failures = Vec::new();
-    for (file, rust) in pairs() {
-        for d in drift(&hand_written(file), &rust) {
-            failures.push(format!("{file} {d}"));
-        }
-    }
+    let failures = drift_of_files(&pairs());
     assert!(
         failures.is_empty(),
         "the viewer's JSON Schemas drifted from its Rust types (fix the file or the type):\n{}",
