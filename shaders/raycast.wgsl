@@ -313,7 +313,7 @@ struct Sampled {
 // texel-fetch site (a CPU Vulkan driver runs every branch's code, so the shader keeps few).
 // With `want`, every missing brick is requested; without it the first miss returns. A clear
 // brick (ENTRY_CLEAR) in the footprint makes the sample clear.
-fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
+fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32, memo: ptr<function, array<vec4<u32>, MAX_CHANNELS>>) -> Sampled {
     let pos = level_pos(l, cell, local);
     let fp = pos.fp - vec3<f32>(0.5);
     let fl = floor(fp);
@@ -334,6 +334,10 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     // 20% faster on lavapipe than the general loop below).
     if all(b0 == b1) {
         let pid = brick_id(c, l, b0);
+        var o: vec3<i32>;
+        if pid == (*memo)[c].x {
+            o = vec3<i32>((*memo)[c].yzw);
+        } else {
         let entry = page_table[pid];
         if entry == 0u {
             result.ok = false;
@@ -350,7 +354,9 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
             result.clear = true;
             return result;
         }
-        let o = slot_origin(entry);
+        o = slot_origin(entry);
+        (*memo)[c] = vec4<u32>(pid, vec3<u32>(o));
+        }
         let l0 = o + vec3<i32>(r0);
         let l1 = o + vec3<i32>(r1);
         let x00 = mix(texel(l0), texel(vec3<i32>(l1.x, l0.y, l0.z)), w.x);
@@ -644,6 +650,7 @@ fn sample_channels(
     t: f32,
     skipping: bool,
     substitute: bool,
+    memo: ptr<function, array<vec4<u32>, MAX_CHANNELS>>,
 ) -> ChannelSamples {
     var out: ChannelSamples;
     out.have = 0u;
@@ -662,9 +669,6 @@ fn sample_channels(
                     continue; // homogeneous: known without its bricks
                 }
             }
-            if substitute && v.action == ACTION_SAMPLE {
-                mask = node_word(v.node, c, 0u);
-            }
         }
         let l = chosen[c];
         var k = l;
@@ -682,7 +686,7 @@ fn sample_channels(
         var s = Sampled(0.0, false, 0u, false);
         var first_missing = 0u;
         loop {
-            s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, t);
+            s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, t, memo);
             if coarse_first {
                 coarse_first = false;
                 if !s.clear {
@@ -697,6 +701,10 @@ fn sample_channels(
             }
             if k == l {
                 first_missing = s.missing;
+                // The levels the node maps for this channel, read only once a sample misses.
+                if METHOD == METHOD_RESIDENCY && substitute && v.action == ACTION_SAMPLE {
+                    mask = node_word(v.node, c, 0u);
+                }
             }
             k = next_candidate(mask, l, k);
             if k == NO_LEVEL {
@@ -807,6 +815,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var c = 0u; c < MAX_CHANNELS; c++) {
             pt_brick[c] = 0xffffffffu;
         }
+        // Residency: the last visit that said "sample here", kept while the ray stays in its
+        // node with the same step, so the octree is descended once per node, not per sample
+        // (a visit is a function of the node and the step alone: the same answer again).
+        var held = Visit(ACTION_SKIP, 0u, 0u, 0u, 0.0);
+        var held_step = 0.0;
+        var held_cell = vec3<i32>(0);
+        // Per channel, the last resident brick sampled whole (page-table id, slot origin): its
+        // next samples need neither the page table nor a second usage write.
+        var memo: array<vec4<u32>, MAX_CHANNELS>;
+        for (var c = 0u; c < MAX_CHANNELS; c++) {
+            memo[c] = vec4<u32>(0xffffffffu);
+        }
         loop {
             iterations++;
             if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
@@ -830,8 +850,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let desired_step = P.step_fraction * level_voxel(finest);
             var v: Visit;
             if METHOD == METHOD_RESIDENCY {
-                v = visit_octree(ray, last_depth, desired_step, dir, skipping);
-                last_depth = v.depth;
+                let node_shift = vec3<u32>(P.leaf_depth - held.depth) + fine_shift();
+                if held.action == ACTION_SAMPLE && desired_step == held_step
+                    && all((ray.cell >> node_shift) == held_cell) {
+                    v = held;
+                } else {
+                    v = visit_octree(ray, last_depth, desired_step, dir, skipping);
+                    last_depth = v.depth;
+                    held = v;
+                    held_step = desired_step;
+                    held_cell = ray.cell >> (vec3<u32>(P.leaf_depth - v.depth) + fine_shift());
+                }
             } else if METHOD == METHOD_PAGE_TABLE {
                 v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
             } else {
@@ -857,7 +886,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 advance(&ray, dir, seg + nudge);
                 continue;
             }
-            let s = sample_channels(ray, v, chosen, ray.t + t_plane, skipping, substitute);
+            let s = sample_channels(ray, v, chosen, ray.t + t_plane, skipping, substitute, &memo);
             if v.action == ACTION_REQUEST {
                 nodata++;
                 advance(&ray, dir, v.skip + nudge);

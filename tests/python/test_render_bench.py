@@ -15,6 +15,8 @@ import jsonschema
 from conftest import BIN, ROOT
 
 SCHEMA = ROOT / "schemas" / "json" / "render-bench.schema.json"
+# Bytes per sample of each type a results file names.
+SAMPLE_BYTES = {"uint8": 1, "uint16": 2, "int16": 2, "uint32": 4, "int32": 4, "float32": 4}
 
 
 def test_short_mode_runs_every_experiment_and_validates(tmp_path):
@@ -64,6 +66,12 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
         for s in r["skipped"]:
             assert s["naive_bricks"] >= s["naive_fill_bricks"] and s["naive_bricks"] >= 1
             assert s["ours_bricks_fetched"] >= 1 and 0 < s["ours_ssim"] <= 1
+            # The bricks the converged image reads were fetched (none is read unfetched), and
+            # the ceiling is naive bytes over their bytes.
+            d = r["dataset"]
+            brick = d["brick_shape"][0] * d["brick_shape"][1] * d["brick_shape"][2] * SAMPLE_BYTES[d["sample_type"]]
+            assert 1 <= s["ours_bricks_read"] <= s["ours_bricks_fetched"], (f.name, s)
+            assert s["bytes_ceiling"] == s["naive_bytes"] / (s["ours_bricks_read"] * brick), (f.name, s)
         if any(run["experiment"] == "table1" for run in r["runs"]):
             # The limit probe ran beside Table 1, by hand and (lavapipe filters R32Float) by
             # the texture unit, and its image matches the reference as the renderer's does.

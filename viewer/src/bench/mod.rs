@@ -345,6 +345,13 @@ pub struct SkippedRecord {
     pub ours_ssim: f64,
     /// `naive_bytes / ours_bytes_fetched` (`null` when ours fetched nothing).
     pub bytes_ratio: Option<f64>,
+    /// Bricks holding data that our converged frame read (its distinct cache slots): what any
+    /// loader must deliver to draw this image, whatever it skips.
+    pub ours_bricks_read: u64,
+    /// `naive_bytes / (ours_bricks_read × brick bytes)`: the most bytes any loader that
+    /// delivers the bricks this image reads can save against the naive one (`null` when the
+    /// image reads no brick).
+    pub bytes_ceiling: Option<f64>,
 }
 
 /// The limit probe with one filter over the orbit (`gpu::probe`): the same rays and step as
@@ -916,6 +923,7 @@ impl Bench {
                     level_bounds: at_naive_level,
                     ..self.base.clone()
                 };
+                let read = p.frames.last().map_or(0, |f| f.shader.bricks_used);
                 let (_, np) = self.cold(k, pinned)?;
                 let naive_image = to_image(o.width, o.height, &np.pixels);
                 let naive_m = metrics::compare(&naive_image, &self.references[k])?;
@@ -937,6 +945,9 @@ impl Bench {
                     ours_psnr_db: finite_psnr(&ours_m),
                     ours_ssim: ours_m.ssim,
                     bytes_ratio: (ours_bytes > 0).then(|| naive_bytes as f64 / ours_bytes as f64),
+                    ours_bricks_read: read,
+                    bytes_ceiling: (read > 0)
+                        .then(|| naive_bytes as f64 / (read * brick_bytes) as f64),
                 })
             })
             .collect()
