@@ -2,9 +2,8 @@
 //! web page): the orbit camera, channel colours and transfer-function ramps from the store's
 //! `omero` windows and channel statistics, and reading scene files.
 
+use std::path::PathBuf;
 use std::str::FromStr;
-
-use anyhow::{Context, Result, ensure};
 
 use crate::gpu::renderer::MAX_CHANNELS;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, box_diagonal};
@@ -29,6 +28,79 @@ pub const DEFAULT_COLOURS: [[f64; 3]; 6] = [
     [1.0, 0.0, 0.0],
     [0.0, 0.0, 1.0],
 ];
+
+/// Why a scene cannot be had: a scene file that cannot be read or is not a scene, or one
+/// that draws a channel the volume does not have. Messages name the file or flag at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// A scene file that cannot be read.
+    #[error("{}: cannot read", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A document that is not a valid scene.
+    #[error("{document}: not a valid scene file")]
+    Parse {
+        /// The document (a file name, or what the page calls it).
+        document: String,
+        /// What serde said.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A channel the volume does not have.
+    #[error("{what}: channel {channel} does not exist ({volume} has {channels} channels)")]
+    NoChannel {
+        /// Where it was asked for (`scene file`, `--tf`, ...).
+        what: String,
+        /// The channel.
+        channel: usize,
+        /// The volume.
+        volume: String,
+        /// Its channels.
+        channels: usize,
+    },
+}
+
+/// A list of numbers ([`numbers`]) that is not `N` finite numbers.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum NumbersError {
+    /// Another count, or something that is not a number.
+    #[error("{what} '{text}': expected {count} comma-separated numbers")]
+    Count {
+        /// The value's name, e.g. `camera eye`.
+        what: String,
+        /// The text given.
+        text: String,
+        /// Numbers expected.
+        count: usize,
+    },
+    /// A number that is not finite.
+    #[error("{what} '{text}': numbers must be finite")]
+    NotFinite {
+        /// The value's name.
+        what: String,
+        /// The text given.
+        text: String,
+    },
+}
+
+/// A `--camera` (or bench camera) that is not a [`CameraSpec`].
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum CameraSpecError {
+    /// Its numbers are not three (or two triples) of finite numbers.
+    #[error(transparent)]
+    Numbers(#[from] NumbersError),
+    /// An orbit distance of zero or less.
+    #[error("camera '{text}': distance must be positive")]
+    Distance {
+        /// The text given.
+        text: String,
+    },
+}
 
 /// A camera as scene files, the command line (`--camera`) and the bench give it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -59,26 +131,33 @@ pub enum CameraSpec {
 ///
 /// # Errors
 ///
-/// Another count, a non-number or a non-finite number.
-pub fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], String> {
+/// [`NumbersError::Count`] for another count or a non-number, [`NumbersError::NotFinite`]
+/// for a non-finite number.
+pub fn numbers<const N: usize>(s: &str, what: &str) -> Result<[f64; N], NumbersError> {
+    let count = || NumbersError::Count {
+        what: what.to_string(),
+        text: s.to_string(),
+        count: N,
+    };
     let v: Vec<f64> = s
         .split(',')
         .map(|p| p.trim().parse::<f64>())
         .collect::<Result<_, _>>()
-        .map_err(|_| format!("{what} '{s}': expected {N} comma-separated numbers"))?;
-    let arr: [f64; N] = v
-        .try_into()
-        .map_err(|_| format!("{what} '{s}': expected {N} comma-separated numbers"))?;
+        .map_err(|_| count())?;
+    let arr: [f64; N] = v.try_into().map_err(|_| count())?;
     if arr.iter().any(|x| !x.is_finite()) {
-        return Err(format!("{what} '{s}': numbers must be finite"));
+        return Err(NumbersError::NotFinite {
+            what: what.to_string(),
+            text: s.to_string(),
+        });
     }
     Ok(arr)
 }
 
 impl FromStr for CameraSpec {
-    type Err = String;
+    type Err = CameraSpecError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, CameraSpecError> {
         if let Some((eye, target)) = s.split_once(':') {
             Ok(Self::LookAt {
                 eye: numbers(eye, "camera eye")?,
@@ -87,7 +166,9 @@ impl FromStr for CameraSpec {
         } else {
             let [azimuth, elevation, distance] = numbers(s, "camera")?;
             if distance <= 0.0 {
-                return Err(format!("camera '{s}': distance must be positive"));
+                return Err(CameraSpecError::Distance {
+                    text: s.to_string(),
+                });
             }
             Ok(Self::Orbit {
                 azimuth,
@@ -225,25 +306,43 @@ pub fn default_scene(info: &VolumeInfo) -> Scene {
 
 /// Errors unless `info`'s volume has channel `channel`; `what` names where it was asked for
 /// (`scene file`, `--tf`, ...).
-pub fn check_channel(info: &VolumeInfo, channel: usize, what: &str) -> Result<()> {
+///
+/// # Errors
+/// [`SceneError::NoChannel`], naming `what`, the channel and the volume.
+pub fn check_channel(info: &VolumeInfo, channel: usize, what: &str) -> Result<(), SceneError> {
     let n = info.channels.len();
-    ensure!(
-        channel < n,
-        "{what}: channel {channel} does not exist ({} has {n} channels)",
-        info.name
-    );
-    Ok(())
+    if channel < n {
+        Ok(())
+    } else {
+        Err(SceneError::NoChannel {
+            what: what.to_string(),
+            channel,
+            volume: info.name.clone(),
+            channels: n,
+        })
+    }
 }
 
 /// Parses a JSON scene (`schemas/json/scene.schema.json`); `source` names the document in the
 /// error.
-pub fn parse_scene(json: &[u8], source: &str) -> Result<Scene> {
-    serde_json::from_slice(json).with_context(|| format!("{source}: not a valid scene file"))
+///
+/// # Errors
+/// [`SceneError::Parse`], naming `source`, with serde's message.
+pub fn parse_scene(json: &[u8], source: &str) -> Result<Scene, SceneError> {
+    serde_json::from_slice(json).map_err(|e| SceneError::Parse {
+        document: source.to_string(),
+        source: e,
+    })
 }
 
 /// Reads a JSON scene file.
-pub fn read_scene(path: &std::path::Path) -> Result<Scene> {
-    let shown = path.display();
-    let bytes = std::fs::read(path).with_context(|| format!("{shown}: cannot read"))?;
-    parse_scene(&bytes, &shown.to_string())
+///
+/// # Errors
+/// [`SceneError::Read`] or [`SceneError::Parse`], naming the file.
+pub fn read_scene(path: &std::path::Path) -> Result<Scene, SceneError> {
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    parse_scene(&bytes, &path.display().to_string())
 }

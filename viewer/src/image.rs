@@ -1,9 +1,68 @@
 //! Linear-RGB `f32` images, as the renderers produce them and `viewer compare` reads them,
 //! written and read as PNG (8-bit sRGB) or OpenEXR (32-bit float, linear) by file extension.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, bail, ensure};
+/// Why an image cannot be written or read: a file name of no known format, pixels that do
+/// not fill the image, or the PNG or OpenEXR encoder's or decoder's error. Messages name the
+/// file.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    /// A file name other than `.png` or `.exr`.
+    #[error("{}: unknown image format (use a .png or .exr file name)", path.display())]
+    UnknownFormat {
+        /// The file.
+        path: PathBuf,
+    },
+    /// An image whose pixels do not fill its size.
+    #[error("{}: image has {pixels} pixels for {width}×{height}", path.display())]
+    PixelCount {
+        /// The file.
+        path: PathBuf,
+        /// Pixels held.
+        pixels: usize,
+        /// Width.
+        width: usize,
+        /// Height.
+        height: usize,
+    },
+    /// A PNG that cannot be written.
+    #[error("{}: cannot write PNG", path.display())]
+    WritePng {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: ::image::ImageError,
+    },
+    /// An OpenEXR file that cannot be written.
+    #[error("{}: cannot write OpenEXR", path.display())]
+    WriteExr {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: exr::error::Error,
+    },
+    /// A PNG that cannot be read.
+    #[error("{}: cannot read PNG", path.display())]
+    ReadPng {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: ::image::ImageError,
+    },
+    /// An OpenEXR file that cannot be read as RGB.
+    #[error("{}: cannot read OpenEXR RGB", path.display())]
+    ReadExr {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: exr::error::Error,
+    },
+}
 
 /// A linear-RGB image, rows top to bottom, pixels left to right.
 #[derive(Clone, Debug, PartialEq)]
@@ -27,17 +86,19 @@ pub enum ImageFormat {
 
 impl ImageFormat {
     /// The format named by `path`'s extension (`.png` or `.exr`, any case).
-    pub fn of(path: &Path) -> Result<Self> {
+    ///
+    /// # Errors
+    /// [`ImageError::UnknownFormat`] for any other name.
+    pub fn of(path: &Path) -> Result<Self, ImageError> {
         let ext = path
             .extension()
             .map(|e| e.to_string_lossy().to_ascii_lowercase());
         match ext.as_deref() {
             Some("png") => Ok(Self::Png),
             Some("exr") => Ok(Self::Exr),
-            _ => bail!(
-                "{}: unknown image format (use a .png or .exr file name)",
-                path.display()
-            ),
+            _ => Err(ImageError::UnknownFormat {
+                path: path.to_path_buf(),
+            }),
         }
     }
 }
@@ -82,15 +143,19 @@ impl RgbImage {
     }
 
     /// Writes the image, in the format of `path`'s extension.
-    pub fn write(&self, path: &Path) -> Result<()> {
-        let shown = path.display();
-        ensure!(
-            self.pixels.len() == self.width * self.height,
-            "{shown}: image has {} pixels for {}×{}",
-            self.pixels.len(),
-            self.width,
-            self.height
-        );
+    ///
+    /// # Errors
+    /// An [`ImageError`] naming `path`: an unknown format, pixels that do not fill the image,
+    /// or the encoder's error.
+    pub fn write(&self, path: &Path) -> Result<(), ImageError> {
+        if self.pixels.len() != self.width * self.height {
+            return Err(ImageError::PixelCount {
+                path: path.to_path_buf(),
+                pixels: self.pixels.len(),
+                width: self.width,
+                height: self.height,
+            });
+        }
         match ImageFormat::of(path)? {
             ImageFormat::Png => {
                 let bytes: Vec<u8> = self
@@ -106,25 +171,36 @@ impl RgbImage {
                     image::ColorType::Rgb8,
                     image::ImageFormat::Png,
                 )
-                .with_context(|| format!("{shown}: cannot write PNG"))
+                .map_err(|source| ImageError::WritePng {
+                    path: path.to_path_buf(),
+                    source,
+                })
             }
             ImageFormat::Exr => {
                 exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
                     let p = self.get(x, y);
                     (p[0], p[1], p[2])
                 })
-                .with_context(|| format!("{shown}: cannot write OpenEXR"))
+                .map_err(|source| ImageError::WriteExr {
+                    path: path.to_path_buf(),
+                    source,
+                })
             }
         }
     }
 
     /// Reads an image written by [`RgbImage::write`] (or any 8/16-bit PNG, taken as sRGB, or
     /// OpenEXR with RGB channels, taken as linear).
-    pub fn read(path: &Path) -> Result<Self> {
-        let shown = path.display();
+    ///
+    /// # Errors
+    /// An [`ImageError`] naming `path`: an unknown format, or the decoder's error.
+    pub fn read(path: &Path) -> Result<Self, ImageError> {
         match ImageFormat::of(path)? {
             ImageFormat::Png => {
-                let img = image::open(path).with_context(|| format!("{shown}: cannot read PNG"))?;
+                let img = image::open(path).map_err(|source| ImageError::ReadPng {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
                 let rgb = img.to_rgb32f();
                 Ok(Self {
                     width: rgb.width() as usize,
@@ -144,7 +220,10 @@ impl RgbImage {
                         img.pixels[pos.y() * w + pos.x()] = [r, g, b];
                     },
                 )
-                .with_context(|| format!("{shown}: cannot read OpenEXR RGB"))?;
+                .map_err(|source| ImageError::ReadExr {
+                    path: path.to_path_buf(),
+                    source,
+                })?;
                 Ok(image.layer_data.channel_data.pixels)
             }
         }
@@ -207,9 +286,10 @@ mod tests {
             "out.tiff: unknown image format (use a .png or .exr file name)"
         );
         let e = RgbImage::read(Path::new("/nonexistent/x.exr")).unwrap_err();
+        let e = crate::error_chain(&e);
         assert!(
-            format!("{e:#}").starts_with("/nonexistent/x.exr: cannot read OpenEXR RGB"),
-            "{e:#}"
+            e.starts_with("/nonexistent/x.exr: cannot read OpenEXR RGB: "),
+            "{e}"
         );
     }
 }

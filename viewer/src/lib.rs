@@ -19,11 +19,11 @@
 //! One renderer, two drivers: everything but [`bench`], [`reference`], the window and the local
 //! and blocking-HTTP sources also compiles for `wasm32-unknown-unknown`. Command-line
 //! flags live in the `viewer` binary only.
-
-// Fallible functions here return `anyhow` errors whose messages name the file, key or brick at
-// fault; they get `# Errors` sections as they move to typed errors (the format model, wire
-// decoding and the server's parsers already have both).
-#![allow(clippy::missing_errors_doc)]
+//!
+//! Errors are `thiserror` enums, one per concept ([`source::SourceError`],
+//! [`gpu::GpuError`], [`octree::OctreeError`], [`defaults::SceneError`], ...), whose messages
+//! name the file, key, brick or parameter at fault; a wrapped error is their `source`, so
+//! [`error_chain`] (or the binary's `{:#}` error line) prints the whole story.
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod bench;
@@ -39,3 +39,31 @@ pub mod scene;
 pub mod source;
 #[cfg(target_arch = "wasm32")]
 pub mod web;
+
+/// `error` and its sources, joined by `": "`: the whole chain on one line, as the binary's
+/// `error: {:#}` line prints it (and the web page, and failed-brick messages).
+pub fn error_chain(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut next = error.source();
+    while let Some(e) = next {
+        text.push_str(": ");
+        text.push_str(&e.to_string());
+        next = e.source();
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{defaults, error_chain};
+
+    #[test]
+    fn the_chain_is_every_source_joined_as_the_binary_prints_it() {
+        let e = defaults::read_scene(std::path::Path::new("/nonexistent/scene.json")).unwrap_err();
+        assert_eq!(e.to_string(), "/nonexistent/scene.json: cannot read");
+        assert_eq!(
+            error_chain(&e),
+            "/nonexistent/scene.json: cannot read: No such file or directory (os error 2)"
+        );
+    }
+}

@@ -9,7 +9,6 @@
 //!   the image (images must be at least 11×11).
 //! - **Max abs error**: the largest `|a − b|` over pixels and channels.
 
-use anyhow::{Result, ensure};
 use schemars::JsonSchema;
 use serde::Serialize;
 
@@ -23,6 +22,50 @@ pub const SSIM_SIGMA: f64 = 1.5;
 pub const SSIM_K1: f64 = 0.01;
 /// SSIM constant `K2`.
 pub const SSIM_K2: f64 = 0.03;
+
+/// Why two images cannot be compared: different sizes, a non-finite pixel, or images smaller
+/// than the SSIM window.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum MetricsError {
+    /// Images of different sizes.
+    #[error(
+        "images differ in size: {}×{} and {}×{}",
+        first[0], first[1], second[0], second[1]
+    )]
+    SizeMismatch {
+        /// The first image's width and height.
+        first: [usize; 2],
+        /// The second image's width and height.
+        second: [usize; 2],
+    },
+    /// A NaN or infinite pixel (its error would be NaN).
+    #[error(
+        "the {which} image has a non-finite pixel {pixel:?} at ({x}, {y}); metrics need finite \
+         images"
+    )]
+    NonFinite {
+        /// `first` or `second`.
+        which: &'static str,
+        /// The pixel.
+        pixel: [f32; 3],
+        /// Its column.
+        x: usize,
+        /// Its row.
+        y: usize,
+    },
+    /// Images smaller than the SSIM window.
+    #[error(
+        "images of {width}×{height} are smaller than the {}×{} SSIM window",
+        SSIM_WINDOW,
+        SSIM_WINDOW
+    )]
+    TooSmall {
+        /// Width.
+        width: usize,
+        /// Height.
+        height: usize,
+    },
+}
 
 /// The metrics of one comparison.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, JsonSchema)]
@@ -40,38 +83,41 @@ pub struct Metrics {
 
 /// Refuses images holding NaN or infinite values: their errors would be NaN, which PSNR would
 /// turn into `null` (read as "identical") and the maximum would skip.
-fn check_finite(a: &RgbImage, b: &RgbImage) -> Result<()> {
+fn check_finite(a: &RgbImage, b: &RgbImage) -> Result<(), MetricsError> {
     for (which, img) in [("first", a), ("second", b)] {
         if let Some(i) = img
             .pixels
             .iter()
             .position(|p| p.iter().any(|v| !v.is_finite()))
         {
-            anyhow::bail!(
-                "the {which} image has a non-finite pixel {:?} at ({}, {}); metrics need finite images",
-                img.pixels[i],
-                i % img.width.max(1),
-                i / img.width.max(1)
-            );
+            return Err(MetricsError::NonFinite {
+                which,
+                pixel: img.pixels[i],
+                x: i % img.width.max(1),
+                y: i / img.width.max(1),
+            });
         }
     }
     Ok(())
 }
 
-fn check_sizes(a: &RgbImage, b: &RgbImage) -> Result<()> {
-    ensure!(
-        a.width == b.width && a.height == b.height,
-        "images differ in size: {}×{} and {}×{}",
-        a.width,
-        a.height,
-        b.width,
-        b.height
-    );
-    Ok(())
+fn check_sizes(a: &RgbImage, b: &RgbImage) -> Result<(), MetricsError> {
+    if a.width == b.width && a.height == b.height {
+        Ok(())
+    } else {
+        Err(MetricsError::SizeMismatch {
+            first: [a.width, a.height],
+            second: [b.width, b.height],
+        })
+    }
 }
 
 /// Compares `a` with `b` (same size, at least 11×11).
-pub fn compare(a: &RgbImage, b: &RgbImage) -> Result<Metrics> {
+///
+/// # Errors
+/// [`MetricsError::SizeMismatch`], [`MetricsError::NonFinite`] or
+/// [`MetricsError::TooSmall`].
+pub fn compare(a: &RgbImage, b: &RgbImage) -> Result<Metrics, MetricsError> {
     check_sizes(a, b)?;
     check_finite(a, b)?;
     let mut sum_sq = 0.0;
@@ -116,14 +162,18 @@ pub fn gaussian_window() -> [f64; SSIM_WINDOW] {
 }
 
 /// Mean SSIM of the luminance of `a` and `b` over every window position.
-pub fn ssim(a: &RgbImage, b: &RgbImage) -> Result<f64> {
+///
+/// # Errors
+/// [`MetricsError::SizeMismatch`] or [`MetricsError::TooSmall`] (images smaller than the
+/// SSIM window).
+pub fn ssim(a: &RgbImage, b: &RgbImage) -> Result<f64, MetricsError> {
     check_sizes(a, b)?;
-    ensure!(
-        a.width >= SSIM_WINDOW && a.height >= SSIM_WINDOW,
-        "images of {}×{} are smaller than the {SSIM_WINDOW}×{SSIM_WINDOW} SSIM window",
-        a.width,
-        a.height
-    );
+    if a.width < SSIM_WINDOW || a.height < SSIM_WINDOW {
+        return Err(MetricsError::TooSmall {
+            width: a.width,
+            height: a.height,
+        });
+    }
     let (w, h) = (a.width, a.height);
     let x: Vec<f64> = a.pixels.iter().map(|&p| luminance(p)).collect();
     let y: Vec<f64> = b.pixels.iter().map(|&p| luminance(p)).collect();
@@ -156,7 +206,10 @@ pub fn ssim(a: &RgbImage, b: &RgbImage) -> Result<f64> {
 }
 
 /// The per-pixel, per-channel absolute difference `|a − b|`.
-pub fn error_map(a: &RgbImage, b: &RgbImage) -> Result<RgbImage> {
+///
+/// # Errors
+/// [`MetricsError::SizeMismatch`].
+pub fn error_map(a: &RgbImage, b: &RgbImage) -> Result<RgbImage, MetricsError> {
     check_sizes(a, b)?;
     Ok(RgbImage {
         width: a.width,

@@ -27,9 +27,105 @@
 use std::collections::HashSet;
 use std::ops::Range;
 
-use anyhow::{Result, bail, ensure};
-
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
+
+/// Why the octree refused a volume, a channel or a brick: a pyramid it cannot describe
+/// (too deep, too many levels, factors that are not powers of two), region metadata that does
+/// not fit, or a brick outside it. Messages name the volume or the brick.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum OctreeError {
+    /// A leaf depth past [`MAX_DEPTH`].
+    #[error("octree depth {depth} exceeds the maximum {}", MAX_DEPTH)]
+    TooDeep {
+        /// The depth asked for.
+        depth: u32,
+    },
+    /// A volume without levels.
+    #[error("{volume}: volume has no levels")]
+    NoLevels {
+        /// The volume.
+        volume: String,
+    },
+    /// More levels than a residency mask holds.
+    #[error(
+        "{volume}: {levels} pyramid levels; a residency mask holds at most {}",
+        MAX_LEVELS
+    )]
+    TooManyLevels {
+        /// The volume.
+        volume: String,
+        /// Its levels.
+        levels: usize,
+    },
+    /// A level whose downsampling factor is not a power of two along some axis.
+    #[error(
+        "{volume}: level {level} downsampling factor {factor:?} is not a power of two per axis"
+    )]
+    FactorNotPowerOfTwo {
+        /// The volume.
+        volume: String,
+        /// The level.
+        level: usize,
+        /// Its factor, `z, y, x`.
+        factor: [u64; 3],
+    },
+    /// A channel the volume does not have.
+    #[error("{volume}: no channel {channel} ({channels} channels)")]
+    NoChannel {
+        /// The volume.
+        volume: String,
+        /// The channel asked for.
+        channel: usize,
+        /// Channels of the volume.
+        channels: usize,
+    },
+    /// A brick of a channel the octree does not hold.
+    #[error("brick {key:?}: channel not in the octree")]
+    ChannelNotInOctree {
+        /// The brick.
+        key: BrickKey,
+    },
+    /// A brick of a level the octree does not have.
+    #[error("brick {key:?}: no such level")]
+    NoSuchLevel {
+        /// The brick.
+        key: BrickKey,
+    },
+    /// A brick outside its level's brick grid.
+    #[error("brick {key:?}: outside the level's brick grid")]
+    OutsideGrid {
+        /// The brick.
+        key: BrickKey,
+    },
+    /// Region metadata without min/max grids for a channel.
+    #[error("{volume}: no min/max grids for channel {channel}")]
+    NoMinMax {
+        /// The volume.
+        volume: String,
+        /// The channel.
+        channel: usize,
+    },
+    /// Region metadata without a min/max grid for a level.
+    #[error("{volume}: channel {channel} level {level}: no min/max grid")]
+    NoMinMaxGrid {
+        /// The volume.
+        volume: String,
+        /// The channel.
+        channel: usize,
+        /// The level.
+        level: usize,
+    },
+    /// A min/max grid whose values or cells do not fit its shape.
+    #[error("{volume}: channel {channel} level {level}: malformed min/max grid")]
+    MalformedMinMax {
+        /// The volume.
+        volume: String,
+        /// The channel.
+        channel: usize,
+        /// The level.
+        level: usize,
+    },
+}
 
 /// Deepest leaf depth accepted (`(8^11 − 1)/7` ≈ 1.2 G nodes is already far too many).
 pub const MAX_DEPTH: u32 = 10;
@@ -102,33 +198,36 @@ pub struct OctreeGeometry {
 impl OctreeGeometry {
     /// The geometry for `info` with leaf depth `depth`. Errors if a downsampling factor is not
     /// a power of two, or the pyramid has more than [`MAX_LEVELS`] levels.
-    pub fn new(info: &VolumeInfo, depth: u32) -> Result<Self> {
-        ensure!(
-            depth <= MAX_DEPTH,
-            "octree depth {depth} exceeds the maximum {MAX_DEPTH}"
-        );
-        ensure!(
-            !info.levels.is_empty(),
-            "{}: volume has no levels",
-            info.name
-        );
-        ensure!(
-            info.levels.len() <= MAX_LEVELS,
-            "{}: {} pyramid levels; a residency mask holds at most {MAX_LEVELS}",
-            info.name,
-            info.levels.len()
-        );
+    ///
+    /// # Errors
+    /// [`OctreeError::TooDeep`], [`OctreeError::NoLevels`], [`OctreeError::TooManyLevels`]
+    /// or [`OctreeError::FactorNotPowerOfTwo`], naming the volume.
+    pub fn new(info: &VolumeInfo, depth: u32) -> Result<Self, OctreeError> {
+        if depth > MAX_DEPTH {
+            return Err(OctreeError::TooDeep { depth });
+        }
+        if info.levels.is_empty() {
+            return Err(OctreeError::NoLevels {
+                volume: info.name.clone(),
+            });
+        }
+        if info.levels.len() > MAX_LEVELS {
+            return Err(OctreeError::TooManyLevels {
+                volume: info.name.clone(),
+                levels: info.levels.len(),
+            });
+        }
         let xyz = |a: [u64; 3]| [a[2], a[1], a[0]];
         let volume_voxels = xyz(info.levels[0].shape);
         let mut level_shift = Vec::new();
         for (l, level) in info.levels.iter().enumerate() {
             let f = xyz(level.factor);
             if f.iter().any(|f| !f.is_power_of_two()) {
-                bail!(
-                    "{}: level {l} downsampling factor {:?} is not a power of two per axis",
-                    info.name,
-                    level.factor
-                );
+                return Err(OctreeError::FactorNotPowerOfTwo {
+                    volume: info.name.clone(),
+                    level: l,
+                    factor: level.factor,
+                });
             }
             level_shift.push(f.map(u64::trailing_zeros));
         }
@@ -244,15 +343,20 @@ pub struct ResidencyOctree {
 impl ResidencyOctree {
     /// Builds the octree of `channels` (source channel indices) over `info` with leaf depth
     /// `depth`, seeding value ranges from the server's min/max grids. No brick is resident.
-    pub fn new(info: &VolumeInfo, channels: &[usize], depth: u32) -> Result<Self> {
+    ///
+    /// # Errors
+    /// The geometry's errors ([`OctreeGeometry::new`]), [`OctreeError::NoChannel`], or an
+    /// error naming the channel and level of region metadata that does not fit.
+    pub fn new(info: &VolumeInfo, channels: &[usize], depth: u32) -> Result<Self, OctreeError> {
         let geometry = OctreeGeometry::new(info, depth)?;
         for &c in channels {
-            ensure!(
-                c < info.channels.len(),
-                "{}: no channel {c} ({} channels)",
-                info.name,
-                info.channels.len()
-            );
+            if c >= info.channels.len() {
+                return Err(OctreeError::NoChannel {
+                    volume: info.name.clone(),
+                    channel: c,
+                    channels: info.channels.len(),
+                });
+            }
         }
         let m = channels.len();
         let nodes = geometry.node_count();
@@ -330,29 +434,31 @@ impl ResidencyOctree {
         std::array::from_fn(|a| self.geometry.leaves_of_brick_axis(l, a, b[a]))
     }
 
-    fn check(&self, key: &BrickKey) -> Result<usize> {
+    fn check(&self, key: &BrickKey) -> Result<usize, OctreeError> {
         let slot = self
             .slot_of(key.channel as usize)
-            .ok_or_else(|| anyhow::anyhow!("brick {key:?}: channel not in the octree"))?;
+            .ok_or(OctreeError::ChannelNotInOctree { key: *key })?;
         let l = key.level as usize;
-        ensure!(
-            l < self.geometry.level_shape.len(),
-            "brick {key:?}: no such level"
-        );
+        if l >= self.geometry.level_shape.len() {
+            return Err(OctreeError::NoSuchLevel { key: *key });
+        }
         let shape = &self.geometry.level_shape[l];
         for (a, (&n, &b)) in shape.iter().zip(&self.geometry.brick).enumerate() {
             let nb = n.div_ceil(b);
-            ensure!(
-                key.brick[2 - a] < nb,
-                "brick {key:?}: outside the level's brick grid"
-            );
+            if key.brick[2 - a] >= nb {
+                return Err(OctreeError::OutsideGrid { key: *key });
+            }
         }
         Ok(slot)
     }
 
     /// Marks `key` resident: sets its level's bit in every overlapping leaf and ORs the change
     /// upward, stopping where a mask is unchanged. Returns whether `key` was newly inserted.
-    pub fn insert(&mut self, key: BrickKey) -> Result<bool> {
+    ///
+    /// # Errors
+    /// [`OctreeError::ChannelNotInOctree`], [`OctreeError::NoSuchLevel`] or
+    /// [`OctreeError::OutsideGrid`] for a brick the octree does not hold.
+    pub fn insert(&mut self, key: BrickKey) -> Result<bool, OctreeError> {
         let slot = self.check(&key)?;
         if !self.resident.insert(key) {
             return Ok(false);
@@ -376,7 +482,10 @@ impl ResidencyOctree {
     /// other resident brick of the same channel and level overlaps, then updates ancestors by
     /// OR of their children, stopping where a mask is unchanged. Returns whether `key` was
     /// resident.
-    pub fn evict(&mut self, key: BrickKey) -> Result<bool> {
+    ///
+    /// # Errors
+    /// As [`ResidencyOctree::insert`].
+    pub fn evict(&mut self, key: BrickKey) -> Result<bool, OctreeError> {
         let slot = self.check(&key)?;
         if !self.resident.remove(&key) {
             return Ok(false);
@@ -589,30 +698,35 @@ impl ResidencyOctree {
         &mut self,
         info: &VolumeInfo,
         grids: &[Vec<Vec<crate::source::MinMaxGrid>>],
-    ) -> Result<()> {
+    ) -> Result<(), OctreeError> {
         let m = self.channels.len();
         let d = self.geometry.depth;
         let n = self.geometry.leaves_per_axis() as f64;
         for (slot, &channel) in self.channels.clone().iter().enumerate() {
-            let per_level = grids.get(channel).ok_or_else(|| {
-                anyhow::anyhow!("{}: no min/max grids for channel {channel}", info.name)
+            let per_level = grids.get(channel).ok_or_else(|| OctreeError::NoMinMax {
+                volume: info.name.clone(),
+                channel,
             })?;
             for (l, level_grids) in per_level.iter().enumerate().take(1) {
                 let Some(grid) = level_grids.first() else {
-                    bail!(
-                        "{}: channel {channel} level {l}: no min/max grid",
-                        info.name
-                    );
+                    return Err(OctreeError::NoMinMaxGrid {
+                        volume: info.name.clone(),
+                        channel,
+                        level: l,
+                    });
                 };
                 let cell = [grid.cell_shape[2], grid.cell_shape[1], grid.cell_shape[0]];
                 let gshape = [grid.grid_shape[2], grid.grid_shape[1], grid.grid_shape[0]];
-                ensure!(
-                    grid.min.len() as u64 == gshape.iter().product::<u64>()
-                        && grid.max.len() == grid.min.len()
-                        && cell.iter().all(|&c| c > 0),
-                    "{}: channel {channel} level {l}: malformed min/max grid",
-                    info.name
-                );
+                if !(grid.min.len() as u64 == gshape.iter().product::<u64>()
+                    && grid.max.len() == grid.min.len()
+                    && cell.iter().all(|&c| c > 0))
+                {
+                    return Err(OctreeError::MalformedMinMax {
+                        volume: info.name.clone(),
+                        channel,
+                        level: l,
+                    });
+                }
                 // Leaf range of each cell along each axis.
                 let leaf_ranges: [Vec<Range<u64>>; 3] = std::array::from_fn(|a| {
                     let f = (1u64 << self.geometry.level_shift[l][a]) as f64;

@@ -10,12 +10,96 @@
 use std::collections::HashMap;
 use std::sync::{Arc, RwLock};
 
-use anyhow::{Context, Result, ensure};
 use rayon::prelude::*;
 
 use crate::image::RgbImage;
 use crate::scene::{ChannelStyle, Scene, corrected_opacity};
-use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
+use crate::source::{BrickKey, BrickSource, BrickVoxels, SourceError, VolumeInfo};
+
+/// Why the reference cannot render a scene: options, a camera or a volume that define no
+/// image, a ray too long to march, or a brick that cannot be read (the source's error,
+/// unchanged). Messages name the option, channel or volume at fault.
+#[derive(Debug, thiserror::Error)]
+pub enum ReferenceError {
+    /// An image without pixels.
+    #[error("image size {width}×{height} is empty")]
+    EmptyImage {
+        /// Width in pixels.
+        width: usize,
+        /// Height in pixels.
+        height: usize,
+    },
+    /// A step fraction that is zero, negative or not finite.
+    #[error("step fraction {step_fraction} must be positive")]
+    BadStep {
+        /// The step fraction.
+        step_fraction: f64,
+    },
+    /// A scene drawing a channel the volume does not have.
+    #[error("scene draws channel {channel} but {volume} has {channels} channels")]
+    NoChannel {
+        /// The channel drawn.
+        channel: usize,
+        /// The volume.
+        volume: String,
+        /// Its channels.
+        channels: usize,
+    },
+    /// A volume whose extent or step is not finite and positive.
+    #[error(
+        "{volume}: volume extent {extent:?} (x, y, z) and step {step} must be finite and positive"
+    )]
+    BadExtent {
+        /// The volume.
+        volume: String,
+        /// Its extent, world `x, y, z`.
+        extent: [f64; 3],
+        /// The step, world units.
+        step: f64,
+    },
+    /// A camera that defines no view.
+    #[error(
+        "camera eye {eye:?}, target {target:?}, up {up:?} and field of view {fov_y_degrees}° do \
+         not define a view: they must be finite, eye and target distinct, up not along the \
+         view, the field of view between 0 and 180°"
+    )]
+    BadCamera {
+        /// Eye.
+        eye: [f64; 3],
+        /// Target.
+        target: [f64; 3],
+        /// Up.
+        up: [f64; 3],
+        /// Vertical field of view, degrees.
+        fov_y_degrees: f64,
+    },
+    /// A ray needing more steps than [`MAX_STEPS_PER_RAY`].
+    #[error(
+        "a ray crossing {length:e} of the volume needs {segments} steps of {step:e}, more than \
+         the {} allowed: use a larger --step",
+        MAX_STEPS_PER_RAY
+    )]
+    RayTooLong {
+        /// Length of the ray inside the volume, world units.
+        length: f64,
+        /// Steps it needs.
+        segments: u64,
+        /// The step, world units.
+        step: f64,
+    },
+    /// A source that answered no result for a brick.
+    #[error("the source answered no brick")]
+    NoAnswer,
+    /// A brick that cannot be read.
+    #[error(transparent)]
+    Source(Box<SourceError>),
+}
+
+impl From<SourceError> for ReferenceError {
+    fn from(e: SourceError) -> Self {
+        Self::Source(Box::new(e))
+    }
+}
 
 /// Default step, as a fraction of the finest level-0 voxel spacing.
 pub const DEFAULT_STEP_FRACTION: f64 = 0.25;
@@ -61,7 +145,7 @@ struct Level0<'a> {
 }
 
 impl Level0<'_> {
-    fn brick(&self, b: [u64; 3]) -> Result<Arc<BrickVoxels>> {
+    fn brick(&self, b: [u64; 3]) -> Result<Arc<BrickVoxels>, ReferenceError> {
         if let Some(v) = self.cache.read().expect("cache lock").get(&b) {
             return Ok(v.clone());
         }
@@ -74,7 +158,7 @@ impl Level0<'_> {
             .source
             .fetch(&[key])
             .pop()
-            .context("the source answered no brick")??;
+            .ok_or(ReferenceError::NoAnswer)??;
         let voxels = Arc::new(voxels);
         self.cache
             .write()
@@ -84,7 +168,11 @@ impl Level0<'_> {
     }
 
     /// Voxel `v` (`z, y, x`), which must lie inside the volume.
-    fn voxel(&self, v: [u64; 3], last: &mut Option<([u64; 3], Arc<BrickVoxels>)>) -> Result<f64> {
+    fn voxel(
+        &self,
+        v: [u64; 3],
+        last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
+    ) -> Result<f64, ReferenceError> {
         let b: [u64; 3] = std::array::from_fn(|i| v[i] / self.brick[i]);
         let bricks = match last {
             Some((lb, data)) if *lb == b => data.clone(),
@@ -101,7 +189,11 @@ impl Level0<'_> {
 
     /// Trilinear sample at continuous voxel coordinates `u` (`z, y, x`; voxel centres at
     /// integers), clamped to the edge voxels.
-    fn sample(&self, u: [f64; 3], last: &mut Option<([u64; 3], Arc<BrickVoxels>)>) -> Result<f64> {
+    fn sample(
+        &self,
+        u: [f64; 3],
+        last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
+    ) -> Result<f64, ReferenceError> {
         let mut i0 = [0u64; 3];
         let mut i1 = [0u64; 3];
         let mut f = [0.0; 3];
@@ -157,32 +249,36 @@ pub fn clip_to_box(eye: [f64; 3], dir: [f64; 3], extent: [f64; 3]) -> Option<(f6
 }
 
 /// Renders `scene` from `source` at level 0.
+///
+/// # Errors
+/// A [`ReferenceError`] naming the option, channel or volume that defines no image, a ray
+/// that needs too many steps, or the source's error for a brick that cannot be read.
 pub fn render(
     source: &dyn BrickSource,
     scene: &Scene,
     options: &ReferenceOptions,
-) -> Result<RgbImage> {
+) -> Result<RgbImage, ReferenceError> {
     let info = source.info();
-    ensure!(
-        options.width > 0 && options.height > 0,
-        "image size {}×{} is empty",
-        options.width,
-        options.height
-    );
-    ensure!(
-        options.step_fraction > 0.0 && options.step_fraction.is_finite(),
-        "step fraction {} must be positive",
-        options.step_fraction
-    );
+    if options.width == 0 || options.height == 0 {
+        return Err(ReferenceError::EmptyImage {
+            width: options.width,
+            height: options.height,
+        });
+    }
+    if !(options.step_fraction > 0.0 && options.step_fraction.is_finite()) {
+        return Err(ReferenceError::BadStep {
+            step_fraction: options.step_fraction,
+        });
+    }
     let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
     for c in &visible {
-        ensure!(
-            c.channel < info.channels.len(),
-            "scene draws channel {} but {} has {} channels",
-            c.channel,
-            info.name,
-            info.channels.len()
-        );
+        if c.channel >= info.channels.len() {
+            return Err(ReferenceError::NoChannel {
+                channel: c.channel,
+                volume: info.name.clone(),
+                channels: info.channels.len(),
+            });
+        }
     }
     let volumes: Vec<Level0> = visible
         .iter()
@@ -198,26 +294,27 @@ pub fn render(
     let reference_step = spacing_xyz.iter().copied().fold(f64::INFINITY, f64::min);
     let step = options.step_fraction * reference_step;
     let extent = extent_xyz(info);
-    ensure!(
-        extent.iter().all(|e| e.is_finite() && *e > 0.0) && step > 0.0 && step.is_finite(),
-        "{}: volume extent {extent:?} (x, y, z) and step {step} must be finite and positive",
-        info.name
-    );
+    if !(extent.iter().all(|e| e.is_finite() && *e > 0.0) && step > 0.0 && step.is_finite()) {
+        return Err(ReferenceError::BadExtent {
+            volume: info.name.clone(),
+            extent,
+            step,
+        });
+    }
     let cam = &scene.camera;
     let (f, r, u) = cam.basis();
-    ensure!(
-        cam.eye.iter().chain(&cam.target).all(|v| v.is_finite())
-            && [f, r, u].iter().flatten().all(|v| v.is_finite())
-            && cam.fov_y_degrees > 0.0
-            && cam.fov_y_degrees < 180.0,
-        "camera eye {:?}, target {:?}, up {:?} and field of view {}° do not define a view: they \
-         must be finite, eye and target distinct, up not along the view, the field of view \
-         between 0 and 180°",
-        cam.eye,
-        cam.target,
-        cam.up,
-        cam.fov_y_degrees
-    );
+    if !(cam.eye.iter().chain(&cam.target).all(|v| v.is_finite())
+        && [f, r, u].iter().flatten().all(|v| v.is_finite())
+        && cam.fov_y_degrees > 0.0
+        && cam.fov_y_degrees < 180.0)
+    {
+        return Err(ReferenceError::BadCamera {
+            eye: cam.eye,
+            target: cam.target,
+            up: cam.up,
+            fov_y_degrees: cam.fov_y_degrees,
+        });
+    }
     let pixels = (0..options.width * options.height)
         .into_par_iter()
         .map(|p| {
@@ -241,7 +338,7 @@ pub fn render(
                 (colour[i] + t * scene.background[i]) as f32
             }))
         })
-        .collect::<Result<Vec<[f32; 3]>>>()?;
+        .collect::<Result<Vec<[f32; 3]>, ReferenceError>>()?;
     Ok(RgbImage {
         width: options.width,
         height: options.height,
@@ -268,19 +365,17 @@ fn march(
     volumes: &[Level0],
     spacing_xyz: [f64; 3],
     lasts: &mut [Option<([u64; 3], Arc<BrickVoxels>)>],
-) -> Result<([f64; 3], f64)> {
+) -> Result<([f64; 3], f64), ReferenceError> {
     let mut colour = [0.0; 3];
     let mut t = 1.0;
     let Some((t0, t1)) = clip_to_box(eye, dir, extent) else {
         return Ok((colour, t));
     };
     let segments = ((t1 - t0) / step).ceil() as u64;
-    let too_long = || {
-        anyhow::anyhow!(
-            "a ray crossing {:e} of the volume needs {segments} steps of {step:e}, more than \
-             the {MAX_STEPS_PER_RAY} allowed: use a larger --step",
-            t1 - t0
-        )
+    let too_long = || ReferenceError::RayTooLong {
+        length: t1 - t0,
+        segments,
+        step,
     };
     if segments > MAX_STEPS_PER_RAY && min_transmittance <= 0.0 {
         return Err(too_long());
@@ -362,7 +457,7 @@ mod tests {
             &self.info
         }
 
-        fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>> {
+        fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>> {
             keys.iter()
                 .map(|k| {
                     self.info.check_key(k)?;

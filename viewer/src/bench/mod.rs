@@ -21,24 +21,109 @@ pub mod report;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::{Context, Result, ensure};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::defaults::CameraSpec;
+use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
-use crate::gpu::probe::LimitProbe;
+use crate::gpu::probe::{LimitProbe, ProbeFilter};
 use crate::gpu::renderer::{Method, RenderOptions, Renderer};
 use crate::gpu::streaming::{Budget, Fetcher, Progressive, converge};
 use crate::image::RgbImage;
-use crate::metrics;
+use crate::metrics::{self, MetricsError};
 use crate::octree::OctreeGeometry;
-use crate::reference::{self, ReferenceOptions};
+use crate::reference::{self, ReferenceError, ReferenceOptions};
 use crate::scene::{Camera, Scene};
 use crate::source::{BrickSource, SampleType, VolumeInfo};
 
 /// Format tag of a results file.
 pub const FORMAT: &str = "residency-render-bench/1";
+
+/// Why a benchmark stopped: a plan that measures nothing, no device, or a view whose
+/// reference, frame or comparison failed. Messages name the dataset, view and configuration
+/// at fault; the renderer's, the reference's and the metrics' errors are theirs, unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    /// `--views 0`.
+    #[error("--views must be at least 1")]
+    NoViews,
+    /// `--timed-frames 0`.
+    #[error("--timed-frames must be at least 1")]
+    NoTimedFrames,
+    /// The device, a renderer, a frame or the limit probe failed.
+    #[error(transparent)]
+    Gpu(Box<GpuError>),
+    /// Two images could not be compared.
+    #[error(transparent)]
+    Metrics(#[from] MetricsError),
+    /// The reference image of a view could not be rendered.
+    #[error("{dataset}: reference of view {view}")]
+    Reference {
+        /// The dataset.
+        dataset: String,
+        /// The view, from 1.
+        view: usize,
+        /// Why.
+        #[source]
+        source: Box<ReferenceError>,
+    },
+    /// No frame was timed (a bug: the plan asks for at least one).
+    #[error("no frame timed")]
+    NoFrameTimed,
+    /// A converged frame could not be compared with its reference.
+    #[error("{dataset}: view {view} against its reference")]
+    Compare {
+        /// The dataset.
+        dataset: String,
+        /// The view, from 0.
+        view: usize,
+        /// Why.
+        #[source]
+        source: MetricsError,
+    },
+    /// A configuration's renderer could not be set up.
+    #[error("{dataset}: {label}")]
+    Renderer {
+        /// The dataset.
+        dataset: String,
+        /// The configuration.
+        label: String,
+        /// Why.
+        #[source]
+        source: Box<GpuError>,
+    },
+    /// A view of a configuration failed.
+    #[error("{dataset}: {experiment} {label}")]
+    Run {
+        /// The dataset.
+        dataset: String,
+        /// The experiment.
+        experiment: Experiment,
+        /// The configuration.
+        label: String,
+        /// Why.
+        #[source]
+        source: Box<BenchError>,
+    },
+    /// A limit-probe frame could not be compared with its reference.
+    #[error("{dataset}: probe of view {view}")]
+    Probe {
+        /// The dataset.
+        dataset: String,
+        /// The view, from 0.
+        view: usize,
+        /// Why.
+        #[source]
+        source: MetricsError,
+    },
+}
+
+impl From<GpuError> for BenchError {
+    fn from(e: GpuError) -> Self {
+        Self::Gpu(Box::new(e))
+    }
+}
 
 /// The machine a result was measured on.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -359,7 +444,7 @@ pub struct SkippedRecord {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ProbeRecord {
     /// `manual` (8 texel loads, as the renderer) or `hardware` (the texture unit filters).
-    pub filter: String,
+    pub filter: ProbeFilter,
     /// Samples per frame (each of every drawn channel), mean over views.
     pub samples: f64,
     /// GPU ms per frame, mean over views of the median per view (`null`: no timestamps).
@@ -429,14 +514,24 @@ impl Experiment {
     }
 }
 
-impl std::str::FromStr for Experiment {
-    type Err = String;
+/// An experiment name that is not one of [`Experiment::ALL`]'s.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown experiment '{name}' (table1, sweep, skipped or scaling)")]
+pub struct UnknownExperiment {
+    /// The name given.
+    pub name: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl std::str::FromStr for Experiment {
+    type Err = UnknownExperiment;
+
+    fn from_str(s: &str) -> Result<Self, UnknownExperiment> {
         Self::ALL
             .into_iter()
             .find(|e| e.name() == s)
-            .ok_or_else(|| format!("unknown experiment '{s}' (table1, sweep, skipped or scaling)"))
+            .ok_or_else(|| UnknownExperiment {
+                name: s.to_string(),
+            })
     }
 }
 
@@ -540,14 +635,23 @@ pub struct Bench {
 
 impl Bench {
     /// Opens the device, lays out the orbit and renders the reference of every view.
+    ///
+    /// # Errors
+    /// [`BenchError::NoViews`] or [`BenchError::NoTimedFrames`] for a plan that measures
+    /// nothing, the device's [`GpuError`], or [`BenchError::Reference`] naming the view whose
+    /// reference failed.
     pub fn new(
         source: Arc<dyn BrickSource>,
         scene: Scene,
         base: RenderOptions,
         plan: Plan,
-    ) -> Result<Self> {
-        ensure!(plan.views > 0, "--views must be at least 1");
-        ensure!(plan.timed_frames > 0, "--timed-frames must be at least 1");
+    ) -> Result<Self, BenchError> {
+        if plan.views == 0 {
+            return Err(BenchError::NoViews);
+        }
+        if plan.timed_frames == 0 {
+            return Err(BenchError::NoTimedFrames);
+        }
         let gpu = Gpu::new()?;
         let info = source.info().clone();
         let fov = scene.camera.fov_y_degrees;
@@ -587,10 +691,13 @@ impl Bench {
                 step_fraction: plan.reference_step,
                 min_transmittance: 0.0,
             };
-            references.push(
-                reference::render(source.as_ref(), &s, &options)
-                    .with_context(|| format!("{}: reference of view {}", info.name, k + 1))?,
-            );
+            references.push(reference::render(source.as_ref(), &s, &options).map_err(
+                |source| BenchError::Reference {
+                    dataset: info.name.clone(),
+                    view: k + 1,
+                    source: Box::new(source),
+                },
+            )?);
         }
         let reference_s = start.elapsed().as_secs_f64();
         tracing::info!(
@@ -654,7 +761,7 @@ impl Bench {
         renderer: &mut Renderer,
         fetcher: &Fetcher,
         k: usize,
-    ) -> Result<ViewRecord> {
+    ) -> Result<ViewRecord, BenchError> {
         let (azimuth, cam) = &self.cameras[k];
         renderer.set_camera(cam.clone());
         let p = converge(&self.gpu, renderer, fetcher, &self.budget())?;
@@ -670,11 +777,16 @@ impl Bench {
             }
             last = Some(out);
         }
-        let out = last.context("no frame timed")?;
+        let out = last.ok_or(BenchError::NoFrameTimed)?;
         let o = renderer.options();
         let image = to_image(o.width, o.height, &out.pixels);
-        let m = metrics::compare(&image, &self.references[k])
-            .with_context(|| format!("{}: view {} against its reference", self.info().name, k))?;
+        let m = metrics::compare(&image, &self.references[k]).map_err(|source| {
+            BenchError::Compare {
+                dataset: self.info().name.clone(),
+                view: k,
+                source,
+            }
+        })?;
         let slot = renderer.cache().slot_bytes();
         self.bar.inc(1);
         Ok(ViewRecord {
@@ -699,22 +811,35 @@ impl Bench {
 
     /// Measures one configuration over the orbit with one renderer (cold at the first view,
     /// warm after).
+    ///
+    /// # Errors
+    /// [`BenchError::Renderer`] naming the configuration when its renderer cannot be set up,
+    /// [`BenchError::Run`] naming the experiment and configuration when a view fails.
     pub fn run(
         &self,
         experiment: Experiment,
         label: String,
         options: RenderOptions,
         sweep: Option<SweepParam>,
-    ) -> Result<RunRecord> {
+    ) -> Result<RunRecord, BenchError> {
         self.bar.set_message(format!("{experiment}: {label}"));
         let mut renderer = Renderer::new(&self.gpu, self.info(), &self.scene, options.clone())
-            .with_context(|| format!("{}: {label}", self.info().name))?;
+            .map_err(|source| BenchError::Renderer {
+                dataset: self.info().name.clone(),
+                label: label.clone(),
+                source: Box::new(source),
+            })?;
         let fetcher = Fetcher::new(Arc::clone(&self.source), self.plan.workers, 16);
         let record = Self::options_record(&options, &renderer);
         let views = (0..self.cameras.len())
             .map(|k| self.measure_view(&mut renderer, &fetcher, k))
-            .collect::<Result<Vec<_>>>()
-            .with_context(|| format!("{}: {experiment} {label}", self.info().name))?;
+            .collect::<Result<Vec<_>, BenchError>>()
+            .map_err(|source| BenchError::Run {
+                dataset: self.info().name.clone(),
+                experiment,
+                label: label.clone(),
+                source: Box::new(source),
+            })?;
         let n = views.len() as f64;
         let mean = |f: &dyn Fn(&ViewRecord) -> f64| views.iter().map(f).sum::<f64>() / n;
         let gpu: Vec<f64> = views.iter().filter_map(|v| v.gpu_ms).collect();
@@ -752,7 +877,10 @@ impl Bench {
     }
 
     /// Table 1: every configured method over the orbit.
-    pub fn table1(&self) -> Result<Vec<RunRecord>> {
+    ///
+    /// # Errors
+    /// The first failed run's, as [`Bench::run`].
+    pub fn table1(&self) -> Result<Vec<RunRecord>, BenchError> {
         self.plan
             .methods
             .iter()
@@ -773,7 +901,10 @@ impl Bench {
     }
 
     /// Time against error: the defaults, then each parameter swept alone.
-    pub fn sweep(&self) -> Result<Vec<RunRecord>> {
+    ///
+    /// # Errors
+    /// The first failed run's, as [`Bench::run`].
+    pub fn sweep(&self) -> Result<Vec<RunRecord>, BenchError> {
         let param = |name: SweptParameter, value: f64| Some(SweepParam { name, value });
         let default = self.run(
             Experiment::Sweep,
@@ -861,7 +992,10 @@ impl Bench {
     }
 
     /// Scaling: one residency run with the base options.
-    pub fn scaling(&self) -> Result<Vec<RunRecord>> {
+    ///
+    /// # Errors
+    /// As [`Bench::run`].
+    pub fn scaling(&self) -> Result<Vec<RunRecord>, BenchError> {
         Ok(vec![self.run(
             Experiment::Scaling,
             "residency".into(),
@@ -871,7 +1005,7 @@ impl Bench {
     }
 
     /// Converges a fresh renderer (cold cache) on view `k` and returns it with the result.
-    fn cold(&self, k: usize, options: RenderOptions) -> Result<(Renderer, Progressive)> {
+    fn cold(&self, k: usize, options: RenderOptions) -> Result<(Renderer, Progressive), GpuError> {
         let mut scene = self.scene.clone();
         scene.camera = self.cameras[k].1.clone();
         let mut renderer = Renderer::new(&self.gpu, self.info(), &scene, options)?;
@@ -882,7 +1016,11 @@ impl Bench {
     }
 
     /// Skipped work: per view, ours from a cold cache against the naive frustum loader.
-    pub fn skipped(&self) -> Result<Vec<SkippedRecord>> {
+    ///
+    /// # Errors
+    /// A renderer's or frame's [`GpuError`], or a [`MetricsError`] comparing an image with
+    /// its reference.
+    pub fn skipped(&self) -> Result<Vec<SkippedRecord>, BenchError> {
         let info = self.info().clone();
         let brick_bytes = self.slot_bytes();
         (0..self.cameras.len())
@@ -955,7 +1093,11 @@ impl Bench {
 
     /// The limit probe over the orbit, with every filter the device has: per view one frame
     /// to warm up, then the timed frames.
-    pub fn probe(&self) -> Result<Vec<ProbeRecord>> {
+    ///
+    /// # Errors
+    /// The probe's [`GpuError`] (say, a volume over one 3D texture), or
+    /// [`BenchError::Probe`] naming the view whose image cannot be compared.
+    pub fn probe(&self) -> Result<Vec<ProbeRecord>, BenchError> {
         let probe = LimitProbe::new(
             &self.gpu,
             self.source.as_ref(),
@@ -979,7 +1121,11 @@ impl Bench {
                     &to_image(o.width, o.height, &frame.pixels),
                     &self.references[k],
                 )
-                .with_context(|| format!("{}: probe of view {k}", self.info().name))?;
+                .map_err(|source| BenchError::Probe {
+                    dataset: self.info().name.clone(),
+                    view: k,
+                    source,
+                })?;
                 psnr.extend(finite_psnr(&m));
                 let mut g = Vec::new();
                 let mut w = Vec::new();
@@ -1000,7 +1146,7 @@ impl Bench {
             let gpu_ms = (gpu.len() == self.cameras.len()).then(|| gpu.iter().sum::<f64>() / views);
             let wall_ms = wall.iter().sum::<f64>() / views;
             records.push(ProbeRecord {
-                filter: filter.name().to_string(),
+                filter,
                 samples,
                 gpu_ms,
                 wall_ms,
@@ -1012,7 +1158,11 @@ impl Bench {
     }
 
     /// Runs every experiment of the plan and gathers the results.
-    pub fn run_all(&self) -> Result<BenchResults> {
+    ///
+    /// # Errors
+    /// The first failed experiment's [`BenchError`]; a limit probe that cannot run is no
+    /// error (its reason is kept in [`BenchResults::probe_error`]).
+    pub fn run_all(&self) -> Result<BenchResults, BenchError> {
         let views = self.cameras.len() as u64;
         let mut total = 0;
         for e in &self.plan.experiments {
@@ -1043,8 +1193,9 @@ impl Bench {
                     match self.probe() {
                         Ok(p) => probe = p,
                         Err(e) => {
-                            tracing::warn!("{}: no limit probe: {e:#}", self.info().name);
-                            probe_error = Some(format!("{e:#}"));
+                            let e = crate::error_chain(&e);
+                            tracing::warn!("{}: no limit probe: {e}", self.info().name);
+                            probe_error = Some(e);
                         }
                     }
                 }
@@ -1215,6 +1366,16 @@ mod tests {
                 .to_string();
             assert!(e.contains(bad), "{e}");
         }
+    }
+
+    #[test]
+    fn a_probe_filter_is_its_name_in_json() {
+        for filter in [ProbeFilter::Manual, ProbeFilter::Hardware] {
+            let json = serde_json::to_value(filter).unwrap();
+            assert_eq!(json, filter.name());
+            assert_eq!(serde_json::from_value::<ProbeFilter>(json).unwrap(), filter);
+        }
+        assert!(serde_json::from_value::<ProbeFilter>("Manual".into()).is_err());
     }
 
     #[test]

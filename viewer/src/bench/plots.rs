@@ -2,10 +2,9 @@
 //! that no system font is needed): time against error with the Pareto front, and scaling with
 //! volume size and channel count.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Once;
 
-use anyhow::{Context, Result, anyhow};
 use plotters::prelude::*;
 
 /// DejaVu Sans Mono (see `fonts/DejaVu-LICENSE.txt`).
@@ -21,16 +20,42 @@ fn register_font() {
     });
 }
 
-fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
-    anyhow!("plotting: {e}")
+/// Why a plot could not be made: plotters failed to draw, or the PNG cannot be written
+/// (the message names the file).
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    /// Plotters failed to draw (its message).
+    #[error("plotting: {message}")]
+    Draw {
+        /// What plotters said.
+        message: String,
+    },
+    /// The drawn buffer does not hold the plot's pixels (a bug).
+    #[error("plot buffer size")]
+    BufferSize,
+    /// The PNG cannot be written.
+    #[error("{}: cannot write the plot", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: ::image::ImageError,
+    },
+}
+
+fn err<E: std::fmt::Display>(e: E) -> PlotError {
+    PlotError::Draw {
+        message: e.to_string(),
+    }
 }
 
 /// Draws into an RGB buffer of `size` and writes it to `path` as PNG.
 fn png(
     path: &Path,
     size: (u32, u32),
-    draw: impl FnOnce(DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>) -> Result<()>,
-) -> Result<()> {
+    draw: impl FnOnce(DrawingArea<BitMapBackend<'_>, plotters::coord::Shift>) -> Result<(), PlotError>,
+) -> Result<(), PlotError> {
     register_font();
     let mut buf = vec![255u8; size.0 as usize * size.1 as usize * 3];
     {
@@ -39,9 +64,11 @@ fn png(
         draw(root.clone())?;
         root.present().map_err(err)?;
     }
-    let img = ::image::RgbImage::from_raw(size.0, size.1, buf).context("plot buffer size")?;
-    img.save(path)
-        .with_context(|| format!("{}: cannot write the plot", path.display()))
+    let img = ::image::RgbImage::from_raw(size.0, size.1, buf).ok_or(PlotError::BufferSize)?;
+    img.save(path).map_err(|source| PlotError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// Draws the legend of `chart` at `position` in DejaVu at `size` px, on a translucent white
@@ -50,7 +77,7 @@ fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
     position: SeriesLabelPosition,
     size: u32,
-) -> Result<()> {
+) -> Result<(), PlotError> {
     chart
         .configure_series_labels()
         .position(position)
@@ -87,7 +114,15 @@ fn padded(lo: f64, hi: f64) -> (f64, f64) {
 }
 
 /// Time against PSNR: every point, the Pareto front as a line, the defaults ringed.
-pub fn tradeoff(path: &Path, title: &str, x_desc: &str, points: &[TradeoffPoint]) -> Result<()> {
+///
+/// # Errors
+/// A [`PlotError`]: plotters failed, or the PNG cannot be written to `path`.
+pub fn tradeoff(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    points: &[TradeoffPoint],
+) -> Result<(), PlotError> {
     let xs = points.iter().map(|p| p.ms);
     let ys = points.iter().map(|p| p.psnr);
     let (x0, x1) = padded(
@@ -211,13 +246,16 @@ const PANELS: [&str; 3] = [
 
 /// Three stacked panels (ms per frame, resident MB, fetched MB) against `x` (log scale when
 /// `log_x`), one line per series.
+///
+/// # Errors
+/// A [`PlotError`]: plotters failed, or the PNG cannot be written to `path`.
 pub fn scaling(
     path: &Path,
     title: &str,
     x_desc: &str,
     log_x: bool,
     series: &[ScalingSeries],
-) -> Result<()> {
+) -> Result<(), PlotError> {
     let all: Vec<&(f64, [f64; 3])> = series.iter().flat_map(|s| &s.points).collect();
     let x_lo = all.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
     let x_hi = all.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);

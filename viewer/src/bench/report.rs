@@ -5,12 +5,67 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result, ensure};
-
-use super::plots::{self, ScalingSeries, TradeoffPoint};
+use super::plots::{self, PlotError, ScalingSeries, TradeoffPoint};
 use super::{
     BenchResults, DatasetInfo, Experiment, FORMAT, ProbeRecord, RunRecord, SweptParameter, pareto,
 };
+use crate::gpu::probe::ProbeFilter;
+
+/// Why a report could not be written: a results file that cannot be read or is not one, or a
+/// report file or plot that cannot be written. Messages name the file.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    /// No results file given.
+    #[error("no results files given")]
+    NoInputs,
+    /// A results file that cannot be read.
+    #[error("{}: cannot read", path.display())]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file that is not a results file.
+    #[error("{}: not a render-bench results file", path.display())]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A results file of another format version.
+    #[error("{}: format {format:?}, expected {:?}", path.display(), FORMAT)]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// Its format tag.
+        format: String,
+    },
+    /// The output folder cannot be created.
+    #[error("{}: cannot create", path.display())]
+    CreateDir {
+        /// The folder.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A report file cannot be written.
+    #[error("{}: cannot write", path.display())]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A plot cannot be drawn or written.
+    #[error(transparent)]
+    Plot(#[from] PlotError),
+}
 
 /// Table 1 of the residency-octree paper: ms per frame and GPU memory (GB) per method.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -59,16 +114,24 @@ pub fn paper_row(kind: &str, channels: usize) -> Option<&'static PaperRow> {
 }
 
 /// Reads and checks a results file.
-pub fn read(path: &Path) -> Result<BenchResults> {
-    let shown = path.display();
-    let bytes = std::fs::read(path).with_context(|| format!("{shown}: cannot read"))?;
-    let r: BenchResults = serde_json::from_slice(&bytes)
-        .with_context(|| format!("{shown}: not a render-bench results file"))?;
-    ensure!(
-        r.format == FORMAT,
-        "{shown}: format {:?}, expected {FORMAT:?}",
-        r.format
-    );
+///
+/// # Errors
+/// [`ReportError::Read`], [`ReportError::Parse`] or [`ReportError::Format`], naming the file.
+pub fn read(path: &Path) -> Result<BenchResults, ReportError> {
+    let bytes = std::fs::read(path).map_err(|source| ReportError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let r: BenchResults = serde_json::from_slice(&bytes).map_err(|source| ReportError::Parse {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    if r.format != FORMAT {
+        return Err(ReportError::Format {
+            path: path.to_path_buf(),
+            format: r.format,
+        });
+    }
     Ok(r)
 }
 
@@ -199,7 +262,7 @@ fn probe_table(out: &mut String, all: &[BenchResults]) {
     );
     for (r, ours) in rows {
         let ours_rate = ours.gpu_ms.map_or(ours.wall_ms, |g| g).recip() * ours.samples * 1e3;
-        let by = |name: &str| r.probe.iter().find(|p| p.filter == name);
+        let by = |filter: ProbeFilter| r.probe.iter().find(|p| p.filter == filter);
         let rate = |p: Option<&ProbeRecord>| {
             p.map_or_else(|| "–".into(), |p| format!("{:.2}", p.samples_per_s / 1e6))
         };
@@ -219,11 +282,11 @@ fn probe_table(out: &mut String, all: &[BenchResults]) {
             r.dataset.label,
             r.dataset.visible_channels,
             ours_rate / 1e6,
-            rate(by("manual")),
-            share(by("manual")),
-            rate(by("hardware")),
-            share(by("hardware")),
-            by("manual").map_or_else(|| "–".into(), |p| psnr(p.psnr_db)),
+            rate(by(ProbeFilter::Manual)),
+            share(by(ProbeFilter::Manual)),
+            rate(by(ProbeFilter::Hardware)),
+            share(by(ProbeFilter::Hardware)),
+            by(ProbeFilter::Manual).map_or_else(|| "–".into(), |p| psnr(p.psnr_db)),
         );
     }
 }
@@ -337,7 +400,7 @@ fn sweep(
     dir: &Path,
     index: usize,
     written: &mut Written,
-) -> Result<()> {
+) -> Result<(), PlotError> {
     let runs: Vec<&RunRecord> = r
         .runs
         .iter()
@@ -621,7 +684,7 @@ fn scaling(
     all: &[BenchResults],
     dir: &Path,
     written: &mut Written,
-) -> Result<()> {
+) -> Result<(), PlotError> {
     let runs: Vec<(&BenchResults, &RunRecord)> = all
         .iter()
         .flat_map(|r| {
@@ -719,10 +782,22 @@ fn scaling(
 }
 
 /// Writes `render-bench.md`, `summary.md` and the plots into `dir` from `inputs`.
-pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
-    ensure!(!inputs.is_empty(), "no results files given");
-    let all = inputs.iter().map(|p| read(p)).collect::<Result<Vec<_>>>()?;
-    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+///
+/// # Errors
+/// [`ReportError::NoInputs`], the first results file that cannot be read, or a report file
+/// or plot that cannot be written, each naming the file.
+pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written, ReportError> {
+    if inputs.is_empty() {
+        return Err(ReportError::NoInputs);
+    }
+    let all = inputs
+        .iter()
+        .map(|p| read(p))
+        .collect::<Result<Vec<_>, _>>()?;
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::CreateDir {
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let mut written = Written::default();
     let devices: Vec<String> = {
         let mut d: Vec<String> = all.iter().map(device_line).collect();
@@ -785,7 +860,10 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
     skipped(&mut out, &all);
     scaling(&mut out, &all, dir, &mut written)?;
     let report = dir.join("render-bench.md");
-    std::fs::write(&report, &out).with_context(|| format!("{}: cannot write", report.display()))?;
+    std::fs::write(&report, &out).map_err(|source| ReportError::Write {
+        path: report.clone(),
+        source,
+    })?;
 
     let mut s = String::new();
     let _ = writeln!(
@@ -816,7 +894,10 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written> {
         write_verdicts(&mut s, &written.verdicts);
     }
     let summary = dir.join("summary.md");
-    std::fs::write(&summary, &s).with_context(|| format!("{}: cannot write", summary.display()))?;
+    std::fs::write(&summary, &s).map_err(|source| ReportError::Write {
+        path: summary.clone(),
+        source,
+    })?;
     written.report = report;
     written.summary = summary;
     Ok(written)

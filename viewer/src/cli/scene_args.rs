@@ -8,7 +8,7 @@ use std::str::FromStr;
 use anyhow::{Result, bail, ensure};
 
 use residency_viewer::defaults::{
-    CameraSpec, check_channel, default_channels, default_scene, numbers, read_scene,
+    CameraSpec, NumbersError, check_channel, default_channels, default_scene, numbers, read_scene,
 };
 use residency_viewer::scene::{OpacityPoint, Scene};
 use residency_viewer::source::{BrickSource, HttpSource, LocalSource, VolumeInfo, read_token_file};
@@ -66,13 +66,26 @@ pub struct TfSpec {
     pub points: Vec<OpacityPoint>,
 }
 
+/// A `--tf` that is not a transfer function: the flag's text and what is wrong with it.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("transfer function '{spec}': {why}")]
+pub struct TfSpecError {
+    /// The text given.
+    pub spec: String,
+    /// What is wrong.
+    pub why: String,
+}
+
 impl FromStr for TfSpec {
-    type Err = String;
+    type Err = TfSpecError;
 
     /// `C:LO:HI:OPACITY` (a ramp from 0 at `LO` to `OPACITY` at `HI`, holding above), or
     /// `C:V=A,V=A,...` (explicit control points).
-    fn from_str(s: &str) -> Result<Self, String> {
-        let bad = |why: &str| format!("transfer function '{s}': {why}");
+    fn from_str(s: &str) -> Result<Self, TfSpecError> {
+        let bad = |why: &str| TfSpecError {
+            spec: s.to_string(),
+            why: why.to_string(),
+        };
         let parts: Vec<&str> = s.split(':').collect();
         let channel = parts[0]
             .trim()
@@ -104,7 +117,7 @@ impl FromStr for TfSpec {
                         opacity: num(a)?,
                     })
                 })
-                .collect::<Result<Vec<_>, String>>()?,
+                .collect::<Result<Vec<_>, TfSpecError>>()?,
             _ => return Err(bad("expected C:LO:HI:OPACITY or C:V=A,V=A,...")),
         };
         if points.iter().any(|p| !(0.0..=1.0).contains(&p.opacity)) {
@@ -126,20 +139,50 @@ pub struct ColorSpec {
     pub color: [f64; 3],
 }
 
-impl FromStr for ColorSpec {
-    type Err = String;
+/// A `--color` that is not `C:R,G,B` with components in `[0, 1]`.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum ColorSpecError {
+    /// No `:` between channel and colour.
+    #[error("colour '{spec}': expected C:R,G,B")]
+    Syntax {
+        /// The text given.
+        spec: String,
+    },
+    /// A channel that is not an index.
+    #[error("colour '{spec}': '{channel}' is not a channel index")]
+    Channel {
+        /// The text given.
+        spec: String,
+        /// The channel part.
+        channel: String,
+    },
+    /// Not three finite numbers.
+    #[error(transparent)]
+    Numbers(#[from] NumbersError),
+    /// A component outside `[0, 1]`.
+    #[error("colour '{spec}': components must lie in [0, 1]")]
+    Range {
+        /// The text given.
+        spec: String,
+    },
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
-        let (c, rgb) = s
-            .split_once(':')
-            .ok_or_else(|| format!("colour '{s}': expected C:R,G,B"))?;
-        let channel = c
-            .trim()
-            .parse()
-            .map_err(|_| format!("colour '{s}': '{c}' is not a channel index"))?;
+impl FromStr for ColorSpec {
+    type Err = ColorSpecError;
+
+    fn from_str(s: &str) -> Result<Self, ColorSpecError> {
+        let (c, rgb) = s.split_once(':').ok_or_else(|| ColorSpecError::Syntax {
+            spec: s.to_string(),
+        })?;
+        let channel = c.trim().parse().map_err(|_| ColorSpecError::Channel {
+            spec: s.to_string(),
+            channel: c.to_string(),
+        })?;
         let color = numbers::<3>(rgb, "colour")?;
         if color.iter().any(|v| !(0.0..=1.0).contains(v)) {
-            return Err(format!("colour '{s}': components must lie in [0, 1]"));
+            return Err(ColorSpecError::Range {
+                spec: s.to_string(),
+            });
         }
         Ok(Self { channel, color })
     }
@@ -150,9 +193,9 @@ impl FromStr for ColorSpec {
 pub struct Rgb(pub [f64; 3]);
 
 impl FromStr for Rgb {
-    type Err = String;
+    type Err = NumbersError;
 
-    fn from_str(s: &str) -> Result<Self, String> {
+    fn from_str(s: &str) -> Result<Self, NumbersError> {
         numbers::<3>(s, "background").map(Rgb)
     }
 }

@@ -107,5 +107,6 @@ pub fn run(args: Args) -> Result<()> {
             exit_after_frames: args.exit_after_frames,
             exit_delay: Duration::from_millis(args.exit_delay_ms),
         },
-    )
+    )?;
+    Ok(())
 }

@@ -5,8 +5,7 @@
 //! to `f32`; `u32`/`i32` above 2²⁴ lose low bits there). Slots are replaced least recently
 //! used first, where "used" is the shader's per-slot usage feedback.
 
-use anyhow::{Result, bail, ensure};
-
+use super::GpuError;
 use crate::source::{BrickVoxels, SampleType};
 
 /// Which of the shader's three atlas bindings holds the data.
@@ -52,28 +51,36 @@ pub struct BrickCache {
 
 impl BrickCache {
     /// A cache of as many `brick`-voxel slots (`x, y, z`) as fit in `cache_bytes` and in the
-    /// device's 3D texture limit. Errors if not even one slot fits.
+    /// device's 3D texture limit.
+    ///
+    /// # Errors
+    /// [`GpuError::BrickOverTextureLimit`] or [`GpuError::CacheTooSmall`] when not even one
+    /// slot fits.
     pub fn new(
         device: &wgpu::Device,
         limits: &wgpu::Limits,
         sample_type: SampleType,
         brick: [u32; 3],
         cache_bytes: u64,
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         let (format, kind) = atlas_format(sample_type);
         let brick_bytes =
             brick.iter().map(|&b| b as u64).product::<u64>() * sample_type.bytes() as u64;
         let wanted = (cache_bytes / brick_bytes).min(u32::MAX as u64 / 2) as u32;
         let max_dim = limits.max_texture_dimension_3d;
         let fit: [u32; 3] = std::array::from_fn(|a| max_dim / brick[a]);
-        ensure!(
-            fit.iter().all(|&f| f > 0),
-            "brick {brick:?} exceeds the device's 3D texture limit {max_dim}"
-        );
-        ensure!(
-            wanted > 0,
-            "cache of {cache_bytes} bytes holds no brick of {brick_bytes} bytes"
-        );
+        if fit.contains(&0) {
+            return Err(GpuError::BrickOverTextureLimit {
+                brick,
+                limit: max_dim,
+            });
+        }
+        if wanted == 0 {
+            return Err(GpuError::CacheTooSmall {
+                cache_bytes,
+                brick_bytes,
+            });
+        }
         // Slots per x and y axis are powers of two, so the shader finds a slot's atlas
         // position with shifts rather than integer division.
         let pow2_floor = |v: u32| 1u32 << v.max(1).ilog2();
@@ -229,7 +236,15 @@ impl BrickCache {
     }
 
     /// Checks that `voxels` is a full brick of the cache's sample type and writes it to `slot`.
-    pub fn upload(&self, queue: &wgpu::Queue, slot: u32, voxels: &BrickVoxels) -> Result<()> {
+    ///
+    /// # Errors
+    /// [`GpuError::EmptyBrickUpload`] or [`GpuError::WrongBrick`], and nothing is written.
+    pub fn upload(
+        &self,
+        queue: &wgpu::Queue,
+        slot: u32,
+        voxels: &BrickVoxels,
+    ) -> Result<(), GpuError> {
         let n = self.brick.iter().map(|&b| b as usize).product::<usize>();
         let bytes: &[u8] = match (self.sample_type, voxels) {
             (SampleType::U8, BrickVoxels::U8(v)) if v.len() == n => v,
@@ -238,12 +253,14 @@ impl BrickCache {
             (SampleType::U32, BrickVoxels::U32(v)) if v.len() == n => bytemuck::cast_slice(v),
             (SampleType::I32, BrickVoxels::I32(v)) if v.len() == n => bytemuck::cast_slice(v),
             (SampleType::F32, BrickVoxels::F32(v)) if v.len() == n => bytemuck::cast_slice(v),
-            (_, BrickVoxels::Empty) => bail!("an empty brick takes no cache slot"),
-            _ => bail!(
-                "brick has {} samples of the wrong type or count (expected {n} of {:?})",
-                voxels.len(),
-                self.sample_type
-            ),
+            (_, BrickVoxels::Empty) => return Err(GpuError::EmptyBrickUpload),
+            _ => {
+                return Err(GpuError::WrongBrick {
+                    samples: voxels.len(),
+                    expected: n,
+                    sample_type: self.sample_type,
+                });
+            }
         };
         let [sx, sy, _] = self.slots_per_axis;
         let s = [slot % sx, (slot / sx) % sy, slot / (sx * sy)];

@@ -2,20 +2,26 @@
 //! uniform, and readback (mapped after a copy), plus the device-limit check for a storage
 //! binding.
 
-use anyhow::{Result, ensure};
-
+use super::GpuError;
 use super::device::Gpu;
 
 /// Errors unless a buffer of `bytes` fits one storage binding and one buffer of `gpu`;
 /// `what` and `hint` say which buffer and what to do.
-pub fn check_binding(gpu: &Gpu, what: &str, bytes: u64, hint: &str) -> Result<()> {
+///
+/// # Errors
+/// [`GpuError::BindingTooLarge`] naming the buffer, its size, the limit and the hint.
+pub fn check_binding(gpu: &Gpu, what: &str, bytes: u64, hint: &str) -> Result<(), GpuError> {
     let max_binding = gpu.limits.max_storage_buffer_binding_size;
-    ensure!(
-        bytes <= max_binding && bytes <= gpu.limits.max_buffer_size,
-        "{what} needs {bytes} bytes, over the device's storage-buffer limit of \
-         {max_binding} bytes; {hint}"
-    );
-    Ok(())
+    if bytes <= max_binding && bytes <= gpu.limits.max_buffer_size {
+        Ok(())
+    } else {
+        Err(GpuError::BindingTooLarge {
+            what: what.to_string(),
+            bytes,
+            limit: max_binding,
+            hint: hint.to_string(),
+        })
+    }
 }
 
 /// A storage buffer of at least 16 bytes that can be written from the CPU.

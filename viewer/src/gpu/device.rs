@@ -1,8 +1,7 @@
 //! GPU device creation. Works on any Vulkan/Metal/DX12/GL adapter wgpu finds, including Mesa's
 //! lavapipe software rasteriser (set `XDG_RUNTIME_DIR` when there is no session).
 
-use anyhow::{Context, Result, bail};
-
+use super::GpuError;
 use super::pipeline::PipelineCache;
 
 /// A device, its queue and what the adapter supports.
@@ -34,23 +33,29 @@ impl std::fmt::Debug for Gpu {
 
 /// Why no adapter was found, and what to do.
 #[cfg(not(target_arch = "wasm32"))]
-const NO_ADAPTER: &str = "no GPU adapter found (without a GPU, install Mesa's lavapipe Vulkan \
+pub(crate) const NO_ADAPTER: &str = "no GPU adapter found (without a GPU, install Mesa's lavapipe Vulkan \
                           driver and set XDG_RUNTIME_DIR)";
 #[cfg(target_arch = "wasm32")]
-const NO_ADAPTER: &str = "this browser offers no WebGPU adapter (use a current Chrome, Edge or \
+pub(crate) const NO_ADAPTER: &str = "this browser offers no WebGPU adapter (use a current Chrome, Edge or \
                           Firefox with WebGPU enabled, on a machine whose GPU it supports)";
 
 impl Gpu {
     /// Opens the best adapter the environment offers (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` and
     /// the other `wgpu` environment variables apply) with the adapter's full limits and, when
     /// supported, `TIMESTAMP_QUERY` and `FLOAT32_FILTERABLE`.
+    ///
+    /// # Errors
+    /// [`GpuError::NoAdapter`] (saying what to install) or [`GpuError::NoDevice`].
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn new() -> Result<Self> {
+    pub fn new() -> Result<Self, GpuError> {
         pollster::block_on(Self::open())
     }
 
     /// [`Gpu::new`], awaited: the only way in the browser (WebGPU there).
-    pub async fn open() -> Result<Self> {
+    ///
+    /// # Errors
+    /// As [`Gpu::new`].
+    pub async fn open() -> Result<Self, GpuError> {
         #[cfg(not(target_arch = "wasm32"))]
         let descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
         #[cfg(target_arch = "wasm32")]
@@ -64,7 +69,7 @@ impl Gpu {
                 ..Default::default()
             })
             .await
-            .context(NO_ADAPTER)?;
+            .map_err(GpuError::NoAdapter)?;
         let adapter_info = adapter.get_info();
         let timestamps = adapter.features().contains(wgpu::Features::TIMESTAMP_QUERY);
         // Timestamps for frame statistics; filterable f32 textures for the limit probe's
@@ -82,7 +87,10 @@ impl Gpu {
                 trace: wgpu::Trace::Off,
             })
             .await
-            .with_context(|| format!("cannot open a device on {}", adapter_info.name))?;
+            .map_err(|source| GpuError::NoDevice {
+                adapter: adapter_info.name.clone(),
+                source,
+            })?;
         tracing::debug!(
             "GPU: {} ({:?}), timestamps: {timestamps}",
             adapter_info.name,
@@ -100,24 +108,37 @@ impl Gpu {
 
     /// Runs `f`, turning any GPU validation or out-of-memory error it raises into an error
     /// naming `what` (instead of wgpu's default panic).
+    ///
+    /// # Errors
+    /// [`GpuError::Validation`] naming `what` when the GPU raised an error, else `f`'s error.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn checked<T>(&self, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    pub fn checked<T>(
+        &self,
+        what: &str,
+        f: impl FnOnce() -> Result<T, GpuError>,
+    ) -> Result<T, GpuError> {
         pollster::block_on(self.checked_async(what, async { f() }))
     }
 
     /// [`Gpu::checked`] for work that awaits (the browser's buffer mapping).
+    ///
+    /// # Errors
+    /// As [`Gpu::checked`].
     pub async fn checked_async<T>(
         &self,
         what: &str,
-        work: impl Future<Output = Result<T>>,
-    ) -> Result<T> {
+        work: impl Future<Output = Result<T, GpuError>>,
+    ) -> Result<T, GpuError> {
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let validation = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let result = work.await;
         let v = validation.pop().await;
         let o = oom.pop().await;
         if let Some(e) = v.or(o) {
-            bail!("{what}: GPU error: {e}");
+            return Err(GpuError::Validation {
+                what: what.to_string(),
+                message: e.to_string(),
+            });
         }
         result
     }

@@ -4,8 +4,7 @@
 //! transparent under the transfer function by its haloed range), and `slot + 2` when it is in
 //! cache slot `slot`. A brick's *id* is its entry's index; the shader reports misses by id.
 
-use anyhow::{Result, bail};
-
+use super::GpuError;
 use crate::octree::OctreeGeometry;
 use crate::source::BrickKey;
 
@@ -36,11 +35,15 @@ pub struct PageTables {
 
 impl PageTables {
     /// Page tables for `channels` (source indices) over the pyramid of `geometry`, all empty.
+    ///
+    /// # Errors
+    /// [`GpuError::TooManyBricks`] when the bricks of all channels and levels need more than
+    /// 31-bit ids.
     pub fn new(
         device: &wgpu::Device,
         geometry: &OctreeGeometry,
         channels: &[usize],
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         let grids: Vec<[u64; 3]> = geometry
             .level_shape
             .iter()
@@ -55,7 +58,7 @@ impl PageTables {
             }
         }
         if total >= u32::MAX as u64 / 2 {
-            bail!("{total} bricks over all channels and levels: too many for 32-bit brick ids");
+            return Err(GpuError::TooManyBricks { total });
         }
         let total = total.max(1);
         let buffer = device.create_buffer(&wgpu::BufferDescriptor {

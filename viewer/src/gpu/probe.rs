@@ -6,8 +6,7 @@
 //! filtering done by hand (8 texel loads, as the renderer does) and, where the device can
 //! filter `R32Float` textures, by the texture unit.
 
-use anyhow::{Context, Result, ensure};
-
+use super::GpuError;
 use super::buffers::{readback_buffer, storage_buffer, uniform_buffer};
 use super::contract::{FILTER_HARDWARE, FILTER_MANUAL, ProbeParams, probe_binding, probe_source};
 use super::device::Gpu;
@@ -20,8 +19,11 @@ use super::timer::PassTimer;
 use crate::scene::{Camera, ChannelStyle, Scene};
 use crate::source::{BrickKey, BrickSource, VolumeInfo};
 
-/// How the probe filters.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How the probe filters; named as [`ProbeFilter::name`] says in results files.
+#[derive(
+    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "lowercase")]
 pub enum ProbeFilter {
     /// 8 texel loads and trilinear weights in the shader (the renderer's way).
     Manual,
@@ -76,7 +78,7 @@ pub struct LimitProbe {
 }
 
 /// Level 0 of `channels` as one `f32` volume, the channels stacked along z (`x` fastest).
-fn level0_slabs(source: &dyn BrickSource, channels: &[usize]) -> Result<Vec<f32>> {
+fn level0_slabs(source: &dyn BrickSource, channels: &[usize]) -> Result<Vec<f32>, GpuError> {
     let info = source.info();
     let [sz, sy, sx] = info.levels[0].shape.map(|s| s as usize);
     let brick = info.brick_shape.map(|b| b as usize);
@@ -92,7 +94,10 @@ fn level0_slabs(source: &dyn BrickSource, channels: &[usize]) -> Result<Vec<f32>
             })
             .collect();
         for (key, voxels) in keys.iter().zip(source.fetch(&keys)) {
-            let voxels = voxels.with_context(|| format!("{}: the probe's level 0", info.name))?;
+            let voxels = voxels.map_err(|source| GpuError::ProbeLevel0 {
+                volume: info.name.clone(),
+                source: Box::new(source),
+            })?;
             let (lo, hi) = info.brick_box(key, 0);
             let [oz, oy, ox] = lo.map(|v| v as usize);
             let [ez, ey, ex] = std::array::from_fn(|a| (hi[a] - lo[a]) as usize);
@@ -113,7 +118,12 @@ fn level0_slabs(source: &dyn BrickSource, channels: &[usize]) -> Result<Vec<f32>
 impl LimitProbe {
     /// Loads level 0 of `scene`'s visible channels from `source` into one texture and builds
     /// the probe's pipelines for `width × height` pixels and the renderer's step
-    /// `step_fraction`. Errors where the volume does not fit one 3D texture of the device.
+    /// `step_fraction`.
+    ///
+    /// # Errors
+    /// [`GpuError::ProbeTexture`] where the volume does not fit one 3D texture of the device,
+    /// [`GpuError::ProbeChannels`] for no visible channel or too many,
+    /// [`GpuError::ProbeLevel0`] where a brick of level 0 cannot be read, or a GPU error.
     pub fn new(
         gpu: &Gpu,
         source: &dyn BrickSource,
@@ -121,7 +131,7 @@ impl LimitProbe {
         width: u32,
         height: u32,
         step_fraction: f32,
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         gpu.checked("setting up the limit probe", || {
             Self::build(gpu, source, scene, width, height, step_fraction)
         })
@@ -134,26 +144,26 @@ impl LimitProbe {
         width: u32,
         height: u32,
         step_fraction: f32,
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         let info = source.info().clone();
         let device = &gpu.device;
         let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
-        ensure!(
-            !visible.is_empty() && visible.len() <= super::contract::MAX_CHANNELS,
-            "the limit probe draws 1 to {} channels, not {}",
-            super::contract::MAX_CHANNELS,
-            visible.len()
-        );
+        if visible.is_empty() || visible.len() > super::contract::MAX_CHANNELS {
+            return Err(GpuError::ProbeChannels {
+                channels: visible.len(),
+            });
+        }
         let [sz, sy, sx] = info.levels[0].shape.map(|s| s as u32);
         let depth = sz * visible.len() as u32;
         let max = gpu.limits.max_texture_dimension_3d;
-        ensure!(
-            sx <= max && sy <= max && depth <= max,
-            "{}: the limit probe needs one 3D texture of {sx}×{sy}×{depth} voxels (level 0 of \
-             {} channels stacked in z), over the device's limit of {max} per axis",
-            info.name,
-            visible.len()
-        );
+        if sx > max || sy > max || depth > max {
+            return Err(GpuError::ProbeTexture {
+                volume: info.name.clone(),
+                size: [sx, sy, depth],
+                channels: visible.len(),
+                limit: max,
+            });
+        }
         let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
         let voxels = level0_slabs(source, &channels)?;
         let size = wgpu::Extent3d {
@@ -345,8 +355,17 @@ impl LimitProbe {
 
     /// Renders one frame from `camera` with `filter` and reads back its image, sample count
     /// and GPU time.
+    ///
+    /// # Errors
+    /// [`GpuError::NoProbe`] for a filter the device does not have, a GPU error, or a
+    /// readback that failed.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn render(&self, gpu: &Gpu, camera: &Camera, filter: ProbeFilter) -> Result<ProbeFrame> {
+    pub fn render(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        filter: ProbeFilter,
+    ) -> Result<ProbeFrame, GpuError> {
         pollster::block_on(gpu.checked_async("a limit-probe frame", async {
             self.render_frame(gpu, camera, filter).await
         }))
@@ -357,12 +376,14 @@ impl LimitProbe {
         gpu: &Gpu,
         camera: &Camera,
         filter: ProbeFilter,
-    ) -> Result<ProbeFrame> {
+    ) -> Result<ProbeFrame, GpuError> {
         let p = self
             .pipelines
             .iter()
             .find(|p| p.filter == filter)
-            .with_context(|| format!("this device has no {} probe", filter.name()))?;
+            .ok_or(GpuError::NoProbe {
+                filter: filter.name(),
+            })?;
         gpu.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&self.params(camera)));
         let mut encoder = gpu

@@ -3,12 +3,12 @@
 //! buffers, with one frame's parameters, dispatch and readback (image, capped request list,
 //! slot usage, statistics, GPU time).
 
-use anyhow::{Context, Result, bail, ensure};
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use std::sync::Arc;
 
+use super::GpuError;
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, readback_buffer, storage_buffer, uniform_buffer};
 use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
@@ -67,14 +67,24 @@ impl Method {
     }
 }
 
-impl std::str::FromStr for Method {
-    type Err = String;
+/// A method name that is not one of [`Method::ALL`]'s.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("unknown method '{name}' (residency, page-table or octree)")]
+pub struct UnknownMethod {
+    /// The name given.
+    pub name: String,
+}
 
-    fn from_str(s: &str) -> Result<Self, String> {
+impl std::str::FromStr for Method {
+    type Err = UnknownMethod;
+
+    fn from_str(s: &str) -> Result<Self, UnknownMethod> {
         Self::ALL
             .into_iter()
             .find(|m| m.name() == s)
-            .ok_or_else(|| format!("unknown method '{s}' (residency, page-table or octree)"))
+            .ok_or_else(|| UnknownMethod {
+                name: s.to_string(),
+            })
     }
 }
 
@@ -214,7 +224,7 @@ struct FrameBuffers {
 impl FrameBuffers {
     /// Buffers for `width × height` pixels, `max_requests` requests and a cache of
     /// `cache_slots` slots.
-    fn new(gpu: &Gpu, options: &RenderOptions, cache_slots: u32) -> Result<Self> {
+    fn new(gpu: &Gpu, options: &RenderOptions, cache_slots: u32) -> Result<Self, GpuError> {
         let pixels = u64::from(options.width) * u64::from(options.height);
         check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
         check_binding(
@@ -269,42 +279,55 @@ impl Renderer {
     /// Sets up the renderer of `scene` over the volume `info`: octree (ranges from the
     /// volume's region metadata), page tables, cache, tables and pipeline. Only visible
     /// channels are rendered (and ever fetched).
+    ///
+    /// # Errors
+    /// A [`GpuError`] naming what does not fit: an empty image, too many visible channels or
+    /// levels, a volume the octree refuses, a buffer or the cache over the device's limits,
+    /// or a GPU error while setting up.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn new(
         gpu: &Gpu,
         info: &VolumeInfo,
         scene: &Scene,
         options: RenderOptions,
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         pollster::block_on(Self::create(gpu, info, scene, options))
     }
 
     /// [`Renderer::new`], awaited (the browser).
+    ///
+    /// # Errors
+    /// As [`Renderer::new`].
     pub async fn create(
         gpu: &Gpu,
         info: &VolumeInfo,
         scene: &Scene,
         options: RenderOptions,
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         gpu.checked_async("setting up the renderer", async {
             Self::build(gpu, info, scene, options)
         })
         .await
     }
 
-    fn build(gpu: &Gpu, info: &VolumeInfo, scene: &Scene, options: RenderOptions) -> Result<Self> {
-        ensure!(
-            options.width > 0 && options.height > 0,
-            "image size {}×{} is empty",
-            options.width,
-            options.height
-        );
+    fn build(
+        gpu: &Gpu,
+        info: &VolumeInfo,
+        scene: &Scene,
+        options: RenderOptions,
+    ) -> Result<Self, GpuError> {
+        if options.width == 0 || options.height == 0 {
+            return Err(GpuError::EmptyImage {
+                width: options.width,
+                height: options.height,
+            });
+        }
         let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
-        ensure!(
-            visible.len() <= MAX_CHANNELS,
-            "{} visible channels; at most {MAX_CHANNELS} render at once",
-            visible.len()
-        );
+        if visible.len() > MAX_CHANNELS {
+            return Err(GpuError::TooManyVisible {
+                channels: visible.len(),
+            });
+        }
         let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
         let mut residency = ResidencyState::new(gpu, info, &channels, &options)?;
         residency.mark_clear(&visible);
@@ -444,7 +467,15 @@ impl Renderer {
     /// Inserts a fetched brick: takes a slot (evicting the least recently used brick not used
     /// by the last frame), uploads it, and updates the page table and the octree. A brick of
     /// the wrong size or type is an error and changes nothing.
-    pub fn insert(&mut self, gpu: &Gpu, key: BrickKey, voxels: &BrickVoxels) -> Result<Inserted> {
+    ///
+    /// # Errors
+    /// As [`ResidencyState::insert`]: a brick not drawn, or one of the wrong size or type.
+    pub fn insert(
+        &mut self,
+        gpu: &Gpu,
+        key: BrickKey,
+        voxels: &BrickVoxels,
+    ) -> Result<Inserted, GpuError> {
         self.residency.insert(gpu, key, voxels, self.frame)
     }
 
@@ -524,19 +555,26 @@ impl Renderer {
 
     /// Renders one frame and reads back its image, requests, usage feedback (folded into
     /// the cache's LRU order) and counters.
+    ///
+    /// # Errors
+    /// A [`GpuError`]: a GPU error while rendering, a readback that failed, or rays still
+    /// marching after the renderer's pass limit.
     #[cfg(not(target_arch = "wasm32"))]
-    pub fn render(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+    pub fn render(&mut self, gpu: &Gpu) -> Result<FrameOutput, GpuError> {
         pollster::block_on(self.render_async(gpu))
     }
 
     /// [`Renderer::render`], awaited: in the browser, buffer mapping completes on the event
     /// loop.
-    pub async fn render_async(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    pub async fn render_async(&mut self, gpu: &Gpu) -> Result<FrameOutput, GpuError> {
         gpu.checked_async("rendering a frame", self.render_frame(gpu))
             .await
     }
 
-    async fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput> {
+    async fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput, GpuError> {
         self.flush(gpu);
         self.frame += 1;
         let params = self.params();
@@ -611,11 +649,13 @@ impl Renderer {
             for b in &maps {
                 b.unmap();
             }
-            ensure!(
-                passes < MAX_PASSES,
-                "{suspended} rays still marching after {passes} passes of {} steps",
-                self.tables.steps_per_pass()
-            );
+            if passes >= MAX_PASSES {
+                return Err(GpuError::RaysStillMarching {
+                    suspended,
+                    passes,
+                    steps: self.tables.steps_per_pass(),
+                });
+            }
             batch = (batch * 2).min(16);
             encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("raycast resume"),
@@ -645,7 +685,7 @@ impl Renderer {
                 .residency
                 .pages()
                 .key(id)
-                .with_context(|| format!("shader reported an unknown brick id {id}"))?;
+                .ok_or(GpuError::UnknownBrickId { id })?;
             requests.push(BrickRequest {
                 key,
                 distance: f32::from_bits(distance),
@@ -674,7 +714,7 @@ impl Renderer {
 pub(super) async fn map_for_reading(
     device: &wgpu::Device,
     buffers: &[&wgpu::Buffer],
-) -> Result<()> {
+) -> Result<(), GpuError> {
     let mut mapped = Vec::with_capacity(buffers.len());
     for b in buffers {
         let (tx, rx) = futures_channel::oneshot::channel();
@@ -686,14 +726,14 @@ pub(super) async fn map_for_reading(
     #[cfg(not(target_arch = "wasm32"))]
     device
         .poll(wgpu::PollType::wait_indefinitely())
-        .context("waiting for the GPU")?;
+        .map_err(GpuError::Poll)?;
     #[cfg(target_arch = "wasm32")]
     let _ = device;
     for (i, rx) in mapped.into_iter().enumerate() {
         match rx.await {
             Ok(Ok(())) => {}
-            Ok(Err(e)) => bail!("cannot read back GPU buffer {i}: {e}"),
-            Err(_) => bail!("cannot read back GPU buffer {i}: the device was lost"),
+            Ok(Err(reason)) => return Err(GpuError::Readback { buffer: i, reason }),
+            Err(_) => return Err(GpuError::DeviceLost { buffer: i }),
         }
     }
     Ok(())

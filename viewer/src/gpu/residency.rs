@@ -4,8 +4,7 @@
 //! arrive and are evicted, never with the style: a restyle only redoes the clear-brick marks
 //! ([`ResidencyState::mark_clear`]), so every resident brick stays.
 
-use anyhow::{Context, Result};
-
+use super::GpuError;
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, storage_buffer};
 use super::device::Gpu;
@@ -31,14 +30,17 @@ pub struct ResidencyState {
 impl ResidencyState {
     /// Empty residency for `channels` of `info`: the octree (ranges from the volume's region
     /// metadata), page tables with every brick missing, a cache of `options.cache_bytes`, and
-    /// (for the baselines) each brick's value range. Errors where a buffer exceeds the device's
-    /// limits.
+    /// (for the baselines) each brick's value range.
+    ///
+    /// # Errors
+    /// The octree's refusal of the volume or channels, or a [`GpuError`] where the page
+    /// tables, the cache or the octree buffer exceed the device's limits.
     pub fn new(
         gpu: &Gpu,
         info: &VolumeInfo,
         channels: &[usize],
         options: &RenderOptions,
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         let depth = match options.octree_depth {
             Some(d) => d,
             None => OctreeGeometry::depth_for(info, options.leaf_voxels, 7),
@@ -174,18 +176,20 @@ impl ResidencyState {
 
     /// Inserts a fetched brick at frame `frame`: takes a slot (evicting the least recently
     /// used brick not used by that frame), uploads it, and updates the page table and the
-    /// octree. A brick of the wrong size or type is an error and changes nothing.
+    /// octree.
+    ///
+    /// # Errors
+    /// [`GpuError::NotRendered`] for a brick of another channel or volume, and
+    /// [`GpuError::Upload`] (naming the brick) for one of the wrong size or type, which
+    /// changes nothing.
     pub fn insert(
         &mut self,
         gpu: &Gpu,
         key: BrickKey,
         voxels: &BrickVoxels,
         frame: u32,
-    ) -> Result<Inserted> {
-        let id = self
-            .pages
-            .id(&key)
-            .with_context(|| format!("brick {key:?} is not part of the rendered volume"))?;
+    ) -> Result<Inserted, GpuError> {
+        let id = self.pages.id(&key).ok_or(GpuError::NotRendered { key })?;
         if self.pages.entry(id) != ENTRY_MISSING {
             return Ok(Inserted::AlreadyResident);
         }
@@ -200,7 +204,7 @@ impl ResidencyState {
         };
         let evicted = match evicted_id {
             Some(old) => {
-                let old_key = self.pages.key(old).context("cache slot owner has no key")?;
+                let old_key = self.pages.key(old).ok_or(GpuError::SlotWithoutKey)?;
                 self.pages.set(old, ENTRY_MISSING);
                 self.octree.evict(old_key)?;
                 Some(old_key)
@@ -209,7 +213,10 @@ impl ResidencyState {
         };
         if let Err(e) = self.cache.upload(&gpu.queue, slot, voxels) {
             self.cache.release(slot);
-            return Err(e.context(format!("brick {key:?}")));
+            return Err(GpuError::Upload {
+                key,
+                source: Box::new(e),
+            });
         }
         self.cache.assign(slot, id);
         self.pages.set(id, slot + 2);

@@ -22,10 +22,10 @@ use std::thread::JoinHandle;
 #[cfg(not(target_arch = "wasm32"))]
 use std::time::{Duration, Instant};
 
-use anyhow::Result;
 use schemars::JsonSchema;
 use serde::Serialize;
 
+use super::GpuError;
 use super::device::Gpu;
 use super::renderer::{BrickRequest, Inserted, Renderer, ShaderCounts};
 #[cfg(not(target_arch = "wasm32"))]
@@ -34,14 +34,14 @@ use super::renderer::{Method, RenderOptions};
 use crate::scene::Scene;
 #[cfg(not(target_arch = "wasm32"))]
 use crate::source::BrickSource;
-use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
+use crate::source::{BrickKey, BrickVoxels, SourceError, VolumeInfo};
 
 #[cfg(not(target_arch = "wasm32"))]
 #[derive(Default)]
 struct Queue {
     pending: VecDeque<BrickKey>,
     in_flight: usize,
-    done: Vec<(BrickKey, Result<BrickVoxels>)>,
+    done: Vec<(BrickKey, Result<BrickVoxels, SourceError>)>,
     shutdown: bool,
 }
 
@@ -78,9 +78,7 @@ impl Fetcher {
                             q.pending.drain(..n).collect()
                         };
                         let mut results = source.fetch(&keys);
-                        results.resize_with(keys.len(), || {
-                            Err(anyhow::anyhow!("brick source returned too few results"))
-                        });
+                        results.resize_with(keys.len(), || Err(SourceError::NoResult));
                         let mut q = lock.lock().expect("fetch queue");
                         q.in_flight -= keys.len();
                         q.done.extend(keys.into_iter().zip(results));
@@ -105,7 +103,10 @@ impl Fetcher {
 
     /// Waits until nothing is queued or in flight (or `deadline` passes) and returns every
     /// completed fetch.
-    pub fn wait(&self, deadline: Option<Instant>) -> Vec<(BrickKey, Result<BrickVoxels>)> {
+    pub fn wait(
+        &self,
+        deadline: Option<Instant>,
+    ) -> Vec<(BrickKey, Result<BrickVoxels, SourceError>)> {
         let (lock, cv) = &*self.shared;
         let mut q = lock.lock().expect("fetch queue");
         while !(q.pending.is_empty() && q.in_flight == 0) {
@@ -322,13 +323,17 @@ pub fn prioritise(requests: &mut [BrickRequest]) {
 
 #[cfg(not(target_arch = "wasm32"))]
 /// Renders `scene` from `source` progressively until converged or out of budget.
+///
+/// # Errors
+/// The renderer's [`GpuError`] when it cannot be set up or a frame fails; bricks that cannot
+/// be fetched are not errors (they are counted, and other levels stand in).
 pub fn render_progressive(
     gpu: &Gpu,
     source: Arc<dyn BrickSource>,
     scene: &Scene,
     options: RenderOptions,
     budget: &Budget,
-) -> Result<Progressive> {
+) -> Result<Progressive, GpuError> {
     let mut renderer = Renderer::new(gpu, source.info(), scene, options)?;
     let fetcher = Fetcher::new(Arc::clone(&source), budget.workers, budget.batch);
     converge(gpu, &mut renderer, &fetcher, budget)
@@ -348,15 +353,18 @@ pub fn coarser_brick(info: &VolumeInfo, key: &BrickKey) -> Option<BrickKey> {
 
 /// Inserts one finished fetch of `key` into `renderer` and counts it in `stats` (fetched,
 /// bytes, evicted, deferred; or failed, with a warning). Returns what the insert did and the
-/// brick's decoded bytes, or the fetch or upload error.
+/// brick's decoded bytes.
+///
+/// # Errors
+/// The fetch's [`SourceError`] (as [`GpuError::Source`]) or the upload's [`GpuError`].
 pub fn insert_fetched(
     gpu: &Gpu,
     renderer: &mut Renderer,
     key: BrickKey,
-    result: Result<BrickVoxels>,
+    result: Result<BrickVoxels, SourceError>,
     stats: &mut FrameStats,
-) -> Result<(Inserted, u64)> {
-    let inserted = result.and_then(|voxels| {
+) -> Result<(Inserted, u64), GpuError> {
+    let inserted = result.map_err(GpuError::from).and_then(|voxels| {
         let bytes = decoded_bytes(&voxels);
         renderer.insert(gpu, key, &voxels).map(|i| (i, bytes))
     });
@@ -371,7 +379,10 @@ pub fn insert_fetched(
             }
         }
         Err(e) => {
-            tracing::warn!("brick {key:?}: {e:#}; substituting other levels");
+            tracing::warn!(
+                "brick {key:?}: {}; substituting other levels",
+                crate::error_chain(e)
+            );
             stats.bricks_failed += 1;
         }
     }
@@ -443,13 +454,13 @@ impl StreamState {
         gpu: &Gpu,
         renderer: &mut Renderer,
         key: BrickKey,
-        result: Result<BrickVoxels>,
+        result: Result<BrickVoxels, SourceError>,
         stats: &mut FrameStats,
     ) -> Option<(Inserted, u64)> {
         match insert_fetched(gpu, renderer, key, result, stats) {
             Ok(done) => Some(done),
             Err(e) => {
-                self.failed.insert(key, format!("{e:#}"));
+                self.failed.insert(key, crate::error_chain(&e));
                 let info = renderer.info();
                 self.fallbacks.extend(coarser_brick(info, &key));
                 None
@@ -488,13 +499,16 @@ impl StreamState {
 /// (coarse before fine, near before far), upload, insert, repeat. A brick that fails to fetch
 /// or upload is never requested again; the next coarser brick over its region is fetched in
 /// its place so the shader can substitute it.
+///
+/// # Errors
+/// A frame's [`GpuError`]; failed bricks are not errors.
 #[cfg(not(target_arch = "wasm32"))]
 pub fn converge(
     gpu: &Gpu,
     renderer: &mut Renderer,
     fetcher: &Fetcher,
     budget: &Budget,
-) -> Result<Progressive> {
+) -> Result<Progressive, GpuError> {
     let start = Instant::now();
     let deadline = budget.time.map(|t| start + t);
     let mut state = StreamState::default();

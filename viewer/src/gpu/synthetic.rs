@@ -5,11 +5,9 @@
 use std::collections::HashSet;
 use std::sync::Mutex;
 
-use anyhow::{Result, bail};
-
 use crate::source::{
     BrickKey, BrickSource, BrickVoxels, ChannelDisplay, LevelInfo, MinMaxGrid, SampleType,
-    VolumeInfo,
+    SourceError, VolumeInfo,
 };
 
 /// A synthetic multi-channel volume held in memory.
@@ -179,10 +177,10 @@ impl SyntheticSource {
         self.data[channel][level][((xyz[2] * s[1] + xyz[1]) * s[2] + xyz[0]) as usize]
     }
 
-    fn brick(&self, key: &BrickKey) -> Result<BrickVoxels> {
+    fn brick(&self, key: &BrickKey) -> Result<BrickVoxels, SourceError> {
         self.info.check_key(key)?;
         if self.failing.contains(key) {
-            bail!("synthetic: brick {key:?}: injected failure (404)");
+            return Err(SourceError::InjectedFailure { key: *key });
         }
         let b = self.info.brick_shape;
         let s = self.info.levels[key.level as usize].shape;
@@ -268,7 +266,7 @@ impl BrickSource for SyntheticSource {
         &self.info
     }
 
-    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>> {
+    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>> {
         self.log.lock().expect("log lock").extend_from_slice(keys);
         keys.iter().map(|k| self.brick(k)).collect()
     }

@@ -10,8 +10,7 @@
 //!   opacity is non-zero somewhere in bin `i`, so "transparent over `[lo, hi]`" is one
 //!   subtraction (Octree Rasterization Sec. 4.1).
 
-use anyhow::{Result, ensure};
-
+use super::GpuError;
 use super::buffers::{check_binding, storage_buffer, uniform_buffer};
 pub use super::contract::TF_BINS;
 use super::contract::{ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms};
@@ -144,25 +143,30 @@ pub struct SceneTables {
 
 impl SceneTables {
     /// The tables of `styles` (one per channel of `residency`, in its order) under `options`'
-    /// level bounds. Errors where the volume has more than [`MAX_LEVELS`] levels, or the
-    /// buffer exceeds the device's limits.
+    /// level bounds.
+    ///
+    /// # Errors
+    /// [`GpuError::TooManyLevels`] where the volume has more than [`MAX_LEVELS`] levels,
+    /// [`GpuError::TooManyChannels`] past [`MAX_CHANNELS`], or
+    /// [`GpuError::BindingTooLarge`] where the buffer exceeds the device's limits.
     pub fn new(
         gpu: &Gpu,
         residency: &ResidencyState,
         options: &RenderOptions,
         styles: &[&ChannelStyle],
-    ) -> Result<Self> {
+    ) -> Result<Self, GpuError> {
         let levels = residency.info().levels.len();
-        ensure!(
-            levels <= MAX_LEVELS,
-            "{}: {levels} pyramid levels; the renderer draws volumes of at most {MAX_LEVELS}",
-            residency.info().name
-        );
-        ensure!(
-            styles.len() <= MAX_CHANNELS,
-            "{} channels drawn; at most {MAX_CHANNELS} render at once",
-            styles.len()
-        );
+        if levels > MAX_LEVELS {
+            return Err(GpuError::TooManyLevels {
+                volume: residency.info().name.clone(),
+                levels,
+            });
+        }
+        if styles.len() > MAX_CHANNELS {
+            return Err(GpuError::TooManyChannels {
+                channels: styles.len(),
+            });
+        }
         let t = residency_tables(residency, options, styles);
         let mut tables = Self::allocate(gpu, t.words.len() + styles.len() * 2 * HEADROOM_POINTS)?;
         tables.write(gpu, &t, residency_steps(residency, styles));
@@ -171,12 +175,20 @@ impl SceneTables {
 
     /// The fixed tables of `styles` drawn at level 0 only, with no page tables and no room
     /// to restyle: the limit probe's.
-    pub fn level0(gpu: &Gpu, info: &VolumeInfo, styles: &[&ChannelStyle]) -> Result<Self> {
-        ensure!(
-            styles.len() <= MAX_CHANNELS,
-            "{} channels drawn; at most {MAX_CHANNELS} render at once",
-            styles.len()
-        );
+    ///
+    /// # Errors
+    /// [`GpuError::TooManyChannels`] past [`MAX_CHANNELS`], the octree's refusal of the
+    /// volume, or [`GpuError::BindingTooLarge`].
+    pub fn level0(
+        gpu: &Gpu,
+        info: &VolumeInfo,
+        styles: &[&ChannelStyle],
+    ) -> Result<Self, GpuError> {
+        if styles.len() > MAX_CHANNELS {
+            return Err(GpuError::TooManyChannels {
+                channels: styles.len(),
+            });
+        }
         let geometry = OctreeGeometry::new(info, 0)?;
         let channels: Vec<ChannelTable<'_>> = styles
             .iter()
@@ -194,7 +206,7 @@ impl SceneTables {
     }
 
     /// Buffers for a table of up to `capacity` words and the scene uniforms.
-    fn allocate(gpu: &Gpu, capacity: usize) -> Result<Self> {
+    fn allocate(gpu: &Gpu, capacity: usize) -> Result<Self, GpuError> {
         check_binding(
             gpu,
             "the scene tables",

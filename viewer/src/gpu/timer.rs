@@ -1,8 +1,7 @@
 //! GPU time of compute passes, from timestamp queries where the device has them: the start
 //! is written by the first pass of a frame, the end by every pass, so the time spans them all.
 
-use anyhow::Result;
-
+use super::GpuError;
 use super::device::Gpu;
 
 /// Two timestamps, their resolve buffer and the staging buffer they are read back through.
@@ -65,7 +64,10 @@ impl PassTimer {
     }
 
     /// Milliseconds between the two timestamps, from the mapped staging buffer.
-    pub fn read_ms(&self, gpu: &Gpu) -> Result<f64> {
+    ///
+    /// # Errors
+    /// [`GpuError::MapRange`] when the staging buffer is not mapped.
+    pub fn read_ms(&self, gpu: &Gpu) -> Result<f64, GpuError> {
         let t: Vec<u64> = bytemuck::cast_slice(&self.staging.get_mapped_range(..)?).to_vec();
         let period = f64::from(gpu.queue.get_timestamp_period());
         Ok(t[1].saturating_sub(t[0]) as f64 * period / 1e6)

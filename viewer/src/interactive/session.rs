@@ -12,13 +12,12 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::Result;
-
+use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{Inserted, RenderOptions, Renderer};
 use crate::gpu::streaming::{Fetcher, FrameStats, StreamState};
 use crate::scene::{Camera, Scene};
-use crate::source::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
+use crate::source::{BrickKey, BrickSource, BrickVoxels, SourceError, VolumeInfo};
 
 /// What one [`Session::step`] did.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -186,7 +185,7 @@ impl Session {
         &self.status
     }
 
-    fn build(&mut self) -> Result<()> {
+    fn build(&mut self) -> Result<(), GpuError> {
         self.rebuild = false;
         self.render_needed = true;
         self.renderer = None;
@@ -223,7 +222,7 @@ impl Session {
     }
 
     /// Inserts finished fetches; returns whether anything changed what a frame would show.
-    fn insert(&mut self, done: Vec<(BrickKey, Result<BrickVoxels>)>) -> bool {
+    fn insert(&mut self, done: Vec<(BrickKey, Result<BrickVoxels, SourceError>)>) -> bool {
         let mut changed = false;
         for (key, result) in done {
             let Some(renderer) = self.renderer.as_mut() else {
@@ -249,7 +248,11 @@ impl Session {
 
     /// Advances the progressive render by one step. When there is nothing to render it
     /// waits for fetches up to `wait` (at least a millisecond).
-    pub fn step(&mut self, wait: Duration) -> Result<Step> {
+    ///
+    /// # Errors
+    /// The renderer's [`GpuError`] when it cannot be (re)built or a frame fails; bricks that
+    /// cannot be fetched are counted, not errors.
+    pub fn step(&mut self, wait: Duration) -> Result<Step, GpuError> {
         if self.rebuild {
             self.build()?;
         }

@@ -7,9 +7,9 @@ use std::num::NonZeroU32;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context as _, Result, anyhow};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
+use winit::error::{EventLoopError, OsError};
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
@@ -20,7 +20,48 @@ use super::controls::{self, End, KEY_STEP};
 use super::overlay::{Canvas, SrgbTable, text_colour};
 use super::session::{Session, Step};
 use crate::defaults::volume_extent;
+use crate::gpu::GpuError;
 use crate::scene::{Camera, Scene};
+
+/// Why the window stopped with an error: no X11 display, a window or frame buffer that cannot
+/// be made, or the renderer's error.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    /// No event loop (no display to open a window on).
+    #[error("cannot open a window (is DISPLAY set? `viewer view` needs an X11 server; Xvfb works)")]
+    NoDisplay(#[source] EventLoopError),
+    /// The event loop failed.
+    #[error("window event loop")]
+    EventLoop(#[source] EventLoopError),
+    /// The window cannot be created.
+    #[error("cannot create the window")]
+    CreateWindow(#[source] OsError),
+    /// `softbuffer` failed to set up, size, fill or present the window's frame buffer.
+    #[error("{what}: {reason}")]
+    Buffer {
+        /// What was being done, e.g. `presenting the frame`.
+        what: &'static str,
+        /// What softbuffer said.
+        reason: String,
+    },
+    /// The renderer failed.
+    #[error(transparent)]
+    Gpu(Box<GpuError>),
+}
+
+impl From<GpuError> for ViewError {
+    fn from(e: GpuError) -> Self {
+        Self::Gpu(Box::new(e))
+    }
+}
+
+/// A softbuffer error as [`ViewError::Buffer`].
+fn buffer_error(what: &'static str) -> impl FnOnce(softbuffer::SoftBufferError) -> ViewError {
+    move |e| ViewError::Buffer {
+        what,
+        reason: e.to_string(),
+    }
+}
 
 /// Window settings.
 #[derive(Clone, Debug)]
@@ -73,15 +114,17 @@ struct App {
     input: bool,
     idle: bool,
     message: Option<(String, Instant)>,
-    error: Option<anyhow::Error>,
+    error: Option<ViewError>,
 }
 
 /// Opens the window and runs until it is closed, or quit by `q`, or by the
 /// `exit_after_frames` rule.
-pub fn run(session: Session, config: ViewConfig) -> Result<()> {
-    let event_loop = EventLoop::new().context(
-        "cannot open a window (is DISPLAY set? `viewer view` needs an X11 server; Xvfb works)",
-    )?;
+///
+/// # Errors
+/// A [`ViewError`]: no display, a window or frame buffer that cannot be made, or the
+/// renderer's error that stopped the session.
+pub fn run(session: Session, config: ViewConfig) -> Result<(), ViewError> {
+    let event_loop = EventLoop::new().map_err(ViewError::NoDisplay)?;
     let home = session.scene().camera.clone();
     let selected = session
         .scene()
@@ -110,7 +153,7 @@ pub fn run(session: Session, config: ViewConfig) -> Result<()> {
         message: None,
         error: None,
     };
-    event_loop.run_app(&mut app).context("window event loop")?;
+    event_loop.run_app(&mut app).map_err(ViewError::EventLoop)?;
     match app.error {
         Some(e) => Err(e),
         None => Ok(()),
@@ -139,7 +182,7 @@ fn mib(bytes: u64) -> f64 {
 }
 
 impl App {
-    fn fail(&mut self, event_loop: &ActiveEventLoop, e: anyhow::Error) {
+    fn fail(&mut self, event_loop: &ActiveEventLoop, e: ViewError) {
         if self.error.is_none() {
             self.error = Some(e);
         }
@@ -280,7 +323,7 @@ impl App {
         }
     }
 
-    fn present(&mut self) -> Result<()> {
+    fn present(&mut self) -> Result<(), ViewError> {
         let lines = self.overlay.then(|| self.stats_lines());
         let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else {
             return Ok(());
@@ -291,10 +334,10 @@ impl App {
         };
         surface
             .resize(w, h)
-            .map_err(|e| anyhow!("resizing the window buffer: {e}"))?;
+            .map_err(buffer_error("resizing the window buffer"))?;
         let mut buffer = surface
             .buffer_mut()
-            .map_err(|e| anyhow!("window buffer: {e}"))?;
+            .map_err(buffer_error("window buffer"))?;
         let mut canvas = Canvas {
             pixels: &mut buffer,
             width: size.width as usize,
@@ -312,7 +355,7 @@ impl App {
         }
         buffer
             .present()
-            .map_err(|e| anyhow!("presenting the frame: {e}"))?;
+            .map_err(buffer_error("presenting the frame"))?;
         let frame = self.session.totals().frames;
         if frame != self.last_shown {
             self.last_shown = frame;
@@ -435,16 +478,16 @@ impl ApplicationHandler for App {
         let attributes = Window::default_attributes()
             .with_title(format!("viewer: {}", self.session.info().name))
             .with_inner_size(PhysicalSize::new(w.max(1), h.max(1)));
-        let result = (|| -> Result<()> {
+        let result = (|| -> Result<(), ViewError> {
             let window = Arc::new(
                 event_loop
                     .create_window(attributes)
-                    .context("cannot create the window")?,
+                    .map_err(ViewError::CreateWindow)?,
             );
             let context = softbuffer::Context::new(Arc::clone(&window))
-                .map_err(|e| anyhow!("softbuffer context: {e}"))?;
+                .map_err(buffer_error("softbuffer context"))?;
             let surface = softbuffer::Surface::new(&context, Arc::clone(&window))
-                .map_err(|e| anyhow!("softbuffer surface: {e}"))?;
+                .map_err(buffer_error("softbuffer surface"))?;
             let size = self.render_size(window.inner_size());
             self.session.set_size(size.0, size.1);
             self.window = Some(window);
@@ -551,7 +594,7 @@ impl ApplicationHandler for App {
             }
             Ok(Step::Waiting) => self.idle = false,
             Ok(Step::Idle) => self.idle = true,
-            Err(e) => return self.fail(event_loop, e),
+            Err(e) => return self.fail(event_loop, e.into()),
         }
         let mut wake = self.message.as_ref().map(|(_, until)| *until);
         if let Some(n) = self.config.exit_after_frames {

@@ -4,11 +4,10 @@
 use std::path::Path;
 use std::time::Duration;
 
-use anyhow::{Context, Result, anyhow};
 use rayon::prelude::*;
 
 use super::server::{self, Get, Reply};
-use super::{BrickKey, BrickSource, BrickVoxels, VolumeInfo};
+use super::{BrickKey, BrickSource, BrickVoxels, SourceError, VolumeInfo};
 
 pub use super::server::{MAX_BATCH, MAX_BATCH_BYTES};
 
@@ -22,21 +21,25 @@ struct Client {
 }
 
 impl Get for Client {
-    async fn get(&self, url: &str) -> Result<Reply> {
+    async fn get(&self, url: &str) -> Result<Reply, SourceError> {
         let mut request = self.agent.get(url);
         if let Some(token) = &self.token {
             request = request.header("Authorization", &format!("Bearer {token}"));
         }
-        let mut response = request
-            .call()
-            .map_err(|e| anyhow!("{url}: cannot reach the brick server: {e}"))?;
+        let mut response = request.call().map_err(|e| SourceError::Unreachable {
+            url: url.to_string(),
+            reason: e.to_string(),
+        })?;
         let status = response.status().as_u16();
         let body = response
             .body_mut()
             .with_config()
             .limit(u64::MAX)
             .read_to_vec()
-            .map_err(|e| anyhow!("{url}: cannot read the response: {e}"))?;
+            .map_err(|e| SourceError::ReadResponse {
+                url: url.to_string(),
+                reason: e.to_string(),
+            })?;
         Ok(Reply::new(status, body, self.token.is_some()))
     }
 }
@@ -58,9 +61,14 @@ impl std::fmt::Debug for HttpSource {
 }
 
 /// Reads a bearer-token file (as `brickserver serve --token-file` does): its text, trimmed.
-pub fn read_token_file(path: &Path) -> Result<String> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read the token", path.display()))?;
+///
+/// # Errors
+/// [`SourceError::TokenFile`], naming the file, when it cannot be read as text.
+pub fn read_token_file(path: &Path) -> Result<String, SourceError> {
+    let text = std::fs::read_to_string(path).map_err(|source| SourceError::TokenFile {
+        path: path.to_path_buf(),
+        source,
+    })?;
     Ok(text.trim().to_string())
 }
 
@@ -68,13 +76,24 @@ impl HttpSource {
     /// Opens dataset `dataset` on the server at `server_url` (e.g. `http://127.0.0.1:8000`):
     /// loads its metadata and, when the server has region metadata, every channel's min/max
     /// hierarchy. Without region metadata, `minmax` is `None` and a warning says so.
-    pub fn open(server_url: &str, dataset: &str) -> Result<Self> {
+    ///
+    /// # Errors
+    /// As [`server::open`]: a server that cannot be reached, a dataset it does not have, or
+    /// metadata that cannot be read, each naming the URL.
+    pub fn open(server_url: &str, dataset: &str) -> Result<Self, SourceError> {
         Self::open_with_token(server_url, dataset, None)
     }
 
     /// [`HttpSource::open`] for a server started with `--token-file`: every request carries
     /// `Authorization: Bearer TOKEN`.
-    pub fn open_with_token(server_url: &str, dataset: &str, token: Option<&str>) -> Result<Self> {
+    ///
+    /// # Errors
+    /// As [`HttpSource::open`]; a refused token is an HTTP 401 naming the URL.
+    pub fn open_with_token(
+        server_url: &str,
+        dataset: &str,
+        token: Option<&str>,
+    ) -> Result<Self, SourceError> {
         let agent: ureq::Agent = ureq::Agent::config_builder()
             .http_status_as_error(false)
             .timeout_global(Some(REQUEST_TIMEOUT))
@@ -101,9 +120,9 @@ impl BrickSource for HttpSource {
         &self.info
     }
 
-    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>> {
+    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>> {
         // Invalid keys are answered here; the rest go to the server in batches.
-        let mut results: Vec<Option<Result<BrickVoxels>>> = keys
+        let mut results: Vec<Option<Result<BrickVoxels, SourceError>>> = keys
             .iter()
             .map(|k| self.info.check_key(k).err().map(Err))
             .collect();
@@ -113,7 +132,7 @@ impl BrickSource for HttpSource {
             .filter(|(i, _)| results[*i].is_none())
             .map(|(i, k)| (i, *k))
             .collect();
-        let answered: Vec<Vec<Result<BrickVoxels>>> = valid
+        let answered: Vec<Vec<Result<BrickVoxels, SourceError>>> = valid
             .par_chunks(self.batch_size())
             .map(|batch| {
                 let keys: Vec<BrickKey> = batch.iter().map(|(_, k)| *k).collect();

@@ -4,14 +4,13 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use anyhow::{Context, Result, bail};
 use rayon::prelude::*;
-use residency_schemas::pyramid::{BrickIndex, Pyramid};
-use zarrs::array::{Array, CodecOptions, ElementOwned};
+use residency_schemas::pyramid::{BrickIndex, Pyramid, PyramidError};
+use zarrs::array::{Array, ArrayError, CodecOptions, ElementOwned};
 use zarrs::filesystem::FilesystemStore;
 
 use super::ome;
-use super::{BrickKey, BrickSource, BrickVoxels, MinMaxGrid, SampleType, VolumeInfo};
+use super::{BrickKey, BrickSource, BrickVoxels, MinMaxGrid, SampleType, SourceError, VolumeInfo};
 
 pub use residency_schemas::dataset::dataset_name;
 
@@ -38,15 +37,20 @@ impl LocalSource {
     ///
     /// # Errors
     /// When the path is missing, is not an OME-Zarr image, or its levels or region metadata
-    /// are unusable; the message names the store.
-    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+    /// are unusable; the [`SourceError`] names the store.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, SourceError> {
         let path = path.as_ref();
         let shown = path.display().to_string();
         if !path.exists() {
-            bail!("{shown}: no such store");
+            return Err(SourceError::NoSuchStore { store: shown });
         }
         let store =
-            Arc::new(FilesystemStore::new(path).with_context(|| format!("{shown}: cannot open"))?);
+            Arc::new(
+                FilesystemStore::new(path).map_err(|source| SourceError::CannotOpen {
+                    store: shown.clone(),
+                    source,
+                })?,
+            );
         let pyramid = Pyramid::open(store, &shown)?;
         let descriptions: Vec<_> = pyramid
             .levels
@@ -77,7 +81,7 @@ impl LocalSource {
         &self.path
     }
 
-    fn fetch_one(&self, key: &BrickKey) -> Result<BrickVoxels> {
+    fn fetch_one(&self, key: &BrickKey) -> Result<BrickVoxels, SourceError> {
         self.info.check_key(key)?;
         let at = BrickIndex {
             level: key.level,
@@ -87,21 +91,12 @@ impl LocalSource {
         let fill = self.pyramid.levels[key.level as usize]
             .description
             .fill_value;
-        let context = || {
-            format!(
-                "{}: cannot read brick {:?} of channel {} at level {}",
-                self.path.display(),
-                key.brick,
-                key.channel,
-                key.level
-            )
-        };
         fn decode<T: ElementOwned + Copy + Into<f64>>(
             pyramid: &Pyramid<FilesystemStore>,
             at: &BrickIndex,
             fill: f64,
             wrap: fn(Vec<T>) -> BrickVoxels,
-        ) -> Result<BrickVoxels> {
+        ) -> Result<BrickVoxels, PyramidError> {
             let v: Vec<T> = pyramid.read_brick(at)?;
             let is_fill = |x: &T| {
                 let x: f64 = (*x).into();
@@ -122,7 +117,11 @@ impl LocalSource {
             SampleType::I32 => decode::<i32>(p, &at, fill, BrickVoxels::I32),
             SampleType::F32 => decode::<f32>(p, &at, fill, BrickVoxels::F32),
         }
-        .with_context(context)
+        .map_err(|source| SourceError::ReadBrick {
+            store: self.path.clone(),
+            key: *key,
+            source: Box::new(source),
+        })
     }
 }
 
@@ -131,7 +130,7 @@ fn read_minmax(
     pyramid: &Pyramid<FilesystemStore>,
     info: &VolumeInfo,
     shown: &str,
-) -> Result<Vec<Vec<Vec<MinMaxGrid>>>> {
+) -> Result<Vec<Vec<Vec<MinMaxGrid>>>, SourceError> {
     let store = &pyramid.store;
     let regions = pyramid
         .attributes
@@ -144,18 +143,33 @@ fn read_minmax(
         let mut per_channel = vec![Vec::with_capacity(level.minmax.len()); channels];
         for grid in &level.minmax {
             let source = format!("{shown}/{}", grid.path);
-            let array = Array::open(store.clone(), &format!("/{}", grid.path))
-                .with_context(|| format!("{source}: cannot open the min/max array"))?;
+            let array = match Array::open(store.clone(), &format!("/{}", grid.path)) {
+                Ok(array) => array,
+                Err(e) => {
+                    return Err(SourceError::OpenMinMax {
+                        array: source,
+                        source: Box::new(e),
+                    });
+                }
+            };
             let [gz, gy, gx] = grid.grid_shape;
             let expected = [channels as u64, 2, gz, gy, gx];
             if array.shape() != expected {
-                bail!(
-                    "{source}: min/max array has shape {:?}, expected {expected:?}",
-                    array.shape()
-                );
+                return Err(SourceError::MinMaxShape {
+                    array: source,
+                    shape: array.shape().to_vec(),
+                    expected,
+                });
             }
-            let values = read_all_f64(&array, info.sample_type)
-                .with_context(|| format!("{source}: cannot read the min/max array"))?;
+            let values = match read_all_f64(&array, info.sample_type) {
+                Ok(values) => values,
+                Err(e) => {
+                    return Err(SourceError::ReadMinMax {
+                        array: source,
+                        source: Box::new(e),
+                    });
+                }
+            };
             let per = 2 * (gz * gy * gx) as usize;
             for (c, chunk) in values.chunks_exact(per).enumerate() {
                 per_channel[c].push(ome::minmax_grid(
@@ -174,8 +188,13 @@ fn read_minmax(
 }
 
 /// The whole array as `f64`.
-fn read_all_f64(array: &Array<FilesystemStore>, sample_type: SampleType) -> Result<Vec<f64>> {
-    fn all<T: ElementOwned + Copy + Into<f64>>(array: &Array<FilesystemStore>) -> Result<Vec<f64>> {
+fn read_all_f64(
+    array: &Array<FilesystemStore>,
+    sample_type: SampleType,
+) -> Result<Vec<f64>, ArrayError> {
+    fn all<T: ElementOwned + Copy + Into<f64>>(
+        array: &Array<FilesystemStore>,
+    ) -> Result<Vec<f64>, ArrayError> {
         let v: Vec<T> =
             array.retrieve_array_subset_opt(&array.subset_all(), &CodecOptions::default())?;
         Ok(v.into_iter().map(Into::into).collect())
@@ -195,7 +214,7 @@ impl BrickSource for LocalSource {
         &self.info
     }
 
-    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>> {
+    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>> {
         keys.par_iter().map(|k| self.fetch_one(k)).collect()
     }
 }

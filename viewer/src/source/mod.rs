@@ -8,7 +8,15 @@
 //!   speaks it through the browser's `fetch`);
 //! - [`ome`]: the volume description both build from `residency_schemas`' format model.
 
-use anyhow::Result;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use residency_schemas::ome::OmeError;
+#[cfg(not(target_arch = "wasm32"))]
+use residency_schemas::pyramid::PyramidError;
+use residency_schemas::sample_type::PartialSample;
+use residency_schemas::wire::{BrickEncoding, WireError};
+use residency_schemas::zarr::ArrayMetadataError;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod http;
@@ -23,6 +31,481 @@ pub use http::{HttpSource, read_token_file};
 pub use local::LocalSource;
 
 pub use residency_schemas::SampleType;
+
+/// Why a volume's description or one of its bricks cannot be had: a store or server that
+/// cannot be reached or read, documents that do not agree, or a brick that does not exist or
+/// cannot be read. Every message names the store, URL or brick at fault; errors of the format
+/// model are theirs, unchanged.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    /// A brick key past the volume's levels.
+    #[error("{volume}: brick {key:?}: no level {} ({levels} levels)", key.level)]
+    NoLevel {
+        /// The volume.
+        volume: String,
+        /// The brick asked for.
+        key: BrickKey,
+        /// Levels of the volume.
+        levels: usize,
+    },
+    /// A brick key past the volume's channels.
+    #[error("{volume}: brick {key:?}: no channel {} ({channels} channels)", key.channel)]
+    NoChannel {
+        /// The volume.
+        volume: String,
+        /// The brick asked for.
+        key: BrickKey,
+        /// Channels of the volume.
+        channels: usize,
+    },
+    /// A brick key outside its level's brick grid.
+    #[error("{volume}: brick {key:?}: outside the level's brick grid {grid:?}")]
+    OutsideGrid {
+        /// The volume.
+        volume: String,
+        /// The brick asked for.
+        key: BrickKey,
+        /// Bricks of the level, `z, y, x`.
+        grid: [u64; 3],
+    },
+    /// A local store path that does not exist.
+    #[error("{store}: no such store")]
+    NoSuchStore {
+        /// The store, as given.
+        store: String,
+    },
+    /// A local store that zarrs cannot open.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[error("{store}: cannot open")]
+    CannotOpen {
+        /// The store, as given.
+        store: String,
+        /// What zarrs said.
+        #[source]
+        source: zarrs::filesystem::FilesystemStoreCreateError,
+    },
+    /// A local pyramid that cannot be opened.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[error(transparent)]
+    Pyramid(Box<PyramidError>),
+    /// A brick of a local store that cannot be read or decoded.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[error(
+        "{store}: cannot read brick {:?} of channel {} at level {}",
+        key.brick, key.channel, key.level
+    )]
+    ReadBrick {
+        /// The store.
+        store: PathBuf,
+        /// The brick.
+        key: BrickKey,
+        /// What the pyramid reader said.
+        #[source]
+        source: Box<PyramidError>,
+    },
+    /// A min/max array of a local store's region metadata that cannot be opened.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[error("{array}: cannot open the min/max array")]
+    OpenMinMax {
+        /// The array, `store/path`.
+        array: String,
+        /// What zarrs said.
+        #[source]
+        source: Box<zarrs::array::ArrayCreateError>,
+    },
+    /// A min/max array of the wrong shape.
+    #[error("{array}: min/max array has shape {shape:?}, expected {expected:?}")]
+    MinMaxShape {
+        /// The array, `store/path`.
+        array: String,
+        /// Its shape.
+        shape: Vec<u64>,
+        /// The shape the region metadata implies, `c, 2, z, y, x`.
+        expected: [u64; 5],
+    },
+    /// A min/max array whose values cannot be read.
+    #[cfg(not(target_arch = "wasm32"))]
+    #[error("{array}: cannot read the min/max array")]
+    ReadMinMax {
+        /// The array, `store/path`.
+        array: String,
+        /// What zarrs said.
+        #[source]
+        source: Box<zarrs::array::ArrayError>,
+    },
+    /// A min/max grid with the wrong number of values for its shape.
+    #[error("{store}: min/max grid {grid_shape:?} needs {needed} values, got {got}")]
+    MinMaxValues {
+        /// The store or document.
+        store: String,
+        /// Cells `z, y, x`.
+        grid_shape: [u64; 3],
+        /// Values needed (minima then maxima).
+        needed: usize,
+        /// Values given.
+        got: usize,
+    },
+    /// Fewer or more level arrays than the multiscales' datasets.
+    #[error("{store}: {arrays} level arrays for {datasets} datasets")]
+    LevelCount {
+        /// The store or server URL.
+        store: String,
+        /// Level arrays read.
+        arrays: usize,
+        /// Datasets of the multiscales.
+        datasets: usize,
+    },
+    /// A level array whose rank is not the number of axes.
+    #[error("{store}: level '{level}' has {dimensions} dimensions for {axes} axes")]
+    LevelRank {
+        /// The store or server URL.
+        store: String,
+        /// The level's path.
+        level: String,
+        /// Its dimensions.
+        dimensions: usize,
+        /// Axes of the multiscales.
+        axes: usize,
+    },
+    /// Levels of different sample types.
+    #[error("{store}: level '{level}' is {sample_type} but level '{first}' is {first_type}")]
+    LevelType {
+        /// The store or server URL.
+        store: String,
+        /// The level's path.
+        level: String,
+        /// Its sample type.
+        sample_type: SampleType,
+        /// The first level's path.
+        first: String,
+        /// The first level's sample type.
+        first_type: SampleType,
+    },
+    /// Levels of different brick shapes.
+    #[error(
+        "{store}: level '{level}' has bricks {brick:?} but level '{first}' has {first_brick:?}"
+    )]
+    LevelBricks {
+        /// The store or server URL.
+        store: String,
+        /// The level's path.
+        level: Box<str>,
+        /// Its brick shape, `z, y, x`.
+        brick: [u64; 3],
+        /// The first level's path.
+        first: Box<str>,
+        /// The first level's brick shape.
+        first_brick: [u64; 3],
+    },
+    /// A level chunked across channels (or another leading axis).
+    #[error(
+        "{store}: level '{level}' has chunks of {chunk} along axis '{axis}'; one brick must \
+         hold one channel"
+    )]
+    LeadingChunk {
+        /// The store or server URL.
+        store: String,
+        /// The level's path.
+        level: String,
+        /// Its chunk edge along the axis.
+        chunk: u64,
+        /// The axis.
+        axis: String,
+    },
+    /// A leading axis other than `c` with several entries.
+    #[error("{store}: axis '{axis}' has {entries} entries; only one is supported")]
+    LeadingAxis {
+        /// The store or server URL.
+        store: String,
+        /// The axis.
+        axis: String,
+        /// Its entries.
+        entries: u64,
+    },
+    /// Region metadata describing other bricks than the arrays have.
+    #[error("{store}: region metadata bricks {regions:?} differ from the arrays' {arrays:?}")]
+    RegionBricks {
+        /// The store or server URL.
+        store: String,
+        /// The region metadata's brick shape.
+        regions: [u64; 3],
+        /// The arrays' brick shape.
+        arrays: [u64; 3],
+    },
+    /// Region metadata of another number of levels than the image.
+    #[error("{store}: region metadata has {regions} levels, the image {levels}")]
+    RegionLevelCount {
+        /// The store or server URL.
+        store: String,
+        /// Levels of the region metadata.
+        regions: usize,
+        /// Levels of the image.
+        levels: usize,
+    },
+    /// A region-metadata level that is not the image's level.
+    #[error(
+        "{store}: region metadata level '{region_level}' {region_shape:?} does not match image \
+         level '{level}' {shape:?}"
+    )]
+    RegionLevel {
+        /// The store or server URL.
+        store: String,
+        /// The region metadata's level path.
+        region_level: Box<str>,
+        /// Its shape.
+        region_shape: [u64; 3],
+        /// The image's level path.
+        level: Box<str>,
+        /// Its shape.
+        shape: [u64; 3],
+    },
+    /// A bearer-token file that cannot be read.
+    #[error("{}: cannot read the token", path.display())]
+    TokenFile {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A brick server that cannot be reached (the transport's message follows).
+    #[error("{url}: cannot reach the brick server: {reason}")]
+    Unreachable {
+        /// The URL asked for.
+        url: String,
+        /// What the HTTP client (or the browser) said.
+        reason: String,
+    },
+    /// A response whose body cannot be read.
+    #[error("{url}: cannot read the response: {reason}")]
+    ReadResponse {
+        /// The URL asked for.
+        url: String,
+        /// What the HTTP client said.
+        reason: String,
+    },
+    /// No browser window to fetch from (web viewer).
+    #[error("{url}: no browser window")]
+    NoWindow {
+        /// The URL asked for.
+        url: String,
+    },
+    /// `fetch` answered with something other than a `Response` (web viewer).
+    #[error("{url}: fetch did not answer with a response")]
+    NotAResponse {
+        /// The URL asked for.
+        url: String,
+    },
+    /// A status other than 200 (or an expected 404).
+    #[error("{url}: HTTP {status}: {message}")]
+    Http {
+        /// The URL asked for.
+        url: String,
+        /// The HTTP status.
+        status: u16,
+        /// The server's message.
+        message: String,
+    },
+    /// A dataset the server does not have.
+    #[error("{base}: no such dataset on the server (neither zarr.json nor .zattrs found)")]
+    NoSuchDataset {
+        /// The dataset's URL.
+        base: String,
+    },
+    /// The image group's OME metadata is unusable.
+    #[error(transparent)]
+    Ome(#[from] OmeError),
+    /// A level's array metadata is unusable.
+    #[error(transparent)]
+    ArrayMetadata(#[from] ArrayMetadataError),
+    /// A min/max document that cannot be decoded.
+    #[error("{url}: corrupt min/max document")]
+    CorruptMinMax {
+        /// The document's URL.
+        url: String,
+        /// Why.
+        #[source]
+        source: WireError,
+    },
+    /// A min/max document for another channel.
+    #[error("{url}: min/max document is for channel {channel}")]
+    MinMaxChannel {
+        /// The document's URL.
+        url: String,
+        /// The channel it is for.
+        channel: usize,
+    },
+    /// A min/max document of another sample type than the image.
+    #[error("{url}: min/max values are {found} but the image is {}", image.zarr_name())]
+    MinMaxType {
+        /// The document's URL.
+        url: String,
+        /// Its sample type.
+        found: SampleType,
+        /// The image's.
+        image: SampleType,
+    },
+    /// A min/max document of another number of levels than the image.
+    #[error("{url}: min/max document has {levels} levels, the image {image_levels}")]
+    MinMaxLevelCount {
+        /// The document's URL.
+        url: String,
+        /// Its levels.
+        levels: usize,
+        /// The image's.
+        image_levels: usize,
+    },
+    /// A min/max level that is not the image's level.
+    #[error(
+        "{url}: min/max level {level} {shape:?} does not match image level {index} {image_shape:?}"
+    )]
+    MinMaxLevel {
+        /// The document's URL.
+        url: String,
+        /// The level the block says it is.
+        level: usize,
+        /// Its shape.
+        shape: [u64; 3],
+        /// The image level at its position.
+        index: usize,
+        /// That level's shape.
+        image_shape: [u64; 3],
+    },
+    /// A min/max grid outside the document's payload.
+    #[error(
+        "{url}: min/max grid of level {level} at bytes {offset}+{length} runs past the \
+         {payload}-byte payload"
+    )]
+    MinMaxGridRange {
+        /// The document's URL.
+        url: String,
+        /// The level.
+        level: usize,
+        /// The grid's offset.
+        offset: u64,
+        /// Its length.
+        length: u64,
+        /// Bytes of the payload.
+        payload: usize,
+    },
+    /// A min/max grid that is not a whole number of samples.
+    #[error("{url}: corrupt min/max grid")]
+    CorruptMinMaxGrid {
+        /// The document's URL.
+        url: String,
+        /// Why.
+        #[source]
+        source: PartialSample,
+    },
+    /// A brick batch that cannot be decoded.
+    #[error("{url}: corrupt brick batch")]
+    CorruptBatch {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// Why.
+        #[source]
+        source: WireError,
+    },
+    /// A brick batch of another encoding than asked for.
+    #[error("{url}: asked for raw bricks, got {encoding:?}")]
+    BatchEncoding {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// The encoding answered.
+        encoding: BrickEncoding,
+    },
+    /// A brick batch of another sample type than the image.
+    #[error("{url}: bricks are {found} but the image is {}", image.zarr_name())]
+    BatchType {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// The bricks' sample type.
+        found: SampleType,
+        /// The image's.
+        image: SampleType,
+    },
+    /// A brick batch of another brick shape than the image.
+    #[error("{url}: bricks of {found:?}, expected {expected:?}")]
+    BatchBrickShape {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// The bricks' shape.
+        found: [u64; 3],
+        /// The image's.
+        expected: [u64; 3],
+    },
+    /// A brick batch answering another number of bricks than asked for.
+    #[error("{url}: {answered} bricks answered for {asked} asked")]
+    BatchCount {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// Bricks answered.
+        answered: usize,
+        /// Bricks asked for.
+        asked: usize,
+    },
+    /// A brick batch answering another brick than asked for at a position.
+    #[error("{url}: answered brick {level},{channel},{brick:?} where {key:?} was asked")]
+    BatchOrder {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// Level answered.
+        level: u32,
+        /// Channel answered.
+        channel: u32,
+        /// Brick answered, `z, y, x`.
+        brick: [u64; 3],
+        /// The brick asked for.
+        key: BrickKey,
+    },
+    /// A brick the server could not read.
+    #[error("{url}: brick {key:?}: the server could not read it: {reason}")]
+    ServerBrick {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// The brick.
+        key: BrickKey,
+        /// The server's reason.
+        reason: String,
+    },
+    /// A brick whose bytes are not a whole brick inside the batch's payload.
+    #[error(
+        "{url}: brick {key:?} at bytes {offset}+{length} is not {expected} bytes inside the \
+         {payload}-byte payload"
+    )]
+    BatchRange {
+        /// The batch's URL, without its brick list.
+        url: String,
+        /// The brick.
+        key: BrickKey,
+        /// Its offset.
+        offset: u64,
+        /// Its length.
+        length: u64,
+        /// Bytes of one brick.
+        expected: usize,
+        /// Bytes of the payload.
+        payload: usize,
+    },
+    /// A brick of a batch whose request or document failed as a whole; the message is that
+    /// failure's, whole chain included.
+    #[error("brick {key:?}: {}", crate::error_chain(&**batch))]
+    Batch {
+        /// The brick.
+        key: BrickKey,
+        /// Why the batch failed (shared by its bricks).
+        batch: Arc<SourceError>,
+    },
+    /// A brick a source answered no result for.
+    #[error("brick source returned too few results")]
+    NoResult,
+    /// A brick the synthetic source was told to fail (tests).
+    #[error("synthetic: brick {key:?}: injected failure (404)")]
+    InjectedFailure {
+        /// The brick.
+        key: BrickKey,
+    },
+}
 
 /// One pyramid level.
 #[derive(Clone, Debug, PartialEq)]
@@ -243,28 +726,42 @@ impl VolumeInfo {
     }
 
     /// Checks that `key` names an existing brick, with an error naming it otherwise.
-    pub fn check_key(&self, key: &BrickKey) -> Result<()> {
+    ///
+    /// # Errors
+    /// [`SourceError::NoLevel`], [`SourceError::NoChannel`] or [`SourceError::OutsideGrid`],
+    /// naming the volume and the key.
+    pub fn check_key(&self, key: &BrickKey) -> Result<(), SourceError> {
         let level = key.level as usize;
-        anyhow::ensure!(
-            level < self.levels.len(),
-            "{}: brick {key:?}: no level {level} ({} levels)",
-            self.name,
-            self.levels.len()
-        );
-        anyhow::ensure!(
-            (key.channel as usize) < self.channels.len(),
-            "{}: brick {key:?}: no channel {} ({} channels)",
-            self.name,
-            key.channel,
-            self.channels.len()
-        );
+        if level >= self.levels.len() {
+            return Err(SourceError::NoLevel {
+                volume: self.name.clone(),
+                key: *key,
+                levels: self.levels.len(),
+            });
+        }
+        if key.channel as usize >= self.channels.len() {
+            return Err(SourceError::NoChannel {
+                volume: self.name.clone(),
+                key: *key,
+                channels: self.channels.len(),
+            });
+        }
         let grid = self.brick_grid(level);
-        anyhow::ensure!(
-            key.brick.iter().zip(&grid).all(|(b, g)| b < g),
-            "{}: brick {key:?}: outside the level's brick grid {grid:?}",
-            self.name
-        );
+        if !key.brick.iter().zip(&grid).all(|(b, g)| b < g) {
+            return Err(SourceError::OutsideGrid {
+                volume: self.name.clone(),
+                key: *key,
+                grid,
+            });
+        }
         Ok(())
+    }
+}
+
+#[cfg(not(target_arch = "wasm32"))]
+impl From<PyramidError> for SourceError {
+    fn from(e: PyramidError) -> Self {
+        Self::Pyramid(Box::new(e))
     }
 }
 
@@ -275,5 +772,5 @@ pub trait BrickSource: Send + Sync {
     fn info(&self) -> &VolumeInfo;
     /// Fetches the given bricks, one result per key, in order. A brick that cannot be read
     /// gives an error naming it; the others are still returned.
-    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>>;
+    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>>;
 }

@@ -3,12 +3,11 @@
 //! `omero`, region metadata) and each level's array metadata ([`ArrayDescription`]), whatever
 //! the transport.
 
-use anyhow::{Result, ensure};
 use residency_schemas::RegionMetadata;
 use residency_schemas::ome::{ImageAttributes, PyramidLayout};
 use residency_schemas::zarr::ArrayDescription;
 
-use super::{ChannelDisplay, LevelInfo, MinMaxGrid, VolumeInfo};
+use super::{ChannelDisplay, LevelInfo, MinMaxGrid, SourceError, VolumeInfo};
 
 /// A `RRGGBB` hex colour (sRGB, as in `omero`) as linear RGB.
 fn hex_colour(hex: &str) -> Option<[f64; 3]> {
@@ -39,20 +38,21 @@ pub fn srgb_to_linear(v: f64) -> f64 {
 /// metadata, and that every leading axis but `c` has one entry.
 ///
 /// # Errors
-/// A message starting with `source` that names the first disagreement.
+/// A [`SourceError`] whose message starts with `source` and names the first disagreement.
 pub fn volume_info(
     name: &str,
     attributes: &ImageAttributes,
     layout: &PyramidLayout,
     arrays: &[ArrayDescription],
     source: &str,
-) -> Result<VolumeInfo> {
-    ensure!(
-        arrays.len() == layout.level_paths.len(),
-        "{source}: {} level arrays for {} datasets",
-        arrays.len(),
-        layout.level_paths.len()
-    );
+) -> Result<VolumeInfo, SourceError> {
+    if arrays.len() != layout.level_paths.len() {
+        return Err(SourceError::LevelCount {
+            store: source.to_string(),
+            arrays: arrays.len(),
+            datasets: layout.level_paths.len(),
+        });
+    }
     let n = layout.axis_names.len();
     let first = &arrays[0];
     let mut channels = 1;
@@ -62,40 +62,49 @@ pub fn volume_info(
         .zip(&layout.level_paths)
         .zip(&layout.level_scales)
     {
-        ensure!(
-            a.shape.len() == n,
-            "{source}: level '{path}' has {} dimensions for {n} axes",
-            a.shape.len()
-        );
-        ensure!(
-            a.sample_type == first.sample_type,
-            "{source}: level '{path}' is {} but level '{}' is {}",
-            a.sample_type,
-            layout.level_paths[0],
-            first.sample_type
-        );
-        ensure!(
-            a.brick_shape() == first.brick_shape(),
-            "{source}: level '{path}' has bricks {:?} but level '{}' has {:?}",
-            a.brick_shape(),
-            layout.level_paths[0],
-            first.brick_shape()
-        );
+        if a.shape.len() != n {
+            return Err(SourceError::LevelRank {
+                store: source.to_string(),
+                level: path.clone(),
+                dimensions: a.shape.len(),
+                axes: n,
+            });
+        }
+        if a.sample_type != first.sample_type {
+            return Err(SourceError::LevelType {
+                store: source.to_string(),
+                level: path.clone(),
+                sample_type: a.sample_type,
+                first: layout.level_paths[0].clone(),
+                first_type: first.sample_type,
+            });
+        }
+        if a.brick_shape() != first.brick_shape() {
+            return Err(SourceError::LevelBricks {
+                store: source.to_string(),
+                level: path.as_str().into(),
+                brick: a.brick_shape(),
+                first: layout.level_paths[0].as_str().into(),
+                first_brick: first.brick_shape(),
+            });
+        }
         for (i, axis) in layout.axis_names[..n - 3].iter().enumerate() {
-            ensure!(
-                a.leading_chunk()[i] == 1,
-                "{source}: level '{path}' has chunks of {} along axis '{axis}'; one brick must \
-                 hold one channel",
-                a.leading_chunk()[i]
-            );
+            if a.leading_chunk()[i] != 1 {
+                return Err(SourceError::LeadingChunk {
+                    store: source.to_string(),
+                    level: path.clone(),
+                    chunk: a.leading_chunk()[i],
+                    axis: axis.clone(),
+                });
+            }
             if Some(i) == layout.channel_axis {
                 channels = a.shape[i];
-            } else {
-                ensure!(
-                    a.shape[i] == 1,
-                    "{source}: axis '{axis}' has {} entries; only one is supported",
-                    a.shape[i]
-                );
+            } else if a.shape[i] != 1 {
+                return Err(SourceError::LeadingAxis {
+                    store: source.to_string(),
+                    axis: axis.clone(),
+                    entries: a.shape[i],
+                });
             }
         }
         let base = layout.level_scales[0];
@@ -106,26 +115,30 @@ pub fn volume_info(
     }
     let regions = attributes.regions.as_ref();
     if let Some(r) = regions {
-        ensure!(
-            r.brick_shape == first.brick_shape(),
-            "{source}: region metadata bricks {:?} differ from the arrays' {:?}",
-            r.brick_shape,
-            first.brick_shape()
-        );
-        ensure!(
-            r.levels.len() == levels.len(),
-            "{source}: region metadata has {} levels, the image {}",
-            r.levels.len(),
-            levels.len()
-        );
+        if r.brick_shape != first.brick_shape() {
+            return Err(SourceError::RegionBricks {
+                store: source.to_string(),
+                regions: r.brick_shape,
+                arrays: first.brick_shape(),
+            });
+        }
+        if r.levels.len() != levels.len() {
+            return Err(SourceError::RegionLevelCount {
+                store: source.to_string(),
+                regions: r.levels.len(),
+                levels: levels.len(),
+            });
+        }
         for ((rl, l), path) in r.levels.iter().zip(&mut levels).zip(&layout.level_paths) {
-            ensure!(
-                rl.image == *path && rl.shape == l.shape,
-                "{source}: region metadata level '{}' {:?} does not match image level '{path}' {:?}",
-                rl.image,
-                rl.shape,
-                l.shape
-            );
+            if rl.image != *path || rl.shape != l.shape {
+                return Err(SourceError::RegionLevel {
+                    store: source.to_string(),
+                    region_level: rl.image.as_str().into(),
+                    region_shape: rl.shape,
+                    level: path.as_str().into(),
+                    shape: l.shape,
+                });
+            }
             l.factor = rl.factor;
         }
     }
@@ -185,19 +198,24 @@ fn channel_display(c: &residency_schemas::ome::OmeroChannel) -> ChannelDisplay {
 
 /// One channel's min/max grid from the region metadata's description and its values: `gz·gy·gx`
 /// minima followed by as many maxima.
+///
+/// # Errors
+/// [`SourceError::MinMaxValues`], naming `source`, when `values` are not two per cell.
 pub fn minmax_grid(
     cell_shape: [u64; 3],
     grid_shape: [u64; 3],
     values: &[f64],
     source: &str,
-) -> Result<MinMaxGrid> {
+) -> Result<MinMaxGrid, SourceError> {
     let cells = grid_shape.iter().product::<u64>() as usize;
-    ensure!(
-        values.len() == 2 * cells,
-        "{source}: min/max grid {grid_shape:?} needs {} values, got {}",
-        2 * cells,
-        values.len()
-    );
+    if values.len() != 2 * cells {
+        return Err(SourceError::MinMaxValues {
+            store: source.to_string(),
+            grid_shape,
+            needed: 2 * cells,
+            got: values.len(),
+        });
+    }
     Ok(MinMaxGrid {
         cell_shape,
         grid_shape,

@@ -10,7 +10,8 @@
 //! `RSBRICKS` document), at most [`MAX_BATCH`] bricks and [`MAX_BATCH_BYTES`] decoded bytes
 //! per request (the server's caps).
 
-use anyhow::{Context, Result, anyhow, bail, ensure};
+use std::sync::Arc;
+
 use residency_schemas::ome::{ImageAttributes, PyramidLayout, ZarrFormat};
 use residency_schemas::server::ApiError;
 use residency_schemas::wire::{
@@ -20,7 +21,7 @@ use residency_schemas::wire::{
 use residency_schemas::zarr::ArrayDescription;
 
 use super::ome;
-use super::{BrickKey, BrickVoxels, MinMaxGrid, SampleType, VolumeInfo};
+use super::{BrickKey, BrickVoxels, MinMaxGrid, SampleType, SourceError, VolumeInfo};
 
 /// Most bricks asked for in one `/bricks` request; larger fetches are split.
 pub const MAX_BATCH: usize = 256;
@@ -60,15 +61,25 @@ impl Reply {
     }
 
     /// The body of a 200; any other status is an error naming `url`.
-    pub fn ok(self, url: &str) -> Result<Vec<u8>> {
+    ///
+    /// # Errors
+    /// [`SourceError::Http`] with the status and the server's message.
+    pub fn ok(self, url: &str) -> Result<Vec<u8>, SourceError> {
         match self {
             Self::Ok(body) => Ok(body),
-            Self::Status(s, msg) => bail!("{url}: HTTP {s}: {msg}"),
+            Self::Status(status, message) => Err(SourceError::Http {
+                url: url.to_string(),
+                status,
+                message,
+            }),
         }
     }
 
     /// The body of a 200, `None` for a 404; any other status is an error naming `url`.
-    pub fn found(self, url: &str) -> Result<Option<Vec<u8>>> {
+    ///
+    /// # Errors
+    /// [`SourceError::Http`] with the status and the server's message.
+    pub fn found(self, url: &str) -> Result<Option<Vec<u8>>, SourceError> {
         match self {
             Self::Status(404, _) => Ok(None),
             other => other.ok(url).map(Some),
@@ -81,7 +92,10 @@ impl Reply {
 #[allow(async_fn_in_trait)] // implemented and awaited inside this crate only
 pub trait Get {
     /// Gets `url`.
-    async fn get(&self, url: &str) -> Result<Reply>;
+    ///
+    /// # Errors
+    /// A [`SourceError`] naming `url` when the server cannot be reached or its answer read.
+    async fn get(&self, url: &str) -> Result<Reply, SourceError>;
 }
 
 /// The URL of dataset `dataset` on the server at `server_url` (e.g. `http://127.0.0.1:8000`).
@@ -97,7 +111,7 @@ pub fn dataset_url(server_url: &str, dataset: &str) -> String {
 ///
 /// A server that cannot be reached, a dataset that does not exist, and metadata that cannot be
 /// read are errors naming the URL.
-pub async fn open<G: Get>(http: &G, base: &str, dataset: &str) -> Result<VolumeInfo> {
+pub async fn open<G: Get>(http: &G, base: &str, dataset: &str) -> Result<VolumeInfo, SourceError> {
     let url = |rest: &str| format!("{base}/{rest}");
     let (format, group_url, group_doc) = {
         let v3 = url("zarr.json");
@@ -107,7 +121,9 @@ pub async fn open<G: Get>(http: &G, base: &str, dataset: &str) -> Result<VolumeI
         } else if let Some(body) = http.get(&v2).await?.found(&v2)? {
             (ZarrFormat::V2, v2, body)
         } else {
-            bail!("{base}: no such dataset on the server (neither zarr.json nor .zattrs found)")
+            return Err(SourceError::NoSuchDataset {
+                base: base.to_string(),
+            });
         }
     };
     let group = ImageAttributes::parse(format, &group_doc, &group_url)?;
@@ -130,7 +146,7 @@ async fn load_minmax<G: Get>(
     http: &G,
     base: &str,
     info: &VolumeInfo,
-) -> Result<Option<Vec<Vec<Vec<MinMaxGrid>>>>> {
+) -> Result<Option<Vec<Vec<Vec<MinMaxGrid>>>>, SourceError> {
     let mut all = Vec::new();
     for c in 0..info.channels.len() {
         let url = format!("{base}/minmax?channel={c}");
@@ -144,44 +160,58 @@ async fn load_minmax<G: Get>(
 }
 
 /// Decodes channel `channel`'s `RSMINMAX` document (from `url`) and checks it against `info`.
+///
+/// # Errors
+/// A [`SourceError`] naming `url`: a document that cannot be decoded, or that is for another
+/// channel, sample type or set of levels than `info`'s.
 pub fn parse_minmax(
     info: &VolumeInfo,
     channel: usize,
     body: &[u8],
     url: &str,
-) -> Result<Vec<Vec<MinMaxGrid>>> {
-    let (header, payload) = decode_framed::<MinMaxHierarchyHeader>(MINMAX_MAGIC, body)
-        .with_context(|| format!("{url}: corrupt min/max document"))?;
-    ensure!(
-        header.channel == channel,
-        "{url}: min/max document is for channel {}",
-        header.channel
-    );
-    ensure!(
-        header.data_type == info.sample_type,
-        "{url}: min/max values are {} but the image is {}",
-        header.data_type,
-        info.sample_type.zarr_name()
-    );
-    ensure!(
-        header.levels.len() == info.levels.len(),
-        "{url}: min/max document has {} levels, the image {}",
-        header.levels.len(),
-        info.levels.len()
-    );
+) -> Result<Vec<Vec<MinMaxGrid>>, SourceError> {
+    let (header, payload) =
+        decode_framed::<MinMaxHierarchyHeader>(MINMAX_MAGIC, body).map_err(|source| {
+            SourceError::CorruptMinMax {
+                url: url.to_string(),
+                source,
+            }
+        })?;
+    if header.channel != channel {
+        return Err(SourceError::MinMaxChannel {
+            url: url.to_string(),
+            channel: header.channel,
+        });
+    }
+    if header.data_type != info.sample_type {
+        return Err(SourceError::MinMaxType {
+            url: url.to_string(),
+            found: header.data_type,
+            image: info.sample_type,
+        });
+    }
+    if header.levels.len() != info.levels.len() {
+        return Err(SourceError::MinMaxLevelCount {
+            url: url.to_string(),
+            levels: header.levels.len(),
+            image_levels: info.levels.len(),
+        });
+    }
     header
         .levels
         .iter()
         .zip(&info.levels)
         .enumerate()
         .map(|(i, (block, level))| {
-            ensure!(
-                block.level == i && block.shape == level.shape,
-                "{url}: min/max level {} {:?} does not match image level {i} {:?}",
-                block.level,
-                block.shape,
-                level.shape
-            );
+            if block.level != i || block.shape != level.shape {
+                return Err(SourceError::MinMaxLevel {
+                    url: url.to_string(),
+                    level: block.level,
+                    shape: block.shape,
+                    index: i,
+                    image_shape: level.shape,
+                });
+            }
             block
                 .grids
                 .iter()
@@ -190,19 +220,19 @@ pub fn parse_minmax(
                         .ok()
                         .zip(usize::try_from(g.length).ok())
                         .and_then(|(o, l)| payload.get(o..o.checked_add(l)?))
-                        .with_context(|| {
-                            format!(
-                                "{url}: min/max grid of level {i} at bytes {}+{} runs past \
-                                 the {}-byte payload",
-                                g.offset,
-                                g.length,
-                                payload.len()
-                            )
+                        .ok_or_else(|| SourceError::MinMaxGridRange {
+                            url: url.to_string(),
+                            level: i,
+                            offset: g.offset,
+                            length: g.length,
+                            payload: payload.len(),
                         })?;
-                    let values = header
-                        .data_type
-                        .decode_le_to_f64(bytes)
-                        .with_context(|| format!("{url}: corrupt min/max grid"))?;
+                    let values = header.data_type.decode_le_to_f64(bytes).map_err(|source| {
+                        SourceError::CorruptMinMaxGrid {
+                            url: url.to_string(),
+                            source,
+                        }
+                    })?;
                     ome::minmax_grid(g.cell_shape, g.grid_shape, &values, url)
                 })
                 .collect()
@@ -229,21 +259,27 @@ pub fn batch_url(base: &str, keys: &[BrickKey]) -> String {
 }
 
 /// Fetches one batch of at most [`batch_size`] valid keys of dataset `base`: one result per
-/// key; a failed request fails every key of the batch with its message.
+/// key; a failed request fails every key of the batch with its message
+/// ([`SourceError::Batch`]).
 pub async fn fetch_batch<G: Get>(
     http: &G,
     base: &str,
     info: &VolumeInfo,
     keys: &[BrickKey],
-) -> Vec<Result<BrickVoxels>> {
+) -> Vec<Result<BrickVoxels, SourceError>> {
     let url = batch_url(base, keys);
     let answer = http.get(&url).await.and_then(|reply| reply.ok(&url));
     match answer.and_then(|body| parse_batch(info, keys, &body, &url)) {
         Ok(results) => results,
         Err(e) => {
-            let msg = format!("{e:#}");
+            let batch = Arc::new(e);
             keys.iter()
-                .map(|k| Err(anyhow!("brick {k:?}: {msg}")))
+                .map(|&key| {
+                    Err(SourceError::Batch {
+                        key,
+                        batch: Arc::clone(&batch),
+                    })
+                })
                 .collect()
         }
     }
@@ -260,68 +296,81 @@ pub fn parse_batch(
     keys: &[BrickKey],
     body: &[u8],
     url: &str,
-) -> Result<Vec<Result<BrickVoxels>>> {
+) -> Result<Vec<Result<BrickVoxels, SourceError>>, SourceError> {
     // Name the document without its long brick list.
     let shown = url.split_once('&').map_or(url, |(a, _)| a);
-    let (header, payload) = decode_framed::<BrickBatchHeader>(BRICKS_MAGIC, body)
-        .with_context(|| format!("{shown}: corrupt brick batch"))?;
-    ensure!(
-        header.encoding == BrickEncoding::Raw,
-        "{shown}: asked for raw bricks, got {:?}",
-        header.encoding
-    );
-    ensure!(
-        header.data_type == info.sample_type,
-        "{shown}: bricks are {} but the image is {}",
-        header.data_type,
-        info.sample_type.zarr_name()
-    );
-    ensure!(
-        header.brick_shape == info.brick_shape,
-        "{shown}: bricks of {:?}, expected {:?}",
-        header.brick_shape,
-        info.brick_shape
-    );
-    ensure!(
-        header.bricks.len() == keys.len(),
-        "{shown}: {} bricks answered for {} asked",
-        header.bricks.len(),
-        keys.len()
-    );
+    let (header, payload) =
+        decode_framed::<BrickBatchHeader>(BRICKS_MAGIC, body).map_err(|source| {
+            SourceError::CorruptBatch {
+                url: shown.to_string(),
+                source,
+            }
+        })?;
+    if header.encoding != BrickEncoding::Raw {
+        return Err(SourceError::BatchEncoding {
+            url: shown.to_string(),
+            encoding: header.encoding,
+        });
+    }
+    if header.data_type != info.sample_type {
+        return Err(SourceError::BatchType {
+            url: shown.to_string(),
+            found: header.data_type,
+            image: info.sample_type,
+        });
+    }
+    if header.brick_shape != info.brick_shape {
+        return Err(SourceError::BatchBrickShape {
+            url: shown.to_string(),
+            found: header.brick_shape,
+            expected: info.brick_shape,
+        });
+    }
+    if header.bricks.len() != keys.len() {
+        return Err(SourceError::BatchCount {
+            url: shown.to_string(),
+            answered: header.bricks.len(),
+            asked: keys.len(),
+        });
+    }
     let expected = info.brick_shape.iter().product::<u64>() as usize * info.sample_type.bytes();
     Ok(header
         .bricks
         .iter()
         .zip(keys)
         .map(|(entry, key)| {
-            ensure!(
-                entry.level == key.level
-                    && entry.channel == key.channel
-                    && entry.brick == key.brick,
-                "{shown}: answered brick {},{},{:?} where {key:?} was asked",
-                entry.level,
-                entry.channel,
-                entry.brick
-            );
+            if entry.level != key.level || entry.channel != key.channel || entry.brick != key.brick
+            {
+                return Err(SourceError::BatchOrder {
+                    url: shown.to_string(),
+                    level: entry.level,
+                    channel: entry.channel,
+                    brick: entry.brick,
+                    key: *key,
+                });
+            }
             match entry.status {
                 BrickStatus::Empty => Ok(BrickVoxels::Empty),
-                BrickStatus::Error => bail!(
-                    "{shown}: brick {key:?}: the server could not read it: {}",
-                    entry.error.as_deref().unwrap_or("no reason given")
-                ),
+                BrickStatus::Error => Err(SourceError::ServerBrick {
+                    url: shown.to_string(),
+                    key: *key,
+                    reason: entry
+                        .error
+                        .clone()
+                        .unwrap_or_else(|| "no reason given".to_string()),
+                }),
                 BrickStatus::Ok => {
                     let bytes = usize::try_from(entry.offset)
                         .ok()
                         .filter(|_| entry.length as usize == expected)
                         .and_then(|o| payload.get(o..o.checked_add(expected)?))
-                        .with_context(|| {
-                            format!(
-                                "{shown}: brick {key:?} at bytes {}+{} is not {expected} \
-                                 bytes inside the {}-byte payload",
-                                entry.offset,
-                                entry.length,
-                                payload.len()
-                            )
+                        .ok_or_else(|| SourceError::BatchRange {
+                            url: shown.to_string(),
+                            key: *key,
+                            offset: entry.offset,
+                            length: entry.length,
+                            expected,
+                            payload: payload.len(),
                         })?;
                     Ok(decode_le(info.sample_type, bytes))
                 }
@@ -439,7 +488,7 @@ mod tests {
         let info = info();
         let e = parse_batch(&info, &[key(0)], b"garbage", "u").unwrap_err();
         assert_eq!(
-            format!("{e:#}"),
+            crate::error_chain(&e),
             "u: corrupt brick batch: not a RSBRICKS document (bad magic)"
         );
         // A brick running past the payload.

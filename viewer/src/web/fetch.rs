@@ -1,9 +1,9 @@
 //! The browser's `fetch` as the [`Get`] of the brick-server protocol.
 
-use anyhow::{Result, anyhow};
 use wasm_bindgen::JsCast;
 use wasm_bindgen_futures::JsFuture;
 
+use crate::source::SourceError;
 use crate::source::server::{Get, Reply};
 
 /// GETs through `window.fetch` (CORS applies: brickserver allows any origin).
@@ -20,17 +20,21 @@ pub fn js_text(value: &wasm_bindgen::JsValue) -> String {
 }
 
 impl Get for BrowserFetch {
-    async fn get(&self, url: &str) -> Result<Reply> {
-        let unreachable = |e: &wasm_bindgen::JsValue| {
-            anyhow!("{url}: cannot reach the brick server: {}", js_text(e))
+    async fn get(&self, url: &str) -> Result<Reply, SourceError> {
+        let unreachable = |e: &wasm_bindgen::JsValue| SourceError::Unreachable {
+            url: url.to_string(),
+            reason: js_text(e),
         };
-        let window = web_sys::window().ok_or_else(|| anyhow!("{url}: no browser window"))?;
+        let window = web_sys::window().ok_or_else(|| SourceError::NoWindow {
+            url: url.to_string(),
+        })?;
         let response = JsFuture::from(window.fetch_with_str(url))
             .await
             .map_err(|e| unreachable(&e))?;
-        let response: web_sys::Response = response
-            .dyn_into()
-            .map_err(|_| anyhow!("{url}: fetch did not answer with a response"))?;
+        let response: web_sys::Response =
+            response.dyn_into().map_err(|_| SourceError::NotAResponse {
+                url: url.to_string(),
+            })?;
         let status = response.status();
         let buffer = JsFuture::from(response.array_buffer().map_err(|e| unreachable(&e))?)
             .await

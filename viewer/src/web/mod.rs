@@ -17,19 +17,20 @@ use std::cell::RefCell;
 use std::collections::HashSet;
 use std::rc::Rc;
 
-use anyhow::{Result, ensure};
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
 use self::fetch::BrowserFetch;
 use crate::defaults::{check_channel, default_scene, parse_scene};
+use crate::error_chain;
+use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{FrameStats, StreamState};
 use crate::image::linear_to_srgb8;
 use crate::interactive::{camera_control, controls};
 use crate::scene::Scene;
-use crate::source::{BrickKey, BrickVoxels, VolumeInfo, server};
+use crate::source::{BrickKey, BrickVoxels, SourceError, VolumeInfo, server};
 
 /// Bricks per `/bricks` request from the page: small batches refine the image sooner.
 const PAGE_BATCH: usize = 32;
@@ -43,8 +44,42 @@ const RADIANS_PER_PIXEL: f64 = 0.01;
 /// Largest canvas side the page renders.
 const MAX_SIDE: u32 = 4096;
 
-fn js_error(e: &anyhow::Error) -> JsValue {
-    JsValue::from_str(&format!("{e:#}"))
+/// Why the page's viewer could not open: an image size out of range, no WebGPU device, or a
+/// dataset that cannot be opened. The page shows the whole chain ([`error_chain`]), as it does
+/// for the renderer's and the scene's errors.
+#[derive(Debug, thiserror::Error)]
+pub enum WebError {
+    /// A canvas side outside `1..=MAX_SIDE`.
+    #[error("image size {width}×{height}: each side must lie in 1..={}", MAX_SIDE)]
+    ImageSize {
+        /// Width asked for.
+        width: u32,
+        /// Height asked for.
+        height: u32,
+    },
+    /// The device failed.
+    #[error(transparent)]
+    Gpu(Box<GpuError>),
+    /// The dataset cannot be opened.
+    #[error(transparent)]
+    Source(Box<SourceError>),
+}
+
+impl From<GpuError> for WebError {
+    fn from(e: GpuError) -> Self {
+        Self::Gpu(Box::new(e))
+    }
+}
+
+impl From<SourceError> for WebError {
+    fn from(e: SourceError) -> Self {
+        Self::Source(Box::new(e))
+    }
+}
+
+/// An error as the text JavaScript sees: its whole chain.
+fn js_error(e: &dyn std::error::Error) -> JsValue {
+    JsValue::from_str(&error_chain(e))
 }
 
 /// Totals over the page's life, and the last frame's counters, as `state()` reports them.
@@ -78,7 +113,7 @@ struct Inner {
     stepping: bool,
     stream: StreamState,
     /// Fetches finished since the last step.
-    arrived: Vec<(BrickKey, Result<BrickVoxels>)>,
+    arrived: Vec<(BrickKey, Result<BrickVoxels, SourceError>)>,
     in_flight: HashSet<BrickKey>,
     requests_in_flight: usize,
     /// Fetch results filed since the last frame (reported with the next one).
@@ -105,8 +140,11 @@ pub fn start() {
 impl Viewer {
     /// Opens dataset `dataset` on the brickserver at `server` (`""`: this page's origin),
     /// rendering `width × height` pixels: WebGPU device, then the dataset's metadata and
-    /// region metadata. Rejects with a message for people (no WebGPU, no such dataset, server
-    /// unreachable).
+    /// region metadata.
+    ///
+    /// # Errors
+    /// Rejects with a message for people, the [`WebError`]'s whole chain: no WebGPU, an image
+    /// size out of range, no such dataset, server unreachable.
     pub async fn open(
         server: String,
         dataset: String,
@@ -118,11 +156,15 @@ impl Viewer {
             .map_err(|e| js_error(&e))
     }
 
-    async fn try_open(server: &str, dataset: &str, width: u32, height: u32) -> Result<Viewer> {
-        ensure!(
-            (1..=MAX_SIDE).contains(&width) && (1..=MAX_SIDE).contains(&height),
-            "image size {width}×{height}: each side must lie in 1..={MAX_SIDE}"
-        );
+    async fn try_open(
+        server: &str,
+        dataset: &str,
+        width: u32,
+        height: u32,
+    ) -> Result<Viewer, WebError> {
+        if !((1..=MAX_SIDE).contains(&width) && (1..=MAX_SIDE).contains(&height)) {
+            return Err(WebError::ImageSize { width, height });
+        }
         let gpu = Gpu::open().await?;
         let base = server::dataset_url(server, dataset);
         let info = server::open(&BrowserFetch, &base, dataset).await?;
@@ -195,6 +237,10 @@ impl Viewer {
     }
 
     /// Replaces the scene with scene-file JSON (`schemas/json/scene.schema.json`).
+    ///
+    /// # Errors
+    /// The [`SceneError`](crate::defaults::SceneError)'s message, scene unchanged, for JSON
+    /// that is not a scene or draws a channel the dataset does not have.
     pub fn set_scene_json(&self, json: &str) -> Result<(), JsValue> {
         let scene = parse_scene(json.as_bytes(), "scene").map_err(|e| js_error(&e))?;
         let mut inner = self.inner.borrow_mut();
@@ -289,7 +335,7 @@ impl Viewer {
             match rendered {
                 Ok(r) => Ok(JsValue::from_bool(r)),
                 Err(e) => {
-                    let message = format!("{e:#}");
+                    let message = error_chain(&e);
                     i.totals.error = Some(message.clone());
                     Err(JsValue::from_str(&message))
                 }
@@ -346,7 +392,7 @@ impl Inner {
                 continue; // fetched for an earlier renderer
             }
             if let Err(e) = &result {
-                self.totals.error = Some(format!("{e:#}"));
+                self.totals.error = Some(error_chain(e));
             }
             if let Some((_, bytes)) =
                 self.stream
@@ -363,7 +409,10 @@ impl Inner {
 
 /// The renderer for `inner`'s wanted scene: the current one restyled in place when it can
 /// be, else a new one.
-async fn renderer_for(inner: &Rc<RefCell<Inner>>, current: Option<Renderer>) -> Result<Renderer> {
+async fn renderer_for(
+    inner: &Rc<RefCell<Inner>>,
+    current: Option<Renderer>,
+) -> Result<Renderer, GpuError> {
     let (gpu, info, scene, options) = {
         let i = inner.borrow();
         (
@@ -384,11 +433,19 @@ async fn renderer_for(inner: &Rc<RefCell<Inner>>, current: Option<Renderer>) -> 
     let mut i = inner.borrow_mut();
     i.totals.renderer_builds += 1;
     // Fetches under way were for the old renderer's channels; they are filed only if drawn.
-    i.stream = StreamState::default();
+    // Failed bricks stay failed (never asked for again), as in the native session; only the
+    // coarser stand-ins wanted for channels no longer drawn are forgotten.
+    let drawn: Vec<usize> = scene
+        .channels
+        .iter()
+        .filter(|c| c.visible)
+        .map(|c| c.channel)
+        .collect();
+    i.stream.retain_channels(&drawn);
     Ok(renderer)
 }
 
-async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool> {
+async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     let (current, rebuild) = {
         let mut i = inner.borrow_mut();
         if i.stepping {
@@ -408,7 +465,10 @@ async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool> {
 }
 
 /// Files arrivals, renders when needed, and sends the frame's missing bricks.
-async fn render_and_request(inner: &Rc<RefCell<Inner>>, renderer: &mut Renderer) -> Result<bool> {
+async fn render_and_request(
+    inner: &Rc<RefCell<Inner>>,
+    renderer: &mut Renderer,
+) -> Result<bool, GpuError> {
     let gpu = {
         let mut i = inner.borrow_mut();
         i.file_arrivals(renderer);

@@ -187,7 +187,7 @@ fn renderer_rejects_bad_setups_with_errors() {
         background: [0.0; 3],
     };
     let err = |s: &Scene, o: RenderOptions| {
-        format!("{:#}", Renderer::new(&gpu, src.info(), s, o).err().unwrap())
+        residency_viewer::error_chain(&Renderer::new(&gpu, src.info(), s, o).err().unwrap())
     };
     let ok = scene(vec![style(0)]);
     assert!(

@@ -105,7 +105,7 @@ fn a_volume_over_the_texture_limit_is_refused() {
         .err()
         .expect("refused");
     assert_eq!(
-        format!("{e:#}"),
+        residency_viewer::error_chain(&e),
         format!(
             "{}: the limit probe needs one 3D texture of 24×32×40 \
              voxels (level 0 of 1 channels stacked in z), over the device's limit of 16 per axis",

@@ -6,7 +6,6 @@
 use std::sync::Arc;
 
 use crate::render_common::*;
-use anyhow::Result;
 use residency_viewer::gpu::renderer::RenderOptions;
 use residency_viewer::gpu::streaming::{Budget, render_progressive};
 use residency_viewer::image::RgbImage;
@@ -14,7 +13,8 @@ use residency_viewer::metrics;
 use residency_viewer::reference::{self, ReferenceOptions};
 use residency_viewer::scene::{Camera, Scene};
 use residency_viewer::source::{
-    BrickKey, BrickSource, BrickVoxels, ChannelDisplay, LevelInfo, SampleType, VolumeInfo,
+    BrickKey, BrickSource, BrickVoxels, ChannelDisplay, LevelInfo, SampleType, SourceError,
+    VolumeInfo,
 };
 
 const WIDTH: u64 = 1 << 25;
@@ -67,7 +67,7 @@ impl BrickSource for Wide {
         &self.info
     }
 
-    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels>> {
+    fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>> {
         keys.iter()
             .map(|k| {
                 self.info.check_key(k)?;

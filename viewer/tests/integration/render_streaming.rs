@@ -316,7 +316,10 @@ fn resubmitting_cancels_stale_queued_requests() {
         fn info(&self) -> &VolumeInfo {
             &self.info
         }
-        fn fetch(&self, keys: &[BrickKey]) -> Vec<anyhow::Result<BrickVoxels>> {
+        fn fetch(
+            &self,
+            keys: &[BrickKey],
+        ) -> Vec<Result<BrickVoxels, residency_viewer::source::SourceError>> {
             if let Some(tx) = self.started.lock().unwrap().take() {
                 tx.send(()).unwrap();
                 self.go.lock().unwrap().recv().unwrap();

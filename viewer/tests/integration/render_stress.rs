@@ -727,7 +727,10 @@ impl BrickSource for FarRoi {
         &self.info
     }
 
-    fn fetch(&self, keys: &[BrickKey]) -> Vec<anyhow::Result<BrickVoxels>> {
+    fn fetch(
+        &self,
+        keys: &[BrickKey],
+    ) -> Vec<Result<BrickVoxels, residency_viewer::source::SourceError>> {
         keys.iter()
             .map(|k| {
                 self.info.check_key(k)?;

@@ -304,12 +304,13 @@ fn bad_stores_and_bricks_give_errors_naming_them() {
     };
     let mut got = src.fetch(&[bad, outside, good]).into_iter();
     let e = got.next().unwrap().unwrap_err();
+    let chain = residency_viewer::error_chain(&e);
     assert!(
-        format!("{e:#}").starts_with(&format!(
+        chain.starts_with(&format!(
             "{}: cannot read brick [0, 1, 1] of channel 1 at level 0: ",
             store.display()
         )),
-        "{e:#}"
+        "{chain}"
     );
     let e = got.next().unwrap().unwrap_err();
     assert_eq!(
