@@ -313,7 +313,7 @@ struct Sampled {
 // texel-fetch site (a CPU Vulkan driver runs every branch's code, so the shader keeps few).
 // With `want`, every missing brick is requested; without it the first miss returns. A clear
 // brick (ENTRY_CLEAR) in the footprint makes the sample clear.
-fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32, memo: ptr<function, array<vec4<u32>, MAX_CHANNELS>>) -> Sampled {
+fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
     let pos = level_pos(l, cell, local);
     let fp = pos.fp - vec3<f32>(0.5);
     let fl = floor(fp);
@@ -334,10 +334,6 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     // 20% faster on lavapipe than the general loop below).
     if all(b0 == b1) {
         let pid = brick_id(c, l, b0);
-        var o: vec3<i32>;
-        if pid == (*memo)[c].x {
-            o = vec3<i32>((*memo)[c].yzw);
-        } else {
         let entry = page_table[pid];
         if entry == 0u {
             result.ok = false;
@@ -354,9 +350,7 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
             result.clear = true;
             return result;
         }
-        o = slot_origin(entry);
-        (*memo)[c] = vec4<u32>(pid, vec3<u32>(o));
-        }
+        let o = slot_origin(entry);
         let l0 = o + vec3<i32>(r0);
         let l1 = o + vec3<i32>(r1);
         let x00 = mix(texel(l0), texel(vec3<i32>(l1.x, l0.y, l0.z)), w.x);
@@ -650,7 +644,6 @@ fn sample_channels(
     t: f32,
     skipping: bool,
     substitute: bool,
-    memo: ptr<function, array<vec4<u32>, MAX_CHANNELS>>,
 ) -> ChannelSamples {
     var out: ChannelSamples;
     out.have = 0u;
@@ -686,7 +679,7 @@ fn sample_channels(
         var s = Sampled(0.0, false, 0u, false);
         var first_missing = 0u;
         loop {
-            s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, t, memo);
+            s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, t);
             if coarse_first {
                 coarse_first = false;
                 if !s.clear {
@@ -821,12 +814,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var held = Visit(ACTION_SKIP, 0u, 0u, 0u, 0.0);
         var held_step = 0.0;
         var held_cell = vec3<i32>(0);
-        // Per channel, the last resident brick sampled whole (page-table id, slot origin): its
-        // next samples need neither the page table nor a second usage write.
-        var memo: array<vec4<u32>, MAX_CHANNELS>;
-        for (var c = 0u; c < MAX_CHANNELS; c++) {
-            memo[c] = vec4<u32>(0xffffffffu);
-        }
         loop {
             iterations++;
             if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
@@ -886,7 +873,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 advance(&ray, dir, seg + nudge);
                 continue;
             }
-            let s = sample_channels(ray, v, chosen, ray.t + t_plane, skipping, substitute, &memo);
+            let s = sample_channels(ray, v, chosen, ray.t + t_plane, skipping, substitute);
             if v.action == ACTION_REQUEST {
                 nodata++;
                 advance(&ray, dir, v.skip + nudge);
