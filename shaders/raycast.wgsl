@@ -35,7 +35,7 @@ struct Params {
     level_count: u32,
     request_cap: u32,
     start_depth: u32,
-    brick_ranges_offset: u32, // word offset of the baselines' brick ranges in `nodes`
+    class_offset: u32, // word offset of the node (ours) or brick (baselines) classes in `nodes`
     steps_per_pass: u32, // then the ray is suspended and resumed by the next pass
     flags: u32, // FLAG_SKIPPING, FLAG_SUBSTITUTION
     pad0: u32,
@@ -103,10 +103,9 @@ struct Requests {
 }
 
 @group(0) @binding(0) var<uniform> P: Params;
-// The octree's nodes, then (the baselines') per-brick ranges from P.brick_ranges_offset.
+// The octree's nodes, then from P.class_offset the node classes (ours) or brick classes.
 @group(0) @binding(1) var<storage, read> nodes: array<u32>;
-// Page-table offsets (channel · levels + level), then each channel's control points and
-// prefix table.
+// Page-table offsets (channel · levels + level), then each channel's control points.
 @group(0) @binding(2) var<storage, read> tables: array<u32>;
 @group(0) @binding(3) var<storage, read> page_table: array<u32>;
 @group(0) @binding(4) var<storage, read_write> flags: array<atomic<u32>>;
@@ -142,42 +141,10 @@ fn page_offset(c: u32, l: u32) -> u32 {
     return tables[c * P.level_count + l];
 }
 
-// (min, max) of a brick, for the baselines' brick-granular culling.
-fn brick_range(pid: u32) -> vec2<f32> {
-    let i = P.brick_ranges_offset + 2u * pid;
-    return vec2<f32>(bitcast<f32>(nodes[i]), bitcast<f32>(nodes[i + 1u]));
-}
-
-// Whether channel c's opacity is zero over [lo, hi]: O(1) with the prefix count of bins of
-// non-zero opacity (conservative by one bin on each side).
-fn tf_transparent(c: u32, lo: f32, hi: f32) -> bool {
-    if !(lo <= hi) {
-        return true; // no data in the node
-    }
-    let ch = S.channels[c];
-    if ch.point_count == 0u {
-        return true;
-    }
-    if lo == hi {
-        return tf_opacity(c, lo) == 0.0; // homogeneous: exact
-    }
-    let d0 = ch.domain.x;
-    let d1 = ch.domain.y;
-    if lo <= d0 && ch.opacity_below > 0.0 {
-        return false;
-    }
-    if hi >= d1 && ch.opacity_above > 0.0 {
-        return false;
-    }
-    if hi <= d0 || lo >= d1 {
-        return true;
-    }
-    let scale = f32(TF_BINS) / (d1 - d0);
-    let fb = f32(TF_BINS) - 1.0;
-    let b0 = u32(clamp(floor((lo - d0) * scale) - 1.0, 0.0, fb));
-    let b1 = u32(clamp(floor((hi - d0) * scale) + 1.0, 0.0, fb));
-    let pre = ch.prefix_offset;
-    return tables[pre + b1 + 1u] == tables[pre + b0];
+// Whether brick pid is empty under its channel's transfer function (the baselines' class,
+// written by the CPU with the style; ours has one class word per node instead).
+fn brick_empty(pid: u32) -> bool {
+    return nodes[P.class_offset + pid] != 0u;
 }
 
 // ---- octree ----
@@ -489,36 +456,35 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
     }
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
     var d = min(clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u, max_depth);
+    let all = (1u << P.channel_count) - 1u;
     loop {
         v.node = node_index(d, ray.cell);
-        var all_empty = true;
-        var all_homog = true;
-        var all_unmapped = true;
+        // The node's class under the transfer functions, one word for every channel (written
+        // by the CPU on a restyle): bits 0-7 empty, 8-15 constant.
+        var homogeneous = 0u;
         v.empty = 0u;
-        for (var c = 0u; c < P.channel_count; c++) {
-            let lo = bitcast<f32>(node_word(v.node, c, 1u));
-            let hi = bitcast<f32>(node_word(v.node, c, 2u));
-            if skipping && tf_transparent(c, lo, hi) {
-                v.empty |= 1u << c;
-            } else {
-                all_empty = false;
-                if !(lo == hi) || !skipping {
-                    all_homog = false;
-                    if node_word(v.node, c, 0u) != 0u {
-                        all_unmapped = false;
-                    }
-                }
-            }
+        if skipping {
+            let word = nodes[P.class_offset + v.node];
+            v.empty = word & all;
+            homogeneous = (word >> 8u) & all;
         }
-        if all_empty {
+        if skipping && v.empty == all {
             v.action = ACTION_SKIP;
             break;
         }
-        if all_homog && skipping {
+        if skipping && (v.empty | homogeneous) == all {
             v.action = ACTION_HOMOGENEOUS;
             break;
         }
         if d >= max_depth {
+            // Unmapped: no channel that needs data here has a level resident.
+            let need = all & ~(v.empty | homogeneous);
+            var all_unmapped = true;
+            for (var c = 0u; c < P.channel_count; c++) {
+                if (need & (1u << c)) != 0u && node_word(v.node, c, 0u) != 0u {
+                    all_unmapped = false;
+                }
+            }
             if all_unmapped {
                 v.action = ACTION_REQUEST;
             }
@@ -554,8 +520,7 @@ fn visit_page_table(
         let bit = 1u << c;
         if pid != (*seen)[c] {
             (*seen)[c] = pid;
-            let r = brick_range(pid);
-            *seen_empty = select(*seen_empty & ~bit, *seen_empty | bit, skipping && tf_transparent(c, r.x, r.y));
+            *seen_empty = select(*seen_empty & ~bit, *seen_empty | bit, skipping && brick_empty(pid));
         }
         if (*seen_empty & bit) != 0u {
             v.empty |= bit;
@@ -591,8 +556,7 @@ fn visit_brick_octree(
             let pos = level_pos(k, ray.cell, ray.local);
             let b = point_brick(k, pos);
             let pid = brick_id(c, k, b);
-            let r = brick_range(pid);
-            if skipping && tf_transparent(c, r.x, r.y) {
+            if skipping && brick_empty(pid) {
                 v.empty |= 1u << c;
                 v.skip = min(v.skip, brick_exit(k, b, pos, dir));
                 break;

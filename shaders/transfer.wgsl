@@ -20,10 +20,7 @@ struct ChannelEntry {
     min_level: u32, // level bounds of the LOD choice
     max_level: u32,
     points_offset: u32, // (value, opacity) pairs in `tables`
-    prefix_offset: u32, // TF_BINS + 1 counts in `tables`
-    domain: vec2<f32>, // first and last control point, rounded outward to f32
-    opacity_below: f32,
-    opacity_above: f32,
+    pad0: u32,
 }
 
 struct SceneUniforms {

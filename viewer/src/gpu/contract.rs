@@ -21,9 +21,6 @@ pub const MAX_CHANNELS: usize = 8;
 /// per level, and the scene uniforms one entry.
 pub use crate::octree::MAX_LEVELS;
 
-/// Bins of each transfer function's prefix table.
-pub const TF_BINS: usize = 1024;
-
 /// What the shaders share: transfer functions, opacity correction, compositing.
 const TRANSFER: &str = include_str!("../../../shaders/transfer.wgsl");
 
@@ -39,7 +36,7 @@ pub mod binding {
     pub const PARAMS: u32 = 0;
     /// The residency octree's nodes, then the per-brick ranges of the baselines.
     pub const NODES: u32 = 1;
-    /// Page-table offsets, transfer-function control points and prefix tables.
+    /// Page-table offsets and transfer-function control points.
     pub const TABLES: u32 = 2;
     /// The page tables.
     pub const PAGES: u32 = 3;
@@ -122,8 +119,11 @@ gpu_struct! {
         pub request_cap: u32,
         /// Depth traversal starts at.
         pub start_depth: u32,
-        /// Word offset of the per-brick ranges in the node buffer (the baselines').
-        pub brick_ranges_offset: u32,
+        /// Word offset of the classes in the node buffer: for ours, per node, bit `c` where
+        /// channel `c` is empty under its transfer function and bit `8 + c` where it is one
+        /// value ([`super::residency::node_class`]); for the baselines, per page-table id, 1
+        /// where the brick is empty.
+        pub class_offset: u32,
         /// Steps a ray may take per pass (then it is suspended and resumed).
         pub steps_per_pass: u32,
         /// 1: skip empty and homogeneous nodes; 2: substitute missing bricks from other levels.
@@ -211,14 +211,8 @@ gpu_struct! {
         pub max_level: u32,
         /// Word offset of the control points `(value, opacity)` in the table buffer.
         pub points_offset: u32,
-        /// Word offset of the prefix table (`TF_BINS + 1` counts) in the table buffer.
-        pub prefix_offset: u32,
-        /// The transfer function's domain `[lo, hi]`, rounded outward to `f32`.
-        pub domain: [f32; 2],
-        /// Opacity below the domain.
-        pub opacity_below: f32,
-        /// Opacity above the domain.
-        pub opacity_above: f32,
+        /// Unused (alignment).
+        pub pad0: u32,
     }
 }
 
@@ -336,7 +330,6 @@ pub fn wgsl_prelude() -> String {
         u("ENTRY_CLEAR", ENTRY_CLEAR),
         u("MAX_LEVELS", MAX_LEVELS as u32),
         u("MAX_CHANNELS", MAX_CHANNELS as u32),
-        u("TF_BINS", TF_BINS as u32),
         u("METHOD_RESIDENCY", Method::Residency as u32),
         u("METHOD_PAGE_TABLE", Method::PageTable as u32),
         u("METHOD_OCTREE", Method::Octree as u32),
@@ -385,7 +378,7 @@ pub fn sources() -> [(&'static str, String); 2] {
 pub mod probe_binding {
     /// [`super::ProbeParams`], uniform.
     pub const PARAMS: u32 = 0;
-    /// Control points and prefix tables of the transfer functions.
+    /// Control points of the transfer functions.
     pub const TABLES: u32 = 1;
     /// [`super::SceneUniforms`], uniform.
     pub const SCENE: u32 = 2;

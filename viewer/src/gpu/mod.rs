@@ -10,8 +10,7 @@
 //! - [`brick_cache`]: the brick cache atlas per sample format, with LRU eviction driven by the
 //!   shader's usage feedback;
 //! - [`tables`]: the scene tables the shader consults (levels, channels, transfer
-//!   functions with their prefix tables for O(1) emptiness tests), rewritten in place when the
-//!   style changes;
+//!   functions), rewritten in place when the style changes;
 //! - [`pipeline`]: the long-lived part, `raycast.wgsl` compiled for one atlas format and one
 //!   method, shared by every renderer on the device;
 //! - [`residency`]: the residency state of one volume (octree, page tables, cache), which

@@ -330,7 +330,7 @@ impl Renderer {
         }
         let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
         let mut residency = ResidencyState::new(gpu, info, &channels, &options)?;
-        residency.mark_clear(&visible);
+        residency.restyle(&visible);
         let tables = SceneTables::new(gpu, &residency, &options, &visible)?;
         let buffers = FrameBuffers::new(gpu, &options, residency.cache().capacity())?;
         let pipeline = RaycastPipeline::shared(gpu, residency.cache().kind(), options.method);
@@ -448,7 +448,7 @@ impl Renderer {
         {
             return false;
         }
-        self.residency.mark_clear(&styles);
+        self.residency.restyle(&styles);
         self.scene = scene.clone();
         true
     }
@@ -524,7 +524,7 @@ impl Renderer {
             level_count: info.levels.len() as u32,
             request_cap: self.options.max_requests,
             start_depth: self.options.start_depth.min(g.depth),
-            brick_ranges_offset: self.residency.brick_ranges_offset(),
+            class_offset: self.residency.class_offset(),
             steps_per_pass: self.tables.steps_per_pass(),
             flags,
             view_cell: view_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32),

@@ -1,8 +1,10 @@
 //! The residency state of one volume on the GPU: which bricks are where. The residency octree
 //! (partial-residency masks and value ranges per node) and its node buffer, the page tables,
-//! the brick cache, and the per-brick ranges the baselines cull with (after the nodes). It changes as bricks
-//! arrive and are evicted, never with the style: a restyle only redoes the clear-brick marks
-//! ([`ResidencyState::mark_clear`]), so every resident brick stays.
+//! the brick cache, and the classes the ray caster culls with (after the nodes): per node for
+//! ours, per brick for the baselines, each "empty" or "constant" per channel under the
+//! transfer functions. It changes as bricks arrive and are evicted; a restyle only redoes the
+//! classes and the clear-brick marks ([`ResidencyState::restyle`]), so every resident brick
+//! stays.
 
 use super::GpuError;
 use super::brick_cache::BrickCache;
@@ -22,9 +24,45 @@ pub struct ResidencyState {
     octree: ResidencyOctree,
     pages: PageTables,
     cache: BrickCache,
-    /// The octree's nodes, then (the baselines') per-brick ranges.
+    /// The octree's nodes, then the per-node classes (ours) or per-brick classes (the
+    /// baselines).
     nodes: wgpu::Buffer,
-    brick_ranges_offset: u32,
+    /// Word offset of the classes in `nodes`.
+    class_offset: u32,
+    /// The baselines' per-brick value ranges, by page-table id (`f32`, rounded outward).
+    brick_ranges: Vec<(f32, f32)>,
+    /// Per channel slot of the octree, its style (`None`: not drawn, so empty).
+    styles: Vec<Option<ChannelStyle>>,
+    /// Whether every class must be rewritten at the next flush (a restyle).
+    classes_stale: bool,
+}
+
+/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style`:
+/// bit 0 when the transfer function is transparent over it (or it holds no data, or the channel
+/// is not drawn), bit 1 when it is one value. The exact rule of [`ChannelStyle::transparent_over`],
+/// as for the clear bricks ([`is_clear`]).
+pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> u32 {
+    let empty = match style {
+        None => true,
+        // No data (an empty range, or NaN only) shows nothing.
+        Some(s) => {
+            lo.partial_cmp(&hi).is_none_or(std::cmp::Ordering::is_gt)
+                || s.transparent_over(f64::from(lo), f64::from(hi))
+        }
+    };
+    u32::from(empty) | (u32::from(lo == hi) << 1)
+}
+
+/// The class word of node `node` of `octree` under `styles` (one per channel slot): bit `c`
+/// where channel slot `c` is empty, bit `8 + c` where it is constant (at most 8 channels).
+pub fn node_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], node: usize) -> u32 {
+    let mut word = 0;
+    for (c, style) in styles.iter().enumerate() {
+        let (lo, hi) = octree.range(node, c);
+        let class = range_class(style.as_ref(), f32_down(lo), f32_up(hi));
+        word |= (class & 1) << c | (class >> 1) << (8 + c);
+    }
+    word
 }
 
 impl ResidencyState {
@@ -56,14 +94,13 @@ impl ResidencyState {
             options.cache_bytes,
         )?;
         let node_words = geometry.node_count() * octree.words_per_node();
-        // Per-brick value ranges (two f32 per page-table id) after the nodes, read by the
-        // baselines only: the page table culls the brick it samples, the octree a brick and
-        // its subtree.
-        let brick_ranges: Vec<f32> = if options.method == Method::Residency {
+        // Per-brick value ranges, for the baselines' classes: the page table culls the brick
+        // it samples, the octree a brick and its subtree.
+        let brick_ranges: Vec<(f32, f32)> = if options.method == Method::Residency {
             Vec::new()
         } else {
             (0..pages.len() as u32)
-                .flat_map(|id| {
+                .map(|id| {
                     let (lo, hi) = pages
                         .key(id)
                         .map_or((f64::INFINITY, f64::NEG_INFINITY), |k| {
@@ -73,11 +110,17 @@ impl ResidencyState {
                                 _ => info.brick_range(&k),
                             }
                         });
-                    [f32_down(lo), f32_up(hi)]
+                    (f32_down(lo), f32_up(hi))
                 })
                 .collect()
         };
-        let bytes = (node_words + brick_ranges.len()) as u64 * 4;
+        // One class word per node (ours) or per brick (the baselines) after the nodes.
+        let class_words = if options.method == Method::Residency {
+            geometry.node_count()
+        } else {
+            brick_ranges.len()
+        };
+        let bytes = (node_words + class_words) as u64 * 4;
         let hint = if brick_ranges.is_empty() {
             "use a smaller --octree-depth"
         } else {
@@ -85,13 +128,7 @@ impl ResidencyState {
         };
         check_binding(gpu, "the octree", bytes, hint)?;
         let nodes = storage_buffer(gpu, "octree nodes", bytes, wgpu::BufferUsages::empty());
-        if !brick_ranges.is_empty() {
-            gpu.queue.write_buffer(
-                &nodes,
-                node_words as u64 * 4,
-                bytemuck::cast_slice(&brick_ranges),
-            );
-        }
+        let styles = vec![None; octree.channels().len()];
         Ok(Self {
             info: info.clone(),
             method: options.method,
@@ -100,7 +137,10 @@ impl ResidencyState {
             pages,
             cache,
             nodes,
-            brick_ranges_offset: node_words as u32,
+            class_offset: node_words as u32,
+            brick_ranges,
+            styles,
+            classes_stale: true,
         })
     }
 
@@ -129,22 +169,30 @@ impl ResidencyState {
         &mut self.cache
     }
 
-    /// The octree's node buffer; the baselines' per-brick ranges (two `f32` per page-table
-    /// id) follow the nodes.
+    /// The octree's node buffer; the classes (one word per node for ours, per page-table id
+    /// for the baselines) follow the nodes.
     pub fn nodes(&self) -> &wgpu::Buffer {
         &self.nodes
     }
 
-    /// Word offset of the per-brick ranges in [`ResidencyState::nodes`].
-    pub fn brick_ranges_offset(&self) -> u32 {
-        self.brick_ranges_offset
+    /// Word offset of the classes in [`ResidencyState::nodes`].
+    pub fn class_offset(&self) -> u32 {
+        self.class_offset
     }
 
-    /// Redoes the [`ENTRY_CLEAR`] marks for the channel `styles` (one per channel drawn): a
-    /// missing brick that [`is_clear`] under its channel's style is never fetched, and a sample
-    /// whose footprint reaches it is clear. Only the residency method with empty-space skipping
-    /// marks bricks clear.
-    pub fn mark_clear(&mut self, styles: &[&ChannelStyle]) {
+    /// Takes the channel `styles` (one per channel drawn): the node or brick classes are
+    /// rewritten at the next [`ResidencyState::flush`], and the [`ENTRY_CLEAR`] marks redone: a
+    /// missing brick that [`is_clear`] under its channel's style is never fetched, and a
+    /// sample whose footprint reaches it is clear. Only the residency method with empty-space
+    /// skipping marks bricks clear.
+    pub fn restyle(&mut self, styles: &[&ChannelStyle]) {
+        self.styles = self
+            .octree
+            .channels()
+            .iter()
+            .map(|&c| styles.iter().find(|s| s.channel == c).map(|s| (*s).clone()))
+            .collect();
+        self.classes_stale = true;
         if self.method != Method::Residency || !self.empty_space_skipping {
             return;
         }
@@ -226,14 +274,50 @@ impl ResidencyState {
         Ok(Inserted::Uploaded { evicted })
     }
 
-    /// Uploads changed page-table entries and octree nodes.
+    /// Uploads changed page-table entries, octree nodes and classes.
     pub fn flush(&mut self, gpu: &Gpu) {
         self.pages.flush(&gpu.queue);
-        if let Some(range) = self.octree.take_dirty() {
+        let dirty = self.octree.take_dirty();
+        if let Some(range) = &dirty {
             let words = self.octree.gpu_words(range.clone());
             let offset = (range.start * self.octree.words_per_node() * 4) as u64;
             gpu.queue
                 .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
+        }
+        let stale = std::mem::take(&mut self.classes_stale);
+        if self.method == Method::Residency {
+            // Node ranges refined from arriving bricks change those nodes' classes.
+            let range = if stale {
+                Some(0..self.octree.geometry().node_count())
+            } else {
+                dirty
+            };
+            if let Some(range) = range {
+                let words: Vec<u32> = range
+                    .clone()
+                    .map(|n| node_class(&self.octree, &self.styles, n))
+                    .collect();
+                let offset = (u64::from(self.class_offset) + range.start as u64) * 4;
+                gpu.queue
+                    .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
+            }
+        } else if stale {
+            let words: Vec<u32> = (0..self.brick_ranges.len() as u32)
+                .map(|id| {
+                    let style = self
+                        .pages
+                        .key(id)
+                        .and_then(|k| self.octree.slot_of(k.channel as usize))
+                        .and_then(|s| self.styles[s].as_ref());
+                    let (lo, hi) = self.brick_ranges[id as usize];
+                    range_class(style, lo, hi) & 1
+                })
+                .collect();
+            gpu.queue.write_buffer(
+                &self.nodes,
+                u64::from(self.class_offset) * 4,
+                bytemuck::cast_slice(&words),
+            );
         }
     }
 }

@@ -1,23 +1,23 @@
 //! The scene tables `raycast.wgsl` consults, in two buffers:
 //!
 //! - the scene uniforms ([`SceneUniforms`]): per level, its downsampling shift, shape, bricks
-//!   per axis and smallest voxel edge; per drawn channel, its colour, level bounds, transfer
-//!   function domain and opacities outside it, and where its control points and prefix table
-//!   lie in the table buffer;
+//!   per axis and smallest voxel edge; per drawn channel, its colour, level bounds, and where
+//!   its control points lie in the table buffer;
 //! - the read-only `u32` table buffer (floats stored as bits): page-table offsets,
-//!   `channel · levels + level`, then each channel's control points `(value, opacity)` and its
-//!   prefix table of `TF_BINS + 1` counts, where `prefix[i + 1] − prefix[i]` is 1 when the
-//!   opacity is non-zero somewhere in bin `i`, so "transparent over `[lo, hi]`" is one
-//!   subtraction (Octree Rasterization Sec. 4.1).
+//!   `channel · levels + level`, then each channel's control points `(value, opacity)`.
+//!
+//! Whether a node or brick is transparent under a transfer function is not asked of the
+//! shader: the CPU writes each node's (or brick's) class with the style
+//! ([`super::residency::node_class`]), one word read where the shader used to test every
+//! channel's range against a prefix table of the transfer function's bins.
 
 use super::GpuError;
 use super::buffers::{check_binding, storage_buffer, uniform_buffer};
-pub use super::contract::TF_BINS;
 use super::contract::{ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms};
 use super::device::Gpu;
 use super::renderer::RenderOptions;
 use super::residency::ResidencyState;
-use crate::octree::{OctreeGeometry, f32_down, f32_up};
+use crate::octree::OctreeGeometry;
 use crate::scene::ChannelStyle;
 use crate::source::VolumeInfo;
 
@@ -45,37 +45,8 @@ pub struct ChannelTable<'a> {
 pub struct Tables {
     /// Per level and per channel.
     pub uniforms: SceneUniforms,
-    /// Page-table offsets, then control points and prefix tables.
+    /// Page-table offsets, then control points.
     pub words: Vec<u32>,
-}
-
-/// The transfer function's domain `[lo, hi]` (widened to `[v, v + 1]` for a single point).
-pub fn tf_domain(style: &ChannelStyle) -> (f64, f64) {
-    let pts = &style.opacity;
-    match (pts.first(), pts.last()) {
-        (Some(a), Some(b)) if b.value > a.value => (a.value, b.value),
-        (Some(a), _) => (a.value, a.value + 1.0),
-        _ => (0.0, 1.0),
-    }
-}
-
-/// Prefix counts of bins (over the domain) where the opacity is non-zero somewhere.
-pub fn tf_prefix(style: &ChannelStyle, bins: usize) -> Vec<u32> {
-    let (lo, hi) = tf_domain(style);
-    let w = (hi - lo) / bins as f64;
-    let mut prefix = Vec::with_capacity(bins + 1);
-    prefix.push(0u32);
-    for i in 0..bins {
-        let (a, b) = (lo + i as f64 * w, lo + (i + 1) as f64 * w);
-        let nonzero = style.opacity_at(a) > 0.0
-            || style.opacity_at(b) > 0.0
-            || style
-                .opacity
-                .iter()
-                .any(|p| p.value > a && p.value < b && p.opacity > 0.0);
-        prefix.push(prefix[i] + nonzero as u32);
-    }
-    prefix
 }
 
 /// Builds the tables for `geometry` (with voxel spacing `spacing`, `x, y, z`), page-table
@@ -111,20 +82,13 @@ pub fn build(
             words.push((p.value as f32).to_bits());
             words.push((p.opacity as f32).to_bits());
         }
-        let prefix_offset = words.len() as u32;
-        words.extend(tf_prefix(s, TF_BINS));
-        let (lo, hi) = tf_domain(s);
         uniforms.channels[i] = ChannelEntry {
             color: s.color.map(|c| c as f32),
             point_count: s.opacity.len() as u32,
             min_level: ch.min_level,
             max_level: ch.max_level,
             points_offset,
-            prefix_offset,
-            // Rounded outward to f32 (exact when representable).
-            domain: [f32_down(lo), f32_up(hi)],
-            opacity_below: s.opacity.first().map_or(0.0, |p| p.opacity as f32),
-            opacity_above: s.opacity.last().map_or(0.0, |p| p.opacity as f32),
+            ..ChannelEntry::default()
         };
     }
     Tables { uniforms, words }

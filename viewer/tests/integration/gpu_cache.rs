@@ -4,8 +4,8 @@
 use crate::render_common::new_gpu as gpu;
 use residency_viewer::gpu::brick_cache::{AtlasKind, BrickCache};
 use residency_viewer::gpu::page_table::PageTables;
+use residency_viewer::gpu::residency::range_class;
 use residency_viewer::gpu::synthetic::SyntheticSource;
-use residency_viewer::gpu::tables::{tf_domain, tf_prefix};
 use residency_viewer::octree::OctreeGeometry;
 use residency_viewer::scene::{ChannelStyle, OpacityPoint};
 use residency_viewer::source::{BrickKey, BrickSource, BrickVoxels, SampleType};
@@ -116,7 +116,7 @@ fn page_table_ids_round_trip() {
 }
 
 #[test]
-fn tf_prefix_marks_exactly_the_bins_with_opacity() {
+fn range_classes_follow_the_exact_transparency_rule() {
     let style = ChannelStyle {
         channel: 0,
         visible: true,
@@ -144,19 +144,38 @@ fn tf_prefix_marks_exactly_the_bins_with_opacity() {
             },
         ],
     };
-    assert_eq!(tf_domain(&style), (0.0, 100.0));
-    let p = tf_prefix(&style, 10);
-    // Bins of 10: opacity is non-zero inside (40, 80), so bins 4..=7.
-    assert_eq!(p, vec![0, 0, 0, 0, 0, 1, 2, 3, 4, 4, 4]);
-    // Agrees with the scene's exact test on every bin.
-    for i in 0..10 {
-        let (a, b) = (i as f64 * 10.0, (i + 1) as f64 * 10.0);
-        assert_eq!(
-            p[i + 1] - p[i] == 0,
-            style.transparent_over(a, b),
-            "bin {i}"
-        );
-    }
+    let s = Some(&style);
+    // Bit 0: empty under the transfer function; bit 1: one value.
+    assert_eq!(
+        range_class(s, 0.0, 40.0),
+        1,
+        "zero opacity up to the ramp's foot"
+    );
+    assert_eq!(range_class(s, 39.0, 41.0), 0, "reaches into the ramp");
+    assert_eq!(
+        range_class(s, 79.0, 100.0),
+        0,
+        "still inside the ramp at 79"
+    );
+    assert_eq!(range_class(s, 80.0, 1e9), 1, "past the ramp");
+    assert_eq!(range_class(s, 50.0, 50.0), 2, "one visible value");
+    assert_eq!(range_class(s, 90.0, 90.0), 3, "one transparent value");
+    assert_eq!(
+        range_class(s, f32::INFINITY, f32::NEG_INFINITY),
+        1,
+        "no data"
+    );
+    assert_eq!(range_class(s, f32::NAN, f32::NAN), 1, "NaN only");
+    assert_eq!(range_class(None, 50.0, 60.0), 1, "a channel not drawn");
+    let hidden = ChannelStyle {
+        visible: false,
+        ..style.clone()
+    };
+    assert_eq!(
+        range_class(Some(&hidden), 50.0, 60.0),
+        1,
+        "a hidden channel"
+    );
 }
 
 #[test]

@@ -166,7 +166,6 @@ fn the_prelude_carries_the_rust_constants() {
         "const ENTRY_CLEAR: u32 = 4294967295u;",
         "const MAX_LEVELS: u32 = 16u;",
         "const MAX_CHANNELS: u32 = 8u;",
-        "const TF_BINS: u32 = 1024u;",
         "const METHOD_RESIDENCY: u32 = 0u;",
         "const METHOD_PAGE_TABLE: u32 = 1u;",
         "const METHOD_OCTREE: u32 = 2u;",
