@@ -263,21 +263,31 @@ impl ImageArrays {
     }
 }
 
+/// Why one brick of a batch could not be read; its message goes into the brick's entry.
+#[derive(Debug, thiserror::Error)]
+pub enum BrickReadError {
+    /// The dataset has no such level, channel or brick.
+    #[error(transparent)]
+    NoSuchBrick(#[from] NoSuchBrick),
+    /// The store could not give the brick (names the brick and its key).
+    #[error(transparent)]
+    Store(#[from] PyramidError),
+}
+
 /// Reads a whole batch (in parallel) into its header and payload, given a brick reader
-/// (which may consult a cache).
+/// (which may consult a cache). A brick that cannot be read gets an error entry with the
+/// reason; the rest of the batch is still answered.
 pub fn read_batch(
     arrays: &ImageArrays,
     bricks: &[BrickAt],
     encoding: BrickEncoding,
-    read: impl Fn(&BrickAt) -> Result<Option<Bytes>, String> + Sync,
+    read: impl Fn(&BrickAt) -> Result<Option<Bytes>, BrickReadError> + Sync,
 ) -> (BrickBatchHeader, Vec<u8>) {
-    let results: Vec<Result<Option<Bytes>, String>> = bricks
+    let results: Vec<Result<Option<Bytes>, BrickReadError>> = bricks
         .par_iter()
         .map(|at| {
-            arrays
-                .check(at)
-                .map_err(|e| e.to_string())
-                .and_then(|()| read(at))
+            arrays.check(at)?;
+            read(at)
         })
         .collect();
     let mut payload = Vec::new();
@@ -292,7 +302,7 @@ pub fn read_batch(
                     (BrickStatus::Ok, offset, bytes.len() as u64, None)
                 }
                 Ok(None) => (BrickStatus::Empty, 0, 0, None),
-                Err(e) => (BrickStatus::Error, 0, 0, Some(e)),
+                Err(e) => (BrickStatus::Error, 0, 0, Some(e.to_string())),
             };
             BrickEntry {
                 level: at.level,

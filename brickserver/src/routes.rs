@@ -633,7 +633,7 @@ async fn bricks(
             if let Some(hit) = st.cache.get(&key) {
                 return Ok((!hit.is_empty()).then_some(hit));
             }
-            let read = arrays.read(at, encoding).map_err(|e| e.to_string())?;
+            let read = arrays.read(at, encoding)?;
             let bytes = read.map(Bytes::from).unwrap_or_default();
             st.cache.insert(key, bytes.clone());
             Ok((!bytes.is_empty()).then_some(bytes))

@@ -286,11 +286,12 @@ impl ResidencyState {
         }
         let stale = std::mem::take(&mut self.classes_stale);
         if self.method == Method::Residency {
-            // Node ranges refined from arriving bricks change those nodes' classes.
+            // Without region metadata, node ranges refined from arriving bricks change those
+            // nodes' classes (otherwise only masks changed, and classes stand).
             let range = if stale {
                 Some(0..self.octree.geometry().node_count())
             } else {
-                dirty
+                dirty.filter(|_| self.octree.unknown_ranges())
             };
             if let Some(range) = range {
                 let words: Vec<u32> = range
