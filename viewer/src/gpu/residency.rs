@@ -37,11 +37,19 @@ pub struct ResidencyState {
     classes_stale: bool,
 }
 
-/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style`:
-/// bit 0 when the transfer function is transparent over it (or it holds no data, or the channel
-/// is not drawn), bit 1 when it is one value. The exact rule of [`ChannelStyle::transparent_over`],
-/// as for the clear bricks ([`is_clear`]).
-pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> u32 {
+/// What the ray caster needs to know of a node's or brick's value range in one channel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RangeClass {
+    /// The transfer function is transparent over the range, the range holds no data, or the
+    /// channel is not drawn: nothing to sample.
+    pub empty: bool,
+    /// The range is one value: integrated in closed form.
+    pub constant: bool,
+}
+
+/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style`: the
+/// exact rule of [`ChannelStyle::transparent_over`], as for the clear bricks ([`is_clear`]).
+pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> RangeClass {
     let empty = match style {
         None => true,
         // No data (an empty range, or NaN only) shows nothing.
@@ -50,7 +58,10 @@ pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> u32 {
                 || s.transparent_over(f64::from(lo), f64::from(hi))
         }
     };
-    u32::from(empty) | (u32::from(lo == hi) << 1)
+    RangeClass {
+        empty,
+        constant: lo == hi,
+    }
 }
 
 /// The class word of node `node` of `octree` under `styles` (one per channel slot): bit `c`
@@ -60,7 +71,7 @@ pub fn node_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], nod
     for (c, style) in styles.iter().enumerate() {
         let (lo, hi) = octree.range(node, c);
         let class = range_class(style.as_ref(), f32_down(lo), f32_up(hi));
-        word |= (class & 1) << c | (class >> 1) << (8 + c);
+        word |= u32::from(class.empty) << c | u32::from(class.constant) << (8 + c);
     }
     word
 }
@@ -311,7 +322,7 @@ impl ResidencyState {
                         .and_then(|k| self.octree.slot_of(k.channel as usize))
                         .and_then(|s| self.styles[s].as_ref());
                     let (lo, hi) = self.brick_ranges[id as usize];
-                    range_class(style, lo, hi) & 1
+                    u32::from(range_class(style, lo, hi).empty)
                 })
                 .collect();
             gpu.queue.write_buffer(

@@ -4,7 +4,7 @@
 use crate::render_common::new_gpu as gpu;
 use residency_viewer::gpu::brick_cache::{AtlasKind, BrickCache};
 use residency_viewer::gpu::page_table::PageTables;
-use residency_viewer::gpu::residency::range_class;
+use residency_viewer::gpu::residency::{RangeClass, range_class};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::octree::OctreeGeometry;
 use residency_viewer::scene::{ChannelStyle, OpacityPoint};
@@ -145,35 +145,44 @@ fn range_classes_follow_the_exact_transparency_rule() {
         ],
     };
     let s = Some(&style);
-    // Bit 0: empty under the transfer function; bit 1: one value.
+    let class = |empty, constant| RangeClass { empty, constant };
+    let cases = [
+        (
+            (0.0, 40.0),
+            class(true, false),
+            "zero opacity up to the ramp's foot",
+        ),
+        ((39.0, 41.0), class(false, false), "reaches into the ramp"),
+        (
+            (79.0, 100.0),
+            class(false, false),
+            "still inside the ramp at 79",
+        ),
+        ((80.0, 1e9), class(true, false), "past the ramp"),
+        ((50.0, 50.0), class(false, true), "one visible value"),
+        ((90.0, 90.0), class(true, true), "one transparent value"),
+        (
+            (f32::INFINITY, f32::NEG_INFINITY),
+            class(true, false),
+            "no data",
+        ),
+        ((f32::NAN, f32::NAN), class(true, false), "NaN only"),
+    ];
+    for ((lo, hi), want, why) in cases {
+        assert_eq!(range_class(s, lo, hi), want, "{why}");
+    }
     assert_eq!(
-        range_class(s, 0.0, 40.0),
-        1,
-        "zero opacity up to the ramp's foot"
+        range_class(None, 50.0, 60.0),
+        class(true, false),
+        "a channel not drawn"
     );
-    assert_eq!(range_class(s, 39.0, 41.0), 0, "reaches into the ramp");
-    assert_eq!(
-        range_class(s, 79.0, 100.0),
-        0,
-        "still inside the ramp at 79"
-    );
-    assert_eq!(range_class(s, 80.0, 1e9), 1, "past the ramp");
-    assert_eq!(range_class(s, 50.0, 50.0), 2, "one visible value");
-    assert_eq!(range_class(s, 90.0, 90.0), 3, "one transparent value");
-    assert_eq!(
-        range_class(s, f32::INFINITY, f32::NEG_INFINITY),
-        1,
-        "no data"
-    );
-    assert_eq!(range_class(s, f32::NAN, f32::NAN), 1, "NaN only");
-    assert_eq!(range_class(None, 50.0, 60.0), 1, "a channel not drawn");
     let hidden = ChannelStyle {
         visible: false,
         ..style.clone()
     };
     assert_eq!(
         range_class(Some(&hidden), 50.0, 60.0),
-        1,
+        class(true, false),
         "a hidden channel"
     );
 }
