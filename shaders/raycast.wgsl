@@ -153,9 +153,14 @@ fn fine_shift() -> vec3<u32> {
     return vec3<u32>(P.fine);
 }
 
+// Shift from fine cells to the node of depth d holding them: `cell >> node_shift(d)`.
+fn node_shift(d: u32) -> vec3<u32> {
+    return vec3<u32>(P.leaf_depth - d) + fine_shift();
+}
+
 // Node of depth d holding the fine cell `cell`.
 fn node_index(d: u32, cell: vec3<i32>) -> u32 {
-    let n = vec3<u32>(cell >> (vec3<u32>(P.leaf_depth - d) + fine_shift()));
+    let n = vec3<u32>(cell >> node_shift(d));
     let offset = ((1u << (3u * d)) - 1u) / 7u;
     return offset + (((n.z << d) + n.y) << d) + n.x;
 }
@@ -417,7 +422,7 @@ fn advance(ray: ptr<function, Ray>, dir: vec3<f32>, dt: f32) {
 // (`dir`: fine units per world unit). The distance to the far face is taken in integers
 // first, so it stays exact near the face however large the node.
 fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
-    let s = vec3<u32>(P.leaf_depth - d) + fine_shift();
+    let s = node_shift(d);
     let lo = (ray.cell >> s) << s;
     let far_cells = select(lo - ray.cell, lo + (vec3<i32>(1) << s) - ray.cell, dir > vec3<f32>(0.0));
     let far = vec3<f32>(far_cells) - ray.local;
@@ -801,16 +806,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let desired_step = P.step_fraction * level_voxel(finest);
             var v: Visit;
             if METHOD == METHOD_RESIDENCY {
-                let node_shift = vec3<u32>(P.leaf_depth - held.depth) + fine_shift();
                 if held.action == ACTION_SAMPLE && desired_step == held_step
-                    && all((ray.cell >> node_shift) == held_cell) {
+                    && all((ray.cell >> node_shift(held.depth)) == held_cell) {
                     v = held;
                 } else {
                     v = visit_octree(ray, last_depth, desired_step, dir, skipping);
                     last_depth = v.depth;
                     held = v;
                     held_step = desired_step;
-                    held_cell = ray.cell >> (vec3<u32>(P.leaf_depth - v.depth) + fine_shift());
+                    held_cell = ray.cell >> node_shift(v.depth);
                 }
             } else if METHOD == METHOD_PAGE_TABLE {
                 v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);

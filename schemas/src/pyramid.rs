@@ -295,7 +295,7 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
     /// Decoded bytes of one full brick.
     #[must_use]
     pub fn brick_bytes(&self) -> u64 {
-        self.brick_shape.iter().product::<u64>() * self.sample_type.bytes() as u64
+        self.sample_type.block_bytes(self.brick_shape)
     }
 
     /// The array chunk (or inner chunk) indices of a brick.

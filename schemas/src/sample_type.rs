@@ -75,6 +75,12 @@ impl SampleType {
         Self::F32,
     ];
 
+    /// Decoded bytes of a block (a brick) of `shape` samples.
+    #[must_use]
+    pub fn block_bytes(self, shape: [u64; 3]) -> u64 {
+        shape.iter().product::<u64>() * self.bytes() as u64
+    }
+
     /// Bytes per sample.
     #[must_use]
     pub fn bytes(self) -> usize {

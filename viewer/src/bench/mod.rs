@@ -919,7 +919,7 @@ impl Bench {
             .max()
             .unwrap_or(1)
             .max(1);
-        let slot = self.slot_bytes();
+        let slot = self.info().brick_bytes();
         let mut runs = vec![default];
         let sv = self.plan.sweep.clone();
         for s in sv.steps {
@@ -986,11 +986,6 @@ impl Bench {
         Ok(runs)
     }
 
-    fn slot_bytes(&self) -> u64 {
-        let info = self.info();
-        info.brick_shape.iter().product::<u64>() * info.sample_type.bytes() as u64
-    }
-
     /// Scaling: one residency run with the base options.
     ///
     /// # Errors
@@ -1022,7 +1017,7 @@ impl Bench {
     /// its reference.
     pub fn skipped(&self) -> Result<Vec<SkippedRecord>, BenchError> {
         let info = self.info().clone();
-        let brick_bytes = self.slot_bytes();
+        let brick_bytes = info.brick_bytes();
         (0..self.cameras.len())
             .map(|k| {
                 self.bar

@@ -6,9 +6,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::plots::{self, PlotError, ScalingSeries, TradeoffPoint};
-use super::{
-    BenchResults, DatasetInfo, Experiment, FORMAT, ProbeRecord, RunRecord, SweptParameter, pareto,
-};
+use super::{BenchResults, Experiment, FORMAT, ProbeRecord, RunRecord, SweptParameter, pareto};
 use crate::gpu::probe::ProbeFilter;
 
 /// Why a report could not be written: a results file that cannot be read or is not one, or a
@@ -579,13 +577,7 @@ fn skipped(out: &mut String, all: &[BenchResults]) {
         "| Dataset | view ° | naive level | naive bricks (fill / empty under TF) | naive MB | ours bricks fetched | ours MB | naive/ours bytes | ours read (converged) | ceiling naive/read | ours requested (empty under TF) | samples naive / ours | PSNR dB naive / ours |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for r in with {
-        let mut tn = 0u64;
-        let mut to = 0u64;
-        let mut tr = 0u64;
         for s in &r.skipped {
-            tn += s.naive_bytes;
-            to += s.ours_bytes_fetched;
-            tr += s.ours_bricks_read;
             let _ = writeln!(
                 out,
                 "| {} | {:.0} | {} | {} ({} / {}) | {} | {} | {} | {} | {} | {} | {} ({}) | {} / {} | {} / {} |",
@@ -609,45 +601,55 @@ fn skipped(out: &mut String, all: &[BenchResults]) {
                 psnr(s.ours_psnr_db),
             );
         }
-        let ratio = |d: u64| {
-            if d > 0 {
-                format!("{:.2}", tn as f64 / d as f64)
-            } else {
-                "–".into()
-            }
-        };
+        let t = SkippedTotals::of(r);
         let _ = writeln!(
             out,
             "| **{} total** | | | | {} | | {} | {} | {} | {} | | | |",
             r.dataset.label,
-            mb(tn as f64),
-            mb(to as f64),
-            ratio(to),
-            tr,
-            ratio(tr * brick_bytes(&r.dataset)),
+            mb(t.naive as f64),
+            mb(t.fetched as f64),
+            opt(t.ratio(), 2),
+            t.bricks_read,
+            opt(t.ceiling(), 2),
         );
     }
 }
 
-/// Decoded bytes of one brick of the dataset.
-fn brick_bytes(d: &DatasetInfo) -> u64 {
-    d.brick_shape.iter().product::<u64>() * d.sample_type.bytes() as u64
+/// Decoded bytes over every skipped record of one results file.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SkippedTotals {
+    /// The naive loader's.
+    pub naive: u64,
+    /// Ours fetched.
+    pub fetched: u64,
+    /// Bricks our converged frames read.
+    pub bricks_read: u64,
+    /// Bytes of one brick.
+    pub brick_bytes: u64,
 }
 
-/// Bytes ratio naive/ours over every skipped record of `r` (`None` if ours fetched nothing).
-pub fn skipped_ratio(r: &BenchResults) -> Option<f64> {
-    let n: u64 = r.skipped.iter().map(|s| s.naive_bytes).sum();
-    let o: u64 = r.skipped.iter().map(|s| s.ours_bytes_fetched).sum();
-    (o > 0).then(|| n as f64 / o as f64)
-}
+impl SkippedTotals {
+    /// The totals of `r`'s skipped records.
+    pub fn of(r: &BenchResults) -> Self {
+        Self {
+            naive: r.skipped.iter().map(|s| s.naive_bytes).sum(),
+            fetched: r.skipped.iter().map(|s| s.ours_bytes_fetched).sum(),
+            bricks_read: r.skipped.iter().map(|s| s.ours_bricks_read).sum(),
+            brick_bytes: r.dataset.sample_type.block_bytes(r.dataset.brick_shape),
+        }
+    }
 
-/// The ceiling of [`skipped_ratio`]: naive bytes over the bytes of the bricks our converged
-/// frames read, over every skipped record of `r` (`None` if they read nothing).
-pub fn skipped_ceiling(r: &BenchResults) -> Option<f64> {
-    let n: u64 = r.skipped.iter().map(|s| s.naive_bytes).sum();
-    let read: u64 =
-        r.skipped.iter().map(|s| s.ours_bricks_read).sum::<u64>() * brick_bytes(&r.dataset);
-    (read > 0).then(|| n as f64 / read as f64)
+    /// Naive over ours fetched (`None` if ours fetched nothing).
+    pub fn ratio(&self) -> Option<f64> {
+        (self.fetched > 0).then(|| self.naive as f64 / self.fetched as f64)
+    }
+
+    /// The ceiling of [`SkippedTotals::ratio`]: naive over the bricks our converged frames
+    /// read (`None` if they read nothing).
+    pub fn ceiling(&self) -> Option<f64> {
+        let read = self.bricks_read * self.brick_bytes;
+        (read > 0).then(|| self.naive as f64 / read as f64)
+    }
 }
 
 /// The scaling series of `runs`: one per distinct `key` with more than one distinct `x`, its
@@ -877,9 +879,12 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written, R
     let skip: Vec<String> = all
         .iter()
         .filter_map(|r| {
-            let ceiling =
-                skipped_ceiling(r).map_or(String::new(), |c| format!(" (ceiling {c:.2}×)"));
-            skipped_ratio(r).map(|x| format!("{} {:.2}×{ceiling}", r.dataset.label, x))
+            let t = SkippedTotals::of(r);
+            let ceiling = t
+                .ceiling()
+                .map_or(String::new(), |c| format!(" (ceiling {c:.2}×)"));
+            t.ratio()
+                .map(|x| format!("{} {:.2}×{ceiling}", r.dataset.label, x))
         })
         .collect();
     if !skip.is_empty() {

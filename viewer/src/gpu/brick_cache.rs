@@ -165,7 +165,7 @@ impl BrickCache {
 
     /// Bytes of one slot.
     pub fn slot_bytes(&self) -> u64 {
-        self.brick.iter().map(|&b| b as u64).product::<u64>() * self.sample_type.bytes() as u64
+        self.sample_type.block_bytes(self.brick.map(u64::from))
     }
 
     /// Views of the `u32`, `i32` and `f32` atlas bindings (two of them 1-texel placeholders).

@@ -47,8 +47,9 @@ pub struct RangeClass {
     pub constant: bool,
 }
 
-/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style`: the
-/// exact rule of [`ChannelStyle::transparent_over`], as for the clear bricks ([`is_clear`]).
+/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style`, by the
+/// exact rule of [`ChannelStyle::transparent_over`]; the clear bricks ([`is_clear`]) follow it
+/// too.
 pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> RangeClass {
     let empty = match style {
         None => true,
@@ -217,15 +218,20 @@ impl ResidencyState {
                 // finds it when it is shown again.
                 continue;
             }
-            let clear = styles
-                .iter()
-                .find(|s| s.channel == key.channel as usize)
+            let clear = self
+                .style_of(&key)
                 .is_some_and(|style| is_clear(&self.info, style, &key));
             let wanted = if clear { ENTRY_CLEAR } else { ENTRY_MISSING };
             if entry != wanted {
                 self.pages.set(id, wanted);
             }
         }
+    }
+
+    /// The style of `key`'s channel (`None`: not drawn).
+    fn style_of(&self, key: &BrickKey) -> Option<&ChannelStyle> {
+        let slot = self.octree.slot_of(key.channel as usize)?;
+        self.styles[slot].as_ref()
     }
 
     /// Whether `key` is resident (in a slot, or as a fill-value brick).
@@ -316,11 +322,7 @@ impl ResidencyState {
         } else if stale {
             let words: Vec<u32> = (0..self.brick_ranges.len() as u32)
                 .map(|id| {
-                    let style = self
-                        .pages
-                        .key(id)
-                        .and_then(|k| self.octree.slot_of(k.channel as usize))
-                        .and_then(|s| self.styles[s].as_ref());
+                    let style = self.pages.key(id).and_then(|k| self.style_of(&k));
                     let (lo, hi) = self.brick_ranges[id as usize];
                     u32::from(range_class(style, lo, hi).empty)
                 })
@@ -340,6 +342,6 @@ impl ResidencyState {
 /// TF".
 pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey) -> bool {
     let (lo, hi) = info.brick_range(key);
-    let (lo, hi) = (f64::from(f32_down(lo)), f64::from(f32_up(hi)));
-    lo <= hi && style.transparent_over(lo, hi)
+    let (lo, hi) = (f32_down(lo), f32_up(hi));
+    lo <= hi && range_class(Some(style), lo, hi).empty
 }

@@ -664,6 +664,11 @@ impl VolumeInfo {
         })
     }
 
+    /// Decoded bytes of one brick.
+    pub fn brick_bytes(&self) -> u64 {
+        self.sample_type.block_bytes(self.brick_shape)
+    }
+
     /// The level-0 voxel size in the GPU's axis order, `x, y, z` (world units).
     pub fn spacing_xyz(&self) -> [f64; 3] {
         let [z, y, x] = self.voxel_size;

@@ -242,8 +242,7 @@ pub fn parse_minmax(
 
 /// Bricks per request: within both of the server's caps, at least one.
 pub fn batch_size(info: &VolumeInfo) -> usize {
-    let brick = info.brick_shape.iter().product::<u64>() * info.sample_type.bytes() as u64;
-    ((MAX_BATCH_BYTES / brick.max(1)) as usize).clamp(1, MAX_BATCH)
+    ((MAX_BATCH_BYTES / info.brick_bytes().max(1)) as usize).clamp(1, MAX_BATCH)
 }
 
 /// The `/bricks` URL asking dataset `base` for `keys`, decoded (`encoding=raw`).
@@ -333,7 +332,7 @@ pub fn parse_batch(
             asked: keys.len(),
         });
     }
-    let expected = info.brick_shape.iter().product::<u64>() as usize * info.sample_type.bytes();
+    let expected = info.brick_bytes() as usize;
     Ok(header
         .bricks
         .iter()
