@@ -203,13 +203,14 @@ fn texel(p: vec3<i32>) -> f32 {
 
 // Atlas origin of the slot of a resident page-table entry; records the slot's use (LRU, and
 // the bricks a frame needs resident). Slots per x and y are powers of two (P.slots_x_log2y: log2).
+// A slot holds the brick and its apron: APRON_VOXELS more voxels per axis.
 fn slot_origin(entry: u32) -> vec3<i32> {
-    let slot = entry - 2u;
+    let slot = (entry & ~ENTRY_APRON) - 2u;
     usage[slot] = P.frame;
     let lx = P.slots_x_log2;
     let ly = P.slots_y_log2;
     let sc = vec3<u32>(slot & ((1u << lx) - 1u), (slot >> lx) & ((1u << ly) - 1u), slot >> (lx + ly));
-    return vec3<i32>(sc * P.brick);
+    return vec3<i32>(sc * (P.brick + vec3<u32>(APRON_VOXELS)));
 }
 
 fn request(pid: u32, t: f32) {
@@ -280,11 +281,13 @@ struct Sampled {
 }
 
 // Trilinear sample of channel c at level l (voxel centres at i + ½, clamped to the edge
-// voxels). The 8 voxels lie in at most 8 bricks; each brick is looked up once per run of
-// corners in it, with one integer division per axis for the whole sample and a single
-// texel-fetch site (a CPU Vulkan driver runs every branch's code, so the shader keeps few).
-// With `want`, every missing brick is requested; without it the first miss returns. A clear
-// brick (ENTRY_CLEAR) in the footprint makes the sample clear.
+// voxels). The 8 voxels lie in at most 8 bricks. The brick of the first voxel is looked up;
+// when the footprint stays in it, or its apron is complete (ENTRY_APRON: the slot holds the
+// next brick's first voxels too), its slot serves all 8. Otherwise each brick is looked up
+// once per run of corners in it, with a single texel-fetch site (a CPU Vulkan driver runs
+// every branch's code, so the shader keeps few). With `want`, every missing brick is
+// requested; without it the first miss returns. A clear brick (ENTRY_CLEAR) in the footprint
+// makes the sample clear.
 fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
     let pos = level_pos(l, cell, local);
     let fp = pos.fp - vec3<f32>(0.5);
@@ -302,11 +305,11 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     let b1 = b0 + select(vec3<u32>(0u), vec3<u32>(1u), wrap);
     let r1 = select(r0n, vec3<u32>(0u), wrap);
     var result = Sampled(0.0, true, 0u, false);
-    // Fast path, the common case: all 8 voxels in one brick (one lookup, unrolled fetches;
-    // 20% faster on lavapipe than the general loop below).
-    if all(b0 == b1) {
-        let pid = brick_id(c, l, b0);
-        let entry = page_table[pid];
+    // Fast path, the common case: all 8 voxels in one slot (one lookup, unrolled fetches).
+    let pid = brick_id(c, l, b0);
+    let entry = page_table[pid];
+    let apron = entry != ENTRY_CLEAR && (entry & ENTRY_APRON) != 0u;
+    if apron || all(b0 == b1) {
         if entry == 0u {
             result.ok = false;
             result.missing = pid + 1u;
@@ -324,7 +327,7 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
         }
         let o = slot_origin(entry);
         let l0 = o + vec3<i32>(r0);
-        let l1 = o + vec3<i32>(r1);
+        let l1 = o + vec3<i32>(r0n);
         let x00 = mix(texel(l0), texel(vec3<i32>(l1.x, l0.y, l0.z)), w.x);
         let x10 = mix(texel(vec3<i32>(l0.x, l1.y, l0.z)), texel(vec3<i32>(l1.x, l1.y, l0.z)), w.x);
         let x01 = mix(texel(vec3<i32>(l0.x, l0.y, l1.z)), texel(vec3<i32>(l1.x, l0.y, l1.z)), w.x);
@@ -334,28 +337,28 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
     }
     var acc = 0.0;
     var last = 0xffffffffu;
-    var entry = 0u;
+    var entry_k = 0u;
     var origin = vec3<i32>(0);
     for (var k = 0u; k < 8u; k++) {
         let bits = vec3<bool>((k & 1u) != 0u, (k & 2u) != 0u, (k & 4u) != 0u);
-        let pid = brick_id(c, l, select(b0, b1, bits));
-        if pid != last {
-            last = pid;
-            entry = page_table[pid];
-            if entry == 0u {
+        let pid_k = brick_id(c, l, select(b0, b1, bits));
+        if pid_k != last {
+            last = pid_k;
+            entry_k = page_table[pid_k];
+            if entry_k == 0u {
                 result.ok = false;
-                result.missing = pid + 1u;
+                result.missing = pid_k + 1u;
                 if !want {
                     return result;
                 }
-                request(pid, t);
-            } else if entry == ENTRY_CLEAR {
+                request(pid_k, t);
+            } else if entry_k == ENTRY_CLEAR {
                 return Sampled(0.0, true, 0u, true);
-            } else if entry != ENTRY_EMPTY {
-                origin = slot_origin(entry);
+            } else if entry_k != ENTRY_EMPTY {
+                origin = slot_origin(entry_k);
             }
         }
-        if entry > ENTRY_EMPTY {
+        if entry_k > ENTRY_EMPTY {
             let wk = select(vec3<f32>(1.0) - w, w, bits);
             acc += wk.x * wk.y * wk.z * texel(origin + vec3<i32>(select(r0, r1, bits)));
         }

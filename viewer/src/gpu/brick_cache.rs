@@ -2,10 +2,13 @@
 //! read by the shader with `textureLoad` and manual trilinear filtering so that 16-bit and
 //! float data stay exact. Format per sample type: `u8 → R8Uint`, `u16 → R16Uint`,
 //! `i16 → R16Sint`, `u32 → R32Uint`, `i32 → R32Sint`, `f32 → R32Float` (the shader converts
-//! to `f32`; `u32`/`i32` above 2²⁴ lose low bits there). Slots are replaced least recently
-//! used first, where "used" is the shader's per-slot usage feedback.
+//! to `f32`; `u32`/`i32` above 2²⁴ lose low bits there). A slot holds a brick and its apron
+//! ([`super::apron`]): [`APRON_VOXELS`] more voxels per axis. Slots are replaced least
+//! recently used first, where "used" is the shader's per-slot usage feedback.
 
 use super::GpuError;
+use super::apron::APRON_VOXELS;
+use super::page_table::ENTRY_APRON;
 use crate::source::{BrickVoxels, SampleType};
 
 /// Which of the shader's three atlas bindings holds the data.
@@ -50,8 +53,8 @@ pub struct BrickCache {
 }
 
 impl BrickCache {
-    /// A cache of as many `brick`-voxel slots (`x, y, z`) as fit in `cache_bytes` and in the
-    /// device's 3D texture limit.
+    /// A cache of as many slots for `brick`-voxel bricks (`x, y, z`) and their aprons as fit
+    /// in `cache_bytes` and in the device's 3D texture limit.
     ///
     /// # Errors
     /// [`GpuError::BrickOverTextureLimit`] or [`GpuError::CacheTooSmall`] when not even one
@@ -64,11 +67,12 @@ impl BrickCache {
         cache_bytes: u64,
     ) -> Result<Self, GpuError> {
         let (format, kind) = atlas_format(sample_type);
-        let brick_bytes =
-            brick.iter().map(|&b| b as u64).product::<u64>() * sample_type.bytes() as u64;
-        let wanted = (cache_bytes / brick_bytes).min(u32::MAX as u64 / 2) as u32;
+        let slot = brick.map(|b| b + APRON_VOXELS);
+        let brick_bytes = sample_type.block_bytes(slot.map(u64::from));
+        // Page-table entries hold `slot + 2` below the apron bit.
+        let wanted = (cache_bytes / brick_bytes).min(u64::from(ENTRY_APRON - 2)) as u32;
         let max_dim = limits.max_texture_dimension_3d;
-        let fit: [u32; 3] = std::array::from_fn(|a| max_dim / brick[a]);
+        let fit: [u32; 3] = std::array::from_fn(|a| max_dim / slot[a]);
         if fit.contains(&0) {
             return Err(GpuError::BrickOverTextureLimit {
                 brick,
@@ -111,7 +115,7 @@ impl BrickCache {
         };
         let atlas = texture(
             "brick cache",
-            [sx * brick[0], sy * brick[1], sz * brick[2]],
+            [sx * slot[0], sy * slot[1], sz * slot[2]],
             format,
         );
         use wgpu::TextureFormat as F;
@@ -163,9 +167,25 @@ impl BrickCache {
         self.kind
     }
 
-    /// Bytes of one slot.
+    /// Bytes of one slot (a brick and its apron).
     pub fn slot_bytes(&self) -> u64 {
-        self.sample_type.block_bytes(self.brick.map(u64::from))
+        self.sample_type
+            .block_bytes(self.brick.map(|b| u64::from(b + APRON_VOXELS)))
+    }
+
+    /// Edge of a brick, voxels (`x, y, z`).
+    pub fn brick(&self) -> [u32; 3] {
+        self.brick
+    }
+
+    /// Bytes of one sample.
+    pub fn sample_bytes(&self) -> usize {
+        self.sample_type.bytes()
+    }
+
+    /// The sample type of the atlas.
+    pub fn sample_type(&self) -> SampleType {
+        self.sample_type
     }
 
     /// Views of the `u32`, `i32` and `f32` atlas bindings (two of them 1-texel placeholders).
@@ -229,24 +249,18 @@ impl BrickCache {
         self.owner[slot as usize] = Some(id);
     }
 
-    /// Returns `slot` to the free list (after a failed upload).
-    pub fn release(&mut self, slot: u32) {
-        self.owner[slot as usize] = None;
-        self.free.push(slot);
+    /// The page-table id `slot` holds.
+    pub fn owner(&self, slot: u32) -> Option<u32> {
+        self.owner[slot as usize]
     }
 
-    /// Checks that `voxels` is a full brick of the cache's sample type and writes it to `slot`.
+    /// The raw samples of `voxels`, checked to be a full brick of the cache's sample type.
     ///
     /// # Errors
-    /// [`GpuError::EmptyBrickUpload`] or [`GpuError::WrongBrick`], and nothing is written.
-    pub fn upload(
-        &self,
-        queue: &wgpu::Queue,
-        slot: u32,
-        voxels: &BrickVoxels,
-    ) -> Result<(), GpuError> {
+    /// [`GpuError::EmptyBrickUpload`] or [`GpuError::WrongBrick`].
+    pub fn brick_bytes<'a>(&self, voxels: &'a BrickVoxels) -> Result<&'a [u8], GpuError> {
         let n = self.brick.iter().map(|&b| b as usize).product::<usize>();
-        let bytes: &[u8] = match (self.sample_type, voxels) {
+        Ok(match (self.sample_type, voxels) {
             (SampleType::U8, BrickVoxels::U8(v)) if v.len() == n => v,
             (SampleType::U16, BrickVoxels::U16(v)) if v.len() == n => bytemuck::cast_slice(v),
             (SampleType::I16, BrickVoxels::I16(v)) if v.len() == n => bytemuck::cast_slice(v),
@@ -261,32 +275,49 @@ impl BrickCache {
                     sample_type: self.sample_type,
                 });
             }
-        };
+        })
+    }
+
+    /// Writes a brick's raw samples (from [`BrickCache::brick_bytes`]) to `slot`.
+    pub fn upload(&self, queue: &wgpu::Queue, slot: u32, bytes: &[u8]) {
+        self.write_box(queue, slot, [0; 3], self.brick, bytes);
+    }
+
+    /// Writes `bytes` (`x` fastest) to the box of `extent` voxels at `origin` within `slot`
+    /// (an apron part, or the whole brick).
+    pub fn write_box(
+        &self,
+        queue: &wgpu::Queue,
+        slot: u32,
+        origin: [u32; 3],
+        extent: [u32; 3],
+        bytes: &[u8],
+    ) {
         let [sx, sy, _] = self.slots_per_axis;
         let s = [slot % sx, (slot / sx) % sy, slot / (sx * sy)];
+        let at = |a: usize| s[a] * (self.brick[a] + APRON_VOXELS) + origin[a];
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.atlas,
                 mip_level: 0,
                 origin: wgpu::Origin3d {
-                    x: s[0] * self.brick[0],
-                    y: s[1] * self.brick[1],
-                    z: s[2] * self.brick[2],
+                    x: at(0),
+                    y: at(1),
+                    z: at(2),
                 },
                 aspect: wgpu::TextureAspect::All,
             },
             bytes,
             wgpu::TexelCopyBufferLayout {
                 offset: 0,
-                bytes_per_row: Some(self.brick[0] * self.sample_type.bytes() as u32),
-                rows_per_image: Some(self.brick[1]),
+                bytes_per_row: Some(extent[0] * self.sample_type.bytes() as u32),
+                rows_per_image: Some(extent[1]),
             },
             wgpu::Extent3d {
-                width: self.brick[0],
-                height: self.brick[1],
-                depth_or_array_layers: self.brick[2],
+                width: extent[0],
+                height: extent[1],
+                depth_or_array_layers: extent[2],
             },
         );
-        Ok(())
     }
 }

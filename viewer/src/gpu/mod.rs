@@ -7,6 +7,8 @@
 //!   prelude of constants; the binding numbers);
 //! - [`device`]: adapter and device creation (lavapipe works), timestamp-query support;
 //! - [`page_table`]: page tables per (channel, level) and the brick ids the shader reports;
+//! - [`apron`]: each slot's one-voxel apron of its neighbours' first voxels, so a trilinear
+//!   sample reads one slot;
 //! - [`brick_cache`]: the brick cache atlas per sample format, with LRU eviction driven by the
 //!   shader's usage feedback;
 //! - [`tables`]: the scene tables the shader consults (levels, channels, transfer
@@ -25,6 +27,7 @@
 //! - [`timer`]: GPU time of compute passes from timestamp queries;
 //! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
 
+pub mod apron;
 pub mod brick_cache;
 pub mod buffers;
 pub mod contract;

@@ -2,7 +2,8 @@
 //! entry of a brick is `0` when it is not resident, `1` when it equals the fill value 0
 //! everywhere (it takes no cache slot), [`ENTRY_CLEAR`] when it is never needed (it is
 //! transparent under the transfer function by its haloed range), and `slot + 2` when it is in
-//! cache slot `slot`. A brick's *id* is its entry's index; the shader reports misses by id.
+//! cache slot `slot`, with [`ENTRY_APRON`] set once the slot's apron is complete
+//! ([`super::apron`]). A brick's *id* is its entry's index; the shader reports misses by id.
 
 use super::GpuError;
 use crate::octree::OctreeGeometry;
@@ -17,6 +18,23 @@ pub const ENTRY_EMPTY: u32 = 1;
 /// trilinear footprint that reaches the brick, so such a sample has opacity exactly 0 and
 /// the shader takes it as clear without reading a voxel.
 pub const ENTRY_CLEAR: u32 = u32::MAX;
+/// Bit of a slot's entry set when its apron is complete: a sample whose first voxel lies in
+/// the brick finds all eight in the slot. Slots are fewer than `ENTRY_APRON - 2`.
+pub const ENTRY_APRON: u32 = 1 << 30;
+
+/// The entry of a brick in cache slot `slot`, with [`ENTRY_APRON`] where its apron is
+/// complete.
+pub fn slot_entry(slot: u32, apron_complete: bool) -> u32 {
+    (slot + 2) | if apron_complete { ENTRY_APRON } else { 0 }
+}
+
+/// The cache slot of an entry (`None`: the brick is in no slot).
+pub fn entry_slot(entry: u32) -> Option<u32> {
+    match entry {
+        ENTRY_MISSING | ENTRY_EMPTY | ENTRY_CLEAR => None,
+        e => Some((e & !ENTRY_APRON) - 2),
+    }
+}
 
 /// The page tables of the rendered channels and all levels, with a CPU mirror.
 pub struct PageTables {
@@ -120,6 +138,11 @@ impl PageTables {
             channel: self.channels[slot] as u32,
             brick: [z, y, x],
         })
+    }
+
+    /// Bricks per axis (`x, y, z`) of level `level`.
+    pub fn grid(&self, level: u32) -> [u64; 3] {
+        self.grids[level as usize]
     }
 
     /// Number of ids (bricks of every rendered channel and level).

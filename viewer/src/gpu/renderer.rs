@@ -13,6 +13,7 @@ use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, readback_buffer, storage_buffer, uniform_buffer};
 use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
 use super::device::Gpu;
+use super::page_table::PageTables;
 use super::pipeline::{Bindings, RaycastPipeline};
 use super::residency::ResidencyState;
 pub use super::residency::is_clear;
@@ -373,6 +374,11 @@ impl Renderer {
     /// The residency octree.
     pub fn octree(&self) -> &ResidencyOctree {
         self.residency.octree()
+    }
+
+    /// The page tables (CPU mirror of what the shader reads).
+    pub fn pages(&self) -> &PageTables {
+        self.residency.pages()
     }
 
     /// The brick cache.

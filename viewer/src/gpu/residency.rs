@@ -2,15 +2,19 @@
 //! (partial-residency masks and value ranges per node) and its node buffer, the page tables,
 //! the brick cache, and the classes the ray caster culls with (after the nodes): per node for
 //! ours, per brick for the baselines, each "empty" or "constant" per channel under the
-//! transfer functions. It changes as bricks arrive and are evicted; a restyle only redoes the
-//! classes and the clear-brick marks ([`ResidencyState::restyle`]), so every resident brick
-//! stays.
+//! transfer functions. It changes as bricks arrive and are evicted, each arrival filling the
+//! aprons it completes ([`super::apron`]); a restyle only redoes the classes, the clear-brick
+//! marks and the aprons that stood in for clear bricks ([`ResidencyState::restyle`]), so
+//! every resident brick stays.
 
 use super::GpuError;
+use super::apron::{self, Aprons, EntryKind, LowFaces, Part, PartSource};
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, storage_buffer};
 use super::device::Gpu;
-use super::page_table::{ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables};
+use super::page_table::{
+    ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables, entry_slot, slot_entry,
+};
 use super::renderer::{Inserted, Method, RenderOptions};
 use crate::octree::{OctreeGeometry, ResidencyOctree, f32_down, f32_up};
 use crate::scene::ChannelStyle;
@@ -24,6 +28,8 @@ pub struct ResidencyState {
     octree: ResidencyOctree,
     pages: PageTables,
     cache: BrickCache,
+    /// What the slots' aprons hold.
+    aprons: Aprons,
     /// The octree's nodes, then the per-node classes (ours) or per-brick classes (the
     /// baselines).
     nodes: wgpu::Buffer,
@@ -35,6 +41,9 @@ pub struct ResidencyState {
     styles: Vec<Option<ChannelStyle>>,
     /// Whether every class must be rewritten at the next flush (a restyle).
     classes_stale: bool,
+    /// Whether every slot's apron must be refilled at the next flush (a restyle emptied the
+    /// parts that stood in for clear bricks).
+    aprons_stale: bool,
 }
 
 /// What the ray caster needs to know of a node's or brick's value range in one channel.
@@ -141,6 +150,7 @@ impl ResidencyState {
         check_binding(gpu, "the octree", bytes, hint)?;
         let nodes = storage_buffer(gpu, "octree nodes", bytes, wgpu::BufferUsages::empty());
         let styles = vec![None; octree.channels().len()];
+        let aprons = Aprons::new(cache.capacity());
         Ok(Self {
             info: info.clone(),
             method: options.method,
@@ -148,11 +158,13 @@ impl ResidencyState {
             octree,
             pages,
             cache,
+            aprons,
             nodes,
             class_offset: node_words as u32,
             brick_ranges,
             styles,
             classes_stale: true,
+            aprons_stale: false,
         })
     }
 
@@ -208,6 +220,12 @@ impl ResidencyState {
         if self.method != Method::Residency || !self.empty_space_skipping {
             return;
         }
+        for slot in self.aprons.drop_stand_ins() {
+            if let Some(id) = self.cache.owner(slot) {
+                self.pages.set(id, slot_entry(slot, false));
+            }
+        }
+        self.aprons_stale = true;
         for id in 0..self.pages.len() as u32 {
             let Some(key) = self.pages.key(id) else {
                 continue;
@@ -262,8 +280,16 @@ impl ResidencyState {
             self.pages.set(id, ENTRY_EMPTY);
             self.octree.insert(key)?;
             self.octree.refine_ranges(&key, voxels);
+            self.fill_lower_aprons(gpu, &key);
             return Ok(Inserted::Empty);
         }
+        let bytes = self
+            .cache
+            .brick_bytes(voxels)
+            .map_err(|e| GpuError::Upload {
+                key,
+                source: Box::new(e),
+            })?;
         let Some((slot, evicted_id)) = self.cache.allocate(frame) else {
             return Ok(Inserted::CacheFull);
         };
@@ -272,27 +298,112 @@ impl ResidencyState {
                 let old_key = self.pages.key(old).ok_or(GpuError::SlotWithoutKey)?;
                 self.pages.set(old, ENTRY_MISSING);
                 self.octree.evict(old_key)?;
+                self.aprons.forget(old);
                 Some(old_key)
             }
             None => None,
         };
-        if let Err(e) = self.cache.upload(&gpu.queue, slot, voxels) {
-            self.cache.release(slot);
-            return Err(GpuError::Upload {
-                key,
-                source: Box::new(e),
-            });
-        }
+        self.cache.upload(&gpu.queue, slot, bytes);
+        let faces = LowFaces::of(bytes, self.cache.brick(), self.cache.sample_bytes());
+        self.aprons.take_slot(slot, id, faces);
         self.cache.assign(slot, id);
-        self.pages.set(id, slot + 2);
+        self.fill_apron(gpu, id, slot);
         self.octree.insert(key)?;
         // Without region metadata, level-0 bricks give ranges (the fallback).
         self.octree.refine_ranges(&key, voxels);
+        self.fill_lower_aprons(gpu, &key);
         Ok(Inserted::Uploaded { evicted })
+    }
+
+    /// The neighbour of `key` at `offset` (`x, y, z` bricks; `sign` ±1) in its level's grid.
+    fn neighbour(&self, key: &BrickKey, offset: [u64; 3], sign: i64) -> Option<u32> {
+        let mut brick = key.brick;
+        for a in 0..3 {
+            let b = &mut brick[2 - a];
+            *b = b.checked_add_signed(sign * offset[a] as i64)?;
+        }
+        self.pages.id(&BrickKey { brick, ..*key })
+    }
+
+    /// What brick `id` offers its lower neighbours' aprons now (`None`: not yet known).
+    fn part_source(&self, id: u32) -> Option<PartSource<'_>> {
+        match apron::entry_offers(self.pages.entry(id))? {
+            EntryKind::Resident => self.aprons.faces(id).map(PartSource::Faces),
+            EntryKind::FillValue => Some(PartSource::Constant {
+                sample: vec![0; self.cache.sample_bytes()],
+                stand_in: false,
+            }),
+            EntryKind::Clear => {
+                let (lo, _) = self.info.brick_range(&self.pages.key(id)?);
+                apron::sample_bytes(self.cache.sample_type(), lo).map(|sample| {
+                    PartSource::Constant {
+                        sample,
+                        stand_in: true,
+                    }
+                })
+            }
+        }
+    }
+
+    /// Fills the parts of the apron of brick `id` (in `slot`) that its neighbours can fill
+    /// now, and rewrites its entry: [`super::page_table::ENTRY_APRON`] once complete.
+    fn fill_apron(&mut self, gpu: &Gpu, id: u32, slot: u32) {
+        let Some(key) = self.pages.key(id) else {
+            return;
+        };
+        let xyz = [key.brick[2], key.brick[1], key.brick[0]];
+        let needed = apron::needed_parts(xyz, self.pages.grid(key.level));
+        let brick = self.cache.brick();
+        for part in 1..8 as Part {
+            if needed & !self.aprons.filled(slot) & (1 << part) == 0 {
+                continue;
+            }
+            let Some(n) = self.neighbour(&key, apron::part_offset(part), 1) else {
+                continue;
+            };
+            let (origin, extent) = apron::part_box(part, brick);
+            let (bytes, stand_in) = match self.part_source(n) {
+                None => continue,
+                Some(PartSource::Faces(f)) => {
+                    (f.part(part, brick, self.cache.sample_bytes()), false)
+                }
+                Some(PartSource::Constant { sample, stand_in }) => (
+                    sample.repeat(extent.iter().product::<u32>() as usize),
+                    stand_in,
+                ),
+            };
+            self.cache
+                .write_box(&gpu.queue, slot, origin, extent, &bytes);
+            self.aprons.mark(slot, part, stand_in);
+        }
+        let complete = self.aprons.filled(slot) & needed == needed;
+        self.pages.set(id, slot_entry(slot, complete));
+    }
+
+    /// Fills what brick `key` (just resident, or known to be the fill value) completes of the
+    /// aprons of the bricks below it.
+    fn fill_lower_aprons(&mut self, gpu: &Gpu, key: &BrickKey) {
+        for part in 1..8 as Part {
+            let Some(m) = self.neighbour(key, apron::part_offset(part), -1) else {
+                continue;
+            };
+            if let Some(slot) = entry_slot(self.pages.entry(m))
+                && self.aprons.filled(slot) & (1 << part) == 0
+            {
+                self.fill_apron(gpu, m, slot);
+            }
+        }
     }
 
     /// Uploads changed page-table entries, octree nodes and classes.
     pub fn flush(&mut self, gpu: &Gpu) {
+        if std::mem::take(&mut self.aprons_stale) {
+            for id in 0..self.pages.len() as u32 {
+                if let Some(slot) = entry_slot(self.pages.entry(id)) {
+                    self.fill_apron(gpu, id, slot);
+                }
+            }
+        }
         self.pages.flush(&gpu.queue);
         let dirty = self.octree.take_dirty();
         if let Some(range) = &dirty {

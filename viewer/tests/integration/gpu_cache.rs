@@ -18,10 +18,12 @@ fn lru_follows_usage_feedback_and_protects_the_current_frame() {
         &gpu.limits,
         SampleType::U16,
         [8, 8, 8],
-        3 * 1024,
+        // Three slots of 9³ u16: an 8³ brick and its one-voxel apron.
+        3 * 2 * 9 * 9 * 9,
     )
     .unwrap();
     assert_eq!(cache.capacity(), 3);
+    assert_eq!(cache.slot_bytes(), 2 * 9 * 9 * 9);
     assert_eq!(cache.kind(), AtlasKind::Uint);
     // Fill at frame 1 (ids 10, 11, 12).
     for id in 10..13 {
@@ -29,7 +31,7 @@ fn lru_follows_usage_feedback_and_protects_the_current_frame() {
         assert_eq!(evicted, None);
         cache.assign(slot, id);
         let v = BrickVoxels::U16(vec![id as u16; 512]);
-        cache.upload(&gpu.queue, slot, &v).unwrap();
+        cache.upload(&gpu.queue, slot, cache.brick_bytes(&v).unwrap());
     }
     // The shader reports slot 1 used last in frame 2, slot 0 in frame 6, slot 2 in frame 7.
     cache.note_usage(&[6, 2, 7]);
@@ -42,17 +44,19 @@ fn lru_follows_usage_feedback_and_protects_the_current_frame() {
     // Slot 2 was used in frame 7 and the others were just filled: nothing left to evict.
     assert_eq!(cache.allocate(7), None);
     // Wrong type or size is refused.
-    assert!(
-        cache
-            .upload(&gpu.queue, 0, &BrickVoxels::U8(vec![0; 512]))
-            .is_err()
+    let refused = |v: &BrickVoxels| cache.brick_bytes(v).unwrap_err().to_string();
+    assert_eq!(
+        refused(&BrickVoxels::U8(vec![0; 512])),
+        "brick has 512 samples of the wrong type or count (expected 512 of U16)"
     );
-    assert!(
-        cache
-            .upload(&gpu.queue, 0, &BrickVoxels::U16(vec![0; 100]))
-            .is_err()
+    assert_eq!(
+        refused(&BrickVoxels::U16(vec![0; 100])),
+        "brick has 100 samples of the wrong type or count (expected 512 of U16)"
     );
-    assert!(cache.upload(&gpu.queue, 0, &BrickVoxels::Empty).is_err());
+    assert_eq!(
+        refused(&BrickVoxels::Empty),
+        "an empty brick takes no cache slot"
+    );
 }
 
 #[test]

@@ -6,6 +6,7 @@
 use std::sync::Arc;
 
 use crate::render_common::*;
+use residency_viewer::gpu::page_table::{ENTRY_APRON, ENTRY_CLEAR, ENTRY_MISSING, entry_slot};
 use residency_viewer::gpu::renderer::{BrickRequest, RenderOptions, Renderer};
 use residency_viewer::gpu::streaming::{Budget, Fetcher, converge, prioritise};
 use residency_viewer::gpu::synthetic::SyntheticSource;
@@ -74,6 +75,89 @@ fn transparent_region_is_never_requested() {
     assert!(p.frames[0].shader.empty_nodes_skipped > 0);
 }
 
+/// 32³ u8 with bricks 8³: x < 16 a smooth pattern in `[60, 180]`, x ≥ 16 a ripple in
+/// `[5, 15]` (transparent under a ramp from 50, shown by a ramp from 0).
+fn ripple_beside_pattern() -> SyntheticSource {
+    SyntheticSource::new(
+        SampleType::U8,
+        [32, 32, 32],
+        [1.0; 3],
+        [8; 3],
+        4,
+        1,
+        |_, [x, y, z]| {
+            if x < 16 {
+                120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
+            } else {
+                (10.0 + 5.0 * (y as f64 * 0.9 + z as f64 * 0.7 + x as f64 * 1.3).sin()).round()
+            }
+        },
+    )
+}
+
+#[test]
+fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
+    let src = Arc::new(ripple_beside_pattern());
+    let gpu = gpu();
+    let scene = |lo: f64| Scene {
+        camera: camera([-40.0, -30.0, 50.0], [16.0, 16.0, 16.0]),
+        channels: vec![ramp(0, [0.9, 0.9, 0.2], lo, 200.0, 0.2)],
+        background: [0.0, 0.0, 0.0],
+    };
+    let (hidden, shown) = (scene(50.0), scene(0.0));
+    let mut renderer = Renderer::new(gpu, src.info(), &hidden, full_res(48, 48)).unwrap();
+    let fetcher = Fetcher::new(src.clone() as Arc<dyn BrickSource>, 4, 8);
+    let budget = Budget {
+        max_frames: 30,
+        ..Default::default()
+    };
+    let p = converge(gpu, &mut renderer, &fetcher, &budget).unwrap();
+    assert!(p.converged, "{}", p.stop_reason);
+    // Level-0 brick x 16..24 holds the pattern's voxel 15 in its halo, so it is fetched;
+    // x 24..32 (haloed from 23) holds only the ripple: clear, never fetched. Its lower
+    // neighbour's apron takes the ripple's least value in its place, and is complete.
+    let [x2, x3] = [2, 3].map(|x| {
+        let key = BrickKey {
+            level: 0,
+            channel: 0,
+            brick: [1, 1, x],
+        };
+        renderer.pages().id(&key).unwrap()
+    });
+    let id = |x| if x == 2 { x2 } else { x3 };
+    assert_eq!(renderer.pages().entry(id(3)), ENTRY_CLEAR);
+    assert!(entry_slot(renderer.pages().entry(id(2))).is_some());
+    assert_ne!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    assert!(
+        !src.fetch_log()
+            .iter()
+            .any(|k| k.level == 0 && k.brick[2] == 3)
+    );
+    let m = check(
+        "apron-hidden",
+        &p,
+        &image(&p),
+        &reference(&src, &hidden, 48, 48),
+    );
+    assert!(m.psnr_db >= 40.0, "{}", m.psnr_db);
+    // Shown: the stand-in no longer holds, so the apron is incomplete until x 24..32
+    // arrives, and then complete with its voxels.
+    assert!(renderer.restyle(gpu, &shown));
+    assert_eq!(renderer.pages().entry(id(3)), ENTRY_MISSING);
+    assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    let p = converge(gpu, &mut renderer, &fetcher, &budget).unwrap();
+    assert!(p.converged, "{}", p.stop_reason);
+    assert!(entry_slot(renderer.pages().entry(id(3))).is_some());
+    assert_ne!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    let m = check(
+        "apron-shown",
+        &p,
+        &image(&p),
+        &reference(&src, &shown, 48, 48),
+    );
+    assert!(m.psnr_db >= 40.0, "{}", m.psnr_db);
+}
+
 #[test]
 fn small_cache_evicts_and_converges_for_a_new_view() {
     let src = Arc::new(SyntheticSource::new(
@@ -90,9 +174,10 @@ fn small_cache_evicts_and_converges_for_a_new_view() {
         },
     ));
     let gpu = gpu();
-    // 12 slots of 8³ u8 for 64 level-0 bricks: each view below needs fewer, both more.
+    // 12 slots of 9³ u8 (an 8³ brick and its apron) for 64 level-0 bricks: each view below
+    // needs fewer, both more.
     let options = RenderOptions {
-        cache_bytes: 12 * 512,
+        cache_bytes: 12 * 729,
         ..full_res(48, 48)
     };
     let view = |eye: [f64; 3], target: [f64; 3]| Scene {
@@ -130,9 +215,9 @@ fn small_cache_evicts_and_converges_for_a_new_view() {
 fn cache_too_small_stops_cleanly() {
     let src = Arc::new(half_empty());
     let scene = half_scene();
-    // 6 slots for a view needing 32 level-0 bricks.
+    // 6 slots (9³ u8: an 8³ brick and its apron) for a view needing 32 level-0 bricks.
     let options = RenderOptions {
-        cache_bytes: 6 * 512,
+        cache_bytes: 6 * 729,
         ..full_res(48, 48)
     };
     let (p, img) = render(&src, &scene, options, 40);
