@@ -430,7 +430,8 @@ pub struct SkippedRecord {
     pub ours_ssim: f64,
     /// `naive_bytes / ours_bytes_fetched` (`null` when ours fetched nothing).
     pub bytes_ratio: Option<f64>,
-    /// Bricks holding data that our converged frame read (its distinct cache slots): what any
+    /// Bricks holding data that our converged frame read (its distinct cache slots, with every
+    /// brick of a sample's footprint looked up rather than read from an apron): what any
     /// loader must deliver to draw this image, whatever it skips.
     pub ours_bricks_read: u64,
     /// `naive_bytes / (ours_bricks_read × brick bytes)`: the most bytes any loader that
@@ -1036,7 +1037,11 @@ impl Bench {
                     lod_bias: -64.0,
                     ..self.base.clone()
                 };
-                let (_, p) = self.cold(k, o.clone())?;
+                let (mut renderer, p) = self.cold(k, o.clone())?;
+                // The bricks this image reads, those copied into aprons included: one more
+                // frame with every brick of a footprint looked up.
+                renderer.use_aprons(&self.gpu, false);
+                let read = renderer.render(&self.gpu)?.counts.bricks_used;
                 let ours_image = to_image(o.width, o.height, &p.pixels);
                 let ours_m = metrics::compare(&ours_image, &self.references[k])?;
                 let fill = naive
@@ -1056,7 +1061,6 @@ impl Bench {
                     level_bounds: at_naive_level,
                     ..self.base.clone()
                 };
-                let read = p.frames.last().map_or(0, |f| f.shader.bricks_used);
                 let (_, np) = self.cold(k, pinned)?;
                 let naive_image = to_image(o.width, o.height, &np.pixels);
                 let naive_m = metrics::compare(&naive_image, &self.references[k])?;

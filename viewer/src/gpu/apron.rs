@@ -187,6 +187,9 @@ pub struct Aprons {
     filled: Vec<u8>,
     /// Per slot: the parts filled with a clear neighbour's stand-in.
     stand_ins: Vec<u8>,
+    /// Whether complete aprons are marked in the page tables (the default), or every brick
+    /// of a footprint is looked up.
+    used: bool,
 }
 
 impl Aprons {
@@ -196,7 +199,18 @@ impl Aprons {
             faces: HashMap::new(),
             filled: vec![0; capacity as usize],
             stand_ins: vec![0; capacity as usize],
+            used: true,
         }
+    }
+
+    /// Whether complete aprons are marked in the page tables.
+    pub fn used(&self) -> bool {
+        self.used
+    }
+
+    /// Marks complete aprons in the page tables (`true`) or not.
+    pub fn set_used(&mut self, used: bool) {
+        self.used = used;
     }
 
     /// Slot `slot` takes brick `id` with low faces `faces`: its parts are empty.

@@ -485,6 +485,12 @@ impl Renderer {
         self.residency.insert(gpu, key, voxels, self.frame)
     }
 
+    /// Whether the shader reads the bricks' aprons (the default; see
+    /// [`ResidencyState::use_aprons`]).
+    pub fn use_aprons(&mut self, gpu: &Gpu, used: bool) {
+        self.residency.use_aprons(gpu, used);
+    }
+
     /// Uploads changed page-table entries and octree nodes.
     pub fn flush(&mut self, gpu: &Gpu) {
         self.residency.flush(gpu);

@@ -377,7 +377,21 @@ impl ResidencyState {
             self.aprons.mark(slot, part, stand_in);
         }
         let complete = self.aprons.filled(slot) & needed == needed;
-        self.pages.set(id, slot_entry(slot, complete));
+        self.pages
+            .set(id, slot_entry(slot, complete && self.aprons.used()));
+    }
+
+    /// Whether the shader may read complete aprons (the default) or must look up every brick
+    /// a sample's footprint reaches. Without them a frame's usage feedback names every brick
+    /// whose voxels the image reads, the neighbours an apron copied included (the
+    /// benchmark's "bricks read"); the aprons stay filled either way.
+    pub fn use_aprons(&mut self, gpu: &Gpu, used: bool) {
+        self.aprons.set_used(used);
+        for id in 0..self.pages.len() as u32 {
+            if let Some(slot) = entry_slot(self.pages.entry(id)) {
+                self.fill_apron(gpu, id, slot);
+            }
+        }
     }
 
     /// Fills what brick `key` (just resident, or known to be the fill value) completes of the

@@ -156,6 +156,33 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
         &reference(&src, &shown, 48, 48),
     );
     assert!(m.psnr_db >= 40.0, "{}", m.psnr_db);
+    // Without aprons every brick of a footprint is looked up. A narrow view of x ≈ 4.7..16.3
+    // from far above has samples past x = 15.5, whose footprints reach voxel 16 (bricks x 16..24)
+    // through the aprons of bricks x 8..16: without aprons the frame reads those bricks
+    // too, and draws the same picture.
+    let mut narrow = camera([10.5, 16.0, 1000.0], [10.5, 16.0, 16.0]);
+    narrow.fov_y_degrees = 0.665;
+    renderer.set_camera(narrow);
+    converge(gpu, &mut renderer, &fetcher, &budget).unwrap();
+    let with = renderer.render(gpu).unwrap();
+    renderer.use_aprons(gpu, false);
+    assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    let without = renderer.render(gpu).unwrap();
+    assert!(
+        without.counts.bricks_used > with.counts.bricks_used,
+        "{} {}",
+        without.counts.bricks_used,
+        with.counts.bricks_used
+    );
+    let diff = with
+        .pixels
+        .iter()
+        .zip(&without.pixels)
+        .flat_map(|(a, b)| (0..4).map(move |i| (a[i] - b[i]).abs()))
+        .fold(0.0f32, f32::max);
+    assert!(diff < 1e-5, "{diff}");
+    renderer.use_aprons(gpu, true);
+    assert_ne!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
 }
 
 #[test]
