@@ -391,18 +391,24 @@ fn next_candidate(mask: u32, first: u32, k: u32) -> u32 {
 }
 
 // Finest level whose voxel is at least the pixel footprint at distance t (scaled by the LOD
-// bias), within the channel's level bounds.
-fn choose_level(c: u32, t: f32) -> u32 {
+// bias), looking from level `first` up. Voxels grow with the level and the footprint with t,
+// so along a ray the level only coarsens: the ray carries it from step to step.
+fn footprint_level(first: u32, t: f32) -> u32 {
     let target_size = max(t, 0.0) * P.pixel_footprint * exp2(P.lod_bias);
-    var l = S.channels[c].min_level;
-    let lmax = min(S.channels[c].max_level, P.level_count - 1u);
+    var l = first;
     loop {
-        if l >= lmax || level_voxel(l) >= target_size {
+        if l + 1u >= P.level_count || level_voxel(l) >= target_size {
             break;
         }
         l++;
     }
-    return min(l, lmax);
+    return l;
+}
+
+// Channel c's level for the footprint's level l: l within the channel's level bounds.
+fn channel_level(c: u32, l: u32) -> u32 {
+    let lmax = min(S.channels[c].max_level, P.level_count - 1u);
+    return min(max(l, S.channels[c].min_level), lmax);
 }
 
 // ---- ray state ----
@@ -784,6 +790,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // node with the same step, so the octree is descended once per node, not per sample
         // (a visit is a function of the node and the step alone: the same answer again).
         var held = Visit(ACTION_SKIP, 0u, 0u, 0u, 0.0);
+        // The footprint's level at the last step (it only coarsens along the ray).
+        var lod = 0u;
         var held_step = 0.0;
         var held_cell = vec3<i32>(0);
         loop {
@@ -800,10 +808,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             budget--;
             // Desired level per channel, and step: the finest over channels.
+            lod = footprint_level(lod, ray.t + t_plane);
             var chosen: array<u32, MAX_CHANNELS>;
             var finest = P.level_count - 1u;
             for (var c = 0u; c < P.channel_count; c++) {
-                chosen[c] = choose_level(c, ray.t + t_plane);
+                chosen[c] = channel_level(c, lod);
                 finest = min(finest, chosen[c]);
             }
             let desired_step = P.step_fraction * level_voxel(finest);

@@ -1,6 +1,7 @@
 //! The naive loader of the skipped-work comparison: the level a plain LOD rule picks for the
-//! whole view (the shader's `choose_level` evaluated at the distance of the volume centre), and
-//! every brick of that level whose box intersects the view frustum, for every visible channel.
+//! whole view (the shader's `footprint_level` and `channel_level` evaluated at the distance of
+//! the volume centre), and every brick of that level whose box intersects the view frustum,
+//! for every visible channel.
 //! A loader without region metadata would fetch all of them.
 
 use crate::gpu::renderer::RenderOptions;
@@ -16,9 +17,9 @@ pub struct NaiveFetch {
     pub bricks: Vec<BrickKey>,
 }
 
-/// The level the shader's `choose_level` picks at distance `t` from the eye for a
-/// `height`-pixel image: the finest level (within `bounds`) whose voxel is at least the pixel
-/// footprint `t · 2 tan(fov/2) / height · 2^lod_bias`.
+/// The level the shader's `footprint_level` and `channel_level` pick at distance `t` from the
+/// eye for a `height`-pixel image: the finest level (within `bounds`) whose voxel is at least
+/// the pixel footprint `t · 2 tan(fov/2) / height · 2^lod_bias`.
 pub fn choose_level(
     info: &VolumeInfo,
     camera: &Camera,
