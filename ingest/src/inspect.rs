@@ -1,13 +1,13 @@
-//! `ingest inspect`: a human-readable report of an OME-Zarr store.
+//! `ingest inspect`: a human-readable report of an OME-Zarr store, in a local folder or an
+//! object store.
 
 use std::fmt::Write;
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::path::PathBuf;
 
+use residency_schemas::location::{LocationError, ObjectStoreOptions, StoreLocation};
 use residency_schemas::pyramid::{Pyramid, PyramidError};
 use residency_schemas::zarr::SHARDING_CODEC;
 use zarrs::array::ArrayMetadata;
-use zarrs::filesystem::{FilesystemStore, FilesystemStoreCreateError};
 use zarrs::metadata::v3::MetadataV3;
 use zarrs::metadata_ext::chunk_grid::regular::RegularChunkGridConfiguration;
 use zarrs::metadata_ext::codec::blosc::BloscCodecConfiguration;
@@ -23,15 +23,9 @@ pub enum InspectError {
         /// The path.
         path: PathBuf,
     },
-    /// zarrs cannot open the folder as a store.
-    #[error("{}: cannot open", path.display())]
-    Open {
-        /// The folder.
-        path: PathBuf,
-        /// What zarrs said.
-        #[source]
-        source: FilesystemStoreCreateError,
-    },
+    /// The store cannot be opened (a folder zarrs refuses, an object store out of reach).
+    #[error(transparent)]
+    Open(#[from] LocationError),
     /// The pyramid reader refuses the store.
     #[error(transparent)]
     Pyramid(#[from] PyramidError),
@@ -110,24 +104,24 @@ fn chunks_and_codecs(metadata: &ArrayMetadata) -> (String, String) {
     }
 }
 
-/// The `ingest inspect` report for the store at `path`.
+/// The `ingest inspect` report for the store at `location`.
 ///
 /// # Errors
-/// When the store is not an OME-Zarr image the pyramid reader accepts.
-pub fn inspect(path: &Path) -> Result<String, InspectError> {
-    let shown = path.display();
-    if !path.is_dir() {
+/// When the store cannot be opened or is not an OME-Zarr image the pyramid reader accepts.
+pub fn inspect(
+    location: &StoreLocation,
+    options: &ObjectStoreOptions,
+) -> Result<String, InspectError> {
+    let shown = location.to_string();
+    if let Some(path) = location.folder()
+        && !path.is_dir()
+    {
         return Err(InspectError::NotAnImage {
             path: path.to_path_buf(),
         });
     }
-    let store = Arc::new(
-        FilesystemStore::new(path).map_err(|source| InspectError::Open {
-            path: path.to_path_buf(),
-            source,
-        })?,
-    );
-    let pyramid = Pyramid::open(store, &shown.to_string())?;
+    let store = location.open_readable(options)?;
+    let pyramid = Pyramid::open(store, &shown)?;
     let attributes = &pyramid.attributes;
     let image = attributes.image();
     let version = image

@@ -10,6 +10,7 @@ use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
 use residency_ingest::store::OmeZarrVersion;
 use residency_ingest::synthetic::{SampleKind, SampleSpec, write_samples};
+use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 
 /// mimalloc keeps freed chunk and slab buffers for reuse instead of returning them to the
 /// kernel, which the system allocator does for every large buffer (measured: most of the
@@ -155,8 +156,13 @@ enum Command {
     },
     /// Print levels, shapes, chunking, codecs, voxel sizes, channel statistics and metadata coverage.
     Inspect {
-        /// The OME-Zarr image group.
-        store: PathBuf,
+        /// The OME-Zarr image group: a folder, a file:// URL, or s3://BUCKET/PREFIX (credentials
+        /// and region from the AWS variables).
+        store: StoreLocation,
+        /// Endpoint URL of an S3-compatible server that is not AWS (default: AWS_ENDPOINT_URL,
+        /// else AWS).
+        #[arg(long, value_name = "URL")]
+        s3_endpoint: Option<String>,
     },
 }
 
@@ -284,8 +290,11 @@ fn run(cli: Cli) -> Result<()> {
             let report = residency_ingest::index::index(&store)?;
             print!("{report}");
         }
-        Command::Inspect { store } => {
-            print!("{}", residency_ingest::inspect::inspect(&store)?);
+        Command::Inspect { store, s3_endpoint } => {
+            let options = ObjectStoreOptions {
+                endpoint: s3_endpoint,
+            };
+            print!("{}", residency_ingest::inspect::inspect(&store, &options)?);
         }
     }
     Ok(())

@@ -13,6 +13,8 @@ pub mod dataset;
 #[cfg(feature = "drift")]
 pub mod drift;
 pub mod float;
+#[cfg(feature = "object-store")]
+pub mod location;
 pub mod ome;
 #[cfg(feature = "store")]
 pub mod pyramid;

@@ -7,6 +7,7 @@ use std::str::FromStr;
 
 use anyhow::{Result, bail, ensure};
 
+use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 use residency_viewer::defaults::{
     CameraSpec, NumbersError, check_channel, default_channels, default_scene, numbers, read_scene,
 };
@@ -30,9 +31,14 @@ pub struct SourceArgs {
     /// File holding the bearer token of a server started with `--token-file`.
     #[arg(long, value_name = "FILE", requires = "server")]
     pub token_file: Option<PathBuf>,
-    /// Local OME-Zarr store, instead of a server.
+    /// OME-Zarr store read directly, instead of a server: a folder, a file:// URL, or
+    /// s3://BUCKET/PREFIX (credentials and region from the AWS variables).
     #[arg(long, value_name = "PATH")]
-    pub store: Option<PathBuf>,
+    pub store: Option<StoreLocation>,
+    /// Endpoint URL of an S3-compatible server that is not AWS, for an s3:// `--store`
+    /// (default: AWS_ENDPOINT_URL, else AWS).
+    #[arg(long, value_name = "URL")]
+    pub s3_endpoint: Option<String>,
 }
 
 impl SourceArgs {
@@ -51,7 +57,12 @@ impl SourceArgs {
                     token.as_deref(),
                 )?))
             }
-            (None, None, Some(path)) => Ok(Box::new(LocalSource::open(path)?)),
+            (None, None, Some(location)) => {
+                let options = ObjectStoreOptions {
+                    endpoint: self.s3_endpoint.clone(),
+                };
+                Ok(Box::new(LocalSource::open_location(location, &options)?))
+            }
             _ => bail!("give either --server URL --dataset NAME, or --store PATH"),
         }
     }

@@ -1,56 +1,73 @@
-//! [`LocalSource`]: a local OME-Zarr store (0.5 on Zarr v3, sharded or not, or 0.4 on Zarr
-//! v2), read with zarrs.
+//! [`LocalSource`]: an OME-Zarr store read directly (0.5 on Zarr v3, sharded or not, or 0.4
+//! on Zarr v2) with zarrs, from a local folder or an S3-compatible object store.
 
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::path::Path;
 
 use rayon::prelude::*;
+use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 use residency_schemas::pyramid::{BrickIndex, Pyramid, PyramidError};
 use zarrs::array::{Array, ArrayError, CodecOptions, ElementOwned};
-use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::ReadableListableStorageTraits;
 
 use super::ome;
 use super::{BrickKey, BrickSource, BrickVoxels, MinMaxGrid, SampleType, SourceError, VolumeInfo};
 
 pub use residency_schemas::dataset::dataset_name;
 
-/// A local OME-Zarr store written by `ingest` (or indexed by `ingest index`), read through
-/// the pyramid reader of `residency_schemas`.
+/// The storage a store is read from (a folder or an object store).
+type Storage = dyn ReadableListableStorageTraits;
+
+/// An OME-Zarr store written by `ingest` (or indexed by `ingest index`), read through the
+/// pyramid reader of `residency_schemas` without a server.
 pub struct LocalSource {
-    path: PathBuf,
+    location: StoreLocation,
     info: VolumeInfo,
-    pyramid: Pyramid<FilesystemStore>,
+    pyramid: Pyramid<Storage>,
 }
 
 impl std::fmt::Debug for LocalSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("LocalSource")
-            .field("path", &self.path)
+            .field("location", &self.location)
             .field("info", &self.info)
             .finish_non_exhaustive()
     }
 }
 
 impl LocalSource {
-    /// Opens the OME-Zarr image at `path`: its multiscales, region metadata and min/max grids.
-    /// A store without region metadata opens with `minmax: None`, and a warning.
+    /// Opens the OME-Zarr image in the folder `path`: its multiscales, region metadata and
+    /// min/max grids. A store without region metadata opens with `minmax: None`, and a
+    /// warning.
     ///
     /// # Errors
     /// When the path is missing, is not an OME-Zarr image, or its levels or region metadata
     /// are unusable; the [`SourceError`] names the store.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, SourceError> {
-        let path = path.as_ref();
-        let shown = path.display().to_string();
-        if !path.exists() {
+        let location = StoreLocation::Folder(path.as_ref().to_path_buf());
+        Self::open_location(&location, &ObjectStoreOptions::default())
+    }
+
+    /// Opens the OME-Zarr image at `location` (a folder, or a prefix of an object store
+    /// reached with `options`), as [`LocalSource::open`].
+    ///
+    /// # Errors
+    /// As [`LocalSource::open`], and when the object store cannot be reached.
+    pub fn open_location(
+        location: &StoreLocation,
+        options: &ObjectStoreOptions,
+    ) -> Result<Self, SourceError> {
+        let shown = location.to_string();
+        if let Some(path) = location.folder()
+            && !path.exists()
+        {
             return Err(SourceError::NoSuchStore { store: shown });
         }
-        let store =
-            Arc::new(
-                FilesystemStore::new(path).map_err(|source| SourceError::CannotOpen {
-                    store: shown.clone(),
-                    source,
-                })?,
-            );
+        let store = location
+            .open_readable(options)
+            .map_err(|source| SourceError::CannotOpen {
+                store: shown.clone(),
+                source,
+            })?;
         let pyramid = Pyramid::open(store, &shown)?;
         let descriptions: Vec<_> = pyramid
             .levels
@@ -58,7 +75,7 @@ impl LocalSource {
             .map(|l| l.description.clone())
             .collect();
         let mut info = ome::volume_info(
-            &dataset_name(path),
+            &dataset_name(Path::new(&location.file_name())),
             &pyramid.attributes,
             &pyramid.layout,
             &descriptions,
@@ -70,15 +87,15 @@ impl LocalSource {
             None
         };
         Ok(Self {
-            path: path.to_path_buf(),
+            location: location.clone(),
             info,
             pyramid,
         })
     }
 
-    /// The store's path.
-    pub fn path(&self) -> &Path {
-        &self.path
+    /// Where the store is.
+    pub fn location(&self) -> &StoreLocation {
+        &self.location
     }
 
     fn fetch_one(&self, key: &BrickKey) -> Result<BrickVoxels, SourceError> {
@@ -92,7 +109,7 @@ impl LocalSource {
             .description
             .fill_value;
         fn decode<T: ElementOwned + Copy + Into<f64>>(
-            pyramid: &Pyramid<FilesystemStore>,
+            pyramid: &Pyramid<Storage>,
             at: &BrickIndex,
             fill: f64,
             wrap: fn(Vec<T>) -> BrickVoxels,
@@ -118,7 +135,7 @@ impl LocalSource {
             SampleType::F32 => decode::<f32>(p, &at, fill, BrickVoxels::F32),
         }
         .map_err(|source| SourceError::ReadBrick {
-            store: self.path.clone(),
+            store: self.location.to_string(),
             key: *key,
             source: Box::new(source),
         })
@@ -127,7 +144,7 @@ impl LocalSource {
 
 /// Reads every min/max grid of the region metadata into `minmax[channel][level][k]`.
 fn read_minmax(
-    pyramid: &Pyramid<FilesystemStore>,
+    pyramid: &Pyramid<Storage>,
     info: &VolumeInfo,
     shown: &str,
 ) -> Result<Vec<Vec<Vec<MinMaxGrid>>>, SourceError> {
@@ -188,12 +205,9 @@ fn read_minmax(
 }
 
 /// The whole array as `f64`.
-fn read_all_f64(
-    array: &Array<FilesystemStore>,
-    sample_type: SampleType,
-) -> Result<Vec<f64>, ArrayError> {
+fn read_all_f64(array: &Array<Storage>, sample_type: SampleType) -> Result<Vec<f64>, ArrayError> {
     fn all<T: ElementOwned + Copy + Into<f64>>(
-        array: &Array<FilesystemStore>,
+        array: &Array<Storage>,
     ) -> Result<Vec<f64>, ArrayError> {
         let v: Vec<T> =
             array.retrieve_array_subset_opt(&array.subset_all(), &CodecOptions::default())?;

@@ -74,15 +74,15 @@ pub enum SourceError {
         /// The store, as given.
         store: String,
     },
-    /// A local store that zarrs cannot open.
+    /// A store that cannot be opened (a folder zarrs refuses, an object store out of reach).
     #[cfg(not(target_arch = "wasm32"))]
     #[error("{store}: cannot open")]
     CannotOpen {
         /// The store, as given.
         store: String,
-        /// What zarrs said.
+        /// Why.
         #[source]
-        source: zarrs::filesystem::FilesystemStoreCreateError,
+        source: residency_schemas::location::LocationError,
     },
     /// A local pyramid that cannot be opened.
     #[cfg(not(target_arch = "wasm32"))]
@@ -96,7 +96,7 @@ pub enum SourceError {
     )]
     ReadBrick {
         /// The store.
-        store: PathBuf,
+        store: String,
         /// The brick.
         key: BrickKey,
         /// What the pyramid reader said.

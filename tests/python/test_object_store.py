@@ -1,0 +1,117 @@
+"""Stores in an S3-compatible object store, read by `ingest inspect` and `viewer render` through
+a real S3 server on loopback: s3s-fs (installed by scripts/setup.sh), serving a folder whose
+subfolders are buckets. What they read over S3 must equal what they read from the folder."""
+
+import os
+import pathlib
+import shutil
+import socket
+import subprocess
+import time
+
+import pytest
+
+from conftest import BIN, run_ingest
+
+KEY = "AKRESIDENCYTEST"
+SECRET = "residency-test-secret-0123456789"
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def s3(tmp_path_factory):
+    """An s3s-fs server on loopback with bucket `bucket` holding `sample.ome.zarr` (a sparse
+    32³ u16 store with 16³ bricks), and that store's local copy."""
+    exe = shutil.which("s3s-fs")
+    assert exe, "s3s-fs not installed: run scripts/setup.sh"
+    tmp = tmp_path_factory.mktemp("s3")
+    samples = tmp / "samples"
+    run_ingest("sample", "-o", samples, "--kind", "sparse", "--size", "32,32,32", "--quiet")
+    local = tmp / "sample.ome.zarr"
+    run_ingest("convert", *sorted(samples.glob("*.tif")), "-o", local, "--chunk", "16", "--quiet")
+    root = tmp / "root"
+    shutil.copytree(local, root / "bucket" / "sample.ome.zarr")
+    port = free_port()
+    server = subprocess.Popen(
+        [exe, "--host", "127.0.0.1", "--port", str(port), "--access-key", KEY,
+         "--secret-key", SECRET, str(root)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 30
+    while True:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            break
+        except OSError:
+            assert server.poll() is None, "s3s-fs exited"
+            assert time.time() < deadline, "s3s-fs did not listen within 30 s"
+            time.sleep(0.1)
+    yield {"endpoint": f"http://127.0.0.1:{port}", "local": local}
+    server.terminate()
+    server.wait(timeout=10)
+
+
+def env(secret=SECRET):
+    e = dict(os.environ)
+    for k in list(e):
+        if k.startswith("AWS_"):
+            del e[k]
+    e.update(AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=secret)
+    e.setdefault("XDG_RUNTIME_DIR", "/tmp")
+    return e
+
+
+def run(exe, *args, secret=SECRET):
+    return subprocess.run([str(BIN / exe), *map(str, args)], capture_output=True, text=True,
+                          env=env(secret), timeout=300)
+
+
+def test_inspect_over_s3_reports_what_the_folder_holds(s3):
+    remote = run("ingest", "inspect", "s3://bucket/sample.ome.zarr", "--s3-endpoint",
+                 s3["endpoint"])
+    assert remote.returncode == 0, remote.stderr
+    local = run("ingest", "inspect", s3["local"])
+    assert local.returncode == 0, local.stderr
+    r, l = remote.stdout.splitlines(), local.stdout.splitlines()
+    assert r[0] == "s3://bucket/sample.ome.zarr: OME-Zarr 0.5"
+    assert l[0] == f"{s3['local']}: OME-Zarr 0.5"
+    assert r[1:] == l[1:]
+    assert any(line.startswith("region metadata: ") for line in r)
+
+
+def test_object_store_errors_name_the_store_and_the_problem(s3):
+    missing = run("ingest", "inspect", "s3://bucket/nothing.ome.zarr", "--s3-endpoint",
+                  s3["endpoint"])
+    assert missing.returncode == 1
+    assert missing.stderr == (
+        "error: s3://bucket/nothing.ome.zarr: not an OME-Zarr image (no zarr.json or .zattrs)\n")
+    denied = run("ingest", "inspect", "s3://bucket/sample.ome.zarr", "--s3-endpoint",
+                 s3["endpoint"], secret="not-the-secret-0123456789")
+    assert denied.returncode == 1
+    assert denied.stderr.startswith("error: s3://bucket/sample.ome.zarr/zarr.json: ")
+    assert "403 Forbidden" in denied.stderr
+    bad = run("ingest", "inspect", "s3://bucket")
+    assert bad.returncode == 2
+    assert ("invalid value 's3://bucket' for '<STORE>': s3://bucket: an S3 location is "
+            "s3://BUCKET/PREFIX (the store's root), with both parts") in bad.stderr
+    scheme = run("viewer", "render", "--store", "gs://bucket/x.ome.zarr", "--out", "x.png")
+    assert scheme.returncode == 2
+    assert ("gs://bucket/x.ome.zarr: unknown scheme (stores are local paths, file:// or s3:// "
+            "URLs)") in scheme.stderr
+
+
+def test_viewer_renders_the_same_image_from_s3_as_from_the_folder(s3, tmp_path):
+    flags = ["--tf", "0:800:6000:0.6", "--width", "64", "--height", "64"]
+    remote = run("viewer", "render", "--store", "s3://bucket/sample.ome.zarr", "--s3-endpoint",
+                 s3["endpoint"], *flags, "--out", tmp_path / "s3.exr")
+    assert remote.returncode == 0, remote.stderr
+    local = run("viewer", "render", "--store", s3["local"], *flags, "--out",
+                tmp_path / "local.exr")
+    assert local.returncode == 0, local.stderr
+    same = run("viewer", "compare", tmp_path / "s3.exr", tmp_path / "local.exr")
+    assert same.returncode == 0, same.stderr
+    assert same.stdout.splitlines() == ["PSNR inf dB", "SSIM 1.000000", "max abs error 0.000000"]
