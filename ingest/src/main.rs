@@ -5,6 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use residency_ingest::convert::{ConvertOptions, convert};
 use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
@@ -74,9 +75,14 @@ enum Command {
         /// TIFF / OME-TIFF / ImageJ files, folders or globs of TIFF slices, or raw files.
         #[arg(required = true)]
         inputs: Vec<String>,
-        /// Output store, e.g. `out.ome.zarr`.
+        /// Output store, e.g. `out.ome.zarr`, or s3://BUCKET/PREFIX (converted in a local
+        /// temporary folder, then uploaded with the root metadata last).
         #[arg(short, long)]
-        output: PathBuf,
+        output: StoreLocation,
+        /// Endpoint URL of an S3-compatible server that is not AWS, for an s3:// output
+        /// (default: AWS_ENDPOINT_URL, else AWS).
+        #[arg(long, value_name = "URL")]
+        s3_endpoint: Option<String>,
         /// Raw inputs: extent X,Y,Z in voxels (not needed for name_XxYxZ_dtype.raw).
         #[arg(long, value_parser = parse_triple_u64)]
         dims: Option<[u64; 3]>,
@@ -211,6 +217,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Convert {
             inputs,
             output,
+            s3_endpoint,
             dims,
             dtype,
             endian,
@@ -230,7 +237,30 @@ fn run(cli: Cli) -> Result<()> {
             if levels == Some(0) {
                 bail!("--levels must be at least 1");
             }
-            let mut options = ConvertOptions::new(inputs, output);
+            let s3 = ObjectStoreOptions {
+                endpoint: s3_endpoint,
+            };
+            // An object-store output is converted in a local folder first, then published.
+            let staging = match &output {
+                StoreLocation::Folder(_) => None,
+                StoreLocation::S3 { .. } => {
+                    if !overwrite && output.exists(&s3)? {
+                        bail!("{output}: output already exists (pass --overwrite to replace it)");
+                    }
+                    Some(
+                        tempfile::Builder::new()
+                            .prefix("ingest-staging-")
+                            .tempdir()
+                            .context("cannot create a local staging folder")?,
+                    )
+                }
+            };
+            let local = match (&output, &staging) {
+                (StoreLocation::Folder(path), _) => path.clone(),
+                (_, Some(dir)) => dir.path().join(output.file_name()),
+                (_, None) => unreachable!("an object-store output has a staging folder"),
+            };
+            let mut options = ConvertOptions::new(inputs, local.clone());
             options.raw = RawOptions {
                 dims,
                 format: dtype.as_deref().map(str::parse::<SampleType>).transpose()?,
@@ -249,7 +279,11 @@ fn run(cli: Cli) -> Result<()> {
             options.overwrite = overwrite;
             options.progress = !quiet;
             options.channel_names = channel_names;
-            let summary = convert(&options)?;
+            let mut summary = convert(&options)?;
+            if staging.is_some() {
+                publish(&local, &output, &s3, overwrite, !quiet)?;
+                summary.output = PathBuf::from(output.to_string());
+            }
             print!("{}", summary.report());
         }
         Command::Sample {
@@ -298,6 +332,49 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Uploads the converted store in `local` to `output`, root metadata last, with a progress
+/// bar unless `quiet`.
+fn publish(
+    local: &std::path::Path,
+    output: &StoreLocation,
+    s3: &ObjectStoreOptions,
+    overwrite: bool,
+    progress: bool,
+) -> Result<()> {
+    let total = dir_bytes(local)?;
+    let bar = if progress {
+        ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "uploading {spinner} [{elapsed_precise}] [{wide_bar}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}",
+        )
+        .expect("template"),
+    );
+    output.publish_folder(local, s3, overwrite, &|n| bar.inc(n))?;
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// Bytes of every file under `dir`.
+fn dir_bytes(dir: &std::path::Path) -> Result<u64> {
+    let mut total = 0;
+    for entry in
+        std::fs::read_dir(dir).with_context(|| format!("{}: cannot read", dir.display()))?
+    {
+        let entry = entry?;
+        let meta = entry.metadata()?;
+        total += if meta.is_dir() {
+            dir_bytes(&entry.path())?
+        } else {
+            meta.len()
+        };
+    }
+    Ok(total)
 }
 
 fn main() -> ExitCode {

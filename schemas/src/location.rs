@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::str::FromStr;
 use std::sync::{Arc, OnceLock};
 
+use futures::{StreamExt, TryStreamExt};
 use zarrs::filesystem::FilesystemStore;
 use zarrs::storage::storage_adapter::async_to_sync::{
     AsyncToSyncBlockOn, AsyncToSyncStorageAdapter,
@@ -19,7 +20,16 @@ use zarrs::storage::storage_adapter::async_to_sync::{
 use zarrs::storage::{ReadableListableStorageTraits, ReadableWritableListableStorageTraits};
 use zarrs_object_store::AsyncObjectStore;
 use zarrs_object_store::object_store::aws::{AmazonS3, AmazonS3Builder};
+use zarrs_object_store::object_store::path::Path as ObjectPath;
 use zarrs_object_store::object_store::prefix::PrefixStore;
+use zarrs_object_store::object_store::{ObjectStore, ObjectStoreExt, PutPayload};
+
+/// The documents at a store's root that say what it is (Zarr v3, then v2): written last when a
+/// store is published, and deleted first when one is replaced.
+pub const ROOT_METADATA: [&str; 3] = ["zarr.json", ".zgroup", ".zattrs"];
+
+/// Objects uploaded at once when a store is published.
+const UPLOADS_IN_FLIGHT: usize = 16;
 
 /// A store's location, parsed from a command-line argument.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -58,14 +68,30 @@ pub enum LocationError {
         /// What zarrs said.
         reason: String,
     },
-    /// The object store client cannot be configured (credentials, region, endpoint).
-    #[error("{location}: cannot reach the object store: {source}")]
+    /// The object store client cannot be configured (credentials, region, endpoint), or a
+    /// request failed.
+    #[error("{location}: {source}")]
     ObjectStore {
-        /// The location.
+        /// The location (and key) of the request.
         location: String,
         /// What `object_store` said.
         #[source]
         source: zarrs_object_store::object_store::Error,
+    },
+    /// A store is already there, and replacing it was not asked for.
+    #[error("{location}: output already exists (pass --overwrite to replace it)")]
+    Exists {
+        /// The location.
+        location: String,
+    },
+    /// A file of the store to publish cannot be read.
+    #[error("{}: cannot read", path.display())]
+    ReadFile {
+        /// The file.
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: std::io::Error,
     },
 }
 
@@ -159,6 +185,16 @@ impl StoreLocation {
     }
 
     fn object_storage(&self, options: &ObjectStoreOptions) -> Result<ObjectStorage, LocationError> {
+        let (s3, prefix) = self.s3_client(options)?;
+        let store = AsyncObjectStore::new(PrefixStore::new(s3, prefix.as_str()));
+        Ok(AsyncToSyncStorageAdapter::new(
+            Arc::new(store),
+            BlockOnRuntime,
+        ))
+    }
+
+    /// The S3 client of an `s3://` location, and its key prefix.
+    fn s3_client(&self, options: &ObjectStoreOptions) -> Result<(AmazonS3, String), LocationError> {
         let Self::S3 { bucket, prefix } = self else {
             unreachable!("called for S3 locations only");
         };
@@ -174,11 +210,117 @@ impl StoreLocation {
                 location: self.to_string(),
                 source,
             })?;
-        let store = AsyncObjectStore::new(PrefixStore::new(s3, prefix.as_str()));
-        Ok(AsyncToSyncStorageAdapter::new(
-            Arc::new(store),
-            BlockOnRuntime,
-        ))
+        Ok((s3, prefix.clone()))
+    }
+
+    /// Whether a store is at this location: its root metadata exists (a folder: the folder
+    /// exists).
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] when the object store cannot be asked.
+    pub fn exists(&self, options: &ObjectStoreOptions) -> Result<bool, LocationError> {
+        let Self::S3 { .. } = self else {
+            return Ok(self.folder().is_some_and(Path::exists));
+        };
+        let (s3, prefix) = self.s3_client(options)?;
+        runtime().block_on(async {
+            for name in ROOT_METADATA {
+                let key = ObjectPath::from(format!("{prefix}/{name}"));
+                match s3.head(&key).await {
+                    Ok(_) => return Ok(true),
+                    Err(zarrs_object_store::object_store::Error::NotFound { .. }) => {}
+                    Err(source) => {
+                        return Err(LocationError::ObjectStore {
+                            location: format!("{self}/{name}"),
+                            source,
+                        });
+                    }
+                }
+            }
+            Ok(false)
+        })
+    }
+
+    /// Copies the finished store in `folder` to this object-store location, so that a reader
+    /// never takes a partial store for a complete one: with `overwrite`, the root metadata
+    /// already there is deleted first and then every other key under the prefix; then every
+    /// file but the root metadata is uploaded, and the root metadata ([`ROOT_METADATA`]) last.
+    /// `uploaded` is called with each file's bytes. Returns the bytes uploaded.
+    ///
+    /// # Errors
+    /// [`LocationError::Exists`] when a store is there and `overwrite` is false,
+    /// [`LocationError::ReadFile`] for a file that cannot be read, and
+    /// [`LocationError::ObjectStore`] (naming the key) for a request that failed.
+    pub fn publish_folder(
+        &self,
+        folder: &Path,
+        options: &ObjectStoreOptions,
+        overwrite: bool,
+        uploaded: &(dyn Fn(u64) + Sync),
+    ) -> Result<u64, LocationError> {
+        if self.exists(options)? && !overwrite {
+            return Err(LocationError::Exists {
+                location: self.to_string(),
+            });
+        }
+        let (s3, prefix) = self.s3_client(options)?;
+        let mut files = Vec::new();
+        list_files(folder, folder, &mut files)?;
+        let (root, rest): (Vec<String>, Vec<String>) = files
+            .into_iter()
+            .partition(|rel| ROOT_METADATA.contains(&rel.as_str()));
+        let failed = |key: &str, source| LocationError::ObjectStore {
+            location: format!("{self}/{key}"),
+            source,
+        };
+        runtime().block_on(async {
+            if overwrite {
+                for name in ROOT_METADATA {
+                    let key = ObjectPath::from(format!("{prefix}/{name}"));
+                    match s3.delete(&key).await {
+                        Ok(()) | Err(zarrs_object_store::object_store::Error::NotFound { .. }) => {}
+                        Err(source) => return Err(failed(name, source)),
+                    }
+                }
+                let listed: Vec<_> = s3
+                    .list(Some(&ObjectPath::from(prefix.as_str())))
+                    .try_collect()
+                    .await
+                    .map_err(|source| failed("", source))?;
+                for meta in listed {
+                    s3.delete(&meta.location)
+                        .await
+                        .map_err(|source| failed(meta.location.as_ref(), source))?;
+                }
+            }
+            let mut total = 0;
+            for batch in [rest, root] {
+                let sizes: Vec<u64> = futures::stream::iter(batch)
+                    .map(|rel| {
+                        let (s3, prefix, failed) = (&s3, &prefix, &failed);
+                        async move {
+                            let path = folder.join(&rel);
+                            let bytes = tokio::fs::read(&path)
+                                .await
+                                .map_err(|source| LocationError::ReadFile { path, source })?;
+                            let n = bytes.len() as u64;
+                            s3.put(
+                                &ObjectPath::from(format!("{prefix}/{rel}")),
+                                PutPayload::from(bytes),
+                            )
+                            .await
+                            .map_err(|source| failed(&rel, source))?;
+                            uploaded(n);
+                            Ok::<u64, LocationError>(n)
+                        }
+                    })
+                    .buffer_unordered(UPLOADS_IN_FLIGHT)
+                    .try_collect()
+                    .await?;
+                total += sizes.iter().sum::<u64>();
+            }
+            Ok(total)
+        })
     }
 
     /// Opens the store for reading.
@@ -210,6 +352,30 @@ impl StoreLocation {
             Self::S3 { .. } => Arc::new(self.object_storage(options)?),
         })
     }
+}
+
+/// Every file under `dir`, as `/`-separated paths relative to `root`, sorted.
+fn list_files(root: &Path, dir: &Path, out: &mut Vec<String>) -> Result<(), LocationError> {
+    let read = |path: &Path, source| LocationError::ReadFile {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .map_err(|e| read(dir, e))?
+        .collect::<Result<_, _>>()
+        .map_err(|e| read(dir, e))?;
+    entries.sort_by_key(std::fs::DirEntry::path);
+    for entry in entries {
+        let path = entry.path();
+        if entry.file_type().map_err(|e| read(&path, e))?.is_dir() {
+            list_files(root, &path, out)?;
+        } else {
+            let rel = path.strip_prefix(root).unwrap_or(&path);
+            let parts: Vec<_> = rel.iter().map(|p| p.to_string_lossy()).collect();
+            out.push(parts.join("/"));
+        }
+    }
+    Ok(())
 }
 
 fn folder_store(path: &Path) -> Result<FilesystemStore, LocationError> {

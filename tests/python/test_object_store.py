@@ -1,6 +1,8 @@
-"""Stores in an S3-compatible object store, read by `ingest inspect` and `viewer render` through
-a real S3 server on loopback: s3s-fs (installed by scripts/setup.sh), serving a folder whose
-subfolders are buckets. What they read over S3 must equal what they read from the folder."""
+"""Stores in an S3-compatible object store, written by `ingest convert` and read by `ingest
+inspect` and `viewer render` through a real S3 server on loopback: s3s-fs (installed by
+scripts/setup.sh), serving a folder whose subfolders are buckets and whose files are the objects.
+What they read over S3 must equal what they read from a folder, and what `convert` writes must
+be byte for byte what it writes to a folder."""
 
 import os
 import pathlib
@@ -30,7 +32,7 @@ def s3(tmp_path_factory):
     exe = shutil.which("s3s-fs")
     assert exe, "s3s-fs not installed: run scripts/setup.sh"
     tmp = tmp_path_factory.mktemp("s3")
-    samples = tmp / "samples"
+    samples = tmp / "samples"  # also the converts' input
     run_ingest("sample", "-o", samples, "--kind", "sparse", "--size", "32,32,32", "--quiet")
     local = tmp / "sample.ome.zarr"
     run_ingest("convert", *sorted(samples.glob("*.tif")), "-o", local, "--chunk", "16", "--quiet")
@@ -50,7 +52,8 @@ def s3(tmp_path_factory):
             assert server.poll() is None, "s3s-fs exited"
             assert time.time() < deadline, "s3s-fs did not listen within 30 s"
             time.sleep(0.1)
-    yield {"endpoint": f"http://127.0.0.1:{port}", "local": local}
+    yield {"endpoint": f"http://127.0.0.1:{port}", "local": local, "root": root,
+           "inputs": sorted(samples.glob("*.tif"))}
     server.terminate()
     server.wait(timeout=10)
 
@@ -115,3 +118,35 @@ def test_viewer_renders_the_same_image_from_s3_as_from_the_folder(s3, tmp_path):
     same = run("viewer", "compare", tmp_path / "s3.exr", tmp_path / "local.exr")
     assert same.returncode == 0, same.stderr
     assert same.stdout.splitlines() == ["PSNR inf dB", "SSIM 1.000000", "max abs error 0.000000"]
+
+
+def files(folder: pathlib.Path) -> dict:
+    """Every file under `folder` (relative path → bytes)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_convert_to_s3_writes_the_bytes_of_a_local_convert_root_metadata_last(s3, tmp_path):
+    url = "s3://bucket/converted/sample.ome.zarr"
+    up = run("ingest", "convert", *s3["inputs"], "-o", url, "--s3-endpoint", s3["endpoint"],
+             "--chunk", "16", "--quiet")
+    assert up.returncode == 0, up.stderr
+    assert up.stdout.startswith(f"wrote {url} (uint16)\n")
+    local = tmp_path / "sample.ome.zarr"
+    run_ingest("convert", *s3["inputs"], "-o", local, "--chunk", "16", "--quiet")
+    remote = s3["root"] / "bucket" / "converted" / "sample.ome.zarr"
+    assert files(remote) == files(local)
+    # The objects were put in order: the root metadata after every other key.
+    others = [p.stat().st_mtime_ns for p in remote.rglob("*") if p.is_file()
+              and p.name != "zarr.json"]
+    assert (remote / "zarr.json").stat().st_mtime_ns >= max(others)
+    again = run("ingest", "convert", *s3["inputs"], "-o", url, "--s3-endpoint", s3["endpoint"],
+                "--quiet")
+    assert again.returncode == 1
+    assert again.stderr == f"error: {url}: output already exists (pass --overwrite to replace it)\n"
+    # Replaced: the old store's keys are gone, the new store's bytes are there.
+    replaced = run("ingest", "convert", *s3["inputs"], "-o", url, "--s3-endpoint",
+                   s3["endpoint"], "--chunk", "32", "--overwrite", "--quiet")
+    assert replaced.returncode == 0, replaced.stderr
+    local32 = tmp_path / "32" / "sample.ome.zarr"
+    run_ingest("convert", *s3["inputs"], "-o", local32, "--chunk", "32", "--quiet")
+    assert files(remote) == files(local32)
