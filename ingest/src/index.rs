@@ -9,14 +9,18 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use residency_schemas::REGIONS_KEY;
+use residency_schemas::location::{
+    LocationError, ObjectStoreOptions, ROOT_METADATA, StoreLocation,
+};
 use residency_schemas::pyramid::{Pyramid, PyramidError};
 use zarrs::array::{ArrayError, ArraySubset};
+use zarrs::storage::{ReadableStorageTraits, StoreKey};
 
 use crate::convert::{ChunkWriteError, SlabSink};
 use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
 use crate::regions::{CellGrid, ChannelAccumulator, LevelHistograms};
 use crate::sample_format::Sample;
-use crate::store::{Store, StoreError, StoreWriter};
+use crate::store::{StoreError, StoreWriter};
 use crate::with_sample_type;
 
 /// Why a store cannot be indexed. Messages name the store (and the level or axis) at fault;
@@ -70,29 +74,86 @@ pub enum IndexError {
     /// A value that cannot be serialised as JSON.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
+    /// The object store cannot be opened or written.
+    #[error(transparent)]
+    Location(#[from] LocationError),
+    /// The local staging folder of an object-store index cannot be created.
+    #[error("cannot create a local staging folder")]
+    Staging {
+        /// What the file system said.
+        #[source]
+        source: std::io::Error,
+    },
 }
 
-/// Indexes the image at `path` and returns a short report.
+/// Indexes the image at `location` and returns a short report. A folder is indexed in place;
+/// in an object store the region metadata is written to a local staging folder with a copy
+/// of the root metadata, then uploaded, the root metadata last (the image's keys are kept).
 ///
 /// # Errors
 /// When the store is not an OME-Zarr image the pyramid reader accepts, has a leading axis
 /// other than `c` with several entries, or cannot be read or written.
-pub fn index(path: &Path) -> Result<String, IndexError> {
-    let shown = path.display().to_string();
+pub fn index(location: &StoreLocation, options: &ObjectStoreOptions) -> Result<String, IndexError> {
+    let path = match location {
+        StoreLocation::Folder(path) => path,
+        StoreLocation::S3 { .. } => return index_object_store(location, options),
+    };
     if !path.is_dir() {
         return Err(IndexError::NotAnImage {
             path: path.to_path_buf(),
         });
     }
     let store = Arc::new(crate::store::StagingStore::new(path)?);
-    let pyramid = Pyramid::open(store, &shown)?;
+    let pyramid = Pyramid::open(store, &path.display().to_string())?;
+    index_pyramid(&pyramid, path, path)
+}
+
+/// Indexes an image in an object store through a local staging folder.
+fn index_object_store(
+    location: &StoreLocation,
+    options: &ObjectStoreOptions,
+) -> Result<String, IndexError> {
+    let shown = PathBuf::from(location.to_string());
+    let store = location.open_readable(options)?;
+    let pyramid = Pyramid::open(store.clone(), &location.to_string())?;
+    let staging = tempfile::Builder::new()
+        .prefix("ingest-index-")
+        .tempdir()
+        .map_err(|source| IndexError::Staging { source })?;
+    // The root metadata, updated in the staging folder and uploaded last.
+    for name in ROOT_METADATA {
+        let key = StoreKey::new(name).expect("a valid key");
+        let bytes = store.get(&key).map_err(|e| PyramidError::Storage {
+            what: format!("{location}/{name}"),
+            reason: e.to_string(),
+        })?;
+        if let Some(bytes) = bytes {
+            let file = staging.path().join(name);
+            std::fs::write(&file, &bytes).map_err(|source| StoreError::Write {
+                path: file.clone(),
+                source,
+            })?;
+        }
+    }
+    let report = index_pyramid(&pyramid, staging.path(), &shown)?;
+    location.upload_folder(staging.path(), options, false, &|_| {})?;
+    Ok(report)
+}
+
+/// Checks the axes, then indexes `pyramid`, writing the region metadata into the folder
+/// `write_to` (errors and the report name the store `shown`).
+fn index_pyramid<S: ReadableStorageTraits + ?Sized + 'static>(
+    pyramid: &Pyramid<S>,
+    write_to: &Path,
+    shown: &Path,
+) -> Result<String, IndexError> {
     let n = pyramid.layout.axis_names.len();
     for level in &pyramid.levels {
         for (i, axis) in pyramid.layout.axis_names[..n - 3].iter().enumerate() {
             let entries = level.description.shape[i];
             if Some(i) != pyramid.layout.channel_axis && entries != 1 {
                 return Err(IndexError::ExtraAxis {
-                    path: path.to_path_buf(),
+                    path: shown.to_path_buf(),
                     axis: axis.clone(),
                     entries,
                 });
@@ -108,15 +169,16 @@ pub fn index(path: &Path) -> Result<String, IndexError> {
                 .unwrap_or_else(|| format!("Channel {c}"))
         })
         .collect();
-    with_sample_type!(pyramid.sample_type, T => index_typed::<T>(path, &pyramid, &labels))
+    with_sample_type!(pyramid.sample_type, T => index_typed::<T, S>(write_to, shown, pyramid, &labels))
 }
 
-fn index_typed<T: Sample>(
+fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
     path: &Path,
-    pyramid: &Pyramid<Store>,
+    shown_path: &Path,
+    pyramid: &Pyramid<S>,
     labels: &[String],
 ) -> Result<String, IndexError> {
-    let shown = path.display().to_string();
+    let shown = shown_path.display().to_string();
     let channels = pyramid.channels as usize;
     let brick = pyramid.brick_shape;
     let levels = &pyramid.levels;
@@ -152,7 +214,7 @@ fn index_typed<T: Sample>(
                 .array
                 .retrieve_array_subset(&ArraySubset::new_with_ranges(&ranges))
                 .map_err(|source| IndexError::ReadLevel {
-                    path: path.to_path_buf(),
+                    path: shown_path.to_path_buf(),
                     level: level.path.clone(),
                     z: z0,
                     source: Box::new(source),

@@ -154,8 +154,12 @@ enum Command {
     },
     /// Add region metadata to an OME-Zarr image written by another tool, without rewriting its data.
     Index {
-        /// The OME-Zarr image group.
-        store: PathBuf,
+        /// The OME-Zarr image group: a folder, a file:// URL, or s3://BUCKET/PREFIX.
+        store: StoreLocation,
+        /// Endpoint URL of an S3-compatible server that is not AWS (default: AWS_ENDPOINT_URL,
+        /// else AWS).
+        #[arg(long, value_name = "URL")]
+        s3_endpoint: Option<String>,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
@@ -319,9 +323,16 @@ fn run(cli: Cli) -> Result<()> {
                 list.join(" ")
             );
         }
-        Command::Index { store, threads } => {
+        Command::Index {
+            store,
+            s3_endpoint,
+            threads,
+        } => {
             set_threads(threads)?;
-            let report = residency_ingest::index::index(&store)?;
+            let options = ObjectStoreOptions {
+                endpoint: s3_endpoint,
+            };
+            let report = residency_ingest::index::index(&store, &options)?;
             print!("{report}");
         }
         Command::Inspect { store, s3_endpoint } => {

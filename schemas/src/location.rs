@@ -263,6 +263,23 @@ impl StoreLocation {
                 location: self.to_string(),
             });
         }
+        self.upload_folder(folder, options, overwrite, uploaded)
+    }
+
+    /// Uploads every file of `folder` under this object-store location, the root metadata
+    /// ([`ROOT_METADATA`]) last, keeping the other keys there unless `clear` (then the root
+    /// metadata is deleted first, then every key under the prefix). `uploaded` is called with
+    /// each file's bytes. Returns the bytes uploaded.
+    ///
+    /// # Errors
+    /// As [`StoreLocation::publish_folder`], except [`LocationError::Exists`].
+    pub fn upload_folder(
+        &self,
+        folder: &Path,
+        options: &ObjectStoreOptions,
+        clear: bool,
+        uploaded: &(dyn Fn(u64) + Sync),
+    ) -> Result<u64, LocationError> {
         let (s3, prefix) = self.s3_client(options)?;
         let mut files = Vec::new();
         list_files(folder, folder, &mut files)?;
@@ -274,7 +291,7 @@ impl StoreLocation {
             source,
         };
         runtime().block_on(async {
-            if overwrite {
+            if clear {
                 for name in ROOT_METADATA {
                     let key = ObjectPath::from(format!("{prefix}/{name}"));
                     match s3.delete(&key).await {

@@ -150,3 +150,40 @@ def test_convert_to_s3_writes_the_bytes_of_a_local_convert_root_metadata_last(s3
     local32 = tmp_path / "32" / "sample.ome.zarr"
     run_ingest("convert", *s3["inputs"], "-o", local32, "--chunk", "32", "--quiet")
     assert files(remote) == files(local32)
+
+
+def test_index_in_s3_writes_what_a_local_index_writes_root_metadata_last(s3, tmp_path):
+    import numpy as np
+    import zarr
+    rng = np.random.default_rng(7)
+    vol = (rng.random((1, 12, 20, 24)) * 3000).astype(np.uint16)
+    foreign = tmp_path / "foreign.ome.zarr"
+    root = zarr.open_group(str(foreign), mode="w", zarr_format=3)
+    root.create_array("0", data=vol, chunks=(1, 8, 8, 8), dimension_names=("c", "z", "y", "x"))
+    root.create_array("1", data=vol[:, :, ::2, ::2].copy(), chunks=(1, 8, 8, 8),
+                      dimension_names=("c", "z", "y", "x"))
+    root.attrs["ome"] = {
+        "version": "0.5",
+        "multiscales": [{
+            "axes": [{"name": "c", "type": "channel"}] + [{"name": a, "type": "space"} for a in "zyx"],
+            "datasets": [{"path": str(i), "coordinateTransformations": [
+                {"type": "scale", "scale": [1.0, 1.0, 2.0**i, 2.0**i]}]} for i in range(2)],
+        }],
+    }
+    remote = s3["root"] / "bucket" / "foreign" / "foreign.ome.zarr"
+    shutil.copytree(foreign, remote)
+    before = files(remote)
+    p = run("ingest", "index", "s3://bucket/foreign/foreign.ome.zarr", "--s3-endpoint",
+            s3["endpoint"])
+    assert p.returncode == 0, p.stderr
+    assert p.stdout == "indexed s3://bucket/foreign/foreign.ome.zarr: 2 levels, 1 channels, bricks [8, 8, 8]\n"
+    run_ingest("index", foreign)
+    after = files(remote)
+    assert after == files(foreign)
+    # The image's keys are untouched; the region metadata is new; the root document last.
+    assert {k: v for k, v in after.items() if k in before and k != "zarr.json"} == \
+        {k: v for k, v in before.items() if k != "zarr.json"}
+    assert any(k.startswith("residency/") for k in after)
+    others = [p.stat().st_mtime_ns for p in remote.rglob("*") if p.is_file()
+              and p.name != "zarr.json" and str(p.relative_to(remote)) not in before]
+    assert (remote / "zarr.json").stat().st_mtime_ns >= max(others)
