@@ -99,9 +99,7 @@ pub fn index(location: &StoreLocation, options: &ObjectStoreOptions) -> Result<S
         StoreLocation::S3 { .. } => return index_object_store(location, options),
     };
     if !path.is_dir() {
-        return Err(IndexError::NotAnImage {
-            path: path.to_path_buf(),
-        });
+        return Err(IndexError::NotAnImage { path: path.clone() });
     }
     let store = Arc::new(crate::store::StagingStore::new(path)?);
     let pyramid = Pyramid::open(store, &path.display().to_string())?;
