@@ -299,16 +299,15 @@ impl StoreLocation {
                         Err(source) => return Err(failed(name, source)),
                     }
                 }
-                let listed: Vec<_> = s3
+                // Then every other key, in bulk requests.
+                let listed = s3
                     .list(Some(&ObjectPath::from(prefix.as_str())))
-                    .try_collect()
+                    .map_ok(|meta| meta.location)
+                    .boxed();
+                s3.delete_stream(listed)
+                    .try_collect::<Vec<_>>()
                     .await
                     .map_err(|source| failed("", source))?;
-                for meta in listed {
-                    s3.delete(&meta.location)
-                        .await
-                        .map_err(|source| failed(meta.location.as_ref(), source))?;
-                }
             }
             let mut total = 0;
             for batch in [rest, root] {
