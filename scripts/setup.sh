@@ -30,15 +30,6 @@ if ! command -v cargo >/dev/null 2>&1; then
   exit 1
 fi
 
-# A real S3 server for the object-storage tests (tests/python/test_object_store.py): s3s-fs, the
-# s3s project's S3 protocol server over a local folder, built once into ~/.cargo/bin (about
-# 2 minutes on 2 cores). Garage would take 20-40 minutes to build here; see the README.
-S3S_FS_VERSION=0.14.1
-if ! s3s-fs --version 2>/dev/null | grep -q " $S3S_FS_VERSION$"; then
-  echo "== installing s3s-fs $S3S_FS_VERSION (once)"
-  cargo install s3s-fs --version "$S3S_FS_VERSION" --features binary --locked
-fi
-
 stamp=.venv/.requirements.sha
 want=$(sha256sum scripts/python-requirements.txt | cut -d' ' -f1)
 if [ ! -x .venv/bin/python ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then

@@ -1,6 +1,6 @@
-"""Stores in an S3-compatible object store, written by `ingest convert` and read by `ingest
-inspect` and `viewer render` through a real S3 server on loopback: s3s-fs (installed by
-scripts/setup.sh), serving a folder whose subfolders are buckets and whose files are the objects.
+"""Stores in an S3-compatible object store, written by `ingest convert` and `ingest index` and
+read by `ingest inspect` and `viewer render` through a real S3 server on loopback: s3s-fs (installed by
+scripts/test.sh), serving a folder whose subfolders are buckets and whose files are the objects.
 What they read over S3 must equal what they read from a folder, and what `convert` writes must
 be byte for byte what it writes to a folder."""
 
@@ -30,7 +30,7 @@ def s3(tmp_path_factory):
     """An s3s-fs server on loopback with bucket `bucket` holding `sample.ome.zarr` (a sparse
     32³ u16 store with 16³ bricks), and that store's local copy."""
     exe = shutil.which("s3s-fs")
-    assert exe, "s3s-fs not installed: run scripts/setup.sh"
+    assert exe, "s3s-fs not installed: run scripts/test.sh (it installs it)"
     tmp = tmp_path_factory.mktemp("s3")
     samples = tmp / "samples"  # also the converts' input
     run_ingest("sample", "-o", samples, "--kind", "sparse", "--size", "32,32,32", "--quiet")
