@@ -13,7 +13,6 @@ use std::sync::Mutex;
 use std::sync::mpsc::sync_channel;
 use std::time::Instant;
 
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use rayon::prelude::*;
 use residency_schemas::dataset::dataset_name;
 use zarrs::array::{Array, ArrayError};
@@ -794,17 +793,7 @@ fn convert_typed<T: Sample>(
     let [depth, ny, nx] = inputs.shape;
     let plane = (ny * nx) as usize;
     let input_bytes = depth * ny * nx * channels as u64 * T::FORMAT.bytes() as u64;
-    let bar = if options.progress {
-        ProgressBar::with_draw_target(Some(input_bytes), ProgressDrawTarget::stderr())
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] [{wide_bar}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}",
-        )
-        .expect("template"),
-    );
+    let bar = crate::progress::bytes_bar(input_bytes, "", options.progress);
 
     // Reader thread: decodes slab k+1 while slab k is processed.
     let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);

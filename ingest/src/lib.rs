@@ -13,6 +13,7 @@
 //! - [`synthetic`]: the built-in synthetic samples (light-sheet fluorescence, sparse CT,
 //!   dense simulation, multiplexed immunofluorescence);
 //! - [`inspect`]: the `ingest inspect` report;
+//! - [`progress`]: the byte-counting progress bar of conversions and uploads;
 //! - [`memory`]: the machine's memory, for refusing work that cannot fit before allocating.
 //!
 //! Errors are `thiserror` enums, one per module ([`source::SourceError`],
@@ -26,6 +27,7 @@ pub mod index;
 pub mod inspect;
 pub mod memory;
 pub mod ome;
+pub mod progress;
 pub mod pyramid;
 pub mod region_writer;
 pub mod regions;

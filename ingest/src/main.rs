@@ -5,8 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use residency_ingest::convert::{ConvertOptions, convert};
+use residency_ingest::progress::bytes_bar;
 use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
 use residency_ingest::store::OmeZarrVersion;
@@ -245,24 +245,16 @@ fn run(cli: Cli) -> Result<()> {
                 endpoint: s3_endpoint,
             };
             // An object-store output is converted in a local folder first, then published.
-            let staging = match &output {
-                StoreLocation::Folder(_) => None,
+            let (local, staging) = match &output {
+                StoreLocation::Folder(path) => (path.clone(), None),
                 StoreLocation::S3 { .. } => {
-                    if !overwrite && output.exists(&s3)? {
-                        bail!("{output}: output already exists (pass --overwrite to replace it)");
-                    }
-                    Some(
-                        tempfile::Builder::new()
-                            .prefix("ingest-staging-")
-                            .tempdir()
-                            .context("cannot create a local staging folder")?,
-                    )
+                    output.check_absent(&s3, overwrite)?;
+                    let dir = tempfile::Builder::new()
+                        .prefix("ingest-staging-")
+                        .tempdir()
+                        .context("cannot create a local staging folder")?;
+                    (dir.path().join(output.file_name()), Some(dir))
                 }
-            };
-            let local = match (&output, &staging) {
-                (StoreLocation::Folder(path), _) => path.clone(),
-                (_, Some(dir)) => dir.path().join(output.file_name()),
-                (_, None) => unreachable!("an object-store output has a staging folder"),
             };
             let mut options = ConvertOptions::new(inputs, local.clone());
             options.raw = RawOptions {
@@ -285,7 +277,10 @@ fn run(cli: Cli) -> Result<()> {
             options.channel_names = channel_names;
             let mut summary = convert(&options)?;
             if staging.is_some() {
-                publish(&local, &output, &s3, overwrite, !quiet)?;
+                // Replacing a store clears its old keys, root metadata first.
+                let bar = bytes_bar(summary.stored_bytes, "uploading", !quiet);
+                output.upload_folder(&local, &s3, overwrite, &|n| bar.inc(n))?;
+                bar.finish_and_clear();
                 summary.output = PathBuf::from(output.to_string());
             }
             print!("{}", summary.report());
@@ -343,49 +338,6 @@ fn run(cli: Cli) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Uploads the converted store in `local` to `output`, root metadata last, with a progress
-/// bar unless `quiet`.
-fn publish(
-    local: &std::path::Path,
-    output: &StoreLocation,
-    s3: &ObjectStoreOptions,
-    overwrite: bool,
-    progress: bool,
-) -> Result<()> {
-    let total = dir_bytes(local)?;
-    let bar = if progress {
-        ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "uploading {spinner} [{elapsed_precise}] [{wide_bar}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}",
-        )
-        .expect("template"),
-    );
-    output.publish_folder(local, s3, overwrite, &|n| bar.inc(n))?;
-    bar.finish_and_clear();
-    Ok(())
-}
-
-/// Bytes of every file under `dir`.
-fn dir_bytes(dir: &std::path::Path) -> Result<u64> {
-    let mut total = 0;
-    for entry in
-        std::fs::read_dir(dir).with_context(|| format!("{}: cannot read", dir.display()))?
-    {
-        let entry = entry?;
-        let meta = entry.metadata()?;
-        total += if meta.is_dir() {
-            dir_bytes(&entry.path())?
-        } else {
-            meta.len()
-        };
-    }
-    Ok(total)
 }
 
 fn main() -> ExitCode {

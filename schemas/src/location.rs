@@ -14,10 +14,10 @@ use std::sync::{Arc, OnceLock};
 
 use futures::{StreamExt, TryStreamExt};
 use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::ReadableListableStorageTraits;
 use zarrs::storage::storage_adapter::async_to_sync::{
     AsyncToSyncBlockOn, AsyncToSyncStorageAdapter,
 };
-use zarrs::storage::{ReadableListableStorageTraits, ReadableWritableListableStorageTraits};
 use zarrs_object_store::AsyncObjectStore;
 use zarrs_object_store::object_store::aws::{AmazonS3, AmazonS3Builder};
 use zarrs_object_store::object_store::path::Path as ObjectPath;
@@ -241,38 +241,33 @@ impl StoreLocation {
         })
     }
 
-    /// Copies the finished store in `folder` to this object-store location, so that a reader
-    /// never takes a partial store for a complete one: with `overwrite`, the root metadata
-    /// already there is deleted first and then every other key under the prefix; then every
-    /// file but the root metadata is uploaded, and the root metadata ([`ROOT_METADATA`]) last.
-    /// `uploaded` is called with each file's bytes. Returns the bytes uploaded.
+    /// Refuses a location where a store already is, unless `overwrite`.
     ///
     /// # Errors
-    /// [`LocationError::Exists`] when a store is there and `overwrite` is false,
-    /// [`LocationError::ReadFile`] for a file that cannot be read, and
-    /// [`LocationError::ObjectStore`] (naming the key) for a request that failed.
-    pub fn publish_folder(
+    /// [`LocationError::Exists`], or [`LocationError::ObjectStore`] when the object store
+    /// cannot be asked.
+    pub fn check_absent(
         &self,
-        folder: &Path,
         options: &ObjectStoreOptions,
         overwrite: bool,
-        uploaded: &(dyn Fn(u64) + Sync),
-    ) -> Result<u64, LocationError> {
-        if self.exists(options)? && !overwrite {
+    ) -> Result<(), LocationError> {
+        if !overwrite && self.exists(options)? {
             return Err(LocationError::Exists {
                 location: self.to_string(),
             });
         }
-        self.upload_folder(folder, options, overwrite, uploaded)
+        Ok(())
     }
 
-    /// Uploads every file of `folder` under this object-store location, the root metadata
-    /// ([`ROOT_METADATA`]) last, keeping the other keys there unless `clear` (then the root
+    /// Uploads every file of `folder` under this object-store location so that a reader never
+    /// takes a partial store for a complete one: the root metadata ([`ROOT_METADATA`]) last.
+    /// The other keys there are kept unless `clear` (replacing a store: then the old root
     /// metadata is deleted first, then every key under the prefix). `uploaded` is called with
     /// each file's bytes. Returns the bytes uploaded.
     ///
     /// # Errors
-    /// As [`StoreLocation::publish_folder`], except [`LocationError::Exists`].
+    /// [`LocationError::ReadFile`] for a file that cannot be read, and
+    /// [`LocationError::ObjectStore`] (naming the key) for a request that failed.
     pub fn upload_folder(
         &self,
         folder: &Path,
@@ -349,20 +344,6 @@ impl StoreLocation {
         &self,
         options: &ObjectStoreOptions,
     ) -> Result<Arc<dyn ReadableListableStorageTraits>, LocationError> {
-        Ok(match self {
-            Self::Folder(path) => Arc::new(folder_store(path)?),
-            Self::S3 { .. } => Arc::new(self.object_storage(options)?),
-        })
-    }
-
-    /// Opens the store for reading and writing.
-    ///
-    /// # Errors
-    /// As [`StoreLocation::open_readable`].
-    pub fn open_writable(
-        &self,
-        options: &ObjectStoreOptions,
-    ) -> Result<Arc<dyn ReadableWritableListableStorageTraits>, LocationError> {
         Ok(match self {
             Self::Folder(path) => Arc::new(folder_store(path)?),
             Self::S3 { .. } => Arc::new(self.object_storage(options)?),

@@ -11,6 +11,11 @@ use super::apron::APRON_VOXELS;
 use super::page_table::ENTRY_APRON;
 use crate::source::{BrickVoxels, SampleType};
 
+/// Edge of a slot, voxels (`x, y, z`): a brick of `brick` voxels and its apron.
+fn slot_edge(brick: [u32; 3]) -> [u32; 3] {
+    brick.map(|b| b + APRON_VOXELS)
+}
+
 /// Which of the shader's three atlas bindings holds the data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AtlasKind {
@@ -67,7 +72,7 @@ impl BrickCache {
         cache_bytes: u64,
     ) -> Result<Self, GpuError> {
         let (format, kind) = atlas_format(sample_type);
-        let slot = brick.map(|b| b + APRON_VOXELS);
+        let slot = slot_edge(brick);
         let brick_bytes = sample_type.block_bytes(slot.map(u64::from));
         // Page-table entries hold `slot + 2` below the apron bit.
         let wanted = (cache_bytes / brick_bytes).min(u64::from(ENTRY_APRON - 2)) as u32;
@@ -170,17 +175,12 @@ impl BrickCache {
     /// Bytes of one slot (a brick and its apron).
     pub fn slot_bytes(&self) -> u64 {
         self.sample_type
-            .block_bytes(self.brick.map(|b| u64::from(b + APRON_VOXELS)))
+            .block_bytes(slot_edge(self.brick).map(u64::from))
     }
 
     /// Edge of a brick, voxels (`x, y, z`).
     pub fn brick(&self) -> [u32; 3] {
         self.brick
-    }
-
-    /// Bytes of one sample.
-    pub fn sample_bytes(&self) -> usize {
-        self.sample_type.bytes()
     }
 
     /// The sample type of the atlas.
@@ -295,7 +295,8 @@ impl BrickCache {
     ) {
         let [sx, sy, _] = self.slots_per_axis;
         let s = [slot % sx, (slot / sx) % sy, slot / (sx * sy)];
-        let at = |a: usize| s[a] * (self.brick[a] + APRON_VOXELS) + origin[a];
+        let edge = slot_edge(self.brick);
+        let at = |a: usize| s[a] * edge[a] + origin[a];
         queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.atlas,

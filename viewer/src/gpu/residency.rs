@@ -304,7 +304,7 @@ impl ResidencyState {
             None => None,
         };
         self.cache.upload(&gpu.queue, slot, bytes);
-        let faces = LowFaces::of(bytes, self.cache.brick(), self.cache.sample_bytes());
+        let faces = LowFaces::of(bytes, self.cache.brick(), self.cache.sample_type().bytes());
         self.aprons.take_slot(slot, id, faces);
         self.cache.assign(slot, id);
         self.fill_apron(gpu, id, slot);
@@ -330,7 +330,7 @@ impl ResidencyState {
         match apron::entry_offers(self.pages.entry(id))? {
             EntryKind::Resident => self.aprons.faces(id).map(PartSource::Faces),
             EntryKind::FillValue => Some(PartSource::Constant {
-                sample: vec![0; self.cache.sample_bytes()],
+                sample: vec![0; self.cache.sample_type().bytes()],
                 stand_in: false,
             }),
             EntryKind::Clear => {
@@ -365,7 +365,7 @@ impl ResidencyState {
             let (bytes, stand_in) = match self.part_source(n) {
                 None => continue,
                 Some(PartSource::Faces(f)) => {
-                    (f.part(part, brick, self.cache.sample_bytes()), false)
+                    (f.part(part, brick, self.cache.sample_type().bytes()), false)
                 }
                 Some(PartSource::Constant { sample, stand_in }) => (
                     sample.repeat(extent.iter().product::<u32>() as usize),
@@ -387,8 +387,13 @@ impl ResidencyState {
     /// benchmark's "bricks read"); the aprons stay filled either way.
     pub fn use_aprons(&mut self, gpu: &Gpu, used: bool) {
         self.aprons.set_used(used);
-        for id in 0..self.pages.len() as u32 {
-            if let Some(slot) = entry_slot(self.pages.entry(id)) {
+        self.refill_aprons(gpu);
+    }
+
+    /// Fills what can be filled of every occupied slot's apron, and rewrites its entry.
+    fn refill_aprons(&mut self, gpu: &Gpu) {
+        for slot in 0..self.cache.capacity() {
+            if let Some(id) = self.cache.owner(slot) {
                 self.fill_apron(gpu, id, slot);
             }
         }
@@ -412,11 +417,7 @@ impl ResidencyState {
     /// Uploads changed page-table entries, octree nodes and classes.
     pub fn flush(&mut self, gpu: &Gpu) {
         if std::mem::take(&mut self.aprons_stale) {
-            for id in 0..self.pages.len() as u32 {
-                if let Some(slot) = entry_slot(self.pages.entry(id)) {
-                    self.fill_apron(gpu, id, slot);
-                }
-            }
+            self.refill_aprons(gpu);
         }
         self.pages.flush(&gpu.queue);
         let dirty = self.octree.take_dirty();

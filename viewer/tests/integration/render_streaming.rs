@@ -14,9 +14,18 @@ use residency_viewer::image::RgbImage;
 use residency_viewer::scene::Scene;
 use residency_viewer::source::{BrickKey, BrickSource, SampleType};
 
-/// 32³ u8 with bricks 8³: x < 24 holds 10 (transparent under the TF), x ≥ 24 a smooth
-/// pattern in `[60, 180]`.
-fn half_empty() -> SyntheticSource {
+/// The smooth pattern in `[60, 180]` that the two-part volumes below show.
+fn pattern(x: u64, y: u64, z: u64) -> f64 {
+    120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
+}
+
+/// 32³ u8 with bricks 8³ and min/max cells of 4, one channel: `below(x, y, z)` where x < `split`,
+/// `above(x, y, z)` elsewhere.
+fn split_at_x(
+    split: u64,
+    below: fn(u64, u64, u64) -> f64,
+    above: fn(u64, u64, u64) -> f64,
+) -> SyntheticSource {
     SyntheticSource::new(
         SampleType::U8,
         [32, 32, 32],
@@ -24,14 +33,19 @@ fn half_empty() -> SyntheticSource {
         [8; 3],
         4,
         1,
-        |_, [x, y, z]| {
-            if x < 24 {
-                10.0
+        move |_, [x, y, z]| {
+            if x < split {
+                below(x, y, z)
             } else {
-                120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
+                above(x, y, z)
             }
         },
     )
+}
+
+/// x < 24 holds 10 (transparent under the TF), x ≥ 24 the [`pattern`].
+fn half_empty() -> SyntheticSource {
+    split_at_x(24, |_, _, _| 10.0, pattern)
 }
 
 fn half_scene() -> Scene {
@@ -75,24 +89,12 @@ fn transparent_region_is_never_requested() {
     assert!(p.frames[0].shader.empty_nodes_skipped > 0);
 }
 
-/// 32³ u8 with bricks 8³: x < 16 a smooth pattern in `[60, 180]`, x ≥ 16 a ripple in
-/// `[5, 15]` (transparent under a ramp from 50, shown by a ramp from 0).
+/// x < 16 the [`pattern`], x ≥ 16 a ripple in `[5, 15]` (transparent under a ramp from 50,
+/// shown by a ramp from 0).
 fn ripple_beside_pattern() -> SyntheticSource {
-    SyntheticSource::new(
-        SampleType::U8,
-        [32, 32, 32],
-        [1.0; 3],
-        [8; 3],
-        4,
-        1,
-        |_, [x, y, z]| {
-            if x < 16 {
-                120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
-            } else {
-                (10.0 + 5.0 * (y as f64 * 0.9 + z as f64 * 0.7 + x as f64 * 1.3).sin()).round()
-            }
-        },
-    )
+    split_at_x(16, pattern, |x, y, z| {
+        (10.0 + 5.0 * (y as f64 * 0.9 + z as f64 * 0.7 + x as f64 * 1.3).sin()).round()
+    })
 }
 
 #[test]
