@@ -18,6 +18,12 @@ median run is reported, so background load hits both alike.
 
 Each server's peak RSS (VmHWM, summed over nginx's processes) is read after its loads.
 Results go to benchmarks/results/server.md (and the README between markers with --readme).
+
+With `--s3`, it measures instead `brickserver` serving the same stores from an S3 server on
+loopback (s3s-fs, as the tests use: `scripts/test.sh` installs it) against `brickserver` serving
+them from disk: random chunk GETs at 16 and 1 connections, 304 revalidations and region queries
+at 16 connections. Results go to benchmarks/results/server-s3.md (README markers
+`server-s3-bench`).
 """
 
 import argparse
@@ -110,12 +116,13 @@ def oha(url, connections, seconds, headers=(), regex=True):
     }
 
 
-def start_brickserver(store, name):
+def start_brickserver(store, name, *extra, env=None):
     p = subprocess.Popen(
-        [str(BIN / "brickserver"), "serve", f"--name={name}={store}", "--bind", "127.0.0.1:0"],
+        [str(BIN / "brickserver"), "serve", f"--name={name}={store}", "--bind", "127.0.0.1:0", *extra],
         stdout=subprocess.PIPE,
         stderr=subprocess.DEVNULL,
         text=True,
+        env=env,
     )
     for line in p.stdout:
         if line.startswith("listening on "):
@@ -198,6 +205,7 @@ def main():
     ap.add_argument("--soak-only", action="store_true", help="run only the soak")
     ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
     ap.add_argument("--readme", action="store_true")
+    ap.add_argument("--s3", action="store_true", help="brickserver from an S3 server (s3s-fs) against from disk")
     a = ap.parse_args()
     work = pathlib.Path(a.work)
     store = work / "www" / "bench"
@@ -209,11 +217,24 @@ def main():
         subprocess.run([BIN / "ingest", "sample", "-o", sample, "--size", "128,256,256", "--quiet"], check=True)
         subprocess.run([BIN / "ingest", "convert", sample / "nuclei.ome.tif", sample / "membranes.ome.tif", "-o", region_store, "--quiet"], check=True)
 
+    results_dir = ROOT / "benchmarks" / "results"
+    if a.s3:
+        s3 = run_s3_loads(a, work, store, region_store)
+        report = render_s3(s3, a)
+        (results_dir / "server-s3.md").write_text(report)
+        (results_dir / "server-s3.json").write_text(json.dumps(s3, indent=1))
+        print(report)
+        if a.readme:
+            readme = ROOT / "README.md"
+            text = readme.read_text()
+            marker = "server-s3-bench"
+            new = re.sub(f"<!-- {marker}:start -->.*<!-- {marker}:end -->", f"<!-- {marker}:start -->\n{report}<!-- {marker}:end -->", text, flags=re.S)
+            readme.write_text(new)
+        return
     results = {}
     if not a.soak_only:
         results = run_loads(a, work, store, region_store)
     soak = run_soak(a, store) if a.soak else None
-    results_dir = ROOT / "benchmarks" / "results"
     sections = []
     if results:
         sections.append(("server-bench", render(results, a), "server"))
@@ -261,6 +282,112 @@ def run_loads(a, work, store, region_store):
         rs.send_signal(signal.SIGTERM)
         rs.wait(timeout=20)
     return results
+
+
+S3_KEY, S3_SECRET = "AKRESIDENCYBENCH", "residency-bench-secret-0123456789"
+
+
+def start_s3s_fs(root: pathlib.Path):
+    """s3s-fs on a free loopback port serving `root` (its subfolders are buckets)."""
+    import socket
+
+    exe = shutil.which("s3s-fs") or str(pathlib.Path.home() / ".cargo" / "bin" / "s3s-fs")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    p = subprocess.Popen([exe, "--host", "127.0.0.1", "--port", str(port), "--access-key", S3_KEY, "--secret-key", S3_SECRET, str(root)],
+                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    for _ in range(300):
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            return p, f"http://127.0.0.1:{port}"
+        except OSError:
+            time.sleep(0.1)
+    raise RuntimeError("s3s-fs did not listen")
+
+
+def run_s3_loads(a, work, store, region_store):
+    """The chunk and region loads against brickserver from disk and from s3s-fs, interleaved."""
+    bucket = work / "s3" / "bucket"
+    if not (bucket / "bench" / "done").exists():
+        shutil.rmtree(work / "s3", ignore_errors=True)
+        bucket.mkdir(parents=True)
+        # Hard links: the same files, no second gigabyte.
+        subprocess.run(["cp", "-al", str(store), str(bucket / "bench")], check=True)
+        subprocess.run(["cp", "-al", str(region_store), str(bucket / "regions.ome.zarr")], check=True)
+    s3, endpoint = start_s3s_fs(work / "s3")
+    env = {k: v for k, v in os.environ.items() if not k.startswith("AWS_")}
+    env.update(AWS_ACCESS_KEY_ID=S3_KEY, AWS_SECRET_ACCESS_KEY=S3_SECRET)
+    servers = {}
+    try:
+        for name, chunks, regions, extra in [
+            ("disk", store, region_store, []),
+            ("s3", "s3://bucket/bench", "s3://bucket/regions.ome.zarr", ["--s3-endpoint", endpoint]),
+        ]:
+            p, pids, base = start_brickserver(chunks, "bench", "--name", f"regions={regions}", *extra, env=env)
+            servers[name] = (p, pids, base)
+        bases = {name: f"{base}/bench" for name, (_, _, base) in servers.items()}
+        etags = {name: etag_of(f"{b}/0/c/0/0/0/0") for name, b in bases.items()}
+        region_url = "/regions/regions\\?level=0&channel=[01]&min=[0-9]{1,2},[0-9]{1,2},[0-9]{1,2}&max=2[0-4][0-9],2[0-4][0-9],12[0-8]"
+        for name, (_, _, base) in servers.items():
+            # Warm both alike: the page cache for the files, the region index for the queries.
+            oha(key_regex(bases[name]), 16, 3)
+            subprocess.run(["curl", "-sf", f"{base}/regions/regions?level=0&channel=0&min=0,0,0&max=1,1,1"], check=True, capture_output=True)
+        plan = [("GET, 16 conn", 16, "get"), ("GET, 1 conn", 1, "get"), ("304, 16 conn", 16, "304"), ("regions, 16 conn", 16, "regions")]
+        out = {name: {} for name in servers}
+        for load, c, kind in plan:
+            runs = {name: [] for name in servers}
+            for _ in range(a.repeat):
+                for name, (_, _, base) in servers.items():
+                    if kind == "304":
+                        r = oha(f"{bases[name]}/0/c/0/0/0/0", c, a.duration, headers=[f"If-None-Match: {etags[name]}"], regex=False)
+                    elif kind == "regions":
+                        r = oha(base + region_url, c, a.duration)
+                    else:
+                        r = oha(key_regex(bases[name]), c, a.duration)
+                    runs[name].append(r)
+            for name in servers:
+                out[name][load] = median_run(runs[name])
+        for name, (_, pids, _) in servers.items():
+            out[name]["rss"] = rss_mb(pids)
+        out["s3s_fs_rss"] = rss_mb([s3.pid])
+        out["s3s_fs_version"] = subprocess.run([shutil.which("s3s-fs") or "s3s-fs", "--version"], capture_output=True, text=True).stdout.strip()
+        return out
+    finally:
+        for p, _, _ in servers.values():
+            p.send_signal(signal.SIGTERM)
+            p.wait(timeout=20)
+        s3.terminate()
+        s3.wait(timeout=10)
+
+
+def render_s3(s3, a):
+    disk, obj = s3["disk"], s3["s3"]
+    lines = [
+        f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
+        f"by `benchmarks/server_bench.py --s3 --duration {a.duration} --repeat {a.repeat}`: one brickserver reads the stores from disk, "
+        f"one from {s3['s3s_fs_version']} on loopback serving the same files (the S3 server, both brickservers and oha share the cores). "
+        "Chunk loads: 20,000 chunks of random bytes (median 40 KiB, about 1 GB, four times the default 256 MB memory cache), keys uniform at random. "
+        "Region queries: random unaligned boxes of a 2-channel 128×256×256 `ingest sample` store. "
+        "The median of the interleaved runs is shown; ratios are S3 / disk.",
+        "",
+        "| Load | disk req/s | S3 req/s | ratio | disk p50 / p99 ms | S3 p50 / p99 ms | p99 ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for load, d in disk.items():
+        if load == "rss":
+            continue
+        o = obj[load]
+        lines.append(
+            f"| {load} | {d['rps']:,.0f} | {o['rps']:,.0f} | {o['rps'] / d['rps']:.2f}x | "
+            f"{d['p50_ms']:.2f} / {d['p99_ms']:.2f} | {o['p50_ms']:.2f} / {o['p99_ms']:.2f} | {o['p99_ms'] / max(d['p99_ms'], 1e-9):.2f}x |"
+        )
+    lines.append("")
+    bad = sum(n for side in (disk, obj) for k, v in side.items() if k != "rss" for c, n in v["codes"].items() if c not in (200, 304))
+    errors = sum(v["errors"] for side in (disk, obj) for k, v in side.items() if k != "rss")
+    lines.append(f"Peak RSS: brickserver from disk {disk['rss']:.0f} MB, from S3 {obj['rss']:.0f} MB, s3s-fs {s3['s3s_fs_rss']:.0f} MB. "
+                 f"Answers other than 200/304: {bad}; transport errors: {errors}.")
+    return "\n".join(lines) + "\n"
 
 
 def run_soak(a, store):

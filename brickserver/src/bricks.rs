@@ -8,15 +8,14 @@
 //! be read or decoded is `error`, with a message naming it, and the rest of the batch is still
 //! answered. A batch is capped in brick count and in decoded size.
 
-use std::path::Path;
-use std::sync::Arc;
-
 use axum::body::Bytes;
 use rayon::prelude::*;
 use residency_schemas::SampleType;
 use residency_schemas::pyramid::{Pyramid, PyramidError};
 use residency_schemas::wire::{BrickBatchHeader, BrickEncoding, BrickEntry, BrickStatus};
-use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::ReadableListableStorageTraits;
+
+use crate::dataset_store::DatasetStore;
 
 /// Caps on one batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -199,7 +198,7 @@ pub use residency_schemas::pyramid::NoSuchBrick;
 /// The image arrays of one dataset, opened once through the pyramid reader, for reading
 /// bricks.
 pub struct ImageArrays {
-    pyramid: Pyramid<FilesystemStore>,
+    pyramid: Pyramid<dyn ReadableListableStorageTraits>,
     /// Sample type of the bricks.
     pub data_type: SampleType,
     /// Brick shape `z, y, x`.
@@ -209,19 +208,12 @@ pub struct ImageArrays {
 }
 
 impl ImageArrays {
-    /// Opens the pyramid levels of the store at `root`.
+    /// Opens the pyramid levels of a dataset's store.
     ///
     /// # Errors
     /// When the store cannot be opened or its pyramid is unusable (see [`Pyramid::open`]).
-    pub fn open(root: &Path) -> Result<Self, PyramidError> {
-        let shown = root.display().to_string();
-        let store = Arc::new(
-            FilesystemStore::new(root).map_err(|e| PyramidError::Storage {
-                what: shown.clone(),
-                reason: format!("cannot open the store: {e}"),
-            })?,
-        );
-        let pyramid = Pyramid::open(store, &shown)?;
+    pub fn open(dataset: &DatasetStore) -> Result<Self, PyramidError> {
+        let pyramid = Pyramid::open(dataset.zarr(), dataset.shown())?;
         Ok(Self {
             data_type: pyramid.sample_type,
             brick_shape: pyramid.brick_shape,

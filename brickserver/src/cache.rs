@@ -1,6 +1,10 @@
-//! A bounded in-memory cache of bricks served in batches: decoded samples, or stored bytes cut
-//! out of shards. Its size never exceeds the configured byte budget (`--cache-bytes`); entries
-//! are evicted by quick_cache's CLOCK-PRO policy. Hits and misses are counted in the metrics.
+//! A bounded in-memory cache of bricks served in batches (decoded samples, or stored bytes cut
+//! out of shards) and of chunk objects read whole from an object store, with their `ETag`. Its
+//! size never exceeds the configured byte budget (`--cache-bytes`); entries are evicted by
+//! quick_cache's CLOCK-PRO policy. Hits and misses are counted in the metrics.
+
+use std::sync::Arc;
+use std::time::Instant;
 
 use axum::body::Bytes;
 use prometheus_client::metrics::counter::Counter;
@@ -8,31 +12,55 @@ use prometheus_client::metrics::gauge::Gauge;
 use quick_cache::Weighter;
 use quick_cache::sync::Cache;
 
-/// A brick of a batch: dataset (index in the served list), level, channel, brick
-/// coordinates `z, y, x`, and whether it holds decoded samples (`raw`) or stored bytes.
+/// What an entry holds.
 #[derive(Clone, Debug, Hash, PartialEq, Eq)]
-pub struct CacheKey {
-    /// Dataset index.
-    pub dataset: usize,
-    /// Level, channel and brick coordinates `z, y, x`.
-    pub at: (u32, u32, [u64; 3]),
-    /// Decoded samples rather than stored bytes.
-    pub raw: bool,
+pub enum CacheKey {
+    /// A brick of a batch: dataset (index in the served list), level, channel, brick
+    /// coordinates `z, y, x`, and whether it holds decoded samples (`raw`) or stored bytes.
+    Brick {
+        /// Dataset index.
+        dataset: usize,
+        /// Level, channel and brick coordinates `z, y, x`.
+        at: (u32, u32, [u64; 3]),
+        /// Decoded samples rather than stored bytes.
+        raw: bool,
+    },
+    /// A chunk object of a dataset in an object store, at its (still percent-encoded) key.
+    Object {
+        /// Dataset index.
+        dataset: usize,
+        /// The key under the dataset's root.
+        key: String,
+    },
+}
+
+/// A cached value: the bytes (empty for an empty brick) and, for an object, its `ETag` and
+/// when it was read.
+#[derive(Clone, Debug)]
+pub struct Cached {
+    /// The bytes.
+    pub bytes: Bytes,
+    /// The object's `ETag` and when it was read (`None` for a brick).
+    pub etag: Option<(Arc<str>, Instant)>,
 }
 
 #[derive(Clone)]
 struct ByteWeight;
 
-impl Weighter<CacheKey, Bytes> for ByteWeight {
-    fn weight(&self, _key: &CacheKey, value: &Bytes) -> u64 {
+impl Weighter<CacheKey, Cached> for ByteWeight {
+    fn weight(&self, key: &CacheKey, value: &Cached) -> u64 {
         // Count the bookkeeping too, so many empty bricks cannot exceed the budget.
-        (value.len() + 96) as u64
+        let key_bytes = match key {
+            CacheKey::Brick { .. } => 0,
+            CacheKey::Object { key, .. } => key.len(),
+        };
+        (value.bytes.len() + key_bytes + 96) as u64
     }
 }
 
 /// The bounded cache, with its hit and miss counters.
 pub struct ByteCache {
-    inner: Option<Cache<CacheKey, Bytes, ByteWeight>>,
+    inner: Option<Cache<CacheKey, Cached, ByteWeight>>,
     hits: Counter,
     misses: Counter,
     bytes: Gauge,
@@ -55,8 +83,8 @@ impl ByteCache {
         }
     }
 
-    /// The cached bytes for `key` (empty for an empty brick), counting a hit or a miss.
-    pub fn get(&self, key: &CacheKey) -> Option<Bytes> {
+    /// The cached entry for `key`, counting a hit or a miss.
+    pub fn get(&self, key: &CacheKey) -> Option<Cached> {
         let found = self.inner.as_ref().and_then(|c| c.get(key));
         if found.is_some() {
             self.hits.inc();
@@ -67,7 +95,7 @@ impl ByteCache {
     }
 
     /// Stores an entry (an entry larger than the whole budget is not kept).
-    pub fn insert(&self, key: CacheKey, value: Bytes) {
+    pub fn insert(&self, key: CacheKey, value: Cached) {
         if let Some(c) = &self.inner {
             c.insert(key, value);
             self.bytes.set(c.weight() as i64);
@@ -88,20 +116,21 @@ mod tests {
     fn never_holds_more_than_its_budget() {
         let (hits, misses) = (Counter::default(), Counter::default());
         let cache = ByteCache::new(100_000, hits.clone(), misses.clone(), Gauge::default());
-        let key = |i: u64| CacheKey {
+        let key = |i: u64| CacheKey::Brick {
             dataset: 0,
             at: (0, 0, [0, 0, i]),
             raw: true,
         };
+        let value = |bytes: Bytes| Cached { bytes, etag: None };
         for i in 0..1000 {
-            cache.insert(key(i), Bytes::from(vec![0u8; 1000]));
+            cache.insert(key(i), value(Bytes::from(vec![0u8; 1000])));
             assert!(cache.weight() <= 100_000, "{}", cache.weight());
         }
         assert!(cache.get(&key(999)).is_some());
         assert!((0..1000).filter(|&i| cache.get(&key(i)).is_some()).count() < 100);
         assert_eq!(hits.get() + misses.get(), 1001);
         let off = ByteCache::new(0, hits, misses.clone(), Gauge::default());
-        off.insert(key(1), Bytes::from_static(b"x"));
+        off.insert(key(1), value(Bytes::from_static(b"x")));
         assert!(off.get(&key(1)).is_none());
     }
 }

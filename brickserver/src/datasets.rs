@@ -1,16 +1,18 @@
 //! The datasets a server exposes, each under `/NAME/`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use residency_schemas::dataset::dataset_name;
+use residency_schemas::location::{LocationError, ObjectStoreOptions, StoreLocation};
 
 /// One served store.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Dataset {
     /// URL name: the store is served under `/NAME/`.
     pub name: String,
-    /// Canonical (symlink-free, absolute) root folder of the store.
-    pub root: PathBuf,
+    /// Where the store is: a canonical (symlink-free, absolute) root folder, or an object-store
+    /// prefix.
+    pub location: StoreLocation,
 }
 
 /// All served datasets, in the order given.
@@ -57,7 +59,7 @@ pub enum DatasetError {
         path: String,
     },
     /// Two datasets with one name.
-    #[error("{path}: dataset name '{name}' is used twice (use --name NAME=PATH)")]
+    #[error("{path}: dataset name '{name}' is used twice (use --name NAME=LOCATION)")]
     Duplicate {
         /// The second store of that name.
         path: String,
@@ -65,7 +67,7 @@ pub enum DatasetError {
         name: String,
     },
     /// A `--name` argument without `=`.
-    #[error("--name {pair}: expected NAME=PATH")]
+    #[error("--name {pair}: expected NAME=LOCATION")]
     BadPair {
         /// The argument.
         pair: String,
@@ -73,44 +75,65 @@ pub enum DatasetError {
     /// Nothing to serve.
     #[error("no dataset given")]
     NoDataset,
+    /// An object-store location with no store there (no root metadata).
+    #[error("{location}: no store there (none of zarr.json, .zgroup, .zattrs at its root)")]
+    NoStore {
+        /// The location.
+        location: String,
+    },
+    /// A location that cannot be parsed, or an object store that cannot be asked.
+    #[error(transparent)]
+    Location(#[from] LocationError),
 }
 
 impl Datasets {
-    /// Builds the set from positional paths (named by [`dataset_name`]) and `NAME=PATH` pairs,
-    /// checking that every path is a folder and every name is unique and URL-safe.
+    /// Builds the set from positional locations (named by [`dataset_name`] of their last
+    /// component) and `NAME=LOCATION` pairs, checking that every folder is a folder, that a
+    /// store is at every object-store location, and that every name is unique and URL-safe.
     ///
     /// # Errors
-    /// [`DatasetError`] naming the first path or argument at fault.
-    pub fn from_args(paths: &[PathBuf], named: &[String]) -> Result<Self, DatasetError> {
+    /// [`DatasetError`] naming the first location or argument at fault.
+    pub fn from_args(
+        locations: &[StoreLocation],
+        named: &[String],
+        options: &ObjectStoreOptions,
+    ) -> Result<Self, DatasetError> {
         let mut out = Vec::new();
-        let mut add = |name: String, path: &Path| -> Result<(), DatasetError> {
-            let shown = path.display().to_string();
+        let mut add = |name: String, location: &StoreLocation| -> Result<(), DatasetError> {
+            let shown = location.to_string();
             if !valid_name(&name) {
                 return Err(DatasetError::BadName { path: shown, name });
             }
-            let root = path
-                .canonicalize()
-                .map_err(|source| DatasetError::CannotOpen {
-                    path: shown.clone(),
-                    source,
-                })?;
-            if !root.is_dir() {
-                return Err(DatasetError::NotAFolder { path: shown });
-            }
+            let location = match location.folder() {
+                Some(path) => {
+                    let root = path
+                        .canonicalize()
+                        .map_err(|source| DatasetError::CannotOpen {
+                            path: shown.clone(),
+                            source,
+                        })?;
+                    if !root.is_dir() {
+                        return Err(DatasetError::NotAFolder { path: shown });
+                    }
+                    StoreLocation::Folder(root)
+                }
+                None if location.exists(options)? => location.clone(),
+                None => return Err(DatasetError::NoStore { location: shown }),
+            };
             if out.iter().any(|d: &Dataset| d.name == name) {
                 return Err(DatasetError::Duplicate { path: shown, name });
             }
-            out.push(Dataset { name, root });
+            out.push(Dataset { name, location });
             Ok(())
         };
-        for p in paths {
-            add(dataset_name(p), p)?;
+        for location in locations {
+            add(dataset_name(Path::new(&location.file_name())), location)?;
         }
         for pair in named {
-            let (name, path) = pair
+            let (name, location) = pair
                 .split_once('=')
                 .ok_or_else(|| DatasetError::BadPair { pair: pair.clone() })?;
-            add(name.to_string(), Path::new(path))?;
+            add(name.to_string(), &location.parse()?)?;
         }
         if out.is_empty() {
             return Err(DatasetError::NoDataset);

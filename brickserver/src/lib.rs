@@ -3,6 +3,7 @@
 //!
 //! - [`datasets`]: the configured datasets and their names;
 //! - [`store_keys`]: turning a request path into a file inside a dataset, safely;
+//! - [`dataset_store`]: where a dataset's keys are read from: a folder or an object store;
 //! - [`responses`]: file answers with `ETag`, `Range`, `Cache-Control` and `Content-Type`;
 //! - [`cache`]: the bounded memory cache;
 //! - [`regions`]: region queries and the min/max hierarchy, from the stored metadata;
@@ -19,6 +20,7 @@
 
 pub mod bricks;
 pub mod cache;
+pub mod dataset_store;
 pub mod datasets;
 pub mod listener;
 pub mod listing;

@@ -7,7 +7,6 @@
 //! (the first value of each, as a reverse proxy sets them), else `http://` and its `Host`.
 
 use std::fmt::Write as _;
-use std::path::Path;
 use std::str::FromStr;
 use std::sync::Arc;
 
@@ -17,9 +16,10 @@ use residency_schemas::ome::{ImageAttributes, OmeError, PyramidLayout, ZarrForma
 use residency_schemas::server::{DatasetEntry, DatasetList};
 use residency_schemas::zarr::{ArrayDescription, ArrayMetadataError};
 
+use crate::dataset_store::DatasetStore;
 use crate::datasets::Dataset;
 use crate::neuroglancer;
-use crate::store_keys::{KeyError, resolve};
+use crate::store_keys::KeyError;
 
 /// The URL the server is reached at from outside (`--public-url`): `http://` or `https://`,
 /// a host, and an optional path prefix; no query or fragment. Kept without a trailing `/`.
@@ -158,33 +158,20 @@ pub struct StoreSummary {
     pub level0: Result<ArrayDescription, Level0Error>,
 }
 
-/// Reads key `key` of the store at `root` (canonical), refusing keys that leave it.
-fn read_key(root: &Path, key: &str) -> Result<Option<Vec<u8>>, KeyError> {
-    // Level paths come from the store's metadata: encode `%` so they are taken literally.
-    const LITERAL: &percent_encoding::AsciiSet = &percent_encoding::CONTROLS.add(b'%');
-    let raw = percent_encoding::utf8_percent_encode(key, LITERAL).to_string();
-    match resolve(root, &raw) {
-        Ok(path) => std::fs::read(path)
-            .map(Some)
-            .map_err(|e| KeyError::Unreadable(e.to_string())),
-        Err(KeyError::NotFound) => Ok(None),
-        Err(e) => Err(e),
-    }
-}
-
 impl StoreSummary {
-    /// Reads the summary of the store at `root`.
+    /// Reads the summary of a dataset's store (synchronous: call it from blocking code).
     ///
     /// # Errors
     /// [`SummaryError`] when the image group's metadata is missing or unusable.
-    pub fn read(root: &Path) -> Result<Self, SummaryError> {
-        let shown = root.display().to_string();
+    pub fn read(store: &DatasetStore) -> Result<Self, SummaryError> {
+        let shown = store.shown().to_string();
+        let read_key = |key: &str| store.read_document(key);
         let no_group = || SummaryError::NoGroup {
             store: shown.clone(),
         };
-        let (format, group) = match read_key(root, "zarr.json").map_err(|_| no_group())? {
+        let (format, group) = match read_key("zarr.json").map_err(|_| no_group())? {
             Some(doc) => (ZarrFormat::V3, doc),
-            None => match read_key(root, ".zattrs").map_err(|_| no_group())? {
+            None => match read_key(".zattrs").map_err(|_| no_group())? {
                 Some(doc) => (ZarrFormat::V2, doc),
                 None => return Err(no_group()),
             },
@@ -194,7 +181,7 @@ impl StoreSummary {
         let layout = PyramidLayout::of(attributes.image(), &source)?;
         let key = format!("{}/{}", layout.level_paths[0], format.array_key());
         let shown_key = format!("{shown}/{key}");
-        let level0 = match read_key(root, &key) {
+        let level0 = match read_key(&key) {
             Ok(Some(doc)) => ArrayDescription::parse(format, &doc, &shown_key).map_err(Into::into),
             Ok(None) | Err(KeyError::NotFound) => Err(Level0Error::Missing { key: shown_key }),
             Err(KeyError::Refused(why)) => Err(Level0Error::Refused {

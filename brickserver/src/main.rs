@@ -13,6 +13,7 @@ use residency_brickserver::bricks::BatchLimits;
 use residency_brickserver::{
     AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, router, serve,
 };
+use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -32,14 +33,18 @@ struct Cli {
 enum Command {
     /// Serve datasets, each under /NAME/ (NAME: the folder name without .ome.zarr).
     Serve {
-        /// OME-Zarr store folders.
-        datasets: Vec<PathBuf>,
+        /// OME-Zarr stores: folders (paths or file:// URLs) or s3://BUCKET/PREFIX locations.
+        datasets: Vec<StoreLocation>,
         /// Address to listen on (loopback unless told otherwise; port 0 picks a free port).
         #[arg(long, default_value = "127.0.0.1:8000")]
         bind: SocketAddr,
-        /// Serve PATH under /NAME/ (repeatable).
-        #[arg(long = "name", value_name = "NAME=PATH")]
+        /// Serve LOCATION under /NAME/ (repeatable).
+        #[arg(long = "name", value_name = "NAME=LOCATION")]
         named: Vec<String>,
+        /// Endpoint URL of an S3-compatible server that is not AWS, for s3:// datasets
+        /// (default: AWS_ENDPOINT_URL, else AWS).
+        #[arg(long, value_name = "URL")]
+        s3_endpoint: Option<String>,
         /// Require `Authorization: Bearer <token>` on every request but /healthz; the token
         /// is the file's content without surrounding whitespace.
         #[arg(long)]
@@ -132,7 +137,7 @@ async fn run(
     let addr = listener.local_addr()?;
     let shutdown = shutdown_signal()?;
     for d in &datasets.0 {
-        println!("serving {} at http://{addr}/{}/", d.root.display(), d.name);
+        println!("serving {} at http://{addr}/{}/", d.location, d.name);
     }
     println!("listening on http://{addr}");
     std::io::stdout().flush()?;
@@ -164,6 +169,7 @@ fn main() -> ExitCode {
             datasets,
             bind,
             named,
+            s3_endpoint,
             token_file,
             viewer_dir,
             public_url,
@@ -173,7 +179,10 @@ fn main() -> ExitCode {
             max_batch_bricks,
             max_batch_bytes,
         } => (|| {
-            let datasets = Datasets::from_args(&datasets, &named)?;
+            let object_store = ObjectStoreOptions {
+                endpoint: s3_endpoint,
+            };
+            let datasets = Datasets::from_args(&datasets, &named, &object_store)?;
             if !(request_timeout > 0.0 && request_timeout.is_finite()) {
                 anyhow::bail!("--request-timeout must be a positive number of seconds");
             }
@@ -190,6 +199,7 @@ fn main() -> ExitCode {
                 },
                 viewer_dir: viewer_dir.or_else(default_viewer_dir),
                 public_url,
+                object_store,
             };
             let limits = ConnectionLimits {
                 max_connections,

@@ -11,7 +11,6 @@
 //! box aligned to cells (bricks) or ending at the level's edge, and found in time that grows
 //! with the box's surface, not its volume.
 
-use std::path::Path;
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -24,7 +23,9 @@ use residency_schemas::wire::{
 };
 use residency_schemas::{MinMaxGrid, RegionMetadata};
 use zarrs::array::{Array, ArrayBytes, ArraySubset};
-use zarrs::filesystem::FilesystemStore;
+use zarrs::storage::ReadableListableStorageTraits;
+
+use crate::dataset_store::DatasetStore;
 
 /// A pyramid of grids: grid `k` has cells of `cell · 2^k` voxels; each cell of grid `k + 1`
 /// aggregates the (up to) 2×2×2 cells below it in grid `k`.
@@ -204,7 +205,7 @@ pub enum RegionsError {
 
 /// Reads a whole array as little-endian bytes and as `f64` values.
 fn read_array(
-    store: &Arc<FilesystemStore>,
+    store: &Arc<dyn ReadableListableStorageTraits>,
     path: &str,
     data_type: SampleType,
 ) -> Result<(Vec<u8>, Vec<f64>), RegionsError> {
@@ -256,20 +257,15 @@ fn coarser_histograms(fine: &[u64], shape: [u64; 3], bins: usize) -> ([u64; 3], 
 }
 
 impl RegionIndex {
-    /// Loads the region index of the store at `root`, or `None` for a store without region
+    /// Loads the region index of a dataset's store, or `None` for a store without region
     /// metadata.
     ///
     /// # Errors
     /// [`RegionsError`] when the store, its pyramid or a region array cannot be read, or the
     /// arrays disagree with the metadata.
-    pub fn load(root: &Path) -> Result<Option<Self>, RegionsError> {
-        let shown = root.display().to_string();
-        let store = Arc::new(
-            FilesystemStore::new(root).map_err(|e| PyramidError::Storage {
-                what: shown.clone(),
-                reason: format!("cannot open the store: {e}"),
-            })?,
-        );
+    pub fn load(dataset: &DatasetStore) -> Result<Option<Self>, RegionsError> {
+        let shown = dataset.shown().to_string();
+        let store = dataset.zarr();
         // The image group's attributes first: a store that is no OME-Zarr image (a bare
         // array, a plain group) or has no region metadata has nothing to load.
         let group = [ZarrFormat::V3, ZarrFormat::V2].into_iter().find_map(|f| {

@@ -108,16 +108,34 @@ pub fn not_modified(key: &str, etag: &str, headers: &HeaderMap) -> Option<Respon
 /// `Range`, 200 otherwise.
 pub fn file_response(bytes: Bytes, etag: &str, key: &str, headers: &HeaderMap) -> Response<Body> {
     let len = bytes.len() as u64;
+    let range = headers
+        .get(header::RANGE)
+        .and_then(|v| v.to_str().ok())
+        .map_or(RangeRequest::Whole, |v| parse_range(v, len));
+    let part = match range {
+        RangeRequest::Part(start, end) => bytes.slice(start as usize..end as usize),
+        RangeRequest::Whole => bytes,
+        RangeRequest::Unsatisfiable => Bytes::new(),
+    };
+    part_response(part, len, range, etag, key)
+}
+
+/// The answer for `part`, the bytes `range` picks out of a stored file of `len` bytes served
+/// as Zarr key `key`: 206 (with `Content-Range`) for a part, 416 for an unsatisfiable range,
+/// 200 for the whole file.
+pub fn part_response(
+    part: Bytes,
+    len: u64,
+    range: RangeRequest,
+    etag: &str,
+    key: &str,
+) -> Response<Body> {
     let (content_type, cache) = kind_of(key);
     let builder = Response::builder()
         .header(header::ETAG, etag)
         .header(header::CACHE_CONTROL, cache)
         .header(header::ACCEPT_RANGES, "bytes")
         .header(header::CONTENT_TYPE, content_type);
-    let range = headers
-        .get(header::RANGE)
-        .and_then(|v| v.to_str().ok())
-        .map_or(RangeRequest::Whole, |v| parse_range(v, len));
     match range {
         RangeRequest::Unsatisfiable => builder
             .status(StatusCode::RANGE_NOT_SATISFIABLE)
@@ -127,7 +145,7 @@ pub fn file_response(bytes: Bytes, etag: &str, key: &str, headers: &HeaderMap) -
         RangeRequest::Whole => builder
             .status(StatusCode::OK)
             .header(header::CONTENT_LENGTH, HeaderValue::from(len))
-            .body(Body::from(bytes))
+            .body(Body::from(part))
             .expect("response"),
         RangeRequest::Part(start, end) => builder
             .status(StatusCode::PARTIAL_CONTENT)
@@ -136,7 +154,7 @@ pub fn file_response(bytes: Bytes, etag: &str, key: &str, headers: &HeaderMap) -
                 format!("bytes {start}-{}/{len}", end - 1),
             )
             .header(header::CONTENT_LENGTH, HeaderValue::from(end - start))
-            .body(Body::from(bytes.slice(start as usize..end as usize)))
+            .body(Body::from(part))
             .expect("response"),
     }
 }

@@ -25,6 +25,8 @@ use axum::middleware::{self, Next};
 use axum::response::Redirect;
 use axum::response::{IntoResponse, Json};
 use axum::routing::get;
+use residency_schemas::location::ObjectStoreOptions;
+use residency_schemas::location::object_store::GetRange;
 use residency_schemas::server::{ApiError, DatasetList};
 use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, MINMAX_MEDIA_TYPE, encode_framed};
 use serde::Deserialize;
@@ -32,13 +34,16 @@ use subtle::ConstantTimeEq;
 use tower_http::cors::{Any, CorsLayer};
 
 use crate::bricks::{BatchError, BatchLimits, ImageArrays, parse_batch, read_batch};
-use crate::cache::{ByteCache, CacheKey};
-use crate::datasets::{Dataset, Datasets};
+use crate::cache::{ByteCache, CacheKey, Cached};
+use crate::dataset_store::{DatasetStore, Keys, ObjectKeys, OpenError, requested_range};
+use crate::datasets::Datasets;
 use crate::listing::{self, PublicUrl};
 use crate::metrics::{Metrics, track};
 use crate::regions::{QueryError, RegionIndex};
-use crate::responses::{etag_of, file_response, is_metadata, not_modified};
-use crate::store_keys::{KeyError, RootDir, read_cached};
+use crate::responses::{
+    RangeRequest, etag_of, file_response, is_metadata, not_modified, parse_range, part_response,
+};
+use crate::store_keys::{KeyError, RootDir, checked_key, read_cached};
 use crate::viewer_page::ViewerFiles;
 
 /// Server-wide options of the router.
@@ -57,6 +62,8 @@ pub struct ServerOptions {
     /// included): every link in the listing is built on it. `None`: from the request's
     /// `X-Forwarded-Proto`/`X-Forwarded-Host`, else its `Host`.
     pub public_url: Option<PublicUrl>,
+    /// How to reach datasets in an object store.
+    pub object_store: ObjectStoreOptions,
 }
 
 impl Default for ServerOptions {
@@ -67,21 +74,9 @@ impl Default for ServerOptions {
             batch: BatchLimits::default(),
             viewer_dir: None,
             public_url: None,
+            object_store: ObjectStoreOptions::default(),
         }
     }
-}
-
-/// Why the router's state could not be made.
-#[derive(Debug, thiserror::Error)]
-pub enum StateError {
-    /// A dataset folder cannot be opened.
-    #[error("{}: cannot open dataset folder", path.display())]
-    OpenDataset {
-        /// The dataset's root folder.
-        path: PathBuf,
-        /// Why it cannot be opened.
-        source: std::io::Error,
-    },
 }
 
 /// A part of a dataset (its region index or image arrays) that could not be loaded; kept, so
@@ -116,7 +111,7 @@ pub struct AppState {
     viewer: ViewerFiles,
     public_url: Option<PublicUrl>,
     loaded: Vec<Loaded>,
-    roots: Vec<RootDir>,
+    stores: Vec<DatasetStore>,
     etags: quick_cache::sync::Cache<(usize, String), (Arc<str>, Instant)>,
 }
 
@@ -128,8 +123,9 @@ impl AppState {
     /// State for `datasets` under `options`.
     ///
     /// # Errors
-    /// [`StateError::OpenDataset`] when a dataset folder cannot be opened.
-    pub fn new(datasets: Datasets, options: &ServerOptions) -> Result<Self, StateError> {
+    /// [`OpenError`] when a dataset folder cannot be opened or an object-store client cannot
+    /// be configured.
+    pub fn new(datasets: Datasets, options: &ServerOptions) -> Result<Self, OpenError> {
         let metrics = Arc::new(Metrics::default());
         let cache = ByteCache::new(
             options.cache_bytes,
@@ -138,15 +134,10 @@ impl AppState {
             metrics.cache_bytes.clone(),
         );
         let loaded = datasets.0.iter().map(|_| Loaded::default()).collect();
-        let roots = datasets
+        let stores = datasets
             .0
             .iter()
-            .map(|d| {
-                RootDir::open(&d.root).map_err(|source| StateError::OpenDataset {
-                    path: d.root.clone(),
-                    source,
-                })
-            })
+            .map(|d| DatasetStore::open(&d.location, &options.object_store))
             .collect::<Result<_, _>>()?;
         Ok(Self {
             datasets,
@@ -156,7 +147,7 @@ impl AppState {
             viewer: ViewerFiles::new(options.viewer_dir.clone()),
             public_url: options.public_url.clone(),
             loaded,
-            roots,
+            stores,
             etags: quick_cache::sync::Cache::new(1 << 16),
         })
     }
@@ -300,9 +291,10 @@ async fn listed(state: &Arc<AppState>, headers: &HeaderMap) -> Vec<listing::List
             .0
             .iter()
             .zip(&st.loaded)
-            .map(|(d, l)| {
+            .zip(&st.stores)
+            .map(|((d, l), store)| {
                 l.summary
-                    .get_or_init(|| match listing::StoreSummary::read(&d.root) {
+                    .get_or_init(|| match listing::StoreSummary::read(store) {
                         Ok(s) => {
                             if let Err(e) = &s.level0 {
                                 tracing::warn!(
@@ -363,7 +355,7 @@ async fn loaded<T: Clone + Send + Sync + 'static, E: Display + 'static>(
     state: &Arc<AppState>,
     i: usize,
     cell: fn(&Loaded) -> &OnceLock<Result<T, LoadError>>,
-    load: fn(&Dataset) -> Result<T, E>,
+    load: fn(&DatasetStore) -> Result<T, E>,
 ) -> Result<T, LoadError> {
     if let Some(done) = cell(&state.loaded[i]).get() {
         return done.clone();
@@ -373,7 +365,7 @@ async fn loaded<T: Clone + Send + Sync + 'static, E: Display + 'static>(
         let d = &st.datasets.0[i];
         cell(&st.loaded[i])
             .get_or_init(|| {
-                load(d).map_err(|e| LoadError {
+                load(&st.stores[i]).map_err(|e| LoadError {
                     dataset: d.name.clone(),
                     reason: format!("{e:#}"),
                 })
@@ -416,41 +408,12 @@ async fn serve_key(
             return answer;
         }
     }
-    // Open beneath the dataset root and read what the page cache holds right here, as nginx
-    // does; only a read that would wait for the disk moves to the blocking pool.
-    let read = match state.roots[index].open_key(&raw_key) {
-        Ok((file, meta)) => {
-            let etag = etag_of(&meta);
-            if chunk {
-                state.etags.insert(
-                    (index, raw_key.clone()),
-                    (etag.as_str().into(), Instant::now()),
-                );
-            }
-            if let Some(answer) = not_modified(&raw_key, &etag, &headers) {
-                return answer;
-            }
-            let len = meta.len() as usize;
-            let (bytes, whole) = read_cached(&file, len);
-            if whole {
-                Ok((bytes, etag))
-            } else {
-                blocking(move || {
-                    use std::os::unix::fs::FileExt;
-                    let mut bytes = bytes;
-                    let done = bytes.len();
-                    bytes.resize(len, 0);
-                    file.read_exact_at(&mut bytes[done..], done as u64)
-                        .map(|()| (bytes, etag))
-                        .map_err(|e| KeyError::Unreadable(e.to_string()))
-                })
-                .await
-            }
-        }
-        Err(e) => Err(e),
+    let answer = match &state.stores[index].keys {
+        Keys::Folder(root) => folder_key(&state, index, root, &raw_key, &headers).await,
+        Keys::Object(objects) => object_key(&state, index, objects, &raw_key, &headers).await,
     };
-    match read {
-        Ok((bytes, etag)) => file_response(Bytes::from(bytes), &etag, &raw_key, &headers),
+    match answer {
+        Ok(response) => response,
         Err(KeyError::NotFound) => (
             StatusCode::NOT_FOUND,
             format!("no key '{raw_key}' in '{name}'\n"),
@@ -465,6 +428,128 @@ async fn serve_key(
             (StatusCode::INTERNAL_SERVER_ERROR, format!("{message}\n")).into_response()
         }
     }
+}
+
+/// Key `raw_key` of dataset `index`, read from its folder `root`.
+async fn folder_key(
+    state: &AppState,
+    index: usize,
+    root: &RootDir,
+    raw_key: &str,
+    headers: &HeaderMap,
+) -> Result<Response<Body>, KeyError> {
+    // Open beneath the dataset root and read what the page cache holds right here, as nginx
+    // does; only a read that would wait for the disk moves to the blocking pool.
+    let (file, meta) = root.open_key(raw_key)?;
+    let etag = etag_of(&meta);
+    if !is_metadata(raw_key) {
+        state.etags.insert(
+            (index, raw_key.to_string()),
+            (etag.as_str().into(), Instant::now()),
+        );
+    }
+    if let Some(answer) = not_modified(raw_key, &etag, headers) {
+        return Ok(answer);
+    }
+    let len = meta.len() as usize;
+    let (bytes, whole) = read_cached(&file, len);
+    let bytes = if whole {
+        bytes
+    } else {
+        blocking(move || {
+            use std::os::unix::fs::FileExt;
+            let mut bytes = bytes;
+            let done = bytes.len();
+            bytes.resize(len, 0);
+            file.read_exact_at(&mut bytes[done..], done as u64)
+                .map(|()| bytes)
+                .map_err(|e| KeyError::Unreadable(e.to_string()))
+        })
+        .await?
+    };
+    Ok(file_response(Bytes::from(bytes), &etag, raw_key, headers))
+}
+
+/// Key `raw_key` of dataset `index`, read from the object store: a chunk read whole in the last
+/// [`ETAG_VALID`] is answered from the memory cache; a `Range` becomes a ranged read, so a
+/// shard's index and chunks are read without the rest of the shard.
+async fn object_key(
+    state: &AppState,
+    index: usize,
+    objects: &ObjectKeys,
+    raw_key: &str,
+    headers: &HeaderMap,
+) -> Result<Response<Body>, KeyError> {
+    let key = checked_key(raw_key)?;
+    let chunk = !is_metadata(raw_key);
+    let cache_key = CacheKey::Object {
+        dataset: index,
+        key: raw_key.to_string(),
+    };
+    if chunk
+        && let Some(Cached {
+            bytes,
+            etag: Some((etag, read)),
+        }) = state.cache.get(&cache_key)
+        && read.elapsed() < ETAG_VALID
+    {
+        let answer = not_modified(raw_key, &etag, headers);
+        return Ok(answer.unwrap_or_else(|| file_response(bytes, &etag, raw_key, headers)));
+    }
+    let range_header = headers.get(header::RANGE).and_then(|v| v.to_str().ok());
+    let range = range_header.and_then(requested_range);
+    let ranged = range.is_some();
+    let part = match objects.get(&key, range).await {
+        Ok(part) => part,
+        Err(KeyError::Unreadable(_)) if let Some(value) = range_header.filter(|_| ranged) => {
+            // The store refused the range (past the end, a suffix of nothing): answer as a
+            // file of the object's length would be.
+            let (len, etag) = objects.head(&key).await?;
+            match parse_range(value, len) {
+                RangeRequest::Part(start, end) => {
+                    objects
+                        .get(&key, Some(GetRange::Bounded(start..end)))
+                        .await?
+                }
+                RangeRequest::Whole => objects.get(&key, None).await?,
+                unsatisfiable @ RangeRequest::Unsatisfiable => {
+                    return Ok(part_response(
+                        Bytes::new(),
+                        len,
+                        unsatisfiable,
+                        &etag,
+                        raw_key,
+                    ));
+                }
+            }
+        }
+        Err(e) => return Err(e),
+    };
+    let tag: Arc<str> = part.etag.as_str().into();
+    if chunk {
+        state
+            .etags
+            .insert((index, raw_key.to_string()), (tag.clone(), Instant::now()));
+    }
+    if let Some(answer) = not_modified(raw_key, &part.etag, headers) {
+        return Ok(answer);
+    }
+    let whole = part.range == (0..part.size);
+    if chunk && whole {
+        let cached = Cached {
+            bytes: part.bytes.clone(),
+            etag: Some((tag, Instant::now())),
+        };
+        state.cache.insert(cache_key, cached);
+    }
+    let served = if ranged {
+        RangeRequest::Part(part.range.start, part.range.end)
+    } else {
+        RangeRequest::Whole
+    };
+    Ok(part_response(
+        part.bytes, part.size, served, &part.etag, raw_key,
+    ))
 }
 
 /// Parses `x,y,z`, the value of query parameter `what`.
@@ -500,7 +585,7 @@ async fn region_index(
         state,
         index,
         |l| &l.regions,
-        |d| RegionIndex::load(&d.root).map(|r| r.map(Arc::new)),
+        |store| RegionIndex::load(store).map(|r| r.map(Arc::new)),
     );
     match regions.await {
         Ok(Some(r)) => Ok(r),
@@ -612,7 +697,7 @@ async fn bricks(
         &state,
         index,
         |l| &l.arrays,
-        |d| ImageArrays::open(&d.root).map(Arc::new),
+        |store| ImageArrays::open(store).map(Arc::new),
     );
     let arrays = match arrays.await {
         Ok(a) => a,
@@ -625,17 +710,21 @@ async fn bricks(
     let raw = encoding == residency_schemas::wire::BrickEncoding::Raw;
     let body = blocking(move || {
         let (header, payload) = read_batch(&arrays, &list, encoding, |at| {
-            let key = CacheKey {
+            let key = CacheKey::Brick {
                 dataset: index,
                 at: (at.level, at.channel, at.brick),
                 raw,
             };
             if let Some(hit) = st.cache.get(&key) {
-                return Ok((!hit.is_empty()).then_some(hit));
+                return Ok((!hit.bytes.is_empty()).then_some(hit.bytes));
             }
             let read = arrays.read(at, encoding)?;
             let bytes = read.map(Bytes::from).unwrap_or_default();
-            st.cache.insert(key, bytes.clone());
+            let cached = Cached {
+                bytes: bytes.clone(),
+                etag: None,
+            };
+            st.cache.insert(key, cached);
             Ok((!bytes.is_empty()).then_some(bytes))
         });
         for e in header.bricks.iter().filter_map(|b| b.error.as_deref()) {

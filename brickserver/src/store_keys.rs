@@ -23,7 +23,10 @@ pub enum KeyError {
 
 /// Decodes a raw (still percent-encoded) key and refuses any spelling that could leave the
 /// dataset: `..` and `.` segments, empty segments, backslashes, absolute paths, NUL bytes.
-fn checked_key(raw_key: &str) -> Result<String, KeyError> {
+///
+/// # Errors
+/// [`KeyError::Refused`] naming the refused spelling, [`KeyError::NotFound`] for no key.
+pub fn checked_key(raw_key: &str) -> Result<String, KeyError> {
     if raw_key.is_empty() {
         return Err(KeyError::NotFound);
     }
@@ -90,6 +93,11 @@ impl RootDir {
             path: path.to_path_buf(),
             dir: File::open(path)?,
         })
+    }
+
+    /// The root folder.
+    pub fn path(&self) -> &Path {
+        &self.path
     }
 
     /// Opens the regular file at `raw_key` (still percent-encoded) beneath the root. The

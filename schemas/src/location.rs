@@ -24,6 +24,13 @@ use zarrs_object_store::object_store::path::Path as ObjectPath;
 use zarrs_object_store::object_store::prefix::PrefixStore;
 use zarrs_object_store::object_store::{ObjectStore, ObjectStoreExt, PutPayload};
 
+/// The `object_store` crate this module reaches object stores with, for callers that make
+/// their own requests (see [`StoreLocation::object_store`]).
+pub use zarrs_object_store::object_store;
+
+/// An object store and the key prefix of a store's root in it.
+pub type ObjectStoreAt = (Arc<dyn ObjectStore>, ObjectPath);
+
 /// The documents at a store's root that say what it is (Zarr v3, then v2): written last when a
 /// store is published, and deleted first when one is replaced.
 pub const ROOT_METADATA: [&str; 3] = ["zarr.json", ".zgroup", ".zattrs"];
@@ -76,7 +83,7 @@ pub enum LocationError {
         location: String,
         /// What `object_store` said.
         #[source]
-        source: zarrs_object_store::object_store::Error,
+        source: object_store::Error,
     },
     /// A store is already there, and replacing it was not asked for.
     #[error("{location}: output already exists (pass --overwrite to replace it)")]
@@ -213,6 +220,22 @@ impl StoreLocation {
         Ok((s3, prefix.clone()))
     }
 
+    /// The object store and the key prefix of an `s3://` location (`None` for a folder), for
+    /// readers that make their own requests: ranged reads with the store's `ETag`s.
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] when the object-store client cannot be configured.
+    pub fn object_store(
+        &self,
+        options: &ObjectStoreOptions,
+    ) -> Result<Option<ObjectStoreAt>, LocationError> {
+        if self.folder().is_some() {
+            return Ok(None);
+        }
+        let (s3, prefix) = self.s3_client(options)?;
+        Ok(Some((Arc::new(s3), ObjectPath::from(prefix))))
+    }
+
     /// Whether a store is at this location: its root metadata exists (a folder: the folder
     /// exists).
     ///
@@ -228,7 +251,7 @@ impl StoreLocation {
                 let key = ObjectPath::from(format!("{prefix}/{name}"));
                 match s3.head(&key).await {
                     Ok(_) => return Ok(true),
-                    Err(zarrs_object_store::object_store::Error::NotFound { .. }) => {}
+                    Err(object_store::Error::NotFound { .. }) => {}
                     Err(source) => {
                         return Err(LocationError::ObjectStore {
                             location: format!("{self}/{name}"),
@@ -290,7 +313,7 @@ impl StoreLocation {
                 for name in ROOT_METADATA {
                     let key = ObjectPath::from(format!("{prefix}/{name}"));
                     match s3.delete(&key).await {
-                        Ok(()) | Err(zarrs_object_store::object_store::Error::NotFound { .. }) => {}
+                        Ok(()) | Err(object_store::Error::NotFound { .. }) => {}
                         Err(source) => return Err(failed(name, source)),
                     }
                 }

@@ -1,8 +1,9 @@
-"""Stores in an S3-compatible object store, written by `ingest convert` and `ingest index` and
-read by `ingest inspect` and `viewer render` through a real S3 server on loopback: s3s-fs (installed by
-scripts/test.sh), serving a folder whose subfolders are buckets and whose files are the objects.
-What they read over S3 must equal what they read from a folder, and what `convert` writes must
-be byte for byte what it writes to a folder."""
+"""Stores in an S3-compatible object store, written by `ingest convert` and `ingest index`, read
+by `ingest inspect` and `viewer render`, and served by `brickserver` replicas, through a real S3
+server on loopback: s3s-fs (installed by scripts/test.sh), serving a folder whose subfolders are
+buckets and whose files are the objects. What they read or serve over S3 must equal what they
+read or serve from a folder, and what `convert` writes must be byte for byte what it writes to a
+folder."""
 
 import os
 import pathlib
@@ -107,17 +108,23 @@ def test_object_store_errors_name_the_store_and_the_problem(s3):
             "URLs)") in scheme.stderr
 
 
-def test_viewer_renders_the_same_image_from_s3_as_from_the_folder(s3, tmp_path):
+def assert_renders_the_local_image(s3, tmp_path, *source):
+    """`viewer render` from `source` (its flags) draws exactly the image it draws from the
+    local copy of the store."""
     flags = ["--tf", "0:800:6000:0.6", "--width", "64", "--height", "64"]
-    remote = run("viewer", "render", "--store", "s3://bucket/sample.ome.zarr", "--s3-endpoint",
-                 s3["endpoint"], *flags, "--out", tmp_path / "s3.exr")
+    remote = run("viewer", "render", *source, *flags, "--out", tmp_path / "remote.exr")
     assert remote.returncode == 0, remote.stderr
     local = run("viewer", "render", "--store", s3["local"], *flags, "--out",
                 tmp_path / "local.exr")
     assert local.returncode == 0, local.stderr
-    same = run("viewer", "compare", tmp_path / "s3.exr", tmp_path / "local.exr")
+    same = run("viewer", "compare", tmp_path / "remote.exr", tmp_path / "local.exr")
     assert same.returncode == 0, same.stderr
     assert same.stdout.splitlines() == ["PSNR inf dB", "SSIM 1.000000", "max abs error 0.000000"]
+
+
+def test_viewer_renders_the_same_image_from_s3_as_from_the_folder(s3, tmp_path):
+    assert_renders_the_local_image(s3, tmp_path, "--store", "s3://bucket/sample.ome.zarr",
+                                   "--s3-endpoint", s3["endpoint"])
 
 
 def files(folder: pathlib.Path) -> dict:
@@ -187,3 +194,145 @@ def test_index_in_s3_writes_what_a_local_index_writes_root_metadata_last(s3, tmp
     others = [p.stat().st_mtime_ns for p in remote.rglob("*") if p.is_file()
               and p.name != "zarr.json" and str(p.relative_to(remote)) not in before]
     assert (remote / "zarr.json").stat().st_mtime_ns >= max(others)
+
+
+def start_brickserver(*args):
+    """`brickserver serve ARGS --bind 127.0.0.1:0` with the test's S3 credentials; returns
+    (process, base URL) once it listens."""
+    proc = subprocess.Popen(
+        [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env())
+    for line in proc.stdout:
+        if line.startswith("listening on "):
+            return proc, line.split("listening on ")[1].strip()
+    raise AssertionError(f"brickserver did not start:\n{proc.stderr.read()}")
+
+
+@pytest.fixture(scope="module")
+def replicas(s3):
+    """Two brickserver replicas serving the store in the bucket, one more without a memory cache
+    (every answer then comes from the S3 server), and one serving its local copy: their base
+    URLs."""
+    procs = []
+    bases = {}
+    url = "s3://bucket/sample.ome.zarr"
+    for name, where, extra in [("a", url, []), ("b", url, []),
+                               ("uncached", url, ["--cache-bytes", "0"]),
+                               ("local", s3["local"], [])]:
+        proc, base = start_brickserver(where, "--s3-endpoint", s3["endpoint"], *extra)
+        procs.append(proc)
+        bases[name] = base
+    yield bases
+    for proc in procs:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def keys_of(folder: pathlib.Path):
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def test_replicas_on_s3_answer_every_key_alike_and_as_the_folder_does(s3, replicas):
+    import requests
+    keys = keys_of(s3["local"])
+    assert len(keys) > 10 and "zarr.json" in keys
+    with requests.Session() as http:
+        for key in keys:
+            a = http.get(f"{replicas['a']}/sample/{key}")
+            b = http.get(f"{replicas['b']}/sample/{key}")
+            local = http.get(f"{replicas['local']}/sample/{key}")
+            assert a.status_code == b.status_code == 200, key
+            assert a.content == b.content == local.content == (s3["local"] / key).read_bytes(), key
+            # The ETag is the object store's, so both replicas give the same one.
+            assert a.headers["ETag"] == b.headers["ETag"], key
+            for h in ["Content-Type", "Cache-Control", "Accept-Ranges", "Content-Length"]:
+                assert a.headers[h] == local.headers[h], (key, h)
+        # Answered the second time from the replica's memory cache: the same.
+        key = next(k for k in keys if "/c/" in k)
+        again = http.get(f"{replicas['a']}/sample/{key}")
+        assert again.content == (s3["local"] / key).read_bytes()
+        missing = http.get(f"{replicas['a']}/sample/0/c/9/9/9/9")
+        assert (missing.status_code, missing.text) == (404, "no key '0/c/9/9/9/9' in 'sample'\n")
+        refused = http.get(f"{replicas['a']}/sample/0/%2e%2e/zarr.json")
+        assert (refused.status_code, refused.text) == (400, "refused: relative path segment\n")
+
+
+def test_ranges_and_revalidation_from_s3(s3, replicas):
+    import requests
+    key = max((k for k in keys_of(s3["local"]) if "/c/" in k),
+              key=lambda k: (s3["local"] / k).stat().st_size)
+    data = (s3["local"] / key).read_bytes()
+    n = len(data)
+    assert n > 40
+    url = f"{replicas['b']}/sample/{key}"
+    etag = requests.get(url).headers["ETag"]
+    cases = [("bytes=2-9", 206, data[2:10], f"bytes 2-9/{n}"),
+             ("bytes=-4", 206, data[-4:], f"bytes {n - 4}-{n - 1}/{n}"),
+             (f"bytes={n - 3}-", 206, data[-3:], f"bytes {n - 3}-{n - 1}/{n}"),
+             (f"bytes=10-{n + 100}", 206, data[10:], f"bytes 10-{n - 1}/{n}"),
+             (f"bytes={n}-", 416, b"", f"bytes */{n}"),
+             ("bytes=-0", 416, b"", f"bytes */{n}"),
+             ("bytes=0-1,4-5", 200, data, None)]
+    assert requests.get(f"{replicas['a']}/sample/{key}").content == data
+    for value, status, body, content_range in cases:
+        # Replica a answers from its memory cache (it has read the chunk whole); the uncached
+        # one turns each range into a ranged read of the object.
+        for base in [replicas["a"], replicas["uncached"]]:
+            r = requests.get(f"{base}/sample/{key}", headers={"Range": value})
+            assert (r.status_code, r.content) == (status, body), (base, value)
+            assert r.headers.get("Content-Range") == content_range, (base, value)
+    for base in [replicas["a"], replicas["uncached"]]:
+        same = requests.get(f"{base}/sample/{key}", headers={"If-None-Match": etag})
+        assert (same.status_code, same.content, same.headers["ETag"]) == (304, b"", etag)
+        other = requests.get(f"{base}/sample/{key}", headers={"If-None-Match": '"other"'})
+        assert (other.status_code, other.content) == (200, data)
+        meta = requests.get(f"{base}/sample/zarr.json")
+        assert requests.get(f"{base}/sample/zarr.json",
+                            headers={"If-None-Match": meta.headers["ETag"]}).status_code == 304
+
+
+def test_region_api_and_batched_bricks_from_s3_are_those_from_disk(replicas):
+    import requests
+    paths = ["datasets", "sample/minmax?channel=0",
+             "sample/regions?level=0&channel=0&min=0,0,0&max=32,32,32",
+             "sample/regions?level=1&channel=0&min=4,0,8&max=16,16,16",
+             "sample/bricks?b=0,0,0,0,0&b=0,0,1,1,1&b=1,0,0,0,0&encoding=raw",
+             "sample/bricks?b=0,0,1,0,1&b=0,0,0,1,0",
+             "sample/bricks?b=0,0,9,9,9"]
+    for path in paths:
+        a, b, local = (requests.get(f"{replicas[n]}/{path}") for n in ["a", "b", "local"])
+        assert a.status_code == b.status_code == local.status_code, path
+        assert a.headers["Content-Type"] == local.headers["Content-Type"], path
+        if path == "datasets":
+            # The listing differs only in the links' host and port (plain and URL-encoded).
+            import re
+            host = re.compile(r"127(\.|%2E)0(\.|%2E)0(\.|%2E)1(:|%3A)[0-9]+")
+            for doc, base in [(a, replicas["a"]), (b, replicas["b"]), (local, replicas["local"])]:
+                assert doc.text.count(base) > 0
+            assert host.sub("HOST", a.text) == host.sub("HOST", b.text) == host.sub("HOST", local.text)
+        else:
+            assert a.content == b.content == local.content, path
+    assert requests.get(f"{replicas['a']}/sample/bricks?b=0,0,0,0,0").status_code == 200
+
+
+def test_zarr_python_and_the_viewer_read_the_s3_store_through_brickserver(s3, replicas, tmp_path):
+    import numpy as np
+    import zarr
+    from ome_zarr_models import open_ome_zarr
+    remote = zarr.open_group(f"{replicas['a']}/sample/", mode="r")
+    local = zarr.open_group(str(s3["local"]), mode="r")
+    levels = [k for k, _ in local.arrays()]
+    assert len(levels) >= 2
+    for level in levels:
+        np.testing.assert_array_equal(remote[level][...], local[level][...])
+    open_ome_zarr(remote)
+    assert_renders_the_local_image(s3, tmp_path, "--server", replicas["b"], "--dataset", "sample")
+
+
+def test_brickserver_refuses_an_s3_location_without_a_store(s3):
+    p = run("brickserver", "serve", "s3://bucket/nothing.ome.zarr", "--s3-endpoint",
+            s3["endpoint"], "--bind", "127.0.0.1:0")
+    assert p.returncode == 1
+    assert p.stderr.endswith(
+        "error: s3://bucket/nothing.ome.zarr: no store there (none of zarr.json, .zgroup, "
+        ".zattrs at its root)\n")

@@ -317,17 +317,23 @@ async fn a_store_without_readable_metadata_is_still_listed() {
 
 #[test]
 fn why_level_0_or_a_link_is_unreadable_is_said() {
+    use residency_brickserver::dataset_store::DatasetStore;
     use residency_brickserver::listing::StoreSummary;
     let dir = tempfile::tempdir().unwrap();
     let cells = v3_store(dir.path(), "cells");
+    let store = || {
+        use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
+        let location = StoreLocation::Folder(cells.clone());
+        DatasetStore::open(&location, &ObjectStoreOptions::default()).unwrap()
+    };
     std::fs::remove_file(cells.join("0/zarr.json")).unwrap();
-    let summary = StoreSummary::read(&cells).unwrap();
+    let summary = StoreSummary::read(&store()).unwrap();
     assert_eq!(
         summary.level0.unwrap_err().to_string(),
         format!("{}/0/zarr.json: missing", cells.display())
     );
     std::fs::write(cells.join("0/zarr.json"), "{").unwrap();
-    let summary = StoreSummary::read(&cells).unwrap();
+    let summary = StoreSummary::read(&store()).unwrap();
     assert!(
         summary
             .level0

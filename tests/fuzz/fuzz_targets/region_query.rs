@@ -24,6 +24,7 @@ use libfuzzer_sys::fuzz_target;
 use residency_brickserver::{AppState, Datasets, ServerOptions, router};
 use residency_fuzz::scratch;
 use residency_ingest::{ConvertOptions, convert};
+use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 use residency_schemas::server::RegionAnswer;
 use residency_schemas::wire::{
     BRICKS_MAGIC, BrickBatchHeader, MINMAX_MAGIC, MinMaxHierarchyHeader, decode_framed,
@@ -52,7 +53,12 @@ fn server() -> &'static Server {
             ConvertOptions::new(vec![input.to_string_lossy().into_owned()], store.clone());
         options.brick = [8, 8, 8];
         convert(&options).expect("ingest converts the fuzz store");
-        let datasets = Datasets::from_args(&[store], &[]).expect("the store is a dataset");
+        let datasets = Datasets::from_args(
+            &[StoreLocation::Folder(store)],
+            &[],
+            &ObjectStoreOptions::default(),
+        )
+        .expect("the store is a dataset");
         // A built web viewer, as `scripts/build-web.sh` leaves one: `/d/view` and `/viewer/...`
         // then answer as they do for users (without one they answer 503 by design, saying how
         // to build it; brickserver's own tests check that).

@@ -11,6 +11,7 @@ use axum::Router;
 use axum::body::Body;
 use axum::http::{HeaderMap, Request, StatusCode};
 use residency_brickserver::{AppState, Datasets, ServerOptions, router};
+use residency_schemas::location::ObjectStoreOptions;
 use tower::ServiceExt as _;
 
 /// The viewer page of the test folder: it names its files through `%VIEWER_BASE%`.
@@ -126,7 +127,8 @@ pub fn server(stores: &[(&str, &Path)], options: &ServerOptions) -> Router {
         .iter()
         .map(|(n, p)| format!("{n}={}", p.display()))
         .collect();
-    let datasets = Datasets::from_args(&[], &named).expect("test datasets");
+    let datasets =
+        Datasets::from_args(&[], &named, &ObjectStoreOptions::default()).expect("test datasets");
     let state = Arc::new(AppState::new(datasets, options).expect("state"));
     router(state, options)
 }
