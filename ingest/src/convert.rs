@@ -8,7 +8,7 @@
 //! and never depends on the depth of the stack.
 
 use std::fmt::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::mpsc::sync_channel;
 use std::time::Instant;
@@ -18,6 +18,10 @@ use residency_schemas::dataset::dataset_name;
 use zarrs::array::{Array, ArrayError};
 
 use crate::ome::{image_attributes, multiscale, omero};
+use crate::partition::{
+    Cuts, HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, Partition,
+    PartitionPlan, write_handoff,
+};
 use crate::pyramid::{LevelPlan, plan_levels};
 use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
 use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
@@ -151,6 +155,9 @@ pub enum ConvertError {
     /// A value that cannot be serialised as JSON.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
+    /// A partition's hand-over file cannot be written, or `finalize` cannot use them.
+    #[error(transparent)]
+    Handoff(#[from] HandoffError),
 }
 
 /// A chunk of an image array that cannot be written.
@@ -389,20 +396,43 @@ pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary, ConvertError>
     result
 }
 
+/// A level's accumulator: exact sums of level-0 voxels and their non-NaN counts,
+/// `[c][depth][y][x]`, for the level's planes `z0..z0 + depth`.
+struct Accumulator<T: Sample> {
+    /// First plane held.
+    z0: u64,
+    /// Planes per channel.
+    depth: u64,
+    /// Exact sums.
+    sum: Vec<T::Sum>,
+    /// Non-NaN level-0 voxel counts matching `sum`.
+    count: Vec<u32>,
+}
+
+impl<T: Sample> Accumulator<T> {
+    /// Zeroed sums for `depth` planes from `z0` of `channels` channels of `plane` voxels.
+    fn new(channels: usize, z0: u64, depth: u64, plane: u64) -> Self {
+        let len = channels * (depth * plane) as usize;
+        Self {
+            z0,
+            depth,
+            sum: vec![T::Sum::default(); len],
+            count: vec![0; len],
+        }
+    }
+}
+
 /// Per-level state during the pass.
 struct Level<T: Sample> {
     plan: LevelPlan,
     array: Array<Store>,
     /// Zarr chunk (shard) shape `z, y, x`.
     outer: [u64; 3],
-    /// First z of the slab the accumulator is filling (levels ≥ 1).
-    acc_z0: u64,
-    /// Planes per channel in the accumulator: `min(outer z, level depth)`.
-    acc_depth: u64,
-    /// Exact sums `[c][outer_z][y][x]` of level-0 voxels (levels ≥ 1).
-    sum: Vec<T::Sum>,
-    /// Non-NaN level-0 voxel counts matching `sum`.
-    count: Vec<u32>,
+    /// The slab being filled (levels ≥ 1; empty for level 0): `min(outer z, level depth)`
+    /// planes.
+    acc: Accumulator<T>,
+    /// Brick shape `z, y, x`.
+    brick: [u64; 3],
     /// The rounded means of the slab being flushed (reused between flushes).
     values: Vec<T>,
     cells: CellGrid<T>,
@@ -526,14 +556,12 @@ impl<T: Sample> Level<T> {
         values: &[T],
         z0: u64,
         nz: u64,
-        channels: usize,
-        brick: [u64; 3],
         stats: Option<&[Mutex<ChannelAccumulator>]>,
     ) -> Result<(), ChunkWriteError> {
         let sink = SlabSink {
-            channels,
+            channels: self.cells.channels,
             shape: self.plan.shape,
-            brick,
+            brick: self.brick,
             outer: self.outer,
             array: Some(&self.array),
             histograms: &self.histograms,
@@ -613,18 +641,19 @@ impl<T: Sample> SlabRows<T> for Sums<'_, T> {
 /// Adds a slab of one level into the accumulator of the next level.
 /// `src_z0..src_z0 + nz` is the slab's z range in the source level's coordinates.
 fn accumulate<T: Sample>(
-    next: &mut Level<T>,
+    plan: &LevelPlan,
+    next: &mut Accumulator<T>,
     channels: usize,
     src_shape: [u64; 3],
     src_z0: u64,
     nz: u64,
     src: &impl SlabRows<T>,
 ) {
-    let step = next.plan.step;
-    let [_, ny, nx] = next.plan.shape;
+    let step = plan.step;
+    let [_, ny, nx] = plan.shape;
     let [_, sy, sx] = src_shape;
-    let oz = next.acc_depth;
-    let a0 = next.acc_z0;
+    let oz = next.depth;
+    let a0 = next.z0;
     let src_plane = (sy * sx) as usize;
     next.sum
         .par_chunks_mut(nx as usize)
@@ -692,11 +721,13 @@ fn check_slab_memory(
     Ok(())
 }
 
-fn convert_typed<T: Sample>(
+/// Checks the options against the inputs and plans the store: brick and shard shapes, levels,
+/// and where `count` partitions cut.
+fn plan_store<T: Sample>(
     options: &ConvertOptions,
-    mut inputs: Inputs,
-) -> Result<ConvertSummary, ConvertError> {
-    let started = Instant::now();
+    inputs: &Inputs,
+    count: usize,
+) -> Result<PartitionPlan, ConvertError> {
     let shown = options.output.display().to_string();
     let requested = options.brick;
     if requested.contains(&0) {
@@ -746,66 +777,98 @@ fn convert_typed<T: Sample>(
         T::FORMAT,
         crate::memory::physical_memory(),
     )?;
-    let plans = plan_levels(inputs.shape, voxel_size, brick, options.levels);
-    let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
-    let channels = inputs.channels;
+    let levels = plan_levels(shape, voxel_size, brick, options.levels);
+    let cuts = Cuts::plan(&levels, outer[0], count);
+    Ok(PartitionPlan {
+        format: T::FORMAT,
+        shape,
+        labels: inputs.labels.clone(),
+        voxel_size,
+        unit: inputs.unit.clone(),
+        brick,
+        outer,
+        sharded: options.shard.is_some(),
+        version: options.version,
+        levels,
+        cuts,
+    })
+}
 
-    let mut levels: Vec<Level<T>> = Vec::new();
-    for (i, plan) in plans.iter().enumerate() {
-        let [z, y, x] = plan.shape;
+/// Creates the arrays of levels `0..written` and their state for a pass over level-0 planes
+/// from `z0`: each level's accumulator starts at the first of its planes that the pass makes.
+fn open_levels<T: Sample>(
+    writer: &StoreWriter,
+    plan: &PartitionPlan,
+    written: usize,
+    z0: u64,
+) -> Result<Vec<Level<T>>, ConvertError> {
+    let channels = plan.labels.len();
+    let (brick, outer) = (plan.brick, plan.outer);
+    let mut levels = Vec::new();
+    for (i, level) in plan.levels.iter().take(written).enumerate() {
+        let [z, y, x] = level.shape;
         let layout = ArrayLayout {
             shape: vec![channels as u64, z, y, x],
             chunk: vec![1, outer[0], outer[1], outer[2]],
-            inner_chunk: options.shard.map(|_| vec![1, brick[0], brick[1], brick[2]]),
+            inner_chunk: plan.sharded.then(|| vec![1, brick[0], brick[1], brick[2]]),
             format: T::FORMAT,
             dimension_names: Some(vec!["c", "z", "y", "x"]),
         };
         let array = writer.create_array(&format!("/{i}"), &layout)?;
         // One slab of the level: a chunk deep, or the whole level when that is shallower.
-        let acc_depth = outer[0].min(z);
-        let acc_len = if i == 0 {
-            0
+        let acc = if i == 0 {
+            Accumulator::new(0, 0, 0, 0)
         } else {
-            channels * (acc_depth * y * x) as usize
+            Accumulator::new(channels, z0 / level.factor[0], outer[0].min(z), y * x)
         };
         levels.push(Level {
-            plan: plan.clone(),
+            plan: level.clone(),
             array,
             outer,
-            acc_z0: 0,
-            acc_depth,
-            sum: vec![T::Sum::default(); acc_len],
-            count: vec![0; acc_len],
+            acc,
+            brick,
             values: Vec::new(),
-            cells: CellGrid::for_shape(channels, plan.shape),
+            cells: CellGrid::for_shape(channels, level.shape),
             histograms: LevelHistograms::new(
                 channels,
-                std::array::from_fn(|a| plan.shape[a].div_ceil(brick[a])),
+                std::array::from_fn(|a| level.shape[a].div_ceil(brick[a])),
             ),
             written: 0,
             empty: 0,
         });
     }
-    let stats: Vec<Mutex<ChannelAccumulator>> = (0..channels)
-        .map(|_| Mutex::new(ChannelAccumulator::default()))
-        .collect();
+    Ok(levels)
+}
 
-    let [depth, ny, nx] = inputs.shape;
+/// Reads level-0 planes `planes` of the inputs slab by slab (a reader thread decodes slab k+1
+/// while slab k is written) and sends each up the pyramid.
+fn read_level0<T: Sample>(
+    options: &ConvertOptions,
+    sources: Vec<Box<dyn VolumeSource>>,
+    plan: &PartitionPlan,
+    planes: std::ops::Range<u64>,
+    levels: &mut [Level<T>],
+    handed_over: &mut HandedOver<T>,
+    stats: &[Mutex<ChannelAccumulator>],
+) -> Result<(), ConvertError> {
+    let channels = plan.labels.len();
+    let [_, ny, nx] = plan.shape;
     let plane = (ny * nx) as usize;
-    let input_bytes = depth * ny * nx * channels as u64 * T::FORMAT.bytes() as u64;
+    let input_bytes =
+        (planes.end - planes.start) * ny * nx * channels as u64 * T::FORMAT.bytes() as u64;
     let bar = crate::progress::bytes_bar(input_bytes, "", options.progress);
 
     // Reader thread: decodes slab k+1 while slab k is processed.
     let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);
     // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
     let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
-    let oz = outer[0];
-    let mut sources = std::mem::take(&mut inputs.sources);
+    let oz = plan.outer[0];
+    let mut sources = sources;
     let reader = std::thread::spawn(move || {
-        let mut z0 = 0;
+        let mut z0 = planes.start;
         let mut allocated = 0;
-        while z0 < depth {
-            let nz = oz.min(depth - z0);
+        while z0 < planes.end {
+            let nz = oz.min(planes.end - z0);
             // At most two slabs exist: the one being processed and the one being read.
             let mut slab = if allocated < 2 {
                 allocated += 1;
@@ -850,12 +913,12 @@ fn convert_typed<T: Sample>(
     let result = (|| -> Result<(), ConvertError> {
         for message in &rx {
             let (z0, nz, slab) = message?;
-            process_level0(&mut levels, &stats, channels, brick, &slab, z0, nz).map_err(
-                |source| ConvertError::WriteLevel0 {
+            process_level0(levels, handed_over, stats, &slab, z0, nz).map_err(|source| {
+                ConvertError::WriteLevel0 {
                     path: options.output.clone(),
                     source,
-                },
-            )?;
+                }
+            })?;
             bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
             let _ = recycle_tx.send(slab);
         }
@@ -867,11 +930,55 @@ fn convert_typed<T: Sample>(
     reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
     result?;
     bar.finish_and_clear();
+    Ok(())
+}
 
-    let stats: Vec<ChannelAccumulator> = stats
+fn new_stats(channels: usize) -> Vec<Mutex<ChannelAccumulator>> {
+    (0..channels)
+        .map(|_| Mutex::new(ChannelAccumulator::default()))
+        .collect()
+}
+
+fn into_stats(stats: Vec<Mutex<ChannelAccumulator>>) -> Vec<ChannelAccumulator> {
+    stats
         .into_iter()
         .map(|m| m.into_inner().expect("stats"))
-        .collect();
+        .collect()
+}
+
+fn convert_typed<T: Sample>(
+    options: &ConvertOptions,
+    mut inputs: Inputs,
+) -> Result<ConvertSummary, ConvertError> {
+    let started = Instant::now();
+    let plan = plan_store::<T>(options, &inputs, 1)?;
+    let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
+    let mut levels = open_levels::<T>(&writer, &plan, plan.levels.len(), 0)?;
+    let stats = new_stats(plan.labels.len());
+    let sources = std::mem::take(&mut inputs.sources);
+    let depth = plan.shape[0];
+    read_level0(
+        options,
+        sources,
+        &plan,
+        0..depth,
+        &mut levels,
+        &mut None,
+        &stats,
+    )?;
+    finish_store(writer, &plan, &levels, &into_stats(stats), started)
+}
+
+/// Writes the region metadata and the root metadata (the last write) of a store whose levels
+/// are all written, and moves it into place.
+fn finish_store<T: Sample>(
+    writer: StoreWriter,
+    plan: &PartitionPlan,
+    levels: &[Level<T>],
+    stats: &[ChannelAccumulator],
+    started: Instant,
+) -> Result<ConvertSummary, ConvertError> {
+    let channels = plan.labels.len();
     let region_levels: Vec<LevelRegions<'_, T>> = levels
         .iter()
         .enumerate()
@@ -886,12 +993,13 @@ fn convert_typed<T: Sample>(
         })
         .collect();
     let (regions, displays) =
-        write_region_metadata(&writer, &region_levels, &stats, &inputs.labels, brick)?;
-    let name = dataset_name(&options.output);
+        write_region_metadata(&writer, &region_levels, stats, &plan.labels, plan.brick)?;
+    let name = dataset_name(&writer.output);
     let metadata_bytes = serde_json::to_vec_pretty(&regions)?.len() as u64;
+    let depth = plan.shape[0];
     let attributes = image_attributes(
-        options.version,
-        multiscale(options.version, &name, &plans, inputs.unit.as_deref()),
+        plan.version,
+        multiscale(plan.version, &name, &plan.levels, plan.unit.as_deref()),
         omero(&displays, depth),
         regions,
     );
@@ -902,6 +1010,7 @@ fn convert_typed<T: Sample>(
     let level0_stored_bytes = directory_bytes(&partial.join("0"));
     let metadata_bytes = directory_bytes(&partial.join("residency")) + metadata_bytes;
     let output = writer.commit()?;
+    let [_, ny, nx] = plan.shape;
     Ok(ConvertSummary {
         output,
         format: T::FORMAT,
@@ -918,7 +1027,7 @@ fn convert_typed<T: Sample>(
                 bricks_empty: l.empty,
             })
             .collect(),
-        input_bytes,
+        input_bytes: depth * ny * nx * channels as u64 * T::FORMAT.bytes() as u64,
         stored_bytes,
         level0_stored_bytes,
         metadata_bytes,
@@ -926,83 +1035,316 @@ fn convert_typed<T: Sample>(
     })
 }
 
+/// What one partition of a conversion did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PartitionSummary {
+    /// The partition.
+    pub partition: Partition,
+    /// The store's temporary folder, which holds its bricks and its hand-over file.
+    pub folder: PathBuf,
+    /// Its level-0 planes.
+    pub planes: std::ops::Range<u64>,
+    /// The levels it wrote (`0..written_levels`).
+    pub written_levels: usize,
+    /// Bricks written, all levels.
+    pub bricks_written: u64,
+    /// Bricks found empty, all levels.
+    pub bricks_empty: u64,
+    /// Bytes of its level-0 voxels (uncompressed).
+    pub input_bytes: u64,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+impl PartitionSummary {
+    /// Human-readable report printed by the command line.
+    pub fn report(&self) -> String {
+        let mb = self.input_bytes as f64 / 1e6;
+        format!(
+            "wrote partition {} into {}: level-0 planes {}..{}, levels 0 to {}, bricks written {}, empty (not written) {}\n  input {mb:.1} MB, {:.2} s, {:.1} MB/s\n",
+            self.partition,
+            self.folder.display(),
+            self.planes.start,
+            self.planes.end,
+            self.written_levels.saturating_sub(1),
+            self.bricks_written,
+            self.bricks_empty,
+            self.seconds,
+            mb / self.seconds.max(1e-9)
+        )
+    }
+}
+
+/// `ingest convert --partition I/N`: converts the partition's level-0 planes, writes the
+/// bricks of the levels it covers whole into the store's temporary folder (shared with the
+/// other partitions, never cleared), and leaves what `finalize` needs in a hand-over file.
+/// Running a partition again replaces what it wrote before.
+///
+/// # Errors
+/// As [`convert`], and [`ConvertError::Handoff`] when the hand-over file cannot be written.
+pub fn convert_partition(
+    options: &ConvertOptions,
+    partition: Partition,
+) -> Result<PartitionSummary, ConvertError> {
+    let inputs = open_inputs(options)?;
+    with_sample_type!(inputs.format, T => partition_typed::<T>(options, inputs, partition))
+}
+
+fn partition_typed<T: Sample>(
+    options: &ConvertOptions,
+    mut inputs: Inputs,
+    partition: Partition,
+) -> Result<PartitionSummary, ConvertError> {
+    let started = Instant::now();
+    let plan = plan_store::<T>(options, &inputs, partition.count)?;
+    let writer = StoreWriter::shared(&options.output, options.version, options.overwrite)?;
+    let planes = plan.cuts.planes(partition.index, plan.shape[0]);
+    let written = plan.cuts.handoff_level;
+    let mut levels = open_levels::<T>(&writer, &plan, written, planes.start)?;
+    let channels = plan.labels.len();
+    let mut handed_over: HandedOver<T> = plan.levels.get(written).map(|level| {
+        let f = level.factor[0];
+        let z0 = planes.start / f;
+        let z1 = planes.end.div_ceil(f).max(z0);
+        let [_, y, x] = level.shape;
+        (
+            level.clone(),
+            Accumulator::new(channels, z0, z1 - z0, y * x),
+        )
+    });
+    let stats = new_stats(channels);
+    let sources = std::mem::take(&mut inputs.sources);
+    read_level0(
+        options,
+        sources,
+        &plan,
+        planes.clone(),
+        &mut levels,
+        &mut handed_over,
+        &stats,
+    )?;
+    let (bricks_written, bricks_empty) = levels
+        .iter()
+        .fold((0, 0), |(w, e), l| (w + l.written, e + l.empty));
+    let handoff = Handoff {
+        levels: levels
+            .into_iter()
+            .map(|l| LevelPart {
+                written: l.written,
+                empty: l.empty,
+                histograms: l.histograms.fine.into_inner().expect("histograms"),
+                cells: l.cells,
+            })
+            .collect(),
+        stats: into_stats(stats),
+        sums: handed_over.map(|(_, acc)| LevelSums {
+            z0: acc.z0,
+            depth: acc.depth,
+            sum: acc.sum,
+            count: acc.count,
+        }),
+    };
+    write_handoff(&writer.partial, partition, &plan, &handoff)?;
+    let [_, ny, nx] = plan.shape;
+    Ok(PartitionSummary {
+        partition,
+        folder: writer.partial.clone(),
+        planes: planes.clone(),
+        written_levels: written,
+        bricks_written,
+        bricks_empty,
+        input_bytes: (planes.end - planes.start)
+            * ny
+            * nx
+            * channels as u64
+            * T::FORMAT.bytes() as u64,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// `ingest finalize`: finishes a store whose N partitions have all run. Merges their region
+/// metadata and statistics, writes the levels they did not (from the exact sums they handed
+/// over), removes the hand-over files, writes the root metadata last and moves the store into
+/// place: byte for byte the store one `ingest convert` writes.
+///
+/// # Errors
+/// [`ConvertError::Handoff`] when partitions are missing, unreadable or disagree, and the
+/// errors of [`convert`] for writing the store.
+pub fn finalize(
+    output: &Path,
+    overwrite: bool,
+    progress: bool,
+) -> Result<ConvertSummary, ConvertError> {
+    let partial = crate::store::partial_path(output);
+    let handoffs = Handoffs::find(&partial)?;
+    let format = handoffs.plan.format;
+    with_sample_type!(format, T => finalize_typed::<T>(output, overwrite, progress, &handoffs))
+}
+
+fn finalize_typed<T: Sample>(
+    output: &Path,
+    overwrite: bool,
+    progress: bool,
+    handoffs: &Handoffs,
+) -> Result<ConvertSummary, ConvertError> {
+    let started = Instant::now();
+    let plan = &handoffs.plan;
+    let writer = StoreWriter::shared(output, plan.version, overwrite)?;
+    let mut levels = open_levels::<T>(&writer, plan, plan.levels.len(), 0)?;
+    let channels = plan.labels.len();
+    let h = plan.cuts.handoff_level;
+    let mut stats = vec![ChannelAccumulator::default(); channels];
+    let bar = crate::progress::bytes_bar(handoffs.files.len() as u64, "merging", progress);
+    for index in 0..handoffs.files.len() {
+        let part = handoffs.read::<T>(index)?;
+        for (level, from) in levels.iter_mut().zip(part.levels) {
+            level.written += from.written;
+            level.empty += from.empty;
+            level.cells.merge(&from.cells);
+            level.histograms.merge(from.histograms);
+        }
+        for (all, from) in stats.iter_mut().zip(&part.stats) {
+            all.merge(from);
+        }
+        if let Some(sums) = part.sums {
+            feed_sums(&mut levels, h, &sums).map_err(|source| ConvertError::WriteLevel0 {
+                path: output.to_path_buf(),
+                source,
+            })?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let folder = writer.partial.join(HANDOFF_FOLDER);
+    std::fs::remove_dir_all(&folder).map_err(|source| HandoffError::Io {
+        path: folder,
+        what: "cannot remove",
+        source,
+    })?;
+    finish_store(writer, plan, &levels, &stats, started)
+}
+
+/// Feeds a partition's level-`h` sums into level `h`'s accumulator plane by plane, flushing
+/// each slab as it fills, as the level below would have.
+fn feed_sums<T: Sample>(
+    levels: &mut [Level<T>],
+    h: usize,
+    sums: &LevelSums<T>,
+) -> Result<(), ChunkWriteError> {
+    let channels = levels[h].cells.channels;
+    let [_, ny, nx] = levels[h].plan.shape;
+    let plane = (ny * nx) as usize;
+    let below_depth = levels[h - 1].plan.shape[0];
+    let step = levels[h].plan.step[0];
+    for p in 0..sums.depth {
+        let z = sums.z0 + p;
+        let acc = &mut levels[h].acc;
+        let zi = (z - acc.z0) as usize;
+        for c in 0..channels {
+            let dst = (c * acc.depth as usize + zi) * plane;
+            let src = (c * sums.depth as usize + p as usize) * plane;
+            acc.sum[dst..dst + plane].copy_from_slice(&sums.sum[src..src + plane]);
+            acc.count[dst..dst + plane].copy_from_slice(&sums.count[src..src + plane]);
+        }
+        flush_if_full(levels, &mut None, h, ((z + 1) * step).min(below_depth))?;
+    }
+    Ok(())
+}
+
+/// The accumulator of the level a partition hands over to `finalize` (the first level it does
+/// not write), with that level's plan.
+type HandedOver<T> = Option<(LevelPlan, Accumulator<T>)>;
+
+/// Adds a slab of level `l` (`z0..z0 + nz`, in its own z) into the level above: the next
+/// written level's accumulator, whose slab is then flushed if full, or the hand-over
+/// accumulator.
+fn propagate<T: Sample>(
+    levels: &mut [Level<T>],
+    handed_over: &mut HandedOver<T>,
+    l: usize,
+    z0: u64,
+    nz: u64,
+    src: &impl SlabRows<T>,
+) -> Result<(), ChunkWriteError> {
+    let channels = levels[l].cells.channels;
+    let shape = levels[l].plan.shape;
+    if l + 1 < levels.len() {
+        let next = &mut levels[l + 1];
+        accumulate(&next.plan, &mut next.acc, channels, shape, z0, nz, src);
+        flush_if_full(levels, handed_over, l + 1, z0 + nz)?;
+    } else if let Some((plan, acc)) = handed_over {
+        accumulate(plan, acc, channels, shape, z0, nz, src);
+    }
+    Ok(())
+}
+
 /// Writes a level-0 slab and propagates it up the pyramid.
 fn process_level0<T: Sample>(
     levels: &mut [Level<T>],
+    handed_over: &mut HandedOver<T>,
     stats: &[Mutex<ChannelAccumulator>],
-    channels: usize,
-    brick: [u64; 3],
     slab: &[T],
     z0: u64,
     nz: u64,
 ) -> Result<(), ChunkWriteError> {
-    levels[0].write_slab(slab, z0, nz, channels, brick, Some(stats))?;
-    let shape = levels[0].plan.shape;
-    if levels.len() > 1 {
-        accumulate(&mut levels[1], channels, shape, z0, nz, &Values(slab));
-        flush_if_full(levels, 1, channels, brick, z0 + nz)?;
-    }
-    Ok(())
+    levels[0].write_slab(slab, z0, nz, Some(stats))?;
+    propagate(levels, handed_over, 0, z0, nz, &Values(slab))
 }
 
 /// Flushes level `l`'s accumulator when the level below has delivered everything it covers
 /// (`below_end` is the end, in level `l-1` z, of what has been delivered).
 fn flush_if_full<T: Sample>(
     levels: &mut [Level<T>],
+    handed_over: &mut HandedOver<T>,
     l: usize,
-    channels: usize,
-    brick: [u64; 3],
     below_end: u64,
 ) -> Result<(), ChunkWriteError> {
     let below_depth = levels[l - 1].plan.shape[0];
     let level = &levels[l];
+    let channels = level.cells.channels;
     let [depth, ny, nx] = level.plan.shape;
     let oz = level.outer[0];
-    let nz = oz.min(depth - level.acc_z0);
-    let needed = ((level.acc_z0 + nz) * level.plan.step[0]).min(below_depth);
+    let nz = oz.min(depth - level.acc.z0);
+    let needed = ((level.acc.z0 + nz) * level.plan.step[0]).min(below_depth);
     if below_end < needed {
         return Ok(());
     }
-    let z0 = level.acc_z0;
+    let z0 = level.acc.z0;
     let plane = (ny * nx) as usize;
     // Means of the slab: rounded once, from exact sums.
     let slab_len = nz as usize * plane;
     let mut values = std::mem::take(&mut levels[l].values);
     values.resize(channels * slab_len, T::default());
     {
-        let level = &levels[l];
+        let acc = &levels[l].acc;
         values
             .par_chunks_mut(slab_len)
             .enumerate()
             .for_each(|(c, out)| {
-                let start = c * level.acc_depth as usize * plane;
-                let sum = &level.sum[start..start + slab_len];
-                let count = &level.count[start..start + slab_len];
+                let start = c * acc.depth as usize * plane;
+                let sum = &acc.sum[start..start + slab_len];
+                let count = &acc.count[start..start + slab_len];
                 for ((o, &s), &n) in out.iter_mut().zip(sum).zip(count) {
                     *o = T::from_mean(s, n);
                 }
             });
     }
-    levels[l].write_slab(&values, z0, nz, channels, brick, None)?;
+    levels[l].write_slab(&values, z0, nz, None)?;
     levels[l].values = values;
-    let shape = levels[l].plan.shape;
-    if l + 1 < levels.len() {
-        let (lower, upper) = levels.split_at_mut(l + 1);
-        let this = &lower[l];
-        let sums = Sums::<T> {
-            sum: &this.sum,
-            count: &this.count,
-            nz_plane: nz as usize * plane,
-            oz_plane: this.acc_depth as usize * plane,
-        };
-        accumulate(&mut upper[0], channels, shape, z0, nz, &sums);
-        flush_if_full(levels, l + 1, channels, brick, z0 + nz)?;
-    }
-    let level = &mut levels[l];
-    level.sum.fill(T::Sum::default());
-    level.count.fill(0);
-    level.acc_z0 += nz;
-    Ok(())
+    let acc = std::mem::replace(&mut levels[l].acc, Accumulator::new(0, 0, 0, 0));
+    let sums = Sums::<T> {
+        sum: &acc.sum,
+        count: &acc.count,
+        nz_plane: nz as usize * plane,
+        oz_plane: acc.depth as usize * plane,
+    };
+    let done = propagate(levels, handed_over, l, z0, nz, &sums);
+    let mut acc = acc;
+    acc.sum.fill(T::Sum::default());
+    acc.count.fill(0);
+    acc.z0 += nz;
+    levels[l].acc = acc;
+    done
 }
 
 #[cfg(test)]

@@ -134,7 +134,7 @@ fn index_object_store(
         }
     }
     let report = index_pyramid(&pyramid, staging.path(), &shown)?;
-    location.upload_folder(staging.path(), options, false, &|_| {})?;
+    location.upload_folder(staging.path(), options, false, None, &|_| {})?;
     Ok(report)
 }
 

@@ -8,7 +8,7 @@
 //! - [`regions`]: min/max cells, brick histograms, channel statistics;
 //! - [`region_writer`]: writing them as Zarr arrays and the `residency` document;
 //! - [`convert`]: the streaming pass itself; [`index`] runs the same analysis on an
-//!   existing store;
+//!   existing store; [`partition`]: a pass split into partitions and finished by `finalize`;
 //! - [`store`] and [`ome`]: Zarr and OME-Zarr metadata, and atomic writes;
 //! - [`synthetic`]: the built-in synthetic samples (light-sheet fluorescence, sparse CT,
 //!   dense simulation, multiplexed immunofluorescence);
@@ -27,6 +27,7 @@ pub mod index;
 pub mod inspect;
 pub mod memory;
 pub mod ome;
+pub mod partition;
 pub mod progress;
 pub mod pyramid;
 pub mod region_writer;
@@ -36,4 +37,4 @@ pub mod source;
 pub mod store;
 pub mod synthetic;
 
-pub use convert::{ConvertOptions, ConvertSummary, convert};
+pub use convert::{ConvertOptions, ConvertSummary, convert, convert_partition, finalize};

@@ -5,11 +5,12 @@ use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
-use residency_ingest::convert::{ConvertOptions, convert};
+use residency_ingest::convert::{ConvertOptions, convert, convert_partition, finalize};
+use residency_ingest::partition::{HANDOFF_FOLDER, Partition};
 use residency_ingest::progress::bytes_bar;
 use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
-use residency_ingest::store::OmeZarrVersion;
+use residency_ingest::store::{OmeZarrVersion, directory_bytes, partial_path};
 use residency_ingest::synthetic::{SampleKind, SampleSpec, write_samples};
 use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 
@@ -119,6 +120,30 @@ enum Command {
         /// Replace an existing output.
         #[arg(long)]
         overwrite: bool,
+        /// Convert only partition I of N (counted from 0): its range of planes, whole slabs of
+        /// every level it covers; run all N (in any order, anywhere), then `ingest finalize`.
+        #[arg(long, value_name = "I/N")]
+        partition: Option<Partition>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Hide the progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
+    /// Finish a store converted in partitions (`convert --partition I/N`): merge their region
+    /// metadata, write the coarse levels, and write the root metadata last.
+    Finalize {
+        /// The store the partitions wrote (the same -o).
+        #[arg(short, long)]
+        output: StoreLocation,
+        /// Endpoint URL of an S3-compatible server that is not AWS, for an s3:// output
+        /// (default: AWS_ENDPOINT_URL, else AWS).
+        #[arg(long, value_name = "URL")]
+        s3_endpoint: Option<String>,
+        /// Replace an existing output (a folder only).
+        #[arg(long)]
+        overwrite: bool,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
@@ -206,6 +231,17 @@ fn parse_edge(s: &str) -> Result<[u64; 3], String> {
     }
 }
 
+/// Partitions write into an object store's prefix directly, so an old store there would mix
+/// with the new one: they refuse to replace it.
+fn refuse_s3_overwrite(output: &StoreLocation, overwrite: bool) -> Result<()> {
+    if overwrite && output.folder().is_none() {
+        bail!(
+            "{output}: --overwrite does not combine with partitions in an object store (their keys would mix with the old store's); delete the old store first"
+        );
+    }
+    Ok(())
+}
+
 fn set_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
         rayon::ThreadPoolBuilder::new()
@@ -234,6 +270,7 @@ fn run(cli: Cli) -> Result<()> {
             levels,
             channel_names,
             overwrite,
+            partition,
             threads,
             quiet,
         } => {
@@ -244,6 +281,9 @@ fn run(cli: Cli) -> Result<()> {
             let s3 = ObjectStoreOptions {
                 endpoint: s3_endpoint,
             };
+            if partition.is_some() {
+                refuse_s3_overwrite(&output, overwrite)?;
+            }
             // An object-store output is converted in a local folder first, then published.
             let (local, staging) = match &output {
                 StoreLocation::Folder(path) => (path.clone(), None),
@@ -275,14 +315,63 @@ fn run(cli: Cli) -> Result<()> {
             options.overwrite = overwrite;
             options.progress = !quiet;
             options.channel_names = channel_names;
+            if let Some(partition) = partition {
+                let mut summary = convert_partition(&options, partition)?;
+                if staging.is_some() {
+                    // Straight into the bucket: no root metadata, so no reader takes it for a
+                    // store before `finalize`.
+                    let bar = bytes_bar(directory_bytes(&summary.folder), "uploading", !quiet);
+                    output.upload_folder(&summary.folder, &s3, false, None, &|n| bar.inc(n))?;
+                    bar.finish_and_clear();
+                    summary.folder = PathBuf::from(output.to_string());
+                }
+                print!("{}", summary.report());
+                return Ok(());
+            }
             let mut summary = convert(&options)?;
             if staging.is_some() {
                 // Replacing a store clears its old keys, root metadata first.
                 let bar = bytes_bar(summary.stored_bytes, "uploading", !quiet);
-                output.upload_folder(&local, &s3, overwrite, &|n| bar.inc(n))?;
+                output.upload_folder(&local, &s3, overwrite, None, &|n| bar.inc(n))?;
                 bar.finish_and_clear();
                 summary.output = PathBuf::from(output.to_string());
             }
+            print!("{}", summary.report());
+        }
+        Command::Finalize {
+            output,
+            s3_endpoint,
+            overwrite,
+            threads,
+            quiet,
+        } => {
+            set_threads(threads)?;
+            let s3 = ObjectStoreOptions {
+                endpoint: s3_endpoint,
+            };
+            let summary = match &output {
+                StoreLocation::Folder(path) => finalize(path, overwrite, !quiet)?,
+                StoreLocation::S3 { .. } => {
+                    refuse_s3_overwrite(&output, overwrite)?;
+                    output.check_absent(&s3, false)?;
+                    let dir = tempfile::Builder::new()
+                        .prefix("ingest-finalize-")
+                        .tempdir()
+                        .context("cannot create a local staging folder")?;
+                    let local = dir.path().join(output.file_name());
+                    output.download_prefix(HANDOFF_FOLDER, &partial_path(&local), &s3)?;
+                    let mut summary = finalize(&local, false, !quiet)?;
+                    // The partitions' bricks are in the bucket already: this adds the rest,
+                    // removes the hand-over files, and writes the root metadata last.
+                    let bar = bytes_bar(directory_bytes(&local), "uploading", !quiet);
+                    output.upload_folder(&local, &s3, false, Some(HANDOFF_FOLDER), &|n| {
+                        bar.inc(n);
+                    })?;
+                    bar.finish_and_clear();
+                    summary.output = PathBuf::from(output.to_string());
+                    summary
+                }
+            };
             print!("{}", summary.report());
         }
         Command::Sample {

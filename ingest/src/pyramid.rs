@@ -6,7 +6,7 @@
 //! until the voxels are nearly isotropic, and then in all three axes.
 
 /// One level of the pyramid.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LevelPlan {
     /// Extent `z, y, x` in voxels.
     pub shape: [u64; 3],

@@ -35,7 +35,8 @@ fn cells_of(v: u64, cells: u64) -> std::ops::RangeInclusive<u64> {
 }
 
 /// Per-cell minima and maxima of every channel, `[c][gz][gy][gx]`.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct Ranges<T: Sample> {
     /// Minimum per cell (`T::HIGHEST` where nothing was seen).
     pub min: Vec<T>,
@@ -60,11 +61,19 @@ impl<T: Sample> Ranges<T> {
             self.max[i] = mx;
         }
     }
+
+    /// Folds another grid's ranges in, cell by cell (the same cells).
+    fn merge(&mut self, other: &Self) {
+        for (i, (&mn, &mx)) in other.min.iter().zip(&other.max).enumerate() {
+            self.fold(i, mn, mx);
+        }
+    }
 }
 
 /// The min/max grids of all channels of one level: haloed (for culling) and exact (for
 /// region queries), over the same cells.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+#[serde(bound = "")]
 pub struct CellGrid<T: Sample> {
     /// Number of cells `z, y, x`.
     pub grid: [u64; 3],
@@ -77,6 +86,17 @@ pub struct CellGrid<T: Sample> {
 }
 
 impl<T: Sample> CellGrid<T> {
+    /// Folds in the ranges another pass over other voxels of the same level found (a
+    /// partition's), so the grid is what one pass over both would have found.
+    ///
+    /// # Panics
+    /// When the grids differ in cells or channels.
+    pub fn merge(&mut self, other: &Self) {
+        assert_eq!((self.grid, self.channels), (other.grid, other.channels));
+        self.haloed.merge(&other.haloed);
+        self.exact.merge(&other.exact);
+    }
+
     /// An empty grid of `grid` cells per channel.
     pub fn new(channels: usize, grid: [u64; 3]) -> Self {
         let n = channels * (grid[0] * grid[1] * grid[2]) as usize;
@@ -225,7 +245,7 @@ fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> Sl
 }
 
 /// Fine-key counts of one brick and channel, stored from the first to the last non-zero key.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FineHistogram {
     /// Key of `counts[0]`.
     pub first_key: u32,
@@ -420,7 +440,7 @@ impl Binning {
 }
 
 /// Whole-channel statistics accumulated over level 0.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct ChannelAccumulator {
     /// Sum of non-NaN values.
     pub sum: f64,
@@ -453,6 +473,24 @@ impl Default for ChannelAccumulator {
 }
 
 impl ChannelAccumulator {
+    /// Adds the statistics of another pass over other voxels of the channel (a partition's).
+    pub fn merge(&mut self, other: &Self) {
+        self.sum += other.sum;
+        self.count += other.count;
+        self.nan += other.nan;
+        self.min = self.min.min(other.min);
+        self.max = self.max.max(other.max);
+        for (k, n) in self.keys.iter_mut().zip(&other.keys) {
+            *k += n;
+        }
+        if !other.exact.is_empty() {
+            self.exact.resize(1 << 16, 0);
+            for (k, n) in self.exact.iter_mut().zip(&other.exact) {
+                *k += n;
+            }
+        }
+    }
+
     /// Adds a brick's statistics.
     pub fn add(&mut self, brick: &BrickStats) {
         self.sum += brick.sum;
@@ -558,6 +596,21 @@ impl LevelHistograms {
         Self {
             bricks,
             fine: Mutex::new(vec![FineHistogram::default(); n]),
+        }
+    }
+
+    /// Takes the histograms of the bricks another pass wrote (a partition's: every brick
+    /// whose histogram it holds is one this pass did not see).
+    ///
+    /// # Panics
+    /// When the other pass's list is of another length.
+    pub fn merge(&self, other: Vec<FineHistogram>) {
+        let mut fine = self.fine.lock().expect("histograms");
+        assert_eq!(fine.len(), other.len());
+        for (mine, theirs) in fine.iter_mut().zip(other) {
+            if !theirs.counts.is_empty() {
+                *mine = theirs;
+            }
         }
     }
 

@@ -20,6 +20,8 @@ pub trait Sample:
     + fmt::Debug
     + zarrs::array::Element
     + zarrs::array::ElementOwned
+    + serde::Serialize
+    + serde::de::DeserializeOwned
     + 'static
 {
     /// The format tag of this type.
@@ -29,7 +31,14 @@ pub trait Sample:
     /// Largest representable value (infinity for floats): the identity of `min`.
     const HIGHEST: Self;
     /// Exact accumulator for sums of many samples.
-    type Sum: Copy + Send + Sync + Default + std::ops::AddAssign + fmt::Debug;
+    type Sum: Copy
+        + Send
+        + Sync
+        + Default
+        + std::ops::AddAssign
+        + fmt::Debug
+        + serde::Serialize
+        + serde::de::DeserializeOwned;
 
     /// This sample as a sum term (0 for NaN).
     fn to_sum(self) -> Self::Sum;

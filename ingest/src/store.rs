@@ -510,6 +510,39 @@ impl StoreWriter {
         })
     }
 
+    /// Opens the temporary folder of `output` that the partitions of one conversion write into
+    /// together, and `ingest finalize` finishes and moves into place: created when missing,
+    /// and never cleared (the other partitions' bricks are there). Refuses an existing output
+    /// without `overwrite`.
+    ///
+    /// # Errors
+    /// When `output` exists and `overwrite` is false, or the folder cannot be created or
+    /// opened as a store.
+    pub fn shared(
+        output: &Path,
+        version: OmeZarrVersion,
+        overwrite: bool,
+    ) -> Result<Self, StoreError> {
+        if output.exists() && !overwrite {
+            return Err(StoreError::OutputExists {
+                path: output.to_path_buf(),
+            });
+        }
+        let partial = partial_path(output);
+        std::fs::create_dir_all(&partial).map_err(|source| StoreError::CreateOutput {
+            path: output.to_path_buf(),
+            partial: partial.clone(),
+            source,
+        })?;
+        let store = Arc::new(StagingStore::new(&partial)?);
+        Ok(Self {
+            output: output.to_path_buf(),
+            partial,
+            store,
+            version,
+        })
+    }
+
     /// Writes into an existing store in place (used by `ingest index`, which only adds new
     /// arrays and then replaces the root attributes atomically); never committed.
     ///

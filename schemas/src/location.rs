@@ -91,6 +91,15 @@ pub enum LocationError {
         /// The location.
         location: String,
     },
+    /// A downloaded file cannot be written.
+    #[error("{}: cannot write", path.display())]
+    WriteFile {
+        /// The file.
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: std::io::Error,
+    },
     /// A file of the store to publish cannot be read.
     #[error("{}: cannot read", path.display())]
     ReadFile {
@@ -285,8 +294,9 @@ impl StoreLocation {
     /// Uploads every file of `folder` under this object-store location so that a reader never
     /// takes a partial store for a complete one: the root metadata ([`ROOT_METADATA`]) last.
     /// The other keys there are kept unless `clear` (replacing a store: then the old root
-    /// metadata is deleted first, then every key under the prefix). `uploaded` is called with
-    /// each file's bytes. Returns the bytes uploaded.
+    /// metadata is deleted first, then every key under the prefix). Keys under `scratch` (a
+    /// sub-prefix such as `.partitions`) are deleted just before the root metadata goes up.
+    /// `uploaded` is called with each file's bytes. Returns the bytes uploaded.
     ///
     /// # Errors
     /// [`LocationError::ReadFile`] for a file that cannot be read, and
@@ -296,6 +306,7 @@ impl StoreLocation {
         folder: &Path,
         options: &ObjectStoreOptions,
         clear: bool,
+        scratch: Option<&str>,
         uploaded: &(dyn Fn(u64) + Sync),
     ) -> Result<u64, LocationError> {
         let (s3, prefix) = self.s3_client(options)?;
@@ -328,7 +339,17 @@ impl StoreLocation {
                     .map_err(|source| failed("", source))?;
             }
             let mut total = 0;
-            for batch in [rest, root] {
+            for (i, batch) in [rest, root].into_iter().enumerate() {
+                if let (1, Some(sub)) = (i, scratch) {
+                    let listed = s3
+                        .list(Some(&ObjectPath::from(format!("{prefix}/{sub}"))))
+                        .map_ok(|meta| meta.location)
+                        .boxed();
+                    s3.delete_stream(listed)
+                        .try_collect::<Vec<_>>()
+                        .await
+                        .map_err(|source| failed(sub, source))?;
+                }
                 let sizes: Vec<u64> = futures::stream::iter(batch)
                     .map(|rel| {
                         let (s3, prefix, failed) = (&s3, &prefix, &failed);
@@ -354,6 +375,51 @@ impl StoreLocation {
                 total += sizes.iter().sum::<u64>();
             }
             Ok(total)
+        })
+    }
+
+    /// Downloads every object under the sub-prefix `sub` of this object-store location into
+    /// `folder` (created), each as the file at its key below the location. Returns how many.
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] (naming the key) for a request that failed, and
+    /// [`LocationError::WriteFile`] when a file cannot be written.
+    pub fn download_prefix(
+        &self,
+        sub: &str,
+        folder: &Path,
+        options: &ObjectStoreOptions,
+    ) -> Result<usize, LocationError> {
+        let (s3, prefix) = self.s3_client(options)?;
+        let failed = |key: &str, source| LocationError::ObjectStore {
+            location: format!("{self}/{key}"),
+            source,
+        };
+        runtime().block_on(async {
+            let listed: Vec<_> = s3
+                .list(Some(&ObjectPath::from(format!("{prefix}/{sub}"))))
+                .try_collect()
+                .await
+                .map_err(|source| failed(sub, source))?;
+            for meta in &listed {
+                let key = meta.location.as_ref();
+                let rel = key.strip_prefix(&format!("{prefix}/")).unwrap_or(key);
+                let got = s3
+                    .get(&meta.location)
+                    .await
+                    .map_err(|source| failed(rel, source))?;
+                let bytes = got.bytes().await.map_err(|source| failed(rel, source))?;
+                let path = folder.join(rel);
+                let write = |source| LocationError::WriteFile {
+                    path: path.clone(),
+                    source,
+                };
+                if let Some(parent) = path.parent() {
+                    tokio::fs::create_dir_all(parent).await.map_err(write)?;
+                }
+                tokio::fs::write(&path, bytes).await.map_err(write)?;
+            }
+            Ok(listed.len())
         })
     }
 
