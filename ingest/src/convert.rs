@@ -1162,7 +1162,8 @@ fn partition_typed<T: Sample>(
     })
 }
 
-/// `ingest finalize`: finishes a store whose N partitions have all run. Merges their region
+/// `ingest finalize`: finishes the store at `output` (named `shown` in messages) whose N
+/// partitions have all run. Merges their region
 /// metadata and statistics, writes the levels they did not (from the exact sums they handed
 /// over), removes the hand-over files, writes the root metadata last and moves the store into
 /// place: byte for byte the store one `ingest convert` writes.
@@ -1172,11 +1173,12 @@ fn partition_typed<T: Sample>(
 /// errors of [`convert`] for writing the store.
 pub fn finalize(
     output: &Path,
+    shown: &str,
     overwrite: bool,
     progress: bool,
 ) -> Result<ConvertSummary, ConvertError> {
     let partial = crate::store::partial_path(output);
-    let handoffs = Handoffs::find(&partial)?;
+    let handoffs = Handoffs::find(&partial, shown)?;
     let format = handoffs.plan.format;
     with_sample_type!(format, T => finalize_typed::<T>(output, overwrite, progress, &handoffs))
 }

@@ -350,7 +350,9 @@ fn run(cli: Cli) -> Result<()> {
                 endpoint: s3_endpoint,
             };
             let summary = match &output {
-                StoreLocation::Folder(path) => finalize(path, overwrite, !quiet)?,
+                StoreLocation::Folder(path) => {
+                    finalize(path, &path.display().to_string(), overwrite, !quiet)?
+                }
                 StoreLocation::S3 { .. } => {
                     refuse_s3_overwrite(&output, overwrite)?;
                     output.check_absent(&s3, false)?;
@@ -360,7 +362,7 @@ fn run(cli: Cli) -> Result<()> {
                         .context("cannot create a local staging folder")?;
                     let local = dir.path().join(output.file_name());
                     output.download_prefix(HANDOFF_FOLDER, &partial_path(&local), &s3)?;
-                    let mut summary = finalize(&local, false, !quiet)?;
+                    let mut summary = finalize(&local, &output.to_string(), false, !quiet)?;
                     // The partitions' bricks are in the bucket already: this adds the rest,
                     // removes the hand-over files, and writes the root metadata last.
                     let bar = bytes_bar(directory_bytes(&local), "uploading", !quiet);

@@ -244,16 +244,20 @@ pub enum HandoffError {
         reason: String,
     },
     /// No partition has handed anything over.
-    #[error("{}: no partition has finished (nothing in {HANDOFF_FOLDER}/; run `ingest convert --partition I/N -o` this store first)", store.display())]
+    #[error(
+        "{store}: no partition has finished (no hand-over file in {HANDOFF_FOLDER}/; run `ingest convert --partition I/N -o {store}` first)"
+    )]
     NoPartitions {
-        /// The store's folder.
-        store: PathBuf,
+        /// The store, as the command line names it.
+        store: String,
     },
     /// Some partitions have not finished.
-    #[error("{}: partitions {missing} of {count} have not finished (no {HANDOFF_FOLDER}/I-of-{count}); rerun them, then finalize", store.display())]
+    #[error(
+        "{store}: partitions {missing} of {count} have not finished (no {HANDOFF_FOLDER}/I-of-{count}); run them, then finalize"
+    )]
     Missing {
-        /// The store's folder.
-        store: PathBuf,
+        /// The store, as the command line names it.
+        store: String,
         /// The missing partitions, comma-separated.
         missing: String,
         /// Partitions.
@@ -337,15 +341,16 @@ fn read_head(path: &Path) -> Result<(HandoffHead, Vec<u8>), HandoffError> {
 }
 
 impl Handoffs {
-    /// Finds and checks the hand-over files of the store being written in `store`.
+    /// Finds and checks the hand-over files in `partial` (the temporary folder of the store
+    /// `shown`, as messages name it).
     ///
     /// # Errors
     /// [`HandoffError`] when there are none, some are missing, one is unreadable, or they
     /// followed different plans.
-    pub fn find(store: &Path) -> Result<Self, HandoffError> {
-        let folder = store.join(HANDOFF_FOLDER);
+    pub fn find(partial: &Path, shown: &str) -> Result<Self, HandoffError> {
+        let folder = partial.join(HANDOFF_FOLDER);
         let none = || HandoffError::NoPartitions {
-            store: store.to_path_buf(),
+            store: shown.to_string(),
         };
         let entries = match std::fs::read_dir(&folder) {
             Ok(entries) => entries,
@@ -388,7 +393,7 @@ impl Handoffs {
         }
         if !missing.is_empty() {
             return Err(HandoffError::Missing {
-                store: store.to_path_buf(),
+                store: shown.to_string(),
                 missing: missing.join(", "),
                 count,
             });

@@ -336,3 +336,45 @@ def test_brickserver_refuses_an_s3_location_without_a_store(s3):
     assert p.stderr.endswith(
         "error: s3://bucket/nothing.ome.zarr: no store there (none of zarr.json, .zgroup, "
         ".zattrs at its root)\n")
+
+
+def test_partitions_write_into_the_bucket_the_bytes_of_one_local_convert(s3, tmp_path):
+    url = "s3://bucket/parted/sample.ome.zarr"
+    flags = ["--chunk", "8", "--s3-endpoint", s3["endpoint"], "--quiet"]
+    procs = [subprocess.Popen([str(BIN / "ingest"), "convert", *map(str, s3["inputs"]), "-o", url,
+                               *flags, "--partition", f"{i}/3"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env())
+             for i in range(3)]
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        assert out.startswith(f"wrote partition {procs.index(p)}/3 into {url}: "), out
+    remote = s3["root"] / "bucket" / "parted" / "sample.ome.zarr"
+    # In the bucket: the partitions' bricks and hand-over files, and no root metadata.
+    assert not (remote / "zarr.json").exists()
+    assert sorted(p.name for p in (remote / ".partitions").iterdir()) == ["0-of-3", "1-of-3", "2-of-3"]
+    done = run("ingest", "finalize", "-o", url, "--s3-endpoint", s3["endpoint"], "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.startswith(f"wrote {url} (uint16)\n")
+    local = tmp_path / "sample.ome.zarr"
+    run_ingest("convert", *s3["inputs"], "-o", local, "--chunk", "8", "--quiet")
+    assert files(remote) == files(local)
+    others = [p.stat().st_mtime_ns for p in remote.rglob("*") if p.is_file()
+              and p.name != "zarr.json"]
+    assert (remote / "zarr.json").stat().st_mtime_ns >= max(others)
+    # Served from the bucket, it draws the local store's image.
+    proc, base = start_brickserver(url, "--s3-endpoint", s3["endpoint"])
+    try:
+        assert_renders_the_local_image(s3, tmp_path, "--server", base, "--dataset", "sample")
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+    # Once finished, it is a store: partitions and finalize refuse to mix into it.
+    again = run("ingest", "finalize", "-o", url, "--s3-endpoint", s3["endpoint"])
+    assert (again.returncode, again.stderr) == (
+        1, f"error: {url}: output already exists (pass --overwrite to replace it)\n")
+    mixed = run("ingest", "convert", *s3["inputs"], "-o", url, "--s3-endpoint", s3["endpoint"],
+                "--partition", "0/3", "--overwrite")
+    assert (mixed.returncode, mixed.stderr) == (
+        1, f"error: {url}: --overwrite does not combine with partitions in an object store (their "
+           "keys would mix with the old store's); delete the old store first\n")

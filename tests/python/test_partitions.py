@@ -1,0 +1,136 @@
+"""Partitioned conversion as a cluster runs it: N `ingest convert --partition I/N` processes at
+once (the array logic of scripts/cluster/), then `ingest finalize`. The store must be byte for
+byte the one a single `ingest convert` writes, for odd shapes, shards, several channels, float
+samples and OME-Zarr 0.4; a failed partition is rerun alone; errors say what is missing."""
+
+import pathlib
+import subprocess
+
+import pytest
+import zarr
+
+from conftest import BIN, run_ingest
+
+
+def files(folder: pathlib.Path) -> dict:
+    """Every file under `folder` (relative path → bytes)."""
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def run_partitions(inputs, output, n, *flags, only=None):
+    """Runs partitions `only` (default: all N) of a conversion as separate processes at once."""
+    procs = [subprocess.Popen([str(BIN / "ingest"), "convert", *map(str, inputs), "-o", str(output),
+                               *flags, "--quiet", "--partition", f"{i}/{n}"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i in (range(n) if only is None else only)]
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        assert out.startswith("wrote partition "), out
+
+
+@pytest.fixture(scope="module")
+def samples(tmp_path_factory):
+    """Inputs of odd shapes: a sparse u16 stack, a 3-channel fluorescence stack (u16 and u8,
+    stored as u16), a float32 simulation."""
+    d = tmp_path_factory.mktemp("inputs")
+    out = {}
+    for kind, size in [("sparse", "45,40,36"), ("fluorescence", "37,50,44"), ("dense", "29,30,31")]:
+        run_ingest("sample", "-o", d / kind, "--kind", kind, "--size", size, "--quiet")
+        out[kind] = sorted((d / kind).glob("*.tif"))
+    return out
+
+
+CASES = {
+    "sparse-bricks-4": ("sparse", ["--chunk", "4"]),
+    "fluorescence-sharded": ("fluorescence", ["--chunk", "8,16,16", "--shard", "16,32,32"]),
+    "fluorescence-anisotropic-0.4": ("fluorescence", ["--chunk", "6", "--voxel-size", "4,1,1",
+                                                      "--ome-zarr-version", "0.4"]),
+    "dense-float": ("dense", ["--chunk", "4"]),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("n", [1, 2, 3, 7])
+def test_n_partitions_write_the_store_one_process_writes(samples, tmp_path, case, n):
+    kind, flags = CASES[case]
+    whole = tmp_path / "whole" / "x.ome.zarr"
+    run_ingest("convert", *samples[kind], "-o", whole, *flags, "--quiet")
+    parted = tmp_path / "parted" / "x.ome.zarr"
+    run_partitions(samples[kind], parted, n, *flags)
+    # Nothing is a store until finalize: no root metadata, only the temporary folder.
+    assert not parted.exists()
+    done = run_ingest("finalize", "-o", parted, "--quiet")
+    assert done.stdout.startswith(f"wrote {parted} (")
+    assert files(parted) == files(whole)
+    assert sorted(p.name for p in parted.parent.iterdir()) == ["x.ome.zarr"]
+
+
+def test_partitions_cut_on_whole_slabs_and_say_what_they_wrote(samples, tmp_path):
+    out = tmp_path / "x.ome.zarr"
+    p = run_ingest("convert", *samples["sparse"], "-o", out, "--chunk", "4", "--quiet",
+                   "--partition", "1/7")
+    first = p.stdout.splitlines()[0]
+    assert first == (f"wrote partition 1/7 into {tmp_path}/.x.ome.zarr.partial: level-0 planes "
+                     "4..12, levels 0 to 0, bricks written 180, empty (not written) 0")
+    two = run_ingest("convert", *samples["sparse"], "-o", tmp_path / "y.ome.zarr", "--chunk", "4",
+                     "--quiet", "--partition", "1/2")
+    assert two.stdout.splitlines()[0].endswith(
+        "level-0 planes 32..45, levels 0 to 3, bricks written 423, empty (not written) 0")
+
+
+def test_a_failed_partition_is_rerun_alone(samples, tmp_path):
+    flags = ["--chunk", "4"]
+    whole = tmp_path / "whole" / "x.ome.zarr"
+    run_ingest("convert", *samples["sparse"], "-o", whole, *flags, "--quiet")
+    out = tmp_path / "parted" / "x.ome.zarr"
+    run_partitions(samples["sparse"], out, 3, *flags)
+    partial = out.parent / ".x.ome.zarr.partial"
+    # Partition 1 "failed": its hand-over file never came, and some of its bricks are missing.
+    (partial / ".partitions" / "1-of-3").unlink()
+    level0 = sorted((partial / "0" / "c" / "0").iterdir(), key=lambda p: int(p.name))
+    for brick_plane in level0[5:7]:
+        for f in brick_plane.rglob("*"):
+            if f.is_file():
+                f.unlink()
+    failed = run_ingest("finalize", "-o", out, check=False)
+    assert failed.returncode == 1
+    assert failed.stderr == (
+        f"error: {out}: partitions 1 of 3 have not finished (no .partitions/I-of-3); run them, "
+        "then finalize\n")
+    assert not out.exists()
+    run_partitions(samples["sparse"], out, 3, *flags, only=[1])
+    run_ingest("finalize", "-o", out, "--quiet")
+    assert files(out) == files(whole)
+    # zarr-python reads it like any store.
+    assert zarr.open_group(str(out), mode="r")["0"].shape == (1, 45, 40, 36)
+
+
+def test_finalize_says_what_is_wrong(samples, tmp_path):
+    out = tmp_path / "x.ome.zarr"
+    none = run_ingest("finalize", "-o", out, check=False)
+    assert none.returncode == 1
+    assert none.stderr == (
+        f"error: {out}: no partition has finished (no hand-over file in .partitions/; run "
+        f"`ingest convert --partition I/N -o {out}` first)\n")
+    run_ingest("convert", *samples["sparse"], "-o", out, "--chunk", "4", "--quiet",
+               "--partition", "0/2")
+    run_ingest("convert", *samples["sparse"], "-o", out, "--chunk", "8", "--quiet",
+               "--partition", "1/2")
+    mixed = run_ingest("finalize", "-o", out, check=False)
+    assert mixed.returncode == 1
+    assert mixed.stderr == (
+        f"error: {tmp_path}/.x.ome.zarr.partial/.partitions/1-of-2: partition 1/2 was converted "
+        "with other inputs or options than partition 0/2 (rerun it with the same command line)\n")
+    bad = run_ingest("convert", *samples["sparse"], "-o", out, "--partition", "2/2", check=False)
+    assert bad.returncode == 2
+    assert ("invalid value '2/2' for '--partition <I/N>': --partition 2/2: expected I/N, "
+            "partition I (counted from 0) of N, with I below N (0/N to N-1/N)") in bad.stderr
+    # A finished store is not replaced without --overwrite.
+    run_partitions(samples["sparse"], tmp_path / "done.ome.zarr", 1, "--chunk", "4")
+    run_ingest("finalize", "-o", tmp_path / "done.ome.zarr", "--quiet")
+    again = run_ingest("convert", *samples["sparse"], "-o", tmp_path / "done.ome.zarr",
+                       "--partition", "0/1", check=False)
+    assert again.returncode == 1
+    assert again.stderr == (f"error: {tmp_path}/done.ome.zarr: output already exists "
+                            "(pass --overwrite to replace it)\n")
