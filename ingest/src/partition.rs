@@ -468,10 +468,10 @@ mod tests {
         assert_eq!(many.handoff_level, 1);
         assert_eq!(many.planes(0, 45), 0..0);
         assert_eq!(many.planes(19, 45), 44..45);
-        // An odd slab depth: units hold whole slabs of level 2 (6 planes) and whole voxels of
-        // level 3 (4 planes).
+        // An odd slab depth: units hold whole slabs of level 1 (6 planes) and whole voxels of
+        // level 2 (4 planes): 12 planes.
         let plans = plan_levels([30, 8, 8], [1.0; 3], [3, 8, 8], None);
         let cuts = Cuts::plan(&plans, 3, 3);
-        assert_eq!((cuts.handoff_level, cuts.unit, cuts.units), (3, 12, 3));
+        assert_eq!((cuts.handoff_level, cuts.unit, cuts.units), (2, 12, 3));
     }
 }
