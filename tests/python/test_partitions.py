@@ -3,13 +3,16 @@ once (the array logic of scripts/cluster/), then `ingest finalize`. The store mu
 byte the one a single `ingest convert` writes, for odd shapes, shards, several channels, float
 samples and OME-Zarr 0.4; a failed partition is rerun alone; errors say what is missing."""
 
+import os
 import pathlib
 import subprocess
 
 import pytest
 import zarr
 
-from conftest import BIN, run_ingest
+from conftest import BIN, ROOT, run_ingest
+
+CLUSTER = ROOT / "scripts" / "cluster"
 
 
 def files(folder: pathlib.Path) -> dict:
@@ -43,6 +46,7 @@ def samples(tmp_path_factory):
 
 CASES = {
     "sparse-bricks-4": ("sparse", ["--chunk", "4"]),
+    "sparse-odd-slabs": ("sparse", ["--chunk", "3,8,8"]),
     "fluorescence-sharded": ("fluorescence", ["--chunk", "8,16,16", "--shard", "16,32,32"]),
     "fluorescence-anisotropic-0.4": ("fluorescence", ["--chunk", "6", "--voxel-size", "4,1,1",
                                                       "--ome-zarr-version", "0.4"]),
@@ -134,3 +138,109 @@ def test_finalize_says_what_is_wrong(samples, tmp_path):
     assert again.returncode == 1
     assert again.stderr == (f"error: {tmp_path}/done.ome.zarr: output already exists "
                             "(pass --overwrite to replace it)\n")
+
+
+def test_the_cluster_task_script_runs_slurm_and_kubernetes_arrays(samples, tmp_path):
+    """scripts/cluster/partition-task.sh as Slurm array tasks and as Kubernetes Indexed Job
+    pods would run it (their variables, four tasks at once), then finalize."""
+    flags = ["--chunk", "4"]
+    whole = tmp_path / "whole" / "x.ome.zarr"
+    run_ingest("convert", *samples["sparse"], "-o", whole, *flags, "--quiet")
+    base = {k: v for k, v in os.environ.items()
+            if not k.startswith(("SLURM_", "JOB_COMPLETION", "PARTITION_"))}
+    base["INGEST"] = str(BIN / "ingest")
+    schedulers = {
+        "slurm": lambda i: {"SLURM_ARRAY_TASK_ID": str(i), "SLURM_ARRAY_TASK_COUNT": "4"},
+        "kubernetes": lambda i: {"JOB_COMPLETION_INDEX": str(i), "PARTITION_COUNT": "4"},
+    }
+    for name, task_env in schedulers.items():
+        out = tmp_path / name / "x.ome.zarr"
+        tasks = [subprocess.Popen([str(CLUSTER / "partition-task.sh"), *map(str, samples["sparse"]),
+                                   "-o", str(out), *flags], env={**base, **task_env(i)},
+                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                 for i in range(4)]
+        for i, t in enumerate(tasks):
+            stdout, stderr = t.communicate(timeout=300)
+            assert t.returncode == 0, stderr
+            assert stdout.startswith(f"wrote partition {i}/4 into "), stdout
+        run_ingest("finalize", "-o", out, "--quiet")
+        assert files(out) == files(whole), name
+    lost = subprocess.run([str(CLUSTER / "partition-task.sh"), "in.tif", "-o", "x.ome.zarr"],
+                          env=base, capture_output=True, text=True)
+    assert (lost.returncode, lost.stderr) == (2, (
+        "partition-task.sh: no task index or count: run it as a Slurm array task or a Kubernetes "
+        "Indexed Job pod, or set PARTITION_INDEX and PARTITION_COUNT\n"))
+
+
+def test_the_kubernetes_manifests_agree_with_each_other():
+    import yaml
+    parts = yaml.safe_load((CLUSTER / "k8s-partitions-job.yaml").read_text())
+    final = yaml.safe_load((CLUSTER / "k8s-finalize-job.yaml").read_text())
+    spec = parts["spec"]
+    pod = spec["template"]["spec"]["containers"][0]
+    count = next(e["value"] for e in pod["env"] if e["name"] == "PARTITION_COUNT")
+    assert spec["completionMode"] == "Indexed"
+    assert spec["completions"] == spec["parallelism"] == int(count)
+    assert pod["command"][0] == "partition-task.sh"
+    output = pod["command"][pod["command"].index("-o") + 1]
+    command = final["spec"]["template"]["spec"]["containers"][0]["command"]
+    assert command[:2] == ["ingest", "finalize"]
+    assert command[command.index("-o") + 1] == output
+
+
+FAKE_SBATCH = """#!/usr/bin/env bash
+# Runs what sbatch is given here and now: an --array's tasks at once, with Slurm's variables,
+# or a --wrap command; records each call's arguments. As sbatch reads them: options up to the
+# script, the script's own arguments after it.
+echo "$*" >> "$SBATCH_CALLS"
+array=""; wrap=""; script=()
+for a in "$@"; do
+  if [ ${#script[@]} -gt 0 ]; then script+=("$a"); continue; fi
+  case "$a" in
+    --array=*) array=${a#--array=} ;;
+    --wrap=*) wrap=${a#--wrap=} ;;
+    --*) ;;
+    *) script+=("$a") ;;
+  esac
+done
+if [ -n "$wrap" ]; then
+  bash -c "$wrap" >> "$SBATCH_OUT" || exit 1
+  echo 1002
+else
+  lo=${array%-*}; hi=${array#*-}; pids=()
+  for i in $(seq "$lo" "$hi"); do
+    SLURM_ARRAY_TASK_ID=$i SLURM_ARRAY_TASK_COUNT=$((hi - lo + 1)) "${script[@]}" >> "$SBATCH_OUT" &
+    pids+=($!)
+  done
+  for p in "${pids[@]}"; do wait "$p" || exit 1; done
+  echo 1001
+fi
+"""
+
+
+def test_the_slurm_submission_script_submits_the_array_then_finalize(samples, tmp_path):
+    """scripts/cluster/slurm-submit.sh against a stand-in `sbatch` that runs the job array's
+    tasks locally and then the finalize job."""
+    bindir = tmp_path / "bin"
+    bindir.mkdir()
+    (bindir / "sbatch").write_text(FAKE_SBATCH)
+    (bindir / "sbatch").chmod(0o755)
+    (bindir / "ingest").symlink_to(BIN / "ingest")
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("SLURM_", "PARTITION_"))}
+    env.update(PATH=f"{bindir}:{env['PATH']}", SBATCH_CALLS=str(tmp_path / "calls"),
+               SBATCH_OUT=str(tmp_path / "out"))
+    out = tmp_path / "cluster" / "x.ome.zarr"
+    p = subprocess.run([str(CLUSTER / "slurm-submit.sh"), "3", *map(str, samples["sparse"]),
+                        "-o", str(out), "--chunk", "4"], env=env, capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout == "submitted array job 1001 (3 partitions) and finalize job 1002\n"
+    calls = (tmp_path / "calls").read_text().splitlines()
+    assert len(calls) == 2
+    assert calls[0].startswith("--parsable --job-name=ingest-partitions --array=0-2 ")
+    assert "--dependency=afterok:1001" in calls[1]
+    outputs = (tmp_path / "out").read_text()
+    assert sorted(l.split(" into ")[0] for l in outputs.splitlines() if " into " in l) == [
+        f"wrote partition {i}/3" for i in range(3)]
+    whole = tmp_path / "whole" / "x.ome.zarr"
+    run_ingest("convert", *samples["sparse"], "-o", whole, "--chunk", "4", "--quiet")
+    assert files(out) == files(whole)
