@@ -496,18 +496,7 @@ impl StoreWriter {
                 source,
             })?;
         }
-        std::fs::create_dir_all(&partial).map_err(|source| StoreError::CreateOutput {
-            path: output.to_path_buf(),
-            partial: partial.clone(),
-            source,
-        })?;
-        let store = Arc::new(StagingStore::new(&partial)?);
-        Ok(Self {
-            output: output.to_path_buf(),
-            partial,
-            store,
-            version,
-        })
+        Self::shared(output, version, overwrite)
     }
 
     /// Opens the temporary folder of `output` that the partitions of one conversion write into

@@ -1,0 +1,135 @@
+"""Partitioned conversion benchmark: `ingest convert` in one process against N partitions run at
+once and `ingest finalize`, to a local folder and to an S3 server on loopback (s3s-fs, as the
+tests use), on the same input in the same run.
+
+    python3 benchmarks/partition_bench.py [--size 256,512,512] [--partitions 1,2,4] [--readme]
+
+Every run's store is checked byte for byte against the single-process store. Reported (the
+median of `--repeat` runs): wall time of the partitions (all at once on this machine, so they
+share its cores), of finalize, and in all; the peak RSS of the largest process (GNU time). Results go to
+benchmarks/results/partitions.md (README markers `partition-bench`).
+"""
+
+import argparse
+import datetime
+import os
+import pathlib
+import platform
+import re
+import shutil
+import subprocess
+import tempfile
+import time
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+BIN = ROOT / "target" / "release"
+from server_bench import S3_KEY as KEY, S3_SECRET as SECRET, cpu_name, start_s3s_fs as start_s3
+
+
+def timed(cmd, env=None):
+    """Starts `cmd` under GNU time; returns the process (stderr carries time's report)."""
+    return subprocess.Popen(["/usr/bin/time", "-f", "RSS_KB %M", *map(str, cmd)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+
+
+def finish(procs):
+    """Waits for `procs`; returns the largest peak RSS in MB."""
+    peak = 0
+    for p in procs:
+        out, err = p.communicate()
+        if p.returncode != 0:
+            raise RuntimeError(err)
+        peak = max(peak, int(re.search(r"RSS_KB (\d+)", err).group(1)) / 1024)
+    return peak
+
+
+def files(folder: pathlib.Path) -> dict:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", default="256,512,512", help="z,y,x of the sparse sample")
+    ap.add_argument("--partitions", default="1,2,4")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each; the median is reported")
+    ap.add_argument("--readme", action="store_true")
+    a = ap.parse_args()
+    counts = [int(n) for n in a.partitions.split(",")]
+    work = pathlib.Path(tempfile.mkdtemp(prefix="partition-bench-"))
+    env = {k: v for k, v in os.environ.items() if not k.startswith("AWS_")}
+    env.update(AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=SECRET)
+    s3root = work / "s3"
+    (s3root / "bucket").mkdir(parents=True)
+    s3, endpoint = start_s3(s3root)
+    rows = []
+    try:
+        subprocess.run([BIN / "ingest", "sample", "-o", work / "in", "--kind", "sparse", "--size", a.size, "--quiet"], check=True)
+        inputs = sorted((work / "in").glob("*.tif"))
+        input_mb = sum(p.stat().st_size for p in inputs) / 1e6
+        ref = work / "ref" / "x.ome.zarr"
+        # Warm the page cache for every run alike, and make the reference store.
+        finish([timed([BIN / "ingest", "convert", *inputs, "-o", ref, "--quiet"])])
+        reference = files(ref)
+
+        def once(target, n):
+            if n == 0:
+                out = work / "one" / "x.ome.zarr"
+                shutil.rmtree(out.parent, ignore_errors=True)
+                t0 = time.time()
+                rss = finish([timed([BIN / "ingest", "convert", *inputs, "-o", out, "--quiet"])])
+                return time.time() - t0, None, rss, files(out)
+            if target == "folder":
+                out, extra, where = work / f"f{n}" / "x.ome.zarr", [], work / f"f{n}"
+            else:
+                out, extra = f"s3://bucket/p{n}/x.ome.zarr", ["--s3-endpoint", endpoint]
+                where = s3root / "bucket" / f"p{n}"
+            shutil.rmtree(where, ignore_errors=True)
+            t0 = time.time()
+            rss = finish([timed([BIN / "ingest", "convert", *inputs, "-o", out, "--quiet", *extra, "--partition", f"{i}/{n}"], env)
+                          for i in range(n)])
+            t1 = time.time()
+            rss = max(rss, finish([timed([BIN / "ingest", "finalize", "-o", out, "--quiet", *extra], env)]))
+            t2 = time.time()
+            return t1 - t0, t2 - t1, rss, files(where / "x.ome.zarr")
+
+        plan = [("folder", 0)] + [(t, n) for t in ["folder", "S3"] for n in counts]
+        for target, n in plan:
+            runs = []
+            for _ in range(a.repeat):
+                tp, tf, rss, got = once(target, n)
+                if got != reference:
+                    raise RuntimeError(f"{target} N={n}: not the single-process store")
+                runs.append((tp + (tf or 0), tp, tf, rss))
+            total, tp, tf, rss = sorted(runs)[len(runs) // 2]
+            rows.append((target, "one process" if n == 0 else f"{n} partitions", tp, tf, max(r[3] for r in runs)))
+    finally:
+        s3.terminate()
+        s3.wait(timeout=10)
+        shutil.rmtree(work, ignore_errors=True)
+    lines = [
+        f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, by "
+        f"`benchmarks/partition_bench.py --size {a.size} --partitions {a.partitions} --repeat {a.repeat}`: the sparse sample ({a.size} z,y,x, uint16, "
+        f"{input_mb:.0f} MB of TIFF), default 64³ bricks; the N partitions run at once on this machine (so they share its "
+        "cores: the speed-up a cluster gets from N machines is not measured here), to a local folder and to s3s-fs on "
+        "loopback, after one conversion that warms the page cache; the median of the runs is shown. "
+        "Every store was checked byte for byte against the single-process store.",
+        "",
+        "| Output | Run | partitions s | finalize s | total s | MB/s | peak RSS per process MB |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for target, run, tp, tf, rss in rows:
+        total = tp + (tf or 0)
+        lines.append(f"| {target} | {run} | {tp:.2f} | {'' if tf is None else f'{tf:.2f}'} | {total:.2f} | "
+                     f"{input_mb / total:.0f} | {rss:.0f} |")
+    report = "\n".join(lines) + "\n"
+    (ROOT / "benchmarks" / "results" / "partitions.md").write_text(report)
+    print(report)
+    if a.readme:
+        readme = ROOT / "README.md"
+        text = readme.read_text()
+        readme.write_text(re.sub("<!-- partition-bench:start -->.*<!-- partition-bench:end -->",
+                                 f"<!-- partition-bench:start -->\n{report}<!-- partition-bench:end -->", text, flags=re.S))
+
+
+if __name__ == "__main__":
+    main()
