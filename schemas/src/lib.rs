@@ -9,6 +9,8 @@
 //! [`server`] holds the JSON answers of `brickserver`'s API, and [`wire`] its binary
 //! documents (the min/max hierarchy and brick batches).
 
+#[cfg(feature = "object-store")]
+pub mod aws_profile;
 pub mod dataset;
 #[cfg(feature = "drift")]
 pub mod drift;

@@ -3,9 +3,11 @@
 //!
 //! Object stores are reached through `object_store` (via `zarrs_object_store`). Credentials
 //! and region come from the standard AWS variables (`AWS_ACCESS_KEY_ID`,
-//! `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`, `AWS_REGION`/`AWS_DEFAULT_REGION`); a
-//! non-AWS server is named by `AWS_ENDPOINT_URL` (plain `http://` needs `AWS_ALLOW_HTTP=true`),
-//! or by [`ObjectStoreOptions::endpoint`]. Requests are path-style (`endpoint/bucket/key`).
+//! `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`, `AWS_REGION`/`AWS_DEFAULT_REGION`), and what
+//! they leave unset from the AWS profile ([`crate::aws_profile`]); a non-AWS server is named by
+//! `AWS_ENDPOINT_URL` (plain `http://` needs `AWS_ALLOW_HTTP=true`), a profile's
+//! `endpoint_url`, or [`ObjectStoreOptions::endpoint`]. Requests are path-style
+//! (`endpoint/bucket/key`).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -13,6 +15,8 @@ use std::str::FromStr;
 use std::sync::{Arc, OnceLock};
 
 use futures::{StreamExt, TryStreamExt};
+
+use crate::aws_profile::{Profile, ProfileError};
 use zarrs::filesystem::FilesystemStore;
 use zarrs::storage::ReadableListableStorageTraits;
 use zarrs::storage::storage_adapter::async_to_sync::{
@@ -85,6 +89,9 @@ pub enum LocationError {
         #[source]
         source: object_store::Error,
     },
+    /// The AWS profile cannot be read.
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
     /// A store is already there, and replacing it was not asked for.
     #[error("{location}: output already exists (pass --overwrite to replace it)")]
     Exists {
@@ -215,6 +222,35 @@ impl StoreLocation {
             unreachable!("called for S3 locations only");
         };
         let mut builder = AmazonS3Builder::from_env().with_bucket_name(bucket);
+        // What the environment leaves unset comes from the AWS profile, if there is one.
+        let unset = |name: &str| std::env::var_os(name).is_none_or(|v| v.is_empty());
+        if let Some(profile) = Profile::from_env()? {
+            if unset("AWS_ACCESS_KEY_ID") {
+                if let Some(key) = profile.access_key_id {
+                    builder = builder.with_access_key_id(key);
+                }
+                if let Some(secret) = profile.secret_access_key {
+                    builder = builder.with_secret_access_key(secret);
+                }
+                if let Some(token) = profile.session_token {
+                    builder = builder.with_token(token);
+                }
+            }
+            if let Some(region) = profile.region
+                && unset("AWS_REGION")
+                && unset("AWS_DEFAULT_REGION")
+            {
+                builder = builder.with_region(region);
+            }
+            if let Some(endpoint) = profile.endpoint_url
+                && unset("AWS_ENDPOINT_URL")
+                && options.endpoint.is_none()
+            {
+                builder = builder
+                    .with_allow_http(endpoint.starts_with("http://"))
+                    .with_endpoint(endpoint);
+            }
+        }
         if let Some(endpoint) = &options.endpoint {
             builder = builder
                 .with_endpoint(endpoint)
@@ -354,17 +390,11 @@ impl StoreLocation {
                     .map(|rel| {
                         let (s3, prefix, failed) = (&s3, &prefix, &failed);
                         async move {
-                            let path = folder.join(&rel);
-                            let bytes = tokio::fs::read(&path)
-                                .await
-                                .map_err(|source| LocationError::ReadFile { path, source })?;
-                            let n = bytes.len() as u64;
-                            s3.put(
-                                &ObjectPath::from(format!("{prefix}/{rel}")),
-                                PutPayload::from(bytes),
-                            )
-                            .await
-                            .map_err(|source| failed(&rel, source))?;
+                            let key = ObjectPath::from(format!("{prefix}/{rel}"));
+                            let n = put_file(s3, &key, &folder.join(&rel), &|source| {
+                                failed(&rel, source)
+                            })
+                            .await?;
                             uploaded(n);
                             Ok::<u64, LocationError>(n)
                         }
@@ -437,6 +467,75 @@ impl StoreLocation {
             Self::Folder(path) => Arc::new(folder_store(path)?),
             Self::S3 { .. } => Arc::new(self.object_storage(options)?),
         })
+    }
+}
+
+/// Files larger than this go up in parts (S3 takes at most 5 GB in one request; the AWS CLI
+/// switches to parts at the same size).
+pub const MULTIPART_THRESHOLD: u64 = 8 << 20;
+
+/// The size of each part of a multipart upload (grown for files of more than 10,000 parts,
+/// S3's limit).
+const PART_BYTES: u64 = 8 << 20;
+
+/// Parts of one file uploaded at once.
+const PARTS_IN_FLIGHT: usize = 4;
+
+/// Uploads the file at `path` to `key`: in one request up to [`MULTIPART_THRESHOLD`], else as
+/// a multipart upload read from the file part by part (aborted if a part fails). Returns its
+/// bytes.
+async fn put_file(
+    s3: &AmazonS3,
+    key: &ObjectPath,
+    path: &Path,
+    failed: &(dyn Fn(object_store::Error) -> LocationError + Sync),
+) -> Result<u64, LocationError> {
+    use tokio::io::AsyncReadExt;
+    let read = |source| LocationError::ReadFile {
+        path: path.to_path_buf(),
+        source,
+    };
+    let len = tokio::fs::metadata(path).await.map_err(read)?.len();
+    if len <= MULTIPART_THRESHOLD {
+        let bytes = tokio::fs::read(path).await.map_err(read)?;
+        s3.put(key, PutPayload::from(bytes)).await.map_err(failed)?;
+        return Ok(len);
+    }
+    let part = PART_BYTES.max(len.div_ceil(10_000)) as usize;
+    let upload = s3.put_multipart(key).await.map_err(failed)?;
+    let mut writer = object_store::WriteMultipart::new_with_chunk_size(upload, part);
+    let mut file = tokio::fs::File::open(path).await.map_err(read)?;
+    let mut buffer = vec![0; part];
+    let sent = async {
+        loop {
+            writer
+                .wait_for_capacity(PARTS_IN_FLIGHT)
+                .await
+                .map_err(failed)?;
+            let mut filled = 0;
+            while filled < part {
+                let n = file.read(&mut buffer[filled..]).await.map_err(read)?;
+                if n == 0 {
+                    break;
+                }
+                filled += n;
+            }
+            if filled == 0 {
+                return Ok(());
+            }
+            writer.write(&buffer[..filled]);
+        }
+    }
+    .await;
+    match sent {
+        Ok(()) => {
+            writer.finish().await.map_err(failed)?;
+            Ok(len)
+        }
+        Err(e) => {
+            let _ = writer.abort().await;
+            Err(e)
+        }
     }
 }
 

@@ -378,3 +378,60 @@ def test_partitions_write_into_the_bucket_the_bytes_of_one_local_convert(s3, tmp
     assert (mixed.returncode, mixed.stderr) == (
         1, f"error: {url}: --overwrite does not combine with partitions in an object store (their "
            "keys would mix with the old store's); delete the old store first\n")
+
+
+def test_files_larger_than_a_part_go_up_in_parts(s3, tmp_path):
+    """A 24 MiB chunk (random bytes: LZ4 cannot shrink them) goes up as a multipart upload of
+    8 MiB parts; the bucket holds the bytes of a local convert, and the object's ETag is the
+    multipart kind (ending in `-N`, N the part count)."""
+    import numpy as np
+    import requests
+    raw = tmp_path / "noise_1024x1024x24_uint8.raw"
+    raw.write_bytes(np.random.default_rng(3).integers(0, 256, 24 << 20, dtype=np.uint8).tobytes())
+    flags = ["--chunk", "24,1024,1024", "--quiet"]
+    url = "s3://bucket/big/noise.ome.zarr"
+    up = run("ingest", "convert", raw, "-o", url, "--s3-endpoint", s3["endpoint"], *flags)
+    assert up.returncode == 0, up.stderr
+    local = tmp_path / "noise.ome.zarr"
+    run_ingest("convert", raw, "-o", local, *flags)
+    remote = s3["root"] / "bucket" / "big" / "noise.ome.zarr"
+    assert files(remote) == files(local)
+    key, size = max(((k, len(v)) for k, v in files(local).items()), key=lambda kv: kv[1])
+    assert size > 16 << 20 and key.startswith("0/c/")
+    proc, base = start_brickserver(url, "--s3-endpoint", s3["endpoint"])
+    try:
+        got = requests.get(f"{base}/noise/{key}")
+        assert got.content == (local / key).read_bytes()
+        parts = -(-size // (8 << 20))  # 24 MiB of samples and Blosc's header: 4 parts
+        assert parts == 4
+        assert got.headers["ETag"].endswith(f'-{parts}"'), got.headers["ETag"]
+    finally:
+        proc.terminate()
+        proc.wait(timeout=10)
+
+
+def test_credentials_region_and_endpoint_from_an_aws_profile(s3, tmp_path):
+    """With no AWS_ACCESS_KEY_ID in the environment, the keys, region and endpoint of the
+    profile AWS_PROFILE names are used; a missing profile is named."""
+    credentials, config = tmp_path / "credentials", tmp_path / "config"
+    credentials.write_text(
+        f"[lab]\naws_access_key_id = {KEY}\naws_secret_access_key = {SECRET}\n\n"
+        f"[wrong]\naws_access_key_id = {KEY}\naws_secret_access_key = not-the-secret-0123456789\n")
+    config.write_text(f"[profile lab]\nregion = eu-west-1\nendpoint_url = {s3['endpoint']}\n\n"
+                      f"[profile wrong]\nendpoint_url = {s3['endpoint']}\n")
+    base = {k: v for k, v in env().items() if k not in ("AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY")}
+    base.update(AWS_SHARED_CREDENTIALS_FILE=str(credentials), AWS_CONFIG_FILE=str(config))
+
+    def inspect(profile):
+        return subprocess.run([str(BIN / "ingest"), "inspect", "s3://bucket/sample.ome.zarr"],
+                              capture_output=True, text=True, env={**base, "AWS_PROFILE": profile},
+                              timeout=120)
+
+    lab = inspect("lab")
+    assert lab.returncode == 0, lab.stderr
+    assert lab.stdout.splitlines()[0] == "s3://bucket/sample.ome.zarr: OME-Zarr 0.5"
+    wrong = inspect("wrong")
+    assert wrong.returncode == 1 and "403 Forbidden" in wrong.stderr, wrong.stderr
+    missing = inspect("nope")
+    assert (missing.returncode, missing.stderr) == (1, (
+        f"error: AWS profile 'nope' (AWS_PROFILE) is in neither {credentials} nor {config}\n"))
