@@ -4,6 +4,12 @@ tests use), on the same input in the same run.
 
     python3 benchmarks/partition_bench.py [--size 256,512,512] [--partitions 1,2,4] [--readme]
 
+With `--large Z,Y,X` it instead converts one sample larger than this machine's memory (written
+by `ingest sample`, deleted afterwards) in one process and in N partitions at once, and reports
+each process's peak RSS against the input's size; the two stores are compared file by file by
+SHA-256, one on disk at a time (the input and a store need about 1.5× the input's size of free
+disk). README markers `partition-large`.
+
 Every run's store is checked byte for byte against the single-process store. Reported (the
 median of `--repeat` runs): wall time of the partitions (all at once on this machine, so they
 share its cores), of finalize, and in all; the peak RSS of the largest process (GNU time). Results go to
@@ -47,13 +53,79 @@ def files(folder: pathlib.Path) -> dict:
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
 
 
+def digests(folder: pathlib.Path) -> dict:
+    """SHA-256 of every file under `folder`, read in blocks (stores larger than memory)."""
+    import hashlib
+
+    out = {}
+    for p in folder.rglob("*"):
+        if p.is_file():
+            h = hashlib.sha256()
+            with p.open("rb") as f:
+                for block in iter(lambda: f.read(1 << 20), b""):
+                    h.update(block)
+            out[str(p.relative_to(folder))] = h.hexdigest()
+    return out
+
+
+def large(a):
+    """One sample larger than memory: one process against N partitions at once."""
+    n = max(int(c) for c in a.partitions.split(","))
+    work = pathlib.Path(tempfile.mkdtemp(prefix="partition-large-", dir=a.work))
+    try:
+        t = time.time()
+        subprocess.run([BIN / "ingest", "sample", "-o", work / "in", "--kind", "sparse", "--size", a.large, "--quiet"], check=True)
+        sample_s = time.time() - t
+        inputs = sorted((work / "in").glob("*.tif"))
+        input_gb = sum(p.stat().st_size for p in inputs) / 1e9
+        t = time.time()
+        one = work / "one" / "x.ome.zarr"
+        one_rss = finish([timed([BIN / "ingest", "convert", *inputs, "-o", one, "--quiet"])])
+        one_s = time.time() - t
+        # One store on disk at a time: the input and two stores may not fit.
+        one_digests = digests(one)
+        shutil.rmtree(one.parent)
+        t = time.time()
+        out = work / "parted" / "x.ome.zarr"
+        part_rss = finish([timed([BIN / "ingest", "convert", *inputs, "-o", out, "--quiet", "--partition", f"{i}/{n}"]) for i in range(n)])
+        parts_s = time.time() - t
+        t = time.time()
+        fin_rss = finish([timed([BIN / "ingest", "finalize", "-o", out, "--quiet"])])
+        fin_s = time.time() - t
+        same = one_digests == digests(out)
+        stored_gb = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) / 1e9
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    mem_gb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    report = (
+        f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) with {mem_gb:.0f} GB of memory, by "
+        f"`benchmarks/partition_bench.py --large {a.large} --partitions {n}`: the sparse sample of {a.large} (z,y,x) uint16 voxels, "
+        f"{input_gb:.1f} GB of TIFF (written by `ingest sample` in {sample_s:.0f} s, deleted after), more than this machine's memory; "
+        f"stored {stored_gb:.2f} GB. One process: {one_s:.0f} s, peak RSS {one_rss:,.0f} MB. {n} partitions at once: "
+        f"{parts_s:.0f} s, peak RSS of the largest {part_rss:,.0f} MB; finalize {fin_s:.1f} s, peak RSS {fin_rss:,.0f} MB. "
+        f"The two stores are {'identical file by file (SHA-256)' if same else 'DIFFERENT'}.\n"
+    )
+    (ROOT / "benchmarks" / "results" / "partitions-large.md").write_text(report)
+    print(report)
+    if a.readme:
+        readme = ROOT / "README.md"
+        text = readme.read_text()
+        readme.write_text(re.sub("<!-- partition-large:start -->.*<!-- partition-large:end -->",
+                                 f"<!-- partition-large:start -->\n{report}<!-- partition-large:end -->", text, flags=re.S))
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", default="256,512,512", help="z,y,x of the sparse sample")
     ap.add_argument("--partitions", default="1,2,4")
     ap.add_argument("--repeat", type=int, default=3, help="runs of each; the median is reported")
+    ap.add_argument("--large", help="Z,Y,X of one sample larger than memory: one process against N partitions")
+    ap.add_argument("--work", default=None, help="folder for the large run's files (default: the system's temp dir)")
     ap.add_argument("--readme", action="store_true")
     a = ap.parse_args()
+    if a.large:
+        large(a)
+        return
     counts = [int(n) for n in a.partitions.split(",")]
     work = pathlib.Path(tempfile.mkdtemp(prefix="partition-bench-"))
     env = {k: v for k, v in os.environ.items() if not k.startswith("AWS_")}

@@ -20,11 +20,13 @@ use zarrs::array::{Array, ArrayError};
 use crate::ome::{image_attributes, multiscale, omero};
 use crate::partition::{
     Cuts, HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, Partition,
-    PartitionPlan, write_handoff,
+    PartitionPlan, claim_plan, write_handoff,
 };
 use crate::pyramid::{LevelPlan, plan_levels};
 use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
-use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
+use crate::regions::{
+    BrickStats, CELL, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch,
+};
 use crate::sample_format::{Sample, SampleType};
 use crate::source::{RawOptions, SourceError, SourceInfo, VolumeSource, open_input};
 use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreError, StoreWriter, directory_bytes};
@@ -1098,6 +1100,11 @@ fn partition_typed<T: Sample>(
     let started = Instant::now();
     let plan = plan_store::<T>(options, &inputs, partition.count)?;
     let writer = StoreWriter::shared(&options.output, options.version, options.overwrite)?;
+    claim_plan(
+        &writer.partial,
+        &options.output.display().to_string(),
+        &plan,
+    )?;
     let planes = plan.cuts.planes(partition.index, plan.shape[0]);
     let written = plan.cuts.handoff_level;
     let mut levels = open_levels::<T>(&writer, &plan, written, planes.start)?;
@@ -1128,12 +1135,22 @@ fn partition_typed<T: Sample>(
         .fold((0, 0), |(w, e), l| (w + l.written, e + l.empty));
     let handoff = Handoff {
         levels: levels
-            .into_iter()
-            .map(|l| LevelPart {
-                written: l.written,
-                empty: l.empty,
-                histograms: l.histograms.fine.into_inner().expect("histograms"),
-                cells: l.cells,
+            .iter()
+            .map(|l| {
+                // This level's planes, and the cell and brick rows they reach (a voxel's
+                // halo reaches one cell row up and down).
+                let f = l.plan.factor[0];
+                let (z0, z1) = (planes.start / f, planes.end.div_ceil(f));
+                let cells_z0 = (z0 / CELL).saturating_sub(1);
+                let bz = l.brick[0];
+                LevelPart {
+                    written: l.written,
+                    empty: l.empty,
+                    cells_z0,
+                    cells: l.cells.rows(cells_z0, z1.div_ceil(CELL) + 1),
+                    histograms_z0: z0 / bz,
+                    histograms: l.histograms.rows(z0 / bz, z1.div_ceil(bz)),
+                }
             })
             .collect(),
         stats: into_stats(stats),
@@ -1202,8 +1219,10 @@ fn finalize_typed<T: Sample>(
         for (level, from) in levels.iter_mut().zip(part.levels) {
             level.written += from.written;
             level.empty += from.empty;
-            level.cells.merge(&from.cells);
-            level.histograms.merge(from.histograms);
+            level.cells.merge_rows(from.cells_z0, &from.cells);
+            level
+                .histograms
+                .merge_rows(from.histograms_z0, from.histograms);
         }
         for (all, from) in stats.iter_mut().zip(&part.stats) {
             all.merge(from);

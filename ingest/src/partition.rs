@@ -9,7 +9,8 @@
 //! with fewer units than partitions leaves some partitions with nothing to do.
 //!
 //! **What a partition hands over** ([`Handoff`]): for each level below H, its bricks' written
-//! and empty counts, its min/max cells and its brick histograms; the whole-channel statistics;
+//! and empty counts, and the min/max cells and brick histograms of the rows its planes reach
+//! (so the file grows with the partition, not the volume); the whole-channel statistics;
 //! and, for level H, the exact sums and counts of level-0 voxels of its planes (level H's
 //! accumulator, before any rounding). `finalize` merges the cells (min and max), histograms
 //! (each brick comes from one partition) and statistics (sums of integers and counts), feeds
@@ -18,8 +19,9 @@
 //! a single process writes.
 //!
 //! Hand-over files lie in the store's folder under `.partitions/` while the partitions run
-//! (`I-of-N`, postcard-encoded: transient files between processes of the same build), and
-//! are removed by `finalize` before the root metadata is written.
+//! (`I-of-N`, postcard-encoded: transient files between processes of the same build), beside
+//! the plan the first partition recorded (`plan`, which later partitions must match), and are
+//! removed by `finalize` before the root metadata is written.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -37,6 +39,9 @@ pub const HANDOFF_FOLDER: &str = ".partitions";
 
 /// Bumped whenever [`Handoff`] changes: `finalize` refuses files of another version.
 const HANDOFF_VERSION: u32 = 1;
+
+/// The file under [`HANDOFF_FOLDER`] holding the plan the first partition to start followed.
+const PLAN_FILE: &str = "plan";
 
 /// One partition of a conversion: `index` counts from 0 and is below `count`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -169,7 +174,8 @@ pub struct PartitionPlan {
     pub cuts: Cuts,
 }
 
-/// What one level below the hand-over level holds after a partition.
+/// What one level below the hand-over level holds after a partition: only the rows of cells
+/// and bricks its planes reach, so hand-over files grow with the partition, not the volume.
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(bound = "")]
 pub struct LevelPart<T: Sample> {
@@ -177,9 +183,14 @@ pub struct LevelPart<T: Sample> {
     pub written: u64,
     /// Bricks found empty.
     pub empty: u64,
-    /// Min/max cells of the whole level (identities where this partition saw nothing).
+    /// First cell row of `cells`.
+    pub cells_z0: u64,
+    /// Min/max cells of the rows its planes reach, halos included (identities where it saw
+    /// nothing).
     pub cells: CellGrid<T>,
-    /// Brick histograms of the whole level (empty for bricks of other partitions).
+    /// First brick row of `histograms`.
+    pub histograms_z0: u64,
+    /// Brick histograms of its brick rows, `[c][z][y][x]`.
     pub histograms: Vec<FineHistogram>,
 }
 
@@ -263,6 +274,14 @@ pub enum HandoffError {
         /// Partitions.
         count: usize,
     },
+    /// A partition started in a temporary folder that holds another conversion's partitions.
+    #[error("{store}: its temporary folder {} holds partitions of a conversion with other inputs, options or partition count; rerun with the same command line, or remove that folder to start over", partial.display())]
+    OtherConversion {
+        /// The store, as the command line names it.
+        store: String,
+        /// The temporary folder.
+        partial: PathBuf,
+    },
     /// Partitions that followed different plans (other inputs, options or counts).
     #[error("{}: partition {} was converted with other inputs or options than partition {} (rerun it with the same command line)", path.display(), partition, first)]
     Disagree {
@@ -273,6 +292,48 @@ pub enum HandoffError {
         /// The first partition's.
         first: Partition,
     },
+}
+
+/// Records `plan` as the plan of the partitions writing into `partial` (the temporary folder of
+/// the store `shown`), or checks it against the one recorded by the first partition to start,
+/// before anything is written: a partition never mixes its bricks with those of a conversion
+/// with other inputs or options left there.
+///
+/// # Errors
+/// [`HandoffError::OtherConversion`] when the recorded plan differs, [`HandoffError::Io`] or
+/// [`HandoffError::Unreadable`] when it cannot be written or read.
+pub fn claim_plan(partial: &Path, shown: &str, plan: &PartitionPlan) -> Result<(), HandoffError> {
+    let folder = partial.join(HANDOFF_FOLDER);
+    let path = folder.join(PLAN_FILE);
+    let unreadable = |e: postcard::Error| HandoffError::Unreadable {
+        path: path.clone(),
+        reason: e.to_string(),
+    };
+    let encoded = postcard::to_stdvec(&(HANDOFF_VERSION, plan)).map_err(unreadable)?;
+    match std::fs::read(&path) {
+        Ok(recorded) if recorded == encoded => Ok(()),
+        Ok(_) => Err(HandoffError::OtherConversion {
+            store: shown.to_string(),
+            partial: partial.to_path_buf(),
+        }),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let io = |what| {
+                let path = path.clone();
+                move |source| HandoffError::Io { path, what, source }
+            };
+            std::fs::create_dir_all(&folder).map_err(io("cannot create the folder"))?;
+            // Partitions starting together write the same bytes: whichever rename lands last
+            // leaves the same plan.
+            let tmp = folder.join(format!(".{PLAN_FILE}.{}.partial", std::process::id()));
+            std::fs::write(&tmp, &encoded).map_err(io("cannot write"))?;
+            std::fs::rename(&tmp, &path).map_err(io("cannot rename into place"))
+        }
+        Err(source) => Err(HandoffError::Io {
+            path,
+            what: "cannot read",
+            source,
+        }),
+    }
 }
 
 /// Writes a partition's hand-over file into `store`'s [`HANDOFF_FOLDER`], under a temporary
@@ -366,7 +427,7 @@ impl Handoffs {
         let mut names: Vec<String> = entries
             .filter_map(Result::ok)
             .map(|e| e.file_name().to_string_lossy().into_owned())
-            .filter(|n| !n.starts_with('.'))
+            .filter(|n| !n.starts_with('.') && n != PLAN_FILE)
             .collect();
         names.sort();
         let first_name = names.first().ok_or_else(none)?;

@@ -62,10 +62,11 @@ impl<T: Sample> Ranges<T> {
         }
     }
 
-    /// Folds another grid's ranges in, cell by cell (the same cells).
-    fn merge(&mut self, other: &Self) {
+    /// Folds another grid's ranges in, cell by cell, its cell `i` onto this grid's cell
+    /// `offset + i`.
+    fn merge_at(&mut self, other: &Self, offset: usize) {
         for (i, (&mn, &mx)) in other.min.iter().zip(&other.max).enumerate() {
-            self.fold(i, mn, mx);
+            self.fold(offset + i, mn, mx);
         }
     }
 }
@@ -86,15 +87,52 @@ pub struct CellGrid<T: Sample> {
 }
 
 impl<T: Sample> CellGrid<T> {
+    /// The cell rows `z0..z1` (clamped to the grid) of every channel, as a grid of their own.
+    pub fn rows(&self, z0: u64, z1: u64) -> Self {
+        let z1 = z1.min(self.grid[0]);
+        let z0 = z0.min(z1);
+        let [gz, gy, gx] = self.grid;
+        let plane = (gy * gx) as usize;
+        let mut out = Self::new(self.channels, [z1 - z0, gy, gx]);
+        for c in 0..self.channels {
+            let from = (c as u64 * gz + z0) as usize * plane;
+            let to = c * (z1 - z0) as usize * plane;
+            let n = (z1 - z0) as usize * plane;
+            for (mine, theirs) in [
+                (&mut out.haloed, &self.haloed),
+                (&mut out.exact, &self.exact),
+            ] {
+                mine.min[to..to + n].copy_from_slice(&theirs.min[from..from + n]);
+                mine.max[to..to + n].copy_from_slice(&theirs.max[from..from + n]);
+            }
+        }
+        out
+    }
+
     /// Folds in the ranges another pass over other voxels of the same level found (a
-    /// partition's), so the grid is what one pass over both would have found.
+    /// partition's rows from `z0`, see [`CellGrid::rows`]), so the grid is what one pass over
+    /// both would have found.
     ///
     /// # Panics
-    /// When the grids differ in cells or channels.
-    pub fn merge(&mut self, other: &Self) {
-        assert_eq!((self.grid, self.channels), (other.grid, other.channels));
-        self.haloed.merge(&other.haloed);
-        self.exact.merge(&other.exact);
+    /// When the rows do not fit the grid.
+    pub fn merge_rows(&mut self, z0: u64, rows: &Self) {
+        let [gz, gy, gx] = self.grid;
+        assert!(
+            rows.channels == self.channels
+                && rows.grid[1..] == self.grid[1..]
+                && z0 + rows.grid[0] <= gz
+        );
+        let plane = (gy * gx) as usize;
+        let n = rows.grid[0] as usize * plane;
+        for c in 0..self.channels {
+            let at = (c as u64 * gz + z0) as usize * plane;
+            let part = |r: &Ranges<T>| Ranges {
+                min: r.min[c * n..(c + 1) * n].to_vec(),
+                max: r.max[c * n..(c + 1) * n].to_vec(),
+            };
+            self.haloed.merge_at(&part(&rows.haloed), at);
+            self.exact.merge_at(&part(&rows.exact), at);
+        }
     }
 
     /// An empty grid of `grid` cells per channel.
@@ -599,17 +637,38 @@ impl LevelHistograms {
         }
     }
 
-    /// Takes the histograms of the bricks another pass wrote (a partition's: every brick
-    /// whose histogram it holds is one this pass did not see).
+    /// The histograms of brick rows `z0..z1` (clamped) of every channel, `[c][z][y][x]`.
+    pub fn rows(&self, z0: u64, z1: u64) -> Vec<FineHistogram> {
+        let [bz, by, bx] = self.bricks;
+        let (z1, plane) = (z1.min(bz), (by * bx) as usize);
+        let z0 = z0.min(z1);
+        let fine = self.fine.lock().expect("histograms");
+        (0..fine.len() / (bz as usize * plane).max(1))
+            .flat_map(|c| {
+                let from = (c as u64 * bz + z0) as usize * plane;
+                fine[from..from + (z1 - z0) as usize * plane].to_vec()
+            })
+            .collect()
+    }
+
+    /// Takes the histograms of the bricks another pass wrote (a partition's rows from `z0`,
+    /// see [`LevelHistograms::rows`]: every brick whose histogram it holds is one this pass
+    /// did not see).
     ///
     /// # Panics
-    /// When the other pass's list is of another length.
-    pub fn merge(&self, other: Vec<FineHistogram>) {
+    /// When the rows do not fit the level.
+    pub fn merge_rows(&self, z0: u64, rows: Vec<FineHistogram>) {
+        let [bz, by, bx] = self.bricks;
+        let plane = (by * bx) as usize;
         let mut fine = self.fine.lock().expect("histograms");
-        assert_eq!(fine.len(), other.len());
-        for (mine, theirs) in fine.iter_mut().zip(other) {
+        let channels = fine.len() / (bz as usize * plane).max(1);
+        let depth = rows.len() / (channels * plane).max(1);
+        assert!(rows.len() == channels * depth * plane && z0 as usize + depth <= bz as usize);
+        for (i, theirs) in rows.into_iter().enumerate() {
+            let (c, rest) = (i / (depth * plane), i % (depth * plane));
+            let at = (c * bz as usize + z0 as usize) * plane + rest;
             if !theirs.counts.is_empty() {
-                *mine = theirs;
+                fine[at] = theirs;
             }
         }
     }

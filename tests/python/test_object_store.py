@@ -352,7 +352,8 @@ def test_partitions_write_into_the_bucket_the_bytes_of_one_local_convert(s3, tmp
     remote = s3["root"] / "bucket" / "parted" / "sample.ome.zarr"
     # In the bucket: the partitions' bricks and hand-over files, and no root metadata.
     assert not (remote / "zarr.json").exists()
-    assert sorted(p.name for p in (remote / ".partitions").iterdir()) == ["0-of-3", "1-of-3", "2-of-3"]
+    assert sorted(p.name for p in (remote / ".partitions").iterdir()) == [
+        "0-of-3", "1-of-3", "2-of-3", "plan"]
     done = run("ingest", "finalize", "-o", url, "--s3-endpoint", s3["endpoint"], "--quiet")
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith(f"wrote {url} (uint16)\n")

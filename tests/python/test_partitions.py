@@ -119,6 +119,16 @@ def test_finalize_says_what_is_wrong(samples, tmp_path):
         f"`ingest convert --partition I/N -o {out}` first)\n")
     run_ingest("convert", *samples["sparse"], "-o", out, "--chunk", "4", "--quiet",
                "--partition", "0/2")
+    # A partition of another conversion is refused before it writes anything.
+    refusal = (f"error: {out}: its temporary folder {tmp_path}/.x.ome.zarr.partial holds "
+               "partitions of a conversion with other inputs, options or partition count; rerun "
+               "with the same command line, or remove that folder to start over\n")
+    for chunk, partition in [("8", "1/2"), ("4", "0/3")]:
+        other = run_ingest("convert", *samples["sparse"], "-o", out, "--chunk", chunk, "--quiet",
+                           "--partition", partition, check=False)
+        assert (other.returncode, other.stderr) == (1, refusal)
+    # Should the record be lost, finalize still refuses partitions that disagree.
+    (tmp_path / ".x.ome.zarr.partial" / ".partitions" / "plan").unlink()
     run_ingest("convert", *samples["sparse"], "-o", out, "--chunk", "8", "--quiet",
                "--partition", "1/2")
     mixed = run_ingest("finalize", "-o", out, check=False)
