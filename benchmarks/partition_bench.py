@@ -53,6 +53,18 @@ def files(folder: pathlib.Path) -> dict:
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
 
 
+def publish(report: str, name: str, marker: str, readme: bool):
+    """Writes `report` to benchmarks/results/NAME.md, prints it, and with `readme` puts it in
+    the README between the `marker` comments."""
+    (ROOT / "benchmarks" / "results" / f"{name}.md").write_text(report)
+    print(report)
+    if readme:
+        path = ROOT / "README.md"
+        path.write_text(re.sub(f"<!-- {marker}:start -->.*<!-- {marker}:end -->",
+                               f"<!-- {marker}:start -->\n{report}<!-- {marker}:end -->",
+                               path.read_text(), flags=re.S))
+
+
 def digests(folder: pathlib.Path) -> dict:
     """SHA-256 of every file under `folder`, read in blocks (stores larger than memory)."""
     import hashlib
@@ -105,13 +117,7 @@ def large(a):
         f"{parts_s:.0f} s, peak RSS of the largest {part_rss:,.0f} MB; finalize {fin_s:.1f} s, peak RSS {fin_rss:,.0f} MB. "
         f"The two stores are {'identical file by file (SHA-256)' if same else 'DIFFERENT'}.\n"
     )
-    (ROOT / "benchmarks" / "results" / "partitions-large.md").write_text(report)
-    print(report)
-    if a.readme:
-        readme = ROOT / "README.md"
-        text = readme.read_text()
-        readme.write_text(re.sub("<!-- partition-large:start -->.*<!-- partition-large:end -->",
-                                 f"<!-- partition-large:start -->\n{report}<!-- partition-large:end -->", text, flags=re.S))
+    publish(report, "partitions-large", "partition-large", a.readme)
 
 
 def main():
@@ -193,14 +199,7 @@ def main():
         total = tp + (tf or 0)
         lines.append(f"| {target} | {run} | {tp:.2f} | {'' if tf is None else f'{tf:.2f}'} | {total:.2f} | "
                      f"{input_mb / total:.0f} | {rss:.0f} |")
-    report = "\n".join(lines) + "\n"
-    (ROOT / "benchmarks" / "results" / "partitions.md").write_text(report)
-    print(report)
-    if a.readme:
-        readme = ROOT / "README.md"
-        text = readme.read_text()
-        readme.write_text(re.sub("<!-- partition-bench:start -->.*<!-- partition-bench:end -->",
-                                 f"<!-- partition-bench:start -->\n{report}<!-- partition-bench:end -->", text, flags=re.S))
+    publish("\n".join(lines) + "\n", "partitions", "partition-bench", a.readme)
 
 
 if __name__ == "__main__":

@@ -472,6 +472,16 @@ pub fn partial_path(output: &Path) -> PathBuf {
     output.with_file_name(format!(".{name}.partial"))
 }
 
+/// Refuses an existing `output` unless `overwrite`.
+fn refuse_existing(output: &Path, overwrite: bool) -> Result<(), StoreError> {
+    if output.exists() && !overwrite {
+        return Err(StoreError::OutputExists {
+            path: output.to_path_buf(),
+        });
+    }
+    Ok(())
+}
+
 impl StoreWriter {
     /// Starts writing `output`: refuses an existing output without `overwrite`, and clears
     /// what an interrupted earlier run left behind.
@@ -484,11 +494,7 @@ impl StoreWriter {
         version: OmeZarrVersion,
         overwrite: bool,
     ) -> Result<Self, StoreError> {
-        if output.exists() && !overwrite {
-            return Err(StoreError::OutputExists {
-                path: output.to_path_buf(),
-            });
-        }
+        refuse_existing(output, overwrite)?;
         let partial = partial_path(output);
         if partial.exists() {
             std::fs::remove_dir_all(&partial).map_err(|source| StoreError::RemoveLeftovers {
@@ -496,7 +502,7 @@ impl StoreWriter {
                 source,
             })?;
         }
-        Self::shared(output, version, overwrite)
+        Self::open_partial(output, version)
     }
 
     /// Opens the temporary folder of `output` that the partitions of one conversion write into
@@ -512,11 +518,12 @@ impl StoreWriter {
         version: OmeZarrVersion,
         overwrite: bool,
     ) -> Result<Self, StoreError> {
-        if output.exists() && !overwrite {
-            return Err(StoreError::OutputExists {
-                path: output.to_path_buf(),
-            });
-        }
+        refuse_existing(output, overwrite)?;
+        Self::open_partial(output, version)
+    }
+
+    /// The temporary folder of `output`, created when missing.
+    fn open_partial(output: &Path, version: OmeZarrVersion) -> Result<Self, StoreError> {
         let partial = partial_path(output);
         std::fs::create_dir_all(&partial).map_err(|source| StoreError::CreateOutput {
             path: output.to_path_buf(),
