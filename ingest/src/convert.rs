@@ -24,9 +24,7 @@ use crate::partition::{
 };
 use crate::pyramid::{LevelPlan, plan_levels};
 use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
-use crate::regions::{
-    BrickStats, CELL, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch,
-};
+use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
 use crate::sample_format::{Sample, SampleType};
 use crate::source::{RawOptions, SourceError, SourceInfo, VolumeSource, open_input};
 use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreError, StoreWriter, directory_bytes};
@@ -797,12 +795,13 @@ fn plan_store<T: Sample>(
 }
 
 /// Creates the arrays of levels `0..written` and their state for a pass over level-0 planes
-/// from `z0`: each level's accumulator starts at the first of its planes that the pass makes.
+/// `planes`: each level's accumulator starts at the first of its planes that the pass makes,
+/// and its region grids hold the rows those planes reach (every row for a whole volume).
 fn open_levels<T: Sample>(
     writer: &StoreWriter,
     plan: &PartitionPlan,
     written: usize,
-    z0: u64,
+    planes: std::ops::Range<u64>,
 ) -> Result<Vec<Level<T>>, ConvertError> {
     let channels = plan.labels.len();
     let (brick, outer) = (plan.brick, plan.outer);
@@ -817,12 +816,16 @@ fn open_levels<T: Sample>(
             dimension_names: Some(vec!["c", "z", "y", "x"]),
         };
         let array = writer.create_array(&format!("/{i}"), &layout)?;
+        // This level's planes.
+        let f = level.factor[0];
+        let (z0, z1) = (planes.start / f, planes.end.div_ceil(f));
         // One slab of the level: a chunk deep, or the whole level when that is shallower.
         let acc = if i == 0 {
             Accumulator::new(0, 0, 0, 0)
         } else {
-            Accumulator::new(channels, z0 / level.factor[0], outer[0].min(z), y * x)
+            Accumulator::new(channels, z0, outer[0].min(z), y * x)
         };
+        let bricks = std::array::from_fn(|a| level.shape[a].div_ceil(brick[a]));
         levels.push(Level {
             plan: level.clone(),
             array,
@@ -830,10 +833,11 @@ fn open_levels<T: Sample>(
             acc,
             brick,
             values: Vec::new(),
-            cells: CellGrid::for_shape(channels, level.shape),
-            histograms: LevelHistograms::new(
+            cells: CellGrid::for_rows(channels, level.shape, z0..z1),
+            histograms: LevelHistograms::for_rows(
                 channels,
-                std::array::from_fn(|a| level.shape[a].div_ceil(brick[a])),
+                bricks,
+                z0 / brick[0]..z1.div_ceil(brick[0]),
             ),
             written: 0,
             empty: 0,
@@ -955,10 +959,10 @@ fn convert_typed<T: Sample>(
     let started = Instant::now();
     let plan = plan_store::<T>(options, &inputs, 1)?;
     let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
-    let mut levels = open_levels::<T>(&writer, &plan, plan.levels.len(), 0)?;
+    let depth = plan.shape[0];
+    let mut levels = open_levels::<T>(&writer, &plan, plan.levels.len(), 0..depth)?;
     let stats = new_stats(plan.labels.len());
     let sources = std::mem::take(&mut inputs.sources);
-    let depth = plan.shape[0];
     read_level0(
         options,
         sources,
@@ -1107,7 +1111,7 @@ fn partition_typed<T: Sample>(
     )?;
     let planes = plan.cuts.planes(partition.index, plan.shape[0]);
     let written = plan.cuts.handoff_level;
-    let mut levels = open_levels::<T>(&writer, &plan, written, planes.start)?;
+    let mut levels = open_levels::<T>(&writer, &plan, written, planes.clone())?;
     let channels = plan.labels.len();
     let mut handed_over: HandedOver<T> = plan.levels.get(written).map(|level| {
         let f = level.factor[0];
@@ -1135,22 +1139,13 @@ fn partition_typed<T: Sample>(
         .fold((0, 0), |(w, e), l| (w + l.written, e + l.empty));
     let handoff = Handoff {
         levels: levels
-            .iter()
-            .map(|l| {
-                // This level's planes, and the cell and brick rows they reach (a voxel's
-                // halo reaches one cell row up and down).
-                let f = l.plan.factor[0];
-                let (z0, z1) = (planes.start / f, planes.end.div_ceil(f));
-                let cells_z0 = (z0 / CELL).saturating_sub(1);
-                let bz = l.brick[0];
-                LevelPart {
-                    written: l.written,
-                    empty: l.empty,
-                    cells_z0,
-                    cells: l.cells.rows(cells_z0, z1.div_ceil(CELL) + 1),
-                    histograms_z0: z0 / bz,
-                    histograms: l.histograms.rows(z0 / bz, z1.div_ceil(bz)),
-                }
+            .into_iter()
+            .map(|l| LevelPart {
+                written: l.written,
+                empty: l.empty,
+                cells: l.cells,
+                histograms_z0: l.histograms.z0,
+                histograms: l.histograms.fine.into_inner().expect("histograms"),
             })
             .collect(),
         stats: into_stats(stats),
@@ -1209,7 +1204,7 @@ fn finalize_typed<T: Sample>(
     let started = Instant::now();
     let plan = &handoffs.plan;
     let writer = StoreWriter::shared(output, plan.version, overwrite)?;
-    let mut levels = open_levels::<T>(&writer, plan, plan.levels.len(), 0)?;
+    let mut levels = open_levels::<T>(&writer, plan, plan.levels.len(), 0..plan.shape[0])?;
     let channels = plan.labels.len();
     let h = plan.cuts.handoff_level;
     let mut stats = vec![ChannelAccumulator::default(); channels];
@@ -1219,7 +1214,7 @@ fn finalize_typed<T: Sample>(
         for (level, from) in levels.iter_mut().zip(part.levels) {
             level.written += from.written;
             level.empty += from.empty;
-            level.cells.merge_rows(from.cells_z0, &from.cells);
+            level.cells.merge_rows(&from.cells);
             level
                 .histograms
                 .merge_rows(from.histograms_z0, from.histograms);

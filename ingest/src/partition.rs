@@ -175,7 +175,8 @@ pub struct PartitionPlan {
 }
 
 /// What one level below the hand-over level holds after a partition: only the rows of cells
-/// and bricks its planes reach, so hand-over files grow with the partition, not the volume.
+/// and bricks its planes reach (all a partition allocates), so a partition's memory and its
+/// hand-over file grow with the partition, not the volume.
 #[derive(Debug, Serialize, Deserialize)]
 #[serde(bound = "")]
 pub struct LevelPart<T: Sample> {
@@ -183,10 +184,8 @@ pub struct LevelPart<T: Sample> {
     pub written: u64,
     /// Bricks found empty.
     pub empty: u64,
-    /// First cell row of `cells`.
-    pub cells_z0: u64,
     /// Min/max cells of the rows its planes reach, halos included (identities where it saw
-    /// nothing).
+    /// nothing); the grid says which rows.
     pub cells: CellGrid<T>,
     /// First brick row of `histograms`.
     pub histograms_z0: u64,

@@ -76,8 +76,13 @@ impl<T: Sample> Ranges<T> {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(bound = "")]
 pub struct CellGrid<T: Sample> {
-    /// Number of cells `z, y, x`.
+    /// Number of cells held `z, y, x`: every cell of the level, or the rows a partition
+    /// reaches.
     pub grid: [u64; 3],
+    /// The level's cell row held first (0 for a whole level).
+    pub z0: u64,
+    /// Cell rows of the whole level.
+    pub depth: u64,
     /// Channels.
     pub channels: usize,
     /// Ranges over each cell plus its halo.
@@ -87,38 +92,18 @@ pub struct CellGrid<T: Sample> {
 }
 
 impl<T: Sample> CellGrid<T> {
-    /// The cell rows `z0..z1` (clamped to the grid) of every channel, as a grid of their own.
-    pub fn rows(&self, z0: u64, z1: u64) -> Self {
-        let z1 = z1.min(self.grid[0]);
-        let z0 = z0.min(z1);
-        let [gz, gy, gx] = self.grid;
-        let plane = (gy * gx) as usize;
-        let mut out = Self::new(self.channels, [z1 - z0, gy, gx]);
-        for c in 0..self.channels {
-            let from = (c as u64 * gz + z0) as usize * plane;
-            let to = c * (z1 - z0) as usize * plane;
-            let n = (z1 - z0) as usize * plane;
-            for (mine, theirs) in [
-                (&mut out.haloed, &self.haloed),
-                (&mut out.exact, &self.exact),
-            ] {
-                mine.min[to..to + n].copy_from_slice(&theirs.min[from..from + n]);
-                mine.max[to..to + n].copy_from_slice(&theirs.max[from..from + n]);
-            }
-        }
-        out
-    }
-
     /// Folds in the ranges another pass over other voxels of the same level found (a
-    /// partition's rows from `z0`, see [`CellGrid::rows`]), so the grid is what one pass over
-    /// both would have found.
+    /// partition's rows, see [`CellGrid::for_rows`]), so this whole-level grid is what one
+    /// pass over both would have found.
     ///
     /// # Panics
-    /// When the rows do not fit the grid.
-    pub fn merge_rows(&mut self, z0: u64, rows: &Self) {
+    /// When this grid is not a whole level, or the rows do not fit it.
+    pub fn merge_rows(&mut self, rows: &Self) {
         let [gz, gy, gx] = self.grid;
+        let z0 = rows.z0;
         assert!(
-            rows.channels == self.channels
+            self.z0 == 0
+                && rows.channels == self.channels
                 && rows.grid[1..] == self.grid[1..]
                 && z0 + rows.grid[0] <= gz
         );
@@ -140,10 +125,24 @@ impl<T: Sample> CellGrid<T> {
         let n = channels * (grid[0] * grid[1] * grid[2]) as usize;
         Self {
             grid,
+            z0: 0,
+            depth: grid[0],
             channels,
             haloed: Ranges::new(n),
             exact: Ranges::new(n),
         }
+    }
+
+    /// The cell rows covering voxel planes `planes` of a level of `shape`, with the rows their
+    /// halos reach (one up, one down): what a partition's planes can touch.
+    pub fn for_rows(channels: usize, shape: [u64; 3], planes: std::ops::Range<u64>) -> Self {
+        let full = shape.map(|s| s.div_ceil(CELL));
+        let z1 = (planes.end.div_ceil(CELL) + 1).min(full[0]);
+        let z0 = (planes.start / CELL).saturating_sub(1).min(z1);
+        let mut grid = Self::new(channels, [z1 - z0, full[1], full[2]]);
+        grid.z0 = z0;
+        grid.depth = full[0];
+        grid
     }
 
     /// The grid of cells covering a level of `shape`.
@@ -174,14 +173,15 @@ impl<T: Sample> CellGrid<T> {
             })
             .collect();
         for (c, z, cells) in slices {
-            for cz in cells_of(z, self.grid[0]) {
-                let base = self.index(c, cz, 0, 0);
+            let held = self.z0..self.z0 + self.grid[0];
+            for cz in cells_of(z, self.depth).filter(|cz| held.contains(cz)) {
+                let base = self.index(c, cz - self.z0, 0, 0);
                 for i in 0..cells.haloed.min.len() {
                     self.haloed
                         .fold(base + i, cells.haloed.min[i], cells.haloed.max[i]);
                 }
             }
-            let base = self.index(c, z / CELL, 0, 0);
+            let base = self.index(c, z / CELL - self.z0, 0, 0);
             for i in 0..cells.exact.min.len() {
                 self.exact
                     .fold(base + i, cells.exact.min[i], cells.exact.max[i]);
@@ -621,8 +621,11 @@ impl ChannelAccumulator {
 /// Fine histograms of every brick of one level, filled concurrently.
 #[derive(Debug)]
 pub struct LevelHistograms {
-    /// Bricks per channel `z, y, x`.
+    /// Bricks held per channel `z, y, x`: every brick of the level, or the brick rows a
+    /// partition writes.
     pub bricks: [u64; 3],
+    /// The level's brick row held first (0 for a whole level).
+    pub z0: u64,
     /// `[c][bz][by][bx]` fine histograms.
     pub fine: Mutex<Vec<FineHistogram>>,
 }
@@ -633,31 +636,27 @@ impl LevelHistograms {
         let n = channels * (bricks[0] * bricks[1] * bricks[2]) as usize;
         Self {
             bricks,
+            z0: 0,
             fine: Mutex::new(vec![FineHistogram::default(); n]),
         }
     }
 
-    /// The histograms of brick rows `z0..z1` (clamped) of every channel, `[c][z][y][x]`.
-    pub fn rows(&self, z0: u64, z1: u64) -> Vec<FineHistogram> {
-        let [bz, by, bx] = self.bricks;
-        let (z1, plane) = (z1.min(bz), (by * bx) as usize);
-        let z0 = z0.min(z1);
-        let fine = self.fine.lock().expect("histograms");
-        (0..fine.len() / (bz as usize * plane).max(1))
-            .flat_map(|c| {
-                let from = (c as u64 * bz + z0) as usize * plane;
-                fine[from..from + (z1 - z0) as usize * plane].to_vec()
-            })
-            .collect()
+    /// Room for brick rows `rows` of `channels` channels of a level of `bricks` bricks.
+    pub fn for_rows(channels: usize, bricks: [u64; 3], rows: std::ops::Range<u64>) -> Self {
+        let (z0, z1) = (rows.start.min(bricks[0]), rows.end.min(bricks[0]));
+        let mut held = Self::new(channels, [z1 - z0.min(z1), bricks[1], bricks[2]]);
+        held.z0 = z0.min(z1);
+        held
     }
 
     /// Takes the histograms of the bricks another pass wrote (a partition's rows from `z0`,
-    /// see [`LevelHistograms::rows`]: every brick whose histogram it holds is one this pass
-    /// did not see).
+    /// `[c][z][y][x]`, see [`LevelHistograms::for_rows`]: every brick whose histogram it holds
+    /// is one this pass did not see) into this whole level.
     ///
     /// # Panics
-    /// When the rows do not fit the level.
+    /// When this is not a whole level, or the rows do not fit it.
     pub fn merge_rows(&self, z0: u64, rows: Vec<FineHistogram>) {
+        assert_eq!(self.z0, 0);
         let [bz, by, bx] = self.bricks;
         let plane = (by * bx) as usize;
         let mut fine = self.fine.lock().expect("histograms");
@@ -673,10 +672,10 @@ impl LevelHistograms {
         }
     }
 
-    /// Linear index of a brick.
+    /// Linear index of a brick (level coordinates; its row must be held).
     pub fn index(&self, c: usize, b: [u64; 3]) -> usize {
         let [bz, by, bx] = self.bricks;
-        ((c as u64 * bz + b[0]) * by * bx + b[1] * bx + b[2]) as usize
+        ((c as u64 * bz + b[0] - self.z0) * by * bx + b[1] * bx + b[2]) as usize
     }
 
     /// The binned histograms `[c][bz][by][bx][HISTOGRAM_BINS]`.
@@ -695,6 +694,29 @@ impl LevelHistograms {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A partition's rows of cells see what the whole grid sees there, and merge back into it.
+    #[test]
+    fn row_windows_see_and_merge_what_the_whole_grid_sees() {
+        let shape = [40, 8, 8];
+        let values: Vec<u16> = (0..40 * 64).map(|i| (i * 7 % 1000) as u16).collect();
+        let mut whole = CellGrid::<u16>::for_shape(1, shape);
+        whole.add_slab(&values, 0, 40, shape);
+        let mut merged = CellGrid::<u16>::for_shape(1, shape);
+        for planes in [0..16, 16..24, 24..40] {
+            let mut part = CellGrid::<u16>::for_rows(1, shape, planes.clone());
+            let slab = &values[(planes.start * 64) as usize..(planes.end * 64) as usize];
+            part.add_slab(slab, planes.start, planes.end - planes.start, shape);
+            merged.merge_rows(&part);
+        }
+        let rows = CellGrid::<u16>::for_rows(1, shape, 16..24);
+        assert_eq!((rows.z0, rows.grid, rows.depth), (1, [3, 1, 1], 5));
+        assert_eq!(merged.haloed, whole.haloed);
+        assert_eq!(merged.exact, whole.exact);
+        let histograms = LevelHistograms::for_rows(2, [5, 2, 2], 3..9);
+        assert_eq!((histograms.z0, histograms.bricks), (3, [2, 2, 2]));
+        assert_eq!(histograms.index(1, [4, 1, 0]), 14);
+    }
 
     #[test]
     fn haloed_cells_include_neighbours() {
