@@ -12,7 +12,6 @@ use residency_schemas::location::object_store::{
     self, GetOptions, GetRange, ObjectStore, ObjectStoreExt,
 };
 use residency_schemas::location::{LocationError, ObjectStoreOptions, StoreLocation};
-use zarrs::filesystem::FilesystemStore;
 use zarrs::storage::{ReadableListableStorageTraits, StoreKey};
 
 use crate::store_keys::{KeyError, RootDir, checked_key, resolve};
@@ -77,23 +76,19 @@ impl DatasetStore {
     /// configured.
     pub fn open(location: &StoreLocation, options: &ObjectStoreOptions) -> Result<Self, OpenError> {
         let shown = location.to_string();
-        let keys = match (location.folder(), location.object_store(options)?) {
-            (Some(path), _) => {
+        let keys = match location.object_store(options)? {
+            Some((store, prefix)) => Keys::Object(ObjectKeys { store, prefix }),
+            None => {
+                let path = location
+                    .folder()
+                    .expect("a location is a folder or an object store");
                 Keys::Folder(RootDir::open(path).map_err(|e| OpenError::Folder {
                     location: shown.clone(),
                     reason: e.to_string(),
                 })?)
             }
-            (None, Some((store, prefix))) => Keys::Object(ObjectKeys { store, prefix }),
-            (None, None) => unreachable!("a location is a folder or an object store"),
         };
-        let zarr = match location.folder() {
-            Some(path) => Arc::new(FilesystemStore::new(path).map_err(|e| OpenError::Folder {
-                location: shown.clone(),
-                reason: e.to_string(),
-            })?) as Arc<dyn ReadableListableStorageTraits>,
-            None => location.open_readable(options)?,
-        };
+        let zarr = location.open_readable(options)?;
         Ok(Self { keys, zarr, shown })
     }
 

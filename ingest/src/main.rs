@@ -242,6 +242,23 @@ fn refuse_s3_overwrite(output: &StoreLocation, overwrite: bool) -> Result<()> {
     Ok(())
 }
 
+/// Uploads `folder` (of `bytes` bytes) to the object-store location `output` with a progress
+/// bar (see [`StoreLocation::upload_folder`] for `clear` and `scratch`).
+fn upload(
+    output: &StoreLocation,
+    folder: &std::path::Path,
+    s3: &ObjectStoreOptions,
+    clear: bool,
+    scratch: Option<&str>,
+    bytes: u64,
+    quiet: bool,
+) -> Result<()> {
+    let bar = bytes_bar(bytes, "uploading", !quiet);
+    output.upload_folder(folder, s3, clear, scratch, &|n| bar.inc(n))?;
+    bar.finish_and_clear();
+    Ok(())
+}
+
 fn set_threads(threads: Option<usize>) -> Result<()> {
     if let Some(n) = threads {
         rayon::ThreadPoolBuilder::new()
@@ -320,9 +337,8 @@ fn run(cli: Cli) -> Result<()> {
                 if staging.is_some() {
                     // Straight into the bucket: no root metadata, so no reader takes it for a
                     // store before `finalize`.
-                    let bar = bytes_bar(directory_bytes(&summary.folder), "uploading", !quiet);
-                    output.upload_folder(&summary.folder, &s3, false, None, &|n| bar.inc(n))?;
-                    bar.finish_and_clear();
+                    let bytes = directory_bytes(&summary.folder);
+                    upload(&output, &summary.folder, &s3, false, None, bytes, quiet)?;
                     summary.folder = PathBuf::from(output.to_string());
                 }
                 print!("{}", summary.report());
@@ -331,9 +347,15 @@ fn run(cli: Cli) -> Result<()> {
             let mut summary = convert(&options)?;
             if staging.is_some() {
                 // Replacing a store clears its old keys, root metadata first.
-                let bar = bytes_bar(summary.stored_bytes, "uploading", !quiet);
-                output.upload_folder(&local, &s3, overwrite, None, &|n| bar.inc(n))?;
-                bar.finish_and_clear();
+                upload(
+                    &output,
+                    &local,
+                    &s3,
+                    overwrite,
+                    None,
+                    summary.stored_bytes,
+                    quiet,
+                )?;
                 summary.output = PathBuf::from(output.to_string());
             }
             print!("{}", summary.report());
@@ -365,11 +387,16 @@ fn run(cli: Cli) -> Result<()> {
                     let mut summary = finalize(&local, &output.to_string(), false, !quiet)?;
                     // The partitions' bricks are in the bucket already: this adds the rest,
                     // removes the hand-over files, and writes the root metadata last.
-                    let bar = bytes_bar(directory_bytes(&local), "uploading", !quiet);
-                    output.upload_folder(&local, &s3, false, Some(HANDOFF_FOLDER), &|n| {
-                        bar.inc(n);
-                    })?;
-                    bar.finish_and_clear();
+                    let bytes = directory_bytes(&local);
+                    upload(
+                        &output,
+                        &local,
+                        &s3,
+                        false,
+                        Some(HANDOFF_FOLDER),
+                        bytes,
+                        quiet,
+                    )?;
                     summary.output = PathBuf::from(output.to_string());
                     summary
                 }

@@ -379,8 +379,9 @@ pub struct Handoffs {
     pub files: Vec<PathBuf>,
 }
 
-fn read_head(path: &Path) -> Result<(HandoffHead, Vec<u8>), HandoffError> {
-    let bytes = std::fs::read(path).map_err(|source| HandoffError::Io {
+/// The head of the hand-over file at `path`, read without the rest of the file.
+fn read_head(path: &Path) -> Result<HandoffHead, HandoffError> {
+    let file = std::fs::File::open(path).map_err(|source| HandoffError::Io {
         path: path.to_path_buf(),
         what: "cannot read",
         source,
@@ -389,15 +390,18 @@ fn read_head(path: &Path) -> Result<(HandoffHead, Vec<u8>), HandoffError> {
         path: path.to_path_buf(),
         reason,
     };
+    // Room for the head's longest field (a label or the unit) while it is decoded.
+    let mut scratch = vec![0; 1 << 16];
     let (head, _): (HandoffHead, _) =
-        postcard::take_from_bytes(&bytes).map_err(|e| unreadable(e.to_string()))?;
+        postcard::from_io((std::io::BufReader::new(file), &mut scratch))
+            .map_err(|e| unreadable(e.to_string()))?;
     if head.version != HANDOFF_VERSION {
         return Err(unreadable(format!(
             "format version {}, this build reads {HANDOFF_VERSION}",
             head.version
         )));
     }
-    Ok((head, bytes))
+    Ok(head)
 }
 
 impl Handoffs {
@@ -430,7 +434,7 @@ impl Handoffs {
             .collect();
         names.sort();
         let first_name = names.first().ok_or_else(none)?;
-        let (first, _) = read_head(&folder.join(first_name))?;
+        let first = read_head(&folder.join(first_name))?;
         let count = first.partition.count;
         let mut files = Vec::new();
         let mut missing = Vec::new();
@@ -441,7 +445,7 @@ impl Handoffs {
                 missing.push(index.to_string());
                 continue;
             }
-            let (head, _) = read_head(&path)?;
+            let head = read_head(&path)?;
             if head.partition != partition || head.plan != first.plan {
                 return Err(HandoffError::Disagree {
                     path,
@@ -470,7 +474,11 @@ impl Handoffs {
     /// [`HandoffError`] when the file cannot be read or decoded.
     pub fn read<T: Sample>(&self, index: usize) -> Result<Handoff<T>, HandoffError> {
         let path = &self.files[index];
-        let (_, bytes) = read_head(path)?;
+        let bytes = std::fs::read(path).map_err(|source| HandoffError::Io {
+            path: path.clone(),
+            what: "cannot read",
+            source,
+        })?;
         let unreadable = |e: postcard::Error| HandoffError::Unreadable {
             path: path.clone(),
             reason: e.to_string(),

@@ -62,10 +62,13 @@ impl<T: Sample> Ranges<T> {
         }
     }
 
-    /// Folds another grid's ranges in, cell by cell, its cell `i` onto this grid's cell
-    /// `offset + i`.
-    fn merge_at(&mut self, other: &Self, offset: usize) {
-        for (i, (&mn, &mx)) in other.min.iter().zip(&other.max).enumerate() {
+    /// Folds cells `from` of another grid's ranges onto this grid's cells from `offset`.
+    fn merge_at(&mut self, other: &Self, from: std::ops::Range<usize>, offset: usize) {
+        for (i, (&mn, &mx)) in other.min[from.clone()]
+            .iter()
+            .zip(&other.max[from])
+            .enumerate()
+        {
             self.fold(offset + i, mn, mx);
         }
     }
@@ -111,12 +114,8 @@ impl<T: Sample> CellGrid<T> {
         let n = rows.grid[0] as usize * plane;
         for c in 0..self.channels {
             let at = (c as u64 * gz + z0) as usize * plane;
-            let part = |r: &Ranges<T>| Ranges {
-                min: r.min[c * n..(c + 1) * n].to_vec(),
-                max: r.max[c * n..(c + 1) * n].to_vec(),
-            };
-            self.haloed.merge_at(&part(&rows.haloed), at);
-            self.exact.merge_at(&part(&rows.exact), at);
+            self.haloed.merge_at(&rows.haloed, c * n..(c + 1) * n, at);
+            self.exact.merge_at(&rows.exact, c * n..(c + 1) * n, at);
         }
     }
 
@@ -643,9 +642,10 @@ impl LevelHistograms {
 
     /// Room for brick rows `rows` of `channels` channels of a level of `bricks` bricks.
     pub fn for_rows(channels: usize, bricks: [u64; 3], rows: std::ops::Range<u64>) -> Self {
-        let (z0, z1) = (rows.start.min(bricks[0]), rows.end.min(bricks[0]));
-        let mut held = Self::new(channels, [z1 - z0.min(z1), bricks[1], bricks[2]]);
-        held.z0 = z0.min(z1);
+        let z1 = rows.end.min(bricks[0]);
+        let z0 = rows.start.min(z1);
+        let mut held = Self::new(channels, [z1 - z0, bricks[1], bricks[2]]);
+        held.z0 = z0;
         held
     }
 

@@ -365,45 +365,29 @@ impl StoreLocation {
                     }
                 }
                 // Then every other key, in bulk requests.
-                let listed = s3
-                    .list(Some(&ObjectPath::from(prefix.as_str())))
-                    .map_ok(|meta| meta.location)
-                    .boxed();
-                s3.delete_stream(listed)
-                    .try_collect::<Vec<_>>()
+                delete_under(&s3, &prefix)
                     .await
                     .map_err(|source| failed("", source))?;
             }
-            let mut total = 0;
-            for (i, batch) in [rest, root].into_iter().enumerate() {
-                if let (1, Some(sub)) = (i, scratch) {
-                    let listed = s3
-                        .list(Some(&ObjectPath::from(format!("{prefix}/{sub}"))))
-                        .map_ok(|meta| meta.location)
-                        .boxed();
-                    s3.delete_stream(listed)
-                        .try_collect::<Vec<_>>()
-                        .await
-                        .map_err(|source| failed(sub, source))?;
-                }
-                let sizes: Vec<u64> = futures::stream::iter(batch)
-                    .map(|rel| {
-                        let (s3, prefix, failed) = (&s3, &prefix, &failed);
-                        async move {
-                            let key = ObjectPath::from(format!("{prefix}/{rel}"));
-                            let n = put_file(s3, &key, &folder.join(&rel), &|source| {
-                                failed(&rel, source)
-                            })
-                            .await?;
-                            uploaded(n);
-                            Ok::<u64, LocationError>(n)
-                        }
+            let upload = |batch: Vec<String>| {
+                let (s3, prefix, failed) = (&s3, &prefix, &failed);
+                futures::stream::iter(batch)
+                    .map(move |rel| async move {
+                        let key = ObjectPath::from(format!("{prefix}/{rel}"));
+                        put_file(s3, &key, &folder.join(&rel), &|source| failed(&rel, source))
+                            .await
+                            .inspect(|&n| uploaded(n))
                     })
                     .buffer_unordered(UPLOADS_IN_FLIGHT)
-                    .try_collect()
-                    .await?;
-                total += sizes.iter().sum::<u64>();
+                    .try_fold(0, |total, n| async move { Ok(total + n) })
+            };
+            let mut total = upload(rest).await?;
+            if let Some(sub) = scratch {
+                delete_under(&s3, &format!("{prefix}/{sub}"))
+                    .await
+                    .map_err(|source| failed(sub, source))?;
             }
+            total += upload(root).await?;
             Ok(total)
         })
     }
@@ -470,6 +454,16 @@ impl StoreLocation {
     }
 }
 
+/// Deletes every key under `prefix`, in bulk requests.
+async fn delete_under(s3: &AmazonS3, prefix: &str) -> Result<(), object_store::Error> {
+    let listed = s3
+        .list(Some(&ObjectPath::from(prefix)))
+        .map_ok(|meta| meta.location)
+        .boxed();
+    s3.delete_stream(listed).try_collect::<Vec<_>>().await?;
+    Ok(())
+}
+
 /// Files larger than this go up in parts (S3 takes at most 5 GB in one request; the AWS CLI
 /// switches to parts at the same size).
 pub const MULTIPART_THRESHOLD: u64 = 8 << 20;
@@ -505,25 +499,23 @@ async fn put_file(
     let upload = s3.put_multipart(key).await.map_err(failed)?;
     let mut writer = object_store::WriteMultipart::new_with_chunk_size(upload, part);
     let mut file = tokio::fs::File::open(path).await.map_err(read)?;
-    let mut buffer = vec![0; part];
+    let mut buffer = Vec::with_capacity(part);
     let sent = async {
         loop {
             writer
                 .wait_for_capacity(PARTS_IN_FLIGHT)
                 .await
                 .map_err(failed)?;
-            let mut filled = 0;
-            while filled < part {
-                let n = file.read(&mut buffer[filled..]).await.map_err(read)?;
-                if n == 0 {
-                    break;
-                }
-                filled += n;
-            }
-            if filled == 0 {
+            buffer.clear();
+            (&mut file)
+                .take(part as u64)
+                .read_to_end(&mut buffer)
+                .await
+                .map_err(read)?;
+            if buffer.is_empty() {
                 return Ok(());
             }
-            writer.write(&buffer[..filled]);
+            writer.write(&buffer);
         }
     }
     .await;
