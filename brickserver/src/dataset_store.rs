@@ -76,17 +76,16 @@ impl DatasetStore {
     /// configured.
     pub fn open(location: &StoreLocation, options: &ObjectStoreOptions) -> Result<Self, OpenError> {
         let shown = location.to_string();
-        let keys = match location.object_store(options)? {
-            Some((store, prefix)) => Keys::Object(ObjectKeys { store, prefix }),
-            None => {
-                let path = location
-                    .folder()
-                    .expect("a location is a folder or an object store");
-                Keys::Folder(RootDir::open(path).map_err(|e| OpenError::Folder {
-                    location: shown.clone(),
-                    reason: e.to_string(),
-                })?)
-            }
+        let keys = if let Some(path) = location.folder() {
+            Keys::Folder(RootDir::open(path).map_err(|e| OpenError::Folder {
+                location: shown.clone(),
+                reason: e.to_string(),
+            })?)
+        } else {
+            let (store, prefix) = location
+                .object_store(options)?
+                .expect("a location is a folder or an object store");
+            Keys::Object(ObjectKeys { store, prefix })
         };
         let zarr = location.open_readable(options)?;
         Ok(Self { keys, zarr, shown })
