@@ -17,16 +17,22 @@ use rayon::prelude::*;
 use residency_schemas::dataset::dataset_name;
 use zarrs::array::{Array, ArrayError};
 
+use crate::columns::{ColumnPlan, MemoryEstimate, Pass, at_level};
 use crate::ome::{image_attributes, multiscale, omero};
 use crate::partition::{
     Cuts, HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, Partition,
-    PartitionPlan, claim_plan, write_handoff,
+    PartitionPlan, RECORDS_FOLDER, claim_plan, records_stem, write_handoff,
 };
 use crate::pyramid::{LevelPlan, plan_levels};
-use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
-use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
+use crate::region_writer::{
+    LevelRegionWriter, RegionWriteError, channel_summaries, region_document,
+};
+use crate::regions::{
+    BrickStats, CELL, CellGrid, ChannelAccumulator, HALO, LevelHistograms, StatsScratch,
+    cells_reached,
+};
 use crate::sample_format::{Sample, SampleType};
-use crate::source::{RawOptions, SourceError, SourceInfo, VolumeSource, open_input};
+use crate::source::{PlaneRegion, RawOptions, SourceError, SourceInfo, VolumeSource, open_input};
 use crate::store::{ArrayLayout, OmeZarrVersion, Store, StoreError, StoreWriter, directory_bytes};
 use crate::with_sample_type;
 
@@ -113,26 +119,24 @@ pub enum ConvertError {
         /// The voxel size `z, y, x`.
         voxel_size: [f64; 3],
     },
-    /// Slabs that cannot fit in the machine's memory.
+    /// A conversion that does not fit `--memory-limit` however its planes are cut.
     #[error(
-        "{output}: converting needs at least {needed} bytes of memory (2 slabs of {channels} channel(s) × {depth} planes of {}×{} {format} voxels), more than this machine's memory ({memory} bytes); a smaller z edge of --chunk (and --shard) needs less",
-        plane[0], plane[1]
+        "{output}: converting needs about {needed} bytes of memory even in the smallest columns ({} for level-0 slabs of {channels} channel(s) × {depth} planes, {} for the coarser levels' sums, {} for the region metadata), more than --memory-limit {limit} bytes; allow more memory, or a smaller z edge of --chunk (and --shard) needs less",
+        estimate.slabs, estimate.pyramid, estimate.regions
     )]
-    SlabMemory {
+    MemoryLimit {
         /// The output, as given.
         output: String,
-        /// Bytes two slabs need.
-        needed: u128,
+        /// The estimate of the smallest columns.
+        estimate: MemoryEstimate,
+        /// Its total.
+        needed: u64,
         /// Channels.
         channels: usize,
         /// Planes per slab.
         depth: u64,
-        /// Plane size `y, x`.
-        plane: [u64; 2],
-        /// The sample type.
-        format: SampleType,
-        /// Physical memory in bytes.
-        memory: u64,
+        /// The limit in bytes.
+        limit: u64,
     },
     /// The output store cannot be created or written.
     #[error(transparent)]
@@ -198,6 +202,14 @@ pub struct ConvertOptions {
     pub progress: bool,
     /// Channel labels overriding the inputs' metadata.
     pub channel_names: Vec<String>,
+    /// Peak memory to stay within, in bytes (default: [`default_memory_limit`]).
+    pub memory_limit: Option<u64>,
+}
+
+/// The memory a conversion keeps within unless told otherwise: half of this machine's
+/// physical memory (no limit where the system does not say).
+pub fn default_memory_limit() -> u64 {
+    crate::memory::physical_memory().map_or(u64::MAX, |m| m / 2)
 }
 
 impl ConvertOptions {
@@ -216,6 +228,7 @@ impl ConvertOptions {
             overwrite: false,
             progress: false,
             channel_names: Vec::new(),
+            memory_limit: None,
         }
     }
 }
@@ -250,6 +263,22 @@ pub struct ConvertSummary {
     pub metadata_bytes: u64,
     /// Wall time in seconds.
     pub seconds: f64,
+    /// The columns the planes were cut into, when they were (see [`crate::columns`]).
+    pub columns: Option<ColumnPlan>,
+}
+
+/// The report line of a pass made in columns, or nothing for whole planes.
+fn columns_report(columns: Option<&ColumnPlan>, plane: [u64; 2]) -> String {
+    columns.map_or_else(String::new, |c| {
+        format!(
+            "  in {} columns of {}×{} voxels (levels 0 to {} column by column) to stay within the memory limit (estimated peak {:.1} MiB)\n",
+            c.columns(plane).len(),
+            c.edge[0].min(plane[0]),
+            c.edge[1].min(plane[1]),
+            c.local_levels - 1,
+            c.estimate as f64 / f64::from(1 << 20)
+        )
+    })
 }
 
 impl ConvertSummary {
@@ -279,7 +308,8 @@ impl ConvertSummary {
             self.seconds,
             mb / self.seconds.max(1e-9)
         );
-        s
+        let plane = [self.levels[0].shape[2], self.levels[0].shape[3]];
+        s + &columns_report(self.columns.as_ref(), plane)
     }
 }
 
@@ -288,7 +318,6 @@ struct Inputs {
     sources: Vec<Box<dyn VolumeSource>>,
     shape: [u64; 3],
     format: SampleType,
-    channels: usize,
     voxel_size: Option<[f64; 3]>,
     unit: Option<String>,
     labels: Vec<String>,
@@ -368,7 +397,6 @@ fn open_inputs(options: &ConvertOptions) -> Result<Inputs, ConvertError> {
     Ok(Inputs {
         shape: first.shape,
         format,
-        channels,
         voxel_size,
         unit,
         labels,
@@ -397,12 +425,14 @@ pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary, ConvertError>
 }
 
 /// A level's accumulator: exact sums of level-0 voxels and their non-NaN counts,
-/// `[c][depth][y][x]`, for the level's planes `z0..z0 + depth`.
+/// `[c][depth][y][x]`, for the level's planes `z0..z0 + depth` over `window` of each.
 struct Accumulator<T: Sample> {
     /// First plane held.
     z0: u64,
     /// Planes per channel.
     depth: u64,
+    /// The part of each plane held (the whole plane, or a column).
+    window: PlaneRegion,
     /// Exact sums.
     sum: Vec<T::Sum>,
     /// Non-NaN level-0 voxel counts matching `sum`.
@@ -410,12 +440,18 @@ struct Accumulator<T: Sample> {
 }
 
 impl<T: Sample> Accumulator<T> {
-    /// Zeroed sums for `depth` planes from `z0` of `channels` channels of `plane` voxels.
-    fn new(channels: usize, z0: u64, depth: u64, plane: u64) -> Self {
-        let len = channels * (depth * plane) as usize;
+    /// An accumulator that holds nothing (level 0's, or one taken out for a while).
+    fn empty() -> Self {
+        Self::new(0, 0, 0, PlaneRegion::whole([0, 0]))
+    }
+
+    /// Zeroed sums for `depth` planes from `z0` of `channels` channels over `window`.
+    fn new(channels: usize, z0: u64, depth: u64, window: PlaneRegion) -> Self {
+        let len = channels * (depth * window.area()) as usize;
         Self {
             z0,
             depth,
+            window,
             sum: vec![T::Sum::default(); len],
             count: vec![0; len],
         }
@@ -433,10 +469,18 @@ struct Level<T: Sample> {
     acc: Accumulator<T>,
     /// Brick shape `z, y, x`.
     brick: [u64; 3],
+    /// The part of the level's planes this pass makes now: the whole plane, or a column.
+    window: PlaneRegion,
     /// The rounded means of the slab being flushed (reused between flushes).
     values: Vec<T>,
+    /// The rows of min/max cells not yet final (all a partition's rows: it writes none).
     cells: CellGrid<T>,
+    /// The rows of brick histograms not yet final (all a partition's rows).
     histograms: LevelHistograms,
+    /// Where final rows go (none in a partition, which hands its rows to `finalize`).
+    regions: Option<LevelRegionWriter<T>>,
+    /// The output, for messages.
+    output: PathBuf,
     written: u64,
     empty: u64,
 }
@@ -445,7 +489,8 @@ struct Level<T: Sample> {
 /// `index`: histograms, cells, global statistics and (optionally) the image write.
 pub(crate) struct SlabSink<'a> {
     pub channels: usize,
-    pub shape: [u64; 3],
+    /// The part of each plane a slab holds (chunk-aligned; the whole plane, or a column).
+    pub window: PlaneRegion,
     pub brick: [u64; 3],
     pub outer: [u64; 3],
     pub array: Option<&'a Array<Store>>,
@@ -454,7 +499,8 @@ pub(crate) struct SlabSink<'a> {
 }
 
 impl SlabSink<'_> {
-    /// Writes (when an array is given) the chunks of a slab `[c][nz][Y][X]` starting at `z0`,
+    /// Writes (when an array is given) the chunks of a slab `[c][nz][y][x]` of the window
+    /// starting at `z0`,
     /// records brick histograms and statistics, and folds the slab into the min/max `cells`.
     /// Returns (bricks written, bricks empty).
     pub fn process<T: Sample>(
@@ -464,12 +510,13 @@ impl SlabSink<'_> {
         nz: u64,
         cells: &mut CellGrid<T>,
     ) -> Result<(u64, u64), ChunkWriteError> {
-        let [_, ny, nx] = self.shape;
+        let w = self.window;
+        let [ny, nx] = w.end();
         let [oz, oy, ox] = self.outer;
         let tasks: Vec<(usize, u64, u64)> = (0..self.channels)
             .flat_map(|c| {
-                (0..ny.div_ceil(oy))
-                    .flat_map(move |cy| (0..nx.div_ceil(ox)).map(move |cx| (c, cy, cx)))
+                (w.y0 / oy..ny.div_ceil(oy))
+                    .flat_map(move |cy| (w.x0 / ox..nx.div_ceil(ox)).map(move |cx| (c, cy, cx)))
             })
             .collect();
         let chunk_len = (oz * oy * ox) as usize;
@@ -483,11 +530,11 @@ impl SlabSink<'_> {
                     chunk.resize(chunk_len, T::default());
                     let (y0, x0) = (cy * oy, cx * ox);
                     let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
-                    let plane = (ny * nx) as usize;
+                    let plane = w.area() as usize;
                     for dz in 0..nz {
                         for dy in 0..vy {
                             let src = (c as u64 * nz + dz) as usize * plane
-                                + ((y0 + dy) * nx + x0) as usize;
+                                + ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
                             let dst = ((dz * oy + dy) * ox) as usize;
                             chunk[dst..dst + vx as usize]
                                 .copy_from_slice(&slab[src..src + vx as usize]);
@@ -542,7 +589,7 @@ impl SlabSink<'_> {
                 },
             )
             .collect::<Result<Vec<_>, _>>()?;
-        cells.add_slab(slab, z0, nz, self.shape);
+        cells.add_slab(slab, z0, nz, w);
         Ok(counts
             .into_iter()
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))
@@ -557,20 +604,89 @@ impl<T: Sample> Level<T> {
         z0: u64,
         nz: u64,
         stats: Option<&[Mutex<ChannelAccumulator>]>,
-    ) -> Result<(), ChunkWriteError> {
+    ) -> Result<(), ConvertError> {
+        let bricks_z = self.plan.shape[0].div_ceil(self.brick[0]);
+        self.histograms
+            .extend_to((z0 + nz).div_ceil(self.brick[0]), bricks_z);
         let sink = SlabSink {
             channels: self.cells.channels,
-            shape: self.plan.shape,
+            window: self.window,
             brick: self.brick,
             outer: self.outer,
             array: Some(&self.array),
             histograms: &self.histograms,
             stats,
         };
-        let (written, empty) = sink.process(values, z0, nz, &mut self.cells)?;
+        let (written, empty) = sink
+            .process(values, z0, nz, &mut self.cells)
+            .map_err(|source| ConvertError::WriteLevel0 {
+                path: self.output.clone(),
+                source,
+            })?;
         self.written += written;
         self.empty += empty;
+        self.release(z0 + nz)?;
         Ok(())
+    }
+
+    /// Starts a column's blocks of region metadata, for the level's planes `planes` over its
+    /// window: the cells they reach (halos included) and their bricks. A partition keeps
+    /// whole rows.
+    fn open_column(&mut self, planes: std::ops::Range<u64>) {
+        if self.regions.is_none() || planes.is_empty() {
+            return;
+        }
+        let channels = self.cells.channels;
+        let w = self.window;
+        let [y1, x1] = w.end();
+        let cells = self.plan.shape.map(|s| s.div_ceil(CELL));
+        self.cells = CellGrid::block(
+            channels,
+            cells_reached(planes.clone(), cells[0]),
+            cells_reached(w.y0..y1, cells[1]),
+            cells_reached(w.x0..x1, cells[2]),
+            cells[0],
+        );
+        let b = self.brick;
+        self.histograms = LevelHistograms::block(
+            channels,
+            planes.start / b[0]..planes.end.div_ceil(b[0]),
+            w.y0 / b[1]..y1.div_ceil(b[1]),
+            w.x0 / b[2]..x1.div_ceil(b[2]),
+        );
+    }
+
+    /// Hands the rest of a column's blocks of region metadata to the level's writer.
+    fn close_column(&mut self) -> Result<(), RegionWriteError> {
+        self.release(u64::MAX)
+    }
+
+    /// Writes the rows of cells the columns found that no plane from `delivered` on can
+    /// reach (every column of the planes before it being made).
+    fn assemble(&mut self, delivered: u64) -> Result<(), RegionWriteError> {
+        let Some(regions) = &mut self.regions else {
+            return Ok(());
+        };
+        let rows = if delivered >= self.plan.shape[0] {
+            u64::MAX
+        } else {
+            delivered.saturating_sub(HALO) / CELL
+        };
+        regions.assemble_cells(rows)
+    }
+
+    /// Writes the rows of region metadata that no plane from `delivered` on can reach (see
+    /// [`LevelRegionWriter::release`]). A partition keeps its rows.
+    fn release(&mut self, delivered: u64) -> Result<(), RegionWriteError> {
+        match &mut self.regions {
+            Some(regions) => regions.release(
+                &mut self.cells,
+                &mut self.histograms,
+                delivered,
+                self.brick[0],
+            ),
+            None => Ok(()),
+        }
     }
 }
 
@@ -639,31 +755,34 @@ impl<T: Sample> SlabRows<T> for Sums<'_, T> {
 }
 
 /// Adds a slab of one level into the accumulator of the next level.
-/// `src_z0..src_z0 + nz` is the slab's z range in the source level's coordinates.
+/// `src_z0..src_z0 + nz` is the slab's z range in the source level's coordinates, and
+/// `window` the part of each plane it holds (its edges on voxel edges of the next level).
 fn accumulate<T: Sample>(
     plan: &LevelPlan,
     next: &mut Accumulator<T>,
     channels: usize,
-    src_shape: [u64; 3],
+    window: PlaneRegion,
     src_z0: u64,
     nz: u64,
     src: &impl SlabRows<T>,
 ) {
     let step = plan.step;
-    let [_, ny, nx] = plan.shape;
-    let [_, sy, sx] = src_shape;
+    let dst = next.window;
     let oz = next.depth;
     let a0 = next.z0;
-    let src_plane = (sy * sx) as usize;
+    let src_plane = window.area() as usize;
+    let [src_y1, _] = window.end();
+    // The first column of the destination this window sums into.
+    let offset = (window.x0 / step[2] - dst.x0) as usize;
     next.sum
-        .par_chunks_mut(nx as usize)
-        .zip(next.count.par_chunks_mut(nx as usize))
+        .par_chunks_mut(dst.nx as usize)
+        .zip(next.count.par_chunks_mut(dst.nx as usize))
         .enumerate()
         .for_each(|(row, (sum, count))| {
             let row = row as u64;
-            let y = row % ny;
-            let zi = (row / ny) % oz;
-            let c = (row / ny / oz) as usize;
+            let y = dst.y0 + row % dst.ny;
+            let zi = (row / dst.ny) % oz;
+            let c = (row / dst.ny / oz) as usize;
             if c >= channels {
                 return;
             }
@@ -675,50 +794,21 @@ fn accumulate<T: Sample>(
                 }
                 for dy in 0..step[1] {
                     let syy = y * step[1] + dy;
-                    if syy >= sy {
+                    if syy < window.y0 || syy >= src_y1 {
                         continue;
                     }
-                    let base =
-                        (c as u64 * nz + (szz - src_z0)) as usize * src_plane + (syy * sx) as usize;
-                    src.add_row(base, sx as usize, step[2], sum, count);
+                    let base = (c as u64 * nz + (szz - src_z0)) as usize * src_plane
+                        + ((syy - window.y0) * window.nx) as usize;
+                    src.add_row(
+                        base,
+                        window.nx as usize,
+                        step[2],
+                        &mut sum[offset..],
+                        &mut count[offset..],
+                    );
                 }
             }
         });
-}
-
-/// Refuses a conversion whose slabs cannot fit in memory, before anything is allocated or
-/// written: the reader decodes the next slab while the current one is processed, so at least
-/// two slabs of every channel, `depth` planes of `ny × nx` voxels each, are held at once
-/// (the pyramid's sums come on top, so this is a lower bound).
-fn check_slab_memory(
-    output: &str,
-    channels: usize,
-    depth: u64,
-    [ny, nx]: [u64; 2],
-    format: SampleType,
-    memory: Option<u64>,
-) -> Result<(), ConvertError> {
-    let Some(memory) = memory else {
-        return Ok(());
-    };
-    let needed = 2
-        * channels as u128
-        * u128::from(depth)
-        * u128::from(ny)
-        * u128::from(nx)
-        * format.bytes() as u128;
-    if needed > u128::from(memory) {
-        return Err(ConvertError::SlabMemory {
-            output: output.to_string(),
-            needed,
-            channels,
-            depth,
-            plane: [ny, nx],
-            format,
-            memory,
-        });
-    }
-    Ok(())
 }
 
 /// Checks the options against the inputs and plans the store: brick and shard shapes, levels,
@@ -728,7 +818,6 @@ fn plan_store<T: Sample>(
     inputs: &Inputs,
     count: usize,
 ) -> Result<PartitionPlan, ConvertError> {
-    let shown = options.output.display().to_string();
     let requested = options.brick;
     if requested.contains(&0) {
         return Err(ConvertError::ChunkNotPositive);
@@ -769,14 +858,6 @@ fn plan_store<T: Sample>(
     if voxel_size.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
         return Err(ConvertError::BadVoxelSize { voxel_size });
     }
-    check_slab_memory(
-        &shown,
-        inputs.channels,
-        outer[0],
-        [shape[1], shape[2]],
-        T::FORMAT,
-        crate::memory::physical_memory(),
-    )?;
     let levels = plan_levels(shape, voxel_size, brick, options.levels);
     let cuts = Cuts::plan(&levels, outer[0], count);
     Ok(PartitionPlan {
@@ -794,14 +875,26 @@ fn plan_store<T: Sample>(
     })
 }
 
+/// Where a pass's region metadata goes.
+#[derive(Clone, Copy, Debug)]
+enum RegionOutput {
+    /// Into the store's arrays; levels `0..gathered_levels` gather their cells from several
+    /// columns or partitions.
+    Store { gathered_levels: usize },
+    /// Into a partition's records, for `finalize`.
+    Partition(Partition),
+}
+
 /// Creates the arrays of levels `0..written` and their state for a pass over level-0 planes
-/// `planes`: each level's accumulator starts at the first of its planes that the pass makes,
-/// and its region grids hold the rows those planes reach (every row for a whole volume).
+/// `planes`: each level's accumulator starts at the first of its planes that the pass makes.
+/// Each level writes its region metadata (or a partition's records of it) as rows become
+/// final, holding a few rows at a time.
 fn open_levels<T: Sample>(
     writer: &StoreWriter,
     plan: &PartitionPlan,
     written: usize,
     planes: std::ops::Range<u64>,
+    output: RegionOutput,
 ) -> Result<Vec<Level<T>>, ConvertError> {
     let channels = plan.labels.len();
     let (brick, outer) = (plan.brick, plan.outer);
@@ -820,25 +913,53 @@ fn open_levels<T: Sample>(
         let f = level.factor[0];
         let (z0, z1) = (planes.start / f, planes.end.div_ceil(f));
         // One slab of the level: a chunk deep, or the whole level when that is shallower.
+        let window = PlaneRegion::whole([y, x]);
         let acc = if i == 0 {
-            Accumulator::new(0, 0, 0, 0)
+            Accumulator::empty()
         } else {
-            Accumulator::new(channels, z0, outer[0].min(z), y * x)
+            Accumulator::new(channels, z0, outer[0].min(z), window)
         };
-        let bricks = std::array::from_fn(|a| level.shape[a].div_ceil(brick[a]));
+        let bricks: [u64; 3] = std::array::from_fn(|a| level.shape[a].div_ceil(brick[a]));
+        let regions = match output {
+            RegionOutput::Store { gathered_levels } => LevelRegionWriter::create(
+                writer,
+                i,
+                &i.to_string(),
+                level.shape,
+                level.factor,
+                channels,
+                brick,
+                i < gathered_levels,
+            )?,
+            RegionOutput::Partition(partition) => LevelRegionWriter::for_partition(
+                &writer.partial.join(HANDOFF_FOLDER).join(RECORDS_FOLDER),
+                &records_stem(partition, i),
+                level.shape,
+                channels,
+            )?,
+        };
+        // Empty windows at the first rows the planes reach.
+        let cells = level.shape.map(|s| s.div_ceil(CELL));
+        let first = if z0 < z1 {
+            cells_reached(z0..z1, cells[0]).start
+        } else {
+            0
+        };
+        let cells = CellGrid::window(channels, [cells[1], cells[2]], first..first, cells[0]);
+        let first = z0 / brick[0];
+        let histograms = LevelHistograms::for_rows(channels, bricks, first..first);
         levels.push(Level {
             plan: level.clone(),
             array,
             outer,
             acc,
             brick,
+            window,
             values: Vec::new(),
-            cells: CellGrid::for_rows(channels, level.shape, z0..z1),
-            histograms: LevelHistograms::for_rows(
-                channels,
-                bricks,
-                z0 / brick[0]..z1.div_ceil(brick[0]),
-            ),
+            cells,
+            histograms,
+            regions: Some(regions),
+            output: writer.output.clone(),
             written: 0,
             empty: 0,
         });
@@ -846,12 +967,100 @@ fn open_levels<T: Sample>(
     Ok(levels)
 }
 
-/// Reads level-0 planes `planes` of the inputs slab by slab (a reader thread decodes slab k+1
-/// while slab k is written) and sends each up the pyramid.
+/// Reads `region` of level-0 planes `planes` of the inputs slab by slab (a reader thread
+/// decodes slab k+1 while slab k is written) and sends each up the pyramid.
+#[allow(clippy::too_many_arguments)]
 fn read_level0<T: Sample>(
-    options: &ConvertOptions,
-    sources: Vec<Box<dyn VolumeSource>>,
+    sources: &mut [Box<dyn VolumeSource>],
     plan: &PartitionPlan,
+    planes: std::ops::Range<u64>,
+    region: PlaneRegion,
+    levels: &mut [Level<T>],
+    handed_over: &mut HandedOver<T>,
+    stats: &[Mutex<ChannelAccumulator>],
+    bar: &indicatif::ProgressBar,
+) -> Result<(), ConvertError> {
+    let channels = plan.labels.len();
+    let plane = region.area() as usize;
+    let oz = plan.outer[0];
+    std::thread::scope(|scope| {
+        // Reader thread: decodes slab k+1 while slab k is processed.
+        let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);
+        // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
+        let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
+        let reader = scope.spawn(move || {
+            let mut z0 = planes.start;
+            let mut allocated = 0;
+            while z0 < planes.end {
+                let nz = oz.min(planes.end - z0);
+                // At most two slabs exist: the one being processed and the one being read.
+                let mut slab = if allocated < 2 {
+                    allocated += 1;
+                    Vec::new()
+                } else {
+                    match recycle_rx.recv() {
+                        Ok(slab) => slab,
+                        Err(_) => return,
+                    }
+                };
+                slab.resize(channels * nz as usize * plane, T::default());
+                let mut rest: &mut [T] = &mut slab;
+                let mut parts = Vec::new();
+                for s in sources.iter_mut() {
+                    let len = s.info().channels * nz as usize * plane;
+                    let (part, tail) = rest.split_at_mut(len);
+                    parts.push((s, part));
+                    rest = tail;
+                }
+                let result: Result<(), SourceError> =
+                    parts.into_par_iter().try_for_each(|(s, part)| {
+                        for c in 0..s.info().channels {
+                            for dz in 0..nz {
+                                let start = (c * nz as usize + dz as usize) * plane;
+                                s.read_region(
+                                    c,
+                                    z0 + dz,
+                                    region,
+                                    T::plane_out(&mut part[start..start + plane]),
+                                )?;
+                            }
+                        }
+                        Ok(())
+                    });
+                let failed = result.is_err();
+                if tx.send(result.map(|()| (z0, nz, slab))).is_err() || failed {
+                    return;
+                }
+                z0 += nz;
+            }
+        });
+
+        let result = (|| -> Result<(), ConvertError> {
+            for message in &rx {
+                let (z0, nz, slab) = message?;
+                process_level0(levels, handed_over, stats, &slab, z0, nz)?;
+                bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
+                let _ = recycle_tx.send(slab);
+            }
+            Ok(())
+        })();
+        // Unblock the reader whether it waits to send a slab or to get one back.
+        drop(rx);
+        drop(recycle_tx);
+        reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
+        result
+    })
+}
+
+/// Runs level-0 planes `planes` of the inputs through the levels of `levels` (and into the
+/// hand-over accumulator after them, in a partition), in the columns of `columns`: whole
+/// planes in one pass, or each group of planes column by column (see [`crate::columns`]).
+#[allow(clippy::too_many_arguments)]
+fn run_pass<T: Sample>(
+    options: &ConvertOptions,
+    sources: &mut [Box<dyn VolumeSource>],
+    plan: &PartitionPlan,
+    columns: &ColumnPlan,
     planes: std::ops::Range<u64>,
     levels: &mut [Level<T>],
     handed_over: &mut HandedOver<T>,
@@ -859,84 +1068,104 @@ fn read_level0<T: Sample>(
 ) -> Result<(), ConvertError> {
     let channels = plan.labels.len();
     let [_, ny, nx] = plan.shape;
-    let plane = (ny * nx) as usize;
     let input_bytes =
         (planes.end - planes.start) * ny * nx * channels as u64 * T::FORMAT.bytes() as u64;
     let bar = crate::progress::bytes_bar(input_bytes, "", options.progress);
-
-    // Reader thread: decodes slab k+1 while slab k is processed.
-    let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);
-    // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
-    let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
-    let oz = plan.outer[0];
-    let mut sources = sources;
-    let reader = std::thread::spawn(move || {
-        let mut z0 = planes.start;
-        let mut allocated = 0;
-        while z0 < planes.end {
-            let nz = oz.min(planes.end - z0);
-            // At most two slabs exist: the one being processed and the one being read.
-            let mut slab = if allocated < 2 {
-                allocated += 1;
-                Vec::new()
-            } else {
-                match recycle_rx.recv() {
-                    Ok(slab) => slab,
-                    Err(_) => return,
-                }
-            };
-            slab.resize(channels * nz as usize * plane, T::default());
-            let mut rest: &mut [T] = &mut slab;
-            let mut parts = Vec::new();
-            for s in &mut sources {
-                let len = s.info().channels * nz as usize * plane;
-                let (part, tail) = rest.split_at_mut(len);
-                parts.push((s, part));
-                rest = tail;
-            }
-            let result: Result<(), SourceError> =
-                parts.into_par_iter().try_for_each(|(s, part)| {
-                    for c in 0..s.info().channels {
-                        for dz in 0..nz {
-                            let start = (c * nz as usize + dz as usize) * plane;
-                            s.read_plane(
-                                c,
-                                z0 + dz,
-                                T::plane_out(&mut part[start..start + plane]),
-                            )?;
-                        }
-                    }
-                    Ok(())
-                });
-            let failed = result.is_err();
-            if tx.send(result.map(|()| (z0, nz, slab))).is_err() || failed {
-                return;
-            }
-            z0 += nz;
-        }
+    let local = columns.local_levels;
+    let split = !columns.is_whole([ny, nx]);
+    // Every local level is complete at the end of a group: one slab of the first level made
+    // from whole planes (all planes when every level is local).
+    let group_depth = levels.get(local).map_or(planes.end - planes.start, |l| {
+        plan.outer[0] * l.plan.factor[0]
     });
-
-    let result = (|| -> Result<(), ConvertError> {
-        for message in &rx {
-            let (z0, nz, slab) = message?;
-            process_level0(levels, handed_over, stats, &slab, z0, nz).map_err(|source| {
-                ConvertError::WriteLevel0 {
-                    path: options.output.clone(),
-                    source,
+    let mut start = planes.start;
+    while start < planes.end {
+        let group = start..(start + group_depth.max(1)).min(planes.end);
+        // The first whole-plane level's slab gathers the columns' sums; it is flushed (and
+        // the coarser levels made) once every column has added its share.
+        let mut gathered: HandedOver<T> = levels.get_mut(local).map(|l| {
+            let acc = std::mem::replace(&mut l.acc, Accumulator::empty());
+            (l.plan.clone(), acc)
+        });
+        for region in columns.columns([ny, nx]) {
+            for (l, level) in levels.iter_mut().enumerate().take(local) {
+                let f = level.plan.factor;
+                level.window = at_level(region, f, level.plan.shape);
+                if l > 0 {
+                    let depth = plan.outer[0].min(level.plan.shape[0]);
+                    level.acc = Accumulator::new(channels, group.start / f[0], depth, level.window);
                 }
-            })?;
-            bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
-            let _ = recycle_tx.send(slab);
+            }
+            if split {
+                for level in levels.iter_mut().take(local) {
+                    let f = level.plan.factor[0];
+                    level.open_column(group.start / f..group.end.div_ceil(f));
+                }
+            }
+            let into = if gathered.is_some() {
+                &mut gathered
+            } else {
+                &mut *handed_over
+            };
+            read_level0(
+                sources,
+                plan,
+                group.clone(),
+                region,
+                &mut levels[..local],
+                into,
+                stats,
+                &bar,
+            )?;
+            if split {
+                for level in levels.iter_mut().take(local) {
+                    level.close_column()?;
+                }
+            }
         }
-        Ok(())
-    })();
-    // Unblock the reader whether it waits to send a slab or to get one back.
-    drop(rx);
-    drop(recycle_tx);
-    reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
-    result?;
+        if split {
+            // Every column of the group is made: the local levels' rows before its end are
+            // final (the whole-plane levels write theirs slab by slab).
+            for level in levels.iter_mut().take(local) {
+                level.assemble(group.end.div_ceil(level.plan.factor[0]))?;
+            }
+        }
+        if let Some((_, acc)) = gathered {
+            levels[local].acc = acc;
+            let below_depth = levels[local - 1].plan.shape[0];
+            flush_if_full(levels, handed_over, local, below_depth)?;
+        }
+        start = group.end;
+    }
     bar.finish_and_clear();
     Ok(())
+}
+
+/// Chooses the columns of a pass over `planes` that writes levels `0..written`, within the
+/// memory limit.
+fn plan_pass<T: Sample>(
+    options: &ConvertOptions,
+    plan: &PartitionPlan,
+    written: usize,
+    planes: &std::ops::Range<u64>,
+) -> Result<ColumnPlan, ConvertError> {
+    let pass = Pass {
+        plan,
+        sum_bytes: size_of::<T::Sum>() as u64,
+        written,
+        planes: planes.end - planes.start,
+        threads: rayon::current_num_threads() as u64,
+    };
+    let limit = options.memory_limit.unwrap_or_else(default_memory_limit);
+    pass.plan_columns(limit)
+        .map_err(|estimate| ConvertError::MemoryLimit {
+            output: options.output.display().to_string(),
+            needed: estimate.total(),
+            estimate,
+            channels: plan.labels.len(),
+            depth: plan.outer[0].min(plan.shape[0]),
+            limit,
+        })
 }
 
 fn new_stats(channels: usize) -> Vec<Mutex<ChannelAccumulator>> {
@@ -958,21 +1187,32 @@ fn convert_typed<T: Sample>(
 ) -> Result<ConvertSummary, ConvertError> {
     let started = Instant::now();
     let plan = plan_store::<T>(options, &inputs, 1)?;
-    let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
     let depth = plan.shape[0];
-    let mut levels = open_levels::<T>(&writer, &plan, plan.levels.len(), 0..depth)?;
+    let columns = plan_pass::<T>(options, &plan, plan.levels.len(), &(0..depth))?;
+    let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
+    let column_levels = if columns.is_whole([plan.shape[1], plan.shape[2]]) {
+        0
+    } else {
+        columns.local_levels
+    };
+    let output = RegionOutput::Store {
+        gathered_levels: column_levels,
+    };
+    let mut levels = open_levels::<T>(&writer, &plan, plan.levels.len(), 0..depth, output)?;
     let stats = new_stats(plan.labels.len());
-    let sources = std::mem::take(&mut inputs.sources);
-    read_level0(
+    run_pass(
         options,
-        sources,
+        &mut inputs.sources,
         &plan,
+        &columns,
         0..depth,
         &mut levels,
         &mut None,
         &stats,
     )?;
-    finish_store(writer, &plan, &levels, &into_stats(stats), started)
+    let mut summary = finish_store(writer, &plan, &mut levels, &into_stats(stats), started)?;
+    summary.columns = (!columns.is_whole([plan.shape[1], plan.shape[2]])).then_some(columns);
+    Ok(summary)
 }
 
 /// Writes the region metadata and the root metadata (the last write) of a store whose levels
@@ -980,26 +1220,22 @@ fn convert_typed<T: Sample>(
 fn finish_store<T: Sample>(
     writer: StoreWriter,
     plan: &PartitionPlan,
-    levels: &[Level<T>],
+    levels: &mut [Level<T>],
     stats: &[ChannelAccumulator],
     started: Instant,
 ) -> Result<ConvertSummary, ConvertError> {
     let channels = plan.labels.len();
-    let region_levels: Vec<LevelRegions<'_, T>> = levels
-        .iter()
-        .enumerate()
-        .map(|(i, l)| LevelRegions {
-            image: i.to_string(),
-            shape: l.plan.shape,
-            factor: l.plan.factor,
-            cells: &l.cells,
-            histograms: &l.histograms,
-            written: l.written,
-            empty: l.empty,
-        })
-        .collect();
-    let (regions, displays) =
-        write_region_metadata(&writer, &region_levels, stats, &plan.labels, plan.brick)?;
+    let (channel_stats, displays, binnings) = channel_summaries::<T>(stats, &plan.labels);
+    let mut region_levels = Vec::new();
+    for level in levels.iter_mut() {
+        level.release(u64::MAX)?;
+        let regions = level
+            .regions
+            .take()
+            .expect("a store's levels write their regions");
+        region_levels.push(regions.finish(&binnings, level.written, level.empty)?);
+    }
+    let regions = region_document(region_levels, channel_stats, plan.brick);
     let name = dataset_name(&writer.output);
     let metadata_bytes = serde_json::to_vec_pretty(&regions)?.len() as u64;
     let depth = plan.shape[0];
@@ -1038,6 +1274,7 @@ fn finish_store<T: Sample>(
         level0_stored_bytes,
         metadata_bytes,
         seconds: started.elapsed().as_secs_f64(),
+        columns: None,
     })
 }
 
@@ -1060,6 +1297,10 @@ pub struct PartitionSummary {
     pub input_bytes: u64,
     /// Wall time in seconds.
     pub seconds: f64,
+    /// The columns the planes were cut into, when they were.
+    pub columns: Option<ColumnPlan>,
+    /// Plane extent `y, x`.
+    pub plane: [u64; 2],
 }
 
 impl PartitionSummary {
@@ -1077,7 +1318,7 @@ impl PartitionSummary {
             self.bricks_empty,
             self.seconds,
             mb / self.seconds.max(1e-9)
-        )
+        ) + &columns_report(self.columns.as_ref(), self.plane)
     }
 }
 
@@ -1103,15 +1344,17 @@ fn partition_typed<T: Sample>(
 ) -> Result<PartitionSummary, ConvertError> {
     let started = Instant::now();
     let plan = plan_store::<T>(options, &inputs, partition.count)?;
+    let planes = plan.cuts.planes(partition.index, plan.shape[0]);
+    let written = plan.cuts.handoff_level;
+    let columns = plan_pass::<T>(options, &plan, written, &planes)?;
     let writer = StoreWriter::shared(&options.output, options.version, options.overwrite)?;
     claim_plan(
         &writer.partial,
         &options.output.display().to_string(),
         &plan,
     )?;
-    let planes = plan.cuts.planes(partition.index, plan.shape[0]);
-    let written = plan.cuts.handoff_level;
-    let mut levels = open_levels::<T>(&writer, &plan, written, planes.clone())?;
+    let output = RegionOutput::Partition(partition);
+    let mut levels = open_levels::<T>(&writer, &plan, written, planes.clone(), output)?;
     let channels = plan.labels.len();
     let mut handed_over: HandedOver<T> = plan.levels.get(written).map(|level| {
         let f = level.factor[0];
@@ -1120,15 +1363,15 @@ fn partition_typed<T: Sample>(
         let [_, y, x] = level.shape;
         (
             level.clone(),
-            Accumulator::new(channels, z0, z1 - z0, y * x),
+            Accumulator::new(channels, z0, z1 - z0, PlaneRegion::whole([y, x])),
         )
     });
     let stats = new_stats(channels);
-    let sources = std::mem::take(&mut inputs.sources);
-    read_level0(
+    run_pass(
         options,
-        sources,
+        &mut inputs.sources,
         &plan,
+        &columns,
         planes.clone(),
         &mut levels,
         &mut handed_over,
@@ -1137,17 +1380,19 @@ fn partition_typed<T: Sample>(
     let (bricks_written, bricks_empty) = levels
         .iter()
         .fold((0, 0), |(w, e), l| (w + l.written, e + l.empty));
-    let handoff = Handoff {
-        levels: levels
-            .into_iter()
-            .map(|l| LevelPart {
-                written: l.written,
-                empty: l.empty,
-                cells: l.cells,
-                histograms_z0: l.histograms.z0,
-                histograms: l.histograms.fine.into_inner().expect("histograms"),
-            })
-            .collect(),
+    let mut parts = Vec::new();
+    for mut level in levels {
+        // The rows at the partition's ends: finalize merges them with the neighbours'.
+        level.release(u64::MAX)?;
+        let regions = level.regions.take().expect("a partition's records");
+        parts.push(LevelPart {
+            written: level.written,
+            empty: level.empty,
+            records: regions.into_records()?,
+        });
+    }
+    let handoff: Handoff<T> = Handoff {
+        levels: parts,
         stats: into_stats(stats),
         sums: handed_over.map(|(_, acc)| LevelSums {
             z0: acc.z0,
@@ -1171,6 +1416,8 @@ fn partition_typed<T: Sample>(
             * channels as u64
             * T::FORMAT.bytes() as u64,
         seconds: started.elapsed().as_secs_f64(),
+        columns: (!columns.is_whole([ny, nx])).then_some(columns),
+        plane: [ny, nx],
     })
 }
 
@@ -1204,29 +1451,38 @@ fn finalize_typed<T: Sample>(
     let started = Instant::now();
     let plan = &handoffs.plan;
     let writer = StoreWriter::shared(output, plan.version, overwrite)?;
-    let mut levels = open_levels::<T>(&writer, plan, plan.levels.len(), 0..plan.shape[0])?;
+    // The levels below the hand-over level gather their cells from the partitions' records.
+    let output = RegionOutput::Store {
+        gathered_levels: plan.cuts.handoff_level,
+    };
+    let mut levels = open_levels::<T>(&writer, plan, plan.levels.len(), 0..plan.shape[0], output)?;
     let channels = plan.labels.len();
     let h = plan.cuts.handoff_level;
     let mut stats = vec![ChannelAccumulator::default(); channels];
     let bar = crate::progress::bytes_bar(handoffs.files.len() as u64, "merging", progress);
-    for index in 0..handoffs.files.len() {
+    let count = handoffs.files.len();
+    for index in 0..count {
         let part = handoffs.read::<T>(index)?;
-        for (level, from) in levels.iter_mut().zip(part.levels) {
+        // Partitions come in z order: rows the next one cannot reach are final.
+        let next = if index + 1 < count {
+            plan.cuts.planes(index + 1, plan.shape[0]).start
+        } else {
+            u64::MAX
+        };
+        let records = writer.partial.join(HANDOFF_FOLDER).join(RECORDS_FOLDER);
+        let partition = Partition { index, count };
+        for (l, (level, from)) in levels.iter_mut().zip(part.levels).enumerate() {
             level.written += from.written;
             level.empty += from.empty;
-            level.cells.merge_rows(&from.cells);
-            level
-                .histograms
-                .merge_rows(from.histograms_z0, from.histograms);
+            let regions = level.regions.as_mut().expect("a store's levels");
+            regions.adopt(&records, &records_stem(partition, l), &from.records)?;
+            level.assemble(next / level.plan.factor[0])?;
         }
         for (all, from) in stats.iter_mut().zip(&part.stats) {
             all.merge(from);
         }
         if let Some(sums) = part.sums {
-            feed_sums(&mut levels, h, &sums).map_err(|source| ConvertError::WriteLevel0 {
-                path: output.to_path_buf(),
-                source,
-            })?;
+            feed_sums(&mut levels, h, &sums)?;
         }
         bar.inc(1);
     }
@@ -1237,7 +1493,7 @@ fn finalize_typed<T: Sample>(
         what: "cannot remove",
         source,
     })?;
-    finish_store(writer, plan, &levels, &stats, started)
+    finish_store(writer, plan, &mut levels, &stats, started)
 }
 
 /// Feeds a partition's level-`h` sums into level `h`'s accumulator plane by plane, flushing
@@ -1246,10 +1502,9 @@ fn feed_sums<T: Sample>(
     levels: &mut [Level<T>],
     h: usize,
     sums: &LevelSums<T>,
-) -> Result<(), ChunkWriteError> {
+) -> Result<(), ConvertError> {
     let channels = levels[h].cells.channels;
-    let [_, ny, nx] = levels[h].plan.shape;
-    let plane = (ny * nx) as usize;
+    let plane = levels[h].window.area() as usize;
     let below_depth = levels[h - 1].plan.shape[0];
     let step = levels[h].plan.step[0];
     for p in 0..sums.depth {
@@ -1281,15 +1536,15 @@ fn propagate<T: Sample>(
     z0: u64,
     nz: u64,
     src: &impl SlabRows<T>,
-) -> Result<(), ChunkWriteError> {
+) -> Result<(), ConvertError> {
     let channels = levels[l].cells.channels;
-    let shape = levels[l].plan.shape;
+    let window = levels[l].window;
     if l + 1 < levels.len() {
         let next = &mut levels[l + 1];
-        accumulate(&next.plan, &mut next.acc, channels, shape, z0, nz, src);
+        accumulate(&next.plan, &mut next.acc, channels, window, z0, nz, src);
         flush_if_full(levels, handed_over, l + 1, z0 + nz)?;
     } else if let Some((plan, acc)) = handed_over {
-        accumulate(plan, acc, channels, shape, z0, nz, src);
+        accumulate(plan, acc, channels, window, z0, nz, src);
     }
     Ok(())
 }
@@ -1302,7 +1557,7 @@ fn process_level0<T: Sample>(
     slab: &[T],
     z0: u64,
     nz: u64,
-) -> Result<(), ChunkWriteError> {
+) -> Result<(), ConvertError> {
     levels[0].write_slab(slab, z0, nz, Some(stats))?;
     propagate(levels, handed_over, 0, z0, nz, &Values(slab))
 }
@@ -1314,11 +1569,11 @@ fn flush_if_full<T: Sample>(
     handed_over: &mut HandedOver<T>,
     l: usize,
     below_end: u64,
-) -> Result<(), ChunkWriteError> {
+) -> Result<(), ConvertError> {
     let below_depth = levels[l - 1].plan.shape[0];
     let level = &levels[l];
     let channels = level.cells.channels;
-    let [depth, ny, nx] = level.plan.shape;
+    let depth = level.plan.shape[0];
     let oz = level.outer[0];
     let nz = oz.min(depth - level.acc.z0);
     let needed = ((level.acc.z0 + nz) * level.plan.step[0]).min(below_depth);
@@ -1326,7 +1581,7 @@ fn flush_if_full<T: Sample>(
         return Ok(());
     }
     let z0 = level.acc.z0;
-    let plane = (ny * nx) as usize;
+    let plane = level.window.area() as usize;
     // Means of the slab: rounded once, from exact sums.
     let slab_len = nz as usize * plane;
     let mut values = std::mem::take(&mut levels[l].values);
@@ -1347,7 +1602,7 @@ fn flush_if_full<T: Sample>(
     }
     levels[l].write_slab(&values, z0, nz, None)?;
     levels[l].values = values;
-    let acc = std::mem::replace(&mut levels[l].acc, Accumulator::new(0, 0, 0, 0));
+    let acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());
     let sums = Sums::<T> {
         sum: &acc.sum,
         count: &acc.count,
@@ -1361,24 +1616,4 @@ fn flush_if_full<T: Sample>(
     acc.z0 += nz;
     levels[l].acc = acc;
     done
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn slabs_that_do_not_fit_in_memory_are_refused() {
-        let check =
-            |memory| check_slab_memory("o.ome.zarr", 3, 64, [1000, 500], SampleType::U16, memory);
-        // 2 × 3 × 64 × 1000 × 500 × 2 bytes.
-        check(Some(384_000_000)).unwrap();
-        check(None).unwrap();
-        assert_eq!(
-            check(Some(383_999_999)).unwrap_err().to_string(),
-            "o.ome.zarr: converting needs at least 384000000 bytes of memory (2 slabs of 3 \
-             channel(s) × 64 planes of 1000×500 uint16 voxels), more than this machine's memory \
-             (383999999 bytes); a smaller z edge of --chunk (and --shard) needs less"
-        );
-    }
 }

@@ -17,9 +17,12 @@ use zarrs::array::{ArrayError, ArraySubset};
 use zarrs::storage::{ReadableStorageTraits, StoreKey};
 
 use crate::convert::{ChunkWriteError, SlabSink};
-use crate::region_writer::{LevelRegions, RegionWriteError, write_region_metadata};
-use crate::regions::{CellGrid, ChannelAccumulator, LevelHistograms};
+use crate::region_writer::{
+    LevelRegionWriter, RegionWriteError, channel_summaries, region_document,
+};
+use crate::regions::{CELL, CellGrid, ChannelAccumulator, LevelHistograms};
 use crate::sample_format::Sample;
+use crate::source::PlaneRegion;
 use crate::store::{StoreError, StoreWriter};
 use crate::with_sample_type;
 
@@ -183,21 +186,27 @@ fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
     let stats: Vec<Mutex<ChannelAccumulator>> = (0..channels)
         .map(|_| Mutex::new(ChannelAccumulator::default()))
         .collect();
+    let writer = StoreWriter::in_place(path, pyramid.attributes.version)?;
     let mut gathered = Vec::new();
     for (i, level) in levels.iter().enumerate() {
         let shape = level.description.zyx_shape();
         let [depth, ny, nx] = shape;
-        let histograms = LevelHistograms::new(channels, level.grid);
-        let mut cells = CellGrid::<T>::for_shape(channels, shape);
-        let sink = SlabSink {
-            channels,
+        let factor =
+            std::array::from_fn(|a| levels[0].description.zyx_shape()[a].div_ceil(shape[a].max(1)));
+        let mut regions = LevelRegionWriter::<T>::create(
+            &writer,
+            i,
+            &level.path,
             shape,
+            factor,
+            channels,
             brick,
-            outer: brick,
-            array: None,
-            histograms: &histograms,
-            stats: (i == 0).then_some(stats.as_slice()),
-        };
+            false,
+        )?;
+        let cell_grid = shape.map(|s| s.div_ceil(CELL));
+        let mut cells =
+            CellGrid::<T>::window(channels, [cell_grid[1], cell_grid[2]], 0..0, cell_grid[0]);
+        let mut histograms = LevelHistograms::for_rows(channels, level.grid, 0..0);
         let (mut written, mut empty) = (0, 0);
         let dims = level.array.shape().len();
         let mut z0 = 0;
@@ -217,34 +226,35 @@ fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
                     z: z0,
                     source: Box::new(source),
                 })?;
+            histograms.extend_to((z0 + nz).div_ceil(brick[0]), level.grid[0]);
+            let sink = SlabSink {
+                channels,
+                window: PlaneRegion::whole([ny, nx]),
+                brick,
+                outer: brick,
+                array: None,
+                histograms: &histograms,
+                stats: (i == 0).then_some(stats.as_slice()),
+            };
             let (w, e) = sink.process(&slab, z0, nz, &mut cells)?;
             written += w;
             empty += e;
             z0 += nz;
+            regions.release(&mut cells, &mut histograms, z0, brick[0])?;
         }
-        gathered.push((cells, histograms, written, empty));
+        regions.release(&mut cells, &mut histograms, u64::MAX, brick[0])?;
+        gathered.push((regions, written, empty));
     }
     let stats: Vec<ChannelAccumulator> = stats
         .into_iter()
         .map(|m| m.into_inner().expect("stats"))
         .collect();
-    let writer = StoreWriter::in_place(path, pyramid.attributes.version)?;
-    let region_levels: Vec<LevelRegions<'_, T>> = levels
-        .iter()
-        .zip(&gathered)
-        .map(|(l, (cells, histograms, written, empty))| LevelRegions {
-            image: l.path.clone(),
-            shape: l.description.zyx_shape(),
-            factor: std::array::from_fn(|a| {
-                levels[0].description.zyx_shape()[a].div_ceil(l.description.zyx_shape()[a].max(1))
-            }),
-            cells,
-            histograms,
-            written: *written,
-            empty: *empty,
-        })
-        .collect();
-    let (regions, _) = write_region_metadata(&writer, &region_levels, &stats, labels, brick)?;
+    let (channel_stats, _, binnings) = channel_summaries::<T>(&stats, labels);
+    let region_levels = gathered
+        .into_iter()
+        .map(|(regions, written, empty)| regions.finish(&binnings, written, empty))
+        .collect::<Result<Vec<_>, _>>()?;
+    let regions = region_document(region_levels, channel_stats, brick);
     // The metadata arrays reach the disk before the attributes that point to them.
     crate::store::sync_file_system(path)?;
     writer.set_root_attribute(REGIONS_KEY, serde_json::to_value(&regions)?)?;

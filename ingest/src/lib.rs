@@ -6,8 +6,10 @@
 //! - [`sample_format`]: the voxel types and their exact arithmetic;
 //! - [`pyramid`]: the anisotropy-aware level plan;
 //! - [`regions`]: min/max cells, brick histograms, channel statistics;
-//! - [`region_writer`]: writing them as Zarr arrays and the `residency` document;
-//! - [`convert`]: the streaming pass itself; [`index`] runs the same analysis on an
+//! - [`region_writer`]: writing them as Zarr arrays and the `residency` document as the pass
+//!   goes, with [`region_scratch`] holding on disk what cannot be written yet;
+//! - [`convert`]: the streaming pass itself, in [`columns`] where planes are too large for
+//!   the memory limit; [`index`] runs the same analysis on an
 //!   existing store; [`partition`]: a pass split into partitions and finished by `finalize`;
 //! - [`store`] and [`ome`]: Zarr and OME-Zarr metadata, and atomic writes;
 //! - [`synthetic`]: the built-in synthetic samples (light-sheet fluorescence, sparse CT,
@@ -22,6 +24,7 @@
 //! names the file, option or array at fault, and the underlying error is its `source()`, so
 //! the binary's `error: {e:#}` prints the whole chain once.
 
+pub mod columns;
 pub mod convert;
 pub mod index;
 pub mod inspect;
@@ -30,6 +33,7 @@ pub mod ome;
 pub mod partition;
 pub mod progress;
 pub mod pyramid;
+pub mod region_scratch;
 pub mod region_writer;
 pub mod regions;
 pub mod sample_format;

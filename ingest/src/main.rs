@@ -124,6 +124,11 @@ enum Command {
         /// every level it covers; run all N (in any order, anywhere), then `ingest finalize`.
         #[arg(long, value_name = "I/N")]
         partition: Option<Partition>,
+        /// Peak memory to stay within: bytes, or with K, M, G or T (powers of 1024), e.g. 4G
+        /// (default: half of this machine's memory). Planes too large for it are converted in
+        /// columns of whole chunks, reading only the strips, tiles or rows each column spans.
+        #[arg(long, value_name = "BYTES", value_parser = parse_bytes)]
+        memory_limit: Option<u64>,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
@@ -211,6 +216,29 @@ fn parse_list<T: std::str::FromStr>(s: &str) -> Result<Vec<T>, String> {
         .collect()
 }
 
+/// A byte count: digits, then optionally K, M, G or T (powers of 1024), with or without a
+/// trailing `B` or `iB`.
+fn parse_bytes(s: &str) -> Result<u64, String> {
+    let t = s.trim();
+    let t = t
+        .strip_suffix("iB")
+        .or_else(|| t.strip_suffix('B'))
+        .unwrap_or(t);
+    let (digits, shift) = match t.char_indices().last() {
+        Some((i, 'K' | 'k')) => (&t[..i], 10),
+        Some((i, 'M' | 'm')) => (&t[..i], 20),
+        Some((i, 'G' | 'g')) => (&t[..i], 30),
+        Some((i, 'T' | 't')) => (&t[..i], 40),
+        _ => (t, 0),
+    };
+    digits
+        .parse::<u64>()
+        .ok()
+        .and_then(|n| n.checked_mul(1 << shift))
+        .filter(|&n| n > 0)
+        .ok_or_else(|| format!("expected a positive byte count such as 4G or 500M, not {s:?}"))
+}
+
 fn parse_triple_u64(s: &str) -> Result<[u64; 3], String> {
     parse_list::<u64>(s)?
         .try_into()
@@ -288,6 +316,7 @@ fn run(cli: Cli) -> Result<()> {
             channel_names,
             overwrite,
             partition,
+            memory_limit,
             threads,
             quiet,
         } => {
@@ -332,6 +361,7 @@ fn run(cli: Cli) -> Result<()> {
             options.overwrite = overwrite;
             options.progress = !quiet;
             options.channel_names = channel_names;
+            options.memory_limit = memory_limit;
             if let Some(partition) = partition {
                 let mut summary = convert_partition(&options, partition)?;
                 if staging.is_some() {

@@ -9,11 +9,13 @@
 //! with fewer units than partitions leaves some partitions with nothing to do.
 //!
 //! **What a partition hands over** ([`Handoff`]): for each level below H, its bricks' written
-//! and empty counts, and the min/max cells and brick histograms of the rows its planes reach
-//! (so the file grows with the partition, not the volume); the whole-channel statistics;
-//! and, for level H, the exact sums and counts of level-0 voxels of its planes (level H's
-//! accumulator, before any rounding). `finalize` merges the cells (min and max), histograms
-//! (each brick comes from one partition) and statistics (sums of integers and counts), feeds
+//! and empty counts, and where its records of min/max cell rows and brick histograms are
+//! (files in `.partitions/.records/`, written slab by slab, so a partition holds a few rows
+//! at a time); the whole-channel statistics; and, for level H, the exact sums and counts of
+//! level-0 voxels of its planes (level H's accumulator, before any rounding). `finalize`
+//! merges the cells (min and max) chunk of rows by chunk of rows as the partitions come, in
+//! z order, the histograms (each brick comes from one partition) and statistics (sums of
+//! integers and counts), feeds
 //! the sums into level H plane by plane in z order, and from there runs the same code as one
 //! process: the same sums are added in the same order, so the store is byte for byte the one
 //! a single process writes.
@@ -30,7 +32,8 @@ use std::str::FromStr;
 use serde::{Deserialize, Serialize};
 
 use crate::pyramid::LevelPlan;
-use crate::regions::{CellGrid, ChannelAccumulator, FineHistogram};
+use crate::region_scratch::LevelRecords;
+use crate::regions::ChannelAccumulator;
 use crate::sample_format::{Sample, SampleType};
 use crate::store::OmeZarrVersion;
 
@@ -38,7 +41,7 @@ use crate::store::OmeZarrVersion;
 pub const HANDOFF_FOLDER: &str = ".partitions";
 
 /// Bumped whenever [`Handoff`] changes: `finalize` refuses files of another version.
-const HANDOFF_VERSION: u32 = 1;
+const HANDOFF_VERSION: u32 = 2;
 
 /// The file under [`HANDOFF_FOLDER`] holding the plan the first partition to start followed.
 const PLAN_FILE: &str = "plan";
@@ -174,23 +177,27 @@ pub struct PartitionPlan {
     pub cuts: Cuts,
 }
 
-/// What one level below the hand-over level holds after a partition: only the rows of cells
-/// and bricks its planes reach (all a partition allocates), so a partition's memory and its
-/// hand-over file grow with the partition, not the volume.
+/// What a partition hands over of one level below the hand-over level: its brick counts,
+/// and where its records of cells and brick histograms are (files in
+/// [`RECORDS_FOLDER`], see [`records_stem`]), written as its slabs were done, so a partition
+/// holds a few rows at a time, never all its rows.
 #[derive(Debug, Serialize, Deserialize)]
-#[serde(bound = "")]
-pub struct LevelPart<T: Sample> {
+pub struct LevelPart {
     /// Bricks written.
     pub written: u64,
     /// Bricks found empty.
     pub empty: u64,
-    /// Min/max cells of the rows its planes reach, halos included (identities where it saw
-    /// nothing); the grid says which rows.
-    pub cells: CellGrid<T>,
-    /// First brick row of `histograms`.
-    pub histograms_z0: u64,
-    /// Brick histograms of its brick rows, `[c][z][y][x]`.
-    pub histograms: Vec<FineHistogram>,
+    /// Its records.
+    pub records: LevelRecords,
+}
+
+/// The folder, in [`HANDOFF_FOLDER`], of the partitions' records of region metadata (hidden,
+/// so listing the hand-over files passes it by).
+pub const RECORDS_FOLDER: &str = ".records";
+
+/// The stem of a partition's record files of a level: `I-of-N.LEVEL`.
+pub fn records_stem(partition: Partition, level: usize) -> String {
+    format!("{}.{level}", partition.file_name())
 }
 
 /// Level H's accumulator over a partition's planes: exact sums and counts of level-0 voxels,
@@ -213,7 +220,7 @@ pub struct LevelSums<T: Sample> {
 #[serde(bound = "")]
 pub struct Handoff<T: Sample> {
     /// The levels below the hand-over level.
-    pub levels: Vec<LevelPart<T>>,
+    pub levels: Vec<LevelPart>,
     /// Whole-channel statistics of this partition's level-0 voxels.
     pub stats: Vec<ChannelAccumulator>,
     /// Level H's sums, when there is a level H.

@@ -1,17 +1,28 @@
-//! Writing region metadata into a store: the min/max grid hierarchy and the brick histograms
-//! of every level as Zarr arrays under `residency/`, and the [`RegionMetadata`] document.
+//! Writing region metadata into a store as the pass goes: the min/max grid hierarchy and the
+//! brick histograms of every level as Zarr arrays under `residency/`, and the
+//! [`RegionMetadata`] document at the end.
+//!
+//! Rows of cells are written as soon as they are final (no later plane can reach them, halo
+//! included), eight rows (one chunk) at a time, and folded into the coarser grids, which are
+//! written the same way; so a pass holds a few rows per level, never a whole grid. Brick
+//! histograms are binned by each channel's range, which is known only at the end: their
+//! final rows go to a scratch file in the store's temporary folder, and are binned and written
+//! row by row when the pass ends.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use residency_schemas::{
     ChannelStatistics, HISTOGRAM_BINS, MinMaxGrid, REGIONS_VERSION, RegionLevel, RegionMetadata,
 };
-use zarrs::array::{ArrayError, ArraySubset};
+use zarrs::array::{Array, ArrayError, ArraySubset};
 
 use crate::ome::ChannelDisplay;
-use crate::regions::{CELL, CellGrid, ChannelAccumulator, HALO, LevelHistograms};
+use crate::region_scratch::{CellRecords, HistogramRecords, LevelRecords};
+use crate::regions::{
+    Binning, CELL, CellGrid, ChannelAccumulator, HALO, HistogramBlock, LevelHistograms,
+};
 use crate::sample_format::{Sample, SampleType};
-use crate::store::{ArrayLayout, StoreError, StoreWriter};
+use crate::store::{ArrayLayout, Store, StoreError, StoreWriter};
 
 /// Region metadata that cannot be written into a store.
 #[derive(Debug, thiserror::Error)]
@@ -19,6 +30,17 @@ pub enum RegionWriteError {
     /// A group or an array cannot be created.
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// A scratch file of region metadata cannot be written or read back.
+    #[error("{}: cannot {what} this scratch file of region metadata", path.display())]
+    Scratch {
+        /// The file.
+        path: PathBuf,
+        /// What failed.
+        what: &'static str,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
     /// An array's values cannot be written.
     #[error("{}: cannot write {array}", path.display())]
     WriteArray {
@@ -35,45 +57,19 @@ pub enum RegionWriteError {
 /// Percentiles recorded for every channel.
 pub const PERCENTS: [f64; 5] = [0.1, 1.0, 50.0, 99.0, 99.9];
 
-/// What the pass gathered for one level.
-pub struct LevelRegions<'a, T: Sample> {
-    /// Path of the level's image array in the group.
-    pub image: String,
-    /// Level shape `z, y, x`.
-    pub shape: [u64; 3],
-    /// Downsampling factor relative to level 0.
-    pub factor: [u64; 3],
-    /// Finest min/max grid.
-    pub cells: &'a CellGrid<T>,
-    /// Brick histograms.
-    pub histograms: &'a LevelHistograms,
-    /// Bricks written.
-    pub written: u64,
-    /// Bricks skipped as empty.
-    pub empty: u64,
-}
+/// Cell rows per chunk of the min/max arrays: the rows written at once.
+pub const CHUNK_ROWS: u64 = 8;
 
-/// Writes the region arrays and returns the metadata document and the channels' display
-/// windows (for `omero`).
-///
-/// # Errors
-/// When a group or an array cannot be created or written.
-pub fn write_region_metadata<T: Sample>(
-    writer: &StoreWriter,
-    levels: &[LevelRegions<'_, T>],
+/// Scratch folder (in the store's temporary folder) of the brick histograms, and of the
+/// columns' cells until their rows are final.
+pub const SCRATCH_FOLDER: &str = ".region-scratch";
+
+/// The channels' statistics, display windows and histogram binnings, from what the pass
+/// gathered.
+pub fn channel_summaries<T: Sample>(
     stats: &[ChannelAccumulator],
     labels: &[String],
-    brick: [u64; 3],
-) -> Result<(RegionMetadata, Vec<ChannelDisplay>), RegionWriteError> {
-    let cannot_write = |array: &str| {
-        let array = array.to_string();
-        move |source: ArrayError| RegionWriteError::WriteArray {
-            path: writer.output.clone(),
-            array,
-            source: Box::new(source),
-        }
-    };
-    let channels = stats.len();
+) -> (Vec<ChannelStatistics>, Vec<ChannelDisplay>, Vec<Binning>) {
     let mut channel_stats = Vec::new();
     let mut displays = Vec::new();
     let mut binnings = Vec::new();
@@ -110,60 +106,127 @@ pub fn write_region_metadata<T: Sample>(
         });
         binnings.push(binning);
     }
+    (channel_stats, displays, binnings)
+}
 
-    writer.write_group("residency")?;
-    let mut region_levels = Vec::new();
-    for (i, level) in levels.iter().enumerate() {
-        writer.write_group(&format!("residency/{i}"))?;
-        writer.write_group(&format!("residency/{i}/minmax"))?;
-        writer.write_group(&format!("residency/{i}/range"))?;
-        let (mut minmax, mut range) = (Vec::new(), Vec::new());
-        let mut grid = level.cells.clone();
-        let mut k = 0;
-        loop {
-            let g = grid.grid;
-            for (kind, exact, out) in [("minmax", false, &mut minmax), ("range", true, &mut range)]
-            {
-                let path = format!("residency/{i}/{kind}/{k}");
-                let array = writer.create_array(
-                    &format!("/{path}"),
-                    &ArrayLayout {
-                        shape: vec![channels as u64, 2, g[0], g[1], g[2]],
-                        chunk: vec![1, 2, g[0].min(64), g[1].min(64), g[2].min(64)],
-                        inner_chunk: None,
-                        format: T::FORMAT,
-                        dimension_names: None,
-                    },
-                )?;
-                array
-                    .store_array_subset(
-                        &ArraySubset::new_with_shape(array.shape().to_vec()),
-                        grid.to_min_max_array(exact).as_slice(),
-                    )
-                    .map_err(cannot_write(&path))?;
-                out.push(MinMaxGrid {
-                    path,
-                    cell_shape: [CELL << k; 3],
-                    grid_shape: g,
-                });
-            }
+/// The region metadata document of finished levels.
+pub fn region_document(
+    levels: Vec<RegionLevel>,
+    channels: Vec<ChannelStatistics>,
+    brick: [u64; 3],
+) -> RegionMetadata {
+    RegionMetadata {
+        version: REGIONS_VERSION.into(),
+        path: "residency".into(),
+        cell_shape: [CELL; 3],
+        halo: HALO,
+        brick_shape: brick,
+        histogram_bins: HISTOGRAM_BINS,
+        levels,
+        channels,
+    }
+}
+
+/// One grid of a level's min/max hierarchy (cells `CELL << k` voxels wide) being written:
+/// its two arrays and the rows not yet written.
+struct GridRows<T: Sample> {
+    /// Cells `z, y, x`.
+    grid: [u64; 3],
+    /// Haloed ranges.
+    minmax: Array<Store>,
+    /// Exact ranges.
+    range: Array<Store>,
+    minmax_path: String,
+    range_path: String,
+    /// Final rows not yet written (a window starting on a multiple of [`CHUNK_ROWS`]).
+    pending: CellGrid<T>,
+}
+
+/// Writes one level's region metadata as the pass makes it final: rows of min/max cells
+/// (and the coarser grids from them) and rows of brick histograms.
+pub struct LevelRegionWriter<T: Sample> {
+    output: PathBuf,
+    image: String,
+    shape: [u64; 3],
+    factor: [u64; 3],
+    channels: usize,
+    /// The min/max hierarchy's arrays (none in a partition, which writes no arrays).
+    grids: Vec<GridRows<T>>,
+    /// The histogram array and its path (none in a partition).
+    histogram: Option<(Array<Store>, String)>,
+    /// Brick histograms waiting for the channels' binnings.
+    histograms: HistogramRecords,
+    /// Cells waiting for other columns or partitions to pass their rows (a level made in
+    /// columns, a partition's levels, and `finalize`'s levels below the hand-over level).
+    cells: Option<CellRecords>,
+}
+
+impl<T: Sample> LevelRegionWriter<T> {
+    /// Creates the level's region groups and arrays (level `index` of the image, its image
+    /// array at `image`) and its scratch files (`cell_records`: rows of cells come from
+    /// several columns or partitions, see [`LevelRegionWriter::assemble_cells`]).
+    ///
+    /// # Errors
+    /// When a group, an array or the scratch file cannot be created.
+    #[allow(clippy::too_many_arguments)]
+    pub fn create(
+        writer: &StoreWriter,
+        index: usize,
+        image: &str,
+        shape: [u64; 3],
+        factor: [u64; 3],
+        channels: usize,
+        brick: [u64; 3],
+        cell_records: bool,
+    ) -> Result<Self, RegionWriteError> {
+        if index == 0 {
+            writer.write_group("residency")?;
+        }
+        writer.write_group(&format!("residency/{index}"))?;
+        writer.write_group(&format!("residency/{index}/minmax"))?;
+        writer.write_group(&format!("residency/{index}/range"))?;
+        let mut grids = Vec::new();
+        let mut g = shape.map(|s| s.div_ceil(CELL));
+        for k in 0.. {
+            let layout = ArrayLayout {
+                shape: vec![channels as u64, 2, g[0], g[1], g[2]],
+                chunk: vec![1, 2, g[0].min(CHUNK_ROWS), g[1].min(64), g[2].min(64)],
+                inner_chunk: None,
+                format: T::FORMAT,
+                dimension_names: None,
+            };
+            let minmax_path = format!("residency/{index}/minmax/{k}");
+            let range_path = format!("residency/{index}/range/{k}");
+            grids.push(GridRows {
+                grid: g,
+                minmax: writer.create_array(&format!("/{minmax_path}"), &layout)?,
+                range: writer.create_array(&format!("/{range_path}"), &layout)?,
+                minmax_path,
+                range_path,
+                pending: CellGrid::window(channels, [g[1], g[2]], 0..0, g[0]),
+            });
             if g == [1, 1, 1] {
                 break;
             }
-            grid = grid.coarsen();
-            k += 1;
+            g = g.map(|s| s.div_ceil(2));
         }
-        let hb = level.histograms.bricks;
-        let hist_path = format!("residency/{i}/histogram");
-        let hist = writer.create_array(
-            &format!("/{hist_path}"),
+        let bricks: [u64; 3] = std::array::from_fn(|a| shape[a].div_ceil(brick[a]));
+        let histogram_path = format!("residency/{index}/histogram");
+        let histogram = writer.create_array(
+            &format!("/{histogram_path}"),
             &ArrayLayout {
-                shape: vec![channels as u64, hb[0], hb[1], hb[2], HISTOGRAM_BINS as u64],
+                shape: vec![
+                    channels as u64,
+                    bricks[0],
+                    bricks[1],
+                    bricks[2],
+                    HISTOGRAM_BINS as u64,
+                ],
                 chunk: vec![
                     1,
-                    hb[0].min(16),
-                    hb[1].min(16),
-                    hb[2].min(16),
+                    1,
+                    bricks[1].min(16),
+                    bricks[2].min(16),
                     HISTOGRAM_BINS as u64,
                 ],
                 inner_chunk: None,
@@ -171,31 +234,285 @@ pub fn write_region_metadata<T: Sample>(
                 dimension_names: None,
             },
         )?;
-        hist.store_array_subset(
-            &ArraySubset::new_with_shape(hist.shape().to_vec()),
-            level.histograms.binned(&binnings).as_slice(),
-        )
-        .map_err(cannot_write(&hist_path))?;
-        region_levels.push(RegionLevel {
-            image: level.image.clone(),
-            shape: level.shape,
-            factor: level.factor,
-            minmax,
-            range,
-            histogram: hist_path,
-            bricks_written: level.written,
-            bricks_empty: level.empty,
-        });
+        let folder = writer.partial.join(SCRATCH_FOLDER);
+        let cells = if cell_records {
+            Some(CellRecords::create(folder.join(format!("{index}.cells")))?)
+        } else {
+            None
+        };
+        Ok(Self {
+            output: writer.output.clone(),
+            image: image.to_string(),
+            shape,
+            factor,
+            channels,
+            grids,
+            histogram: Some((histogram, histogram_path)),
+            histograms: HistogramRecords::create(folder.join(format!("{index}.histograms")))?,
+            cells,
+        })
     }
-    let regions = RegionMetadata {
-        version: REGIONS_VERSION.into(),
-        path: "residency".into(),
-        cell_shape: [CELL; 3],
-        halo: HALO,
-        brick_shape: brick,
-        histogram_bins: HISTOGRAM_BINS,
-        levels: region_levels,
-        channels: channel_stats,
-    };
-    Ok((regions, displays))
+
+    /// A partition's writer for a level of `shape`: it writes no arrays, only records of its
+    /// rows of cells and brick histograms, in `folder` as `STEM.cells` and `STEM.histograms`,
+    /// for `finalize` (see [`LevelRegionWriter::into_records`] and
+    /// [`LevelRegionWriter::adopt`]).
+    ///
+    /// # Errors
+    /// When a file cannot be created.
+    pub fn for_partition(
+        folder: &Path,
+        stem: &str,
+        shape: [u64; 3],
+        channels: usize,
+    ) -> Result<Self, RegionWriteError> {
+        Ok(Self {
+            output: folder.to_path_buf(),
+            image: String::new(),
+            shape,
+            factor: [1; 3],
+            channels,
+            grids: Vec::new(),
+            histogram: None,
+            histograms: HistogramRecords::create(folder.join(format!("{stem}.histograms")))?,
+            cells: Some(CellRecords::create(folder.join(format!("{stem}.cells")))?),
+        })
+    }
+
+    /// A partition's records, with its files complete.
+    ///
+    /// # Errors
+    /// When a file cannot be written.
+    pub fn into_records(self) -> Result<LevelRecords, RegionWriteError> {
+        Ok(LevelRecords {
+            cells: match self.cells {
+                Some(cells) => cells.into_records()?,
+                None => Vec::new(),
+            },
+            histograms: self.histograms.into_records()?,
+        })
+    }
+
+    /// Takes in a partition's records of this level, in its files `STEM.cells` and
+    /// `STEM.histograms` in `folder`: its histograms are copied into this writer's scratch
+    /// file, its cells read when their chunk of rows is assembled.
+    ///
+    /// # Errors
+    /// When a file cannot be read or written.
+    ///
+    /// # Panics
+    /// When the level was not created with cell records.
+    pub fn adopt(
+        &mut self,
+        folder: &Path,
+        stem: &str,
+        records: &LevelRecords,
+    ) -> Result<(), RegionWriteError> {
+        self.histograms.adopt(
+            &folder.join(format!("{stem}.histograms")),
+            &records.histograms,
+        )?;
+        self.cells
+            .as_mut()
+            .expect("cell records")
+            .adopt(&folder.join(format!("{stem}.cells")), &records.cells)
+    }
+
+    /// Takes the rows of `cells` and `histograms` (the pass's windows over the level, or a
+    /// column's blocks) that no plane from `delivered` on can reach, every plane before it
+    /// being made: min/max cell rows whose halo ends before it, and whole brick rows. A
+    /// column's cells go to the scratch file until every column has passed them (see
+    /// [`LevelRegionWriter::assemble_cells`]).
+    ///
+    /// # Errors
+    /// When an array or the scratch file cannot be written.
+    pub fn release(
+        &mut self,
+        cells: &mut CellGrid<T>,
+        histograms: &mut LevelHistograms,
+        delivered: u64,
+        brick_depth: u64,
+    ) -> Result<(), RegionWriteError> {
+        let (cell_rows, brick_rows) = if delivered >= self.shape[0] {
+            (u64::MAX, u64::MAX)
+        } else {
+            (
+                delivered.saturating_sub(HALO) / CELL,
+                delivered / brick_depth,
+            )
+        };
+        let rows = cells.split_before(cell_rows);
+        if rows.rows().is_empty() {
+        } else if let Some(records) = &mut self.cells {
+            // A column's or a partition's rows: final for it, but others fold into them too.
+            records.spill(&rows)?;
+        } else {
+            self.push_cells(&rows)?;
+        }
+        let block = histograms.split_before(brick_rows);
+        if !block.fine.is_empty() {
+            self.push_histograms(&block)?;
+        }
+        Ok(())
+    }
+
+    /// Assembles the columns' cells of every whole chunk of rows before `end` (and of the
+    /// rows left, past the level's last row) and writes them as [`push_cells`] does.
+    ///
+    /// # Errors
+    /// When the scratch file cannot be read or an array cannot be written.
+    ///
+    /// [`push_cells`]: LevelRegionWriter::push_cells
+    pub fn assemble_cells(&mut self, end: u64) -> Result<(), RegionWriteError> {
+        let Some(grid) = self.grids.first() else {
+            // A partition's: `finalize` assembles its rows.
+            return Ok(());
+        };
+        let [depth, gy, gx] = grid.grid;
+        let end = end.min(depth);
+        loop {
+            let records = self.cells.as_mut().expect("cell records");
+            let start = records.next;
+            let stop = (start / CHUNK_ROWS + 1) * CHUNK_ROWS;
+            if start >= depth || (stop > end && end < depth) {
+                return Ok(());
+            }
+            let stop = stop.min(depth);
+            let mut rows = CellGrid::window(self.channels, [gy, gx], start..stop, depth);
+            records.take_chunk(start / CHUNK_ROWS, &mut rows)?;
+            records.next = stop;
+            self.push_cells(&rows)?;
+        }
+    }
+
+    /// Takes final rows of min/max cells (the next rows of the level, in order): writes every
+    /// whole chunk of rows, and folds whole pairs of rows into the next coarser grid.
+    ///
+    /// # Errors
+    /// When an array cannot be written.
+    pub fn push_cells(&mut self, rows: &CellGrid<T>) -> Result<(), RegionWriteError> {
+        self.push_grid(0, rows)
+    }
+
+    fn push_grid(&mut self, k: usize, rows: &CellGrid<T>) -> Result<(), RegionWriteError> {
+        let grid = &mut self.grids[k];
+        debug_assert_eq!(rows.z0, grid.pending.rows().end);
+        grid.pending.extend_to(rows.rows().end);
+        grid.pending.merge_rows(rows);
+        let held = grid.pending.rows();
+        // Whole chunks, or everything at the level's end.
+        let end = if held.end == grid.grid[0] {
+            held.end
+        } else {
+            held.end / CHUNK_ROWS * CHUNK_ROWS
+        };
+        if end <= held.start {
+            return Ok(());
+        }
+        let done = grid.pending.split_before(end);
+        let subset = ArraySubset::new_with_ranges(&[
+            0..self.channels as u64,
+            0..2,
+            done.rows(),
+            0..grid.grid[1],
+            0..grid.grid[2],
+        ]);
+        for (array, path, exact) in [
+            (&grid.minmax, &grid.minmax_path, false),
+            (&grid.range, &grid.range_path, true),
+        ] {
+            array
+                .store_array_subset(&subset, done.to_min_max_array(exact).as_slice())
+                .map_err(|source| RegionWriteError::WriteArray {
+                    path: self.output.clone(),
+                    array: path.clone(),
+                    source: Box::new(source),
+                })?;
+        }
+        if k + 1 < self.grids.len() {
+            // Chunks hold an even number of rows, so the written rows coarsen whole.
+            self.push_grid(k + 1, &done.coarsen())?;
+        }
+        Ok(())
+    }
+
+    /// Takes final brick histograms (a block of bricks no later plane reaches) into the
+    /// scratch file, until the channels' binnings are known.
+    ///
+    /// # Errors
+    /// When the scratch file cannot be written.
+    pub fn push_histograms(&mut self, block: &HistogramBlock) -> Result<(), RegionWriteError> {
+        self.histograms.push(block)
+    }
+
+    /// Bins the histograms of the scratch file by the channels' `binnings` and writes them
+    /// row by row, removes the scratch file, and returns the level's entry in the document.
+    ///
+    /// # Errors
+    /// When the scratch file cannot be read back or an array cannot be written.
+    pub fn finish(
+        mut self,
+        binnings: &[Binning],
+        written: u64,
+        empty: u64,
+    ) -> Result<RegionLevel, RegionWriteError> {
+        if self.cells.is_some() {
+            self.assemble_cells(u64::MAX)?;
+        }
+        debug_assert!(self.grids.iter().all(|g| g.pending.rows().end == g.grid[0]));
+        let (histogram, histogram_path) = self.histogram.take().expect("a store's level");
+        let channels = self.channels as u64;
+        let output = self.output.clone();
+        let mut binned = Vec::new();
+        self.histograms.for_each(|block| {
+            let [z0, y0, x0] = block.origin;
+            let [nz, ny, nx] = block.bricks;
+            let per_channel = (nz * ny * nx) as usize;
+            binned.clear();
+            binned.resize(block.fine.len() * HISTOGRAM_BINS, 0u32);
+            for (i, f) in block.fine.iter().enumerate() {
+                binnings[i / per_channel]
+                    .bin_into(f, &mut binned[i * HISTOGRAM_BINS..(i + 1) * HISTOGRAM_BINS]);
+            }
+            let subset = ArraySubset::new_with_ranges(&[
+                0..channels,
+                z0..z0 + nz,
+                y0..y0 + ny,
+                x0..x0 + nx,
+                0..HISTOGRAM_BINS as u64,
+            ]);
+            histogram
+                .store_array_subset(&subset, binned.as_slice())
+                .map_err(|source| RegionWriteError::WriteArray {
+                    path: output.clone(),
+                    array: histogram_path.clone(),
+                    source: Box::new(source),
+                })
+        })?;
+        self.histograms.remove()?;
+        if let Some(cells) = self.cells {
+            cells.remove()?;
+        }
+        let grids = |exact: bool| {
+            self.grids
+                .iter()
+                .enumerate()
+                .map(|(k, g)| MinMaxGrid {
+                    path: if exact { &g.range_path } else { &g.minmax_path }.clone(),
+                    cell_shape: [CELL << k; 3],
+                    grid_shape: g.grid,
+                })
+                .collect()
+        };
+        Ok(RegionLevel {
+            image: self.image,
+            shape: self.shape,
+            factor: self.factor,
+            minmax: grids(false),
+            range: grids(true),
+            histogram: histogram_path,
+            bricks_written: written,
+            bricks_empty: empty,
+        })
+    }
 }

@@ -20,11 +20,17 @@ use std::sync::Mutex;
 use residency_schemas::{HISTOGRAM_BINS, Percentile};
 
 use crate::sample_format::{FINE_KEYS, Sample};
+use crate::source::PlaneRegion;
 
 /// Edge of a min/max cell in voxels of its level.
 pub const CELL: u64 = 8;
 /// Halo, in voxels, added around every cell.
 pub const HALO: u64 = 1;
+
+/// The cells (along one axis of extent `cells`) whose haloed ranges contain any of `voxels`.
+pub fn cells_reached(voxels: std::ops::Range<u64>, cells: u64) -> std::ops::Range<u64> {
+    *cells_of(voxels.start, cells).start()..*cells_of(voxels.end - 1, cells).end() + 1
+}
 
 /// The cells (along one axis of extent `cells`) whose haloed range contains voxel `v`.
 #[inline]
@@ -79,11 +85,15 @@ impl<T: Sample> Ranges<T> {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 #[serde(bound = "")]
 pub struct CellGrid<T: Sample> {
-    /// Number of cells held `z, y, x`: every cell of the level, or the rows a partition
-    /// reaches.
+    /// Number of cells held `z, y, x`: every cell of the level, the rows a partition reaches,
+    /// or the block of cells one column reaches.
     pub grid: [u64; 3],
     /// The level's cell row held first (0 for a whole level).
     pub z0: u64,
+    /// The level's cell held first along `y` (0 but in a column's block).
+    pub y0: u64,
+    /// The level's cell held first along `x` (0 but in a column's block).
+    pub x0: u64,
     /// Cell rows of the whole level.
     pub depth: u64,
     /// Channels.
@@ -95,28 +105,98 @@ pub struct CellGrid<T: Sample> {
 }
 
 impl<T: Sample> CellGrid<T> {
-    /// Folds in the ranges another pass over other voxels of the same level found (a
-    /// partition's rows, see [`CellGrid::for_rows`]), so this whole-level grid is what one
-    /// pass over both would have found.
+    /// Folds in the ranges another grid of the same level found over the cells both hold
+    /// (another pass's rows, or a column's block), so these cells are what one pass over both
+    /// grids' voxels would have found.
     ///
     /// # Panics
-    /// When this grid is not a whole level, or the rows do not fit it.
-    pub fn merge_rows(&mut self, rows: &Self) {
-        let [gz, gy, gx] = self.grid;
-        let z0 = rows.z0;
-        assert!(
-            self.z0 == 0
-                && rows.channels == self.channels
-                && rows.grid[1..] == self.grid[1..]
-                && z0 + rows.grid[0] <= gz
-        );
-        let plane = (gy * gx) as usize;
-        let n = rows.grid[0] as usize * plane;
-        for c in 0..self.channels {
-            let at = (c as u64 * gz + z0) as usize * plane;
-            self.haloed.merge_at(&rows.haloed, c * n..(c + 1) * n, at);
-            self.exact.merge_at(&rows.exact, c * n..(c + 1) * n, at);
+    /// When the grids are of different levels or channels.
+    pub fn merge_rows(&mut self, other: &Self) {
+        assert!(other.channels == self.channels && other.depth == self.depth);
+        let overlap = |a0: u64, an: u64, b0: u64, bn: u64| a0.max(b0)..(a0 + an).min(b0 + bn);
+        let zs = overlap(self.z0, self.grid[0], other.z0, other.grid[0]);
+        let ys = overlap(self.y0, self.grid[1], other.y0, other.grid[1]);
+        let xs = overlap(self.x0, self.grid[2], other.x0, other.grid[2]);
+        if zs.is_empty() || ys.is_empty() || xs.is_empty() {
+            return;
         }
+        let n = (xs.end - xs.start) as usize;
+        for c in 0..self.channels {
+            for z in zs.clone() {
+                for y in ys.clone() {
+                    let theirs = other.index(c, z - other.z0, y - other.y0, xs.start - other.x0);
+                    let at = self.index(c, z - self.z0, y - self.y0, xs.start - self.x0);
+                    self.haloed.merge_at(&other.haloed, theirs..theirs + n, at);
+                    self.exact.merge_at(&other.exact, theirs..theirs + n, at);
+                }
+            }
+        }
+    }
+
+    /// The cell rows held: `z0..z0 + grid[0]`.
+    pub fn rows(&self) -> std::ops::Range<u64> {
+        self.z0..self.z0 + self.grid[0]
+    }
+
+    /// An empty block of cells `rows × ys × xs` of a level of `depth` rows (a column's).
+    pub fn block(
+        channels: usize,
+        rows: std::ops::Range<u64>,
+        ys: std::ops::Range<u64>,
+        xs: std::ops::Range<u64>,
+        depth: u64,
+    ) -> Self {
+        let mut grid = Self::new(
+            channels,
+            [rows.end - rows.start, ys.end - ys.start, xs.end - xs.start],
+        );
+        (grid.z0, grid.y0, grid.x0, grid.depth) = (rows.start, ys.start, xs.start, depth);
+        grid
+    }
+
+    /// Its rows `rows` (as a block of the same cells in `y` and `x`).
+    pub fn rows_of(&self, rows: std::ops::Range<u64>) -> Self {
+        let mut out = Self::block(
+            self.channels,
+            rows,
+            self.y0..self.y0 + self.grid[1],
+            self.x0..self.x0 + self.grid[2],
+            self.depth,
+        );
+        out.merge_rows(self);
+        out
+    }
+
+    /// An empty window of rows `rows` of a level of `depth` rows of `gy × gx` cells.
+    pub fn window(
+        channels: usize,
+        [gy, gx]: [u64; 2],
+        rows: std::ops::Range<u64>,
+        depth: u64,
+    ) -> Self {
+        let mut grid = Self::new(channels, [rows.end - rows.start, gy, gx]);
+        grid.z0 = rows.start;
+        grid.depth = depth;
+        grid
+    }
+
+    /// Holds rows up to `end` (capped at the level's rows) as well, empty.
+    pub fn extend_to(&mut self, end: u64) {
+        let end = end.min(self.depth);
+        if end <= self.z0 + self.grid[0] {
+            return;
+        }
+        *self = self.rows_of(self.z0..end);
+    }
+
+    /// Takes the rows before `end` out of the window (they are final), which then starts at
+    /// `end` (or holds nothing past its last row).
+    pub fn split_before(&mut self, end: u64) -> Self {
+        let held = self.rows();
+        let end = end.clamp(held.start, held.end);
+        let front = self.rows_of(held.start..end);
+        *self = self.rows_of(end..held.end);
+        front
     }
 
     /// An empty grid of `grid` cells per channel.
@@ -125,6 +205,8 @@ impl<T: Sample> CellGrid<T> {
         Self {
             grid,
             z0: 0,
+            y0: 0,
+            x0: 0,
             depth: grid[0],
             channels,
             haloed: Ranges::new(n),
@@ -133,7 +215,7 @@ impl<T: Sample> CellGrid<T> {
     }
 
     /// The cell rows covering voxel planes `planes` of a level of `shape`, with the rows their
-    /// halos reach (one up, one down): what a partition's planes can touch.
+    /// halos reach (one up, one down): what a pass over those planes can touch.
     pub fn for_rows(channels: usize, shape: [u64; 3], planes: std::ops::Range<u64>) -> Self {
         let full = shape.map(|s| s.div_ceil(CELL));
         let z1 = (planes.end.div_ceil(CELL) + 1).min(full[0]);
@@ -154,44 +236,73 @@ impl<T: Sample> CellGrid<T> {
         ((c as u64 * self.grid[0] + z) * gy * gx + y * gx + x) as usize
     }
 
-    /// Folds one slab of voxels (`[c][nz][Y][X]`, starting at depth `z0` of a level of
-    /// `shape`) into the cells. Slabs may arrive in any order.
-    pub fn add_slab(&mut self, slab: &[T], z0: u64, nz: u64, shape: [u64; 3]) {
+    /// Folds one slab of voxels (`[c][nz][y][x]` over `window` of each plane, starting at
+    /// depth `z0` of the level) into the cells. Slabs and windows may arrive in any
+    /// order: a cell at a window's edge takes its halo from the next window's voxels when
+    /// they come.
+    pub fn add_slab(&mut self, slab: &[T], z0: u64, nz: u64, window: PlaneRegion) {
         use rayon::prelude::*;
-        let [_, ny, nx] = shape;
-        let plane = (ny * nx) as usize;
-        let [_, gy, gx] = self.grid;
+        if nz == 0 {
+            return;
+        }
+        let plane = window.area() as usize;
+        // The level's cells per row (a block holds the cells its column reaches).
+        let gy = (window.y0 + window.ny)
+            .div_ceil(CELL)
+            .max(self.y0 + self.grid[1]);
+        let gx = (window.x0 + window.nx)
+            .div_ceil(CELL)
+            .max(self.x0 + self.grid[2]);
+        // The rows these planes reach, halos included, may start past the window's end.
+        self.extend_to(*cells_of(z0 + nz - 1, self.depth).end() + 1);
         let slices: Vec<(usize, u64, SliceCells<T>)> = (0..self.channels)
             .flat_map(|c| (0..nz).map(move |dz| (c, dz)))
             .collect::<Vec<_>>()
             .into_par_iter()
             .map(|(c, dz)| {
                 let start = (c as u64 * nz + dz) as usize * plane;
-                let cells = slice_cells(&slab[start..start + plane], ny, nx, gy, gx);
+                let cells = slice_cells(&slab[start..start + plane], window, [gy, gx]);
                 (c, z0 + dz, cells)
             })
             .collect();
         for (c, z, cells) in slices {
             let held = self.z0..self.z0 + self.grid[0];
+            let (hy, hx) = (&cells.haloed_cells[0], &cells.haloed_cells[1]);
+            let w = (hx.end - hx.start) as usize;
             for cz in cells_of(z, self.depth).filter(|cz| held.contains(cz)) {
-                let base = self.index(c, cz - self.z0, 0, 0);
-                for i in 0..cells.haloed.min.len() {
-                    self.haloed
-                        .fold(base + i, cells.haloed.min[i], cells.haloed.max[i]);
+                for (j, cy) in hy.clone().enumerate() {
+                    let base = self.index(c, cz - self.z0, cy - self.y0, hx.start - self.x0);
+                    for i in 0..w {
+                        let k = j * w + i;
+                        self.haloed
+                            .fold(base + i, cells.haloed.min[k], cells.haloed.max[k]);
+                    }
                 }
             }
-            let base = self.index(c, z / CELL - self.z0, 0, 0);
-            for i in 0..cells.exact.min.len() {
-                self.exact
-                    .fold(base + i, cells.exact.min[i], cells.exact.max[i]);
+            let (ey, ex) = (&cells.exact_cells[0], &cells.exact_cells[1]);
+            let w = (ex.end - ex.start) as usize;
+            for (j, cy) in ey.clone().enumerate() {
+                let base = self.index(c, z / CELL - self.z0, cy - self.y0, ex.start - self.x0);
+                for i in 0..w {
+                    let k = j * w + i;
+                    self.exact
+                        .fold(base + i, cells.exact.min[k], cells.exact.max[k]);
+                }
             }
         }
     }
 
     /// The next coarser grid: each cell is the min of mins and max of maxes of 2×2×2 cells.
+    /// A window of rows starting on an even row gives the coarser rows it covers.
     pub fn coarsen(&self) -> Self {
+        debug_assert!(self.z0.is_multiple_of(2) && self.y0 == 0 && self.x0 == 0);
         let g = self.grid.map(|s| s.div_ceil(2));
-        let mut out = Self::new(self.channels, g);
+        let mut out = Self::window(
+            self.channels,
+            [g[1], g[2]],
+            self.z0 / 2..self.z0 / 2 + g[0],
+            self.depth.div_ceil(2),
+        );
         for c in 0..self.channels {
             for z in 0..self.grid[0] {
                 for y in 0..self.grid[1] {
@@ -227,27 +338,52 @@ impl<T: Sample> CellGrid<T> {
     }
 }
 
-/// The cells of one slice: haloed ranges (x and y halo; z is the caller's) and exact ranges.
+/// The cells one window of a slice reaches: haloed ranges (x and y halo; z is the caller's)
+/// over the cells `haloed_cells` (rows, columns), and exact ranges over `exact_cells`.
 struct SliceCells<T: Sample> {
+    haloed_cells: [std::ops::Range<u64>; 2],
     haloed: Ranges<T>,
+    exact_cells: [std::ops::Range<u64>; 2],
     exact: Ranges<T>,
 }
 
-/// Min/max cells of one `ny × nx` slice, as `gy × gx` row-major grids: haloed in x and y,
-/// and exact.
-fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> SliceCells<T> {
-    let mut row = Ranges::<T>::new(gx as usize);
+/// Min/max cells of one window of a slice (`window.ny × window.nx` values) of a level whose
+/// planes have `grid` = `gy, gx` cells: haloed in x and y, and exact, over the cells the
+/// window's voxels reach.
+fn slice_cells<T: Sample>(slice: &[T], window: PlaneRegion, [gy, gx]: [u64; 2]) -> SliceCells<T> {
+    let [y1, x1] = window.end();
+    let haloed_cells = [
+        cells_reached(window.y0..y1, gy),
+        cells_reached(window.x0..x1, gx),
+    ];
+    let exact_cells = [
+        window.y0 / CELL..(y1 - 1) / CELL + 1,
+        window.x0 / CELL..(x1 - 1) / CELL + 1,
+    ];
+    let (hx0, ex0) = (haloed_cells[1].start, exact_cells[1].start);
+    let hw = (haloed_cells[1].end - hx0) as usize;
+    let ew = (exact_cells[1].end - ex0) as usize;
     let mut out = SliceCells {
-        haloed: Ranges::new((gy * gx) as usize),
-        exact: Ranges::new((gy * gx) as usize),
+        haloed: Ranges::new((haloed_cells[0].end - haloed_cells[0].start) as usize * hw),
+        exact: Ranges::new((exact_cells[0].end - exact_cells[0].start) as usize * ew),
+        haloed_cells,
+        exact_cells,
     };
-    for y in 0..ny {
-        row.min.fill(T::HIGHEST);
-        row.max.fill(T::LOWEST);
-        let values = &slice[(y * nx) as usize..((y + 1) * nx) as usize];
-        for (cx, cell) in values.chunks(CELL as usize).enumerate() {
-            let (mut mn, mut mx) = (row.min[cx], row.max[cx]);
-            for &v in cell {
+    let mut exact_row = Ranges::<T>::new(ew);
+    let mut haloed_row = Ranges::<T>::new(hw);
+    let nx = window.nx;
+    for y in window.y0..y1 {
+        exact_row.min.fill(T::HIGHEST);
+        exact_row.max.fill(T::LOWEST);
+        let row = (y - window.y0) * nx;
+        let values = &slice[row as usize..(row + nx) as usize];
+        // Exact ranges of the row's part of each cell (the window may start mid-cell).
+        let mut i = 0;
+        let mut cx = window.x0 / CELL;
+        while i < nx {
+            let end = ((cx + 1) * CELL - window.x0).min(nx);
+            let (mut mn, mut mx) = (T::HIGHEST, T::LOWEST);
+            for &v in &values[i as usize..end as usize] {
                 if v < mn {
                     mn = v;
                 }
@@ -255,26 +391,35 @@ fn slice_cells<T: Sample>(slice: &[T], ny: u64, nx: u64, gy: u64, gx: u64) -> Sl
                     mx = v;
                 }
             }
-            row.min[cx] = mn;
-            row.max[cx] = mx;
+            exact_row.fold((cx - ex0) as usize, mn, mx);
+            i = end;
+            cx += 1;
         }
-        let base = ((y / CELL) * gx) as usize;
-        for i in 0..gx as usize {
-            out.exact.fold(base + i, row.min[i], row.max[i]);
+        let base = ((y / CELL - out.exact_cells[0].start) * ew as u64) as usize;
+        for i in 0..ew {
+            out.exact.fold(base + i, exact_row.min[i], exact_row.max[i]);
         }
-        // Halo in x: the voxel just left of and just right of each cell.
-        for cx in 0..gx {
+        // Haloed: each cell's own part, and the voxel just left of and just right of it.
+        haloed_row.min.fill(T::HIGHEST);
+        haloed_row.max.fill(T::LOWEST);
+        for cx in out.haloed_cells[1].clone() {
+            let h = (cx - hx0) as usize;
+            if out.exact_cells[1].contains(&cx) {
+                let e = (cx - ex0) as usize;
+                haloed_row.fold(h, exact_row.min[e], exact_row.max[e]);
+            }
             for x in [(cx * CELL).wrapping_sub(1), (cx + 1) * CELL] {
-                if x < nx {
-                    let v = values[x as usize];
-                    row.fold(cx as usize, v, v);
+                if (window.x0..x1).contains(&x) {
+                    let v = values[(x - window.x0) as usize];
+                    haloed_row.fold(h, v, v);
                 }
             }
         }
         for cy in cells_of(y, gy) {
-            let base = (cy * gx) as usize;
-            for i in 0..gx as usize {
-                out.haloed.fold(base + i, row.min[i], row.max[i]);
+            let base = ((cy - out.haloed_cells[0].start) * hw as u64) as usize;
+            for i in 0..hw {
+                out.haloed
+                    .fold(base + i, haloed_row.min[i], haloed_row.max[i]);
             }
         }
     }
@@ -620,13 +765,29 @@ impl ChannelAccumulator {
 /// Fine histograms of every brick of one level, filled concurrently.
 #[derive(Debug)]
 pub struct LevelHistograms {
-    /// Bricks held per channel `z, y, x`: every brick of the level, or the brick rows a
-    /// partition writes.
+    /// Bricks held per channel `z, y, x`: every brick of the level, the brick rows a
+    /// partition writes, or the bricks of one column.
     pub bricks: [u64; 3],
     /// The level's brick row held first (0 for a whole level).
     pub z0: u64,
+    /// The first brick held along `y` and `x` (0 but in a column).
+    pub yx0: [u64; 2],
+    /// Channels.
+    pub channels: usize,
     /// `[c][bz][by][bx]` fine histograms.
     pub fine: Mutex<Vec<FineHistogram>>,
+}
+
+/// Fine histograms of a block of bricks: `[c][z][y][x]` over `bricks` from brick `origin`
+/// (`z, y, x`).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct HistogramBlock {
+    /// The first brick `z, y, x`.
+    pub origin: [u64; 3],
+    /// Bricks per channel `z, y, x`.
+    pub bricks: [u64; 3],
+    /// The histograms.
+    pub fine: Vec<FineHistogram>,
 }
 
 impl LevelHistograms {
@@ -636,6 +797,8 @@ impl LevelHistograms {
         Self {
             bricks,
             z0: 0,
+            yx0: [0, 0],
+            channels,
             fine: Mutex::new(vec![FineHistogram::default(); n]),
         }
     }
@@ -649,45 +812,73 @@ impl LevelHistograms {
         held
     }
 
-    /// Takes the histograms of the bricks another pass wrote (a partition's rows from `z0`,
-    /// `[c][z][y][x]`, see [`LevelHistograms::for_rows`]: every brick whose histogram it holds
-    /// is one this pass did not see) into this whole level.
-    ///
-    /// # Panics
-    /// When this is not a whole level, or the rows do not fit it.
-    pub fn merge_rows(&self, z0: u64, rows: Vec<FineHistogram>) {
-        assert_eq!(self.z0, 0);
+    /// Room for the bricks `rows × ys × xs` (a column's).
+    pub fn block(
+        channels: usize,
+        rows: std::ops::Range<u64>,
+        ys: std::ops::Range<u64>,
+        xs: std::ops::Range<u64>,
+    ) -> Self {
+        let mut held = Self::new(
+            channels,
+            [rows.end - rows.start, ys.end - ys.start, xs.end - xs.start],
+        );
+        held.z0 = rows.start;
+        held.yx0 = [ys.start, xs.start];
+        held
+    }
+
+    /// Holds brick rows up to `end` as well (capped at the level's `depth` rows), empty.
+    pub fn extend_to(&mut self, end: u64, depth: u64) {
+        let end = end.min(depth);
         let [bz, by, bx] = self.bricks;
+        if end <= self.z0 + bz {
+            return;
+        }
+        let fine = self.fine.get_mut().expect("histograms");
         let plane = (by * bx) as usize;
-        let mut fine = self.fine.lock().expect("histograms");
-        let channels = fine.len() / (bz as usize * plane).max(1);
-        let depth = rows.len() / (channels * plane).max(1);
-        assert!(rows.len() == channels * depth * plane && z0 as usize + depth <= bz as usize);
-        for (i, theirs) in rows.into_iter().enumerate() {
-            let (c, rest) = (i / (depth * plane), i % (depth * plane));
-            let at = (c * bz as usize + z0 as usize) * plane + rest;
-            if !theirs.counts.is_empty() {
-                fine[at] = theirs;
+        let rows = (end - self.z0) as usize;
+        let mut grown = vec![FineHistogram::default(); self.channels * rows * plane];
+        for (i, h) in fine.drain(..).enumerate() {
+            let (c, rest) = (i / (bz as usize * plane), i % (bz as usize * plane));
+            grown[c * rows * plane + rest] = h;
+        }
+        *fine = grown;
+        self.bricks[0] = end - self.z0;
+    }
+
+    /// Takes the rows before `end` out (they are final), with the window then starting at
+    /// `end`.
+    pub fn split_before(&mut self, end: u64) -> HistogramBlock {
+        let [bz, by, bx] = self.bricks;
+        let end = end.clamp(self.z0, self.z0 + bz);
+        let taken = (end - self.z0) as usize;
+        let fine = self.fine.get_mut().expect("histograms");
+        let plane = (by * bx) as usize;
+        let (mut front, mut back) = (Vec::new(), Vec::new());
+        for (i, h) in fine.drain(..).enumerate() {
+            if i / plane % (bz as usize).max(1) < taken {
+                front.push(h);
+            } else {
+                back.push(h);
             }
         }
+        *fine = back;
+        let block = HistogramBlock {
+            origin: [self.z0, self.yx0[0], self.yx0[1]],
+            bricks: [taken as u64, by, bx],
+            fine: front,
+        };
+        self.z0 = end;
+        self.bricks[0] = bz - taken as u64;
+        block
     }
 
-    /// Linear index of a brick (level coordinates; its row must be held).
+    /// Linear index of a brick (level coordinates; it must be held).
     pub fn index(&self, c: usize, b: [u64; 3]) -> usize {
         let [bz, by, bx] = self.bricks;
-        ((c as u64 * bz + b[0] - self.z0) * by * bx + b[1] * bx + b[2]) as usize
-    }
-
-    /// The binned histograms `[c][bz][by][bx][HISTOGRAM_BINS]`.
-    pub fn binned(&self, binnings: &[Binning]) -> Vec<u32> {
-        let fine = self.fine.lock().expect("histograms");
-        let per_channel = fine.len() / binnings.len().max(1);
-        let mut out = vec![0u32; fine.len() * HISTOGRAM_BINS];
-        for (i, f) in fine.iter().enumerate() {
-            binnings[i / per_channel]
-                .bin_into(f, &mut out[i * HISTOGRAM_BINS..(i + 1) * HISTOGRAM_BINS]);
-        }
-        out
+        let [y0, x0] = self.yx0;
+        ((c as u64 * bz + b[0] - self.z0) * by * bx + (b[1] - y0) * bx + b[2] - x0) as usize
     }
 }
 
@@ -696,17 +887,117 @@ mod tests {
     use super::*;
 
     /// A partition's rows of cells see what the whole grid sees there, and merge back into it.
+    /// Columns of a plane, in any order and not on cell edges, fold into the cells what the
+    /// whole plane does, halos across column edges included.
+    #[test]
+    fn columns_see_what_whole_planes_see() {
+        let shape = [12, 30, 37];
+        let values: Vec<u16> = (0..12 * 30 * 37)
+            .map(|i| (i * 7919 % 1009) as u16)
+            .collect();
+        let plane = PlaneRegion::whole([30, 37]);
+        let mut whole = CellGrid::<u16>::for_shape(1, shape);
+        whole.add_slab(&values, 0, 12, plane);
+        let mut cut = CellGrid::<u16>::for_shape(1, shape);
+        for (y0, ny, x0, nx) in [
+            (13, 17, 20, 17),
+            (0, 13, 0, 20),
+            (13, 17, 0, 20),
+            (0, 13, 20, 17),
+        ] {
+            let region = PlaneRegion { y0, x0, ny, nx };
+            let slab: Vec<u16> = (0..12)
+                .flat_map(|z| {
+                    let values = &values;
+                    (y0..y0 + ny).flat_map(move |y| {
+                        let row = ((z * 30 + y) * 37) as usize;
+                        values[row + x0 as usize..row + (x0 + nx) as usize]
+                            .iter()
+                            .copied()
+                    })
+                })
+                .collect();
+            cut.add_slab(&slab, 0, 12, region);
+        }
+        assert_eq!(cut.haloed, whole.haloed);
+        assert_eq!(cut.exact, whole.exact);
+    }
+
+    /// A window that slides down the level (rows taken out as they become final) sees what
+    /// the whole grid sees, and its histograms come out row by row.
+    #[test]
+    fn sliding_windows_give_the_whole_grid_row_by_row() {
+        let shape = [40, 8, 8];
+        let values: Vec<u16> = (0..40 * 64).map(|i| (i * 13 % 977) as u16).collect();
+        let plane = PlaneRegion::whole([8, 8]);
+        let mut whole = CellGrid::<u16>::for_shape(1, shape);
+        whole.add_slab(&values, 0, 40, plane);
+        let mut window = CellGrid::<u16>::window(1, [1, 1], 0..0, 5);
+        let mut rows = CellGrid::<u16>::window(1, [1, 1], 0..0, 5);
+        for z0 in (0..40).step_by(6) {
+            let nz = 6.min(40 - z0);
+            window.add_slab(
+                &values[(z0 * 64) as usize..((z0 + nz) * 64) as usize],
+                z0,
+                nz,
+                plane,
+            );
+            // Rows whose halo ends before the next plane are final.
+            let done = window.split_before((z0 + nz - HALO) / CELL);
+            assert_eq!(done.z0, rows.rows().end);
+            rows.extend_to(done.rows().end);
+            rows.merge_rows(&done);
+            assert!(window.grid[0] <= 3, "{:?}", window.rows());
+        }
+        let last = window.split_before(u64::MAX);
+        rows.extend_to(last.rows().end);
+        rows.merge_rows(&last);
+        assert_eq!(rows.rows(), 0..5);
+        assert_eq!(rows.haloed, whole.haloed);
+        assert_eq!(rows.exact, whole.exact);
+
+        let mut histograms = LevelHistograms::for_rows(2, [5, 1, 2], 0..0);
+        histograms.extend_to(3, 5);
+        for b in 0..3 {
+            let i = histograms.index(1, [b, 0, 1]);
+            histograms.fine.get_mut().unwrap()[i].first_key = b as u32 + 10;
+        }
+        let front = histograms.split_before(2);
+        assert_eq!((front.origin, front.bricks), ([0, 0, 0], [2, 1, 2]));
+        assert_eq!((histograms.z0, histograms.bricks), (2, [1, 1, 2]));
+        assert_eq!(
+            front.fine.iter().map(|h| h.first_key).collect::<Vec<_>>(),
+            [0, 0, 0, 0, 0, 10, 0, 11]
+        );
+        let mut column = LevelHistograms::block(1, 4..6, 2..3, 1..3);
+        let i = column.index(0, [5, 2, 2]);
+        assert_eq!(i, 3);
+        column.fine.get_mut().unwrap()[i].first_key = 7;
+        let block = column.split_before(u64::MAX);
+        assert_eq!((block.origin, block.bricks), ([4, 2, 1], [2, 1, 2]));
+        assert_eq!(block.fine[3].first_key, 7);
+        histograms.extend_to(9, 5);
+        assert_eq!(histograms.bricks, [3, 1, 2]);
+        let i = histograms.index(1, [2, 0, 1]);
+        assert_eq!(histograms.fine.get_mut().unwrap()[i].first_key, 12);
+    }
+
     #[test]
     fn row_windows_see_and_merge_what_the_whole_grid_sees() {
         let shape = [40, 8, 8];
         let values: Vec<u16> = (0..40 * 64).map(|i| (i * 7 % 1000) as u16).collect();
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
-        whole.add_slab(&values, 0, 40, shape);
+        whole.add_slab(&values, 0, 40, PlaneRegion::whole([shape[1], shape[2]]));
         let mut merged = CellGrid::<u16>::for_shape(1, shape);
         for planes in [0..16, 16..24, 24..40] {
             let mut part = CellGrid::<u16>::for_rows(1, shape, planes.clone());
             let slab = &values[(planes.start * 64) as usize..(planes.end * 64) as usize];
-            part.add_slab(slab, planes.start, planes.end - planes.start, shape);
+            part.add_slab(
+                slab,
+                planes.start,
+                planes.end - planes.start,
+                PlaneRegion::whole([shape[1], shape[2]]),
+            );
             merged.merge_rows(&part);
         }
         let rows = CellGrid::<u16>::for_rows(1, shape, 16..24);
@@ -732,7 +1023,7 @@ mod tests {
         // 1 × 1 × 20 volume: value = x.
         let slab: Vec<u16> = (0..20).collect();
         let mut g = CellGrid::<u16>::for_shape(1, [1, 1, 20]);
-        g.add_slab(&slab, 0, 1, [1, 1, 20]);
+        g.add_slab(&slab, 0, 1, PlaneRegion::whole([1, 20]));
         assert_eq!(g.grid, [1, 1, 3]);
         assert_eq!(g.haloed.min, [0, 7, 15]);
         assert_eq!(g.haloed.max, [8, 16, 19]);

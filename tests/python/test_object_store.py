@@ -353,7 +353,13 @@ def test_partitions_write_into_the_bucket_the_bytes_of_one_local_convert(s3, tmp
     # In the bucket: the partitions' bricks and hand-over files, and no root metadata.
     assert not (remote / "zarr.json").exists()
     assert sorted(p.name for p in (remote / ".partitions").iterdir()) == [
-        "0-of-3", "1-of-3", "2-of-3", "plan"]
+        ".records", "0-of-3", "1-of-3", "2-of-3", "plan"]
+    # Each partition's records of region metadata, level by level, beside its hand-over file.
+    records = sorted(p.name for p in (remote / ".partitions" / ".records").iterdir())
+    levels = len(records) // 6
+    assert levels >= 1 and records == sorted(
+        f"{i}-of-3.{l}.{kind}" for i in range(3) for l in range(levels)
+        for kind in ("cells", "histograms"))
     done = run("ingest", "finalize", "-o", url, "--s3-endpoint", s3["endpoint"], "--quiet")
     assert done.returncode == 0, done.stderr
     assert done.stdout.startswith(f"wrote {url} (uint16)\n")

@@ -1,10 +1,9 @@
 //! Raw volumes: headerless (or fixed-header) binary stacks, `x` fastest, then `y`, then `z`.
 
 use std::fs::File;
-use std::io::{Read, Seek, SeekFrom};
 use std::path::Path;
 
-use super::{PlaneOut, SourceError, SourceInfo, VolumeSource};
+use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
 use crate::sample_format::SampleType;
 
 /// Layout options for raw inputs (`--dims`, `--dtype`, `--endian`, `--header-bytes`).
@@ -140,23 +139,35 @@ impl VolumeSource for RawSource {
         &self.info
     }
 
-    fn read_plane(
+    fn read_region(
         &mut self,
         _channel: usize,
         z: u64,
+        region: PlaneRegion,
         mut out: PlaneOut<'_>,
     ) -> Result<(), SourceError> {
-        let [_, y, x] = self.info.shape;
-        let plane_bytes = y * x * self.info.format.bytes() as u64;
-        self.buffer.resize(plane_bytes as usize, 0);
-        self.file
-            .seek(SeekFrom::Start(self.header_bytes + z * plane_bytes))
-            .and_then(|_| self.file.read_exact(&mut self.buffer))
-            .map_err(|source| SourceError::ReadPlane {
-                path: self.info.path.clone(),
-                z,
-                source,
-            })?;
+        use std::os::unix::fs::FileExt;
+        let [_, _, x] = self.info.shape;
+        let sample = self.info.format.bytes() as u64;
+        let plane_start = self.header_bytes + z * self.info.shape[1] * x * sample;
+        let row_bytes = (region.nx * sample) as usize;
+        self.buffer.resize(region.ny as usize * row_bytes, 0);
+        let cannot_read = |source| SourceError::ReadPlane {
+            path: self.info.path.clone(),
+            z,
+            source,
+        };
+        if region.nx == x {
+            // Whole rows lie next to each other in the file: one read.
+            self.file
+                .read_exact_at(&mut self.buffer, plane_start + region.y0 * x * sample)
+                .map_err(cannot_read)?;
+        } else {
+            for (dy, row) in self.buffer.chunks_exact_mut(row_bytes).enumerate() {
+                let at = plane_start + ((region.y0 + dy as u64) * x + region.x0) * sample;
+                self.file.read_exact_at(row, at).map_err(cannot_read)?;
+            }
+        }
         out.fill_from_bytes(&self.buffer, self.info.format, self.big_endian, 1, 0);
         Ok(())
     }

@@ -2,17 +2,19 @@
 
 use std::path::{Path, PathBuf};
 
-use super::tiff::{NATIVE_BIG_ENDIAN, check_page, decode_page, open_decoder, page_format};
-use super::{PlaneOut, SourceError, SourceInfo, VolumeSource};
+use super::tiff::{NATIVE_BIG_ENDIAN, check_page, decode_region, open_decoder, page_format};
+use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
 
 /// A folder or glob of single-slice TIFF files.
 pub struct SliceFolderSource {
     info: SourceInfo,
     files: Vec<PathBuf>,
     samples_per_pixel: usize,
-    /// Slice decoded in `page`.
-    cached: Option<u64>,
+    /// Slice and region decoded in `page`.
+    cached: Option<(u64, PlaneRegion)>,
     page: Vec<u8>,
+    /// One decoded strip or tile, while a region is gathered.
+    chunk: Vec<u8>,
 }
 
 fn is_tiff(path: &Path) -> bool {
@@ -85,6 +87,7 @@ impl SliceFolderSource {
             samples_per_pixel,
             cached: None,
             page: Vec::new(),
+            chunk: Vec::new(),
         })
     }
 }
@@ -94,14 +97,15 @@ impl VolumeSource for SliceFolderSource {
         &self.info
     }
 
-    fn read_plane(
+    fn read_region(
         &mut self,
         channel: usize,
         z: u64,
+        region: PlaneRegion,
         mut out: PlaneOut<'_>,
     ) -> Result<(), SourceError> {
         let file = &self.files[z as usize];
-        if self.cached != Some(z) {
+        if self.cached != Some((z, region)) {
             self.cached = None;
             let (mut decoder, tiff) = open_decoder(file)?;
             let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
@@ -126,8 +130,18 @@ impl VolumeSource for SliceFolderSource {
                     expected_format: self.info.format,
                 });
             }
-            decode_page(&mut decoder, file, 0, tiff, format, spp, &mut self.page)?;
-            self.cached = Some(z);
+            decode_region(
+                &mut decoder,
+                file,
+                0,
+                tiff,
+                (format, spp),
+                [ey, ex],
+                region,
+                &mut self.page,
+                &mut self.chunk,
+            )?;
+            self.cached = Some((z, region));
         }
         out.fill_from_bytes(
             &self.page,

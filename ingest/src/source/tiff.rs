@@ -2,7 +2,7 @@
 //! decodes (none, LZW, Deflate, PackBits), with ImageJ hyperstack and OME-TIFF metadata.
 
 use std::fs::File;
-use std::io::BufReader;
+use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
 
 use tiff::decoder::{Decoder, Limits};
@@ -10,7 +10,7 @@ use tiff::tags::Tag;
 
 use super::tiff_claims::PageClaims;
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
-use super::{PlaneOut, SourceError, SourceInfo, VolumeSource};
+use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
 use crate::sample_format::SampleType;
 
 /// A TIFF file holding a z-stack of one or more channels.
@@ -20,9 +20,11 @@ pub struct TiffSource {
     layout: StackLayout,
     samples_per_pixel: usize,
     file: TiffFile,
-    /// Index of the page decoded in `page`.
-    cached: Option<u64>,
+    /// The page and region decoded in `page`.
+    cached: Option<(u64, PlaneRegion)>,
     page: Vec<u8>,
+    /// One decoded strip or tile, while a region is gathered.
+    chunk: Vec<u8>,
 }
 
 /// What the checks of a TIFF file's claims need to know about it.
@@ -183,6 +185,107 @@ pub(super) fn decode_page(
         })
 }
 
+/// Decodes `region` of the current page (`page` of `path`, planes of `plane` = `y, x`
+/// voxels) into `buffer`, as [`decode_page`] does the whole page: rows of `region.nx` pixels
+/// of `samples` interleaved samples, in native byte order. A region smaller than the page
+/// decodes only the strips or tiles it meets, each into `chunk` first.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn decode_region(
+    decoder: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    page: u64,
+    file: TiffFile,
+    (format, samples): (SampleType, usize),
+    plane: [u64; 2],
+    region: PlaneRegion,
+    buffer: &mut Vec<u8>,
+    chunk: &mut Vec<u8>,
+) -> Result<(), SourceError> {
+    if region.is_whole(plane) {
+        return decode_page(decoder, path, page, file, format, samples, buffer);
+    }
+    check_page(decoder, path, page, file, format, samples)?;
+    let cannot_decode = |source| SourceError::Decode {
+        path: path.to_path_buf(),
+        page,
+        source,
+    };
+    let pixel = samples * format.bytes();
+    buffer.resize(region.area() as usize * pixel, 0);
+    // Strips are chunks as wide as the page.
+    let (cw, ch) = decoder.chunk_dimensions();
+    let (cw, ch) = (u64::from(cw), u64::from(ch));
+    let across = plane[1].div_ceil(cw);
+    let [y1, x1] = region.end();
+    let tag = |decoder: &mut Decoder<BufReader<File>>, tag| {
+        decoder
+            .find_tag_unsigned::<u16>(tag)
+            .ok()
+            .flatten()
+            .unwrap_or(1)
+    };
+    if tag(decoder, Tag::Compression) == 1 && tag(decoder, Tag::Predictor) == 1 {
+        // Uncompressed (ImageJ's and tifffile's one strip per page): read the region's row
+        // segments where they lie, never the whole strip.
+        let offsets = match decoder.get_chunk_type() {
+            tiff::decoder::ChunkType::Strip => Tag::StripOffsets,
+            tiff::decoder::ChunkType::Tile => Tag::TileOffsets,
+        };
+        let offsets = decoder.get_tag_u64_vec(offsets).map_err(cannot_decode)?;
+        let big_endian = decoder.byte_order() == tiff::tags::ByteOrder::BigEndian;
+        let file = decoder.inner();
+        for ty in region.y0 / ch..y1.div_ceil(ch) {
+            for tx in region.x0 / cw..x1.div_ceil(cw) {
+                let offset = offsets
+                    .get((ty * across + tx) as usize)
+                    .copied()
+                    .ok_or_else(|| {
+                        cannot_decode(tiff::TiffError::FormatError(
+                            tiff::TiffFormatError::InconsistentSizesEncountered,
+                        ))
+                    })?;
+                let (cy0, cx0) = (ty * ch, tx * cw);
+                let xs = region.x0.max(cx0)..x1.min(cx0 + cw);
+                let n = (xs.end - xs.start) as usize * pixel;
+                for y in region.y0.max(cy0)..y1.min(cy0 + ch) {
+                    let at = offset + ((y - cy0) * cw + xs.start - cx0) * pixel as u64;
+                    let dst = ((y - region.y0) * region.nx + xs.start - region.x0) as usize * pixel;
+                    file.seek(SeekFrom::Start(at))
+                        .and_then(|_| file.read_exact(&mut buffer[dst..dst + n]))
+                        .map_err(|e| cannot_decode(tiff::TiffError::IoError(e)))?;
+                }
+            }
+        }
+        if big_endian != NATIVE_BIG_ENDIAN {
+            for sample in buffer.chunks_exact_mut(format.bytes()) {
+                sample.reverse();
+            }
+        }
+        return Ok(());
+    }
+    for ty in region.y0 / ch..y1.div_ceil(ch) {
+        for tx in region.x0 / cw..x1.div_ceil(cw) {
+            let index = u32::try_from(ty * across + tx)
+                .map_err(|_| cannot_decode(tiff::TiffError::LimitsExceeded))?;
+            let (dw, dh) = decoder.chunk_data_dimensions(index);
+            let (dw, dh) = (u64::from(dw), u64::from(dh));
+            chunk.resize((dw * dh) as usize * pixel, 0);
+            decoder
+                .read_chunk_bytes(index, chunk)
+                .map_err(cannot_decode)?;
+            let (cy0, cx0) = (ty * ch, tx * cw);
+            let xs = region.x0.max(cx0)..x1.min(cx0 + dw);
+            let n = (xs.end - xs.start) as usize * pixel;
+            for y in region.y0.max(cy0)..y1.min(cy0 + dh) {
+                let src = ((y - cy0) * dw + xs.start - cx0) as usize * pixel;
+                let dst = ((y - region.y0) * region.nx + xs.start - region.x0) as usize * pixel;
+                buffer[dst..dst + n].copy_from_slice(&chunk[src..src + n]);
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Whether decoded pages are big-endian (they are in native byte order).
 pub(super) const NATIVE_BIG_ENDIAN: bool = cfg!(target_endian = "big");
 
@@ -328,6 +431,7 @@ impl TiffSource {
             file,
             cached: None,
             page: Vec::new(),
+            chunk: Vec::new(),
         })
     }
 }
@@ -337,16 +441,17 @@ impl VolumeSource for TiffSource {
         &self.info
     }
 
-    fn read_plane(
+    fn read_region(
         &mut self,
         channel: usize,
         z: u64,
+        region: PlaneRegion,
         mut out: PlaneOut<'_>,
     ) -> Result<(), SourceError> {
         let spp = self.samples_per_pixel;
         let page = (channel / spp) as u64 * self.layout.channel_stride + z * self.layout.z_stride;
         let path = self.info.path.clone();
-        if self.cached != Some(page) {
+        if self.cached != Some((page, region)) {
             self.cached = None;
             self.decoder
                 .seek_to_image(page as usize)
@@ -377,16 +482,18 @@ impl VolumeSource for TiffSource {
                     expected_format: self.info.format,
                 });
             }
-            decode_page(
+            decode_region(
                 &mut self.decoder,
                 &path,
                 page,
                 self.file,
-                format,
-                spp,
+                (format, spp),
+                [ey, ex],
+                region,
                 &mut self.page,
+                &mut self.chunk,
             )?;
-            self.cached = Some(page);
+            self.cached = Some((page, region));
         }
         out.fill_from_bytes(
             &self.page,

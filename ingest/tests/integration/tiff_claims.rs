@@ -356,35 +356,40 @@ fn a_plane_larger_than_memory_is_refused_even_when_the_file_holds_it() {
 }
 
 #[test]
-fn a_stack_whose_slabs_exceed_memory_is_refused_before_a_store_is_created() {
-    // 64 pages that all point at one real (sparse) plane of about 1/64 of the memory: every
-    // page is honest, but converting holds two slabs of 64 planes.
-    let memory = residency_ingest::memory::physical_memory().expect("physical memory");
-    let side = ((memory / 128) as f64).sqrt().ceil() as u64;
-    let plane = side * side * 2;
-    assert!(plane <= memory && 2 * 64 * plane > memory);
+fn a_stack_that_fits_no_column_of_the_memory_limit_is_refused_before_a_store_is_created() {
+    // 64 pages that all point at one real (sparse) plane of 1 GiB: every page is honest, but
+    // even the smallest columns hold more than --memory-limit allows.
+    let side = 1u64 << 15;
+    let plane = side * side;
     let dir = tempfile::tempdir().unwrap();
     let pages = vec![page(side, side, 1 << 16); 64];
     let bytes = build(false, &pages, &[]);
-    assert!(bytes.len() < 1 << 16);
     let file = write(dir.path(), "deep.tif", &bytes);
     std::fs::OpenOptions::new()
         .write(true)
         .open(&file)
         .unwrap()
-        .set_len(8 + (1 << 16) + plane)
+        .set_len(8 + (1 << 16) + 2 * plane)
         .unwrap();
     let store = dir.path().join("out.ome.zarr");
-    let out = ingest(&["convert", arg(&file), "-o", arg(&store), "--quiet"]);
-    assert_eq!(
-        String::from_utf8_lossy(&out.stderr),
-        format!(
-            "error: {}: converting needs at least {} bytes of memory (2 slabs of 1 channel(s) × \
-             64 planes of {side}×{side} uint16 voxels), more than this machine's memory \
-             ({memory} bytes); a smaller z edge of --chunk (and --shard) needs less\n",
-            store.display(),
-            2 * 64 * plane
-        )
+    let out = ingest(&[
+        "convert",
+        arg(&file),
+        "-o",
+        arg(&store),
+        "--quiet",
+        "--memory-limit",
+        "64M",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let prefix = format!("error: {}: converting needs about ", store.display());
+    assert!(stderr.starts_with(&prefix), "{stderr}");
+    assert!(
+        stderr.ends_with(
+            "for the region metadata), more than --memory-limit 67108864 bytes; allow more \
+             memory, or a smaller z edge of --chunk (and --shard) needs less\n"
+        ),
+        "{stderr}"
     );
     assert_eq!(out.status.code(), Some(1));
     assert!(!store.exists());
