@@ -28,8 +28,7 @@ import subprocess
 import tempfile
 import time
 
-from partition_bench import ROOT, digests, publish
-from server_bench import cpu_name
+from partition_bench import ROOT, digests, machine, outputs, publish, timed
 
 # The binaries under test (a copy lets the tree be rebuilt while the benchmark runs).
 BIN = pathlib.Path(os.environ.get("RESIDENCY_BIN", ROOT / "target" / "release"))
@@ -68,13 +67,8 @@ def write_mosaic(path: pathlib.Path, depth: int, edge: int):
 def run(cmd):
     """Runs `cmd` under GNU time; returns (seconds, peak RSS in MB, stdout)."""
     t = time.time()
-    p = subprocess.run(["/usr/bin/time", "-f", "RSS_KB %M", *map(str, cmd)],
-                       capture_output=True, text=True)
-    seconds = time.time() - t
-    if p.returncode != 0:
-        raise RuntimeError(p.stderr)
-    rss = int(re.search(r"RSS_KB (\d+)", p.stderr).group(1)) / 1024
-    return seconds, rss, p.stdout
+    [(stdout, rss)] = outputs([timed(cmd)])
+    return time.time() - t, rss, stdout
 
 
 def limit_bytes(limit):
@@ -144,10 +138,9 @@ def main():
                     print(rows[-1], flush=True)
         finally:
             shutil.rmtree(work, ignore_errors=True)
-    mem_gb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
     report = (
-        f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) with "
-        f"{mem_gb:.0f} GB of memory, by `benchmarks/columns_bench.py --planes {a.planes}"
+        f"Measured {datetime.date.today()} on {machine()}, by "
+        f"`benchmarks/columns_bench.py --planes {a.planes}"
         f"{' --baseline-bin …' if a.baseline_bin else ''}`: the sparse sample (uint16, OME-TIFF "
         "in uncompressed strips of about 1 MB) for 1024² and 4096² planes, a synthetic mosaic "
         "(uint16 BigTIFF, one uncompressed strip per page) for 16384²; default 64³ bricks; wall time "

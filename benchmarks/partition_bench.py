@@ -38,15 +38,26 @@ def timed(cmd, env=None):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
 
 
-def finish(procs):
-    """Waits for `procs`; returns the largest peak RSS in MB."""
-    peak = 0
+def outputs(procs):
+    """Waits for `procs`; returns each one's (stdout, peak RSS in MB)."""
+    done = []
     for p in procs:
         out, err = p.communicate()
         if p.returncode != 0:
             raise RuntimeError(err)
-        peak = max(peak, int(re.search(r"RSS_KB (\d+)", err).group(1)) / 1024)
-    return peak
+        done.append((out, int(re.search(r"RSS_KB (\d+)", err).group(1)) / 1024))
+    return done
+
+
+def finish(procs):
+    """Waits for `procs`; returns the largest peak RSS in MB."""
+    return max(rss for _, rss in outputs(procs))
+
+
+def machine() -> str:
+    """This machine, for a report: cores, CPU and memory."""
+    mem_gb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
+    return f"{os.cpu_count()} cores ({cpu_name()}) with {mem_gb:.0f} GB of memory"
 
 
 def files(folder: pathlib.Path) -> dict:
@@ -108,9 +119,8 @@ def large(a):
         stored_gb = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) / 1e9
     finally:
         shutil.rmtree(work, ignore_errors=True)
-    mem_gb = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES") / 1e9
     report = (
-        f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) with {mem_gb:.0f} GB of memory, by "
+        f"Measured {datetime.date.today()} on {machine()}, by "
         f"`benchmarks/partition_bench.py --large {a.large} --partitions {n}`: the sparse sample of {a.large} (z,y,x) uint16 voxels, "
         f"{input_gb:.1f} GB of TIFF (written by `ingest sample` in {sample_s:.0f} s, deleted after), more than this machine's memory; "
         f"stored {stored_gb:.2f} GB. One process: {one_s:.0f} s, peak RSS {one_rss:,.0f} MB. {n} partitions at once: "

@@ -656,11 +656,6 @@ impl<T: Sample> Level<T> {
         );
     }
 
-    /// Hands the rest of a column's blocks of region metadata to the level's writer.
-    fn close_column(&mut self) -> Result<(), RegionWriteError> {
-        self.release(u64::MAX)
-    }
-
     /// Writes the rows of cells the columns found that no plane from `delivered` on can
     /// reach (every column of the planes before it being made).
     fn assemble(&mut self, delivered: u64) -> Result<(), RegionWriteError> {
@@ -1091,9 +1086,11 @@ fn run_pass<T: Sample>(
             for (l, level) in levels.iter_mut().enumerate().take(local) {
                 let f = level.plan.factor;
                 level.window = at_level(region, f, level.plan.shape);
-                if l > 0 {
+                // A column's own sums (whole planes keep those `open_levels` made).
+                let z0 = group.start / f[0];
+                if l > 0 && (level.acc.window, level.acc.z0) != (level.window, z0) {
                     let depth = plan.outer[0].min(level.plan.shape[0]);
-                    level.acc = Accumulator::new(channels, group.start / f[0], depth, level.window);
+                    level.acc = Accumulator::new(channels, z0, depth, level.window);
                 }
             }
             if split {
@@ -1118,8 +1115,9 @@ fn run_pass<T: Sample>(
                 &bar,
             )?;
             if split {
+                // The rest of the column's blocks of region metadata.
                 for level in levels.iter_mut().take(local) {
-                    level.close_column()?;
+                    level.release(u64::MAX)?;
                 }
             }
         }
@@ -1487,6 +1485,8 @@ fn finalize_typed<T: Sample>(
         bar.inc(1);
     }
     bar.finish_and_clear();
+    // The store must not hold the hand-over files when its root metadata is written; the
+    // partitions' record files the levels adopted stay open and readable until they finish.
     let folder = writer.partial.join(HANDOFF_FOLDER);
     std::fs::remove_dir_all(&folder).map_err(|source| HandoffError::Io {
         path: folder,

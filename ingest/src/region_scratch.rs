@@ -100,12 +100,8 @@ impl Scratch {
     pub fn append(&mut self, value: &impl Serialize) -> Result<Record, RegionWriteError> {
         let bytes = postcard::to_stdvec(value)
             .map_err(|e| scratch_error(&self.path, "write")(std::io::Error::other(e)))?;
-        self.append_bytes(&bytes)
-    }
-
-    fn append_bytes(&mut self, bytes: &[u8]) -> Result<Record, RegionWriteError> {
         self.file
-            .write_all(bytes)
+            .write_all(&bytes)
             .map_err(scratch_error(&self.path, "write"))?;
         let record = Record {
             offset: self.len,
@@ -153,14 +149,51 @@ impl Scratch {
     }
 }
 
-/// Rows of cells waiting for every column or partition to pass them: this pass's own records
-/// and those of partitions' files it adopted, by chunk of rows.
-pub struct CellRecords {
+/// A pass's own scratch file, and the files of other passes (partitions) whose records it
+/// adopted, read where they lie.
+struct RecordFiles {
     own: Scratch,
     /// Partitions' record files: path (for messages) and file.
     adopted: Vec<(PathBuf, File)>,
-    /// Each chunk's records: `(0` for its own file, `i + 1` for adopted file `i`, `record)`.
-    chunks: BTreeMap<u64, Vec<(usize, Record)>>,
+}
+
+/// Which file of a [`RecordFiles`] a record is in: 0 for its own, `i + 1` for adopted file `i`.
+type FileIndex = usize;
+
+impl RecordFiles {
+    fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
+        Ok(Self {
+            own: Scratch::create(path)?,
+            adopted: Vec::new(),
+        })
+    }
+
+    /// Opens another pass's file at `path`; returns its index.
+    fn adopt(&mut self, path: &Path) -> Result<FileIndex, RegionWriteError> {
+        let file = File::open(path).map_err(scratch_error(path, "open"))?;
+        self.adopted.push((path.to_path_buf(), file));
+        Ok(self.adopted.len())
+    }
+
+    fn read<R: serde::de::DeserializeOwned>(
+        &mut self,
+        (file, record): (FileIndex, Record),
+    ) -> Result<R, RegionWriteError> {
+        if file == 0 {
+            self.own.read(record)
+        } else {
+            let (path, file) = &self.adopted[file - 1];
+            read_record(file, path, record)
+        }
+    }
+}
+
+/// Rows of cells waiting for every column or partition to pass them: this pass's own records
+/// and those of partitions' files it adopted, by chunk of rows.
+pub struct CellRecords {
+    files: RecordFiles,
+    /// Each chunk's records.
+    chunks: BTreeMap<u64, Vec<(FileIndex, Record)>>,
     /// Its own records in the order written, for a partition's hand-over.
     written: Vec<(u64, Record)>,
     /// The first row not yet assembled.
@@ -174,8 +207,7 @@ impl CellRecords {
     /// When the file cannot be created.
     pub fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
         Ok(Self {
-            own: Scratch::create(path)?,
-            adopted: Vec::new(),
+            files: RecordFiles::create(path)?,
             chunks: BTreeMap::new(),
             written: Vec::new(),
             next: 0,
@@ -192,7 +224,7 @@ impl CellRecords {
         while start < rows.end {
             let chunk = start / CHUNK_ROWS;
             let end = ((chunk + 1) * CHUNK_ROWS).min(rows.end);
-            let record = self.own.append(&block.rows_of(start..end))?;
+            let record = self.files.own.append(&block.rows_of(start..end))?;
             self.chunks.entry(chunk).or_default().push((0, record));
             self.written.push((chunk, record));
             start = end;
@@ -212,11 +244,9 @@ impl CellRecords {
         if records.is_empty() {
             return Ok(());
         }
-        let file = File::open(path).map_err(scratch_error(path, "open"))?;
-        self.adopted.push((path.to_path_buf(), file));
-        let index = self.adopted.len();
+        let file = self.files.adopt(path)?;
         for &(chunk, record) in records {
-            self.chunks.entry(chunk).or_default().push((index, record));
+            self.chunks.entry(chunk).or_default().push((file, record));
         }
         Ok(())
     }
@@ -230,14 +260,9 @@ impl CellRecords {
         chunk: u64,
         rows: &mut CellGrid<T>,
     ) -> Result<(), RegionWriteError> {
-        for (file, record) in self.chunks.remove(&chunk).unwrap_or_default() {
-            let block: CellGrid<T> = if file == 0 {
-                self.own.read(record)?
-            } else {
-                let (path, file) = &self.adopted[file - 1];
-                read_record(file, path, record)?
-            };
-            rows.merge_rows(&block);
+        for record in self.chunks.remove(&chunk).unwrap_or_default() {
+            let block: CellGrid<T> = self.files.read(record)?;
+            rows.merge(&block);
         }
         Ok(())
     }
@@ -248,7 +273,7 @@ impl CellRecords {
     /// # Errors
     /// When the file cannot be written.
     pub fn into_records(mut self) -> Result<Vec<(u64, Record)>, RegionWriteError> {
-        self.own.flush()?;
+        self.files.own.flush()?;
         Ok(self.written)
     }
 
@@ -257,14 +282,15 @@ impl CellRecords {
     /// # Errors
     /// When the file cannot be removed.
     pub fn remove(self) -> Result<(), RegionWriteError> {
-        self.own.remove()
+        self.files.own.remove()
     }
 }
 
-/// Blocks of brick histograms waiting to be binned.
+/// Blocks of brick histograms waiting to be binned: its own and those of partitions' files it
+/// adopted, read where they lie.
 pub struct HistogramRecords {
-    own: Scratch,
-    blocks: Vec<Record>,
+    files: RecordFiles,
+    blocks: Vec<(FileIndex, Record)>,
 }
 
 impl HistogramRecords {
@@ -274,7 +300,7 @@ impl HistogramRecords {
     /// When the file cannot be created.
     pub fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
         Ok(Self {
-            own: Scratch::create(path)?,
+            files: RecordFiles::create(path)?,
             blocks: Vec::new(),
         })
     }
@@ -284,58 +310,53 @@ impl HistogramRecords {
     /// # Errors
     /// When the file cannot be written.
     pub fn push(&mut self, block: &HistogramBlock) -> Result<(), RegionWriteError> {
-        let record = self.own.append(block)?;
-        self.blocks.push(record);
+        let record = self.files.own.append(block)?;
+        self.blocks.push((0, record));
         Ok(())
     }
 
-    /// Copies in the blocks of another pass's file at `path` (a partition's).
+    /// Takes in the blocks of another pass's file at `path` (a partition's).
     ///
     /// # Errors
-    /// When a file cannot be read or written.
+    /// When the file cannot be opened.
     pub fn adopt(&mut self, path: &Path, records: &[Record]) -> Result<(), RegionWriteError> {
         if records.is_empty() {
             return Ok(());
         }
-        let file = File::open(path).map_err(scratch_error(path, "open"))?;
-        for &record in records {
-            let mut bytes = vec![0; record.len as usize];
-            file.read_exact_at(&mut bytes, record.offset)
-                .map_err(scratch_error(path, "read"))?;
-            let copy = self.own.append_bytes(&bytes)?;
-            self.blocks.push(copy);
-        }
+        let file = self.files.adopt(path)?;
+        self.blocks.extend(records.iter().map(|&r| (file, r)));
         Ok(())
     }
 
-    /// Reads the blocks back one at a time, in the order pushed.
+    /// Reads the blocks back one at a time, in the order pushed or adopted.
     ///
     /// # Errors
-    /// When the file cannot be read, a record does not decode, or `each` fails.
+    /// When a file cannot be read, a record does not decode, or `each` fails.
     pub fn for_each(
         &mut self,
         mut each: impl FnMut(HistogramBlock) -> Result<(), RegionWriteError>,
     ) -> Result<(), RegionWriteError> {
         for record in std::mem::take(&mut self.blocks) {
-            each(self.own.read(record)?)?;
+            each(self.files.read(record)?)?;
         }
         Ok(())
     }
 
-    /// Its records, in the order pushed, with the file flushed: what a partition hands over.
+    /// Its own records, in the order pushed, with the file flushed: what a partition hands
+    /// over.
     ///
     /// # Errors
     /// When the file cannot be written.
     pub fn into_records(mut self) -> Result<Vec<Record>, RegionWriteError> {
-        self.own.flush()?;
-        Ok(self.blocks)
+        self.files.own.flush()?;
+        Ok(self.blocks.into_iter().map(|(_, r)| r).collect())
     }
 
-    /// Removes its file.
+    /// Removes its own file.
     ///
     /// # Errors
     /// When the file cannot be removed.
     pub fn remove(self) -> Result<(), RegionWriteError> {
-        self.own.remove()
+        self.files.own.remove()
     }
 }

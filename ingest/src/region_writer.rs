@@ -294,8 +294,8 @@ impl<T: Sample> LevelRegionWriter<T> {
     }
 
     /// Takes in a partition's records of this level, in its files `STEM.cells` and
-    /// `STEM.histograms` in `folder`: its histograms are copied into this writer's scratch
-    /// file, its cells read when their chunk of rows is assembled.
+    /// `STEM.histograms` in `folder`, which stay open and are read where they lie: its cells
+    /// when their chunk of rows is assembled, its histograms when they are binned.
     ///
     /// # Errors
     /// When a file cannot be read or written.
@@ -398,7 +398,7 @@ impl<T: Sample> LevelRegionWriter<T> {
         let grid = &mut self.grids[k];
         debug_assert_eq!(rows.z0, grid.pending.rows().end);
         grid.pending.extend_to(rows.rows().end);
-        grid.pending.merge_rows(rows);
+        grid.pending.merge(rows);
         let held = grid.pending.rows();
         // Whole chunks, or everything at the level's end.
         let end = if held.end == grid.grid[0] {

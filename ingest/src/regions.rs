@@ -111,7 +111,7 @@ impl<T: Sample> CellGrid<T> {
     ///
     /// # Panics
     /// When the grids are of different levels or channels.
-    pub fn merge_rows(&mut self, other: &Self) {
+    pub fn merge(&mut self, other: &Self) {
         assert!(other.channels == self.channels && other.depth == self.depth);
         let overlap = |a0: u64, an: u64, b0: u64, bn: u64| a0.max(b0)..(a0 + an).min(b0 + bn);
         let zs = overlap(self.z0, self.grid[0], other.z0, other.grid[0]);
@@ -163,7 +163,7 @@ impl<T: Sample> CellGrid<T> {
             self.x0..self.x0 + self.grid[2],
             self.depth,
         );
-        out.merge_rows(self);
+        out.merge(self);
         out
     }
 
@@ -806,10 +806,7 @@ impl LevelHistograms {
     /// Room for brick rows `rows` of `channels` channels of a level of `bricks` bricks.
     pub fn for_rows(channels: usize, bricks: [u64; 3], rows: std::ops::Range<u64>) -> Self {
         let z1 = rows.end.min(bricks[0]);
-        let z0 = rows.start.min(z1);
-        let mut held = Self::new(channels, [z1 - z0, bricks[1], bricks[2]]);
-        held.z0 = z0;
-        held
+        Self::block(channels, rows.start.min(z1)..z1, 0..bricks[1], 0..bricks[2])
     }
 
     /// Room for the bricks `rows × ys × xs` (a column's).
@@ -946,12 +943,12 @@ mod tests {
             let done = window.split_before((z0 + nz - HALO) / CELL);
             assert_eq!(done.z0, rows.rows().end);
             rows.extend_to(done.rows().end);
-            rows.merge_rows(&done);
+            rows.merge(&done);
             assert!(window.grid[0] <= 3, "{:?}", window.rows());
         }
         let last = window.split_before(u64::MAX);
         rows.extend_to(last.rows().end);
-        rows.merge_rows(&last);
+        rows.merge(&last);
         assert_eq!(rows.rows(), 0..5);
         assert_eq!(rows.haloed, whole.haloed);
         assert_eq!(rows.exact, whole.exact);
@@ -998,7 +995,7 @@ mod tests {
                 planes.end - planes.start,
                 PlaneRegion::whole([shape[1], shape[2]]),
             );
-            merged.merge_rows(&part);
+            merged.merge(&part);
         }
         let rows = CellGrid::<u16>::for_rows(1, shape, 16..24);
         assert_eq!((rows.z0, rows.grid, rows.depth), (1, [3, 1, 1], 5));

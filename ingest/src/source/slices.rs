@@ -2,7 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::tiff::{NATIVE_BIG_ENDIAN, check_page, decode_region, open_decoder, page_format};
+use super::tiff::{DecodedRegion, check_page, open_decoder, page_format};
 use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
 
 /// A folder or glob of single-slice TIFF files.
@@ -10,11 +10,8 @@ pub struct SliceFolderSource {
     info: SourceInfo,
     files: Vec<PathBuf>,
     samples_per_pixel: usize,
-    /// Slice and region decoded in `page`.
-    cached: Option<(u64, PlaneRegion)>,
-    page: Vec<u8>,
-    /// One decoded strip or tile, while a region is gathered.
-    chunk: Vec<u8>,
+    /// The slice and region decoded last.
+    decoded: DecodedRegion,
 }
 
 fn is_tiff(path: &Path) -> bool {
@@ -85,9 +82,7 @@ impl SliceFolderSource {
             },
             files,
             samples_per_pixel,
-            cached: None,
-            page: Vec::new(),
-            chunk: Vec::new(),
+            decoded: DecodedRegion::default(),
         })
     }
 }
@@ -105,8 +100,7 @@ impl VolumeSource for SliceFolderSource {
         mut out: PlaneOut<'_>,
     ) -> Result<(), SourceError> {
         let file = &self.files[z as usize];
-        if self.cached != Some((z, region)) {
-            self.cached = None;
+        if !self.decoded.holds(z, region) {
             let (mut decoder, tiff) = open_decoder(file)?;
             let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
             let [_, ey, ex] = self.info.shape;
@@ -130,7 +124,8 @@ impl VolumeSource for SliceFolderSource {
                     expected_format: self.info.format,
                 });
             }
-            decode_region(
+            self.decoded.decode(
+                z,
                 &mut decoder,
                 file,
                 0,
@@ -138,18 +133,10 @@ impl VolumeSource for SliceFolderSource {
                 (format, spp),
                 [ey, ex],
                 region,
-                &mut self.page,
-                &mut self.chunk,
             )?;
-            self.cached = Some((z, region));
         }
-        out.fill_from_bytes(
-            &self.page,
-            self.info.format,
-            NATIVE_BIG_ENDIAN,
-            self.samples_per_pixel,
-            channel,
-        );
+        self.decoded
+            .fill(&mut out, self.info.format, self.samples_per_pixel, channel);
         Ok(())
     }
 }

@@ -20,11 +20,61 @@ pub struct TiffSource {
     layout: StackLayout,
     samples_per_pixel: usize,
     file: TiffFile,
-    /// The page and region decoded in `page`.
-    cached: Option<(u64, PlaneRegion)>,
-    page: Vec<u8>,
+    /// The page and region decoded last.
+    decoded: DecodedRegion,
+}
+
+/// The region of a plane decoded last (native byte order, samples interleaved), kept so the
+/// channels of one page (RGB samples) decode it once.
+#[derive(Default)]
+pub(super) struct DecodedRegion {
+    /// Which plane (a page, or a slice) and region `pixels` holds.
+    held: Option<(u64, PlaneRegion)>,
+    pixels: Vec<u8>,
     /// One decoded strip or tile, while a region is gathered.
     chunk: Vec<u8>,
+}
+
+impl DecodedRegion {
+    /// Whether it holds `region` of plane `plane`.
+    pub(super) fn holds(&self, plane: u64, region: PlaneRegion) -> bool {
+        self.held == Some((plane, region))
+    }
+
+    /// Decodes `region` of the decoder's current page (`page` of `path`, with `samples` and
+    /// `extent` checked against the stack's) as the region of plane `plane`: see
+    /// [`decode_region`].
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn decode(
+        &mut self,
+        plane: u64,
+        decoder: &mut Decoder<BufReader<File>>,
+        path: &Path,
+        page: u64,
+        file: TiffFile,
+        samples: (SampleType, usize),
+        extent: [u64; 2],
+        region: PlaneRegion,
+    ) -> Result<(), SourceError> {
+        self.held = None;
+        let (pixels, chunk) = (&mut self.pixels, &mut self.chunk);
+        decode_region(
+            decoder, path, page, file, samples, extent, region, pixels, chunk,
+        )?;
+        self.held = Some((plane, region));
+        Ok(())
+    }
+
+    /// Fills `out` with sample `sample` of every pixel of `samples` of the region held.
+    pub(super) fn fill(
+        &self,
+        out: &mut PlaneOut<'_>,
+        format: SampleType,
+        samples: usize,
+        sample: usize,
+    ) {
+        out.fill_from_bytes(&self.pixels, format, NATIVE_BIG_ENDIAN, samples, sample);
+    }
 }
 
 /// What the checks of a TIFF file's claims need to know about it.
@@ -164,7 +214,7 @@ pub(super) fn page_format(
 
 /// Decodes the current page of `decoder` into `buffer` (native byte order), reusing its
 /// memory, once [`check_page`] has found that the file can hold the plane it claims.
-pub(super) fn decode_page(
+fn decode_page(
     decoder: &mut Decoder<BufReader<File>>,
     path: &Path,
     page: u64,
@@ -190,7 +240,7 @@ pub(super) fn decode_page(
 /// of `samples` interleaved samples, in native byte order. A region smaller than the page
 /// decodes only the strips or tiles it meets, each into `chunk` first.
 #[allow(clippy::too_many_arguments)]
-pub(super) fn decode_region(
+fn decode_region(
     decoder: &mut Decoder<BufReader<File>>,
     path: &Path,
     page: u64,
@@ -287,7 +337,7 @@ pub(super) fn decode_region(
 }
 
 /// Whether decoded pages are big-endian (they are in native byte order).
-pub(super) const NATIVE_BIG_ENDIAN: bool = cfg!(target_endian = "big");
+const NATIVE_BIG_ENDIAN: bool = cfg!(target_endian = "big");
 
 fn rational(value: tiff::decoder::ifd::Value) -> Option<f64> {
     use tiff::decoder::ifd::Value;
@@ -429,9 +479,7 @@ impl TiffSource {
             layout,
             samples_per_pixel,
             file,
-            cached: None,
-            page: Vec::new(),
-            chunk: Vec::new(),
+            decoded: DecodedRegion::default(),
         })
     }
 }
@@ -451,8 +499,7 @@ impl VolumeSource for TiffSource {
         let spp = self.samples_per_pixel;
         let page = (channel / spp) as u64 * self.layout.channel_stride + z * self.layout.z_stride;
         let path = self.info.path.clone();
-        if self.cached != Some((page, region)) {
-            self.cached = None;
+        if !self.decoded.holds(page, region) {
             self.decoder
                 .seek_to_image(page as usize)
                 .map_err(|source| SourceError::Seek {
@@ -482,7 +529,8 @@ impl VolumeSource for TiffSource {
                     expected_format: self.info.format,
                 });
             }
-            decode_region(
+            self.decoded.decode(
+                page,
                 &mut self.decoder,
                 &path,
                 page,
@@ -490,18 +538,10 @@ impl VolumeSource for TiffSource {
                 (format, spp),
                 [ey, ex],
                 region,
-                &mut self.page,
-                &mut self.chunk,
             )?;
-            self.cached = Some((page, region));
         }
-        out.fill_from_bytes(
-            &self.page,
-            self.info.format,
-            NATIVE_BIG_ENDIAN,
-            spp,
-            channel % spp,
-        );
+        self.decoded
+            .fill(&mut out, self.info.format, spp, channel % spp);
         Ok(())
     }
 }
