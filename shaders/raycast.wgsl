@@ -23,6 +23,9 @@ override SAMPLE_KIND: u32 = 0u;
 // Traversal method: METHOD_RESIDENCY (the residency octree), METHOD_PAGE_TABLE (MRMCPT) or
 // METHOD_OCTREE (one node per brick, GigaVoxels style).
 override METHOD: u32 = 0u;
+// Reconstruction filter: FILTER_TRILINEAR or FILTER_TRICUBIC (the cubic B-spline as 8
+// trilinear samples).
+override FILTER: u32 = 0u;
 const NO_LEVEL: u32 = 0xffffffffu;
 
 // Per frame. Positions are in leaf units (octree leaves) or fine units; axes x, y, z.
@@ -288,8 +291,7 @@ struct Sampled {
 // every branch's code, so the shader keeps few). With `want`, every missing brick is
 // requested; without it the first miss returns. A clear brick (ENTRY_CLEAR) in the footprint
 // makes the sample clear.
-fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
-    let pos = level_pos(l, cell, local);
+fn sample_level(c: u32, l: u32, pos: LevelPos, want: bool, t: f32) -> Sampled {
     let fp = pos.fp - vec3<f32>(0.5);
     let fl = floor(fp);
     let w = fp - fl;
@@ -367,6 +369,64 @@ fn sample_level(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t
         result.value = acc;
     }
     return result;
+}
+
+// The filtered sample of channel c at level l. Trilinear: one sample_level. Tricubic: the
+// cubic B-spline over the 4³ voxels around the sample (Sigg and Hadwiger's fast form): per axis
+// the weights w0..w3 of voxels i-1..i+2 are folded into two trilinear fetches, at i-1+w1/g0
+// with weight g0 = w0+w1 and at i+1+w3/g1 with weight g1 = w2+w3; 8 fetches in all, each
+// clamped to the edge voxels as a trilinear sample is, so the result is the clamped tricubic
+// sum. A clear fetch makes the sample clear: with the classes widened by the filter's reach
+// (Filter::reach), every voxel of a footprint that reaches a clear brick lies in its range.
+// Missing bricks are handled as sample_level does (one call site: see sample_channels).
+fn sample_filtered(c: u32, l: u32, cell: vec3<i32>, local: vec3<f32>, want: bool, t: f32) -> Sampled {
+    let pos = level_pos(l, cell, local);
+    var fp0 = pos.fp;
+    var fp1 = pos.fp;
+    var g0 = vec3<f32>(1.0);
+    var g1 = vec3<f32>(0.0);
+    var fetches = 1u;
+    if FILTER == FILTER_TRICUBIC {
+        let x = pos.fp - vec3<f32>(0.5);
+        let fl = floor(x);
+        let a = x - fl;
+        let a2 = a * a;
+        let a3 = a2 * a;
+        let one = vec3<f32>(1.0) - a;
+        let w0 = one * one * one / 6.0;
+        let w1 = (3.0 * a3 - 6.0 * a2 + vec3<f32>(4.0)) / 6.0;
+        let w2 = (-3.0 * a3 + 3.0 * a2 + 3.0 * a + vec3<f32>(1.0)) / 6.0;
+        let w3 = a3 / 6.0;
+        g0 = w0 + w1;
+        g1 = w2 + w3;
+        // Positions in LevelPos form (voxel centres at i + 1/2).
+        fp0 = fl - vec3<f32>(0.5) + w1 / g0;
+        fp1 = fl + vec3<f32>(1.5) + w3 / g1;
+        fetches = 8u;
+    }
+    var out = Sampled(0.0, true, 0u, false);
+    for (var k = 0u; k < fetches; k++) {
+        let bits = vec3<bool>((k & 1u) != 0u, (k & 2u) != 0u, (k & 4u) != 0u);
+        let s = sample_level(c, l, LevelPos(pos.ip, select(fp0, fp1, bits)), want, t);
+        if s.clear {
+            return Sampled(0.0, true, 0u, true);
+        }
+        if !s.ok {
+            out.ok = false;
+            if out.missing == 0u {
+                out.missing = s.missing;
+            }
+            if !want {
+                return out;
+            }
+        }
+        let g = select(g0, g1, bits);
+        out.value += g.x * g.y * g.z * s.value;
+    }
+    if !out.ok {
+        out.value = 0.0;
+    }
+    return out;
 }
 
 // Next level to try for a missing sample at level `first`, having just tried `k`: coarser
@@ -648,7 +708,7 @@ fn sample_channels(
         // stop early, so the finer bricks behind opaque matter are never requested. Where
         // the coarsest level is clear (averaging can take thin bright structures below the
         // TF), it says nothing of finer ones: then the wanted level is asked for. (One
-        // sample_level call site: on lavapipe every inlined copy costs every sample.)
+        // sample_filtered call site: on lavapipe every inlined copy costs every sample.)
         var coarse_first = false;
         if METHOD == METHOD_RESIDENCY && v.action == ACTION_REQUEST && substitute {
             k = min(S.channels[c].max_level, P.level_count - 1u);
@@ -657,7 +717,7 @@ fn sample_channels(
         var s = Sampled(0.0, false, 0u, false);
         var first_missing = 0u;
         loop {
-            s = sample_level(c, k, ray.cell, ray.local, k == l || coarse_first, t);
+            s = sample_filtered(c, k, ray.cell, ray.local, k == l || coarse_first, t);
             if coarse_first {
                 coarse_first = false;
                 if !s.clear {

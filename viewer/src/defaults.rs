@@ -301,6 +301,7 @@ pub fn default_scene(info: &VolumeInfo) -> Scene {
         camera: DEFAULT_ORBIT.camera(info, DEFAULT_FOV_DEGREES),
         channels: default_channels(info),
         background: [0.0; 3],
+        filter: crate::scene::Filter::Trilinear,
     }
 }
 

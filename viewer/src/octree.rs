@@ -338,6 +338,8 @@ pub struct ResidencyOctree {
     resident: HashSet<BrickKey>,
     dirty: Option<Range<usize>>,
     unknown_ranges: bool,
+    /// Voxels the filter reads beyond the trilinear footprint ([`crate::scene::Filter::reach`]).
+    reach: u64,
 }
 
 impl ResidencyOctree {
@@ -348,6 +350,22 @@ impl ResidencyOctree {
     /// The geometry's errors ([`OctreeGeometry::new`]), [`OctreeError::NoChannel`], or an
     /// error naming the channel and level of region metadata that does not fit.
     pub fn new(info: &VolumeInfo, channels: &[usize], depth: u32) -> Result<Self, OctreeError> {
+        Self::for_filter(info, channels, depth, 0)
+    }
+
+    /// [`ResidencyOctree::new`] for a filter that reads `reach` voxels beyond the trilinear
+    /// footprint on each side ([`crate::scene::Filter::reach`]): every node's range covers the
+    /// region metadata's cells within `reach` voxels of it, so it still bounds every sample
+    /// inside the node.
+    ///
+    /// # Errors
+    /// As [`ResidencyOctree::new`].
+    pub fn for_filter(
+        info: &VolumeInfo,
+        channels: &[usize],
+        depth: u32,
+        reach: u64,
+    ) -> Result<Self, OctreeError> {
         let geometry = OctreeGeometry::new(info, depth)?;
         for &c in channels {
             if c >= info.channels.len() {
@@ -368,6 +386,7 @@ impl ResidencyOctree {
             resident: HashSet::new(),
             dirty: Some(0..nodes),
             unknown_ranges: info.minmax.is_none(),
+            reach,
         };
         if let Some(grids) = &info.minmax {
             tree.seed_ranges(info, grids)?;
@@ -585,8 +604,8 @@ impl ResidencyOctree {
     }
 
     /// Fallback for a store without region metadata: sets the range of every leaf whose
-    /// trilinear footprint (its voxels plus one on each side, clamped to the volume) lies
-    /// inside level-0 brick `key`, from `voxels`, and updates ancestors. Returns how many
+    /// filter footprint (its voxels plus one on each side, plus the filter's reach, clamped
+    /// to the volume) lies inside level-0 brick `key`, from `voxels`, and updates ancestors. Returns how many
     /// leaves got a range. Does nothing when the ranges came from the server.
     pub fn refine_ranges(&mut self, key: &BrickKey, voxels: &BrickVoxels) -> usize {
         if !self.unknown_ranges || key.level != 0 {
@@ -610,8 +629,9 @@ impl ResidencyOctree {
                 if lo >= n[a] as f64 {
                     continue;
                 }
-                let first = ((lo - 0.5).floor().max(0.0)) as u64;
-                let last = ((hi - 0.5).ceil().min((n[a] - 1) as f64)) as u64;
+                let reach = self.reach as f64;
+                let first = ((lo - 0.5 - reach).floor().max(0.0)) as u64;
+                let last = ((hi - 0.5 + reach).ceil().min((n[a] - 1) as f64)) as u64;
                 if first >= b0 && last < b1 {
                     axes[a].push((k, first - b0, last - b0));
                 }
@@ -727,15 +747,16 @@ impl ResidencyOctree {
                         level: l,
                     });
                 }
-                // Leaf range of each cell along each axis.
+                // Leaf range of each cell (widened by the filter's reach) along each axis.
+                let reach = self.reach;
                 let leaf_ranges: [Vec<Range<u64>>; 3] = std::array::from_fn(|a| {
                     let f = (1u64 << self.geometry.level_shift[l][a]) as f64;
                     let s = (self.geometry.leaf_shift[a] as f64).exp2();
                     let vol = self.geometry.volume_voxels[a] as f64;
                     (0..gshape[a])
                         .map(|g| {
-                            let lo = (g * cell[a]) as f64 * f;
-                            let hi = (((g + 1) * cell[a]) as f64 * f).min(vol);
+                            let lo = (g * cell[a]).saturating_sub(reach) as f64 * f;
+                            let hi = (((g + 1) * cell[a] + reach) as f64 * f).min(vol);
                             if hi <= lo {
                                 return 0..0;
                             }

@@ -1,5 +1,5 @@
 //! The reference ray caster: the scene's ground truth, on the CPU in `f64`, at level 0, with
-//! trilinear sampling and a fine fixed step, following the conventions of [`crate::scene`]
+//! the scene's filter (trilinear or tricubic) and a fine fixed step, following the conventions of [`crate::scene`]
 //! exactly (world space, projection, opacity correction and compositing).
 //!
 //! Each ray is clipped to the volume box `[0, extent)` and cut into segments of the step `Δ`
@@ -13,7 +13,7 @@ use std::sync::{Arc, RwLock};
 use rayon::prelude::*;
 
 use crate::image::RgbImage;
-use crate::scene::{ChannelStyle, Scene, corrected_opacity};
+use crate::scene::{ChannelStyle, Filter, Scene, bspline_weights, corrected_opacity};
 use crate::source::{BrickKey, BrickSource, BrickVoxels, SourceError, VolumeInfo};
 
 /// Why the reference cannot render a scene: options, a camera or a volume that define no
@@ -224,6 +224,50 @@ impl Level0<'_> {
         }
         Ok(value)
     }
+
+    /// Tricubic B-spline sample at `u` (as [`Level0::sample`]): the 4³ voxels around it
+    /// weighted by [`bspline_weights`] per axis, indices clamped to the edge voxels.
+    fn sample_tricubic(
+        &self,
+        u: [f64; 3],
+        last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
+    ) -> Result<f64, ReferenceError> {
+        let mut index = [[0u64; 4]; 3];
+        let mut weight = [[0.0; 4]; 3];
+        for a in 0..3 {
+            let lo = u[a].floor();
+            weight[a] = bspline_weights(u[a] - lo);
+            let max = (self.shape[a] - 1) as f64;
+            for (k, i) in index[a].iter_mut().enumerate() {
+                *i = (lo + k as f64 - 1.0).clamp(0.0, max) as u64;
+            }
+        }
+        let mut value = 0.0;
+        for (z, wz) in index[0].iter().zip(weight[0]) {
+            for (y, wy) in index[1].iter().zip(weight[1]) {
+                for (x, wx) in index[2].iter().zip(weight[2]) {
+                    let w = wz * wy * wx;
+                    if w != 0.0 {
+                        value += w * self.voxel([*z, *y, *x], last)?;
+                    }
+                }
+            }
+        }
+        Ok(value)
+    }
+
+    /// The sample of `filter` at `u`.
+    fn filtered(
+        &self,
+        filter: Filter,
+        u: [f64; 3],
+        last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
+    ) -> Result<f64, ReferenceError> {
+        match filter {
+            Filter::Trilinear => self.sample(u, last),
+            Filter::Tricubic => self.sample_tricubic(u, last),
+        }
+    }
 }
 
 /// Where a ray meets the box `[0, extent)`: `(t_enter, t_exit)` with `t_enter ≥ 0`, or `None`.
@@ -329,6 +373,7 @@ pub fn render(
                 extent,
                 (step, reference_step),
                 options.min_transmittance,
+                scene.filter,
                 &visible,
                 &volumes,
                 spacing_xyz,
@@ -361,6 +406,7 @@ fn march(
     extent: [f64; 3],
     (step, reference_step): (f64, f64),
     min_transmittance: f64,
+    filter: Filter,
     styles: &[&ChannelStyle],
     volumes: &[Level0],
     spacing_xyz: [f64; 3],
@@ -403,7 +449,7 @@ fn march(
         let mut sample_colour = [0.0; 3];
         let mut alpha_sum = 0.0;
         for ((style, volume), last) in styles.iter().zip(volumes).zip(lasts.iter_mut()) {
-            let v = volume.sample(u, last)?;
+            let v = volume.filtered(filter, u, last)?;
             let alpha = corrected_opacity(style.opacity_at(v), b - a, reference_step);
             alpha_sum += alpha;
             for (s, c) in sample_colour.iter_mut().zip(style.color) {
@@ -504,6 +550,7 @@ mod tests {
                 }],
             }],
             background: [0.0, 0.0, 1.0],
+            filter: Filter::Trilinear,
         }
     }
 

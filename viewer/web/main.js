@@ -248,7 +248,12 @@ function listen() {
     e.preventDefault();
     viewer.zoom(-Math.sign(e.deltaY) * Math.min(4, Math.abs(e.deltaY) / 100 || 1));
   }, { passive: false });
-  const reset = () => { viewer.reset(); buildControls(JSON.parse(viewer.info_json())); };
+  // The reconstruction filter (scene "filter"): a new renderer, the cache refilled.
+  const filter = document.getElementById("filter");
+  const showFilter = () => { filter.value = JSON.parse(viewer.scene_json()).filter ?? "trilinear"; };
+  showFilter();
+  filter.addEventListener("change", (e) => viewer.set_filter(e.target.value));
+  const reset = () => { viewer.reset(); buildControls(JSON.parse(viewer.info_json())); showFilter(); };
   document.getElementById("reset").addEventListener("click", reset);
   window.addEventListener("keydown", (e) => {
     if ((e.key === "r" || e.key === "R") && e.target.tagName !== "INPUT") reset();

@@ -133,7 +133,7 @@ pub fn transparent(info: &VolumeInfo, scene: &Scene, key: &BrickKey) -> bool {
         .channels
         .iter()
         .find(|c| c.channel == key.channel as usize)
-        .is_none_or(|c| crate::gpu::renderer::is_clear(info, c, key))
+        .is_none_or(|c| crate::gpu::renderer::is_clear(info, c, key, scene.filter))
 }
 
 /// Whether `key` holds the fill value (0) everywhere by its range, so that the store has no

@@ -11,7 +11,7 @@ use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 use residency_viewer::defaults::{
     CameraSpec, NumbersError, check_channel, default_channels, default_scene, numbers, read_scene,
 };
-use residency_viewer::scene::{OpacityPoint, Scene};
+use residency_viewer::scene::{Filter, OpacityPoint, Scene};
 use residency_viewer::source::{BrickSource, HttpSource, LocalSource, VolumeInfo, read_token_file};
 
 /// Where the volume comes from: a brick server and dataset name, or a local store.
@@ -239,6 +239,18 @@ pub struct SceneArgs {
     /// Background: `R,G,B`, linear RGB [default: black].
     #[arg(long, value_name = "RGB")]
     pub background: Option<Rgb>,
+    /// Reconstruction filter of every sample: `trilinear`, or `tricubic` (the cubic B-spline
+    /// over 4³ voxels; 8 trilinear fetches per sample) [default: the scene file's, else
+    /// trilinear].
+    #[arg(long, value_name = "FILTER", value_parser = filter_parser())]
+    pub filter: Option<Filter>,
+}
+
+/// Parses `--filter`: one of the library's [`Filter`] names.
+pub fn filter_parser() -> impl clap::builder::TypedValueParser<Value = Filter> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Filter::ALL.map(Filter::name))
+        .map(|s| s.parse::<Filter>().expect("one of the possible values"))
 }
 
 impl SceneArgs {
@@ -294,6 +306,9 @@ impl SceneArgs {
         }
         if let Some(Rgb(bg)) = self.background {
             scene.background = bg;
+        }
+        if let Some(filter) = self.filter {
+            scene.filter = filter;
         }
         scene.channels.sort_by_key(|s| s.channel);
         Ok(scene)
@@ -483,6 +498,8 @@ mod tests {
             "0,2",
             "--background",
             "1,1,1",
+            "--filter",
+            "tricubic",
         ]);
         assert_eq!(cli.source.server.as_deref(), Some("http://h:1"));
         let scene = cli.scene.scene(&info).unwrap();
@@ -505,6 +522,7 @@ mod tests {
         assert_eq!(c[2].color, [0.5, 0.25, 1.0]);
         assert_eq!(c[1].opacity_at(10.0), 0.15000000000000002);
         assert_eq!(scene.background, [1.0; 3]);
+        assert_eq!(scene.filter, Filter::Tricubic);
     }
 
     #[test]

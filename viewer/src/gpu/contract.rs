@@ -14,6 +14,7 @@ use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
 use super::page_table::{ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
 use super::renderer::Method;
+use crate::scene::Filter;
 
 /// Most channels rendered at once (the shader keeps one value per channel in registers).
 pub const MAX_CHANNELS: usize = 8;
@@ -336,6 +337,8 @@ pub fn wgsl_prelude() -> String {
         u("METHOD_RESIDENCY", Method::Residency as u32),
         u("METHOD_PAGE_TABLE", Method::PageTable as u32),
         u("METHOD_OCTREE", Method::Octree as u32),
+        u("FILTER_TRILINEAR", Filter::Trilinear as u32),
+        u("FILTER_TRICUBIC", Filter::Tricubic as u32),
         u("ATLAS_UINT", AtlasKind::Uint as u32),
         u("ATLAS_SINT", AtlasKind::Sint as u32),
         u("ATLAS_FLOAT", AtlasKind::Float as u32),

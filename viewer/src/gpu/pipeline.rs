@@ -10,6 +10,7 @@ use super::brick_cache::AtlasKind;
 use super::contract::{binding, raycast_source};
 use super::device::Gpu;
 use super::renderer::Method;
+use crate::scene::Filter;
 
 /// A compute-stage layout entry of binding `binding`.
 pub(super) fn compute_layout(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
@@ -99,18 +100,19 @@ pub struct Bindings<'a> {
     pub rays: &'a wgpu::Buffer,
 }
 
-/// `raycast.wgsl` compiled for one atlas format and one method.
+/// `raycast.wgsl` compiled for one atlas format, one method and one filter.
 pub struct RaycastPipeline {
     kind: AtlasKind,
     method: Method,
+    filter: Filter,
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
 }
 
 impl RaycastPipeline {
-    /// Compiles the shader for atlas `kind` and `method` (pipeline constants, so that the
-    /// driver compiles only the code this pipeline runs).
-    pub fn new(device: &wgpu::Device, kind: AtlasKind, method: Method) -> Self {
+    /// Compiles the shader for atlas `kind`, `method` and `filter` (pipeline constants, so
+    /// that the driver compiles only the code this pipeline runs).
+    pub fn new(device: &wgpu::Device, kind: AtlasKind, method: Method, filter: Filter) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast.wgsl"),
             source: wgpu::ShaderSource::Wgsl(raycast_source().into()),
@@ -150,6 +152,7 @@ impl RaycastPipeline {
                 constants: &[
                     ("SAMPLE_KIND", f64::from(kind as u32)),
                     ("METHOD", f64::from(method as u32)),
+                    ("FILTER", f64::from(filter as u32)),
                 ],
                 ..Default::default()
             },
@@ -158,14 +161,17 @@ impl RaycastPipeline {
         Self {
             kind,
             method,
+            filter,
             layout,
             pipeline,
         }
     }
 
-    /// The pipeline of `kind` and `method` on `gpu`: the one built before, else a new one.
-    pub fn shared(gpu: &Gpu, kind: AtlasKind, method: Method) -> Arc<Self> {
-        gpu.pipelines.get_or_build(&gpu.device, kind, method)
+    /// The pipeline of `kind`, `method` and `filter` on `gpu`: the one built before, else a
+    /// new one.
+    pub fn shared(gpu: &Gpu, kind: AtlasKind, method: Method, filter: Filter) -> Arc<Self> {
+        gpu.pipelines
+            .get_or_build(&gpu.device, kind, method, filter)
     }
 
     /// The compute pipeline.
@@ -197,28 +203,32 @@ impl RaycastPipeline {
     }
 }
 
-/// The pipelines a device has built, one per (atlas format, method).
+/// The pipelines a device has built, one per (atlas format, method, filter).
 #[derive(Default)]
 pub struct PipelineCache {
     built: Mutex<Vec<Arc<RaycastPipeline>>>,
 }
 
 impl PipelineCache {
-    /// The pipeline of `kind` and `method`, built on first use.
+    /// The pipeline of `kind`, `method` and `filter`, built on first use.
     fn get_or_build(
         &self,
         device: &wgpu::Device,
         kind: AtlasKind,
         method: Method,
+        filter: Filter,
     ) -> Arc<RaycastPipeline> {
         let mut built = self
             .built
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(p) = built.iter().find(|p| p.kind == kind && p.method == method) {
+        if let Some(p) = built
+            .iter()
+            .find(|p| p.kind == kind && p.method == method && p.filter == filter)
+        {
             return Arc::clone(p);
         }
-        let p = Arc::new(RaycastPipeline::new(device, kind, method));
+        let p = Arc::new(RaycastPipeline::new(device, kind, method, filter));
         built.push(Arc::clone(&p));
         p
     }

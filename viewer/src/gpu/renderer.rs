@@ -330,11 +330,12 @@ impl Renderer {
             });
         }
         let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
-        let mut residency = ResidencyState::new(gpu, info, &channels, &options)?;
+        let mut residency = ResidencyState::new(gpu, info, &channels, scene.filter, &options)?;
         residency.restyle(&visible);
         let tables = SceneTables::new(gpu, &residency, &options, &visible)?;
         let buffers = FrameBuffers::new(gpu, &options, residency.cache().capacity())?;
-        let pipeline = RaycastPipeline::shared(gpu, residency.cache().kind(), options.method);
+        let pipeline =
+            RaycastPipeline::shared(gpu, residency.cache().kind(), options.method, scene.filter);
         let atlas = residency.cache().views();
         let bind_group = pipeline.bind_group(
             &gpu.device,
@@ -421,6 +422,9 @@ impl Renderer {
     /// the table: such a scene needs a new renderer.
     pub fn restyle(&mut self, gpu: &Gpu, scene: &Scene) -> bool {
         let drawn = self.residency.octree().channels();
+        if scene.filter != self.scene.filter {
+            return false;
+        }
         if scene
             .channels
             .iter()

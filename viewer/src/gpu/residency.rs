@@ -17,13 +17,15 @@ use super::page_table::{
 };
 use super::renderer::{Inserted, Method, RenderOptions};
 use crate::octree::{OctreeGeometry, ResidencyOctree, f32_down, f32_up};
-use crate::scene::ChannelStyle;
+use crate::scene::{ChannelStyle, Filter};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
 /// Octree, page tables, cache and their GPU buffers for the channels one renderer draws.
 pub struct ResidencyState {
     info: VolumeInfo,
     method: Method,
+    /// The filter the classes and clear marks are widened for.
+    filter: Filter,
     empty_space_skipping: bool,
     octree: ResidencyOctree,
     pages: PageTables,
@@ -87,9 +89,10 @@ pub fn node_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], nod
 }
 
 impl ResidencyState {
-    /// Empty residency for `channels` of `info`: the octree (ranges from the volume's region
-    /// metadata), page tables with every brick missing, a cache of `options.cache_bytes`, and
-    /// (for the baselines) each brick's value range.
+    /// Empty residency for `channels` of `info` sampled with `filter`: the octree (ranges from
+    /// the volume's region metadata, widened by the filter's reach), page tables with every
+    /// brick missing, a cache of `options.cache_bytes`, and (for the baselines) each brick's
+    /// value range.
     ///
     /// # Errors
     /// The octree's refusal of the volume or channels, or a [`GpuError`] where the page
@@ -98,13 +101,14 @@ impl ResidencyState {
         gpu: &Gpu,
         info: &VolumeInfo,
         channels: &[usize],
+        filter: Filter,
         options: &RenderOptions,
     ) -> Result<Self, GpuError> {
         let depth = match options.octree_depth {
             Some(d) => d,
             None => OctreeGeometry::depth_for(info, options.leaf_voxels, 7),
         };
-        let octree = ResidencyOctree::new(info, channels, depth)?;
+        let octree = ResidencyOctree::for_filter(info, channels, depth, filter.reach())?;
         let geometry = octree.geometry();
         let pages = PageTables::new(&gpu.device, geometry, channels)?;
         let cache = BrickCache::new(
@@ -127,8 +131,8 @@ impl ResidencyState {
                         .map_or((f64::INFINITY, f64::NEG_INFINITY), |k| {
                             match options.method {
                                 // Culling a brick of the octree culls its subtree.
-                                Method::Octree => info.subtree_range(&k),
-                                _ => info.brick_range(&k),
+                                Method::Octree => info.widened_subtree_range(&k, filter.reach()),
+                                _ => info.widened_brick_range(&k, filter.reach()),
                             }
                         });
                     (f32_down(lo), f32_up(hi))
@@ -154,6 +158,7 @@ impl ResidencyState {
         Ok(Self {
             info: info.clone(),
             method: options.method,
+            filter,
             empty_space_skipping: options.empty_space_skipping,
             octree,
             pages,
@@ -238,7 +243,7 @@ impl ResidencyState {
             }
             let clear = self
                 .style_of(&key)
-                .is_some_and(|style| is_clear(&self.info, style, &key));
+                .is_some_and(|style| is_clear(&self.info, style, &key, self.filter));
             let wanted = if clear { ENTRY_CLEAR } else { ENTRY_MISSING };
             if entry != wanted {
                 self.pages.set(id, wanted);
@@ -334,7 +339,7 @@ impl ResidencyState {
                 stand_in: false,
             }),
             EntryKind::Clear => {
-                let (lo, _) = self.info.brick_range(&self.pages.key(id)?);
+                let (lo, _) = clear_range(&self.info, &self.pages.key(id)?, self.filter);
                 apron::sample_bytes(self.cache.sample_type(), lo).map(|sample| {
                     PartSource::Constant {
                         sample,
@@ -462,12 +467,19 @@ impl ResidencyState {
     }
 }
 
-/// Whether brick `key` is clear under `style`: its conservative (haloed) range, rounded
+/// The range that decides whether brick `key` is clear under `filter`: its conservative
+/// (haloed) range, widened by twice the filter's reach, so that it holds every voxel of any
+/// footprint of the filter that reaches the brick.
+pub fn clear_range(info: &VolumeInfo, key: &BrickKey, filter: Filter) -> (f64, f64) {
+    info.widened_brick_range(key, 2 * filter.reach())
+}
+
+/// Whether brick `key` is clear under `style` and `filter`: its [`clear_range`], rounded
 /// outward to `f32` as the shader sees values, holds data and is transparent under the
 /// transfer function. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
 /// TF".
-pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey) -> bool {
-    let (lo, hi) = info.brick_range(key);
+pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey, filter: Filter) -> bool {
+    let (lo, hi) = clear_range(info, key, filter);
     let (lo, hi) = (f32_down(lo), f32_up(hi));
     lo <= hi && range_class(Some(style), lo, hi).empty
 }

@@ -648,17 +648,40 @@ impl VolumeInfo {
     /// sample inside the brick can interpolate lies in it. `min > max`: the brick holds only
     /// NaN. Unbounded when the store has no region metadata for this channel and level.
     pub fn brick_range(&self, key: &BrickKey) -> (f64, f64) {
+        self.widened_brick_range(key, 0)
+    }
+
+    /// [`VolumeInfo::brick_range`] over the brick's box widened by `widen` voxels of its
+    /// level on every side (clipped to the level): with `widen` the filter's extra reach
+    /// ([`crate::scene::Filter::reach`]), it bounds every sample of a wider filter inside the
+    /// brick; with twice that, every sample whose footprint reaches the brick.
+    pub fn widened_brick_range(&self, key: &BrickKey, widen: u64) -> (f64, f64) {
         let level = key.level as usize;
-        let (lo, hi) = self.brick_box(key, level);
+        let (lo, hi) = self.widened_box(key, level, widen);
         self.region_range(key.channel as usize, level, lo, hi)
+    }
+
+    fn widened_box(&self, key: &BrickKey, at: usize, widen: u64) -> ([u64; 3], [u64; 3]) {
+        let (lo, hi) = self.brick_box(key, at);
+        let shape = self.levels[at].shape;
+        (
+            lo.map(|v| v.saturating_sub(widen)),
+            std::array::from_fn(|a| (hi[a] + widen).min(shape[a])),
+        )
     }
 
     /// Conservative value range of a brick *and of every finer level* over its region (each
     /// level's haloed cells under the brick's box), so that a sample of any level inside the
     /// box lies in it. A brick-granular octree culls a whole subtree with it.
     pub fn subtree_range(&self, key: &BrickKey) -> (f64, f64) {
+        self.widened_subtree_range(key, 0)
+    }
+
+    /// [`VolumeInfo::subtree_range`] with each level's box widened by `widen` voxels of that
+    /// level (see [`VolumeInfo::widened_brick_range`]).
+    pub fn widened_subtree_range(&self, key: &BrickKey, widen: u64) -> (f64, f64) {
         (0..=key.level as usize).fold((f64::INFINITY, f64::NEG_INFINITY), |r, level| {
-            let (lo, hi) = self.brick_box(key, level);
+            let (lo, hi) = self.widened_box(key, level, widen);
             let (a, b) = self.region_range(key.channel as usize, level, lo, hi);
             (r.0.min(a), r.1.max(b))
         })

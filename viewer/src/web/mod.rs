@@ -29,7 +29,7 @@ use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{FrameStats, StreamState};
 use crate::image::linear_to_srgb8;
 use crate::interactive::{camera_control, controls};
-use crate::scene::Scene;
+use crate::scene::{Filter, Scene};
 use crate::source::{BrickKey, BrickVoxels, SourceError, VolumeInfo, server};
 
 /// Bricks per `/bricks` request from the page: small batches refine the image sooner.
@@ -284,6 +284,19 @@ impl Viewer {
         });
     }
 
+    /// Sets the reconstruction filter by name (`trilinear` or `tricubic`): a new renderer at
+    /// the next step, since the filter's culling ranges differ.
+    ///
+    /// # Errors
+    /// The [`UnknownFilter`](crate::scene::UnknownFilter) message, scene unchanged.
+    pub fn set_filter(&self, name: &str) -> Result<(), JsValue> {
+        let filter: Filter = name.parse().map_err(|e| js_error(&e))?;
+        self.inner
+            .borrow_mut()
+            .edit(|scene, _, _| scene.filter = filter);
+        Ok(())
+    }
+
     /// Shows or hides channel `channel`.
     pub fn set_visible(&self, channel: usize, visible: bool) {
         self.inner.borrow_mut().edit(|scene, info, _| {
@@ -370,7 +383,10 @@ impl Inner {
     /// at the next step; the camera is set on every frame anyway.
     fn set_scene(&mut self, scene: Scene) {
         if scene != self.scene {
-            if scene.channels != self.scene.channels || scene.background != self.scene.background {
+            if scene.channels != self.scene.channels
+                || scene.background != self.scene.background
+                || scene.filter != self.scene.filter
+            {
                 self.scene_changed = true;
             }
             self.scene = scene;
@@ -423,8 +439,9 @@ async fn renderer_for(
         )
     };
     if let Some(mut r) = current {
-        let same_style =
-            r.scene().channels == scene.channels && r.scene().background == scene.background;
+        let same_style = r.scene().channels == scene.channels
+            && r.scene().background == scene.background
+            && r.scene().filter == scene.filter;
         if same_style || r.restyle(&gpu, &scene) {
             return Ok(r);
         }

@@ -217,6 +217,7 @@ fn renderer_rejects_bad_setups_with_errors() {
         },
         channels,
         background: [0.0; 3],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let err = |s: &Scene, o: RenderOptions| {
         residency_viewer::error_chain(&Renderer::new(&gpu, src.info(), s, o).err().unwrap())

@@ -169,6 +169,8 @@ fn the_prelude_carries_the_rust_constants() {
         "const METHOD_RESIDENCY: u32 = 0u;",
         "const METHOD_PAGE_TABLE: u32 = 1u;",
         "const METHOD_OCTREE: u32 = 2u;",
+        "const FILTER_TRILINEAR: u32 = 0u;",
+        "const FILTER_TRICUBIC: u32 = 1u;",
         "const ATLAS_FLOAT: u32 = 2u;",
         "const FLAG_SUBSTITUTION: u32 = 2u;",
         "const FILTER_HARDWARE: u32 = 1u;",

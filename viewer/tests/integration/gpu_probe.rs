@@ -51,6 +51,7 @@ fn probe_images_match_the_reference_and_count_their_samples() {
             ramp(1, [0.2, 0.6, 1.0], 2000.0, 40000.0, 0.2),
         ],
         background: [0.0, 0.0, 0.1],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let (w, h) = (48, 40);
     let reference = reference(&src, &scene, w as usize, h as usize);
@@ -98,6 +99,7 @@ fn a_volume_over_the_texture_limit_is_refused() {
         camera: camera([-30.0, -25.0, 50.0], [20.0, 16.0, 18.0]),
         channels: vec![ramp(0, [1.0, 1.0, 1.0], 0.0, 40000.0, 0.2)],
         background: [0.0; 3],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let mut small = new_gpu();
     small.limits.max_texture_dimension_3d = 16;

@@ -21,6 +21,7 @@ mod json_schemas;
 mod reference_cli;
 mod render_baselines;
 mod render_cli;
+mod render_filters;
 mod render_precision;
 mod render_reference;
 mod render_streaming;

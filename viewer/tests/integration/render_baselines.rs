@@ -50,6 +50,7 @@ fn scene(channels: usize) -> Scene {
             .map(|c| ramp(c, colors[c], 1000.0, 20000.0, 0.4))
             .collect(),
         background: [0.02, 0.02, 0.05],
+        filter: residency_viewer::scene::Filter::Trilinear,
     }
 }
 
@@ -230,6 +231,7 @@ fn bricks_used_counts_the_working_set() {
         camera: camera([-40.0, -50.0, 60.0], [16.0, 16.0, 16.0]),
         channels: vec![ramp(0, [1.0, 1.0, 1.0], 30.0, 240.0, 0.05)],
         background: [0.0; 3],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     for method in METHODS {
         let (p, _) = render(&src, &s, options(method), 30);

@@ -41,6 +41,7 @@ fn scene(camera: Camera, channels: Vec<ChannelStyle>) -> Scene {
         camera,
         channels,
         background: [0.05, 0.05, 0.1],
+        filter: residency_viewer::scene::Filter::Trilinear,
     }
 }
 

@@ -53,6 +53,7 @@ fn half_scene() -> Scene {
         camera: camera([-40.0, -30.0, 50.0], [16.0, 16.0, 16.0]),
         channels: vec![ramp(0, [0.9, 0.9, 0.2], 50.0, 200.0, 0.2)],
         background: [0.0, 0.0, 0.0],
+        filter: residency_viewer::scene::Filter::Trilinear,
     }
 }
 
@@ -105,6 +106,7 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
         camera: camera([-40.0, -30.0, 50.0], [16.0, 16.0, 16.0]),
         channels: vec![ramp(0, [0.9, 0.9, 0.2], lo, 200.0, 0.2)],
         background: [0.0, 0.0, 0.0],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let (hidden, shown) = (scene(50.0), scene(0.0));
     let mut renderer = Renderer::new(gpu, src.info(), &hidden, full_res(48, 48)).unwrap();
@@ -213,6 +215,7 @@ fn small_cache_evicts_and_converges_for_a_new_view() {
         camera: camera(eye, target),
         channels: vec![ramp(0, [0.2, 0.9, 0.9], 60.0, 180.0, 0.3)],
         background: [0.0, 0.0, 0.0],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     // Views from inside, looking at opposite corners (opaque enough to stop early).
     let a = view([12.0, 12.0, 12.0], [0.0, 0.0, 0.0]);
@@ -400,6 +403,7 @@ fn per_channel_level_bounds_pick_the_levels_fetched() {
             ramp(1, [0.2, 0.2, 1.0], 60.0, 160.0, 0.1),
         ],
         background: [0.0; 3],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let options = RenderOptions {
         width: 32,
@@ -552,6 +556,7 @@ fn bricks_behind_opaque_matter_are_not_fetched() {
         camera: camera([-40.0, 16.0, 16.0], [16.0, 16.0, 16.0]),
         channels: vec![ramp(0, [0.9, 0.7, 0.3], 100.0, 200.0, 1.0)],
         background: [0.0, 0.0, 0.0],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let (p, img) = render(&src, &scene, finest_wanted(32, 32), 20);
     assert!(p.converged, "{}", p.stop_reason);
@@ -612,6 +617,7 @@ fn structures_averaged_away_at_the_coarsest_level_still_render() {
         camera: camera([16.0, -30.0, 40.0], [16.0, 16.0, 16.0]),
         channels: vec![ramp(0, [0.9, 0.9, 0.9], 100.0, 255.0, 0.8)],
         background: [0.0, 0.0, 0.0],
+        filter: residency_viewer::scene::Filter::Trilinear,
     };
     let (p, img) = render(&src, &scene, finest_wanted(32, 32), 20);
     assert!(p.converged, "{}", p.stop_reason);

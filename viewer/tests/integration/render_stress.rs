@@ -288,6 +288,7 @@ fn scene(camera: Camera, channels: Vec<ChannelStyle>, background: [f64; 3]) -> S
         camera,
         channels,
         background,
+        filter: residency_viewer::scene::Filter::Trilinear,
     }
 }
 

@@ -62,6 +62,7 @@ fn scene() -> Scene {
         },
         channels: vec![style(0, [0.0, 1.0, 1.0]), style(1, [1.0, 0.0, 1.0])],
         background: [0.0, 0.0, 0.1],
+        filter: residency_viewer::scene::Filter::Trilinear,
     }
 }
 
