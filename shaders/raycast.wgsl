@@ -20,54 +20,14 @@ const MAX_ITERATIONS: u32 = 1000000u; // loop guard per ray (steps plus skips)
 // Sample format of the atlas (ATLAS_UINT, ATLAS_SINT or ATLAS_FLOAT), fixed when the pipeline
 // is built so that only one atlas is read.
 override SAMPLE_KIND: u32 = 0u;
-// Traversal method: METHOD_RESIDENCY (the residency octree), METHOD_PAGE_TABLE (MRMCPT) or
-// METHOD_OCTREE (one node per brick, GigaVoxels style).
+// Traversal method: METHOD_RESIDENCY (the residency octree), METHOD_PAGE_TABLE (MRMCPT),
+// METHOD_OCTREE (one node per brick, GigaVoxels style), METHOD_SPARSELEAP (ray segment lists of
+// occupancy geometry) or METHOD_RASTERIZE (ray segment lists of a cut of bricks).
 override METHOD: u32 = 0u;
 // Reconstruction filter: FILTER_TRILINEAR or FILTER_TRICUBIC (the cubic B-spline as 8
 // trilinear samples).
 override FILTER: u32 = 0u;
 const NO_LEVEL: u32 = 0xffffffffu;
-
-// Per frame. Positions are in leaf units (octree leaves) or fine units; axes x, y, z.
-struct Params {
-    width: u32,
-    height: u32,
-    frame: u32, // >= 1: the mark of usage feedback and request flags
-    channel_count: u32,
-    leaf_depth: u32,
-    level_count: u32,
-    request_cap: u32,
-    start_depth: u32,
-    class_offset: u32, // word offset of the node (ours) or brick (baselines) classes in `nodes`
-    steps_per_pass: u32, // then the ray is suspended and resumed by the next pass
-    flags: u32, // FLAG_SKIPPING, FLAG_SUBSTITUTION
-    pad0: u32,
-    // The view point V = eye + D·forward (D = view_distance), leaf units: integer part. Rays
-    // start from the plane through V facing the camera, so a far camera keeps voxel
-    // precision (D = 0, V the eye, for a camera near the volume).
-    view_cell: vec3<i32>,
-    slots_z: u32, // atlas slots per z
-    view_frac: vec3<f32>, // V, leaf units: fraction
-    reference_step: f32, // Δ0 of the opacity correction (world)
-    right: vec3<f32>, // camera right · tan(fov/2) · aspect
-    lod_bias: f32, // log2
-    up: vec3<f32>, // camera up · tan(fov/2)
-    pixel_footprint: f32, // per unit distance (world)
-    forward: vec3<f32>, // camera forward (unit)
-    step_fraction: f32, // step as a fraction of a voxel of the level in use
-    world_to_leaf: vec3<f32>, // leaf units per world unit
-    leaf_edge: f32, // world, smallest axis
-    volume_leaf: vec3<f32>, // volume extent in leaf units
-    view_distance: f32, // D (world)
-    background: vec3<f32>,
-    slots_x_log2: u32, // log2 of atlas slots per x
-    unit_shift: vec3<i32>, // log2 of a fine unit's edge in level-0 voxels (leaf shift - fine)
-    slots_y_log2: u32, // log2 of atlas slots per y
-    fine: vec3<i32>, // F: log2 of fine units per leaf
-    pad1: u32,
-    brick: vec3<u32>, // brick edge in voxels
-    pad2: u32,
-}
 
 // A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan driver
 // ends every loop of an invocation after 65535 iterations in all, so long rays are marched a
@@ -98,6 +58,8 @@ struct FrameCounters {
     requests_over_cap: atomic<u32>,
     samples_without_data: atomic<u32>,
     rays_suspended: atomic<u32>, // by the latest pass
+    rays_overflowed: atomic<u32>, // ray segment lists that did not fit (marched whole)
+    pad0: u32,
 }
 
 struct Requests {
@@ -664,6 +626,100 @@ fn visit_brick_octree(
     return v;
 }
 
+// ---- ray segment lists (SparseLeap, rasterize): segments.wgsl wrote them ----
+
+// Where a ray stands on its pixel's segment list: what holds up to `end` (a distance t).
+struct Segment {
+    occupancy: u32, // SparseLeap: occupancy class; rasterize: OCCUPANCY_EMPTY outside every brick
+    level: u32, // rasterize: the brick's level (NO_LEVEL: the ray's own LOD, the list overflowed)
+    end: f32, // where the next record starts or ends: look again there
+}
+
+fn segment_word(k: u32) -> u32 {
+    return nodes[P.segment_offset + k];
+}
+
+fn segment_overflowed(pixel: u32) -> bool {
+    return segment_word(SEGMENT_HEADS + P.width * P.height + pixel) != 0u;
+}
+
+fn segment_record(i: u32) -> SegmentRecord {
+    let at = SEGMENT_HEADS + 2u * P.width * P.height + i * RECORD_WORDS;
+    return SegmentRecord(
+        bitcast<f32>(segment_word(at)),
+        bitcast<f32>(segment_word(at + 1u)),
+        segment_word(at + 2u),
+        segment_word(at + 3u),
+    );
+}
+
+// SparseLeap: the occupancy class at distance t, that of the deepest box holding t (boxes are
+// nested octree nodes, a child's class overriding its parent's; at equal depth, the class
+// that is not empty), and the next distance where a record starts or ends. Unknown where no
+// box holds t or the list overflowed.
+fn occupancy_at(pixel: u32, t: f32) -> Segment {
+    var seg = Segment(OCCUPANCY_UNKNOWN, NO_LEVEL, 3.0e38);
+    if segment_overflowed(pixel) {
+        return seg;
+    }
+    var best = -1;
+    var i = segment_word(SEGMENT_HEADS + pixel);
+    for (var guard = 0u; i != 0u && guard < P.segment_capacity; guard++) {
+        let r = segment_record(i - 1u);
+        if r.t_in <= t && t < r.t_out {
+            let depth = i32((r.payload >> 4u) & 15u);
+            let cls = r.payload & 3u;
+            if depth > best || (depth == best && cls != OCCUPANCY_EMPTY) {
+                best = depth;
+                seg.occupancy = cls;
+            }
+        }
+        if r.t_in > t {
+            seg.end = min(seg.end, r.t_in);
+        }
+        if r.t_out > t {
+            seg.end = min(seg.end, r.t_out);
+        }
+        i = r.next;
+    }
+    return seg;
+}
+
+// Rasterize: the brick holding distance t (bricks of the cut do not overlap but by a hair at
+// shared faces) and where it ends; outside every brick, OCCUPANCY_EMPTY up to the next brick.
+// A list that overflowed holds everywhere, at the ray's own level of detail.
+fn brick_at(pixel: u32, t: f32) -> Segment {
+    if segment_overflowed(pixel) {
+        return Segment(OCCUPANCY_NONEMPTY, NO_LEVEL, 3.0e38);
+    }
+    var seg = Segment(OCCUPANCY_EMPTY, NO_LEVEL, 3.0e38);
+    var i = segment_word(SEGMENT_HEADS + pixel);
+    for (var guard = 0u; i != 0u && guard < P.segment_capacity; guard++) {
+        let r = segment_record(i - 1u);
+        if r.t_in <= t && t < r.t_out {
+            return Segment(OCCUPANCY_NONEMPTY, (r.payload >> 8u) & 15u, r.t_out);
+        }
+        if r.t_in > t {
+            seg.end = min(seg.end, r.t_in);
+        }
+        i = r.next;
+    }
+    return seg;
+}
+
+// Rasterize inside a brick of level l: whether the macrocell holding the ray (the octree node
+// of 8³ voxels of level l, whose range is the region metadata's) is empty in every channel, and
+// then where it ends.
+fn macrocell_skip(ray: Ray, l: u32, dir: vec3<f32>) -> f32 {
+    let d = P.leaf_depth - min(l, P.leaf_depth);
+    let all = (1u << P.channel_count) - 1u;
+    let word = nodes[P.class_offset + node_index(d, ray.cell)];
+    if (word & all) == all {
+        return node_exit(ray, d, dir);
+    }
+    return -1.0;
+}
+
 // ---- sampling every channel ----
 
 struct ChannelSamples {
@@ -736,6 +792,11 @@ fn sample_channels(
                 if METHOD == METHOD_RESIDENCY && substitute && v.action == ACTION_SAMPLE {
                     mask = node_word(v.node, c, 0u);
                 }
+                // The segment methods keep no residency masks: every level may stand in,
+                // coarser first, as its page table says.
+                if (METHOD == METHOD_SPARSELEAP || METHOD == METHOD_RASTERIZE) && substitute {
+                    mask = (1u << P.level_count) - 1u;
+                }
             }
             k = next_candidate(mask, l, k);
             if k == NO_LEVEL {
@@ -769,32 +830,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if st.status == RAY_DONE {
         return;
     }
-    let ndc = vec2<f32>(
-        (f32(gid.x) + 0.5) / f32(P.width) * 2.0 - 1.0,
-        1.0 - (f32(gid.y) + 0.5) / f32(P.height) * 2.0,
-    );
-    let across = ndc.x * P.right + ndc.y * P.up;
-    let ray_forward = P.forward + across;
-    let world_dir = normalize(ray_forward);
-    // The ray meets the view plane at V + D·across (leaf units: `start`), at distance t_plane
-    // from the eye; `ray.t` counts from there, and t_plane is added back for the LOD rule.
-    let view_d = P.view_distance;
-    let t_plane = view_d * length(ray_forward);
-    let start = view_d * across * P.world_to_leaf;
-    var dir_leaf = world_dir * P.world_to_leaf; // leaf units per world unit
-    dir_leaf = select(dir_leaf, vec3<f32>(1e-20), abs(dir_leaf) < vec3<f32>(1e-20));
+    let pray = pixel_ray(gid.x, gid.y);
+    let t_plane = pray.t_plane;
+    let start = pray.start;
+    let dir_leaf = pray.dir_leaf; // leaf units per world unit
     let fine = vec3<f32>(ldexp(1.0, P.fine.x), ldexp(1.0, P.fine.y), ldexp(1.0, P.fine.z));
     let dir = dir_leaf * fine; // fine units per world unit
-
-    // Slab test against the volume box, relative to the eye (leaf units).
-    let eye_rel_lo = -vec3<f32>(P.view_cell) - P.view_frac - start;
-    let eye_rel_hi = P.volume_leaf + eye_rel_lo;
-    let ta = eye_rel_lo / dir_leaf;
-    let tb = eye_rel_hi / dir_leaf;
-    let tmin = min(ta, tb);
-    let tmax = max(ta, tb);
-    let t_enter = max(max(tmin.x, max(tmin.y, tmin.z)), -t_plane);
-    let t_exit = min(tmax.x, min(tmax.y, tmax.z));
+    let span = volume_span(pray);
+    let t_enter = span.x;
+    let t_exit = span.y;
 
     var color = st.color;
     var trans = st.trans;
@@ -854,6 +898,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var lod = 0u;
         var held_step = 0.0;
         var held_cell = vec3<i32>(0);
+        // SparseLeap and rasterize: what the pixel's segment list says up to seg.end (looked
+        // up again from the list there, also after a resume).
+        let segments = (METHOD == METHOD_SPARSELEAP || METHOD == METHOD_RASTERIZE) && skipping;
+        var seg = Segment(OCCUPANCY_UNKNOWN, NO_LEVEL, -3.0e38);
+        if segments && st.status == RAY_FRESH && segment_overflowed(pixel) {
+            atomicAdd(&requests.counters.rays_overflowed, 1u);
+        }
         loop {
             iterations++;
             if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
@@ -875,9 +926,34 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 chosen[c] = channel_level(c, lod);
                 finest = min(finest, chosen[c]);
             }
-            let desired_step = P.step_fraction * level_voxel(finest);
-            var v: Visit;
-            if METHOD == METHOD_RESIDENCY {
+            var desired_step = P.step_fraction * level_voxel(finest);
+            var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
+            if segments {
+                if ray.t >= seg.end {
+                    if METHOD == METHOD_SPARSELEAP {
+                        seg = occupancy_at(pixel, ray.t);
+                    } else {
+                        seg = brick_at(pixel, ray.t);
+                    }
+                }
+                if seg.occupancy == OCCUPANCY_EMPTY {
+                    v.action = ACTION_SKIP;
+                    v.skip = min(seg.end, t_exit) - ray.t;
+                } else if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
+                    // The brick's level, not the sample's footprint, and its macrocells.
+                    finest = P.level_count - 1u;
+                    for (var c = 0u; c < P.channel_count; c++) {
+                        chosen[c] = channel_level(c, seg.level);
+                        finest = min(finest, chosen[c]);
+                    }
+                    desired_step = P.step_fraction * level_voxel(finest);
+                    let macro_end = macrocell_skip(ray, seg.level, dir);
+                    if macro_end >= 0.0 {
+                        v.action = ACTION_SKIP;
+                        v.skip = min(macro_end, seg.end - ray.t);
+                    }
+                }
+            } else if METHOD == METHOD_RESIDENCY {
                 if held.action == ACTION_SAMPLE && desired_step == held_step
                     && all((ray.cell >> node_shift(held.depth)) == held_cell) {
                     v = held;
@@ -890,7 +966,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             } else if METHOD == METHOD_PAGE_TABLE {
                 v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
-            } else {
+            } else if METHOD == METHOD_OCTREE {
                 v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
             }
             if v.action == ACTION_SKIP {

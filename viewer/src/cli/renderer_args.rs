@@ -46,8 +46,11 @@ pub struct RendererArgs {
     /// yet is a hole until it arrives (the page-table-only baseline's behaviour).
     #[arg(long)]
     pub no_substitution: bool,
-    /// Traversal method: ours (`residency`), or a baseline: `page-table` (MRMCPT: whole-brick
-    /// skipping, no substitution) or `octree` (one node per brick, GigaVoxels style).
+    /// Traversal method: ours (`residency`), a baseline: `page-table` (MRMCPT: whole-brick
+    /// skipping, no substitution) or `octree` (one node per brick, GigaVoxels style), or
+    /// another paper's renderer: `sparseleap` (occupancy geometry rasterised into per-pixel
+    /// ray segment lists) or `rasterize` (a cut of bricks by projected bounding sphere,
+    /// rasterised into ray segment lists, with macrocell skipping).
     #[arg(long, default_value = Method::Residency.name(), value_parser = method_parser())]
     pub method: Method,
     /// Brick fetch worker threads.
@@ -153,6 +156,14 @@ mod tests {
         assert_eq!(
             options(&["--method", "octree"]).unwrap().method,
             Method::Octree
+        );
+        assert_eq!(
+            options(&["--method", "sparseleap"]).unwrap().method,
+            Method::SparseLeap
+        );
+        assert_eq!(
+            options(&["--method", "rasterize"]).unwrap().method,
+            Method::Rasterize
         );
         let o = options(&[
             "--min-level",

@@ -1,4 +1,5 @@
-//! The contract between the renderer and `shaders/raycast.wgsl`, written once:
+//! The contract between the renderer and its shaders (`shaders/raycast.wgsl`, and
+//! `shaders/segments.wgsl` for the methods that rasterise ray segment lists), written once:
 //!
 //! - every struct the CPU and the shader share, as a `#[repr(C)]` [`bytemuck`] type here with a
 //!   WGSL struct of the same name and fields in the shader ([`GpuStruct`]; the viewer's
@@ -25,6 +26,12 @@ pub use crate::octree::MAX_LEVELS;
 
 /// What the shaders share: transfer functions, opacity correction, compositing.
 const TRANSFER: &str = include_str!("../../../shaders/transfer.wgsl");
+
+/// The per-frame uniforms and the pixel rays, shared by the ray caster and the segment lists.
+const VIEW: &str = include_str!("../../../shaders/view.wgsl");
+
+/// The ray segment lists' rasteriser as written.
+const SEGMENTS_BODY: &str = include_str!("../../../shaders/segments.wgsl");
 
 /// The ray caster as written.
 const RAYCAST_BODY: &str = include_str!("../../../shaders/raycast.wgsl");
@@ -60,6 +67,16 @@ pub mod binding {
     pub const RAYS: u32 = 11;
     /// [`super::SceneUniforms`], uniform.
     pub const SCENE: u32 = 12;
+}
+
+/// Binding numbers of `segments.wgsl`'s group 0.
+pub mod segment_binding {
+    /// [`super::Params`], uniform (the ray caster's, shared).
+    pub const PARAMS: u32 = 0;
+    /// The boxes, [`super::SegmentBox`] each.
+    pub const BOXES: u32 = 1;
+    /// The ray segment area of the node buffer (see [`super::SEGMENT_HEADS`]).
+    pub const AREA: u32 = 2;
 }
 
 /// A struct shared with the shader: its WGSL name and each field's name, byte offset and
@@ -130,8 +147,9 @@ gpu_struct! {
         pub steps_per_pass: u32,
         /// 1: skip empty and homogeneous nodes; 2: substitute missing bricks from other levels.
         pub flags: u32,
-        /// Unused (alignment).
-        pub pad0: u32,
+        /// Word offset of the ray segment area in the node buffer (SparseLeap and rasterize;
+        /// 0 for the other methods): see [`SEGMENT_HEADS`].
+        pub segment_offset: u32,
         /// The view point `V = eye + D·forward` (`D = view_distance`), leaf units: integer
         /// part. Rays start from the plane through V facing the camera, so a far camera keeps
         /// voxel precision (`D = 0`, V the eye, for a camera near the volume).
@@ -172,8 +190,8 @@ gpu_struct! {
         pub slots_y_log2: u32,
         /// `log2` of fine units per leaf, per axis.
         pub fine: [i32; 3],
-        /// Unused (alignment).
-        pub pad1: u32,
+        /// Records the ray segment area holds (0 where unused).
+        pub segment_capacity: u32,
         /// Brick edge in voxels, per axis.
         pub brick: [u32; 3],
         /// Unused (alignment).
@@ -249,7 +267,66 @@ gpu_struct! {
         pub samples_without_data: u32,
         /// Rays the latest pass suspended.
         pub rays_suspended: u32,
+        /// Rays whose ray segment list overflowed the pool (SparseLeap, rasterize): they
+        /// march their whole length.
+        pub rays_overflowed: u32,
+        /// Unused (alignment of the request list that follows).
+        pub pad0: u32,
     }
+}
+
+gpu_struct! {
+    /// One box the segment lists rasterise, in leaf units (`x, y, z`): a node of SparseLeap's
+    /// occupancy geometry, or a brick of the rasterize method's cut. Read by the vertex and
+    /// fragment stages of `segments.wgsl` from a storage buffer, one per instance.
+    pub struct SegmentBox {
+        /// Low corner.
+        pub lo: [f32; 3],
+        /// What a record of this box carries: [`segment_payload`].
+        pub payload: u32,
+        /// High corner.
+        pub hi: [f32; 3],
+        /// Unused (alignment).
+        pub pad0: u32,
+    }
+}
+
+gpu_struct! {
+    /// One record of a pixel's ray segment list: where the pixel's ray is inside one box.
+    /// Stored as [`RECORD_WORDS`] words in the ray segment area, in this order.
+    pub struct SegmentRecord {
+        /// Distance (the ray caster's `t`) where the ray enters the box (or starts).
+        pub t_in: f32,
+        /// Distance where it leaves the box (or the volume).
+        pub t_out: f32,
+        /// The box's payload.
+        pub payload: u32,
+        /// The next record of the pixel's list, plus 1 (0 ends the list).
+        pub next: u32,
+    }
+}
+
+/// Words of one [`SegmentRecord`].
+pub const RECORD_WORDS: u32 = (size_of::<SegmentRecord>() / 4) as u32;
+
+/// Layout of the ray segment area (words from [`Params::segment_offset`]): word 0 counts the
+/// records allocated (atomic); from `SEGMENT_HEADS`, one head per pixel (the first record
+/// plus 1; 0: none); then one overflow flag per pixel (1: a record did not fit, so the list is
+/// incomplete); then the records, [`RECORD_WORDS`] each.
+pub const SEGMENT_HEADS: u32 = 4;
+
+/// Occupancy class of a SparseLeap box: transparent under every transfer function.
+pub const OCCUPANCY_EMPTY: u32 = 0;
+/// Occupancy class of a SparseLeap box: some channel visible and data resident.
+pub const OCCUPANCY_NONEMPTY: u32 = 1;
+/// Occupancy class of a SparseLeap box: not known to be empty, and some visible channel has
+/// no level resident there yet (or the store has no region metadata).
+pub const OCCUPANCY_UNKNOWN: u32 = 2;
+
+/// The payload of a segment box: its occupancy class (bits 0–1), its octree depth (bits 4–7)
+/// and the pyramid level to sample (bits 8–11; the rasterize method's brick level).
+pub fn segment_payload(class: u32, depth: u32, level: u32) -> u32 {
+    class | (depth & 15) << 4 | (level & 15) << 8
 }
 
 gpu_struct! {
@@ -337,6 +414,13 @@ pub fn wgsl_prelude() -> String {
         u("METHOD_RESIDENCY", Method::Residency as u32),
         u("METHOD_PAGE_TABLE", Method::PageTable as u32),
         u("METHOD_OCTREE", Method::Octree as u32),
+        u("METHOD_SPARSELEAP", Method::SparseLeap as u32),
+        u("METHOD_RASTERIZE", Method::Rasterize as u32),
+        u("OCCUPANCY_EMPTY", OCCUPANCY_EMPTY),
+        u("OCCUPANCY_NONEMPTY", OCCUPANCY_NONEMPTY),
+        u("OCCUPANCY_UNKNOWN", OCCUPANCY_UNKNOWN),
+        u("SEGMENT_HEADS", SEGMENT_HEADS),
+        u("RECORD_WORDS", RECORD_WORDS),
         u("FILTER_TRILINEAR", Filter::Trilinear as u32),
         u("FILTER_TRICUBIC", Filter::Tricubic as u32),
         u("ATLAS_UINT", AtlasKind::Uint as u32),
@@ -363,7 +447,13 @@ pub const FLAG_SUBSTITUTION: u32 = 2;
 /// The ray caster as compiled: [`wgsl_prelude`], `shaders/transfer.wgsl`, then
 /// `shaders/raycast.wgsl`.
 pub fn raycast_source() -> String {
-    [wgsl_prelude().as_str(), TRANSFER, RAYCAST_BODY].concat()
+    [wgsl_prelude().as_str(), TRANSFER, VIEW, RAYCAST_BODY].concat()
+}
+
+/// The segment lists' rasteriser as compiled: [`wgsl_prelude`], `shaders/view.wgsl`, then
+/// `shaders/segments.wgsl`.
+pub fn segments_source() -> String {
+    [wgsl_prelude().as_str(), VIEW, SEGMENTS_BODY].concat()
 }
 
 /// The limit probe as compiled: [`wgsl_prelude`], `shaders/transfer.wgsl`, then
@@ -373,9 +463,10 @@ pub fn probe_source() -> String {
 }
 
 /// The WGSL files of `shaders/` as compiled, by file name: every file is part of at least one.
-pub fn sources() -> [(&'static str, String); 2] {
+pub fn sources() -> [(&'static str, String); 3] {
     [
         ("raycast.wgsl", raycast_source()),
+        ("segments.wgsl", segments_source()),
         ("probe.wgsl", probe_source()),
     ]
 }

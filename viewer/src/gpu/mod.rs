@@ -29,15 +29,18 @@
 
 pub mod apron;
 pub mod brick_cache;
+pub mod brick_cut;
 pub mod buffers;
 pub mod contract;
 pub mod device;
+pub mod occupancy;
 pub mod page_table;
 pub mod pipeline;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod probe;
 pub mod renderer;
 pub mod residency;
+pub mod segments;
 pub mod streaming;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod synthetic;

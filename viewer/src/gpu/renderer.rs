@@ -10,13 +10,16 @@ use std::sync::Arc;
 
 use super::GpuError;
 use super::brick_cache::BrickCache;
+use super::brick_cut::{CutView, brick_cut};
 use super::buffers::{check_binding, readback_buffer, storage_buffer, uniform_buffer};
 use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
 use super::device::Gpu;
+use super::occupancy::occupancy_geometry;
 use super::page_table::PageTables;
 use super::pipeline::{Bindings, RaycastPipeline};
 use super::residency::ResidencyState;
 pub use super::residency::is_clear;
+use super::segments::SegmentStage;
 use super::tables::SceneTables;
 use super::timer::PassTimer;
 use crate::octree::ResidencyOctree;
@@ -52,11 +55,30 @@ pub enum Method {
     /// coarsest level to the level it wants, needs every ancestor brick resident, and renders
     /// from the finest resident ancestor while a brick is missing.
     Octree,
+    /// SparseLeap (Hadwiger et al. 2018): occupancy geometry (nested octree boxes where the
+    /// occupancy class changes: empty under the transfer functions, non-empty, unknown) is
+    /// rasterised each frame into per-pixel ray segment lists, and the ray caster leaps over
+    /// the empty segments without traversing a hierarchy, sampling the others through the page
+    /// table as ours does.
+    #[serde(rename = "sparseleap")]
+    SparseLeap,
+    /// Octree rasterisation (Wang et al.): the CPU picks a cut of bricks by the projected
+    /// size of each brick's bounding sphere and culls empty ones, the bricks are rasterised
+    /// into per-pixel ray segment lists, and each ray samples every brick on its list at that
+    /// brick's level, skipping empty macrocells (the octree nodes of 8³ voxels of the level)
+    /// inside it.
+    Rasterize,
 }
 
 impl Method {
     /// Every method, ours first.
-    pub const ALL: [Self; 3] = [Self::Residency, Self::PageTable, Self::Octree];
+    pub const ALL: [Self; 5] = [
+        Self::Residency,
+        Self::PageTable,
+        Self::Octree,
+        Self::SparseLeap,
+        Self::Rasterize,
+    ];
 
     /// The name used on the command line and in statistics.
     pub fn name(self) -> &'static str {
@@ -64,13 +86,27 @@ impl Method {
             Self::Residency => "residency",
             Self::PageTable => "page-table",
             Self::Octree => "octree",
+            Self::SparseLeap => "sparseleap",
+            Self::Rasterize => "rasterize",
         }
+    }
+
+    /// Whether the method rasterises boxes into ray segment lists before ray casting.
+    pub fn uses_segment_lists(self) -> bool {
+        matches!(self, Self::SparseLeap | Self::Rasterize)
+    }
+
+    /// Whether the method culls with the residency octree's per-node classes (and never
+    /// fetches bricks that are clear under the transfer functions), rather than with the
+    /// baselines' per-brick classes.
+    pub fn uses_node_classes(self) -> bool {
+        !matches!(self, Self::PageTable | Self::Octree)
     }
 }
 
 /// A method name that is not one of [`Method::ALL`]'s.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown method '{name}' (residency, page-table or octree)")]
+#[error("unknown method '{name}' (residency, page-table, octree, sparseleap or rasterize)")]
 pub struct UnknownMethod {
     /// The name given.
     pub name: String,
@@ -164,6 +200,12 @@ pub struct ShaderCounts {
     /// Distinct cache slots the frame read (usage feedback): the bricks this method needs
     /// resident for this view.
     pub bricks_used: u64,
+    /// Boxes rasterised into ray segment lists before ray casting: SparseLeap's occupancy
+    /// geometry or the rasterize method's cut of bricks (0 for the other methods).
+    pub segment_boxes: u64,
+    /// Rays whose ray segment list did not fit the pool (SparseLeap, rasterize): marched
+    /// whole.
+    pub rays_overflowed: u64,
 }
 
 /// One missing brick the shader reported.
@@ -273,6 +315,8 @@ pub struct Renderer {
     tables: SceneTables,
     buffers: FrameBuffers,
     bind_group: wgpu::BindGroup,
+    /// The ray segment lists (SparseLeap and rasterize).
+    segments: Option<SegmentStage>,
     frame: u32,
 }
 
@@ -353,6 +397,16 @@ impl Renderer {
                 rays: &buffers.rays,
             },
         );
+        let segments = residency.segment_area().map(|area| {
+            SegmentStage::new(
+                gpu,
+                options.width,
+                options.height,
+                &buffers.params,
+                residency.nodes(),
+                area,
+            )
+        });
         let mut renderer = Self {
             options,
             scene: scene.clone(),
@@ -361,6 +415,7 @@ impl Renderer {
             tables,
             buffers,
             bind_group,
+            segments,
             frame: 0,
         };
         renderer.flush(gpu);
@@ -524,6 +579,7 @@ impl Renderer {
         let bg = self.scene.background;
         // Slots per x and y are powers of two: the shader takes their log2.
         let slots = cache.slots_per_axis();
+        let area = self.residency.segment_area();
         let mut flags = 0;
         if self.options.empty_space_skipping {
             flags |= FLAG_SKIPPING;
@@ -543,6 +599,8 @@ impl Renderer {
             class_offset: self.residency.class_offset(),
             steps_per_pass: self.tables.steps_per_pass(),
             flags,
+            segment_offset: area.map_or(0, |a| a.offset_words as u32),
+            segment_capacity: area.map_or(0, |a| a.capacity as u32),
             view_cell: view_leaf.map(|e| e.floor().clamp(i32::MIN as f64, i32::MAX as f64) as i32),
             slots_z: slots[2],
             view_frac: f3(view_leaf.map(|e| e - e.floor())),
@@ -567,6 +625,44 @@ impl Renderer {
             brick: g.brick.map(|b| b as u32),
             ..Params::default()
         }
+    }
+
+    /// The boxes of this frame's ray segment lists: SparseLeap's occupancy geometry, rebuilt
+    /// when classes or residency changed; the rasterize method's cut of bricks, every frame.
+    fn update_segment_boxes(&mut self, gpu: &Gpu) {
+        let Some(stage) = &mut self.segments else {
+            return;
+        };
+        let changed = self.residency.take_occupancy_changed();
+        let boxes = match self.options.method {
+            Method::SparseLeap if changed => {
+                occupancy_geometry(self.residency.octree(), self.residency.styles()).boxes
+            }
+            Method::Rasterize => {
+                let info = self.residency.info();
+                let levels = info.levels.len();
+                let bounds = |i: usize| {
+                    self.options
+                        .level_bounds
+                        .get(i)
+                        .map_or((0, levels - 1), |&(lo, hi)| (lo as usize, hi as usize))
+                };
+                let drawn = self.residency.octree().channels().len();
+                let finest = (0..drawn).map(|i| bounds(i).0).min().unwrap_or(0);
+                let coarsest = (0..drawn).map(|i| bounds(i).1).max().unwrap_or(levels - 1);
+                let view = CutView {
+                    camera: self.scene.camera.clone(),
+                    aspect: f64::from(self.options.width) / f64::from(self.options.height),
+                    height: f64::from(self.options.height),
+                    lod_bias: f64::from(self.options.lod_bias),
+                    spacing: info.spacing_xyz(),
+                    levels: (finest.min(levels - 1), coarsest.min(levels - 1)),
+                };
+                brick_cut(self.residency.octree(), self.residency.styles(), &view).boxes
+            }
+            _ => return,
+        };
+        stage.set_boxes(gpu, &self.buffers.params, self.residency.nodes(), &boxes);
     }
 
     /// Renders one frame and reads back its image, requests, usage feedback (folded into
@@ -600,6 +696,10 @@ impl Renderer {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
             label: Some("raycast frame"),
         });
+        self.update_segment_boxes(gpu);
+        if let Some(stage) = &self.segments {
+            stage.encode(&mut encoder, self.residency.nodes());
+        }
         let buffers = &self.buffers;
         encoder.clear_buffer(&buffers.requests, 0, Some(COUNTER_BYTES));
         encoder.clear_buffer(&buffers.rays, 0, None);
@@ -719,6 +819,11 @@ impl Renderer {
                 samples_without_data: u64::from(counters.samples_without_data),
                 bricks_requested: requested as u64,
                 bricks_used,
+                segment_boxes: self
+                    .segments
+                    .as_ref()
+                    .map_or(0, |s| u64::from(s.box_count())),
+                rays_overflowed: u64::from(counters.rays_overflowed),
             },
             gpu_time_ms,
         })

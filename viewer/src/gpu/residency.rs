@@ -11,6 +11,7 @@ use super::GpuError;
 use super::apron::{self, Aprons, EntryKind, LowFaces, Part, PartSource};
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, storage_buffer};
+use super::contract::{RECORD_WORDS, SEGMENT_HEADS};
 use super::device::Gpu;
 use super::page_table::{
     ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables, entry_slot, slot_entry,
@@ -37,15 +38,105 @@ pub struct ResidencyState {
     nodes: wgpu::Buffer,
     /// Word offset of the classes in `nodes`.
     class_offset: u32,
+    /// Where the ray segment lists lie in `nodes` (SparseLeap and rasterize only).
+    segments: Option<SegmentArea>,
     /// The baselines' per-brick value ranges, by page-table id (`f32`, rounded outward).
     brick_ranges: Vec<(f32, f32)>,
     /// Per channel slot of the octree, its style (`None`: not drawn, so empty).
     styles: Vec<Option<ChannelStyle>>,
-    /// Whether every class must be rewritten at the next flush (a restyle).
-    classes_stale: bool,
-    /// Whether every slot's apron must be refilled at the next flush (a restyle emptied the
-    /// parts that stood in for clear bricks).
-    aprons_stale: bool,
+    /// What the next flush, or the next occupancy geometry, must redo.
+    pending: Pending,
+}
+
+/// What a [`ResidencyState`] must redo.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Pending {
+    /// Every class must be rewritten at the next flush (a restyle).
+    classes: bool,
+    /// Every slot's apron must be refilled at the next flush (a restyle emptied the parts that
+    /// stood in for clear bricks).
+    aprons: bool,
+    /// Classes or residency masks changed since SparseLeap's occupancy geometry was last built
+    /// ([`ResidencyState::take_occupancy_changed`]).
+    occupancy: bool,
+}
+
+/// Where the ray segment lists of one renderer lie in its node buffer, after the nodes and
+/// classes: the layout of [`super::contract::SEGMENT_HEADS`], for one image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SegmentArea {
+    /// Word offset in the node buffer (a multiple of 64 words, so the segment pass can bind
+    /// it with the offset alignment WebGPU guarantees).
+    pub offset_words: u64,
+    /// Pixels of the image.
+    pub pixels: u64,
+    /// Records the pool holds.
+    pub capacity: u64,
+}
+
+/// Records per pixel the pool holds when the device allows. SparseLeap's paper sizes its pool
+/// for an average depth complexity of 4 to 8; a cut of small bricks (the rasterize method with
+/// bricks of 8³ to 32³) puts more on a ray, so the pool holds twice the paper's largest.
+const RECORDS_PER_PIXEL: u64 = 16;
+
+impl SegmentArea {
+    /// The area for `options` after `words_before` words, or `None` for a method without
+    /// segment lists. The pool holds [`RECORDS_PER_PIXEL`] records per pixel, fewer where
+    /// the device's largest binding is smaller (a ray whose list does not fit is marched
+    /// whole).
+    ///
+    /// # Errors
+    /// [`GpuError::BindingTooLarge`] when not even one record per pixel fits.
+    fn plan(
+        gpu: &Gpu,
+        options: &RenderOptions,
+        words_before: u64,
+    ) -> Result<Option<Self>, GpuError> {
+        if !options.method.uses_segment_lists() {
+            return Ok(None);
+        }
+        let pixels = u64::from(options.width) * u64::from(options.height);
+        let offset_words = words_before.div_ceil(64) * 64;
+        let fixed = offset_words + u64::from(SEGMENT_HEADS) + 2 * pixels;
+        let limit_words = gpu
+            .limits
+            .max_storage_buffer_binding_size
+            .min(gpu.limits.max_buffer_size)
+            / 4;
+        let room = limit_words.saturating_sub(fixed) / u64::from(RECORD_WORDS);
+        let capacity = (RECORDS_PER_PIXEL * pixels)
+            .min(room)
+            .min(u64::from(u32::MAX / 4));
+        let area = Self {
+            offset_words,
+            pixels,
+            capacity,
+        };
+        if capacity < pixels {
+            check_binding(
+                gpu,
+                "the ray segment lists",
+                (fixed + pixels * u64::from(RECORD_WORDS)) * 4,
+                "render a smaller image",
+            )?;
+        }
+        Ok(Some(area))
+    }
+
+    /// Bytes of the node buffer up to the end of the area.
+    pub fn end_bytes(&self) -> u64 {
+        (self.offset_words
+            + u64::from(SEGMENT_HEADS)
+            + 2 * self.pixels
+            + self.capacity * u64::from(RECORD_WORDS))
+            * 4
+    }
+
+    /// Bytes from the start of the area to the first record: the counter, heads and overflow
+    /// flags, cleared before each frame's lists are drawn.
+    pub fn header_bytes(&self) -> u64 {
+        (u64::from(SEGMENT_HEADS) + 2 * self.pixels) * 4
+    }
 }
 
 /// What the ray caster needs to know of a node's or brick's value range in one channel.
@@ -121,7 +212,7 @@ impl ResidencyState {
         let node_words = geometry.node_count() * octree.words_per_node();
         // Per-brick value ranges, for the baselines' classes: the page table culls the brick
         // it samples, the octree a brick and its subtree.
-        let brick_ranges: Vec<(f32, f32)> = if options.method == Method::Residency {
+        let brick_ranges: Vec<(f32, f32)> = if options.method.uses_node_classes() {
             Vec::new()
         } else {
             (0..pages.len() as u32)
@@ -140,12 +231,13 @@ impl ResidencyState {
                 .collect()
         };
         // One class word per node (ours) or per brick (the baselines) after the nodes.
-        let class_words = if options.method == Method::Residency {
+        let class_words = if options.method.uses_node_classes() {
             geometry.node_count()
         } else {
             brick_ranges.len()
         };
-        let bytes = (node_words + class_words) as u64 * 4;
+        let segments = SegmentArea::plan(gpu, options, (node_words + class_words) as u64)?;
+        let bytes = segments.map_or((node_words + class_words) as u64 * 4, |a| a.end_bytes());
         let hint = if brick_ranges.is_empty() {
             "use a smaller --octree-depth"
         } else {
@@ -166,10 +258,14 @@ impl ResidencyState {
             aprons,
             nodes,
             class_offset: node_words as u32,
+            segments,
             brick_ranges,
             styles,
-            classes_stale: true,
-            aprons_stale: false,
+            pending: Pending {
+                classes: true,
+                aprons: false,
+                occupancy: true,
+            },
         })
     }
 
@@ -209,6 +305,23 @@ impl ResidencyState {
         self.class_offset
     }
 
+    /// Where the ray segment lists lie in [`ResidencyState::nodes`] (SparseLeap and
+    /// rasterize; `None` for the other methods).
+    pub fn segment_area(&self) -> Option<SegmentArea> {
+        self.segments
+    }
+
+    /// Whether classes or residency changed since the last call (SparseLeap rebuilds its
+    /// occupancy geometry then).
+    pub fn take_occupancy_changed(&mut self) -> bool {
+        std::mem::take(&mut self.pending.occupancy)
+    }
+
+    /// The channel styles, one per channel slot of the octree (`None`: not drawn).
+    pub fn styles(&self) -> &[Option<ChannelStyle>] {
+        &self.styles
+    }
+
     /// Takes the channel `styles` (one per channel drawn): the node or brick classes are
     /// rewritten at the next [`ResidencyState::flush`], and the [`ENTRY_CLEAR`] marks redone: a
     /// missing brick that [`is_clear`] under its channel's style is never fetched, and a
@@ -221,8 +334,8 @@ impl ResidencyState {
             .iter()
             .map(|&c| styles.iter().find(|s| s.channel == c).map(|s| (*s).clone()))
             .collect();
-        self.classes_stale = true;
-        if self.method != Method::Residency || !self.empty_space_skipping {
+        self.pending.classes = true;
+        if !self.method.uses_node_classes() || !self.empty_space_skipping {
             return;
         }
         for slot in self.aprons.drop_stand_ins() {
@@ -230,7 +343,7 @@ impl ResidencyState {
                 self.pages.set(id, slot_entry(slot, false));
             }
         }
-        self.aprons_stale = true;
+        self.pending.aprons = true;
         for id in 0..self.pages.len() as u32 {
             let Some(key) = self.pages.key(id) else {
                 continue;
@@ -421,7 +534,7 @@ impl ResidencyState {
 
     /// Uploads changed page-table entries, octree nodes and classes.
     pub fn flush(&mut self, gpu: &Gpu) {
-        if std::mem::take(&mut self.aprons_stale) {
+        if std::mem::take(&mut self.pending.aprons) {
             self.refill_aprons(gpu);
         }
         self.pages.flush(&gpu.queue);
@@ -432,8 +545,9 @@ impl ResidencyState {
             gpu.queue
                 .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
         }
-        let stale = std::mem::take(&mut self.classes_stale);
-        if self.method == Method::Residency {
+        let stale = std::mem::take(&mut self.pending.classes);
+        self.pending.occupancy |= stale || dirty.is_some();
+        if self.method.uses_node_classes() {
             // Without region metadata, node ranges refined from arriving bricks change those
             // nodes' classes (otherwise only masks changed, and classes stand).
             let range = if stale {

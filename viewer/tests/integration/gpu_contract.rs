@@ -4,7 +4,7 @@
 
 use residency_viewer::gpu::contract::{
     self, ChannelEntry, FrameCounters, GpuStruct, LevelEntry, Params, ProbeParams, RayState,
-    SceneUniforms,
+    SceneUniforms, SegmentBox, SegmentRecord,
 };
 
 fn parse(source: &str) -> naga::Module {
@@ -77,6 +77,7 @@ fn all_disagreements(module: &naga::Module) -> Vec<String> {
         disagreements::<SceneUniforms>(module),
         disagreements::<FrameCounters>(module),
         disagreements::<RayState>(module),
+        disagreements::<SegmentRecord>(module),
     ]
     .concat()
 }
@@ -91,6 +92,16 @@ fn every_shared_struct_matches_its_wgsl_twin() {
             disagreements::<ProbeParams>(&probe),
             disagreements::<SceneUniforms>(&probe),
             disagreements::<ChannelEntry>(&probe),
+        ]
+        .concat(),
+        Vec::<String>::new()
+    );
+    let segments = parse(&contract::segments_source());
+    assert_eq!(
+        [
+            disagreements::<Params>(&segments),
+            disagreements::<SegmentBox>(&segments),
+            disagreements::<SegmentRecord>(&segments),
         ]
         .concat(),
         Vec::<String>::new()

@@ -1,6 +1,7 @@
 //! Every WGSL file in `shaders/` parses and validates with naga, as compiled
-//! (`gpu::contract::sources`: the generated prelude, the shared `transfer.wgsl`, then the
-//! shader), and every file there is part of a compiled source.
+//! (`gpu::contract::sources`: the generated prelude, the shared `transfer.wgsl` and
+//! `view.wgsl` where the shader uses them, then the shader), and every file there is part of a
+//! compiled source.
 
 use residency_viewer::gpu::contract;
 
@@ -28,10 +29,28 @@ fn every_wgsl_file_validates() {
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
         .collect();
     files.sort();
-    assert_eq!(files, ["probe.wgsl", "raycast.wgsl", "transfer.wgsl"]);
-    let transfer = std::fs::read_to_string(dir.join("transfer.wgsl")).unwrap();
+    assert_eq!(
+        files,
+        [
+            "probe.wgsl",
+            "raycast.wgsl",
+            "segments.wgsl",
+            "transfer.wgsl",
+            "view.wgsl"
+        ]
+    );
+    let read = |name: &str| std::fs::read_to_string(dir.join(name)).unwrap();
+    let (transfer, view) = (read("transfer.wgsl"), read("view.wgsl"));
     for (name, src) in &sources {
-        let own = std::fs::read_to_string(dir.join(name)).unwrap();
-        assert!(src.contains(&transfer) && src.ends_with(&own), "{name}");
+        assert!(src.ends_with(&read(name)), "{name}");
     }
+    let with = |part: &str| -> Vec<&str> {
+        sources
+            .iter()
+            .filter(|(_, src)| src.contains(part))
+            .map(|(name, _)| *name)
+            .collect()
+    };
+    assert_eq!(with(&transfer), ["raycast.wgsl", "probe.wgsl"]);
+    assert_eq!(with(&view), ["raycast.wgsl", "segments.wgsl"]);
 }

@@ -24,6 +24,7 @@ mod render_cli;
 mod render_filters;
 mod render_precision;
 mod render_reference;
+mod render_segments;
 mod render_streaming;
 mod render_stress;
 mod source_http;

@@ -15,7 +15,7 @@ use residency_viewer::metrics;
 use residency_viewer::scene::Scene;
 use residency_viewer::source::{BrickSource, SampleType};
 
-const METHODS: [Method; 3] = [Method::Residency, Method::PageTable, Method::Octree];
+const METHODS: [Method; 5] = Method::ALL;
 
 /// 32³ voxels in 16³ bricks (8 bricks, 2 levels): a blob of radius 3 in one octant of brick
 /// (x 1, y 0, z 0) in channel 0 (so it fills one 8³ octree leaf of that brick), a shell around the volume centre in channel 1, and zero

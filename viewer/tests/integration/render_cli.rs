@@ -132,6 +132,73 @@ fn render_matches_reference_and_writes_stats() {
     }
 }
 
+/// `--method sparseleap` and `--method rasterize`, each with `--filter tricubic`, match
+/// `viewer reference --filter tricubic` on a store written by `ingest`, and say in their
+/// statistics how many boxes they rasterised.
+#[test]
+fn seed_methods_and_tricubic_match_the_reference() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = store(dir.path());
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let store = s(&store);
+    let scene = [
+        "--camera",
+        "-30,-40,70:20,16,24",
+        "--tf",
+        "0:300:3000:0.2",
+        "--tf",
+        "1:500:2500:0.1",
+        "--width",
+        "40",
+        "--height",
+        "32",
+        "--filter",
+        "tricubic",
+    ];
+    let reference = dir.path().join("ref.exr");
+    let r = s(&reference);
+    let mut args = vec!["reference", "--store", &store, "--out", &r];
+    args.extend(scene);
+    let out = viewer(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for method in ["sparseleap", "rasterize"] {
+        let (gpu, stats) = (
+            dir.path().join(format!("{method}.exr")),
+            dir.path().join(format!("{method}.json")),
+        );
+        let (g, st) = (s(&gpu), s(&stats));
+        let mut args = vec!["render", "--store", &store, "--method", method];
+        args.extend(scene);
+        args.extend(["--out", &g, "--stats", &st, "--max-level", "0"]);
+        let out = viewer(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let m = metrics::compare(
+            &RgbImage::read(&gpu).unwrap(),
+            &RgbImage::read(&reference).unwrap(),
+        )
+        .unwrap();
+        eprintln!("{method}: PSNR {:.2} dB, SSIM {:.5}", m.psnr_db, m.ssim);
+        assert!(m.psnr_db >= 40.0 && m.ssim >= 0.99, "{method}: {m:?}");
+        let json: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        assert_eq!(json["converged"], true, "{method}");
+        let last = json["frames"].as_array().unwrap().last().unwrap().clone();
+        assert!(
+            last["segment_boxes"].as_u64().unwrap() > 0,
+            "{method}: {last}"
+        );
+        assert_eq!(last["rays_overflowed"], 0, "{method}");
+    }
+}
+
 #[test]
 fn bad_input_fails_with_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();

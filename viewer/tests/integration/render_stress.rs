@@ -22,7 +22,7 @@ use residency_viewer::source::{
     VolumeInfo,
 };
 
-const METHODS: [Method; 3] = [Method::Residency, Method::PageTable, Method::Octree];
+const METHODS: [Method; 5] = Method::ALL;
 
 // ---------------------------------------------------------------------------------------------
 // Rendering and checking
@@ -457,18 +457,14 @@ fn far_scene(n: u64, diagonals: f64) -> Scene {
 fn far_camera(n: u64, diagonals: f64, psnr: f64, ssim: f64, max_abs: f64) {
     let src = shell_n(n);
     let s = far_scene(n, diagonals);
-    let label = format!("far-{n}-{diagonals:e}");
-    let g = gpu_render(
-        &label,
-        src.clone(),
-        &s,
-        options(32, 32, Method::Residency),
-        false,
-    );
     let reference = reference(src.as_ref(), &s, 32, 32);
-    let m = compare(&label, &g, &reference);
     assert!(reference.pixels.iter().filter(|p| p[0] > 0.2).count() > 150);
-    assert_metrics(&label, &m, psnr, ssim, max_abs);
+    for method in METHODS {
+        let label = format!("far-{n}-{diagonals:e}-{}", method.name());
+        let g = gpu_render(&label, src.clone(), &s, options(32, 32, method), false);
+        let m = compare(&label, &g, &reference);
+        assert_metrics(&label, &m, psnr, ssim, max_abs);
+    }
 }
 
 /// A camera 100 volume diagonals (5540 voxels) from the 32³ [`shell`], field of view 0.01 rad:
@@ -796,62 +792,58 @@ fn region_1e7_voxels_from_the_origin_has_no_cracks_or_jitter() {
     // The same region 40 voxels from the origin, with empty space on both sides as far away.
     let near: Arc<dyn BrickSource> = Arc::new(FarRoi::new(ROI + 80, vec![40], roi_value));
     let shifts = [0.0, 0.05, 0.3];
-    let render = |src: &Arc<dyn BrickSource>, x0: u64, shift: f64| {
-        let s = roi_scene(x0, shift);
-        let label = format!("roi-{x0}-{shift}");
-        let g = gpu_render(
-            &label,
-            src.clone(),
-            &s,
-            options(32, 32, Method::Residency),
-            false,
-        );
-        let r =
-            reference::render(src.as_ref(), &s, &ReferenceOptions::new(32, 32)).expect("reference");
-        let m = compare(&label, &g, &r);
-        assert!(
-            r.pixels.iter().filter(|p| p[0] > 0.3).count() > 300,
-            "{label}: the region must fill the picture"
-        );
-        assert_metrics(&label, &m, 45.0, 0.998, 0.05);
-        (g.img, r)
-    };
-    let max_diff = |a: &RgbImage, b: &RgbImage, c: &RgbImage, d: &RgbImage| {
-        let mut m = 0.0f32;
-        for i in 0..a.pixels.len() {
-            for k in 0..3 {
-                let x = (a.pixels[i][k] - b.pixels[i][k]) - (c.pixels[i][k] - d.pixels[i][k]);
-                m = m.max(x.abs());
-            }
-        }
-        m
-    };
-    let blank = RgbImage::filled(32, 32, [0.0; 3]);
-    let near_images: Vec<(RgbImage, RgbImage)> =
-        shifts.iter().map(|&s| render(&near, 40, s)).collect();
-    for x0 in far_starts {
-        let images: Vec<(RgbImage, RgbImage)> =
-            shifts.iter().map(|&s| render(&far, x0, s)).collect();
-        for (k, shift) in shifts.iter().enumerate() {
-            let twin = max_diff(&images[k].0, &near_images[k].0, &blank, &blank);
-            eprintln!("roi-{x0}-{shift}: vs near twin max {twin:.5}");
-            if k == 0 {
-                continue;
-            }
-            let (g, g0) = (&images[k].0, &images[0].0);
-            let jitter = max_diff(g, g0, &near_images[k].0, &near_images[0].0);
-            let against_ref = max_diff(g, g0, &images[k].1, &images[0].1);
-            let change = max_diff(&images[k].1, &images[0].1, &blank, &blank);
-            eprintln!(
-                "roi-{x0}-{shift}: jitter vs near {jitter:.5}, vs reference {against_ref:.5}, \
-                 reference change {change:.5}"
-            );
+    for method in METHODS {
+        let render = |src: &Arc<dyn BrickSource>, x0: u64, shift: f64| {
+            let s = roi_scene(x0, shift);
+            let label = format!("roi-{x0}-{shift}-{}", method.name());
+            let g = gpu_render(&label, src.clone(), &s, options(32, 32, method), false);
+            let r = reference::render(src.as_ref(), &s, &ReferenceOptions::new(32, 32))
+                .expect("reference");
+            let m = compare(&label, &g, &r);
             assert!(
-                change > 0.005,
-                "roi-{x0}-{shift}: the move must change the picture"
+                r.pixels.iter().filter(|p| p[0] > 0.3).count() > 300,
+                "{label}: the region must fill the picture"
             );
-            assert!(jitter <= 0.03, "roi-{x0}-{shift}: jitter {jitter}");
-            assert!(against_ref <= 0.05, "roi-{x0}-{shift}: {against_ref}");
+            assert_metrics(&label, &m, 45.0, 0.998, 0.05);
+            (g.img, r)
+        };
+        let max_diff = |a: &RgbImage, b: &RgbImage, c: &RgbImage, d: &RgbImage| {
+            let mut m = 0.0f32;
+            for i in 0..a.pixels.len() {
+                for k in 0..3 {
+                    let x = (a.pixels[i][k] - b.pixels[i][k]) - (c.pixels[i][k] - d.pixels[i][k]);
+                    m = m.max(x.abs());
+                }
+            }
+            m
+        };
+        let blank = RgbImage::filled(32, 32, [0.0; 3]);
+        let near_images: Vec<(RgbImage, RgbImage)> =
+            shifts.iter().map(|&s| render(&near, 40, s)).collect();
+        for x0 in far_starts {
+            let images: Vec<(RgbImage, RgbImage)> =
+                shifts.iter().map(|&s| render(&far, x0, s)).collect();
+            for (k, shift) in shifts.iter().enumerate() {
+                let twin = max_diff(&images[k].0, &near_images[k].0, &blank, &blank);
+                eprintln!("roi-{x0}-{shift}: vs near twin max {twin:.5}");
+                if k == 0 {
+                    continue;
+                }
+                let (g, g0) = (&images[k].0, &images[0].0);
+                let jitter = max_diff(g, g0, &near_images[k].0, &near_images[0].0);
+                let against_ref = max_diff(g, g0, &images[k].1, &images[0].1);
+                let change = max_diff(&images[k].1, &images[0].1, &blank, &blank);
+                eprintln!(
+                    "roi-{x0}-{shift}: jitter vs near {jitter:.5}, vs reference {against_ref:.5}, \
+                 reference change {change:.5}"
+                );
+                assert!(
+                    change > 0.005,
+                    "roi-{x0}-{shift}: the move must change the picture"
+                );
+                assert!(jitter <= 0.03, "roi-{x0}-{shift}: jitter {jitter}");
+                assert!(against_ref <= 0.05, "roi-{x0}-{shift}: {against_ref}");
+            }
         }
     }
 }
@@ -884,30 +876,26 @@ fn region_1e7_voxels_from_the_origin_steps_exactly_along_the_long_axis() {
         let tf = style(0, [1.0, 0.75, 0.35], &[(45.0, 0.0), (220.0, 0.12)]);
         scene(cam, vec![tf], [0.0, 0.0, 0.12])
     };
-    let mut images = Vec::new();
-    for (name, src, x0) in [("near", &near, 40), ("far", &far, x_far)] {
-        let label = format!("stripes-{name}");
-        let s = view(x0);
-        let g = gpu_render(
-            &label,
-            src.clone(),
-            &s,
-            options(32, 32, Method::Residency),
-            false,
+    for method in METHODS {
+        let mut images = Vec::new();
+        for (name, src, x0) in [("near", &near, 40), ("far", &far, x_far)] {
+            let label = format!("stripes-{name}-{}", method.name());
+            let s = view(x0);
+            let g = gpu_render(&label, src.clone(), &s, options(32, 32, method), false);
+            let r = reference::render(src.as_ref(), &s, &ReferenceOptions::new(32, 32))
+                .expect("reference");
+            let m = compare(&label, &g, &r);
+            assert!(m.psnr_db >= 50.0, "{label}: PSNR {}", m.psnr_db);
+            images.push(g.img);
+        }
+        let twin = metrics::compare(&images[1], &images[0]).expect("compare");
+        eprintln!("stripes: far vs near max {:.5}", twin.max_abs_error);
+        assert!(
+            twin.max_abs_error <= 0.005,
+            "far vs near {}",
+            twin.max_abs_error
         );
-        let r =
-            reference::render(src.as_ref(), &s, &ReferenceOptions::new(32, 32)).expect("reference");
-        let m = compare(&label, &g, &r);
-        assert!(m.psnr_db >= 50.0, "{label}: PSNR {}", m.psnr_db);
-        images.push(g.img);
     }
-    let twin = metrics::compare(&images[1], &images[0]).expect("compare");
-    eprintln!("stripes: far vs near max {:.5}", twin.max_abs_error);
-    assert!(
-        twin.max_abs_error <= 0.005,
-        "far vs near {}",
-        twin.max_abs_error
-    );
 }
 
 // ---------------------------------------------------------------------------------------------
