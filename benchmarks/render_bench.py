@@ -12,9 +12,11 @@ transfer functions (`--vary-tf`). The renderer draws at most 8 channels at once,
 16-channel CyCIF-like store renders 8.
 
 Experiments (see `viewer bench run --help` and docs/benchmarks/render-bench.md):
-- table1: every method over the same orbit (sparse 1 and 4 channels, dense 1 and 4, cycif);
-- sweep: step, LOD bias, cache budget and leaf size on sparse 1 channel; leaf size again on
-  stores of smaller and larger bricks;
+- table1: every method over the same orbit (sparse 1 and 4 channels, dense 1 and 4, cycif):
+  ours, the page-table and octree baselines, no skipping, SparseLeap and octree rasterisation;
+- sweep: step, LOD bias, cache budget and leaf size on sparse 1 channel, and step and LOD bias
+  for every other method on sparse, dense and cycif (the time–error front of every renderer);
+  leaf size again on stores of smaller and larger bricks;
 - skipped: bytes fetched against a naive frustum loader (sparse, dense, cycif);
 - scaling: sparse at three sizes, and 1, 2, 4, 8 channels.
 
@@ -111,6 +113,8 @@ def plan(short: bool):
         s, big, cy, chunk = (128, 128, 128), (192, 192, 192), (24, 256, 256), 16
     small = tuple(v // 2 for v in s)
     sweep_leaf = ["--sweep-params", "leaf"]
+    # Every method over step and LOD bias, on the kinds the full sweep does not cover.
+    sweep_methods = ["--sweep-params", "step,lod-bias,methods"]
 
     def bone(n):
         # A CT bone window on each of n channels: the soft tissue (values 100-400) is
@@ -123,14 +127,14 @@ def plan(short: bool):
     p = [
         (f"sparse {s[0]}³", "sparse", s, chunk, 1, None, None, "table1,skipped,sweep,scaling", bone(1)),
         (f"sparse {s[0]}³ ×4", "sparse", s, chunk, 4, None, None, "table1,scaling", ["--vary-tf"] + bone(4)),
-        (f"dense {s[0]}³", "dense", s, chunk, 1, None, None, "table1,skipped,scaling", []),
+        (f"dense {s[0]}³", "dense", s, chunk, 1, None, None, "table1,skipped,sweep,scaling", sweep_methods),
         (f"dense {s[0]}³ ×4", "dense", s, chunk, 4, None, None, "table1", ["--vary-tf"]),
         # Skipping behind opaque matter: the heavy fluid made nearly opaque.
         (f"dense {s[0]}³ opaque", "dense", s, chunk, 1, None, None, "skipped", ["--tf", "0:0.3:0.8:0.9"]),
         # A contrast window above the camera background (offset 60, noise and autofluorescence
         # reach 163), as a microscopist sets it: the default ramp starts at the median (108),
         # so the background noise would be faint fog and no brick would be transparent.
-        (f"cycif {cy[0]}×{cy[1]}×{cy[2]}", "cycif", cy, chunk, None, 16, list(range(8)), "table1,skipped", window(8)),
+        (f"cycif {cy[0]}×{cy[1]}×{cy[2]}", "cycif", cy, chunk, None, 16, list(range(8)), "table1,skipped,sweep", sweep_methods + window(8)),
         (f"sparse {small[0]}³", "sparse", small, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {big[0]}³", "sparse", big, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {s[0]}³ ×8 (2 shown)", "sparse", s, chunk, 8, None, [0, 1], "scaling", ["--vary-tf"] + bone(8)),

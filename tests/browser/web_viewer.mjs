@@ -126,6 +126,11 @@ try {
         // The fragment follows the view once the next frame renders.
         results.push(await until(() => page.evaluate((old) => (location.hash && location.hash !== old ? location.hash : null), step.not ?? null)));
         break;
+      case "select":
+        // Picks an option of a <select> on the page, as a person does.
+        await page.selectOption(step.selector, step.value);
+        results.push(null);
+        break;
       case "goto":
         await page.goto(step.url);
         results.push(null);

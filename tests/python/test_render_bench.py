@@ -84,8 +84,29 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
         if any(run["experiment"] == "sweep" for run in r["runs"]):
             sweeps += 1
             assert sum(run["is_default"] for run in r["runs"] if run["experiment"] == "sweep") == 1
-    assert {"page-table", "octree", "residency", "residency (no skipping)"} <= methods
+    assert {"page-table", "octree", "residency", "residency (no skipping)", "sparseleap", "rasterize"} <= methods
+    # The other papers' renderers rasterised boxes into ray segment lists in every view.
+    for f in files:
+        for run in json.loads(f.read_text())["runs"]:
+            boxes = [v["segment_boxes"] for v in run["views"]]
+            if run["method"] in ("sparseleap", "rasterize"):
+                assert all(b > 0 for b in boxes), (f.name, run["label"], boxes)
+            else:
+                assert all(b == 0 for b in boxes), (f.name, run["label"], boxes)
+    # Their table, with the papers' speed-ups beside ours, in the report and the summary.
+    assert "### The other papers' renderers" in report
+    assert "(King Snake 0.92%)" in report and "2.63× (2.18–4.23×)" in report
+    assert "| Octree/SparseLeap (paper) |" in (out / "summary.md").read_text()
     assert sweeps >= 1
+    # Every dataset kind has a time–error sweep holding every method.
+    swept = {}
+    for f in files:
+        r = json.loads(f.read_text())
+        runs = [run for run in r["runs"] if run["experiment"] == "sweep"]
+        if runs:
+            swept.setdefault(r["dataset"]["kind"], set()).update(run["method"] for run in runs)
+    every = {"residency", "page-table", "octree", "sparseleap", "rasterize"}
+    assert all(swept.get(k) == every for k in ("sparse", "dense", "cycif")), swept
     assert probes >= 1 and "### Ours against the limit probe" in report
     assert "| Ours / manual |" in (out / "summary.md").read_text()
     # The report marks a non-empty Pareto front for every sweep.

@@ -251,6 +251,35 @@ def test_hiding_a_channel_or_moving_a_window_fetches_no_brick(served, tmp_path):
     assert errors(console) == []
 
 
+def test_the_filter_menu_renders_tricubic_as_the_reference_does(served, stores, tmp_path):
+    """Choosing *tricubic* in the page's Filter menu builds a new renderer whose converged
+    image equals `viewer reference` of the scene the page then carries (`"filter":
+    "tricubic"`), and differs from the trilinear image."""
+    results, console = drive(
+        view_url(served, "u8"),
+        [
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "trilinear.png")},
+            {"do": "select", "selector": "#filter", "value": "tricubic"},
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "snapshot", "path": str(tmp_path / "tricubic.png")},
+        ],
+    )
+    state, fragment = results[3], results[4]
+    assert state["error"] is None and state["converged"], state
+    assert state["renderer_builds"] == 2, state
+    scene = scene_of(fragment)
+    assert scene["filter"] == "tricubic"
+    ref = reference(stores["u8"], scene, tmp_path / "ref.exr")
+    psnr, ssim = compare(tmp_path / "tricubic.png", ref)
+    assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
+    lin = read_png(tmp_path / "trilinear.png")
+    cub = read_png(tmp_path / "tricubic.png")
+    assert np.abs(lin - cub).max() > 8
+    assert errors(console) == []
+
+
 def test_missing_dataset_and_no_webgpu_show_their_messages(served):
     (msg,), _ = drive(f"{served}/nope/view", [{"do": "waitMessage"}])
     assert "Cannot open dataset 'nope'" in msg and "no such dataset on the server" in msg

@@ -287,6 +287,9 @@ pub struct ViewRecord {
     pub resident_bytes: u64,
     /// Samples per converged frame.
     pub samples: u64,
+    /// Boxes the converged frame rasterised into ray segment lists (SparseLeap, rasterize;
+    /// 0 for the other methods).
+    pub segment_boxes: u64,
     /// PSNR against the reference, dB (`null`: identical).
     pub psnr_db: Option<f64>,
     /// SSIM against the reference.
@@ -553,6 +556,9 @@ pub struct SweepValues {
     pub cache_fractions: Vec<f64>,
     /// Leaf targets in level-0 voxels.
     pub leaf_voxels: Vec<u64>,
+    /// Other methods swept too, each at its defaults and over `steps` and `lod_biases`, so
+    /// that the time–error front holds every renderer, not only ours.
+    pub methods: Vec<Method>,
 }
 
 /// What to measure and how.
@@ -624,6 +630,12 @@ fn to_image(width: u32, height: u32, pixels: &[[f32; 4]]) -> RgbImage {
 /// The driver: one source, scene, device, orbit and set of reference images.
 pub struct Bench {
     gpu: Gpu,
+    /// A second device for the methods that rasterise ray segment lists. On lavapipe, once a
+    /// render pass has run on a device, every later compute pass's timestamps on it come out
+    /// nearly equal (measured: the residency renderer's GPU time fell from 5.5 ms to 0.006 ms
+    /// after a SparseLeap renderer had run, its wall time unchanged), so those methods get a
+    /// device of their own and the others keep honest GPU times.
+    raster_gpu: std::sync::OnceLock<Gpu>,
     source: Arc<dyn BrickSource>,
     scene: Scene,
     base: RenderOptions,
@@ -708,6 +720,7 @@ impl Bench {
         );
         Ok(Self {
             gpu,
+            raster_gpu: std::sync::OnceLock::new(),
             source,
             scene,
             base,
@@ -756,6 +769,18 @@ impl Bench {
             .count() as u64
     }
 
+    /// The device the renderers of `method` run on (see `raster_gpu`).
+    fn device_for(&self, method: Method) -> Result<&Gpu, GpuError> {
+        if !method.uses_segment_lists() {
+            return Ok(&self.gpu);
+        }
+        if let Some(gpu) = self.raster_gpu.get() {
+            return Ok(gpu);
+        }
+        let gpu = Gpu::new()?;
+        Ok(self.raster_gpu.get_or_init(|| gpu))
+    }
+
     /// Converges `renderer` on view `k`, times the converged frames and compares the image.
     fn measure_view(
         &self,
@@ -765,13 +790,14 @@ impl Bench {
     ) -> Result<ViewRecord, BenchError> {
         let (azimuth, cam) = &self.cameras[k];
         renderer.set_camera(cam.clone());
-        let p = converge(&self.gpu, renderer, fetcher, &self.budget())?;
+        let gpu = self.device_for(renderer.options().method)?;
+        let p = converge(gpu, renderer, fetcher, &self.budget())?;
         let mut gpu_ms = Vec::new();
         let mut wall_ms = Vec::new();
         let mut last = None;
         for _ in 0..self.plan.timed_frames {
             let t = Instant::now();
-            let out = renderer.render(&self.gpu)?;
+            let out = renderer.render(gpu)?;
             wall_ms.push(t.elapsed().as_secs_f64() * 1e3);
             if let Some(g) = out.gpu_time_ms {
                 gpu_ms.push(g);
@@ -804,6 +830,7 @@ impl Bench {
             bricks_used: out.counts.bricks_used,
             resident_bytes: out.counts.bricks_used * slot,
             samples: out.counts.samples,
+            segment_boxes: out.counts.segment_boxes,
             psnr_db: finite_psnr(&m),
             ssim: m.ssim,
             max_abs_error: m.max_abs_error,
@@ -824,7 +851,9 @@ impl Bench {
         sweep: Option<SweepParam>,
     ) -> Result<RunRecord, BenchError> {
         self.bar.set_message(format!("{experiment}: {label}"));
-        let mut renderer = Renderer::new(&self.gpu, self.info(), &self.scene, options.clone())
+        let mut renderer = self
+            .device_for(options.method)
+            .and_then(|gpu| Renderer::new(gpu, self.info(), &self.scene, options.clone()))
             .map_err(|source| BenchError::Renderer {
                 dataset: self.info().name.clone(),
                 label: label.clone(),
@@ -923,7 +952,7 @@ impl Bench {
         let slot = self.info().brick_bytes();
         let mut runs = vec![default];
         let sv = self.plan.sweep.clone();
-        for s in sv.steps {
+        for &s in &sv.steps {
             if s == self.base.step_factor {
                 continue;
             }
@@ -938,7 +967,7 @@ impl Bench {
                 param(SweptParameter::Step, s as f64),
             )?);
         }
-        for b in sv.lod_biases {
+        for &b in &sv.lod_biases {
             if b == self.base.lod_bias {
                 continue;
             }
@@ -953,7 +982,7 @@ impl Bench {
                 param(SweptParameter::LodBias, b as f64),
             )?);
         }
-        for f in sv.cache_fractions {
+        for &f in &sv.cache_fractions {
             let slots = ((working_set as f64 * f).round() as u64).max(1);
             let o = RenderOptions {
                 cache_bytes: slots * slot,
@@ -965,6 +994,9 @@ impl Bench {
                 o,
                 param(SweptParameter::CacheFraction, f),
             )?);
+        }
+        for &method in &sv.methods {
+            runs.extend(self.method_sweep(method, &sv)?);
         }
         let default_depth = OctreeGeometry::depth_for(self.info(), self.base.leaf_voxels, 7);
         for l in sv.leaf_voxels {
@@ -982,6 +1014,48 @@ impl Bench {
                 format!("leaf {l} voxels"),
                 o,
                 param(SweptParameter::LeafVoxels, l as f64),
+            )?);
+        }
+        Ok(runs)
+    }
+
+    /// Another method over the time–error sweep: its defaults, then each step and LOD bias
+    /// alone (labels start with the method's name).
+    fn method_sweep(&self, method: Method, sv: &SweepValues) -> Result<Vec<RunRecord>, BenchError> {
+        let name = method.name();
+        let param = |name: SweptParameter, value: f64| Some(SweepParam { name, value });
+        let base = RenderOptions {
+            method,
+            ..self.base.clone()
+        };
+        let mut runs = vec![self.run(
+            Experiment::Sweep,
+            format!("{name} defaults"),
+            base.clone(),
+            param(SweptParameter::Default, 0.0),
+        )?];
+        for &s in sv.steps.iter().filter(|&&s| s != base.step_factor) {
+            let o = RenderOptions {
+                step_factor: s,
+                ..base.clone()
+            };
+            runs.push(self.run(
+                Experiment::Sweep,
+                format!("{name} step {s}"),
+                o,
+                param(SweptParameter::Step, f64::from(s)),
+            )?);
+        }
+        for &b in sv.lod_biases.iter().filter(|&&b| b != base.lod_bias) {
+            let o = RenderOptions {
+                lod_bias: b,
+                ..base.clone()
+            };
+            runs.push(self.run(
+                Experiment::Sweep,
+                format!("{name} LOD bias {b}"),
+                o,
+                param(SweptParameter::LodBias, f64::from(b)),
             )?);
         }
         Ok(runs)
@@ -1172,7 +1246,9 @@ impl Bench {
                     (1 + s.steps.len()
                         + s.lod_biases.len()
                         + s.cache_fractions.len()
-                        + s.leaf_voxels.len()) as u64
+                        + s.leaf_voxels.len()
+                        + s.methods.len() * (1 + s.steps.len() + s.lod_biases.len()))
+                        as u64
                         * views
                 }
                 Experiment::Skipped => 2 * views,

@@ -86,22 +86,24 @@ pub struct RunArgs {
     /// Reference step as a fraction of the finest level-0 voxel.
     #[arg(long, default_value_t = residency_viewer::reference::DEFAULT_STEP_FRACTION)]
     pub reference_step: f64,
-    /// Table-1 methods, comma-separated: residency, page-table, octree, no-skipping.
+    /// Table-1 methods, comma-separated: residency, page-table, octree, sparseleap,
+    /// rasterize, no-skipping.
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "page-table,octree,residency,no-skipping"
+        default_value = "page-table,octree,residency,no-skipping,sparseleap,rasterize"
     )]
     pub methods: Vec<String>,
     /// Give each visible channel after the first a transfer function shifted up its range
     /// (simulated channels: one volume duplicated, as in the paper).
     #[arg(long)]
     pub vary_tf: bool,
-    /// Sweep: which parameters to sweep, comma-separated: step, lod-bias, cache, leaf.
+    /// Sweep: which parameters to sweep, comma-separated: step, lod-bias, cache, leaf, and
+    /// `methods` (every other `--methods` method over the same steps and LOD biases).
     #[arg(
         long,
         value_delimiter = ',',
-        default_value = "step,lod-bias,cache,leaf"
+        default_value = "step,lod-bias,cache,leaf,methods"
     )]
     pub sweep_params: Vec<String>,
     /// Sweep: step factors.
@@ -151,15 +153,17 @@ fn experiment_parser() -> impl clap::builder::TypedValueParser<Value = Experimen
 }
 
 fn parse_method(s: &str) -> Result<(Method, bool)> {
-    Ok(match s.trim() {
-        "residency" => (Method::Residency, true),
-        "page-table" => (Method::PageTable, true),
-        "octree" => (Method::Octree, true),
-        "no-skipping" => (Method::Residency, false),
-        other => anyhow::bail!(
-            "--methods: unknown method {other:?} (residency, page-table, octree, no-skipping)"
+    let s = s.trim();
+    if s == "no-skipping" {
+        return Ok((Method::Residency, false));
+    }
+    match s.parse::<Method>() {
+        Ok(m) => Ok((m, true)),
+        Err(_) => anyhow::bail!(
+            "--methods: unknown method {s:?} (residency, page-table, octree, sparseleap, \
+             rasterize, no-skipping)"
         ),
-    })
+    }
 }
 
 /// The values of a sweep parameter: all of `values` when it is swept (`on`), else none.
@@ -185,6 +189,11 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
         info.levels.len(),
         scene.channels.len(),
     )?;
+    let methods: Vec<(Method, bool)> = args
+        .methods
+        .iter()
+        .map(|m| parse_method(m))
+        .collect::<Result<_>>()?;
     let plan = Plan {
         experiments: args.experiment.clone(),
         label: args.label.clone(),
@@ -197,16 +206,13 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
         first_azimuth: args.first_azimuth,
         reference_step: args.reference_step,
         workers: args.renderer.workers,
-        methods: args
-            .methods
-            .iter()
-            .map(|m| parse_method(m))
-            .collect::<Result<_>>()?,
+        methods: methods.clone(),
         sweep: {
             for p in &args.sweep_params {
                 ensure!(
-                    ["step", "lod-bias", "cache", "leaf"].contains(&p.as_str()),
-                    "--sweep-params: unknown parameter {p:?} (step, lod-bias, cache, leaf)"
+                    ["step", "lod-bias", "cache", "leaf", "methods"].contains(&p.as_str()),
+                    "--sweep-params: unknown parameter {p:?} (step, lod-bias, cache, leaf, \
+                     methods)"
                 );
             }
             let on = |p: &str| args.sweep_params.iter().any(|x| x == p);
@@ -215,6 +221,15 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
                 lod_biases: swept(on("lod-bias"), &args.lod_biases),
                 cache_fractions: swept(on("cache"), &args.cache_fractions),
                 leaf_voxels: swept(on("leaf"), &args.leaf_voxels),
+                methods: if on("methods") {
+                    methods
+                        .iter()
+                        .filter(|&&(m, skipping)| skipping && m != Method::Residency)
+                        .map(|&(m, _)| m)
+                        .collect()
+                } else {
+                    Vec::new()
+                },
             }
         },
         progress: !args.quiet,

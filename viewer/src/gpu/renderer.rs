@@ -698,7 +698,8 @@ impl Renderer {
         });
         self.update_segment_boxes(gpu);
         if let Some(stage) = &self.segments {
-            stage.encode(&mut encoder, self.residency.nodes());
+            let timer = self.buffers.readback.timer.as_ref();
+            stage.encode(&mut encoder, self.residency.nodes(), timer);
         }
         let buffers = &self.buffers;
         encoder.clear_buffer(&buffers.requests, 0, Some(COUNTER_BYTES));
@@ -720,7 +721,9 @@ impl Renderer {
                     std::mem::offset_of!(FrameCounters, rays_suspended) as u64,
                     Some(4),
                 );
-                let timestamp_writes = rb.timer.as_ref().map(|t| t.writes(passes == 0));
+                // The frame starts at its first pass: the segment lists' where there are.
+                let first = passes == 0 && self.segments.is_none();
+                let timestamp_writes = rb.timer.as_ref().map(|t| t.writes(first));
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                     label: Some("raycast"),
                     timestamp_writes,

@@ -9,6 +9,7 @@ use super::contract::{SegmentBox, segment_binding, segments_source};
 use super::device::Gpu;
 use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
 use super::residency::SegmentArea;
+use super::timer::PassTimer;
 
 /// Vertices of one box (12 triangles).
 const BOX_VERTICES: u32 = 36;
@@ -166,8 +167,14 @@ impl SegmentStage {
         self.box_count
     }
 
-    /// Clears the lists in `nodes` and rasterises the boxes into them.
-    pub fn encode(&self, encoder: &mut wgpu::CommandEncoder, nodes: &wgpu::Buffer) {
+    /// Clears the lists in `nodes` and rasterises the boxes into them; with `timer`, the pass
+    /// writes the frame's start time.
+    pub fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        nodes: &wgpu::Buffer,
+        timer: Option<&PassTimer>,
+    ) {
         encoder.clear_buffer(
             nodes,
             self.area.offset_words * 4,
@@ -185,7 +192,7 @@ impl SegmentStage {
                 },
             })],
             depth_stencil_attachment: None,
-            timestamp_writes: None,
+            timestamp_writes: timer.map(PassTimer::frame_start),
             occlusion_query_set: None,
             multiview_mask: None,
         });

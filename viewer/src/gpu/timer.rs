@@ -1,5 +1,6 @@
-//! GPU time of compute passes, from timestamp queries where the device has them: the start
-//! is written by the first pass of a frame, the end by every pass, so the time spans them all.
+//! GPU time of a frame's passes, from timestamp queries where the device has them: the start
+//! is written by the first pass of a frame (the segment lists' render pass where there is one,
+//! else the first compute pass), the end by every compute pass, so the time spans them all.
 
 use super::GpuError;
 use super::device::Gpu;
@@ -49,6 +50,16 @@ impl PassTimer {
             query_set: &self.set,
             beginning_of_pass_write_index: first.then_some(0),
             end_of_pass_write_index: Some(1),
+        }
+    }
+
+    /// The timestamp writes of a render pass that starts a frame (the segment lists'): the
+    /// start of the frame, so that its time spans the rasterisation too.
+    pub fn frame_start(&self) -> wgpu::RenderPassTimestampWrites<'_> {
+        wgpu::RenderPassTimestampWrites {
+            query_set: &self.set,
+            beginning_of_pass_write_index: Some(0),
+            end_of_pass_write_index: None,
         }
     }
 
