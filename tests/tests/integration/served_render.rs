@@ -127,3 +127,65 @@ fn sample_served_and_rendered_on_the_gpu_matches_the_reference() {
     );
     assert!(hits > 0.0, "{metrics}");
 }
+
+/// `viewer render --method sparseleap` and `--method rasterize`, each with `--filter tricubic`,
+/// through `brickserver`, match `viewer reference --filter tricubic` through the same server.
+#[test]
+fn seed_methods_with_tricubic_render_over_the_server() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
+    let sample = p("sample");
+    run(
+        "ingest",
+        &["sample", "-o", &sample, "--size", "16,48,48", "--quiet"],
+    );
+    let store = p("sample.ome.zarr");
+    let n = p("sample/nuclei.ome.tif");
+    run(
+        "ingest",
+        &["convert", &n, "-o", &store, "--chunk", "16", "--quiet"],
+    );
+    let server = Server::start(&store);
+    let scene = [
+        "--server",
+        &server.url,
+        "--dataset",
+        "sample",
+        "--camera",
+        "30,20,1.6",
+        "--width",
+        "48",
+        "--height",
+        "48",
+        "--filter",
+        "tricubic",
+    ];
+    let reference = p("ref.exr");
+    let mut args = vec!["reference"];
+    args.extend(scene);
+    args.extend(["--out", &reference]);
+    run("viewer", &args);
+    for method in ["sparseleap", "rasterize"] {
+        let (gpu, stats) = (p(&format!("{method}.exr")), p(&format!("{method}.json")));
+        let mut args = vec!["render", "--method", method];
+        args.extend(scene);
+        args.extend(["--out", &gpu, "--stats", &stats, "--max-level", "0"]);
+        run("viewer", &args);
+        let out = run("viewer", &["compare", &gpu, &reference, "--json"]);
+        let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let (psnr, ssim) = (
+            cmp["psnr_db"].as_f64().unwrap_or(f64::INFINITY),
+            cmp["ssim"].as_f64().unwrap(),
+        );
+        assert!(psnr >= 40.0 && ssim >= 0.99, "{method}: {cmp}");
+        let stats: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+        assert_eq!(stats["converged"], true, "{method}: {stats}");
+        assert_eq!(stats["method"], method);
+        let last = stats["frames"].as_array().unwrap().last().unwrap();
+        assert!(
+            last["segment_boxes"].as_u64().unwrap() > 0,
+            "{method}: {last}"
+        );
+    }
+}
