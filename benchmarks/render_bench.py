@@ -164,7 +164,7 @@ def main():
     out = args.out_dir or (ROOT / "benchmarks" / "data" / "short-report" if args.short else ROOT / "docs" / "benchmarks")
     raw = out / "raw"
     raw.mkdir(parents=True, exist_ok=True)
-    for old in raw.glob("*.json"):  # a stale file would be mistaken for this run's
+    for old in [*raw.glob("*.json"), *out.glob("*.png")]:  # a stale file would be mistaken for this run's
         old.unlink()
     views = args.views or (1 if args.short else 3)
     size = args.size or (32 if args.short else 96)

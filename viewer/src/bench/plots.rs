@@ -101,7 +101,19 @@ pub struct TradeoffPoint {
     pub front: bool,
     /// The renderer's defaults.
     pub default: bool,
+    /// The series it belongs to (the method), one colour and legend entry each.
+    pub group: String,
 }
+
+/// Colours of the tradeoff plot's series, in order of first appearance.
+const GROUP_COLOURS: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(127, 127, 127),
+];
 
 fn padded(lo: f64, hi: f64) -> (f64, f64) {
     let (lo, hi) = if lo.is_finite() && hi.is_finite() {
@@ -159,14 +171,33 @@ pub fn tradeoff(
             .map_err(err)?
             .label("Pareto front")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+        let mut groups: Vec<&str> = Vec::new();
+        for p in points {
+            if !groups.contains(&p.group.as_str()) {
+                groups.push(&p.group);
+            }
+        }
+        for (i, group) in groups.iter().enumerate() {
+            let colour = GROUP_COLOURS[i % GROUP_COLOURS.len()];
+            chart
+                .draw_series(
+                    points
+                        .iter()
+                        .filter(|p| p.group == *group)
+                        .map(|p| Circle::new((p.ms, p.psnr), 4, colour.filled())),
+                )
+                .map_err(err)?
+                .label(*group)
+                .legend(move |(x, y)| Circle::new((x + 10, y), 4, colour.filled()));
+        }
         chart
-            .draw_series(points.iter().map(|p| {
-                let style = if p.front { RED.filled() } else { BLUE.filled() };
-                Circle::new((p.ms, p.psnr), 4, style)
-            }))
-            .map_err(err)?
-            .label("configuration")
-            .legend(|(x, y)| Circle::new((x + 10, y), 4, BLUE.filled()));
+            .draw_series(
+                points
+                    .iter()
+                    .filter(|p| p.front)
+                    .map(|p| Circle::new((p.ms, p.psnr), 6, RED.stroke_width(2))),
+            )
+            .map_err(err)?;
         chart
             .draw_series(
                 points
@@ -300,6 +331,7 @@ mod tests {
                 psnr: 30.0,
                 front: true,
                 default: true,
+                group: "residency".into(),
             },
             TradeoffPoint {
                 label: "b".into(),
@@ -307,6 +339,7 @@ mod tests {
                 psnr: 29.0,
                 front: false,
                 default: false,
+                group: "sparseleap".into(),
             },
         ];
         tradeoff(&p, "t", "GPU ms", &pts).unwrap();

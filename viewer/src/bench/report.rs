@@ -634,6 +634,7 @@ fn sweep(
             ),
             front: front.contains(&i),
             default: x.is_default,
+            group: x.method.name().to_string(),
         })
         .collect();
     plots::tradeoff(
@@ -645,7 +646,7 @@ fn sweep(
     written.plots.push(path);
     let _ = writeln!(
         out,
-        "\n![time against error, {}]({name})\n\nLabels: `s` step, `b` LOD bias, `c` cache fraction, `l` leaf voxels, prefixed `PT` (page table), `OC` (octree), `SL` (SparseLeap) or `RA` (rasterize) for the other methods' runs; the ringed point is ours at its defaults; red points and the line are the Pareto front over every method.\n",
+        "\n![time against error, {}]({name})\n\nLabels: `s` step, `b` LOD bias, `c` cache fraction, `l` leaf voxels, prefixed `PT` (page table), `OC` (octree), `SL` (SparseLeap) or `RA` (rasterize) for the other methods' runs, one colour per method; the black ring is ours at its defaults; red rings and the line are the Pareto front over every method.\n",
         r.dataset.label
     );
     // Verdicts: the defaults against the whole front, and against each parameter's own sweep.
