@@ -61,22 +61,31 @@ fn metric(text: &str, name: &str) -> f64 {
         .unwrap_or_else(|| panic!("{name} not in metrics:\n{text}"))
 }
 
+/// `ingest sample --size SIZE` in `dir`, its `channels` (sample file stems) converted into one
+/// store of 16³ chunks, served by a new `brickserver`.
+fn serve_sample(dir: &std::path::Path, size: &str, channels: &[&str]) -> Server {
+    let p = |name: &str| dir.join(name).to_str().unwrap().to_string();
+    run(
+        "ingest",
+        &["sample", "-o", &p("sample"), "--size", size, "--quiet"],
+    );
+    let store = p("sample.ome.zarr");
+    let inputs: Vec<String> = channels
+        .iter()
+        .map(|c| p(&format!("sample/{c}.ome.tif")))
+        .collect();
+    let mut args: Vec<&str> = vec!["convert"];
+    args.extend(inputs.iter().map(String::as_str));
+    args.extend(["-o", &store, "--chunk", "16", "--quiet"]);
+    run("ingest", &args);
+    Server::start(&store)
+}
+
 #[test]
 fn sample_served_and_rendered_on_the_gpu_matches_the_reference() {
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let sample = p("sample");
-    run(
-        "ingest",
-        &["sample", "-o", &sample, "--size", "24,64,64", "--quiet"],
-    );
-    let store = p("sample.ome.zarr");
-    let [n, m] = [p("sample/nuclei.ome.tif"), p("sample/membranes.ome.tif")];
-    run(
-        "ingest",
-        &["convert", &n, &m, "-o", &store, "--chunk", "16", "--quiet"],
-    );
-    let server = Server::start(&store);
+    let server = serve_sample(dir.path(), "24,64,64", &["nuclei", "membranes"]);
     let scene = [
         "--server",
         &server.url,
@@ -134,18 +143,7 @@ fn sample_served_and_rendered_on_the_gpu_matches_the_reference() {
 fn seed_methods_with_tricubic_render_over_the_server() {
     let dir = tempfile::tempdir().unwrap();
     let p = |name: &str| dir.path().join(name).to_str().unwrap().to_string();
-    let sample = p("sample");
-    run(
-        "ingest",
-        &["sample", "-o", &sample, "--size", "16,48,48", "--quiet"],
-    );
-    let store = p("sample.ome.zarr");
-    let n = p("sample/nuclei.ome.tif");
-    run(
-        "ingest",
-        &["convert", &n, "-o", &store, "--chunk", "16", "--quiet"],
-    );
-    let server = Server::start(&store);
+    let server = serve_sample(dir.path(), "16,48,48", &["nuclei"]);
     let scene = [
         "--server",
         &server.url,

@@ -16,6 +16,24 @@ fn viewer(args: &[&str]) -> std::process::Output {
     cmd.args(args).output().unwrap()
 }
 
+/// Runs `viewer` and fails the test with its stderr unless it succeeds.
+fn viewer_ok(args: &[&str]) {
+    let out = viewer(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Asserts the images at `a` and `b` agree as a converged render and its reference do
+/// (PSNR ≥ 40 dB, SSIM ≥ 0.99).
+fn assert_matches(label: &str, a: &Path, b: &Path) {
+    let m = metrics::compare(&RgbImage::read(a).unwrap(), &RgbImage::read(b).unwrap()).unwrap();
+    eprintln!("{label}: PSNR {:.2} dB, SSIM {:.5}", m.psnr_db, m.ssim);
+    assert!(m.psnr_db >= 40.0 && m.ssim >= 0.99, "{label}: {m:?}");
+}
+
 /// 24 × 32 × 40 (z, y, x) u16, two channels, bricks 8³, voxel size 2 × 1 × 1.
 fn store(dir: &Path) -> PathBuf {
     let (nz, ny, nx) = (24u64, 32u64, 40u64);
@@ -79,30 +97,14 @@ fn render_matches_reference_and_writes_stats() {
     args.extend(scene);
     let (g, st) = (s(&gpu), s(&stats));
     args.extend(["--out", &g, "--stats", &st, "--max-level", "0"]);
-    let out = viewer(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    viewer_ok(&args);
     let mut args = vec!["reference", "--store", &store];
     args.extend(scene);
     let r = s(&reference);
     args.extend(["--out", &r]);
-    let out = viewer(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    viewer_ok(&args);
 
-    let m = metrics::compare(
-        &RgbImage::read(&gpu).unwrap(),
-        &RgbImage::read(&reference).unwrap(),
-    )
-    .unwrap();
-    eprintln!("cli: PSNR {:.2} dB, SSIM {:.5}", m.psnr_db, m.ssim);
-    assert!(m.psnr_db >= 40.0 && m.ssim >= 0.99, "{m:?}");
+    assert_matches("cli", &gpu, &reference);
 
     let json: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
     assert_eq!(json["converged"], true);
@@ -159,12 +161,7 @@ fn seed_methods_and_tricubic_match_the_reference() {
     let r = s(&reference);
     let mut args = vec!["reference", "--store", &store, "--out", &r];
     args.extend(scene);
-    let out = viewer(&args);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    viewer_ok(&args);
     for method in ["sparseleap", "rasterize"] {
         let (gpu, stats) = (
             dir.path().join(format!("{method}.exr")),
@@ -174,19 +171,8 @@ fn seed_methods_and_tricubic_match_the_reference() {
         let mut args = vec!["render", "--store", &store, "--method", method];
         args.extend(scene);
         args.extend(["--out", &g, "--stats", &st, "--max-level", "0"]);
-        let out = viewer(&args);
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let m = metrics::compare(
-            &RgbImage::read(&gpu).unwrap(),
-            &RgbImage::read(&reference).unwrap(),
-        )
-        .unwrap();
-        eprintln!("{method}: PSNR {:.2} dB, SSIM {:.5}", m.psnr_db, m.ssim);
-        assert!(m.psnr_db >= 40.0 && m.ssim >= 0.99, "{method}: {m:?}");
+        viewer_ok(&args);
+        assert_matches(method, &gpu, &reference);
         let json: serde_json::Value =
             serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
         assert_eq!(json["converged"], true, "{method}");
