@@ -28,6 +28,7 @@ Keys:
   [  ]                          move the selected ramp's low end down/up
   {  }                          move the selected ramp's high end down/up
                                 (by 5% of the channel's default ramp width)
+  f                             switch the filter: trilinear, tricubic (rebuilds the renderer)
   r                             reset the camera
   h                             hide/show the statistics panel
   q, Esc                        quit

@@ -8,7 +8,7 @@
 //! window to the new one, so a multi-point transfer function keeps its shape.
 
 use crate::defaults::{DEFAULT_COLOURS, default_channels, default_opacity};
-use crate::scene::{ChannelStyle, OpacityPoint, Scene};
+use crate::scene::{ChannelStyle, Filter, OpacityPoint, Scene};
 use crate::source::VolumeInfo;
 
 /// The colours `c` cycles through: the default channel colours, then white (linear RGB).
@@ -104,6 +104,12 @@ pub fn next_colour(current: [f64; 3]) -> [f64; 3] {
         Some(i) => PALETTE[(i + 1) % PALETTE.len()],
         None => PALETTE[0],
     }
+}
+
+/// The filter after `current` in [`Filter::ALL`] (trilinear, tricubic, then trilinear again).
+pub fn next_filter(current: Filter) -> Filter {
+    let i = Filter::ALL.iter().position(|&f| f == current).unwrap_or(0);
+    Filter::ALL[(i + 1) % Filter::ALL.len()]
 }
 
 /// Width of channel `channel`'s default ramp: the unit of the window/level steps.
@@ -239,6 +245,12 @@ mod tests {
             c = next_colour(c);
         }
         assert_eq!(c, PALETTE[1]);
+    }
+
+    #[test]
+    fn filters_alternate() {
+        assert_eq!(next_filter(Filter::Trilinear), Filter::Tricubic);
+        assert_eq!(next_filter(Filter::Tricubic), Filter::Trilinear);
     }
 
     #[test]

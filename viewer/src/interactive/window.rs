@@ -397,6 +397,11 @@ impl App {
             Key::Character(s) => match s.as_str() {
                 "q" | "Q" => event_loop.exit(),
                 "h" | "H" => self.overlay = !self.overlay,
+                "f" | "F" => {
+                    let filter = controls::next_filter(self.session.scene().filter);
+                    self.update_scene(|_, scene| scene.filter = filter);
+                    self.say(format!("{} filter", filter.name()));
+                }
                 "r" | "R" => {
                     let home = self.home.clone();
                     self.session.set_camera(home);

@@ -153,6 +153,24 @@ fn session_converges_and_keeps_its_bricks_through_camera_and_style_changes() {
     // Every renderer on the device (the session's two, the blocking loop's) shares one
     // compiled pipeline: the format and method did not change.
     assert_eq!(s.gpu().pipelines.len(), 1);
+
+    // The tricubic filter (the `f` key): a new renderer and pipeline, a smoother image; and
+    // back to trilinear, the first pipeline again.
+    let trilinear = s.image().2.to_vec();
+    let mut cubic = s.scene().clone();
+    cubic.filter = residency_viewer::scene::Filter::Tricubic;
+    s.set_scene(cubic);
+    settle(&mut s);
+    assert_eq!(s.totals().rebuilds, 3);
+    assert_eq!(s.gpu().pipelines.len(), 2);
+    assert_ne!(s.image().2, &trilinear[..]);
+    let mut linear = s.scene().clone();
+    linear.filter = residency_viewer::scene::Filter::Trilinear;
+    s.set_scene(linear);
+    settle(&mut s);
+    assert_eq!(s.totals().rebuilds, 4);
+    assert_eq!(s.gpu().pipelines.len(), 2);
+    assert_eq!(s.image().2, &trilinear[..]);
     let (w, h, pixels) = s.image();
     assert_eq!((w, h, pixels.len()), (24, 20, 480));
 
