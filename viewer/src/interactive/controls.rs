@@ -277,7 +277,7 @@ mod tests {
             },
             channels: vec![],
             background: [0.0; 3],
-            filter: crate::scene::Filter::Trilinear,
+            filter: Filter::Trilinear,
         };
         assert!(style_mut(&mut scene, &info, 2).is_none());
         let s = style_mut(&mut scene, &info, 1).unwrap();
