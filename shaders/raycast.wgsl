@@ -915,16 +915,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             budget--;
-            // Desired level per channel, and step: the finest over channels.
             lod = footprint_level(lod, ray.t + t_plane);
-            var chosen: array<u32, MAX_CHANNELS>;
-            var finest = P.level_count - 1u;
-            for (var c = 0u; c < P.channel_count; c++) {
-                chosen[c] = channel_level(c, lod);
-                finest = min(finest, chosen[c]);
-            }
-            var desired_step = P.step_fraction * level_voxel(finest);
-            var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
+            var level = lod;
+            // SparseLeap and rasterize: where the ray stands on its segment list; rasterize
+            // samples at the level of the brick it is in, not at the footprint's.
             if segments {
                 if ray.t >= seg.end {
                     if METHOD == METHOD_SPARSELEAP {
@@ -933,17 +927,25 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         seg = brick_at(pixel, ray.t);
                     }
                 }
+                if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
+                    level = seg.level;
+                }
+            }
+            // Desired level per channel, and step: the finest over channels.
+            var chosen: array<u32, MAX_CHANNELS>;
+            var finest = P.level_count - 1u;
+            for (var c = 0u; c < P.channel_count; c++) {
+                chosen[c] = channel_level(c, level);
+                finest = min(finest, chosen[c]);
+            }
+            let desired_step = P.step_fraction * level_voxel(finest);
+            var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
+            if segments {
                 if seg.occupancy == OCCUPANCY_EMPTY {
                     v.action = ACTION_SKIP;
                     v.skip = min(seg.end, t_exit) - ray.t;
                 } else if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
-                    // The brick's level, not the sample's footprint, and its macrocells.
-                    finest = P.level_count - 1u;
-                    for (var c = 0u; c < P.channel_count; c++) {
-                        chosen[c] = channel_level(c, seg.level);
-                        finest = min(finest, chosen[c]);
-                    }
-                    desired_step = P.step_fraction * level_voxel(finest);
+                    // Empty macrocells inside the brick are skipped.
                     let macro_end = macrocell_skip(ray, seg.level, dir);
                     if macro_end >= 0.0 {
                         v.action = ACTION_SKIP;

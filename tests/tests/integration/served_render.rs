@@ -81,6 +81,18 @@ fn serve_sample(dir: &std::path::Path, size: &str, channels: &[&str]) -> Server 
     Server::start(&store)
 }
 
+/// Asserts, with `viewer compare`, that the image `gpu` matches `reference` as a converged
+/// render does (PSNR ≥ 40 dB, SSIM ≥ 0.99).
+fn assert_matches(label: &str, gpu: &str, reference: &str) {
+    let out = run("viewer", &["compare", gpu, reference, "--json"]);
+    let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let (psnr, ssim) = (
+        cmp["psnr_db"].as_f64().unwrap_or(f64::INFINITY),
+        cmp["ssim"].as_f64().unwrap(),
+    );
+    assert!(psnr >= 40.0 && ssim >= 0.99, "{label}: {cmp}");
+}
+
 #[test]
 fn sample_served_and_rendered_on_the_gpu_matches_the_reference() {
     let dir = tempfile::tempdir().unwrap();
@@ -108,13 +120,7 @@ fn sample_served_and_rendered_on_the_gpu_matches_the_reference() {
     args.extend(["--out", &reference]);
     run("viewer", &args);
 
-    let out = run("viewer", &["compare", &gpu, &reference, "--json"]);
-    let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let (psnr, ssim) = (
-        cmp["psnr_db"].as_f64().unwrap_or(f64::INFINITY),
-        cmp["ssim"].as_f64().unwrap(),
-    );
-    assert!(psnr >= 40.0 && ssim >= 0.99, "{cmp}");
+    assert_matches("residency", &gpu, &reference);
 
     let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
     assert_eq!(stats["converged"], true, "{stats}");
@@ -169,13 +175,7 @@ fn seed_methods_with_tricubic_render_over_the_server() {
         args.extend(scene);
         args.extend(["--out", &gpu, "--stats", &stats, "--max-level", "0"]);
         run("viewer", &args);
-        let out = run("viewer", &["compare", &gpu, &reference, "--json"]);
-        let cmp: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        let (psnr, ssim) = (
-            cmp["psnr_db"].as_f64().unwrap_or(f64::INFINITY),
-            cmp["ssim"].as_f64().unwrap(),
-        );
-        assert!(psnr >= 40.0 && ssim >= 0.99, "{method}: {cmp}");
+        assert_matches(method, &gpu, &reference);
         let stats: serde_json::Value =
             serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
         assert_eq!(stats["converged"], true, "{method}: {stats}");

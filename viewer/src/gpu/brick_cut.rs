@@ -5,16 +5,16 @@
 //! projected size of the brick's bounding sphere (the paper's Eq. 1). The bricks of the cut
 //! are the boxes the method rasterises into ray segment lists ([`super::segments`]).
 //!
-//! Emptiness comes from the residency octree's per-node classes (the region metadata under
-//! the transfer functions), over the nodes of the smallest size that covers a brick. Bricks
+//! Emptiness comes from the residency octree's per-node class words (the region metadata under
+//! the transfer functions, as ours culls with them), over the nodes of the smallest size that
+//! covers a brick. Bricks
 //! are widened by [`super::occupancy::HAIR`] of a leaf, so that neighbours overlap by a hair
 //! and no ray slips between them.
 
 use super::contract::{OCCUPANCY_NONEMPTY, SegmentBox, segment_payload};
 use super::occupancy::HAIR;
-use super::residency::node_class;
 use crate::octree::{OctreeGeometry, ResidencyOctree, node_index};
-use crate::scene::{Camera, ChannelStyle};
+use crate::scene::Camera;
 
 /// The camera as the cut sees it.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,14 +62,9 @@ fn voxel_box(g: &OctreeGeometry, b: Brick) -> ([u64; 3], [u64; 3]) {
 
 /// Whether every drawn channel is empty over the voxel box `[lo, hi)`, by the classes of the
 /// octree nodes of the deepest depth whose nodes are at least the box's size.
-fn box_is_empty(
-    octree: &ResidencyOctree,
-    styles: &[Option<ChannelStyle>],
-    lo: [u64; 3],
-    hi: [u64; 3],
-) -> bool {
+fn box_is_empty(octree: &ResidencyOctree, classes: &[u32], lo: [u64; 3], hi: [u64; 3]) -> bool {
     let g = octree.geometry();
-    let all = (1u32 << styles.len()) - 1;
+    let all = (1u32 << octree.channels().len()) - 1;
     // The node edge at depth d is 2^(leaf_shift + D - d) voxels.
     let fits = |d: u32| {
         (0..3).all(|a| {
@@ -91,7 +86,7 @@ fn box_is_empty(
     for z in first[2]..=last[2] {
         for y in first[1]..=last[1] {
             for x in first[0]..=last[0] {
-                if node_class(octree, styles, node_index(d, [x, y, z])) & all != all {
+                if classes[node_index(d, [x, y, z])] & all != all {
                     return false;
                 }
             }
@@ -160,12 +155,9 @@ impl Frustum {
     }
 }
 
-/// The cut of `octree`'s bricks for `view`, under `styles`.
-pub fn brick_cut(
-    octree: &ResidencyOctree,
-    styles: &[Option<ChannelStyle>],
-    view: &CutView,
-) -> BrickCut {
+/// The cut of `octree`'s bricks for `view`, whose node class words are `classes`
+/// ([`super::residency::node_classes`]).
+pub fn brick_cut(octree: &ResidencyOctree, classes: &[u32], view: &CutView) -> BrickCut {
     let g = octree.geometry();
     let frustum = Frustum::new(view);
     let (finest, coarsest) = view.levels;
@@ -206,7 +198,7 @@ pub fn brick_cut(
             cut.outside += 1;
             continue;
         }
-        if box_is_empty(octree, styles, lo, hi) {
+        if box_is_empty(octree, classes, lo, hi) {
             cut.empty += 1;
             continue;
         }

@@ -4,7 +4,8 @@
 //!
 //! - **Occupancy classes** of the *occupancy leaves*, the octree nodes at depth
 //!   `min(D, MAX_GEOMETRY_DEPTH)`: *empty* where every drawn channel is transparent under its
-//!   transfer function by the node's range (the region metadata's, as ours culls), *unknown*
+//!   transfer function by the node's class word (the one ours culls with,
+//!   [`super::residency::node_class`]), *unknown*
 //!   where some channel that is not empty has no level resident anywhere in the node (or the
 //!   store has no region metadata), *non-empty* otherwise.
 //! - **Occupancy histograms**: every coarser node counts its occupancy leaves per class, and
@@ -24,9 +25,7 @@
 use super::contract::{
     OCCUPANCY_EMPTY, OCCUPANCY_NONEMPTY, OCCUPANCY_UNKNOWN, SegmentBox, segment_payload,
 };
-use super::residency::node_class;
 use crate::octree::{ResidencyOctree, node_index};
-use crate::scene::ChannelStyle;
 
 /// Deepest octree depth whose nodes are occupancy leaves (8⁶ of them at most).
 pub const MAX_GEOMETRY_DEPTH: u32 = 6;
@@ -43,18 +42,19 @@ pub struct OccupancyGeometry {
     pub leaves: [u64; 3],
 }
 
-/// The occupancy class of node `node` of `octree` under `styles` (one per channel slot).
-pub fn leaf_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], node: usize) -> u32 {
-    let word = node_class(octree, styles, node);
-    let all = (1u32 << styles.len()) - 1;
-    let empty = word & all;
+/// The occupancy class of node `node` of `octree`, whose class words are `classes`
+/// ([`super::residency::node_classes`]).
+pub fn leaf_class(octree: &ResidencyOctree, classes: &[u32], node: usize) -> u32 {
+    let channels = octree.channels().len();
+    let all = (1u32 << channels) - 1;
+    let empty = classes[node] & all;
     if empty == all {
         return OCCUPANCY_EMPTY;
     }
     if octree.unknown_ranges() {
         return OCCUPANCY_UNKNOWN;
     }
-    let unmapped = (0..styles.len()).any(|c| empty & (1 << c) == 0 && octree.mask(node, c) == 0);
+    let unmapped = (0..channels).any(|c| empty & (1 << c) == 0 && octree.mask(node, c) == 0);
     if unmapped {
         OCCUPANCY_UNKNOWN
     } else {
@@ -74,11 +74,8 @@ fn majority(counts: [u64; 3]) -> u32 {
     }
 }
 
-/// Builds the occupancy geometry of `octree` under `styles`.
-pub fn occupancy_geometry(
-    octree: &ResidencyOctree,
-    styles: &[Option<ChannelStyle>],
-) -> OccupancyGeometry {
+/// Builds the occupancy geometry of `octree`, whose class words are `classes`.
+pub fn occupancy_geometry(octree: &ResidencyOctree, classes: &[u32]) -> OccupancyGeometry {
     let leaf_depth = octree.geometry().depth;
     let g = leaf_depth.min(MAX_GEOMETRY_DEPTH);
     let nodes = node_index(g + 1, [0, 0, 0]);
@@ -89,7 +86,7 @@ pub fn occupancy_geometry(
         for y in 0..n {
             for x in 0..n {
                 let i = node_index(g, [x, y, z]);
-                let class = leaf_class(octree, styles, i) as usize;
+                let class = leaf_class(octree, classes, i) as usize;
                 counts[i][class] = 1;
                 leaves[class] += 1;
             }

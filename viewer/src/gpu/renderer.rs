@@ -20,7 +20,7 @@ use super::pipeline::{Bindings, RaycastPipeline};
 use super::residency::ResidencyState;
 pub use super::residency::is_clear;
 use super::segments::SegmentStage;
-use super::tables::SceneTables;
+use super::tables::{SceneTables, channel_level_bounds};
 use super::timer::PassTimer;
 use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
@@ -636,29 +636,25 @@ impl Renderer {
         let changed = self.residency.take_occupancy_changed();
         let boxes = match self.options.method {
             Method::SparseLeap if changed => {
-                occupancy_geometry(self.residency.octree(), self.residency.styles()).boxes
+                occupancy_geometry(self.residency.octree(), self.residency.classes()).boxes
             }
             Method::Rasterize => {
                 let info = self.residency.info();
-                let levels = info.levels.len();
-                let bounds = |i: usize| {
-                    self.options
-                        .level_bounds
-                        .get(i)
-                        .map_or((0, levels - 1), |&(lo, hi)| (lo as usize, hi as usize))
-                };
-                let drawn = self.residency.octree().channels().len();
-                let finest = (0..drawn).map(|i| bounds(i).0).min().unwrap_or(0);
-                let coarsest = (0..drawn).map(|i| bounds(i).1).max().unwrap_or(levels - 1);
+                let levels = info.levels.len() as u32;
+                let bounds: Vec<(u32, u32)> = (0..self.residency.octree().channels().len())
+                    .map(|i| channel_level_bounds(&self.options, levels, i))
+                    .collect();
+                let finest = bounds.iter().map(|b| b.0).min().unwrap_or(0);
+                let coarsest = bounds.iter().map(|b| b.1).max().unwrap_or(levels - 1);
                 let view = CutView {
                     camera: self.scene.camera.clone(),
                     aspect: f64::from(self.options.width) / f64::from(self.options.height),
                     height: f64::from(self.options.height),
                     lod_bias: f64::from(self.options.lod_bias),
                     spacing: info.spacing_xyz(),
-                    levels: (finest.min(levels - 1), coarsest.min(levels - 1)),
+                    levels: (finest as usize, coarsest as usize),
                 };
-                brick_cut(self.residency.octree(), self.residency.styles(), &view).boxes
+                brick_cut(self.residency.octree(), self.residency.classes(), &view).boxes
             }
             _ => return,
         };

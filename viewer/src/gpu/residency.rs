@@ -38,6 +38,9 @@ pub struct ResidencyState {
     nodes: wgpu::Buffer,
     /// Word offset of the classes in `nodes`.
     class_offset: u32,
+    /// The node classes as uploaded ([`node_class`] of every node; empty for the baselines),
+    /// kept for the CPU's own culling (SparseLeap's geometry, the rasterize cut).
+    classes: Vec<u32>,
     /// Where the ray segment lists lie in `nodes` (SparseLeap and rasterize only).
     segments: Option<SegmentArea>,
     /// The baselines' per-brick value ranges, by page-table id (`f32`, rounded outward).
@@ -167,6 +170,14 @@ pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> RangeClass
     }
 }
 
+/// The class words of every node of `octree` under `styles` ([`node_class`] of each), as a
+/// renderer of our method uploads them.
+pub fn node_classes(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>]) -> Vec<u32> {
+    (0..octree.geometry().node_count())
+        .map(|n| node_class(octree, styles, n))
+        .collect()
+}
+
 /// The class word of node `node` of `octree` under `styles` (one per channel slot): bit `c`
 /// where channel slot `c` is empty, bit `8 + c` where it is constant (at most 8 channels).
 pub fn node_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], node: usize) -> u32 {
@@ -258,6 +269,11 @@ impl ResidencyState {
             aprons,
             nodes,
             class_offset: node_words as u32,
+            classes: if options.method.uses_node_classes() {
+                vec![0; class_words]
+            } else {
+                Vec::new()
+            },
             segments,
             brick_ranges,
             styles,
@@ -317,9 +333,10 @@ impl ResidencyState {
         std::mem::take(&mut self.pending.occupancy)
     }
 
-    /// The channel styles, one per channel slot of the octree (`None`: not drawn).
-    pub fn styles(&self) -> &[Option<ChannelStyle>] {
-        &self.styles
+    /// The node classes the shader culls with, as of the last flush ([`node_class`] of every
+    /// node; empty for the baselines, which cull per brick).
+    pub fn classes(&self) -> &[u32] {
+        &self.classes
     }
 
     /// Takes the channel `styles` (one per channel drawn): the node or brick classes are
@@ -556,13 +573,15 @@ impl ResidencyState {
                 dirty.filter(|_| self.octree.unknown_ranges())
             };
             if let Some(range) = range {
-                let words: Vec<u32> = range
-                    .clone()
-                    .map(|n| node_class(&self.octree, &self.styles, n))
-                    .collect();
+                for n in range.clone() {
+                    self.classes[n] = node_class(&self.octree, &self.styles, n);
+                }
                 let offset = (u64::from(self.class_offset) + range.start as u64) * 4;
-                gpu.queue
-                    .write_buffer(&self.nodes, offset, bytemuck::cast_slice(&words));
+                gpu.queue.write_buffer(
+                    &self.nodes,
+                    offset,
+                    bytemuck::cast_slice(&self.classes[range]),
+                );
             }
         } else if stale {
             let words: Vec<u32> = (0..self.brick_ranges.len() as u32)

@@ -257,8 +257,20 @@ fn residency_tables(
     )
 }
 
-/// The table entries of `styles`: style and level bounds (from `options.level_bounds`, every
-/// level where none is given).
+/// The level bounds `(finest, coarsest)` of the `i`-th rendered channel of a volume of
+/// `levels` levels: `options.level_bounds`, clamped to the levels that exist, every level where
+/// none is given.
+pub fn channel_level_bounds(options: &RenderOptions, levels: u32, i: usize) -> (u32, u32) {
+    let (lo, hi) = options
+        .level_bounds
+        .get(i)
+        .copied()
+        .unwrap_or((0, levels - 1));
+    let lo = lo.min(levels - 1);
+    (lo, hi.clamp(lo, levels - 1))
+}
+
+/// The table entries of `styles`: style and level bounds ([`channel_level_bounds`]).
 fn channel_tables<'a>(
     options: &RenderOptions,
     levels: u32,
@@ -268,15 +280,11 @@ fn channel_tables<'a>(
         .iter()
         .enumerate()
         .map(|(i, style)| {
-            let (lo, hi) = options
-                .level_bounds
-                .get(i)
-                .copied()
-                .unwrap_or((0, levels - 1));
+            let (min_level, max_level) = channel_level_bounds(options, levels, i);
             ChannelTable {
                 style,
-                min_level: lo.min(levels - 1),
-                max_level: hi.clamp(lo.min(levels - 1), levels - 1),
+                min_level,
+                max_level,
             }
         })
         .collect()

@@ -16,6 +16,16 @@ fn viewer(args: &[&str]) -> std::process::Output {
     cmd.args(args).output().unwrap()
 }
 
+/// The camera and transfer functions both renders of [`store`] draw.
+const VIEW: [&str; 6] = [
+    "--camera",
+    "-30,-40,70:20,16,24",
+    "--tf",
+    "0:300:3000:0.2",
+    "--tf",
+    "1:500:2500:0.1",
+];
+
 /// Runs `viewer` and fails the test with its stderr unless it succeeds.
 fn viewer_ok(args: &[&str]) {
     let out = viewer(args);
@@ -76,13 +86,8 @@ fn render_matches_reference_and_writes_stats() {
         dir.path().join("ref.exr"),
         dir.path().join("stats.json"),
     );
-    let scene = [
-        "--camera",
-        "-30,-40,70:20,16,24",
-        "--tf",
-        "0:300:3000:0.2",
-        "--tf",
-        "1:500:2500:0.1",
+    let mut scene = VIEW.to_vec();
+    scene.extend([
         "--color",
         "0:1,0.3,0.1",
         "--color",
@@ -91,15 +96,15 @@ fn render_matches_reference_and_writes_stats() {
         "48",
         "--height",
         "40",
-    ];
+    ]);
     let store = s(&store);
     let mut args = vec!["render", "--store", &store];
-    args.extend(scene);
+    args.extend(&scene);
     let (g, st) = (s(&gpu), s(&stats));
     args.extend(["--out", &g, "--stats", &st, "--max-level", "0"]);
     viewer_ok(&args);
     let mut args = vec!["reference", "--store", &store];
-    args.extend(scene);
+    args.extend(&scene);
     let r = s(&reference);
     args.extend(["--out", &r]);
     viewer_ok(&args);
@@ -143,24 +148,12 @@ fn seed_methods_and_tricubic_match_the_reference() {
     let store = store(dir.path());
     let s = |p: &Path| p.to_str().unwrap().to_string();
     let store = s(&store);
-    let scene = [
-        "--camera",
-        "-30,-40,70:20,16,24",
-        "--tf",
-        "0:300:3000:0.2",
-        "--tf",
-        "1:500:2500:0.1",
-        "--width",
-        "40",
-        "--height",
-        "32",
-        "--filter",
-        "tricubic",
-    ];
+    let mut scene = VIEW.to_vec();
+    scene.extend(["--width", "40", "--height", "32", "--filter", "tricubic"]);
     let reference = dir.path().join("ref.exr");
     let r = s(&reference);
     let mut args = vec!["reference", "--store", &store, "--out", &r];
-    args.extend(scene);
+    args.extend(&scene);
     viewer_ok(&args);
     for method in ["sparseleap", "rasterize"] {
         let (gpu, stats) = (
@@ -169,7 +162,7 @@ fn seed_methods_and_tricubic_match_the_reference() {
         );
         let (g, st) = (s(&gpu), s(&stats));
         let mut args = vec!["render", "--store", &store, "--method", method];
-        args.extend(scene);
+        args.extend(&scene);
         args.extend(["--out", &g, "--stats", &st, "--max-level", "0"]);
         viewer_ok(&args);
         assert_matches(method, &gpu, &reference);

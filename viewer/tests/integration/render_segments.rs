@@ -11,6 +11,7 @@ use residency_viewer::gpu::brick_cut::{CutView, brick_cut};
 use residency_viewer::gpu::contract::{OCCUPANCY_EMPTY, OCCUPANCY_NONEMPTY, OCCUPANCY_UNKNOWN};
 use residency_viewer::gpu::occupancy::{leaf_class, occupancy_geometry};
 use residency_viewer::gpu::renderer::{Method, RenderOptions};
+use residency_viewer::gpu::residency::node_classes;
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::octree::{ResidencyOctree, node_index};
 use residency_viewer::scene::{ChannelStyle, Filter, Scene};
@@ -64,7 +65,9 @@ fn occupancy_geometry_is_exact_and_nests_where_the_class_changes() {
     let styles = vec![Some(style())];
     // Leaves of 8³ (depth 2): the octant is one depth-1 node of 8 leaves, 7 with data.
     let mut tree = ResidencyOctree::new(info, &[0], 2).unwrap();
-    let geometry = occupancy_geometry(&tree, &styles);
+    // The classes depend on the ranges and styles only, not on what is resident.
+    let classes = node_classes(&tree, &styles);
+    let geometry = occupancy_geometry(&tree, &classes);
     // Nothing resident: the leaves with data are unknown.
     assert_eq!(geometry.leaves, [57, 0, 7]);
     // Root (empty, 57 of 64), the octant (unknown, 7 of 8), its empty corner leaf.
@@ -90,7 +93,7 @@ fn occupancy_geometry_is_exact_and_nests_where_the_class_changes() {
         brick: [0, 0, 1],
     })
     .unwrap();
-    let geometry = occupancy_geometry(&tree, &styles);
+    let geometry = occupancy_geometry(&tree, &classes);
     assert_eq!(geometry.leaves, [57, 7, 0]);
     assert_eq!(geometry.boxes.len(), 3);
     assert_eq!(geometry.boxes[1].payload & 3, OCCUPANCY_NONEMPTY);
@@ -99,7 +102,7 @@ fn occupancy_geometry_is_exact_and_nests_where_the_class_changes() {
         for y in 0..4u64 {
             for x in 0..4u64 {
                 let centre = [x, y, z].map(|v| v as f32 + 0.5);
-                let own = leaf_class(&tree, &styles, node_index(2, [x, y, z]));
+                let own = leaf_class(&tree, &classes, node_index(2, [x, y, z]));
                 assert_eq!(class_at(&geometry.boxes, centre), own, "leaf {x} {y} {z}");
             }
         }
@@ -143,7 +146,7 @@ fn cut_view(eye: [f64; 3], target: [f64; 3], fov: f64) -> CutView {
 fn brick_cut_refines_by_projected_size_and_culls_empty_and_hidden_bricks() {
     let src = big_octant();
     let tree = ResidencyOctree::new(src.info(), &[0], 3).unwrap();
-    let styles = vec![Some(ramp(0, [1.0; 3], 50.0, 200.0, 0.3))];
+    let classes = node_classes(&tree, &[Some(ramp(0, [1.0; 3], 50.0, 200.0, 0.3))]);
     let levels = |cut: &residency_viewer::gpu::brick_cut::BrickCut| {
         let mut n = [0usize; 4];
         for b in &cut.boxes {
@@ -154,7 +157,7 @@ fn brick_cut_refines_by_projected_size_and_culls_empty_and_hidden_bricks() {
     // Far away (the volume 3 pixels across): the coarsest brick, which holds data.
     let far = brick_cut(
         &tree,
-        &styles,
+        &classes,
         &cut_view([3000.0, 2000.0, 2500.0], [32.0; 3], 20.0),
     );
     assert_eq!(levels(&far), [0, 0, 0, 1]);
@@ -164,7 +167,7 @@ fn brick_cut_refines_by_projected_size_and_culls_empty_and_hidden_bricks() {
     // halo (the octant's faces touch data at 32).
     let mid = brick_cut(
         &tree,
-        &styles,
+        &classes,
         &cut_view([320.7, 320.7, 320.7], [32.0; 3], 20.0),
     );
     assert_eq!(levels(&mid), [0, 63, 0, 0]);
@@ -179,7 +182,7 @@ fn brick_cut_refines_by_projected_size_and_culls_empty_and_hidden_bricks() {
     // Close to a corner: level-0 bricks at the eye, coarser ones further away.
     let near = brick_cut(
         &tree,
-        &styles,
+        &classes,
         &cut_view([70.0, 70.0, 70.0], [32.0; 3], 60.0),
     );
     // (At 60° the bricks off the view axis project larger on the image plane, Eq. 1's
@@ -189,14 +192,14 @@ fn brick_cut_refines_by_projected_size_and_culls_empty_and_hidden_bricks() {
     // on the near side, level 1 on the far side.
     let n = levels(&brick_cut(
         &tree,
-        &styles,
+        &classes,
         &cut_view([217.0, 217.0, 217.0], [32.0; 3], 25.0),
     ));
     assert!(n[0] > 0 && n[1] > 0, "{n:?}");
     // Looking away from the volume: nothing drawn, the coarsest brick culled as hidden.
     let away = brick_cut(
         &tree,
-        &styles,
+        &classes,
         &cut_view([70.0, 70.0, 70.0], [200.0; 3], 40.0),
     );
     assert!(away.boxes.is_empty());
