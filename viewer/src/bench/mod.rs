@@ -952,36 +952,7 @@ impl Bench {
         let slot = self.info().brick_bytes();
         let mut runs = vec![default];
         let sv = self.plan.sweep.clone();
-        for &s in &sv.steps {
-            if s == self.base.step_factor {
-                continue;
-            }
-            let o = RenderOptions {
-                step_factor: s,
-                ..self.base.clone()
-            };
-            runs.push(self.run(
-                Experiment::Sweep,
-                format!("step {s}"),
-                o,
-                param(SweptParameter::Step, s as f64),
-            )?);
-        }
-        for &b in &sv.lod_biases {
-            if b == self.base.lod_bias {
-                continue;
-            }
-            let o = RenderOptions {
-                lod_bias: b,
-                ..self.base.clone()
-            };
-            runs.push(self.run(
-                Experiment::Sweep,
-                format!("LOD bias {b}"),
-                o,
-                param(SweptParameter::LodBias, b as f64),
-            )?);
-        }
+        runs.extend(self.step_and_bias_runs(&self.base, "", &sv)?);
         for &f in &sv.cache_fractions {
             let slots = ((working_set as f64 * f).round() as u64).max(1);
             let o = RenderOptions {
@@ -1023,7 +994,6 @@ impl Bench {
     /// alone (labels start with the method's name).
     fn method_sweep(&self, method: Method, sv: &SweepValues) -> Result<Vec<RunRecord>, BenchError> {
         let name = method.name();
-        let param = |name: SweptParameter, value: f64| Some(SweepParam { name, value });
         let base = RenderOptions {
             method,
             ..self.base.clone()
@@ -1032,8 +1002,25 @@ impl Bench {
             Experiment::Sweep,
             format!("{name} defaults"),
             base.clone(),
-            param(SweptParameter::Default, 0.0),
+            Some(SweepParam {
+                name: SweptParameter::Default,
+                value: 0.0,
+            }),
         )?];
+        runs.extend(self.step_and_bias_runs(&base, &format!("{name} "), sv)?);
+        Ok(runs)
+    }
+
+    /// The sweep runs of `base` with each step of `sv` and then each LOD bias alone (those
+    /// equal to `base`'s skipped), labelled `{prefix}step S` and `{prefix}LOD bias B`.
+    fn step_and_bias_runs(
+        &self,
+        base: &RenderOptions,
+        prefix: &str,
+        sv: &SweepValues,
+    ) -> Result<Vec<RunRecord>, BenchError> {
+        let param = |name: SweptParameter, value: f64| Some(SweepParam { name, value });
+        let mut runs = Vec::new();
         for &s in sv.steps.iter().filter(|&&s| s != base.step_factor) {
             let o = RenderOptions {
                 step_factor: s,
@@ -1041,7 +1028,7 @@ impl Bench {
             };
             runs.push(self.run(
                 Experiment::Sweep,
-                format!("{name} step {s}"),
+                format!("{prefix}step {s}"),
                 o,
                 param(SweptParameter::Step, f64::from(s)),
             )?);
@@ -1053,7 +1040,7 @@ impl Bench {
             };
             runs.push(self.run(
                 Experiment::Sweep,
-                format!("{name} LOD bias {b}"),
+                format!("{prefix}LOD bias {b}"),
                 o,
                 param(SweptParameter::LodBias, f64::from(b)),
             )?);
