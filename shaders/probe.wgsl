@@ -88,16 +88,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var samples = 0u;
     let all = (1u << P.channel_count) - 1u;
     var t = t_enter + 0.5 * P.step;
+    var values: array<f32, MAX_CHANNELS>;
     loop {
         if t >= t_exit || trans < T_MIN {
             break;
         }
         let p = o + t * d;
-        var values: array<f32, MAX_CHANNELS>;
         for (var c = 0u; c < P.channel_count; c++) {
             values[c] = probe_sample(c, p);
         }
-        composite(&color, &trans, mixture(all, values, P.step), 1.0);
+        composite(&color, &trans, mixture(all, &values, P.step), 1.0);
         samples++;
         t += P.step;
     }

@@ -27,6 +27,13 @@ override METHOD: u32 = 0u;
 // Reconstruction filter: FILTER_TRILINEAR or FILTER_TRICUBIC (the cubic B-spline as 8
 // trilinear samples).
 override FILTER: u32 = 0u;
+// The resident-only pass, a frame's first: it samples only what one cache slot serves whole,
+// and carries no requests, no substitution of missing bricks and no per-corner sampling. A
+// ray that needs any of them stops where it stands (suspended, before that step), and the
+// full pass resumes it there, so the image is the full pass's. A converged frame is then one
+// pass of the smaller loop: on a CPU Vulkan driver every branch of the loop body runs on
+// every iteration, taken or not, so what a converged frame never needs still costs it.
+override RESIDENT_ONLY: bool = false;
 const NO_LEVEL: u32 = 0xffffffffu;
 
 // A ray between passes. A frame runs passes until no ray is suspended: a CPU Vulkan driver
@@ -190,6 +197,9 @@ fn request(pid: u32, t: f32) {
     }
 }
 
+// Set in the resident-only pass when the ray's step needs the full pass.
+var<private> needs_full: bool;
+
 fn note_substituted(pid: u32) {
     let old = atomicExchange(&flags[2u * pid + 1u], P.frame);
     if old != P.frame {
@@ -215,6 +225,13 @@ fn level_pos(l: u32, cell: vec3<i32>, local: vec3<f32>) -> LevelPos {
     );
 }
 
+// The brick of level-voxel v (v / P.brick), through f32 division: a CPU driver has no vector
+// integer division and divides lane by lane. Exact below 2^23 voxels per axis: there the
+// correctly rounded quotient of v = q·B + r (r < B) stays below q + 1 - 1/(2B).
+fn voxel_brick(v: vec3<u32>) -> vec3<u32> {
+    return vec3<u32>(vec3<f32>(v) / vec3<f32>(P.brick));
+}
+
 // Page-table id of brick b of channel c at level l.
 fn brick_id(c: u32, l: u32, b: vec3<u32>) -> u32 {
     let nb = level_bricks(l);
@@ -224,7 +241,7 @@ fn brick_id(c: u32, l: u32, b: vec3<u32>) -> u32 {
 // The brick of level l holding a position (not its trilinear footprint).
 fn point_brick(l: u32, pos: LevelPos) -> vec3<u32> {
     let v = clamp(pos.ip + vec3<i32>(floor(pos.fp)), vec3<i32>(0), level_shape(l) - vec3<i32>(1));
-    return vec3<u32>(v) / P.brick;
+    return voxel_brick(vec3<u32>(v));
 }
 
 // World distance from a position to the exit of the box of brick b of level l, along a ray
@@ -247,8 +264,8 @@ struct Sampled {
 
 // Trilinear sample of channel c at level l (voxel centres at i + ½, clamped to the edge
 // voxels). The 8 voxels lie in at most 8 bricks. The brick of the first voxel is looked up;
-// when the footprint stays in it, or its apron is complete (ENTRY_APRON: the slot holds the
-// next brick's first voxels too), its slot serves all 8. Otherwise each brick is looked up
+// when the footprint stays in it, or its apron serves the footprint's crossing (ENTRY_APRON:
+// the slot holds the next bricks' first voxels there too), its slot serves all 8. Otherwise each brick is looked up
 // once per run of corners in it, with a single texel-fetch site (a CPU Vulkan driver runs
 // every branch's code, so the shader keeps few). With `want`, every missing brick is
 // requested; without it the first miss returns. A clear brick (ENTRY_CLEAR) in the footprint
@@ -262,7 +279,7 @@ fn sample_level(c: u32, l: u32, pos: LevelPos, want: bool, t: f32) -> Sampled {
     let c0 = vec3<u32>(clamp(i0, vec3<i32>(0), hi));
     let c1 = vec3<u32>(clamp(i0 + vec3<i32>(1), vec3<i32>(0), hi));
     let bs = P.brick;
-    let b0 = c0 / bs;
+    let b0 = voxel_brick(c0);
     let r0 = c0 - b0 * bs;
     let r0n = r0 + (c1 - c0);
     let wrap = r0n == bs;
@@ -272,12 +289,22 @@ fn sample_level(c: u32, l: u32, pos: LevelPos, want: bool, t: f32) -> Sampled {
     // Fast path, the common case: all 8 voxels in one slot (one lookup, unrolled fetches).
     let pid = brick_id(c, l, b0);
     let entry = page_table[pid];
-    let apron = entry != ENTRY_CLEAR && (entry & ENTRY_APRON) != 0u;
-    if apron || all(b0 == b1) {
+    // The slot serves the whole footprint where it stays in the brick, where the brick is clear
+    // (the sample is), or where the apron parts it crosses into are filled (ENTRY_APRON: a
+    // bit per crossing, the axes along which the footprint leaves the brick).
+    let crossing = select(0u, 1u, wrap.x) | select(0u, 2u, wrap.y) | select(0u, 4u, wrap.z);
+    let one_slot = crossing == 0u || entry == ENTRY_CLEAR
+        || ((entry >> (APRON_SHIFT + crossing - 1u)) & 1u) != 0u;
+    if RESIDENT_ONLY && (entry == 0u || !one_slot) {
+        needs_full = true;
+        result.ok = false;
+        return result;
+    }
+    if RESIDENT_ONLY || one_slot {
         if entry == 0u {
             result.ok = false;
             result.missing = pid + 1u;
-            if want {
+            if want && !RESIDENT_ONLY {
                 request(pid, t);
             }
             return result;
@@ -537,7 +564,7 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
 // renderer would (`seen`: the brick of each channel's last sample; `seen_empty`: its bits).
 fn visit_page_table(
     ray: Ray,
-    chosen: array<u32, MAX_CHANNELS>,
+    chosen: ptr<function, array<u32, MAX_CHANNELS>>,
     seen: ptr<function, array<u32, MAX_CHANNELS>>,
     seen_empty: ptr<function, u32>,
     dir: vec3<f32>,
@@ -546,7 +573,7 @@ fn visit_page_table(
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
     var all_empty = true;
     for (var c = 0u; c < P.channel_count; c++) {
-        let l = chosen[c];
+        let l = (*chosen)[c];
         let pos = level_pos(l, ray.cell, ray.local);
         let b = point_brick(l, pos);
         let pid = brick_id(c, l, b);
@@ -596,7 +623,11 @@ fn visit_brick_octree(
             }
             let entry = page_table[pid];
             if entry == 0u {
-                request(pid, t);
+                if RESIDENT_ONLY {
+                    needs_full = true;
+                } else {
+                    request(pid, t);
+                }
                 missing = pid + 1u;
                 break;
             }
@@ -612,7 +643,7 @@ fn visit_brick_octree(
         if (v.empty & (1u << c)) == 0u {
             all_empty = false;
             (*chosen)[c] = resident;
-            if missing != 0u && resident != NO_LEVEL {
+            if !RESIDENT_ONLY && missing != 0u && resident != NO_LEVEL {
                 note_substituted(missing - 1u);
             }
         }
@@ -720,92 +751,94 @@ fn macrocell_skip(ray: Ray, l: u32, dir: vec3<f32>) -> f32 {
 // ---- sampling every channel ----
 
 struct ChannelSamples {
-    values: array<f32, MAX_CHANNELS>,
     have: u32, // bits: the channels with a value (not clear)
     used: u32, // finest level sampled
     any_value: bool, // some channel had data (a clear sample counts)
 }
 
 // Samples every channel not empty here at its chosen level, substituting missing bricks from
-// the levels the node maps. For ACTION_REQUEST this only requests the bricks.
+// the levels the node maps, into `values` (only where `have` says). For ACTION_REQUEST this
+// only requests the bricks.
 fn sample_channels(
     ray: Ray,
     v: Visit,
-    chosen: array<u32, MAX_CHANNELS>,
+    chosen: ptr<function, array<u32, MAX_CHANNELS>>,
+    values: ptr<function, array<f32, MAX_CHANNELS>>,
     t: f32,
     skipping: bool,
     substitute: bool,
 ) -> ChannelSamples {
-    var out: ChannelSamples;
-    out.have = 0u;
-    out.used = P.level_count - 1u;
-    out.any_value = false;
+    var out = ChannelSamples(0u, P.level_count - 1u, false);
     for (var c = 0u; c < P.channel_count; c++) {
-        if (v.empty & (1u << c)) != 0u || chosen[c] == NO_LEVEL {
+        if (v.empty & (1u << c)) != 0u || (*chosen)[c] == NO_LEVEL {
             continue;
         }
-        var mask = 0u;
-        if METHOD == METHOD_RESIDENCY {
-            if v.action == ACTION_REQUEST && skipping {
-                let lo = bitcast<f32>(node_word(v.node, c, 1u));
-                let hi = bitcast<f32>(node_word(v.node, c, 2u));
-                if lo == hi {
-                    continue; // homogeneous: known without its bricks
-                }
-            }
-        }
-        let l = chosen[c];
+        let l = (*chosen)[c];
         var k = l;
-        // Coarse first: where nothing of this channel is resident (ACTION_REQUEST), ask for
-        // its coarsest allowed level first. Once that stands in, rays gather opacity and
-        // stop early, so the finer bricks behind opaque matter are never requested. Where
-        // the coarsest level is clear (averaging can take thin bright structures below the
-        // TF), it says nothing of finer ones: then the wanted level is asked for. (One
-        // sample_filtered call site: on lavapipe every inlined copy costs every sample.)
-        var coarse_first = false;
-        if METHOD == METHOD_RESIDENCY && v.action == ACTION_REQUEST && substitute {
-            k = min(S.channels[c].max_level, P.level_count - 1u);
-            coarse_first = k != l;
-        }
         var s = Sampled(0.0, false, 0u, false);
         var first_missing = 0u;
-        loop {
-            s = sample_filtered(c, k, ray.cell, ray.local, k == l || coarse_first, t);
-            if coarse_first {
-                coarse_first = false;
-                if !s.clear {
-                    s.ok = false; // requested: nothing to sample in ACTION_REQUEST
+        if RESIDENT_ONLY {
+            s = sample_filtered(c, l, ray.cell, ray.local, false, t);
+        } else {
+            var mask = 0u;
+            if METHOD == METHOD_RESIDENCY {
+                if v.action == ACTION_REQUEST && skipping {
+                    let lo = bitcast<f32>(node_word(v.node, c, 1u));
+                    let hi = bitcast<f32>(node_word(v.node, c, 2u));
+                    if lo == hi {
+                        continue; // homogeneous: known without its bricks
+                    }
+                }
+            }
+            // Coarse first: where nothing of this channel is resident (ACTION_REQUEST), ask for
+            // its coarsest allowed level first. Once that stands in, rays gather opacity and
+            // stop early, so the finer bricks behind opaque matter are never requested. Where
+            // the coarsest level is clear (averaging can take thin bright structures below the
+            // TF), it says nothing of finer ones: then the wanted level is asked for. (One
+            // sample_filtered call site: on lavapipe every inlined copy costs every sample.)
+            var coarse_first = false;
+            if METHOD == METHOD_RESIDENCY && v.action == ACTION_REQUEST && substitute {
+                k = min(S.channels[c].max_level, P.level_count - 1u);
+                coarse_first = k != l;
+            }
+            loop {
+                s = sample_filtered(c, k, ray.cell, ray.local, k == l || coarse_first, t);
+                if coarse_first {
+                    coarse_first = false;
+                    if !s.clear {
+                        s.ok = false; // requested: nothing to sample in ACTION_REQUEST
+                        break;
+                    }
+                    k = l;
+                    continue;
+                }
+                if s.ok {
                     break;
                 }
-                k = l;
-                continue;
-            }
-            if s.ok {
-                break;
-            }
-            if k == l {
-                first_missing = s.missing;
-                // The levels the node maps for this channel, read only once a sample misses.
-                if METHOD == METHOD_RESIDENCY && substitute && v.action == ACTION_SAMPLE {
-                    mask = node_word(v.node, c, 0u);
+                if k == l {
+                    first_missing = s.missing;
+                    // The levels the node maps for this channel, read only once a sample misses.
+                    if METHOD == METHOD_RESIDENCY && substitute && v.action == ACTION_SAMPLE {
+                        mask = node_word(v.node, c, 0u);
+                    }
+                    // The segment methods keep no residency masks: every level may stand in,
+                    // coarser first, as its page table says.
+                    if (METHOD == METHOD_SPARSELEAP || METHOD == METHOD_RASTERIZE) && substitute {
+                        mask = (1u << P.level_count) - 1u;
+                    }
                 }
-                // The segment methods keep no residency masks: every level may stand in,
-                // coarser first, as its page table says.
-                if (METHOD == METHOD_SPARSELEAP || METHOD == METHOD_RASTERIZE) && substitute {
-                    mask = (1u << P.level_count) - 1u;
+                k = next_candidate(mask, l, k);
+                if k == NO_LEVEL {
+                    break;
                 }
-            }
-            k = next_candidate(mask, l, k);
-            if k == NO_LEVEL {
-                break;
             }
         }
         if s.ok {
-            if k != l {
+            if !RESIDENT_ONLY && k != l {
                 note_substituted(first_missing - 1u);
             }
             if !s.clear {
-                out.values[c] = s.value;
+                (*values)[c] = s.value;
                 out.have |= 1u << c;
             }
             out.used = min(out.used, k);
@@ -891,6 +924,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // node with the same step, so the octree is descended once per node, not per sample
         // (a visit is a function of the node and the step alone: the same answer again).
         var held = Visit(ACTION_SKIP, 0u, 0u, 0u, 0.0);
+        // Each step's level per channel and its samples, declared once per ray: a
+        // declaration in the loop is zeroed on every iteration, lane by lane on a CPU driver.
+        var chosen: array<u32, MAX_CHANNELS>;
+        var values: array<f32, MAX_CHANNELS>;
         // The footprint's level at the last step (it only coarsens along the ray).
         var lod = 0u;
         var held_step = 0.0;
@@ -932,7 +969,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
             // Desired level per channel, and step: the finest over channels.
-            var chosen: array<u32, MAX_CHANNELS>;
             var finest = P.level_count - 1u;
             for (var c = 0u; c < P.channel_count; c++) {
                 chosen[c] = channel_level(c, level);
@@ -964,43 +1000,57 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     held_cell = ray.cell >> node_shift(v.depth);
                 }
             } else if METHOD == METHOD_PAGE_TABLE {
-                v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
+                v = visit_page_table(ray, &chosen, &pt_brick, &pt_empty, dir, skipping);
             } else if METHOD == METHOD_OCTREE {
                 v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
+            }
+            if RESIDENT_ONLY && (needs_full || v.action == ACTION_REQUEST) {
+                suspended = true;
+                break;
             }
             if v.action == ACTION_SKIP {
                 skipped++;
                 advance(&ray, dir, v.skip + nudge);
                 continue;
             }
+            // One compositing site for both kinds of step (on a CPU driver every inlined copy
+            // costs every iteration): a homogeneous node is seg/Δ steps of its constant
+            // values' per-step opacity, in closed form; a sample is one step.
+            var s = ChannelSamples(0u, 0u, false);
+            var step = desired_step; // the step the mixture's opacities are corrected to
+            var steps = 1.0; // steps of it composited
+            var move_by = 0.0;
             if v.action == ACTION_HOMOGENEOUS {
-                // Constant in every channel over the node: seg/Δ steps of the per-step
-                // opacity, in closed form.
                 let seg = min(node_exit(ray, v.depth, dir) + nudge, t_exit - ray.t);
-                var values: array<f32, MAX_CHANNELS>;
                 for (var c = 0u; c < P.channel_count; c++) {
                     values[c] = bitcast<f32>(node_word(v.node, c, 1u));
                 }
-                let have = ~v.empty & ((1u << P.channel_count) - 1u);
+                s.have = ~v.empty & ((1u << P.channel_count) - 1u);
                 homogeneous++;
                 samples++;
-                composite(&color, &trans, mixture(have, values, desired_step), seg / desired_step);
-                advance(&ray, dir, seg + nudge);
-                continue;
+                steps = seg / desired_step;
+                move_by = seg + nudge;
+            } else {
+                s = sample_channels(ray, v, &chosen, &values, ray.t + t_plane, skipping, substitute);
+                if RESIDENT_ONLY && needs_full {
+                    suspended = true;
+                    break;
+                }
+                if v.action == ACTION_REQUEST {
+                    nodata++;
+                    s.have = 0u;
+                    move_by = v.skip + nudge;
+                } else {
+                    step = select(desired_step, P.step_fraction * level_voxel(s.used), s.any_value);
+                    if !s.any_value {
+                        nodata++;
+                    }
+                    samples++;
+                    move_by = step;
+                }
             }
-            let s = sample_channels(ray, v, chosen, ray.t + t_plane, skipping, substitute);
-            if v.action == ACTION_REQUEST {
-                nodata++;
-                advance(&ray, dir, v.skip + nudge);
-                continue;
-            }
-            let step = select(desired_step, P.step_fraction * level_voxel(s.used), s.any_value);
-            if !s.any_value {
-                nodata++;
-            }
-            samples++;
-            composite(&color, &trans, mixture(s.have, s.values, step), 1.0);
-            advance(&ray, dir, step);
+            composite(&color, &trans, mixture(s.have, &values, step), steps);
+            advance(&ray, dir, move_by);
         }
         st.cell = ray.cell;
         st.local = ray.local;

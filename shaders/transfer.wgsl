@@ -76,11 +76,13 @@ struct Mixture {
 
 // The mixture of the channels in `have` with `values`, each opacity corrected to `step`.
 // Channels mix additively (DESIGN.md: colours weighted by opacity, opacities summed).
-fn mixture(have: u32, values: array<f32, MAX_CHANNELS>, step: f32) -> Mixture {
+// Arrays go by pointer and live outside the ray loops: on a CPU Vulkan driver a copied or
+// loop-local array is written lane by lane on every iteration.
+fn mixture(have: u32, values: ptr<function, array<f32, MAX_CHANNELS>>, step: f32) -> Mixture {
     var m = Mixture(vec3<f32>(0.0), 0.0);
     for (var c = 0u; c < P.channel_count; c++) {
         if (have & (1u << c)) != 0u {
-            let a = corrected(tf_opacity(c, values[c]), step);
+            let a = corrected(tf_opacity(c, (*values)[c]), step);
             m.color += a * S.channels[c].color;
             m.alpha += a;
         }

@@ -4,8 +4,9 @@
 //! apron). A trilinear sample reads voxels `i` and `i + 1` per axis; with a complete apron the
 //! brick holding voxel `i` holds both, so the shader looks the page table up once per sample
 //! instead of once per brick its footprint crosses. A slot's page-table entry carries
-//! [`super::page_table::ENTRY_APRON`] once every part it needs is filled; until then the shader takes the
-//! per-corner path, which is exact whatever the apron holds.
+//! one bit of [`super::page_table::ENTRY_APRON`] for each *crossing* (the set of axes along
+//! which a footprint leaves the brick) whose parts are all filled; a sample whose crossing
+//! is not served takes the per-corner path, which is exact whatever the apron holds.
 //!
 //! A part is filled from:
 //! - a neighbour in a cache slot: its low faces, which are kept while it is resident (three
@@ -154,6 +155,20 @@ pub fn needed_parts(brick: [u64; 3], grid: [u64; 3]) -> u8 {
             (0..3).all(|a| brick[a] + o[a] < grid[a])
         })
         .fold(0, |m, p| m | 1 << p)
+}
+
+/// The crossings a slot serves, given the parts `present` in it (bit `part`: filled, or not
+/// needed because that neighbour lies outside the level's grid, where no footprint reaches):
+/// bit `m - 1` for each crossing `m` (1 to 7: bit 0 `x`, 1 `y`, 2 `z`) whose parts (every
+/// non-empty `p ⊆ m`) are all present.
+pub fn servable_crossings(present: u8) -> u8 {
+    (1..8u8)
+        .filter(|&m| {
+            (1..8u8)
+                .filter(|&p| p & !m == 0)
+                .all(|p| present & (1 << p) != 0)
+        })
+        .fold(0, |acc, m| acc | 1 << (m - 1))
 }
 
 /// Whether an entry is a brick whose voxels are somewhere an apron can take them from, and
@@ -312,6 +327,21 @@ mod tests {
         assert_eq!(needed_parts([1, 0, 0], [2, 2, 2]), 0b0101_0100);
         assert_eq!(needed_parts([1, 1, 1], [2, 2, 2]), 0);
         assert_eq!(needed_parts([0, 0, 0], [1, 1, 1]), 0);
+    }
+
+    #[test]
+    fn a_crossing_is_served_once_all_its_parts_are_present() {
+        assert_eq!(servable_crossings(0b1111_1110), 0b111_1111);
+        assert_eq!(servable_crossings(0), 0);
+        // x alone: only the crossing along x.
+        assert_eq!(servable_crossings(0b10), 0b1);
+        // x and y but not the xy edge: x or y alone, not both at once.
+        assert_eq!(servable_crossings(0b110), 0b11);
+        assert_eq!(servable_crossings(0b1110), 0b111);
+        // Everything but the z face: no crossing along z.
+        assert_eq!(servable_crossings(0b1110_1110), 0b111);
+        // Everything but the corner: every crossing but all three axes at once.
+        assert_eq!(servable_crossings(0b0111_1110), 0b011_1111);
     }
 
     #[test]

@@ -13,7 +13,7 @@ use bytemuck::{Pod, Zeroable};
 
 use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
-use super::page_table::{ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
+use super::page_table::{APRON_SHIFT, ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
 use super::renderer::Method;
 use crate::scene::Filter;
 
@@ -408,6 +408,7 @@ pub fn wgsl_prelude() -> String {
         u("ENTRY_EMPTY", ENTRY_EMPTY),
         u("ENTRY_CLEAR", ENTRY_CLEAR),
         u("ENTRY_APRON", ENTRY_APRON),
+        u("APRON_SHIFT", APRON_SHIFT),
         u("APRON_VOXELS", APRON_VOXELS),
         u("MAX_LEVELS", MAX_LEVELS as u32),
         u("MAX_CHANNELS", MAX_CHANNELS as u32),

@@ -2,8 +2,8 @@
 //! entry of a brick is `0` when it is not resident, `1` when it equals the fill value 0
 //! everywhere (it takes no cache slot), [`ENTRY_CLEAR`] when it is never needed (it is
 //! transparent under the transfer function by its haloed range), and `slot + 2` when it is in
-//! cache slot `slot`, with [`ENTRY_APRON`] set once the slot's apron is complete
-//! ([`super::apron`]). A brick's *id* is its entry's index; the shader reports misses by id.
+//! cache slot `slot`, with a bit of [`ENTRY_APRON`] set for each way a sample's footprint can
+//! leave the brick that the slot's apron serves ([`super::apron`]). A brick's *id* is its entry's index; the shader reports misses by id.
 
 use super::GpuError;
 use crate::octree::OctreeGeometry;
@@ -18,14 +18,24 @@ pub const ENTRY_EMPTY: u32 = 1;
 /// trilinear footprint that reaches the brick, so such a sample has opacity exactly 0 and
 /// the shader takes it as clear without reading a voxel.
 pub const ENTRY_CLEAR: u32 = u32::MAX;
-/// Bit of a slot's entry set when its apron is complete: a sample whose first voxel lies in
-/// the brick finds all eight in the slot. Slots are fewer than `ENTRY_APRON - 2`.
-pub const ENTRY_APRON: u32 = 1 << 30;
+/// First bit of [`ENTRY_APRON`] in a slot's entry.
+pub const APRON_SHIFT: u32 = 23;
+/// The apron bits of a slot's entry: bit `APRON_SHIFT + m - 1` is set when a sample whose
+/// first voxel lies in the brick, and whose footprint crosses into the next bricks along the
+/// axes of *crossing* `m` (bit 0 `x`, 1 `y`, 2 `z`; 1 to 7), finds all eight voxels in the
+/// slot ([`super::apron::servable_crossings`]). All seven: the apron is complete. Slots are
+/// fewer than `(1 << APRON_SHIFT) - 2`.
+pub const ENTRY_APRON: u32 = 0x7f << APRON_SHIFT;
 
-/// The entry of a brick in cache slot `slot`, with [`ENTRY_APRON`] where its apron is
-/// complete.
-pub fn slot_entry(slot: u32, apron_complete: bool) -> u32 {
-    (slot + 2) | if apron_complete { ENTRY_APRON } else { 0 }
+/// The entry of a brick in cache slot `slot` whose apron serves `crossings` (bit `m - 1`:
+/// crossing `m`).
+pub fn slot_entry(slot: u32, crossings: u8) -> u32 {
+    (slot + 2) | (u32::from(crossings & 0x7f) << APRON_SHIFT)
+}
+
+/// Whether a slot's entry serves crossing `m` (1 to 7) from its apron.
+pub fn entry_serves(entry: u32, m: u32) -> bool {
+    entry != ENTRY_CLEAR && (1..8).contains(&m) && entry & (1 << (APRON_SHIFT + m - 1)) != 0
 }
 
 /// The cache slot of an entry (`None`: the brick is in no slot).
@@ -201,5 +211,26 @@ impl PageTables {
     /// The GPU request/substitution flag buffer.
     pub fn flags(&self) -> &wgpu::Buffer {
         &self.flags
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slot_entries_carry_their_slot_and_crossings() {
+        let e = slot_entry(5, 0b101);
+        assert_eq!(e, 7 | 0b101 << APRON_SHIFT);
+        assert_eq!(entry_slot(e), Some(5));
+        assert_eq!(entry_slot(slot_entry(5, 0x7f)), Some(5));
+        assert_eq!(
+            (1..8).map(|m| entry_serves(e, m)).collect::<Vec<_>>(),
+            [true, false, true, false, false, false, false]
+        );
+        assert!(!entry_serves(ENTRY_CLEAR, 1));
+        assert!(!entry_serves(ENTRY_EMPTY, 1));
+        assert!(!entry_serves(e, 0));
+        assert_eq!(slot_entry(3, 0x7f) & ENTRY_APRON, ENTRY_APRON);
     }
 }

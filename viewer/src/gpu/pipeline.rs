@@ -100,13 +100,15 @@ pub struct Bindings<'a> {
     pub rays: &'a wgpu::Buffer,
 }
 
-/// `raycast.wgsl` compiled for one atlas format, one method and one filter.
+/// `raycast.wgsl` compiled for one atlas format, one method and one filter, as the full pass
+/// and as the resident-only pass.
 pub struct RaycastPipeline {
     kind: AtlasKind,
     method: Method,
     filter: Filter,
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
+    resident_only: wgpu::ComputePipeline,
 }
 
 impl RaycastPipeline {
@@ -143,27 +145,37 @@ impl RaycastPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("raycast"),
-            layout: Some(&pipeline_layout),
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &[
-                    ("SAMPLE_KIND", f64::from(kind as u32)),
-                    ("METHOD", f64::from(method as u32)),
-                    ("FILTER", f64::from(filter as u32)),
-                ],
-                ..Default::default()
-            },
-            cache: None,
-        });
+        let build = |resident_only: bool| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(if resident_only {
+                    "raycast resident-only"
+                } else {
+                    "raycast"
+                }),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some("main"),
+                compilation_options: wgpu::PipelineCompilationOptions {
+                    constants: &[
+                        ("SAMPLE_KIND", f64::from(kind as u32)),
+                        ("METHOD", f64::from(method as u32)),
+                        ("FILTER", f64::from(filter as u32)),
+                        ("RESIDENT_ONLY", f64::from(u8::from(resident_only))),
+                    ],
+                    ..Default::default()
+                },
+                cache: None,
+            })
+        };
+        let pipeline = build(false);
+        let resident_only = build(true);
         Self {
             kind,
             method,
             filter,
             layout,
             pipeline,
+            resident_only,
         }
     }
 
@@ -174,9 +186,17 @@ impl RaycastPipeline {
             .get_or_build(&gpu.device, kind, method, filter)
     }
 
-    /// The compute pipeline.
+    /// The full pass's compute pipeline.
     pub fn pipeline(&self) -> &wgpu::ComputePipeline {
         &self.pipeline
+    }
+
+    /// The resident-only pass's compute pipeline (`RESIDENT_ONLY` in `raycast.wgsl`): a frame's
+    /// first pass, which samples only bricks one cache slot serves whole and leaves every
+    /// ray that needs a request, a substitute or a brick's neighbours suspended for the full
+    /// pass.
+    pub fn resident_only(&self) -> &wgpu::ComputePipeline {
+        &self.resident_only
     }
 
     /// Binds one renderer's buffers and atlas.

@@ -206,6 +206,10 @@ pub struct ShaderCounts {
     /// Rays whose ray segment list did not fit the pool (SparseLeap, rasterize): marched
     /// whole.
     pub rays_overflowed: u64,
+    /// Compute passes the frame's ray casting took: 1 where the resident-only pass finished
+    /// every ray (a converged frame), more where rays needed requests, substitutes or the
+    /// per-corner path (the full pass), or more steps than one pass allows.
+    pub passes: u64,
 }
 
 /// One missing brick the shader reported.
@@ -724,7 +728,13 @@ impl Renderer {
                     label: Some("raycast"),
                     timestamp_writes,
                 });
-                pass.set_pipeline(self.pipeline.pipeline());
+                // A frame's first pass is the resident-only one; the full pass resumes what
+                // it left.
+                pass.set_pipeline(if passes == 0 {
+                    self.pipeline.resident_only()
+                } else {
+                    self.pipeline.pipeline()
+                });
                 pass.set_bind_group(0, &self.bind_group, &[]);
                 pass.dispatch_workgroups(
                     self.options.width.div_ceil(8),
@@ -771,7 +781,9 @@ impl Renderer {
                     steps: self.tables.steps_per_pass(),
                 });
             }
-            batch = (batch * 2).min(16);
+            // After the resident-only pass one full pass usually finishes what it left;
+            // then batches double (long rays).
+            batch = if passes == 1 { 1 } else { (batch * 2).min(16) };
             encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("raycast resume"),
             });
@@ -823,6 +835,7 @@ impl Renderer {
                     .as_ref()
                     .map_or(0, |s| u64::from(s.box_count())),
                 rays_overflowed: u64::from(counters.rays_overflowed),
+                passes: u64::from(passes),
             },
             gpu_time_ms,
         })

@@ -357,7 +357,7 @@ impl ResidencyState {
         }
         for slot in self.aprons.drop_stand_ins() {
             if let Some(id) = self.cache.owner(slot) {
-                self.pages.set(id, slot_entry(slot, false));
+                self.pages.set(id, slot_entry(slot, 0));
             }
         }
         self.pending.aprons = true;
@@ -481,7 +481,8 @@ impl ResidencyState {
     }
 
     /// Fills the parts of the apron of brick `id` (in `slot`) that its neighbours can fill
-    /// now, and rewrites its entry: [`super::page_table::ENTRY_APRON`] once complete.
+    /// now, and rewrites its entry with the crossings its apron serves
+    /// ([`super::page_table::ENTRY_APRON`]).
     fn fill_apron(&mut self, gpu: &Gpu, id: u32, slot: u32) {
         let Some(key) = self.pages.key(id) else {
             return;
@@ -511,9 +512,12 @@ impl ResidencyState {
                 .write_box(&gpu.queue, slot, origin, extent, &bytes);
             self.aprons.mark(slot, part, stand_in);
         }
-        let complete = self.aprons.filled(slot) & needed == needed;
-        self.pages
-            .set(id, slot_entry(slot, complete && self.aprons.used()));
+        let crossings = if self.aprons.used() {
+            apron::servable_crossings(self.aprons.filled(slot) | !needed)
+        } else {
+            0
+        };
+        self.pages.set(id, slot_entry(slot, crossings));
     }
 
     /// Whether the shader may read complete aprons (the default) or must look up every brick

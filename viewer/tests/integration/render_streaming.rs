@@ -6,7 +6,9 @@
 use std::sync::Arc;
 
 use crate::render_common::*;
-use residency_viewer::gpu::page_table::{ENTRY_APRON, ENTRY_CLEAR, ENTRY_MISSING, entry_slot};
+use residency_viewer::gpu::page_table::{
+    ENTRY_APRON, ENTRY_CLEAR, ENTRY_MISSING, entry_serves, entry_slot,
+};
 use residency_viewer::gpu::renderer::{BrickRequest, RenderOptions, Renderer};
 use residency_viewer::gpu::streaming::{Budget, Fetcher, converge, prioritise};
 use residency_viewer::gpu::synthetic::SyntheticSource;
@@ -131,7 +133,7 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
     let id = |x| if x == 2 { x2 } else { x3 };
     assert_eq!(renderer.pages().entry(id(3)), ENTRY_CLEAR);
     assert!(entry_slot(renderer.pages().entry(id(2))).is_some());
-    assert_ne!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, ENTRY_APRON);
     assert!(
         !src.fetch_log()
             .iter()
@@ -148,11 +150,14 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
     // arrives, and then complete with its voxels.
     assert!(renderer.restyle(gpu, &shown));
     assert_eq!(renderer.pages().entry(id(3)), ENTRY_MISSING);
-    assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    // Every crossing along x (x alone, with y, with z, with both) waits for x 24..32.
+    for m in [1, 3, 5, 7] {
+        assert!(!entry_serves(renderer.pages().entry(id(2)), m), "{m}");
+    }
     let p = converge(gpu, &mut renderer, &fetcher, &budget).unwrap();
     assert!(p.converged, "{}", p.stop_reason);
     assert!(entry_slot(renderer.pages().entry(id(3))).is_some());
-    assert_ne!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, ENTRY_APRON);
     let m = check(
         "apron-shown",
         &p,
@@ -172,6 +177,10 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
     renderer.use_aprons(gpu, false);
     assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
     let without = renderer.render(gpu).unwrap();
+    // With aprons the converged frame is the resident-only pass alone; without them, rays
+    // whose footprints cross into the next brick stop there for the full pass.
+    assert_eq!(with.counts.passes, 1);
+    assert_eq!(without.counts.passes, 2);
     assert!(
         without.counts.bricks_used > with.counts.bricks_used,
         "{} {}",
@@ -186,7 +195,7 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
         .fold(0.0f32, f32::max);
     assert!(diff < 1e-5, "{diff}");
     renderer.use_aprons(gpu, true);
-    assert_ne!(renderer.pages().entry(id(2)) & ENTRY_APRON, 0);
+    assert_eq!(renderer.pages().entry(id(2)) & ENTRY_APRON, ENTRY_APRON);
 }
 
 #[test]
