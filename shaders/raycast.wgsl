@@ -769,8 +769,16 @@ fn sample_channels(
     substitute: bool,
 ) -> ChannelSamples {
     var out = ChannelSamples(0u, P.level_count - 1u, false);
-    for (var c = 0u; c < P.channel_count; c++) {
-        if (v.empty & (1u << c)) != 0u || (*chosen)[c] == NO_LEVEL {
+    // Only the channels not empty here: the loop runs as often as the most such channels
+    // any ray of a warp (or of a CPU driver's SIMD lanes) has, not once per channel.
+    var need = ((1u << P.channel_count) - 1u) & ~v.empty;
+    loop {
+        if need == 0u {
+            break;
+        }
+        let c = firstTrailingBit(need);
+        need &= need - 1u;
+        if (*chosen)[c] == NO_LEVEL {
             continue;
         }
         let l = (*chosen)[c];
@@ -1022,10 +1030,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var move_by = 0.0;
             if v.action == ACTION_HOMOGENEOUS {
                 let seg = min(node_exit(ray, v.depth, dir) + nudge, t_exit - ray.t);
-                for (var c = 0u; c < P.channel_count; c++) {
+                s.have = ~v.empty & ((1u << P.channel_count) - 1u);
+                var left = s.have;
+                loop {
+                    if left == 0u {
+                        break;
+                    }
+                    let c = firstTrailingBit(left);
+                    left &= left - 1u;
                     values[c] = bitcast<f32>(node_word(v.node, c, 1u));
                 }
-                s.have = ~v.empty & ((1u << P.channel_count) - 1u);
                 homogeneous++;
                 samples++;
                 steps = seg / desired_step;

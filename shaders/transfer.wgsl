@@ -80,12 +80,17 @@ struct Mixture {
 // loop-local array is written lane by lane on every iteration.
 fn mixture(have: u32, values: ptr<function, array<f32, MAX_CHANNELS>>, step: f32) -> Mixture {
     var m = Mixture(vec3<f32>(0.0), 0.0);
-    for (var c = 0u; c < P.channel_count; c++) {
-        if (have & (1u << c)) != 0u {
-            let a = corrected(tf_opacity(c, (*values)[c]), step);
-            m.color += a * S.channels[c].color;
-            m.alpha += a;
+    // The channels in `have` only: as often as the most any ray of a warp has.
+    var left = have;
+    loop {
+        if left == 0u {
+            break;
         }
+        let c = firstTrailingBit(left);
+        left &= left - 1u;
+        let a = corrected(tf_opacity(c, (*values)[c]), step);
+        m.color += a * S.channels[c].color;
+        m.alpha += a;
     }
     return m;
 }
