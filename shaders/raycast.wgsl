@@ -225,11 +225,17 @@ fn level_pos(l: u32, cell: vec3<i32>, local: vec3<f32>) -> LevelPos {
     );
 }
 
-// The brick of level-voxel v (v / P.brick), through f32 division: a CPU driver has no vector
-// integer division and divides lane by lane. Exact below 2^23 voxels per axis: there the
-// correctly rounded quotient of v = q·B + r (r < B) stays below q + 1 - 1/(2B).
+// The brick of level-voxel v (v / P.brick), through f32 division corrected by one step each
+// way: a CPU driver has no vector integer division and divides lane by lane. The f32 quotient
+// is within one of the true one while it is below 2^23 (relative error 2^-23 at most), so the
+// result is exact for levels of fewer than 2^23 bricks per axis.
 fn voxel_brick(v: vec3<u32>) -> vec3<u32> {
-    return vec3<u32>(vec3<f32>(v) / vec3<f32>(P.brick));
+    let bs = P.brick;
+    var q = vec3<u32>(vec3<f32>(v) / vec3<f32>(bs));
+    let r = vec3<i32>(v - q * bs);
+    q = select(q, q - vec3<u32>(1u), r < vec3<i32>(0));
+    q = select(q, q + vec3<u32>(1u), r >= vec3<i32>(bs));
+    return q;
 }
 
 // Page-table id of brick b of channel c at level l.
@@ -265,10 +271,10 @@ struct Sampled {
 // Trilinear sample of channel c at level l (voxel centres at i + ½, clamped to the edge
 // voxels). The 8 voxels lie in at most 8 bricks. The brick of the first voxel is looked up;
 // when the footprint stays in it, or its apron serves the footprint's crossing (ENTRY_APRON:
-// the slot holds the next bricks' first voxels there too), its slot serves all 8. Otherwise each brick is looked up
-// once per run of corners in it, with a single texel-fetch site (a CPU Vulkan driver runs
-// every branch's code, so the shader keeps few). With `want`, every missing brick is
-// requested; without it the first miss returns. A clear brick (ENTRY_CLEAR) in the footprint
+// the slot holds the next bricks' first voxels there too), its slot serves all 8. Otherwise
+// each brick is looked up once per run of corners in it, with a single texel-fetch site (a
+// CPU Vulkan driver runs every branch's code, so the shader keeps few). With `want`, every
+// missing brick is requested; without it the first miss returns. A clear brick (ENTRY_CLEAR) in the footprint
 // makes the sample clear.
 fn sample_level(c: u32, l: u32, pos: LevelPos, want: bool, t: f32) -> Sampled {
     let fp = pos.fp - vec3<f32>(0.5);
