@@ -457,6 +457,26 @@ fn footprint_level(first: u32, t: f32) -> u32 {
     return l;
 }
 
+// Each channel's level at a step, packed 8 bits a channel, four to a word (0xff: NO_LEVEL):
+// a value, not an array, so a CPU driver keeps it in registers instead of storing it lane by
+// lane.
+fn level_of(levels: vec2<u32>, c: u32) -> u32 {
+    let l = (select(levels.x, levels.y, c >= 4u) >> (8u * (c & 3u))) & 0xffu;
+    return select(l, NO_LEVEL, l == 0xffu);
+}
+
+// `levels` with channel c's level set to l (NO_LEVEL allowed).
+fn with_level(levels: vec2<u32>, c: u32, l: u32) -> vec2<u32> {
+    let sh = 8u * (c & 3u);
+    let keep = ~(0xffu << sh);
+    let byte = min(l, 0xffu) << sh;
+    return select(
+        vec2<u32>((levels.x & keep) | byte, levels.y),
+        vec2<u32>(levels.x, (levels.y & keep) | byte),
+        c >= 4u,
+    );
+}
+
 // Channel c's level for the footprint's level l: l within the channel's level bounds.
 fn channel_level(c: u32, l: u32) -> u32 {
     let lmax = min(S.channels[c].max_level, P.level_count - 1u);
@@ -570,7 +590,7 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
 // renderer would (`seen`: the brick of each channel's last sample; `seen_empty`: its bits).
 fn visit_page_table(
     ray: Ray,
-    chosen: ptr<function, array<u32, MAX_CHANNELS>>,
+    chosen: vec2<u32>,
     seen: ptr<function, array<u32, MAX_CHANNELS>>,
     seen_empty: ptr<function, u32>,
     dir: vec3<f32>,
@@ -579,7 +599,7 @@ fn visit_page_table(
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
     var all_empty = true;
     for (var c = 0u; c < P.channel_count; c++) {
-        let l = (*chosen)[c];
+        let l = level_of(chosen, c);
         let pos = level_pos(l, ray.cell, ray.local);
         let b = point_brick(l, pos);
         let pid = brick_id(c, l, b);
@@ -606,7 +626,7 @@ fn visit_page_table(
 // resident one is sampled (`chosen` becomes that level, or NO_LEVEL).
 fn visit_brick_octree(
     ray: Ray,
-    chosen: ptr<function, array<u32, MAX_CHANNELS>>,
+    chosen: ptr<function, vec2<u32>>,
     dir: vec3<f32>,
     skipping: bool,
     t: f32,
@@ -614,7 +634,7 @@ fn visit_brick_octree(
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
     var all_empty = true;
     for (var c = 0u; c < P.channel_count; c++) {
-        let l = (*chosen)[c];
+        let l = level_of(*chosen, c);
         var k = min(S.channels[c].max_level, P.level_count - 1u);
         var resident = NO_LEVEL;
         var missing = 0u;
@@ -648,7 +668,7 @@ fn visit_brick_octree(
         }
         if (v.empty & (1u << c)) == 0u {
             all_empty = false;
-            (*chosen)[c] = resident;
+            *chosen = with_level(*chosen, c, resident);
             if !RESIDENT_ONLY && missing != 0u && resident != NO_LEVEL {
                 note_substituted(missing - 1u);
             }
@@ -768,7 +788,7 @@ struct ChannelSamples {
 fn sample_channels(
     ray: Ray,
     v: Visit,
-    chosen: ptr<function, array<u32, MAX_CHANNELS>>,
+    chosen: vec2<u32>,
     values: ptr<function, array<f32, MAX_CHANNELS>>,
     t: f32,
     skipping: bool,
@@ -784,10 +804,10 @@ fn sample_channels(
         }
         let c = firstTrailingBit(need);
         need &= need - 1u;
-        if (*chosen)[c] == NO_LEVEL {
+        if level_of(chosen, c) == NO_LEVEL {
             continue;
         }
-        let l = (*chosen)[c];
+        let l = level_of(chosen, c);
         var k = l;
         var s = Sampled(0.0, false, 0u, false);
         var first_missing = 0u;
@@ -940,7 +960,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var held = Visit(ACTION_SKIP, 0u, 0u, 0u, 0.0);
         // Each step's level per channel and its samples, declared once per ray: a
         // declaration in the loop is zeroed on every iteration, lane by lane on a CPU driver.
-        var chosen: array<u32, MAX_CHANNELS>;
         var values: array<f32, MAX_CHANNELS>;
         // The footprint's level at the last step (it only coarsens along the ray).
         var lod = 0u;
@@ -984,9 +1003,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             // Desired level per channel, and step: the finest over channels.
             var finest = P.level_count - 1u;
+            var chosen = vec2<u32>(0xffffffffu);
             for (var c = 0u; c < P.channel_count; c++) {
-                chosen[c] = channel_level(c, level);
-                finest = min(finest, chosen[c]);
+                let l = channel_level(c, level);
+                chosen = with_level(chosen, c, l);
+                finest = min(finest, l);
             }
             let desired_step = P.step_fraction * level_voxel(finest);
             var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
@@ -1014,7 +1035,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     held_cell = ray.cell >> node_shift(v.depth);
                 }
             } else if METHOD == METHOD_PAGE_TABLE {
-                v = visit_page_table(ray, &chosen, &pt_brick, &pt_empty, dir, skipping);
+                v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
             } else if METHOD == METHOD_OCTREE {
                 v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
             }
@@ -1051,7 +1072,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 steps = seg / desired_step;
                 move_by = seg + nudge;
             } else {
-                s = sample_channels(ray, v, &chosen, &values, ray.t + t_plane, skipping, substitute);
+                s = sample_channels(ray, v, chosen, &values, ray.t + t_plane, skipping, substitute);
                 if RESIDENT_ONLY && needs_full {
                     suspended = true;
                     break;
