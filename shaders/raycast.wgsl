@@ -543,12 +543,11 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
     var d = min(clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u, max_depth);
     let all = (1u << P.channel_count) - 1u;
+    var homogeneous = 0u;
     loop {
         v.node = node_index(d, ray.cell);
         // The node's class under the transfer functions, one word for every channel (written
         // by the CPU on a restyle): bits 0-7 empty, 8-15 constant.
-        var homogeneous = 0u;
-        v.empty = 0u;
         if skipping {
             let word = nodes[P.class_offset + v.node];
             v.empty = word & all;
@@ -563,20 +562,28 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
             break;
         }
         if d >= max_depth {
-            // Unmapped: no channel that needs data here has a level resident.
-            let need = all & ~(v.empty | homogeneous);
-            var all_unmapped = true;
-            for (var c = 0u; c < P.channel_count; c++) {
-                if (need & (1u << c)) != 0u && node_word(v.node, c, 0u) != 0u {
-                    all_unmapped = false;
-                }
-            }
-            if all_unmapped {
-                v.action = ACTION_REQUEST;
-            }
             break;
         }
         d++;
+    }
+    // Unmapped: no channel that needs data here has a level resident (judged once, after the
+    // descent: on a CPU driver a loop inside the descent would run at every depth).
+    if v.action == ACTION_SAMPLE {
+        var need = all & ~(v.empty | homogeneous);
+        var all_unmapped = true;
+        loop {
+            if need == 0u {
+                break;
+            }
+            let c = firstTrailingBit(need);
+            need &= need - 1u;
+            if node_word(v.node, c, 0u) != 0u {
+                all_unmapped = false;
+            }
+        }
+        if all_unmapped {
+            v.action = ACTION_REQUEST;
+        }
     }
     v.depth = d;
     if v.action == ACTION_SKIP || v.action == ACTION_REQUEST {
