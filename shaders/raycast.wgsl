@@ -66,7 +66,7 @@ struct FrameCounters {
     samples_without_data: atomic<u32>,
     rays_suspended: atomic<u32>, // by the latest pass
     rays_overflowed: atomic<u32>, // ray segment lists that did not fit (marched whole)
-    pad0: u32,
+    rays_need_full: atomic<u32>, // by the latest pass (resident-only): stopped for the full pass
 }
 
 struct Requests {
@@ -1048,6 +1048,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             if RESIDENT_ONLY && (needs_full || v.action == ACTION_REQUEST) {
                 suspended = true;
+                needs_full = true;
                 break;
             }
             if v.action == ACTION_SKIP {
@@ -1112,6 +1113,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     rays[pixel] = st;
     if suspended {
         atomicAdd(&requests.counters.rays_suspended, 1u);
+        if RESIDENT_ONLY && needs_full {
+            atomicAdd(&requests.counters.rays_need_full, 1u);
+        }
     } else {
         out_color[pixel] = vec4<f32>(color + trans * P.background, 1.0 - trans);
     }

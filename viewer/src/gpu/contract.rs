@@ -270,8 +270,9 @@ gpu_struct! {
         /// Rays whose ray segment list overflowed the pool (SparseLeap, rasterize): they
         /// march their whole length.
         pub rays_overflowed: u32,
-        /// Unused (alignment of the request list that follows).
-        pub pad0: u32,
+        /// Rays the latest pass, a resident-only one, stopped for the full pass (a request,
+        /// a substitute or the per-corner path needed).
+        pub rays_need_full: u32,
     }
 }
 

@@ -206,9 +206,10 @@ pub struct ShaderCounts {
     /// Rays whose ray segment list did not fit the pool (SparseLeap, rasterize): marched
     /// whole.
     pub rays_overflowed: u64,
-    /// Compute passes the frame's ray casting took: 1 where the resident-only pass finished
-    /// every ray (a converged frame), more where rays needed requests, substitutes or the
-    /// per-corner path (the full pass), or more steps than one pass allows.
+    /// Compute passes the frame's ray casting took: resident-only passes while rays only run
+    /// out of steps, and a full pass after any that stopped rays for it (a request, a
+    /// substitute or the per-corner path needed). 1 for a converged frame whose rays fit in
+    /// one pass.
     pub passes: u64,
 }
 
@@ -714,13 +715,18 @@ impl Renderer {
         // header says how many rays the last pass suspended.
         let mut passes = 0u32;
         let mut batch = 1u32;
+        // A frame starts with the resident-only pass, and goes on with it while the rays it
+        // suspends only ran out of steps; a pass that stopped rays for the full pass is
+        // followed by one full pass.
+        let mut resident_only = true;
         loop {
             for _ in 0..batch {
-                encoder.clear_buffer(
-                    &buffers.requests,
-                    std::mem::offset_of!(FrameCounters, rays_suspended) as u64,
-                    Some(4),
-                );
+                for counter in [
+                    std::mem::offset_of!(FrameCounters, rays_suspended),
+                    std::mem::offset_of!(FrameCounters, rays_need_full),
+                ] {
+                    encoder.clear_buffer(&buffers.requests, counter as u64, Some(4));
+                }
                 // The frame starts at its first pass: the segment lists' where there are.
                 let first = passes == 0 && self.segments.is_none();
                 let timestamp_writes = rb.timer.as_ref().map(|t| t.writes(first));
@@ -728,9 +734,7 @@ impl Renderer {
                     label: Some("raycast"),
                     timestamp_writes,
                 });
-                // A frame's first pass is the resident-only one; the full pass resumes what
-                // it left.
-                pass.set_pipeline(if passes == 0 {
+                pass.set_pipeline(if resident_only {
                     self.pipeline.resident_only()
                 } else {
                     self.pipeline.pipeline()
@@ -764,9 +768,10 @@ impl Renderer {
             }
             gpu.queue.submit([encoder.finish()]);
             map_for_reading(device, &maps).await?;
-            let suspended = {
+            let (suspended, need_full) = {
                 let header = rb.requests.get_mapped_range(..COUNTER_BYTES)?;
-                bytemuck::pod_read_unaligned::<FrameCounters>(&header).rays_suspended
+                let c = bytemuck::pod_read_unaligned::<FrameCounters>(&header);
+                (c.rays_suspended, c.rays_need_full)
             };
             if suspended == 0 {
                 break;
@@ -781,9 +786,14 @@ impl Renderer {
                     steps: self.tables.steps_per_pass(),
                 });
             }
-            // After the resident-only pass one full pass usually finishes what it left;
-            // then batches double (long rays).
-            batch = if passes == 1 { 1 } else { (batch * 2).min(16) };
+            // One full pass usually finishes what a resident-only pass left; rays that only
+            // ran out of steps go on in batches that double (long rays).
+            resident_only = need_full == 0;
+            batch = if resident_only {
+                (batch * 2).min(16)
+            } else {
+                1
+            };
             encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("raycast resume"),
             });
