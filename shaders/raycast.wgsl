@@ -575,8 +575,7 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
             if need == 0u {
                 break;
             }
-            let c = firstTrailingBit(need);
-            need &= need - 1u;
+            let c = take_channel(&need);
             if node_word(v.node, c, 0u) != 0u {
                 all_unmapped = false;
             }
@@ -809,8 +808,7 @@ fn sample_channels(
         if need == 0u {
             break;
         }
-        let c = firstTrailingBit(need);
-        need &= need - 1u;
+        let c = take_channel(&need);
         if level_of(chosen, c) == NO_LEVEL {
             continue;
         }
@@ -1071,8 +1069,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     if left == 0u {
                         break;
                     }
-                    let c = firstTrailingBit(left);
-                    left &= left - 1u;
+                    let c = take_channel(&left);
                     values[c] = bitcast<f32>(node_word(v.node, c, 1u));
                 }
                 homogeneous++;

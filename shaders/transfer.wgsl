@@ -74,6 +74,15 @@ struct Mixture {
     alpha: f32,
 }
 
+// The lowest channel of `bits`, taken out of it. Loops over the channels a step needs run
+// `loop { if bits == 0u { break; } let c = take_channel(&bits); ... }`: as often as the most
+// such channels any ray of a warp (or of a CPU driver's SIMD lanes) has, not once per channel.
+fn take_channel(bits: ptr<function, u32>) -> u32 {
+    let c = firstTrailingBit(*bits);
+    *bits &= *bits - 1u;
+    return c;
+}
+
 // The mixture of the channels in `have` with `values`, each opacity corrected to `step`.
 // Channels mix additively (DESIGN.md: colours weighted by opacity, opacities summed).
 // Arrays go by pointer and live outside the ray loops: on a CPU Vulkan driver a copied or
@@ -86,8 +95,7 @@ fn mixture(have: u32, values: ptr<function, array<f32, MAX_CHANNELS>>, step: f32
         if left == 0u {
             break;
         }
-        let c = firstTrailingBit(left);
-        left &= left - 1u;
+        let c = take_channel(&left);
         let a = corrected(tf_opacity(c, (*values)[c]), step);
         m.color += a * S.channels[c].color;
         m.alpha += a;
