@@ -978,81 +978,100 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             atomicAdd(&requests.counters.rays_overflowed, 1u);
         }
         loop {
-            iterations++;
-            if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
-                break;
-            }
-            if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= end_cell) {
-                break;
-            }
-            if budget == 0u {
-                suspended = true;
-                break;
-            }
-            budget--;
-            lod = footprint_level(lod, ray.t + t_plane);
-            var level = lod;
-            // SparseLeap and rasterize: where the ray stands on its segment list; rasterize
-            // samples at the level of the brick it is in, not at the footprint's.
-            if segments {
-                if ray.t >= seg.end {
-                    if METHOD == METHOD_SPARSELEAP {
-                        seg = occupancy_at(pixel, ray.t);
-                    } else {
-                        seg = brick_at(pixel, ray.t);
-                    }
-                }
-                if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
-                    level = seg.level;
-                }
-            }
-            // Desired level per channel, and step: the finest over channels.
-            var finest = P.level_count - 1u;
-            var chosen = vec2<u32>(0xffffffffu);
-            for (var c = 0u; c < P.channel_count; c++) {
-                let l = channel_level(c, level);
-                chosen = with_level(chosen, c, l);
-                finest = min(finest, l);
-            }
-            let desired_step = P.step_fraction * level_voxel(finest);
+            // While-while (Aila and Laine 2009): the inner loop moves the ray through empty
+            // nodes until it stands where it samples or integrates, so a skip costs the
+            // traversal's code and not the whole step's (on a CPU driver every branch of a
+            // loop body runs on every iteration; on a GPU, rays of a warp that skip wait less
+            // for those that sample).
+            var stop = false;
             var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
-            if segments {
-                if seg.occupancy == OCCUPANCY_EMPTY {
-                    v.action = ACTION_SKIP;
-                    v.skip = min(seg.end, t_exit) - ray.t;
-                } else if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
-                    // Empty macrocells inside the brick are skipped.
-                    let macro_end = macrocell_skip(ray, seg.level, dir);
-                    if macro_end >= 0.0 {
-                        v.action = ACTION_SKIP;
-                        v.skip = min(macro_end, seg.end - ray.t);
+            var chosen = vec2<u32>(0xffffffffu);
+            var desired_step = 0.0;
+            loop {
+                iterations++;
+                if ray.t >= t_exit || trans < T_MIN || iterations > MAX_ITERATIONS {
+                    stop = true;
+                    break;
+                }
+                if any(ray.cell < vec3<i32>(0)) || any(ray.cell >= end_cell) {
+                    stop = true;
+                    break;
+                }
+                if budget == 0u {
+                    suspended = true;
+                    stop = true;
+                    break;
+                }
+                budget--;
+                lod = footprint_level(lod, ray.t + t_plane);
+                var level = lod;
+                // SparseLeap and rasterize: where the ray stands on its segment list; rasterize
+                // samples at the level of the brick it is in, not at the footprint's.
+                if segments {
+                    if ray.t >= seg.end {
+                        if METHOD == METHOD_SPARSELEAP {
+                            seg = occupancy_at(pixel, ray.t);
+                        } else {
+                            seg = brick_at(pixel, ray.t);
+                        }
+                    }
+                    if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
+                        level = seg.level;
                     }
                 }
-            } else if METHOD == METHOD_RESIDENCY {
-                if held.action == ACTION_SAMPLE && desired_step == held_step
-                    && all((ray.cell >> node_shift(held.depth)) == held_cell) {
-                    v = held;
-                } else {
-                    v = visit_octree(ray, last_depth, desired_step, dir, skipping);
-                    last_depth = v.depth;
-                    held = v;
-                    held_step = desired_step;
-                    held_cell = ray.cell >> node_shift(v.depth);
+                // Desired level per channel, and step: the finest over channels.
+                var finest = P.level_count - 1u;
+                chosen = vec2<u32>(0xffffffffu);
+                for (var c = 0u; c < P.channel_count; c++) {
+                    let l = channel_level(c, level);
+                    chosen = with_level(chosen, c, l);
+                    finest = min(finest, l);
                 }
-            } else if METHOD == METHOD_PAGE_TABLE {
-                v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
-            } else if METHOD == METHOD_OCTREE {
-                v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
-            }
-            if RESIDENT_ONLY && (needs_full || v.action == ACTION_REQUEST) {
-                suspended = true;
-                needs_full = true;
+                desired_step = P.step_fraction * level_voxel(finest);
+                v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
+                if segments {
+                    if seg.occupancy == OCCUPANCY_EMPTY {
+                        v.action = ACTION_SKIP;
+                        v.skip = min(seg.end, t_exit) - ray.t;
+                    } else if METHOD == METHOD_RASTERIZE && seg.level != NO_LEVEL {
+                        // Empty macrocells inside the brick are skipped.
+                        let macro_end = macrocell_skip(ray, seg.level, dir);
+                        if macro_end >= 0.0 {
+                            v.action = ACTION_SKIP;
+                            v.skip = min(macro_end, seg.end - ray.t);
+                        }
+                    }
+                } else if METHOD == METHOD_RESIDENCY {
+                    if held.action == ACTION_SAMPLE && desired_step == held_step
+                        && all((ray.cell >> node_shift(held.depth)) == held_cell) {
+                        v = held;
+                    } else {
+                        v = visit_octree(ray, last_depth, desired_step, dir, skipping);
+                        last_depth = v.depth;
+                        held = v;
+                        held_step = desired_step;
+                        held_cell = ray.cell >> node_shift(v.depth);
+                    }
+                } else if METHOD == METHOD_PAGE_TABLE {
+                    v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
+                } else if METHOD == METHOD_OCTREE {
+                    v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
+                }
+                if RESIDENT_ONLY && (needs_full || v.action == ACTION_REQUEST) {
+                    suspended = true;
+                    needs_full = true;
+                    stop = true;
+                    break;
+                }
+                if v.action == ACTION_SKIP {
+                    skipped++;
+                    advance(&ray, dir, v.skip + nudge);
+                    continue;
+                }
                 break;
             }
-            if v.action == ACTION_SKIP {
-                skipped++;
-                advance(&ray, dir, v.skip + nudge);
-                continue;
+            if stop {
+                break;
             }
             // One compositing site for both kinds of step (on a CPU driver every inlined copy
             // costs every iteration): a homogeneous node is seg/Δ steps of its constant
