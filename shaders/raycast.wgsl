@@ -274,8 +274,8 @@ struct Sampled {
 // the slot holds the next bricks' first voxels there too), its slot serves all 8. Otherwise
 // each brick is looked up once per run of corners in it, with a single texel-fetch site (a
 // CPU Vulkan driver runs every branch's code, so the shader keeps few). With `want`, every
-// missing brick is requested; without it the first miss returns. A clear brick (ENTRY_CLEAR) in the footprint
-// makes the sample clear.
+// missing brick is requested; without it the first miss returns. A clear brick (ENTRY_CLEAR)
+// in the footprint makes the sample clear.
 fn sample_level(c: u32, l: u32, pos: LevelPos, want: bool, t: f32) -> Sampled {
     let fp = pos.fp - vec3<f32>(0.5);
     let fl = floor(fp);
@@ -582,6 +582,10 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
         }
         if all_unmapped {
             v.action = ACTION_REQUEST;
+            // The resident-only pass neither requests nor substitutes.
+            if RESIDENT_ONLY {
+                needs_full = true;
+            }
         }
     }
     v.depth = d;
@@ -801,18 +805,17 @@ fn sample_channels(
     substitute: bool,
 ) -> ChannelSamples {
     var out = ChannelSamples(0u, P.level_count - 1u, false);
-    // Only the channels not empty here: the loop runs as often as the most such channels
-    // any ray of a warp (or of a CPU driver's SIMD lanes) has, not once per channel.
+    // Only the channels not empty here (take_channel).
     var need = ((1u << P.channel_count) - 1u) & ~v.empty;
     loop {
         if need == 0u {
             break;
         }
         let c = take_channel(&need);
-        if level_of(chosen, c) == NO_LEVEL {
+        let l = level_of(chosen, c);
+        if l == NO_LEVEL {
             continue;
         }
-        let l = level_of(chosen, c);
         var k = l;
         var s = Sampled(0.0, false, 0u, false);
         var first_missing = 0u;
@@ -963,8 +966,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // node with the same step, so the octree is descended once per node, not per sample
         // (a visit is a function of the node and the step alone: the same answer again).
         var held = Visit(ACTION_SKIP, 0u, 0u, 0u, 0.0);
-        // Each step's level per channel and its samples, declared once per ray: a
-        // declaration in the loop is zeroed on every iteration, lane by lane on a CPU driver.
+        // Each step's channel values, declared once per ray: an array declared in the loop
+        // is zeroed on every iteration, lane by lane on a CPU driver.
         var values: array<f32, MAX_CHANNELS>;
         // The footprint's level at the last step (it only coarsens along the ray).
         var lod = 0u;
@@ -1057,9 +1060,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 } else if METHOD == METHOD_OCTREE {
                     v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
                 }
-                if RESIDENT_ONLY && (needs_full || v.action == ACTION_REQUEST) {
+                if RESIDENT_ONLY && needs_full {
                     suspended = true;
-                    needs_full = true;
                     stop = true;
                     break;
                 }

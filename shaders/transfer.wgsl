@@ -89,7 +89,7 @@ fn take_channel(bits: ptr<function, u32>) -> u32 {
 // loop-local array is written lane by lane on every iteration.
 fn mixture(have: u32, values: ptr<function, array<f32, MAX_CHANNELS>>, step: f32) -> Mixture {
     var m = Mixture(vec3<f32>(0.0), 0.0);
-    // The channels in `have` only: as often as the most any ray of a warp has.
+    // The channels in `have` only (take_channel).
     var left = have;
     loop {
         if left == 0u {

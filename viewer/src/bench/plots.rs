@@ -105,14 +105,15 @@ pub struct TradeoffPoint {
     pub group: String,
 }
 
-/// Colours of the tradeoff plot's series, in order of first appearance.
-const GROUP_COLOURS: [RGBColor; 6] = [
+/// Colours of a plot's series, in order (the tradeoff plot's methods, the scaling plots'
+/// lines). No red: red marks the Pareto front.
+const PALETTE: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
     RGBColor(255, 127, 14),
     RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
     RGBColor(140, 86, 75),
-    RGBColor(127, 127, 127),
+    RGBColor(23, 190, 207),
 ];
 
 fn padded(lo: f64, hi: f64) -> (f64, f64) {
@@ -178,7 +179,7 @@ pub fn tradeoff(
             }
         }
         for (i, group) in groups.iter().enumerate() {
-            let colour = GROUP_COLOURS[i % GROUP_COLOURS.len()];
+            let colour = PALETTE[i % PALETTE.len()];
             chart
                 .draw_series(
                     points
@@ -229,15 +230,6 @@ pub struct ScalingSeries {
     /// Points, ascending in `x`.
     pub points: Vec<(f64, [f64; 3])>,
 }
-
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(255, 127, 14),
-    RGBColor(23, 190, 207),
-];
 
 /// Draws the mesh, one line per series and the legend of panel `$i` of a scaling plot
 /// (a macro because the linear and log charts have different coordinate types).

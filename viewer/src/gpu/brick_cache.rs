@@ -8,7 +8,7 @@
 
 use super::GpuError;
 use super::apron::APRON_VOXELS;
-use super::page_table::APRON_SHIFT;
+use super::page_table::MAX_SLOTS;
 use crate::source::{BrickVoxels, SampleType};
 
 /// Edge of a slot, voxels (`x, y, z`): a brick of `brick` voxels and its apron.
@@ -74,8 +74,7 @@ impl BrickCache {
         let (format, kind) = atlas_format(sample_type);
         let slot = slot_edge(brick);
         let brick_bytes = sample_type.block_bytes(slot.map(u64::from));
-        // Page-table entries hold `slot + 2` below the apron bit.
-        let wanted = (cache_bytes / brick_bytes).min(u64::from((1u32 << APRON_SHIFT) - 2)) as u32;
+        let wanted = (cache_bytes / brick_bytes).min(u64::from(MAX_SLOTS)) as u32;
         let max_dim = limits.max_texture_dimension_3d;
         let fit: [u32; 3] = std::array::from_fn(|a| max_dim / slot[a]);
         if fit.contains(&0) {

@@ -7,9 +7,8 @@
 //!
 //! Emptiness comes from the residency octree's per-node class words (the region metadata under
 //! the transfer functions, as ours culls with them), over the nodes of the smallest size that
-//! covers a brick. Bricks
-//! are widened by [`super::occupancy::HAIR`] of a leaf, so that neighbours overlap by a hair
-//! and no ray slips between them.
+//! covers a brick. Bricks are widened by [`super::occupancy::HAIR`] of a leaf, so that
+//! neighbours overlap by a hair and no ray slips between them.
 
 use super::contract::{OCCUPANCY_NONEMPTY, SegmentBox, segment_payload};
 use super::occupancy::HAIR;

@@ -5,9 +5,9 @@
 //! - **Occupancy classes** of the *occupancy leaves*, the octree nodes at depth
 //!   `min(D, MAX_GEOMETRY_DEPTH)`: *empty* where every drawn channel is transparent under its
 //!   transfer function by the node's class word (the one ours culls with,
-//!   [`super::residency::node_class`]), *unknown*
-//!   where some channel that is not empty has no level resident anywhere in the node (or the
-//!   store has no region metadata), *non-empty* otherwise.
+//!   [`super::residency::node_class`]), *unknown* where some channel that is not empty has no
+//!   level resident anywhere in the node (or the store has no region metadata), *non-empty*
+//!   otherwise.
 //! - **Occupancy histograms**: every coarser node counts its occupancy leaves per class, and
 //!   takes the majority class (ties: non-empty, then unknown, then empty).
 //! - **Geometry**: breadth first from the root, a node emits its box when its class differs

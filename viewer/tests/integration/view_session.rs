@@ -11,8 +11,9 @@ use residency_viewer::gpu::renderer::RenderOptions;
 use residency_viewer::gpu::streaming::{Budget, render_progressive};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::interactive::camera_control::orbit;
+use residency_viewer::interactive::controls::next_filter;
 use residency_viewer::interactive::session::{Session, Step};
-use residency_viewer::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
+use residency_viewer::scene::{Camera, ChannelStyle, Filter, OpacityPoint, Scene};
 use residency_viewer::source::SampleType;
 
 fn source() -> Arc<SyntheticSource> {
@@ -62,7 +63,7 @@ fn scene() -> Scene {
         },
         channels: vec![style(0, [0.0, 1.0, 1.0]), style(1, [1.0, 0.0, 1.0])],
         background: [0.0, 0.0, 0.1],
-        filter: residency_viewer::scene::Filter::Trilinear,
+        filter: Filter::Trilinear,
     }
 }
 
@@ -157,17 +158,18 @@ fn session_converges_and_keeps_its_bricks_through_camera_and_style_changes() {
     // The tricubic filter (the `f` key): a new renderer and pipeline, a smoother image; and
     // back to trilinear, the first pipeline again.
     let trilinear = s.image().2.to_vec();
-    let mut cubic = s.scene().clone();
-    cubic.filter = residency_viewer::scene::Filter::Tricubic;
-    s.set_scene(cubic);
-    settle(&mut s);
+    let press_f = |s: &mut Session| {
+        let mut scene = s.scene().clone();
+        scene.filter = next_filter(scene.filter);
+        s.set_scene(scene);
+        settle(s);
+        s.scene().filter
+    };
+    assert_eq!(press_f(&mut s), Filter::Tricubic);
     assert_eq!(s.totals().rebuilds, 3);
     assert_eq!(s.gpu().pipelines.len(), 2);
     assert_ne!(s.image().2, &trilinear[..]);
-    let mut linear = s.scene().clone();
-    linear.filter = residency_viewer::scene::Filter::Trilinear;
-    s.set_scene(linear);
-    settle(&mut s);
+    assert_eq!(press_f(&mut s), Filter::Trilinear);
     assert_eq!(s.totals().rebuilds, 4);
     assert_eq!(s.gpu().pipelines.len(), 2);
     assert_eq!(s.image().2, &trilinear[..]);
