@@ -459,22 +459,19 @@ fn footprint_level(first: u32, t: f32) -> u32 {
 
 // Each channel's level at a step, packed 8 bits a channel, four to a word (0xff: NO_LEVEL):
 // a value, not an array, so a CPU driver keeps it in registers instead of storing it lane by
-// lane.
-fn level_of(levels: vec2<u32>, c: u32) -> u32 {
-    let l = (select(levels.x, levels.y, c >= 4u) >> (8u * (c & 3u))) & 0xffu;
+// lane. The word is picked by selects, not by a dynamic index, for the same reason.
+fn level_of(levels: ChannelLevels, c: u32) -> u32 {
+    let w = c >> 2u;
+    let word = select(select(levels.x, levels.y, w == 1u), select(levels.z, levels.w, w == 3u), w >= 2u);
+    let l = (word >> (8u * (c & 3u))) & 0xffu;
     return select(l, NO_LEVEL, l == 0xffu);
 }
 
 // `levels` with channel c's level set to l (NO_LEVEL allowed).
-fn with_level(levels: vec2<u32>, c: u32, l: u32) -> vec2<u32> {
+fn with_level(levels: ChannelLevels, c: u32, l: u32) -> ChannelLevels {
     let sh = 8u * (c & 3u);
-    let keep = ~(0xffu << sh);
-    let byte = min(l, 0xffu) << sh;
-    return select(
-        vec2<u32>((levels.x & keep) | byte, levels.y),
-        vec2<u32>(levels.x, (levels.y & keep) | byte),
-        c >= 4u,
-    );
+    let updated = (levels & ChannelLevels(~(0xffu << sh))) | ChannelLevels(min(l, 0xffu) << sh);
+    return select(levels, updated, ChannelLevels(c >> 2u) == ChannelLevels(0u, 1u, 2u, 3u));
 }
 
 // Channel c's level for the footprint's level l: l within the channel's level bounds.
@@ -547,11 +544,11 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
     loop {
         v.node = node_index(d, ray.cell);
         // The node's class under the transfer functions, one word for every channel (written
-        // by the CPU on a restyle): bits 0-7 empty, 8-15 constant.
+        // by the CPU on a restyle): bit c empty, bit CLASS_CONSTANT_SHIFT + c constant.
         if skipping {
             let word = nodes[P.class_offset + v.node];
             v.empty = word & all;
-            homogeneous = (word >> 8u) & all;
+            homogeneous = (word >> CLASS_CONSTANT_SHIFT) & all;
         }
         if skipping && v.empty == all {
             v.action = ACTION_SKIP;
@@ -600,7 +597,7 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
 // renderer would (`seen`: the brick of each channel's last sample; `seen_empty`: its bits).
 fn visit_page_table(
     ray: Ray,
-    chosen: vec2<u32>,
+    chosen: ChannelLevels,
     seen: ptr<function, array<u32, MAX_CHANNELS>>,
     seen_empty: ptr<function, u32>,
     dir: vec3<f32>,
@@ -636,7 +633,7 @@ fn visit_page_table(
 // resident one is sampled (`chosen` becomes that level, or NO_LEVEL).
 fn visit_brick_octree(
     ray: Ray,
-    chosen: ptr<function, vec2<u32>>,
+    chosen: ptr<function, ChannelLevels>,
     dir: vec3<f32>,
     skipping: bool,
     t: f32,
@@ -798,7 +795,7 @@ struct ChannelSamples {
 fn sample_channels(
     ray: Ray,
     v: Visit,
-    chosen: vec2<u32>,
+    chosen: ChannelLevels,
     values: ptr<function, array<f32, MAX_CHANNELS>>,
     t: f32,
     skipping: bool,
@@ -959,7 +956,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         // is empty under the channel's TF.
         var pt_brick: array<u32, MAX_CHANNELS>;
         var pt_empty = 0u;
-        for (var c = 0u; c < MAX_CHANNELS; c++) {
+        for (var c = 0u; c < P.channel_count; c++) {
             pt_brick[c] = 0xffffffffu;
         }
         // Residency: the last visit that said "sample here", kept while the ray stays in its
@@ -971,6 +968,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var values: array<f32, MAX_CHANNELS>;
         // The footprint's level at the last step (it only coarsens along the ray).
         var lod = 0u;
+        // Each channel's level and the finest of them, for the level `levels_for`.
+        var levels_for = NO_LEVEL;
+        var level_levels = ChannelLevels(0xffffffffu);
+        var finest = 0u;
         var held_step = 0.0;
         var held_cell = vec3<i32>(0);
         // SparseLeap and rasterize: what the pixel's segment list says up to seg.end (looked
@@ -988,7 +989,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             // for those that sample).
             var stop = false;
             var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
-            var chosen = vec2<u32>(0xffffffffu);
+            var chosen = ChannelLevels(0xffffffffu);
             var desired_step = 0.0;
             loop {
                 iterations++;
@@ -1022,14 +1023,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         level = seg.level;
                     }
                 }
-                // Desired level per channel, and step: the finest over channels.
-                var finest = P.level_count - 1u;
-                chosen = vec2<u32>(0xffffffffu);
-                for (var c = 0u; c < P.channel_count; c++) {
+                // Desired level per channel, and step: the finest over channels. They follow
+                // from the level alone, which changes a few times along a ray: the loop runs
+                // only then (a bound of 0, not an `if`, since a CPU driver runs an `if` body
+                // masked on every iteration).
+                let changed = level != levels_for;
+                let to_set = select(0u, P.channel_count, changed);
+                finest = select(finest, P.level_count - 1u, changed);
+                level_levels = select(level_levels, ChannelLevels(0xffffffffu), changed);
+                for (var c = 0u; c < to_set; c++) {
                     let l = channel_level(c, level);
-                    chosen = with_level(chosen, c, l);
+                    level_levels = with_level(level_levels, c, l);
                     finest = min(finest, l);
                 }
+                levels_for = level;
+                chosen = level_levels;
                 desired_step = P.step_fraction * level_voxel(finest);
                 v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
                 if segments {

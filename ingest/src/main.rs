@@ -45,8 +45,10 @@ enum Kind {
     Fluorescence,
     /// Micro-CT of a coiled skeleton, mostly exactly 0 (uint16, 1 channel); 256,256,256.
     Sparse,
-    /// Mixing fluids filling the volume (float32, 1 channel); 256,256,256.
+    /// Mixing fluids filling the volume, no region constant (float32, 1 channel); 256,256,256.
     Dense,
+    /// Mixing fluids, pure (constant) outside the mixing layer (float32, 1 channel); 256,256,256.
+    Mixing,
     /// Multiplexed immunofluorescence of a thin section (uint16, 16 markers); 24,256,256.
     Cycif,
 }
@@ -57,6 +59,7 @@ impl From<Kind> for SampleKind {
             Kind::Fluorescence => SampleKind::Fluorescence,
             Kind::Sparse => SampleKind::Sparse,
             Kind::Dense => SampleKind::Dense,
+            Kind::Mixing => SampleKind::Mixing,
             Kind::Cycif => SampleKind::Cycif,
         }
     }
@@ -165,11 +168,11 @@ enum Command {
         #[arg(long, value_enum, default_value = "fluorescence")]
         kind: Kind,
         /// Extent Z,Y,X in voxels (default: 96,256,256 for fluorescence, 256,256,256 for
-        /// sparse and dense, 24,256,256 for cycif).
+        /// sparse, dense and mixing, 24,256,256 for cycif).
         #[arg(long, value_parser = parse_triple_u64)]
         size: Option<[u64; 3]>,
         /// Number of channels (default: 3 for fluorescence, which has exactly 3; 1 for sparse
-        /// and dense, whose extra channels are other transfer functions; 16 for cycif).
+        /// dense and mixing, whose extra channels are other transfer functions; 16 for cycif).
         #[arg(long)]
         channels: Option<usize>,
         /// Random seed.

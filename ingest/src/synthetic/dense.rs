@@ -1,13 +1,17 @@
-//! The `dense` sample: a float field that fills the whole volume, in the spirit of the
-//! Rayleigh–Taylor instability simulation.
+//! The `dense` and `mixing` samples: a float field that fills the whole volume, in the spirit
+//! of the Rayleigh–Taylor instability simulation.
 //!
 //! A heavy fluid (density about 1) lies above a light one (about 0.25) and the two are
 //! mixing: the interface between them, around mid-depth, is pushed up and down by large
 //! bubbles and spikes, and inside the mixing layer the density is stirred by turbulence at
-//! every scale (multi-octave value noise), strongest where the two fluids are half mixed. Both
-//! fluids are faintly stratified in smooth low-frequency bands. There is no empty space: every
-//! voxel holds a positive density and every small region varies, which is the worst case for
-//! empty-space skipping.
+//! every scale (multi-octave value noise), strongest where the two fluids are half mixed.
+//!
+//! - `dense` ([`Fluids::Stratified`]): both fluids are also faintly stratified in smooth
+//!   low-frequency bands and grained everywhere, so every voxel holds a positive density and
+//!   every small region varies: the worst case for empty-space skipping.
+//! - `mixing` ([`Fluids::Pure`]): as in the simulation, where the density is a function of the
+//!   fluids' mass fraction, the fluids outside the mixing layer are pure: exactly 1 above and
+//!   exactly 0.25 below, so whole regions are constant.
 //!
 //! Extra channels are the same field through different transfer functions (like the paper's
 //! "simulated channels"): a power that emphasises the heavy fluid, an inversion that
@@ -23,11 +27,21 @@ use crate::sample_format::SampleType;
 /// Densities are clamped to this range, so every channel stays positive.
 pub(crate) const DENSITY_RANGE: (f64, f64) = (0.05, 1.2);
 
+/// What the fluids outside the mixing layer are like.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Fluids {
+    /// Faintly stratified and grained: no region is constant (the `dense` sample).
+    Stratified,
+    /// Pure: exactly uniform outside the mixing layer (the `mixing` sample).
+    Pure,
+}
+
 /// The mixing fluids.
 pub(crate) struct DenseScene {
     shape: [u64; 3],
     channels: usize,
     seed: u64,
+    fluids: Fluids,
     /// The largest extent: noise coordinates are in its units, so features are isotropic.
     scale: f64,
 }
@@ -56,12 +70,14 @@ pub(crate) fn map_density(rho: f64, k: usize) -> f64 {
 }
 
 impl DenseScene {
-    /// The field for a volume of `shape` voxels with `channels` transfer functions.
-    pub(crate) fn new(shape: [u64; 3], channels: usize, seed: u64) -> Self {
+    /// The field for a volume of `shape` voxels with `channels` transfer functions, with
+    /// `fluids` outside the mixing layer.
+    pub(crate) fn new(shape: [u64; 3], channels: usize, seed: u64, fluids: Fluids) -> Self {
         Self {
             shape,
             channels,
             seed,
+            fluids,
             scale: shape.iter().copied().max().unwrap_or(1) as f64,
         }
     }
@@ -84,6 +100,11 @@ impl DenseScene {
         let turbulence = NoisePlane::new(s ^ 0x7B7B, Some(pz * 8.0), ymax * 8.0, xmax * 8.0, 4);
         let bands = NoisePlane::new(s ^ 0xBA4D, Some(pz * 2.0), ymax * 2.0, xmax * 2.0, 1);
         let fine = NoisePlane::new(s ^ 0xF14E, Some(pz * 32.0), ymax * 32.0, xmax * 32.0, 2);
+        // The pure fluids' grain fades out with the mixing layer; the stratified ones keep some.
+        let (band_amplitude, grain_floor) = match self.fluids {
+            Fluids::Stratified => (0.04, 0.15),
+            Fluids::Pure => (0.0, 0.0),
+        };
         let mut out = Vec::with_capacity((ny * nx) as usize);
         for y in 0..ny {
             let py = self.coordinate(y);
@@ -94,8 +115,9 @@ impl DenseScene {
                     + 0.2 * (turbulence.at(py * 8.0, px * 8.0) - 0.5);
                 let mix = smoothstep(-0.12, 0.12, d);
                 let layer = 4.0 * mix * (1.0 - mix);
-                let band = 0.04 * (TAU * (4.0 * height + 0.6 * bands.at(py * 2.0, px * 2.0))).sin();
-                let grain = 0.12 * (fine.at(py * 32.0, px * 32.0) - 0.5) * (0.15 + layer);
+                let band = band_amplitude
+                    * (TAU * (4.0 * height + 0.6 * bands.at(py * 2.0, px * 2.0))).sin();
+                let grain = 0.12 * (fine.at(py * 32.0, px * 32.0) - 0.5) * (grain_floor + layer);
                 out.push(
                     (0.25 + 0.75 * mix + band + grain).clamp(DENSITY_RANGE.0, DENSITY_RANGE.1),
                 );
@@ -115,11 +137,15 @@ impl Scene for DenseScene {
     }
 
     fn channels(&self) -> Vec<ChannelSpec> {
-        ChannelSpec::transfer_channels("dense", SampleType::F32, self.channels, |k| match transfer(
-            k,
-        ) {
-            (kind, 0) => kind.to_string(),
-            (kind, r) => format!("{kind}{}", r + 1),
+        let stem = match self.fluids {
+            Fluids::Stratified => "dense",
+            Fluids::Pure => "mixing",
+        };
+        ChannelSpec::transfer_channels(stem, SampleType::F32, self.channels, |k| {
+            match transfer(k) {
+                (kind, 0) => kind.to_string(),
+                (kind, r) => format!("{kind}{}", r + 1),
+            }
         })
     }
 
@@ -161,9 +187,30 @@ mod tests {
 
     #[test]
     fn heavy_fluid_lies_above_the_light_one() {
-        let scene = DenseScene::new([64, 32, 32], 1, 1);
+        let scene = DenseScene::new([64, 32, 32], 1, 1, Fluids::Stratified);
         let mean = |z: u64| scene.density_plane(z).iter().sum::<f64>() / 1024.0;
         assert!(mean(1) < 0.45, "bottom {}", mean(1));
         assert!(mean(62) > 0.8, "top {}", mean(62));
+    }
+
+    #[test]
+    fn pure_fluids_are_exactly_uniform_outside_the_mixing_layer() {
+        let pure = DenseScene::new([64, 32, 32], 1, 1, Fluids::Pure);
+        // The interface moves at most 0.325 of the height from mid-depth and the layer is
+        // 0.12 thick on each side: the bottom and top planes are pure everywhere.
+        assert!(pure.density_plane(0).iter().all(|&rho| rho == 0.25));
+        assert!(pure.density_plane(63).iter().all(|&rho| rho == 1.0));
+        let middle = pure.density_plane(32);
+        let distinct: std::collections::BTreeSet<u64> =
+            middle.iter().map(|r| r.to_bits()).collect();
+        assert!(
+            distinct.len() > 500,
+            "{} distinct densities",
+            distinct.len()
+        );
+        // The stratified fluids vary on the same planes.
+        let stratified = DenseScene::new([64, 32, 32], 1, 1, Fluids::Stratified);
+        let bottom = stratified.density_plane(0);
+        assert!(bottom.iter().any(|&rho| rho != bottom[0]));
     }
 }

@@ -1,7 +1,7 @@
 //! `ingest sample`: deterministic synthetic volumes, generated plane by plane, written as one
 //! BigTIFF OME-TIFF per channel so they exercise the TIFF path of `ingest convert`.
 //!
-//! Four kinds of specimen, each in the spirit of a data set that volume renderers are judged on:
+//! Five kinds of specimen, each in the spirit of a data set that volume renderers are judged on:
 //!
 //! - [`SampleKind::Fluorescence`] (the default): a cleared-tissue light-sheet acquisition. An
 //!   ellipsoidal piece of tissue floats in mostly empty space; a 16-bit nuclear stain shows
@@ -15,6 +15,8 @@
 //!   fluid sinking into a light one through a turbulent mixing layer. Every voxel holds a
 //!   positive density and every region varies, so nothing can be skipped. 32-bit float,
 //!   isotropic voxels.
+//! - [`SampleKind::Mixing`]: the same simulation as the paper's Rayleigh–Taylor data set has
+//!   it: the fluids outside the mixing layer are pure, so their regions are exactly constant.
 //! - [`SampleKind::Cycif`]: a thin tissue section stained in many cycles of multiplexed
 //!   immunofluorescence (CyCIF): cells packed in the xy plane, one channel per antibody, each
 //!   bright in the nuclei, membranes or cytoplasm of its own subset of cells, near-zero noisy
@@ -145,15 +147,24 @@ pub enum SampleKind {
     Fluorescence,
     /// Micro-CT of a coiled skeleton in empty space (uint16), mostly exactly 0.
     Sparse,
-    /// Rayleigh–Taylor-like mixing fluids (float32) filling the whole volume.
+    /// Rayleigh–Taylor-like mixing fluids (float32) filling the whole volume, no region
+    /// constant.
     Dense,
+    /// Rayleigh–Taylor-like mixing fluids (float32), pure (constant) outside the mixing layer.
+    Mixing,
     /// Multiplexed immunofluorescence of a thin tissue section (uint16), many markers.
     Cycif,
 }
 
 impl SampleKind {
     /// Every kind, in the order `--kind` lists them.
-    pub const ALL: [SampleKind; 4] = [Self::Fluorescence, Self::Sparse, Self::Dense, Self::Cycif];
+    pub const ALL: [SampleKind; 5] = [
+        Self::Fluorescence,
+        Self::Sparse,
+        Self::Dense,
+        Self::Mixing,
+        Self::Cycif,
+    ];
 
     /// The name `--kind` takes.
     pub fn name(self) -> &'static str {
@@ -161,6 +172,7 @@ impl SampleKind {
             Self::Fluorescence => "fluorescence",
             Self::Sparse => "sparse",
             Self::Dense => "dense",
+            Self::Mixing => "mixing",
             Self::Cycif => "cycif",
         }
     }
@@ -169,7 +181,7 @@ impl SampleKind {
     pub fn default_shape(self) -> [u64; 3] {
         match self {
             Self::Fluorescence => [96, 256, 256],
-            Self::Sparse | Self::Dense => [256, 256, 256],
+            Self::Sparse | Self::Dense | Self::Mixing => [256, 256, 256],
             Self::Cycif => [24, 256, 256],
         }
     }
@@ -178,7 +190,7 @@ impl SampleKind {
     pub fn default_channels(self) -> usize {
         match self {
             Self::Fluorescence => 3,
-            Self::Sparse | Self::Dense => 1,
+            Self::Sparse | Self::Dense | Self::Mixing => 1,
             Self::Cycif => 16,
         }
     }
@@ -187,7 +199,7 @@ impl SampleKind {
     pub fn voxel_size(self) -> [f64; 3] {
         match self {
             Self::Fluorescence => SAMPLE_VOXEL_SIZE,
-            Self::Sparse | Self::Dense => [1.0; 3],
+            Self::Sparse | Self::Dense | Self::Mixing => [1.0; 3],
             Self::Cycif => CYCIF_VOXEL_SIZE,
         }
     }
@@ -276,7 +288,18 @@ pub fn write_samples(
     let scene: Box<dyn Scene> = match kind {
         SampleKind::Fluorescence => Box::new(SampleScene::new(shape, seed)),
         SampleKind::Sparse => Box::new(sparse::SparseScene::new(shape, channels, seed)),
-        SampleKind::Dense => Box::new(dense::DenseScene::new(shape, channels, seed)),
+        SampleKind::Dense => Box::new(dense::DenseScene::new(
+            shape,
+            channels,
+            seed,
+            dense::Fluids::Stratified,
+        )),
+        SampleKind::Mixing => Box::new(dense::DenseScene::new(
+            shape,
+            channels,
+            seed,
+            dense::Fluids::Pure,
+        )),
         SampleKind::Cycif => Box::new(cycif::CycifScene::new(shape, channels, seed)),
     };
     debug_assert_eq!(scene.voxel_size(), kind.voxel_size());

@@ -17,8 +17,22 @@ use super::page_table::{APRON_SHIFT, ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
 use super::renderer::Method;
 use crate::scene::Filter;
 
-/// Most channels rendered at once (the shader keeps one value per channel in registers).
-pub const MAX_CHANNELS: usize = 8;
+/// Most channels rendered at once (the shader keeps one value per channel in registers, each
+/// channel's level in 8 bits of a [`CHANNEL_LEVELS`] value, and a node's class word holds an
+/// empty and a constant bit per channel).
+pub const MAX_CHANNELS: usize = 16;
+
+/// Where a node's class word keeps its constant bits: bit `c` says channel slot `c` is empty
+/// under its transfer function, bit `CLASS_CONSTANT_SHIFT + c` that it is constant over the
+/// node ([`super::residency::node_class`]).
+pub const CLASS_CONSTANT_SHIFT: u32 = MAX_CHANNELS as u32;
+
+/// The WGSL type of a step's channel levels: 8 bits a channel, four channels a word.
+pub const CHANNEL_LEVELS: &str = "vec4<u32>";
+
+// The class word's two bits a channel fill one u32; the levels fill the four words of a
+// `vec4<u32>` (the shader's `level_of` and `with_level` pick among exactly four).
+const _: () = assert!(2 * MAX_CHANNELS == 32 && MAX_CHANNELS == 4 * 4);
 
 /// Most pyramid levels a volume may have: the octree's 16-bit residency masks hold one bit
 /// per level, and the scene uniforms one entry.
@@ -413,6 +427,8 @@ pub fn wgsl_prelude() -> String {
         u("APRON_VOXELS", APRON_VOXELS),
         u("MAX_LEVELS", MAX_LEVELS as u32),
         u("MAX_CHANNELS", MAX_CHANNELS as u32),
+        u("CLASS_CONSTANT_SHIFT", CLASS_CONSTANT_SHIFT),
+        format!("alias ChannelLevels = {CHANNEL_LEVELS};\n"),
         u("METHOD_RESIDENCY", Method::Residency as u32),
         u("METHOD_PAGE_TABLE", Method::PageTable as u32),
         u("METHOD_OCTREE", Method::Octree as u32),

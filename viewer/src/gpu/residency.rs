@@ -11,7 +11,7 @@ use super::GpuError;
 use super::apron::{self, Aprons, EntryKind, LowFaces, Part, PartSource};
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, storage_buffer};
-use super::contract::{RECORD_WORDS, SEGMENT_HEADS};
+use super::contract::{CLASS_CONSTANT_SHIFT, RECORD_WORDS, SEGMENT_HEADS};
 use super::device::Gpu;
 use super::page_table::{
     ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables, entry_slot, slot_entry,
@@ -179,13 +179,14 @@ pub fn node_classes(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>]) -
 }
 
 /// The class word of node `node` of `octree` under `styles` (one per channel slot): bit `c`
-/// where channel slot `c` is empty, bit `8 + c` where it is constant (at most 8 channels).
+/// where channel slot `c` is empty, bit [`CLASS_CONSTANT_SHIFT`]` + c` where it is constant.
 pub fn node_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], node: usize) -> u32 {
     let mut word = 0;
     for (c, style) in styles.iter().enumerate() {
         let (lo, hi) = octree.range(node, c);
         let class = range_class(style.as_ref(), f32_down(lo), f32_up(hi));
-        word |= u32::from(class.empty) << c | u32::from(class.constant) << (8 + c);
+        word |= u32::from(class.empty) << c
+            | u32::from(class.constant) << (CLASS_CONSTANT_SHIFT as usize + c);
     }
     word
 }

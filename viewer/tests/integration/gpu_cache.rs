@@ -236,10 +236,10 @@ fn renderer_rejects_bad_setups_with_errors() {
     assert!(err(&scene(vec![style(3)]), RenderOptions::default()).contains("no channel 3"));
     assert!(
         err(
-            &scene((0..9).map(|_| style(0)).collect()),
+            &scene((0..17).map(|_| style(0)).collect()),
             RenderOptions::default()
         )
-        .contains("at most 8")
+        .contains("at most 16")
     );
     assert!(
         err(
