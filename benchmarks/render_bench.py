@@ -18,8 +18,9 @@ Experiments (see `viewer bench run --help` and docs/benchmarks/render-bench.md):
 - sweep: step, LOD bias, cache budget and leaf size on sparse 1 channel, and step and LOD bias
   for every other method on sparse, dense and cycif (the time–error front of every renderer);
   leaf size again on stores of smaller and larger bricks;
-- skipped: bytes fetched against a naive frustum loader (sparse, mixing, dense, cycif);
-- scaling: sparse at three sizes, and 1, 2, 4, 8 channels.
+- skipped: bytes fetched against a naive frustum loader (sparse, mixing, dense, cycif, and
+  sparse at half the brick size);
+- scaling: sparse at three sizes, and 1, 2, 4, 8, 16 channels.
 
 `--short` runs tiny sizes, one view, one timed frame, 32x32 images (CI's mode, a few minutes
 on two cores; it asserts nothing about speed). Outputs go to docs/benchmarks/ (full) or
@@ -145,7 +146,9 @@ def plan(short: bool):
         (f"sparse {big[0]}³", "sparse", big, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {s[0]}³ ×8 (2 shown)", "sparse", s, chunk, 8, None, [0, 1], "scaling", ["--vary-tf"] + bone(8)),
         (f"sparse {s[0]}³ ×8", "sparse", s, chunk, 8, None, None, "scaling", ["--vary-tf"] + bone(8)),
-        (f"sparse {s[0]}³ bricks {chunk // 2}", "sparse", s, chunk // 2, 1, None, None, "sweep", sweep_leaf + bone(1)),
+        (f"sparse {s[0]}³ ×16", "sparse", s, chunk, 16, None, None, "scaling", ["--vary-tf"] + bone(16)),
+        # Bytes against the naive loader at finer bricks too: the ceiling grows as bricks shrink.
+        (f"sparse {s[0]}³ bricks {chunk // 2}", "sparse", s, chunk // 2, 1, None, None, "sweep,skipped", sweep_leaf + bone(1)),
         (f"sparse {s[0]}³ bricks {chunk * 2}", "sparse", s, chunk * 2, 1, None, None, "sweep", sweep_leaf + bone(1)),
     ]
     if short:

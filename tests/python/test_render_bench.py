@@ -107,6 +107,11 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
             swept.setdefault(r["dataset"]["kind"], set()).update(run["method"] for run in runs)
     every = {"residency", "page-table", "octree", "sparseleap", "rasterize"}
     assert all(swept.get(k) == every for k in ("sparse", "dense", "cycif")), swept
+    # The Rayleigh–Taylor stand-in (pure fluids) and its worst case both run Table 1, and the
+    # CyCIF-like store renders all 16 of its channels, as the paper's CyCIF Small row does.
+    datasets = [json.loads(f.read_text())["dataset"] for f in files]
+    assert {"sparse", "mixing", "dense", "cycif"} <= {d["kind"] for d in datasets}
+    assert [d["visible_channels"] for d in datasets if d["kind"] == "cycif"] == [16]
     assert probes >= 1 and "### Ours against the limit probe" in report
     assert "| Ours / manual |" in (out / "summary.md").read_text()
     # The report marks a non-empty Pareto front for every sweep.
