@@ -9,9 +9,9 @@
 //! - `dense` ([`Fluids::Stratified`]): both fluids are also faintly stratified in smooth
 //!   low-frequency bands and grained everywhere, so every voxel holds a positive density and
 //!   every small region varies: the worst case for empty-space skipping.
-//! - `mixing` ([`Fluids::Pure`]): as in the simulation, where the density is a function of the
-//!   fluids' mass fraction, the fluids outside the mixing layer are pure: exactly 1 above and
-//!   exactly 0.25 below, so whole regions are constant.
+//! - `mixing` ([`Fluids::Pure`]): as in a simulation of two miscible fluids, where the density
+//!   follows the fluids' mass fraction, the fluids away from the mixing layer are pure: exactly
+//!   1 above and exactly 0.25 below, so whole regions are constant.
 //!
 //! Extra channels are the same field through different transfer functions (like the paper's
 //! "simulated channels"): a power that emphasises the heavy fluid, an inversion that

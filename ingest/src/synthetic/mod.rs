@@ -15,8 +15,9 @@
 //!   fluid sinking into a light one through a turbulent mixing layer. Every voxel holds a
 //!   positive density and every region varies, so nothing can be skipped. 32-bit float,
 //!   isotropic voxels.
-//! - [`SampleKind::Mixing`]: the same simulation as the paper's Rayleigh–Taylor data set has
-//!   it: the fluids outside the mixing layer are pure, so their regions are exactly constant.
+//! - [`SampleKind::Mixing`]: the same fluids, closer to the Rayleigh–Taylor data set the
+//!   residency-octree paper measures: outside the mixing layer the fluids are pure, so their
+//!   regions are exactly constant.
 //! - [`SampleKind::Cycif`]: a thin tissue section stained in many cycles of multiplexed
 //!   immunofluorescence (CyCIF): cells packed in the xy plane, one channel per antibody, each
 //!   bright in the nuclei, membranes or cytoplasm of its own subset of cells, near-zero noisy
