@@ -86,7 +86,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var color = vec3<f32>(0.0);
     var trans = 1.0;
     var samples = 0u;
-    let all = (1u << P.channel_count) - 1u;
+    let all = drawn_channels();
     var t = t_enter + 0.5 * P.step;
     var values: array<f32, MAX_CHANNELS>;
     loop {

@@ -306,6 +306,9 @@ fn sample_level(c: u32, l: u32, pos: LevelPos, want: bool, t: f32) -> Sampled {
         result.ok = false;
         return result;
     }
+    // `RESIDENT_ONLY ||` and `&& !RESIDENT_ONLY` restate what the return above implies, as
+    // pipeline constants, so the resident-only pipeline compiles without the per-corner path
+    // and the request: a CPU driver would run their code masked on every sample.
     if RESIDENT_ONLY || one_slot {
         if entry == 0u {
             result.ok = false;
@@ -539,7 +542,7 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
     }
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
     var d = min(clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u, max_depth);
-    let all = (1u << P.channel_count) - 1u;
+    let all = drawn_channels();
     var homogeneous = 0u;
     loop {
         v.node = node_index(d, ray.cell);
@@ -773,7 +776,7 @@ fn brick_at(pixel: u32, t: f32) -> Segment {
 // then where it ends.
 fn macrocell_skip(ray: Ray, l: u32, dir: vec3<f32>) -> f32 {
     let d = P.leaf_depth - min(l, P.leaf_depth);
-    let all = (1u << P.channel_count) - 1u;
+    let all = drawn_channels();
     let word = nodes[P.class_offset + node_index(d, ray.cell)];
     if (word & all) == all {
         return node_exit(ray, d, dir);
@@ -803,7 +806,7 @@ fn sample_channels(
 ) -> ChannelSamples {
     var out = ChannelSamples(0u, P.level_count - 1u, false);
     // Only the channels not empty here (take_channel).
-    var need = ((1u << P.channel_count) - 1u) & ~v.empty;
+    var need = drawn_channels() & ~v.empty;
     loop {
         if need == 0u {
             break;
@@ -1092,7 +1095,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var move_by = 0.0;
             if v.action == ACTION_HOMOGENEOUS {
                 let seg = min(node_exit(ray, v.depth, dir) + nudge, t_exit - ray.t);
-                s.have = ~v.empty & ((1u << P.channel_count) - 1u);
+                s.have = drawn_channels() & ~v.empty;
                 var left = s.have;
                 loop {
                     if left == 0u {

@@ -74,6 +74,11 @@ struct Mixture {
     alpha: f32,
 }
 
+// Bits: every channel drawn.
+fn drawn_channels() -> u32 {
+    return (1u << P.channel_count) - 1u;
+}
+
 // The lowest channel of `bits`, taken out of it. Loops over the channels a step needs run
 // `loop { if bits == 0u { break; } let c = take_channel(&bits); ... }`: as often as the most
 // such channels any ray of a warp (or of a CPU driver's SIMD lanes) has, not once per channel.

@@ -289,18 +289,14 @@ pub fn write_samples(
     let scene: Box<dyn Scene> = match kind {
         SampleKind::Fluorescence => Box::new(SampleScene::new(shape, seed)),
         SampleKind::Sparse => Box::new(sparse::SparseScene::new(shape, channels, seed)),
-        SampleKind::Dense => Box::new(dense::DenseScene::new(
-            shape,
-            channels,
-            seed,
-            dense::Fluids::Stratified,
-        )),
-        SampleKind::Mixing => Box::new(dense::DenseScene::new(
-            shape,
-            channels,
-            seed,
-            dense::Fluids::Pure,
-        )),
+        SampleKind::Dense | SampleKind::Mixing => {
+            let fluids = if kind == SampleKind::Mixing {
+                dense::Fluids::Pure
+            } else {
+                dense::Fluids::Stratified
+            };
+            Box::new(dense::DenseScene::new(shape, channels, seed, fluids))
+        }
         SampleKind::Cycif => Box::new(cycif::CycifScene::new(shape, channels, seed)),
     };
     debug_assert_eq!(scene.voxel_size(), kind.voxel_size());
