@@ -1,7 +1,7 @@
 """Memory-limit benchmark: `ingest convert --memory-limit` on planes of 1024², 4096² and 16384²
 voxels, against whole-plane conversion of the same input in the same run.
 
-    python3 benchmarks/columns_bench.py [--planes 1024,4096,16384] [--readme]
+    python3 benchmarks/columns_bench.py [--planes 1024,4096,16384] [--docs]
         [--baseline-bin PATH]
 
 The 1024² and 4096² inputs are the sparse sample (`ingest sample --kind sparse`, uint16,
@@ -14,7 +14,8 @@ plane size is done. For every run it reports wall time, MB/s of input, the peak 
 compared file by file (SHA-256) with the first run's. `--baseline-bin` adds runs of another
 `ingest` binary (for example the build before columns existed) on the 1024² input.
 
-Results go to benchmarks/results/columns.md (README markers `columns-bench`).
+Results go to docs/benchmarks/columns.md (docs/benchmarks.md markers `columns-bench`, with
+`--docs`).
 """
 
 import argparse
@@ -82,7 +83,7 @@ def main():
     ap.add_argument("--planes", default="1024,4096,16384")
     ap.add_argument("--work", default=tempfile.gettempdir())
     ap.add_argument("--baseline-bin", type=pathlib.Path)
-    ap.add_argument("--readme", action="store_true")
+    ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     a = ap.parse_args()
     rows = []
     for edge in map(int, a.planes.split(",")):
@@ -149,7 +150,7 @@ def main():
         "| Volume z×plane | input MB | Run | s | MB/s | peak RSS MiB | limit MiB | under | "
         "columns | store |\n|---|---|---|---|---|---|---|---|---|---|\n"
         + "".join("| " + " | ".join(r) + " |\n" for r in rows))
-    publish(report, "columns", "columns-bench", a.readme)
+    publish(report, "columns", "columns-bench", a.docs)
 
 
 if __name__ == "__main__":

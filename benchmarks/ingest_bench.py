@@ -1,7 +1,7 @@
 """Ingest benchmark: converts the same synthetic u16 stack with `ingest` and with its peers,
 in one run, and reports wall time, MB/s and peak RSS as ratios to `ingest`.
 
-    .venv-bench/bin/python benchmarks/ingest_bench.py [--sizes 64,512] [--readme]
+    .venv-bench/bin/python benchmarks/ingest_bench.py [--sizes 64,512] [--docs]
 
 Input: the `nuclei` channel of `ingest sample` (uint16, 1024 x 1024 pixels per plane, depth
 chosen for the size), as a BigTIFF OME-TIFF. Every tool writes OME-Zarr 0.5 / Zarr v3 with
@@ -10,6 +10,9 @@ downsampling by 2 in every axis (`ingest` runs with --voxel-size 1,1,1 so its
 anisotropy-aware pyramid is the same isotropic one). Each run is a separate process timed by
 GNU time after `sync`; the peers read the TIFF with tifffile. zarrs_ome reads a Zarr array, so
 it gets the stack pre-converted to a plain Zarr v3 array (that conversion is not timed).
+
+Results go to docs/benchmarks/ingest.md (with --docs, docs/benchmarks.md links to them between
+its `ingest-bench` markers).
 """
 
 import argparse
@@ -22,6 +25,8 @@ import re
 import shutil
 import subprocess
 import sys
+
+from docs_page import point_page_at, write_result
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 INGEST = ROOT / "target" / "release" / "ingest"
@@ -96,7 +101,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", default="64,512", help="input sizes in MiB, comma-separated")
     ap.add_argument("--work", default=str(ROOT / "bench-data"), help="folder for inputs and outputs")
-    ap.add_argument("--readme", action="store_true", help="write the table into README.md")
+    ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     args = ap.parse_args()
     if not INGEST.exists():
         sys.exit(f"{INGEST} not built: run cargo build --release")
@@ -110,16 +115,9 @@ def main():
     )
     text = header + "\n" + table(results)
     print(text)
-    out = ROOT / "benchmarks" / "results"
-    out.mkdir(exist_ok=True)
-    (out / "ingest.md").write_text(text + "\n")
-    if args.readme:
-        readme = ROOT / "README.md"
-        body = readme.read_text()
-        start, end = "<!-- ingest-bench:start -->", "<!-- ingest-bench:end -->"
-        new = f"{start}\n{text}\n{end}"
-        body = re.sub(re.escape(start) + ".*?" + re.escape(end), lambda _: new, body, flags=re.S)
-        readme.write_text(body)
+    result = write_result("ingest.md", text + "\n")
+    if args.docs:
+        point_page_at("ingest-bench", result, text)
 
 
 if __name__ == "__main__":

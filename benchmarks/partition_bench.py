@@ -2,18 +2,20 @@
 once and `ingest finalize`, to a local folder and to an S3 server on loopback (s3s-fs, as the
 tests use), on the same input in the same run.
 
-    python3 benchmarks/partition_bench.py [--size 256,512,512] [--partitions 1,2,4] [--readme]
+    python3 benchmarks/partition_bench.py [--size 256,512,512] [--partitions 1,2,4] [--docs]
 
 With `--large Z,Y,X` it instead converts one sample larger than this machine's memory (written
 by `ingest sample`, deleted afterwards) in one process and in N partitions at once, and reports
 each process's peak RSS against the input's size; the two stores are compared file by file by
 SHA-256, one on disk at a time (the input and a store need about 1.5× the input's size of free
-disk). README markers `partition-large`.
+disk). Results go to docs/benchmarks/partitions-large.md (docs/benchmarks.md markers
+`partition-large`).
 
 Every run's store is checked byte for byte against the single-process store. Reported (the
 median of `--repeat` runs): wall time of the partitions (all at once on this machine, so they
 share its cores), of finalize, and in all; the peak RSS of the largest process (GNU time). Results go to
-benchmarks/results/partitions.md (README markers `partition-bench`).
+docs/benchmarks/partitions.md; with `--docs`, docs/benchmarks.md links to them between its
+`partition-bench` markers.
 """
 
 import argparse
@@ -29,6 +31,7 @@ import time
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BIN = ROOT / "target" / "release"
+from docs_page import point_page_at, write_result
 from server_bench import S3_KEY as KEY, S3_SECRET as SECRET, cpu_name, start_s3s_fs as start_s3
 
 
@@ -64,16 +67,13 @@ def files(folder: pathlib.Path) -> dict:
     return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
 
 
-def publish(report: str, name: str, marker: str, readme: bool):
-    """Writes `report` to benchmarks/results/NAME.md, prints it, and with `readme` puts it in
-    the README between the `marker` comments."""
-    (ROOT / "benchmarks" / "results" / f"{name}.md").write_text(report)
+def publish(report: str, name: str, marker: str, docs: bool):
+    """Writes `report` to docs/benchmarks/NAME.md, prints it, and with `docs` links
+    docs/benchmarks.md to it between the `marker` comments."""
+    result = write_result(f"{name}.md", report)
     print(report)
-    if readme:
-        path = ROOT / "README.md"
-        path.write_text(re.sub(f"<!-- {marker}:start -->.*<!-- {marker}:end -->",
-                               f"<!-- {marker}:start -->\n{report}<!-- {marker}:end -->",
-                               path.read_text(), flags=re.S))
+    if docs:
+        point_page_at(marker, result, report)
 
 
 def digests(folder: pathlib.Path) -> dict:
@@ -127,7 +127,7 @@ def large(a):
         f"{parts_s:.0f} s, peak RSS of the largest {part_rss:,.0f} MB; finalize {fin_s:.1f} s, peak RSS {fin_rss:,.0f} MB. "
         f"The two stores are {'identical file by file (SHA-256)' if same else 'DIFFERENT'}.\n"
     )
-    publish(report, "partitions-large", "partition-large", a.readme)
+    publish(report, "partitions-large", "partition-large", a.docs)
 
 
 def main():
@@ -137,7 +137,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3, help="runs of each; the median is reported")
     ap.add_argument("--large", help="Z,Y,X of one sample larger than memory: one process against N partitions")
     ap.add_argument("--work", default=None, help="folder for the large run's files (default: the system's temp dir)")
-    ap.add_argument("--readme", action="store_true")
+    ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     a = ap.parse_args()
     if a.large:
         large(a)
@@ -209,7 +209,7 @@ def main():
         total = tp + (tf or 0)
         lines.append(f"| {target} | {run} | {tp:.2f} | {'' if tf is None else f'{tf:.2f}'} | {total:.2f} | "
                      f"{input_mb / total:.0f} | {rss:.0f} |")
-    publish("\n".join(lines) + "\n", "partitions", "partition-bench", a.readme)
+    publish("\n".join(lines) + "\n", "partitions", "partition-bench", a.docs)
 
 
 if __name__ == "__main__":

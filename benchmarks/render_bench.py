@@ -1,7 +1,7 @@
 """Renderer benchmark: generates the datasets, runs `viewer bench run` on each, and writes the
 report (markdown, PNG plots, raw JSON) with `viewer bench report`.
 
-    python3 benchmarks/render_bench.py [--short] [--readme] [--out-dir DIR] [--data-dir DIR]
+    python3 benchmarks/render_bench.py [--short] [--docs] [--out-dir DIR] [--data-dir DIR]
 
 Builds nothing: it needs `target/release/ingest` and `target/release/viewer`
 (`cargo build --release`), or the folder named by RESIDENCY_BIN. Datasets come from
@@ -24,8 +24,8 @@ Experiments (see `viewer bench run --help` and docs/benchmarks/render-bench.md):
 
 `--short` runs tiny sizes, one view, one timed frame, 32x32 images (CI's mode, a few minutes
 on two cores; it asserts nothing about speed). Outputs go to docs/benchmarks/ (full) or
-benchmarks/data/short-report/ (short) unless --out-dir says otherwise; `--readme` also
-rewrites the summary table in README.md between the render-bench markers.
+benchmarks/data/short-report/ (short) unless --out-dir says otherwise; `--docs` also
+points docs/benchmarks.md at the report, between its render-bench markers.
 """
 
 import argparse
@@ -38,9 +38,10 @@ import subprocess
 import sys
 import time
 
+from docs_page import point_page_at
+
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BIN = pathlib.Path(os.environ.get("RESIDENCY_BIN", ROOT / "target" / "release"))
-START, END = "<!-- render-bench:start -->", "<!-- render-bench:end -->"
 
 
 def run(cmd, quiet=False):
@@ -160,7 +161,7 @@ def plan(short: bool):
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--short", action="store_true", help="tiny sizes, 1 view, 1 timed frame, 32x32 images")
-    ap.add_argument("--readme", action="store_true", help="rewrite the summary table in README.md")
+    ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     ap.add_argument("--out-dir", type=pathlib.Path, help="report folder [docs/benchmarks, or benchmarks/data/short-report with --short]")
     ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data", help="scratch folder for datasets")
     ap.add_argument("--views", type=int, help="views of the orbit [4; 1 with --short]")
@@ -204,18 +205,12 @@ def main():
     summary = (out / "summary.md").read_text()
     stamp = datetime.date.today().isoformat()
     summary = summary.replace("Measured on", f"Measured {stamp} on", 1)
-    (out / "summary.md").write_text(summary)
+    # The report links the full tables from the repository's root; summary.md sits beside them.
+    (out / "summary.md").write_text(summary.replace("](docs/benchmarks/render-bench.md)", "](render-bench.md)"))
     print(f"\nwrote {out / 'render-bench.md'} in {time.time() - started:.0f} s\n")
     print(summary)
-    if args.readme:
-        readme = ROOT / "README.md"
-        text = readme.read_text()
-        if START not in text or END not in text:
-            raise SystemExit(f"{readme}: no {START} / {END} markers")
-        head, rest = text.split(START, 1)
-        _, tail = rest.split(END, 1)
-        readme.write_text(f"{head}{START}\n{summary.strip()}\n{END}{tail}")
-        print(f"updated {readme}")
+    if args.docs:
+        point_page_at("render-bench", out / "render-bench.md", summary)
     # The raw results files, in run order, for whoever reads the folder.
     (raw / "index.json").write_text(json.dumps([r.name for r in results], indent=1) + "\n")
 

@@ -1,7 +1,7 @@
 """Server benchmark: `brickserver` against nginx serving the same store directory, in one run,
 with `oha` as the load generator on the same machine (client and servers share the cores).
 
-    python3 benchmarks/server_bench.py [--duration 10] [--soak 300] [--readme]
+    python3 benchmarks/server_bench.py [--duration 10] [--soak 300] [--docs]
 
 Needs `oha` (`cargo install oha`), nginx (Debian `nginx-light`) and a release build. Loads:
 
@@ -17,13 +17,14 @@ median run is reported, so background load hits both alike.
   server's RSS every 5 s, counting every non-200 answer and transport error.
 
 Each server's peak RSS (VmHWM, summed over nginx's processes) is read after its loads.
-Results go to benchmarks/results/server.md (and the README between markers with --readme).
+Results go to docs/benchmarks/server.md and server-soak.md (with --docs, docs/benchmarks.md
+links to them between its `server-bench` and `server-soak` markers).
 
 With `--s3`, it measures instead `brickserver` serving the same stores from an S3 server on
 loopback (s3s-fs, as the tests use: `scripts/test.sh` installs it) against `brickserver` serving
 them from disk: random chunk GETs at 16 and 1 connections, 304 revalidations and region queries
-at 16 connections. Results go to benchmarks/results/server-s3.md (README markers
-`server-s3-bench`).
+at 16 connections. Results go to docs/benchmarks/server-s3.md (docs/benchmarks.md markers
+`server-s3-bench`, with --docs).
 """
 
 import argparse
@@ -32,7 +33,6 @@ import json
 import os
 import pathlib
 import platform
-import re
 import shutil
 import signal
 import subprocess
@@ -40,6 +40,8 @@ import tempfile
 import time
 
 import numpy as np
+
+from docs_page import point_page_at, write_result
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 BIN = ROOT / "target" / "release"
@@ -204,7 +206,7 @@ def main():
     ap.add_argument("--soak", type=int, default=0, help="seconds of soak at 256 connections (0: none)")
     ap.add_argument("--soak-only", action="store_true", help="run only the soak")
     ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
-    ap.add_argument("--readme", action="store_true")
+    ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     ap.add_argument("--s3", action="store_true", help="brickserver from an S3 server (s3s-fs) against from disk")
     a = ap.parse_args()
     work = pathlib.Path(a.work)
@@ -217,19 +219,14 @@ def main():
         subprocess.run([BIN / "ingest", "sample", "-o", sample, "--size", "128,256,256", "--quiet"], check=True)
         subprocess.run([BIN / "ingest", "convert", sample / "nuclei.ome.tif", sample / "membranes.ome.tif", "-o", region_store, "--quiet"], check=True)
 
-    results_dir = ROOT / "benchmarks" / "results"
     if a.s3:
         s3 = run_s3_loads(a, work, store, region_store)
         report = render_s3(s3, a)
-        (results_dir / "server-s3.md").write_text(report)
-        (results_dir / "server-s3.json").write_text(json.dumps(s3, indent=1))
+        result = write_result("server-s3.md", report)
+        write_result("server-s3.json", json.dumps(s3, indent=1))
         print(report)
-        if a.readme:
-            readme = ROOT / "README.md"
-            text = readme.read_text()
-            marker = "server-s3-bench"
-            new = re.sub(f"<!-- {marker}:start -->.*<!-- {marker}:end -->", f"<!-- {marker}:start -->\n{report}<!-- {marker}:end -->", text, flags=re.S)
-            readme.write_text(new)
+        if a.docs:
+            point_page_at("server-s3-bench", result, report)
         return
     results = {}
     if not a.soak_only:
@@ -241,17 +238,14 @@ def main():
     if soak:
         sections.append(("server-soak", render_soak(soak, a), "server-soak"))
     for marker, report, name in sections:
-        (results_dir / f"{name}.md").write_text(report)
+        result = write_result(f"{name}.md", report)
         print(report)
-        if a.readme:
-            readme = ROOT / "README.md"
-            text = readme.read_text()
-            new = re.sub(f"<!-- {marker}:start -->.*<!-- {marker}:end -->", f"<!-- {marker}:start -->\n{report}<!-- {marker}:end -->", text, flags=re.S)
-            readme.write_text(new)
+        if a.docs:
+            point_page_at(marker, result, report)
     if results:
-        (results_dir / "server.json").write_text(json.dumps(results, indent=1))
+        write_result("server.json", json.dumps(results, indent=1))
     if soak:
-        (results_dir / "server-soak.json").write_text(json.dumps(soak, indent=1))
+        write_result("server-soak.json", json.dumps(soak, indent=1))
 
 
 def run_loads(a, work, store, region_store):

@@ -14,8 +14,8 @@
 # target's libFuzzer log goes; default tests/fuzz/target/fuzz-logs), FUZZ_ARGS (extra
 # libFuzzer arguments), FUZZ_NO_BUILD (set: run the targets as last built, e.g. for a second
 # run beside a first). Corpora grow in tests/fuzz/corpus/TARGET (ignored by git); the
-# committed seeds in tests/fuzz/seeds/TARGET are read, never written. the README's "Fuzzing"
-# section has the limits, the targets and the results.
+# committed seeds in tests/fuzz/seeds/TARGET are read, never written. docs/fuzzing.md has the
+# limits, the targets and the results.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

@@ -30,16 +30,19 @@ if ! command -v cargo >/dev/null 2>&1; then
   exit 1
 fi
 
+# The test environment comes from the lock (exact versions of every package, transitive ones
+# included); scripts/python-requirements.txt is the human list the lock is made from (the lock's
+# header says how). The stamp is the lock's hash, so a changed lock reinstalls.
 stamp=.venv/.requirements.sha
-want=$(sha256sum scripts/python-requirements.txt | cut -d' ' -f1)
+want=$(sha256sum scripts/python-requirements.lock | cut -d' ' -f1)
 if [ ! -x .venv/bin/python ] || [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   python3 -m venv .venv
   .venv/bin/pip install -q --upgrade pip
-  .venv/bin/pip install -q -r scripts/python-requirements.txt
+  .venv/bin/pip install -q -r scripts/python-requirements.lock
   echo "$want" > "$stamp"
 fi
 
-# The browser tests (tests/browser, tests/python/browser.py) drive Debian's Chromium with
+# The browser tests (tests/browser, tests/python/support/browser.py) drive Debian's Chromium with
 # playwright-core, which needs Node.js 20 or newer. Debian 12's own nodejs is 18: where `node` is
 # older than 20, a Node.js 22 binary comes from the npm registry (package node-linux-ARCH) into
 # tests/browser/.node, and the tests use it.

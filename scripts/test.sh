@@ -8,8 +8,8 @@ cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 # A real S3 server for the object-storage tests (tests/python/test_object_store.py): s3s-fs, the
 # s3s project's S3 protocol server over a local folder, built once into ~/.cargo/bin (about
-# 2 minutes on 2 cores). Garage would take an estimated 20-40 minutes to build here; see the
-# README.
+# 2 minutes on 2 cores). Garage would take an estimated 20-40 minutes to build here; see
+# docs/storage.md.
 S3S_FS_VERSION=0.14.1
 if ! s3s-fs --version 2>/dev/null | grep -q " $S3S_FS_VERSION$"; then
   echo "== installing s3s-fs $S3S_FS_VERSION (once)"
@@ -17,10 +17,15 @@ if ! s3s-fs --version 2>/dev/null | grep -q " $S3S_FS_VERSION$"; then
 fi
 
 export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
+# The tree's shape (docs/architecture.md): no import loop between modules, no Rust or WGSL file
+# above 1,000 lines; the checker first proves on small trees that it finds both.
+python3 scripts/check_structure.py --self-test
+python3 scripts/check_structure.py
 cargo fmt --all --check
 # The fuzz targets are a cargo project of their own (outside the workspace).
 cargo fmt --manifest-path tests/fuzz/Cargo.toml --check
 cargo clippy --workspace --all-targets -- -D warnings
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 cargo build --release --workspace --bins
 # The web viewer (WebAssembly + WebGPU) into target/release/web, where brickserver finds it.
 bash scripts/build-web.sh

@@ -11,8 +11,8 @@
 use axum::body::Bytes;
 use rayon::prelude::*;
 use residency_schemas::SampleType;
-use residency_schemas::pyramid::{Pyramid, PyramidError};
 use residency_schemas::wire::{BrickBatchHeader, BrickEncoding, BrickEntry, BrickStatus};
+use residency_store::pyramid::{Pyramid, PyramidError};
 use zarrs::storage::ReadableListableStorageTraits;
 
 use crate::dataset_store::DatasetStore;
@@ -40,7 +40,7 @@ impl BatchLimits {
     ///
     /// # Errors
     /// [`BatchError::TooManyBytes`] when they exceed [`BatchLimits::max_bytes`].
-    pub fn check_bytes(&self, bricks: usize, brick_bytes: u64) -> Result<(), BatchError> {
+    pub(crate) fn check_bytes(&self, bricks: usize, brick_bytes: u64) -> Result<(), BatchError> {
         let decoded = (bricks as u64).saturating_mul(brick_bytes);
         if decoded > self.max_bytes {
             return Err(BatchError::TooManyBytes {
@@ -54,7 +54,7 @@ impl BatchLimits {
 }
 
 /// One requested brick: level, channel and brick coordinates `z, y, x`.
-pub use residency_schemas::pyramid::BrickIndex as BrickAt;
+pub use residency_store::pyramid::BrickIndex as BrickAt;
 
 /// Why a batch request was refused: malformed (400) or over a cap (413, see
 /// [`BatchError::is_over_limit`]).
@@ -193,18 +193,16 @@ pub fn parse_batch(
     Ok((bricks, encoding))
 }
 
-pub use residency_schemas::pyramid::NoSuchBrick;
+pub(crate) use residency_store::pyramid::NoSuchBrick;
 
 /// The image arrays of one dataset, opened once through the pyramid reader, for reading
 /// bricks.
-pub struct ImageArrays {
+pub(crate) struct ImageArrays {
     pyramid: Pyramid<dyn ReadableListableStorageTraits>,
     /// Sample type of the bricks.
     pub data_type: SampleType,
     /// Brick shape `z, y, x`.
     pub brick_shape: [u64; 3],
-    /// Channels.
-    pub channels: u64,
 }
 
 impl ImageArrays {
@@ -217,7 +215,6 @@ impl ImageArrays {
         Ok(Self {
             data_type: pyramid.sample_type,
             brick_shape: pyramid.brick_shape,
-            channels: pyramid.channels,
             pyramid,
         })
     }
@@ -257,7 +254,7 @@ impl ImageArrays {
 
 /// Why one brick of a batch could not be read; its message goes into the brick's entry.
 #[derive(Debug, thiserror::Error)]
-pub enum BrickReadError {
+pub(crate) enum BrickReadError {
     /// The dataset has no such level, channel or brick.
     #[error(transparent)]
     NoSuchBrick(#[from] NoSuchBrick),
@@ -269,7 +266,7 @@ pub enum BrickReadError {
 /// Reads a whole batch (in parallel) into its header and payload, given a brick reader
 /// (which may consult a cache). A brick that cannot be read gets an error entry with the
 /// reason; the rest of the batch is still answered.
-pub fn read_batch(
+pub(crate) fn read_batch(
     arrays: &ImageArrays,
     bricks: &[BrickAt],
     encoding: BrickEncoding,

@@ -14,7 +14,7 @@ use quick_cache::sync::Cache;
 
 /// What an entry holds.
 #[derive(Clone, Debug, Hash, PartialEq, Eq)]
-pub enum CacheKey {
+pub(crate) enum CacheKey {
     /// A brick of a batch: dataset (index in the served list), level, channel, brick
     /// coordinates `z, y, x`, and whether it holds decoded samples (`raw`) or stored bytes.
     Brick {
@@ -37,11 +37,11 @@ pub enum CacheKey {
 /// A cached value: the bytes (empty for an empty brick) and, for an object, its `ETag` and
 /// when it was read.
 #[derive(Clone, Debug)]
-pub struct Cached {
+pub(crate) struct Cached {
     /// The bytes.
-    pub bytes: Bytes,
+    pub(crate) bytes: Bytes,
     /// The object's `ETag` and when it was read (`None` for a brick).
-    pub etag: Option<(Arc<str>, Instant)>,
+    pub(crate) etag: Option<(Arc<str>, Instant)>,
 }
 
 #[derive(Clone)]
@@ -59,7 +59,7 @@ impl Weighter<CacheKey, Cached> for ByteWeight {
 }
 
 /// The bounded cache, with its hit and miss counters.
-pub struct ByteCache {
+pub(crate) struct ByteCache {
     inner: Option<Cache<CacheKey, Cached, ByteWeight>>,
     hits: Counter,
     misses: Counter,
@@ -69,7 +69,7 @@ pub struct ByteCache {
 impl ByteCache {
     /// A cache holding at most `capacity` bytes (0 turns caching off), counting into the
     /// given metrics.
-    pub fn new(capacity: u64, hits: Counter, misses: Counter, bytes: Gauge) -> Self {
+    pub(crate) fn new(capacity: u64, hits: Counter, misses: Counter, bytes: Gauge) -> Self {
         let inner = (capacity > 0).then(|| {
             // Estimate the entry count from a typical 64 KiB brick.
             let items = (capacity / 65536).clamp(16, 1 << 20) as usize;
@@ -84,7 +84,7 @@ impl ByteCache {
     }
 
     /// The cached entry for `key`, counting a hit or a miss.
-    pub fn get(&self, key: &CacheKey) -> Option<Cached> {
+    pub(crate) fn get(&self, key: &CacheKey) -> Option<Cached> {
         let found = self.inner.as_ref().and_then(|c| c.get(key));
         if found.is_some() {
             self.hits.inc();
@@ -95,7 +95,7 @@ impl ByteCache {
     }
 
     /// Stores an entry (an entry larger than the whole budget is not kept).
-    pub fn insert(&self, key: CacheKey, value: Cached) {
+    pub(crate) fn insert(&self, key: CacheKey, value: Cached) {
         if let Some(c) = &self.inner {
             c.insert(key, value);
             self.bytes.set(c.weight() as i64);
@@ -103,7 +103,8 @@ impl ByteCache {
     }
 
     /// Bytes held now.
-    pub fn weight(&self) -> u64 {
+    #[cfg(test)]
+    pub(crate) fn weight(&self) -> u64 {
         self.inner.as_ref().map_or(0, Cache::weight)
     }
 }

@@ -7,11 +7,13 @@ use std::ops::Range;
 use std::sync::Arc;
 
 use axum::body::Bytes;
-use residency_schemas::location::object_store::path::Path as ObjectPath;
-use residency_schemas::location::object_store::{
+use residency_store::location::object_store::path::Path as ObjectPath;
+use residency_store::location::object_store::{
     self, GetOptions, GetRange, ObjectStore, ObjectStoreExt,
 };
-use residency_schemas::location::{LocationError, ObjectStoreOptions, StoreLocation};
+use residency_store::location::{
+    BlockOn, LocationError, ObjectStoreOptions, StoreLocation, object_storage,
+};
 use zarrs::storage::{ReadableListableStorageTraits, StoreKey};
 
 use crate::store_keys::{KeyError, RootDir, checked_key, resolve};
@@ -20,26 +22,33 @@ use crate::store_keys::{KeyError, RootDir, checked_key, resolve};
 #[derive(Debug, thiserror::Error)]
 pub enum OpenError {
     /// A dataset folder cannot be opened.
-    #[error("{location}: cannot open dataset folder: {reason}")]
+    #[error("{location}: cannot open dataset folder: {source}")]
     Folder {
         /// The dataset's root folder.
         location: String,
         /// Why it cannot be opened.
-        reason: String,
+        #[source]
+        source: std::io::Error,
     },
     /// The object-store client cannot be configured.
     #[error(transparent)]
     ObjectStore(#[from] LocationError),
+    /// An object-store dataset opened outside a tokio runtime, which its reads need.
+    #[error("{location}: an object-store dataset is opened on the server's tokio runtime")]
+    NoRuntime {
+        /// The dataset's location.
+        location: String,
+    },
 }
 
 /// A dataset's keys in an object store: its client and the key prefix of the store's root.
-pub struct ObjectKeys {
+pub(crate) struct ObjectKeys {
     store: Arc<dyn ObjectStore>,
     prefix: ObjectPath,
 }
 
 /// Where a dataset's keys are read from.
-pub enum Keys {
+pub(crate) enum Keys {
     /// A local folder, opened once; keys are opened beneath it.
     Folder(RootDir),
     /// A prefix in an object store.
@@ -47,17 +56,19 @@ pub enum Keys {
 }
 
 /// A served dataset's store: its keys for verbatim answers, and the same store as zarrs storage
-/// for the region index, batched bricks and the listing.
+/// for the region index, batched bricks and the listing. An object store is reached through one
+/// client, which both use: zarrs' synchronous reads run its requests on the server's runtime
+/// from blocking tasks.
 pub struct DatasetStore {
     /// The keys.
-    pub keys: Keys,
+    pub(crate) keys: Keys,
     zarr: Arc<dyn ReadableListableStorageTraits>,
     shown: String,
 }
 
 /// Part of an object, read with its `ETag`.
 #[derive(Clone, Debug)]
-pub struct ObjectPart {
+pub(crate) struct ObjectPart {
     /// The bytes read.
     pub bytes: Bytes,
     /// Where they lie in the object.
@@ -69,25 +80,31 @@ pub struct ObjectPart {
 }
 
 impl DatasetStore {
-    /// Opens the store at `location` (a folder's canonical path, or an `s3://` location).
+    /// Opens the store at `location` (a folder's canonical path, or an `s3://` location). An
+    /// object store is opened on a tokio runtime (the server's), which runs its requests.
     ///
     /// # Errors
-    /// [`OpenError`] when the folder cannot be opened or the object-store client cannot be
-    /// configured.
+    /// [`OpenError`] when the folder cannot be opened, the object-store client cannot be
+    /// configured, or an object store is opened outside a runtime.
     pub fn open(location: &StoreLocation, options: &ObjectStoreOptions) -> Result<Self, OpenError> {
         let shown = location.to_string();
-        let keys = if let Some(path) = location.folder() {
-            Keys::Folder(RootDir::open(path).map_err(|e| OpenError::Folder {
+        let (keys, zarr) = if let Some(path) = location.folder() {
+            let root = RootDir::open(path).map_err(|source| OpenError::Folder {
                 location: shown.clone(),
-                reason: e.to_string(),
-            })?)
+                source,
+            })?;
+            (Keys::Folder(root), location.open_readable(options)?)
         } else {
+            let runtime =
+                tokio::runtime::Handle::try_current().map_err(|_| OpenError::NoRuntime {
+                    location: shown.clone(),
+                })?;
             let (store, prefix) = location
                 .object_store(options)?
                 .expect("a location is a folder or an object store");
-            Keys::Object(ObjectKeys { store, prefix })
+            let zarr = object_storage(store.clone(), &prefix, BlockOn::new(runtime));
+            (Keys::Object(ObjectKeys { store, prefix }), zarr)
         };
-        let zarr = location.open_readable(options)?;
         Ok(Self { keys, zarr, shown })
     }
 
@@ -106,7 +123,7 @@ impl DatasetStore {
     ///
     /// # Errors
     /// [`KeyError`] when the key is malformed, leaves the store, or cannot be read.
-    pub fn read_document(&self, key: &str) -> Result<Option<Vec<u8>>, KeyError> {
+    pub(crate) fn read_document(&self, key: &str) -> Result<Option<Vec<u8>>, KeyError> {
         // Keys from metadata are literal: encode `%` so they are not decoded again.
         const LITERAL: &percent_encoding::AsciiSet = &percent_encoding::CONTROLS.add(b'%');
         let raw = percent_encoding::utf8_percent_encode(key, LITERAL).to_string();
@@ -114,7 +131,7 @@ impl DatasetStore {
             Keys::Folder(root) => match resolve(root.path(), &raw) {
                 Ok(path) => std::fs::read(path)
                     .map(Some)
-                    .map_err(|e| KeyError::Unreadable(e.to_string())),
+                    .map_err(|e| KeyError::Unreadable(e.into())),
                 Err(KeyError::NotFound) => Ok(None),
                 Err(e) => Err(e),
             },
@@ -124,7 +141,7 @@ impl DatasetStore {
                 self.zarr
                     .get(&key)
                     .map(|found| found.map(|bytes| bytes.to_vec()))
-                    .map_err(|e| KeyError::Unreadable(e.to_string()))
+                    .map_err(|e| KeyError::Unreadable(e.into()))
             }
         }
     }
@@ -187,7 +204,7 @@ impl ObjectKeys {
 /// `bytes=a-` and `bytes=-n`. `None` where a file would be answered whole (several ranges,
 /// another unit, a malformed or reversed range). Whether the range lies in the object is the
 /// store's to say.
-pub fn requested_range(value: &str) -> Option<GetRange> {
+pub(crate) fn requested_range(value: &str) -> Option<GetRange> {
     use http_range_header::SyntacticallyCorrectRange as R;
     let ranges = http_range_header::parse_range_header(value.trim()).ok()?;
     let [range] = ranges.into_ranges()[..] else {
@@ -203,7 +220,7 @@ pub fn requested_range(value: &str) -> Option<GetRange> {
 fn failed(e: object_store::Error) -> KeyError {
     match e {
         object_store::Error::NotFound { .. } => KeyError::NotFound,
-        other => KeyError::Unreadable(other.to_string()),
+        other => KeyError::Unreadable(other.into()),
     }
 }
 

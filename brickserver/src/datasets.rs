@@ -3,7 +3,7 @@
 use std::path::Path;
 
 use residency_schemas::dataset::dataset_name;
-use residency_schemas::location::{LocationError, ObjectStoreOptions, StoreLocation};
+use residency_store::location::{LocationError, ObjectStoreOptions, StoreLocation};
 
 /// One served store.
 #[derive(Clone, Debug, PartialEq)]
@@ -89,51 +89,58 @@ pub enum DatasetError {
 impl Datasets {
     /// Builds the set from positional locations (named by [`dataset_name`] of their last
     /// component) and `NAME=LOCATION` pairs, checking that every folder is a folder, that a
-    /// store is at every object-store location, and that every name is unique and URL-safe.
+    /// store is at every object-store location (asked on the caller's runtime), and that every
+    /// name is unique and URL-safe.
     ///
     /// # Errors
     /// [`DatasetError`] naming the first location or argument at fault.
-    pub fn from_args(
+    pub async fn from_args(
         locations: &[StoreLocation],
         named: &[String],
         options: &ObjectStoreOptions,
     ) -> Result<Self, DatasetError> {
-        let mut out = Vec::new();
-        let mut add = |name: String, location: &StoreLocation| -> Result<(), DatasetError> {
+        let mut out: Vec<Dataset> = Vec::new();
+        // Positional locations, then `NAME=LOCATION` pairs, each checked in turn (a pair is
+        // parsed when its turn comes, so the first argument at fault is the one named).
+        let positional = locations
+            .iter()
+            .map(|l| Ok((dataset_name(Path::new(&l.file_name())), l.clone())));
+        let pairs = named.iter().map(|pair| -> Result<_, DatasetError> {
+            let (name, location) = pair
+                .split_once('=')
+                .ok_or_else(|| DatasetError::BadPair { pair: pair.clone() })?;
+            Ok((name.to_string(), location.parse::<StoreLocation>()?))
+        });
+        for entry in positional.chain(pairs) {
+            let (name, location) = entry?;
             let shown = location.to_string();
             if !valid_name(&name) {
                 return Err(DatasetError::BadName { path: shown, name });
             }
-            let location = match location.folder() {
-                Some(path) => {
-                    let root = path
-                        .canonicalize()
-                        .map_err(|source| DatasetError::CannotOpen {
-                            path: shown.clone(),
-                            source,
-                        })?;
-                    if !root.is_dir() {
-                        return Err(DatasetError::NotAFolder { path: shown });
-                    }
-                    StoreLocation::Folder(root)
+            let location = if let Some(path) = location.folder() {
+                let root = path
+                    .canonicalize()
+                    .map_err(|source| DatasetError::CannotOpen {
+                        path: shown.clone(),
+                        source,
+                    })?;
+                if !root.is_dir() {
+                    return Err(DatasetError::NotAFolder { path: shown });
                 }
-                None if location.exists(options)? => location.clone(),
-                None => return Err(DatasetError::NoStore { location: shown }),
+                StoreLocation::Folder(root)
+            } else {
+                let at = location
+                    .object_store(options)?
+                    .expect("a location is a folder or an object store");
+                if !location.exists_in(&at).await? {
+                    return Err(DatasetError::NoStore { location: shown });
+                }
+                location
             };
-            if out.iter().any(|d: &Dataset| d.name == name) {
+            if out.iter().any(|d| d.name == name) {
                 return Err(DatasetError::Duplicate { path: shown, name });
             }
             out.push(Dataset { name, location });
-            Ok(())
-        };
-        for location in locations {
-            add(dataset_name(Path::new(&location.file_name())), location)?;
-        }
-        for pair in named {
-            let (name, location) = pair
-                .split_once('=')
-                .ok_or_else(|| DatasetError::BadPair { pair: pair.clone() })?;
-            add(name.to_string(), &location.parse()?)?;
         }
         if out.is_empty() {
             return Err(DatasetError::NoDataset);

@@ -5,35 +5,37 @@
 //! - [`store_keys`]: turning a request path into a file inside a dataset, safely;
 //! - [`dataset_store`]: where a dataset's keys are read from: a folder or an object store;
 //! - [`responses`]: file answers with `ETag`, `Range`, `Cache-Control` and `Content-Type`;
-//! - [`cache`]: the bounded memory cache;
-//! - [`regions`]: region queries and the min/max hierarchy, from the stored metadata;
+//! - `cache`: the bounded memory cache;
+//! - `regions`: region queries and the min/max hierarchy, from the stored metadata;
 //! - [`bricks`]: batched bricks;
 //! - [`metrics`]: Prometheus metrics;
-//! - [`openapi`]: the OpenAPI document;
+//! - `openapi`: the OpenAPI document's base and the helpers the routes document themselves
+//!   with;
 //! - [`listing`]: the dataset listing (JSON, or an HTML page) and its links, built on the
 //!   server's public URL;
 //! - [`neuroglancer`]: the neuroglancer link's viewer state;
 //! - [`viewer_page`]: the Residency web viewer's page and files (`/NAME/view`, `/viewer/`);
-//! - [`routes`]: the axum router;
+//! - `routes`: the axum router, one module per API, and the OpenAPI document generated
+//!   from it;
 //! - [`listener`]: connections, with a header timeout, a connection limit and graceful
 //!   shutdown.
 
 pub mod bricks;
-pub mod cache;
+mod cache;
 pub mod dataset_store;
 pub mod datasets;
 pub mod listener;
 pub mod listing;
 pub mod metrics;
 pub mod neuroglancer;
-pub mod openapi;
-pub mod regions;
+mod openapi;
+mod regions;
 pub mod responses;
-pub mod routes;
+mod routes;
 pub mod store_keys;
 pub mod viewer_page;
 
 pub use datasets::{Dataset, Datasets};
 pub use listener::{ConnectionLimits, serve};
 pub use listing::PublicUrl;
-pub use routes::{AppState, ServerOptions, router};
+pub use routes::{AppState, ServerOptions, openapi_document, router};

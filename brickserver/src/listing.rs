@@ -84,7 +84,7 @@ fn first_value<'a>(headers: &'a HeaderMap, name: &str) -> Option<&'a str> {
 /// The base URL links are built on, without a trailing `/`: `public` when given, else
 /// `X-Forwarded-Proto` (`http` or `https`; `http` otherwise) with `X-Forwarded-Host`, else
 /// `Host` (`localhost` when neither is a plausible host).
-pub fn base_url(headers: &HeaderMap, public: Option<&PublicUrl>) -> String {
+pub(crate) fn base_url(headers: &HeaderMap, public: Option<&PublicUrl>) -> String {
     if let Some(p) = public {
         return p.as_str().to_string();
     }
@@ -132,12 +132,13 @@ pub enum Level0Error {
         why: &'static str,
     },
     /// The key exists but cannot be read.
-    #[error("{key}: {why}")]
+    #[error("{key}: {source}")]
     Unreadable {
         /// The array metadata's key, under the store's root.
         key: String,
         /// The I/O error.
-        why: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// The array metadata is unusable.
     #[error(transparent)]
@@ -188,9 +189,9 @@ impl StoreSummary {
                 key: shown_key,
                 why,
             }),
-            Err(KeyError::Unreadable(why)) => Err(Level0Error::Unreadable {
+            Err(KeyError::Unreadable(source)) => Err(Level0Error::Unreadable {
                 key: shown_key,
-                why,
+                source,
             }),
         };
         Ok(Self {
@@ -208,20 +209,20 @@ impl StoreSummary {
     }
 
     /// Level 0's size `x, y, z` in voxels, when readable.
-    pub fn size_xyz(&self) -> Option<[u64; 3]> {
+    pub(crate) fn size_xyz(&self) -> Option<[u64; 3]> {
         let [z, y, x] = self.level0.as_ref().ok()?.zyx_shape();
         Some([x, y, z])
     }
 
     /// The sample type, when level 0 is readable.
-    pub fn sample_type(&self) -> Option<SampleType> {
+    pub(crate) fn sample_type(&self) -> Option<SampleType> {
         Some(self.level0.as_ref().ok()?.sample_type)
     }
 }
 
 /// One dataset as listed: its entry and what is known of its store.
 #[derive(Debug)]
-pub struct Listed {
+pub(crate) struct Listed {
     /// The JSON entry.
     pub entry: DatasetEntry,
     /// The store's summary, when its metadata could be read.
@@ -230,7 +231,7 @@ pub struct Listed {
 
 /// Lists `datasets`, with their `summaries` (one per dataset, read once by the caller:
 /// [`StoreSummary::read`]), with links built on `base` (see [`base_url`]).
-pub fn list(
+pub(crate) fn list(
     datasets: &[Dataset],
     summaries: &[Option<Arc<StoreSummary>>],
     base: &str,
@@ -267,7 +268,7 @@ pub fn list(
 }
 
 /// The JSON listing.
-pub fn json(listed: Vec<Listed>) -> DatasetList {
+pub(crate) fn json(listed: Vec<Listed>) -> DatasetList {
     DatasetList {
         datasets: listed.into_iter().map(|l| l.entry).collect(),
     }
@@ -275,7 +276,7 @@ pub fn json(listed: Vec<Listed>) -> DatasetList {
 
 /// Whether a request's `Accept` header prefers HTML (`text/html` or `application/xhtml+xml`)
 /// to JSON, by quality; a tie (`*/*`, or no header) is JSON.
-pub fn prefers_html(accept: Option<&str>) -> bool {
+pub(crate) fn prefers_html(accept: Option<&str>) -> bool {
     let Some(accept) = accept else {
         return false;
     };
@@ -306,7 +307,7 @@ pub fn prefers_html(accept: Option<&str>) -> bool {
 }
 
 /// Escapes text for HTML (element content and quoted attribute values).
-pub fn escape_html(text: &str) -> String {
+pub(crate) fn escape_html(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {
         match c {
@@ -323,7 +324,7 @@ pub fn escape_html(text: &str) -> String {
 
 /// The listing as an HTML page: a table of the datasets, each with its size, levels, channels
 /// and sample type when known, and its links (the Residency viewer's relative, `NAME/view`).
-pub fn html(listed: &[Listed]) -> String {
+pub(crate) fn html(listed: &[Listed]) -> String {
     let mut page = String::from(
         "<!doctype html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\

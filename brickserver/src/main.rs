@@ -13,7 +13,7 @@ use residency_brickserver::bricks::BatchLimits;
 use residency_brickserver::{
     AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, router, serve,
 };
-use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
+use residency_store::location::{ObjectStoreOptions, StoreLocation};
 
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
@@ -182,7 +182,10 @@ fn main() -> ExitCode {
             let object_store = ObjectStoreOptions {
                 endpoint: s3_endpoint,
             };
-            let datasets = Datasets::from_args(&datasets, &named, &object_store)?;
+            // One runtime for everything the server does, object-store requests included.
+            let runtime = tokio::runtime::Runtime::new().context("cannot start the runtime")?;
+            let datasets =
+                runtime.block_on(Datasets::from_args(&datasets, &named, &object_store))?;
             if !(request_timeout > 0.0 && request_timeout.is_finite()) {
                 anyhow::bail!("--request-timeout must be a positive number of seconds");
             }
@@ -206,15 +209,16 @@ fn main() -> ExitCode {
                 header_timeout: timeout,
             };
             raise_file_limit();
-            tokio::runtime::Runtime::new()
-                .context("cannot start the runtime")?
-                .block_on(run(datasets, bind, options, limits))
+            runtime.block_on(run(datasets, bind, options, limits))
         })(),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!(
+                "error: {}",
+                residency_schemas::error_chain::join_chain(e.chain())
+            );
             ExitCode::FAILURE
         }
     }

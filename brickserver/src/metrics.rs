@@ -19,7 +19,7 @@ use prometheus_client::registry::Registry;
 
 /// Label of a request counter: the response's status class (`2xx`, `3xx`, `4xx`, `5xx`).
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
-pub struct StatusClass {
+pub(crate) struct StatusClass {
     /// `2xx`, `3xx`, `4xx` or `5xx`.
     pub class: String,
 }
@@ -117,7 +117,7 @@ impl Default for Metrics {
 
 impl Metrics {
     /// The metrics as OpenMetrics text.
-    pub fn render(&self) -> String {
+    pub(crate) fn render(&self) -> String {
         let mut out = String::new();
         encode(&mut out, &self.registry).expect("writing to a String cannot fail");
         out
@@ -125,7 +125,7 @@ impl Metrics {
 }
 
 /// Middleware recording every request in `metrics`.
-pub async fn track(
+pub(crate) async fn track(
     State(metrics): State<Arc<Metrics>>,
     request: Request,
     next: Next,

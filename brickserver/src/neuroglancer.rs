@@ -133,7 +133,7 @@ pub struct Invlerp {
 
 /// The size of one OME unit in neuroglancer's SI base unit (`m` or `s`), for the unit names
 /// neuroglancer's OME reader accepts; `None` for any other.
-pub fn si_unit(ome_unit: &str) -> Option<(f64, &'static str)> {
+pub(crate) fn si_unit(ome_unit: &str) -> Option<(f64, &'static str)> {
     // The SI prefixes, as neuroglancer's `allSiPrefixes` long names.
     const PREFIXES: [(&str, f64); 25] = [
         ("quetta", 1e30),
@@ -302,7 +302,7 @@ pub fn state(
 
 /// The state of a store whose metadata could not be read: one layer with neuroglancer's
 /// defaults, the Zarr version left to neuroglancer.
-pub fn fallback_state(name: &str, store_url: &str) -> State {
+pub(crate) fn fallback_state(name: &str, store_url: &str) -> State {
     State {
         dimensions: None,
         layers: vec![layer(name.to_string(), source(store_url, None), None, None)],

@@ -1,194 +1,220 @@
-//! The OpenAPI 3.1 document served at `/openapi.json`. Its component schemas are the JSON
-//! Schemas in `schemas/json/`, embedded at build time, so the two cannot drift apart; those
-//! are checked against the schemas `schemars` derives from the Rust types
-//! (`schemas/tests/json_schemas.rs`), and the query parameters of its paths against what the
-//! handlers read (the tests of [`crate::routes`]).
+//! The OpenAPI 3.1 document served at `/openapi.json`, generated: its paths, methods and
+//! parameters by `aide` from the routes and the types their handlers extract (each route
+//! module documents its own responses, with the helpers here), and its component schemas by
+//! `schemars` from the Rust types of the documents answered, exactly as the JSON Schema files
+//! in `schemas/json/` are generated ([`residency_schemas::generate`]).
 
-use serde_json::{Value, json};
+use aide::openapi::{
+    Components, Info, MediaType, OpenApi, ReferenceOr, Response, SchemaObject, SecurityScheme,
+    StatusCode,
+};
+use aide::transform::TransformOperation;
+use residency_schemas::RegionMetadata;
+use residency_schemas::generate::SchemaFile;
+use residency_schemas::server::{ApiError, DatasetList, RegionAnswer};
+use residency_schemas::wire::{BrickBatchHeader, MinMaxHierarchyHeader};
+use schemars::{JsonSchema, Schema, json_schema};
+use serde_json::Value;
 
-/// An embedded JSON Schema as the component `name`: its local references (`#/$defs/...`)
-/// re-rooted under `#/components/schemas/NAME/`, and its `$id` dropped, so OpenAPI tools that
-/// resolve every reference against the document root find them.
-fn schema(name: &str, text: &str) -> Value {
-    fn reroot(v: &mut Value, prefix: &str) {
-        match v {
-            Value::Object(map) => {
-                map.remove("$id");
-                for (k, child) in map.iter_mut() {
-                    match child {
-                        Value::String(r) if k == "$ref" && r.starts_with("#/") => {
-                            *r = format!("{prefix}{}", &r[1..]);
-                        }
-                        _ => reroot(child, prefix),
+/// The document's `info` and components, before the routes add their paths.
+pub(crate) fn base() -> OpenApi {
+    let mut components = Components::default();
+    components.schemas.extend([
+        component::<DatasetList>(),
+        component::<RegionAnswer>(),
+        component::<ApiError>(),
+        component::<MinMaxHierarchyHeader>(),
+        component::<BrickBatchHeader>(),
+        component::<RegionMetadata>(),
+    ]);
+    components.security_schemes.insert(
+        "bearer".into(),
+        ReferenceOr::Item(SecurityScheme::Http {
+            scheme: "bearer".into(),
+            bearer_format: None,
+            description: Some("Only when the server runs with --token-file.".into()),
+            // No extensions (aide's map type is indexmap's).
+            extensions: std::iter::empty().collect(),
+        }),
+    );
+    OpenApi {
+        info: Info {
+            title: "Residency brickserver".into(),
+            version: env!("CARGO_PKG_VERSION").into(),
+            description: Some(
+                "Serves OME-Zarr stores verbatim at their Zarr keys (for any viewer), plus region \
+                 metadata queries, the binary min/max hierarchy and batched bricks (for \
+                 renderers), and the Residency web viewer. Read-only: GET, HEAD and OPTIONS \
+                 only. With --token-file, every path but /healthz needs `Authorization: Bearer \
+                 <token>`."
+                    .into(),
+            ),
+            ..Info::default()
+        },
+        components: Some(components),
+        ..OpenApi::default()
+    }
+}
+
+/// The finished document as JSON: axum's wildcard captures (`{*key}`) written as OpenAPI
+/// path parameters (`{key}`).
+pub(crate) fn finish(mut api: OpenApi) -> Value {
+    if let Some(paths) = &mut api.paths {
+        paths.paths = std::mem::take(&mut paths.paths)
+            .into_iter()
+            .map(|(path, item)| (path.replace("{*", "{"), item))
+            .collect();
+    }
+    serde_json::to_value(api).expect("an OpenAPI document always serializes")
+}
+
+/// The component schema of `T`, named as the type: the schema of its JSON Schema file, its
+/// local references (`#/$defs/...`) re-rooted under `#/components/schemas/NAME/` and its
+/// `$id` dropped, so OpenAPI tools that resolve every reference against the document root
+/// find them.
+fn component<T: JsonSchema>() -> (String, SchemaObject) {
+    let name = T::schema_name().into_owned();
+    let file = SchemaFile::written::<T>("");
+    let mut value: Value =
+        serde_json::from_str(&file.text).expect("a generated JSON Schema is JSON");
+    reroot(&mut value, &format!("#/components/schemas/{name}"));
+    let json_schema = Schema::try_from(value).expect("a generated JSON Schema is an object");
+    (name, schema_object(json_schema))
+}
+
+/// `v` (a JSON Schema) with its local references (`#/...`) re-rooted under `prefix` and every
+/// `$id` dropped.
+fn reroot(v: &mut Value, prefix: &str) {
+    match v {
+        Value::Object(map) => {
+            map.remove("$id");
+            for (k, child) in map.iter_mut() {
+                match child {
+                    Value::String(r) if k == "$ref" && r.starts_with("#/") => {
+                        *r = format!("{prefix}{}", &r[1..]);
                     }
+                    _ => reroot(child, prefix),
                 }
             }
-            Value::Array(items) => items.iter_mut().for_each(|i| reroot(i, prefix)),
-            _ => {}
         }
+        Value::Array(items) => items.iter_mut().for_each(|i| reroot(i, prefix)),
+        _ => {}
     }
-    let mut value: Value =
-        serde_json::from_str(text).expect("the embedded JSON Schemas are valid JSON");
-    reroot(&mut value, &format!("#/components/schemas/{name}"));
-    value
 }
 
-fn error_responses(codes: &[(&str, &str)]) -> Value {
-    let mut out = serde_json::Map::new();
-    for (code, why) in codes {
-        out.insert(
-            (*code).into(),
-            json!({
-                "description": why,
-                "content": {"application/json": {"schema": {"$ref": "#/components/schemas/ApiError"}}}
-            }),
-        );
+/// `json_schema` as OpenAPI schema object.
+fn schema_object(json_schema: Schema) -> SchemaObject {
+    SchemaObject {
+        json_schema,
+        example: None,
+        external_docs: None,
     }
-    Value::Object(out)
 }
 
-fn with(mut base: Value, extra: Value) -> Value {
-    if let (Some(b), Value::Object(e)) = (base.as_object_mut(), extra) {
-        b.extend(e);
+/// A response without content.
+pub(crate) fn answer(description: &str) -> Response {
+    Response {
+        description: description.into(),
+        ..Response::default()
     }
-    base
 }
 
-/// The OpenAPI document.
-pub fn document() -> Value {
-    let name = json!({"name": "name", "in": "path", "required": true, "schema": {"type": "string"}, "description": "Dataset name."});
-    let datasets = json!({
-        "get": {
-            "summary": "List the served datasets, with links that open each in the Residency web viewer, neuroglancer and vizarr",
-            "description": "Links are built on --public-url when given, else on the request's X-Forwarded-Proto and X-Forwarded-Host (first values), else http:// and its Host. The neuroglancer link names the store's Zarr version (zarr:// for v2, zarr3:// for v3) and carries each channel's omero window and colour.",
-            "responses": {"200": {"description": "The datasets", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/DatasetList"}}}}}
-        }
-    });
-    let text = |description: &str| json!({"description": description, "content": {"text/plain": {"schema": {"type": "string"}}}});
-    let page = |description: &str| json!({"description": description, "content": {"text/html": {"schema": {"type": "string"}}}});
-    let not_built = text(
-        "The web viewer is not built: the message names the folder looked at and says how to build it (scripts/build-web.sh, or --viewer-dir)",
+/// `response` with a body of media type `media` described by `schema`.
+pub(crate) fn with_content(mut response: Response, media: &str, schema: Schema) -> Response {
+    response.content.insert(
+        media.into(),
+        MediaType {
+            schema: Some(schema_object(schema)),
+            ..MediaType::default()
+        },
     );
-    json!({
-        "openapi": "3.1.0",
-        "info": {
-            "title": "Residency brickserver",
-            "version": env!("CARGO_PKG_VERSION"),
-            "description": "Serves OME-Zarr stores verbatim at their Zarr keys (for any viewer), plus region metadata queries, the binary min/max hierarchy and batched bricks (for renderers), and the Residency web viewer. Read-only: GET, HEAD and OPTIONS only. With --token-file, every path but /healthz needs `Authorization: Bearer <token>`."
-        },
-        "paths": {
-            "/": {
-                "get": {
-                    "summary": "The datasets: for a browser (an Accept that prefers text/html) an HTML page with each dataset's size, levels, channels and links (the Residency viewer's relative, NAME/view); otherwise the JSON of /datasets",
-                    "responses": {"200": {"description": "The datasets (the answer varies with Accept)", "content": {
-                        "application/json": {"schema": {"$ref": "#/components/schemas/DatasetList"}},
-                        "text/html": {"schema": {"type": "string"}}
-                    }}}
-                }
-            },
-            "/{name}/view": {"get": {
-                "summary": "The Residency web viewer (WebAssembly + WebGPU) on dataset NAME",
-                "description": "The viewer's index.html, its %VIEWER_BASE% placeholders replaced with ../viewer/ (relative, so it works behind a path prefix). Wins over the Zarr key route: a store's root key 'view' is not served.",
-                "parameters": [name.clone()],
-                "responses": {
-                    "200": page("The viewer page"),
-                    "404": page("No such dataset: the same page, which says so"),
-                    "503": not_built.clone()
-                }
-            }},
-            "/viewer": {"get": {
-                "summary": "Redirects to viewer/ (relative, so a path prefix survives)",
-                "responses": {"308": {"description": "Location: viewer/"}}
-            }},
-            "/viewer/": {"get": {
-                "summary": "The Residency web viewer page, its %VIEWER_BASE% placeholders replaced with ./ (the page takes ?server=URL&dataset=NAME)",
-                "responses": {
-                    "200": page("The viewer page"),
-                    "503": not_built.clone()
-                }
-            }},
-            "/viewer/{file}": {"get": {
-                "summary": "A file of the web viewer: .wasm as application/wasm, .js as text/javascript, .html, .css; Last-Modified with If-Modified-Since, Range",
-                "parameters": [{"name": "file", "in": "path", "required": true, "schema": {"type": "string"}, "description": "Path of the file in the viewer's folder ('/'-separated); index.html is the page as at /viewer/."}],
-                "responses": {
-                    "200": {"description": "The file", "content": {
-                        "application/wasm": {"schema": {"type": "string", "contentMediaType": "application/wasm"}},
-                        "text/javascript": {"schema": {"type": "string"}},
-                        "text/html": {"schema": {"type": "string"}},
-                        "text/css": {"schema": {"type": "string"}}
-                    }},
-                    "206": {"description": "A byte range of the file"},
-                    "304": {"description": "Not modified (If-Modified-Since)"},
-                    "404": text("No such file (hidden files and paths leaving the folder included)"),
-                    "503": not_built
-                }
-            }},
-            "/datasets": datasets,
-            "/healthz": {"get": {"summary": "Liveness", "security": [], "responses": {"200": {"description": "ok", "content": {"text/plain": {"schema": {"type": "string"}}}}}}},
-            "/metrics": {"get": {"summary": "Prometheus metrics: requests by status class, bytes, latency histogram, cache hits/misses/bytes, connections", "responses": {"200": {"description": "OpenMetrics text", "content": {"application/openmetrics-text": {"schema": {"type": "string"}}}}}}},
-            "/openapi.json": {"get": {"summary": "This document", "responses": {"200": {"description": "OpenAPI 3.1", "content": {"application/json": {"schema": {"type": "object"}}}}}}},
-            "/{name}/regions": {"get": {
-                "summary": "Value range and histogram of a box of voxels, from the stored region metadata",
-                "description": "Never narrower than the truth; exact for a box aligned to the stored cells (min/max, 8 voxels at the finest grid) and bricks (histogram), or ending at the level's edge. The answer states the boxes it covers.",
-                "parameters": [
-                    name.clone(),
-                    {"name": "level", "in": "query", "required": true, "schema": {"type": "integer", "minimum": 0}},
-                    {"name": "channel", "in": "query", "required": true, "schema": {"type": "integer", "minimum": 0}},
-                    {"name": "min", "in": "query", "required": true, "schema": {"type": "string", "pattern": "^[0-9]+,[0-9]+,[0-9]+$"}, "description": "First voxel x,y,z of the level."},
-                    {"name": "max", "in": "query", "required": true, "schema": {"type": "string", "pattern": "^[0-9]+,[0-9]+,[0-9]+$"}, "description": "One past the last voxel x,y,z (exclusive)."}
-                ],
-                "responses": with(
-                    json!({"200": {"description": "The answer", "content": {"application/json": {"schema": {"$ref": "#/components/schemas/RegionAnswer"}}}}}),
-                    error_responses(&[("400", "Malformed query, level or channel out of range, or box outside the level"), ("404", "No such dataset, or no region metadata"), ("500", "Region metadata unreadable")])
-                )
-            }},
-            "/{name}/minmax": {"get": {
-                "summary": "The whole conservative min/max hierarchy of one channel, every level and grid, in one framed binary document",
-                "description": "Framing: 8 bytes 'RSMINMAX', little-endian u32 header length, JSON header (schema MinMaxHierarchyHeader), payload.",
-                "parameters": [name.clone(), {"name": "channel", "in": "query", "required": true, "schema": {"type": "integer", "minimum": 0}}],
-                "responses": with(
-                    json!({"200": {"description": "The document", "content": {"application/x-residency-minmax": {"schema": {"type": "string", "contentMediaType": "application/x-residency-minmax"}}}}}),
-                    error_responses(&[("400", "Malformed query or channel out of range"), ("404", "No such dataset, or no region metadata"), ("500", "Region metadata unreadable")])
-                )
-            }},
-            "/{name}/bricks": {"get": {
-                "summary": "Many bricks in one framed binary document",
-                "description": "Framing: 8 bytes 'RSBRICKS', little-endian u32 header length, JSON header (schema BrickBatchHeader), payload. An unreadable or corrupt brick is an `error` entry naming its key; the other bricks are still answered.",
-                "parameters": [
-                    name.clone(),
-                    {"name": "b", "in": "query", "required": true, "schema": {"type": "string"}, "description": "Bricks as L,C,z,y,x separated by ';' (level, channel, brick coordinates)."},
-                    {"name": "encoding", "in": "query", "required": false, "schema": {"enum": ["stored", "raw"], "default": "stored"}}
-                ],
-                "responses": with(
-                    json!({"200": {"description": "The batch", "content": {"application/x-residency-bricks": {"schema": {"type": "string", "contentMediaType": "application/x-residency-bricks"}}}}}),
-                    error_responses(&[("400", "Malformed request"), ("404", "No such dataset"), ("413", "Too many bricks, or too many decoded bytes, in one batch"), ("500", "Image arrays unreadable")])
-                )
-            }},
-            "/{name}/{key}": {"get": {
-                "summary": "A Zarr key of the store, verbatim",
-                "description": "zarr.json, .zattrs, .zarray, chunk and shard keys, residency/ arrays. ETag with If-None-Match (304), single Range (206/416), Cache-Control immutable for chunks and no-cache for metadata, CORS. A missing chunk is a 404 (the fill value to Zarr readers).",
-                "parameters": [name, {"name": "key", "in": "path", "required": true, "schema": {"type": "string"}, "description": "The Zarr key, '/'-separated."}],
-                "responses": {
-                    "200": {"description": "The stored bytes", "content": {"application/json": {"schema": {"type": "object"}}, "application/octet-stream": {"schema": {"type": "string", "contentMediaType": "application/octet-stream"}}}},
-                    "206": {"description": "A byte range of the stored bytes"},
-                    "304": {"description": "Not modified (If-None-Match matched the ETag)"},
-                    "400": {"description": "Refused key: '..', backslash, absolute path, NUL byte, empty segment, or a symlink leading out of the dataset"},
-                    "404": {"description": "No such key (a missing chunk reads as the fill value)"},
-                    "416": {"description": "Range outside the file"},
-                    "500": {"description": "The key exists but cannot be read; the message names it"}
-                }
-            }}
-        },
-        "components": {
-            "schemas": {
-                "DatasetList": schema("DatasetList", include_str!("../../schemas/json/datasets.schema.json")),
-                "RegionAnswer": schema("RegionAnswer", include_str!("../../schemas/json/region-answer.schema.json")),
-                "ApiError": schema("ApiError", include_str!("../../schemas/json/api-error.schema.json")),
-                "MinMaxHierarchyHeader": schema("MinMaxHierarchyHeader", include_str!("../../schemas/json/minmax-hierarchy.schema.json")),
-                "BrickBatchHeader": schema("BrickBatchHeader", include_str!("../../schemas/json/brick-batch.schema.json")),
-                "RegionMetadata": schema("RegionMetadata", include_str!("../../schemas/json/region-metadata.schema.json"))
-            },
-            "securitySchemes": {"bearer": {"type": "http", "scheme": "bearer", "description": "Only when the server runs with --token-file."}}
+    response
+}
+
+/// The schema of a text body.
+pub(crate) fn string() -> Schema {
+    json_schema!({"type": "string"})
+}
+
+/// The schema of a binary body of media type `media`.
+pub(crate) fn binary(media: &str) -> Schema {
+    json_schema!({"type": "string", "contentMediaType": media})
+}
+
+/// A reference to the component schema of `T`.
+pub(crate) fn component_ref<T: JsonSchema>() -> Schema {
+    json_schema!({"$ref": format!("#/components/schemas/{}", T::schema_name())})
+}
+
+/// A plain-text answer.
+pub(crate) fn text(description: &str) -> Response {
+    with_content(answer(description), "text/plain", string())
+}
+
+/// An HTML page.
+pub(crate) fn page(description: &str) -> Response {
+    with_content(answer(description), "text/html", string())
+}
+
+/// A JSON answer of the document type `T`.
+pub(crate) fn json<T: JsonSchema>(description: &str) -> Response {
+    with_content(
+        answer(description),
+        "application/json",
+        component_ref::<T>(),
+    )
+}
+
+/// Documents `answers` (status code, response) as responses of the operation.
+pub(crate) fn responses(
+    mut op: TransformOperation<'_>,
+    answers: impl IntoIterator<Item = (u16, Response)>,
+) -> TransformOperation<'_> {
+    let documented = op.inner_mut().responses.get_or_insert_default();
+    for (status, response) in answers {
+        documented
+            .responses
+            .insert(StatusCode::Code(status), ReferenceOr::Item(response));
+    }
+    op
+}
+
+/// Documents the JSON error answers ([`ApiError`]) of an API operation: status code and when.
+pub(crate) fn api_errors<'a>(
+    op: TransformOperation<'a>,
+    errors: &[(u16, &str)],
+) -> TransformOperation<'a> {
+    let answers = errors.iter().map(|&(s, why)| (s, json::<ApiError>(why)));
+    responses(op, answers)
+}
+
+#[cfg(test)]
+mod tests {
+    use residency_schemas::generate::schema_dir;
+    use serde_json::Value;
+
+    use super::{base, reroot};
+
+    /// The component schemas are the committed JSON Schema files, re-rooted, under the names
+    /// the OpenAPI clients know.
+    #[test]
+    fn components_are_the_schema_files() {
+        let api = base();
+        let schemas = &api.components.as_ref().expect("components").schemas;
+        let files = [
+            ("DatasetList", "datasets.schema.json"),
+            ("RegionAnswer", "region-answer.schema.json"),
+            ("ApiError", "api-error.schema.json"),
+            ("MinMaxHierarchyHeader", "minmax-hierarchy.schema.json"),
+            ("BrickBatchHeader", "brick-batch.schema.json"),
+            ("RegionMetadata", "region-metadata.schema.json"),
+        ];
+        assert_eq!(schemas.len(), files.len());
+        for (name, file) in files {
+            let text = std::fs::read_to_string(schema_dir().join(file)).expect(file);
+            let mut value: Value = serde_json::from_str(&text).expect(file);
+            reroot(&mut value, &format!("#/components/schemas/{name}"));
+            assert_eq!(schemas[name].json_schema.as_value(), &value, "{name}");
         }
-    })
+    }
 }

@@ -16,12 +16,12 @@ use std::sync::Arc;
 use axum::body::Bytes;
 use residency_schemas::SampleType;
 use residency_schemas::ome::{ImageAttributes, OmeError, ZarrFormat};
-use residency_schemas::pyramid::{Pyramid, PyramidError, read_key};
 use residency_schemas::server::{RegionAnswer, RegionHistogram, VoxelBox};
 use residency_schemas::wire::{
     MINMAX_MAGIC, MinMaxGridBlock, MinMaxHierarchyHeader, MinMaxLevelBlock, encode_framed,
 };
 use residency_schemas::{MinMaxGrid, RegionMetadata};
+use residency_store::pyramid::{Pyramid, PyramidError, read_key};
 use zarrs::array::{Array, ArrayBytes, ArraySubset};
 use zarrs::storage::ReadableListableStorageTraits;
 
@@ -116,16 +116,16 @@ struct LevelIndex {
 }
 
 /// Everything the server answers region questions from, for one dataset.
-pub struct RegionIndex {
+pub(crate) struct RegionIndex {
     /// The store's region metadata document.
-    pub meta: RegionMetadata,
+    pub(crate) meta: RegionMetadata,
     levels: Vec<LevelIndex>,
     minmax_docs: Vec<Bytes>,
 }
 
 /// A bad region or min/max query (answered 400).
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum QueryError {
+pub(crate) enum QueryError {
     /// A coordinate parameter (`min`, `max`) is not `x,y,z`.
     #[error("{parameter} '{text}' is not three integers x,y,z")]
     NotXyz {
@@ -172,7 +172,7 @@ pub enum QueryError {
 
 /// Why a dataset's region metadata could not be loaded.
 #[derive(Debug, thiserror::Error)]
-pub enum RegionsError {
+pub(crate) enum RegionsError {
     /// The store or its pyramid could not be opened.
     #[error(transparent)]
     Store(#[from] PyramidError),
@@ -180,12 +180,13 @@ pub enum RegionsError {
     #[error("region metadata lists no level")]
     NoLevel,
     /// A region array could not be opened or read.
-    #[error("cannot read region array '{path}': {reason}")]
+    #[error("cannot read region array '{path}': {source}")]
     ReadArray {
         /// The array's path in the store.
         path: String,
         /// What zarrs said.
-        reason: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// A region array holds another number of values than its description implies.
     #[error("{kind} array '{path}' holds {found} {unit}, expected {expected}")]
@@ -209,16 +210,21 @@ fn read_array(
     path: &str,
     data_type: SampleType,
 ) -> Result<(Vec<u8>, Vec<f64>), RegionsError> {
-    let failed = |e: &dyn std::fmt::Display| RegionsError::ReadArray {
+    let failed = |e: Box<dyn std::error::Error + Send + Sync>| RegionsError::ReadArray {
         path: path.to_string(),
-        reason: e.to_string(),
+        source: e,
     };
-    let array = Array::open(store.clone(), &format!("/{path}")).map_err(|e| failed(&e))?;
+    let array = Array::open(store.clone(), &format!("/{path}")).map_err(|e| failed(e.into()))?;
     let bytes: ArrayBytes<'static> = array
         .retrieve_array_subset(&ArraySubset::new_with_shape(array.shape().to_vec()))
-        .map_err(|e| failed(&e))?;
-    let raw = bytes.into_fixed().map_err(|e| failed(&e))?.into_owned();
-    let values = data_type.decode_le_to_f64(&raw).map_err(|e| failed(&e))?;
+        .map_err(|e| failed(e.into()))?;
+    let raw = bytes
+        .into_fixed()
+        .map_err(|e| failed(e.into()))?
+        .into_owned();
+    let values = data_type
+        .decode_le_to_f64(&raw)
+        .map_err(|e| failed(e.into()))?;
     Ok((raw, values))
 }
 
@@ -263,7 +269,7 @@ impl RegionIndex {
     /// # Errors
     /// [`RegionsError`] when the store, its pyramid or a region array cannot be read, or the
     /// arrays disagree with the metadata.
-    pub fn load(dataset: &DatasetStore) -> Result<Option<Self>, RegionsError> {
+    pub(crate) fn load(dataset: &DatasetStore) -> Result<Option<Self>, RegionsError> {
         let shown = dataset.shown().to_string();
         let store = dataset.zarr();
         // The image group's attributes first: a store that is no OME-Zarr image (a bare
@@ -426,7 +432,7 @@ impl RegionIndex {
     ///
     /// # Errors
     /// [`QueryError::NoChannel`] for a channel the dataset does not have.
-    pub fn minmax_document(&self, channel: usize) -> Result<Bytes, QueryError> {
+    pub(crate) fn minmax_document(&self, channel: usize) -> Result<Bytes, QueryError> {
         self.minmax_docs
             .get(channel)
             .cloned()
@@ -442,7 +448,7 @@ impl RegionIndex {
     /// # Errors
     /// [`QueryError`] for a level or channel the dataset does not have, an empty box, or a
     /// box reaching past the level.
-    pub fn query(
+    pub(crate) fn query(
         &self,
         dataset: &str,
         level: usize,

@@ -9,12 +9,12 @@ use headers::{ETag, HeaderMapExt, IfNoneMatch};
 use http_range_header::RangeUnsatisfiableError;
 
 /// `Cache-Control` for chunks and shards: immutable once written by `ingest`.
-pub const CACHE_IMMUTABLE: &str = "public, max-age=31536000, immutable";
+pub(crate) const CACHE_IMMUTABLE: &str = "public, max-age=31536000, immutable";
 /// `Cache-Control` for metadata documents, which `ingest index` may update: revalidate.
-pub const CACHE_REVALIDATE: &str = "public, no-cache";
+pub(crate) const CACHE_REVALIDATE: &str = "public, no-cache";
 
 /// Whether a key names a metadata document rather than chunk data.
-pub fn is_metadata(key: &str) -> bool {
+pub(crate) fn is_metadata(key: &str) -> bool {
     let name = key.rsplit('/').next().unwrap_or(key);
     matches!(
         name,
@@ -58,7 +58,7 @@ pub fn parse_range(value: &str, len: u64) -> RangeRequest {
 }
 
 /// The entity tag of a stored file: its length and modification time.
-pub fn etag_of(meta: &std::fs::Metadata) -> String {
+pub(crate) fn etag_of(meta: &std::fs::Metadata) -> String {
     let mtime = meta
         .modified()
         .ok()
@@ -89,7 +89,7 @@ fn kind_of(key: &str) -> (&'static str, &'static str) {
 
 /// The `304 Not Modified` answer for key `key` when `If-None-Match` matches `etag`; checked
 /// before the file is read, so revalidations cost no read.
-pub fn not_modified(key: &str, etag: &str, headers: &HeaderMap) -> Option<Response<Body>> {
+pub(crate) fn not_modified(key: &str, etag: &str, headers: &HeaderMap) -> Option<Response<Body>> {
     if !if_none_match(headers, etag) {
         return None;
     }
@@ -106,7 +106,12 @@ pub fn not_modified(key: &str, etag: &str, headers: &HeaderMap) -> Option<Respon
 
 /// The answer for a stored file's `bytes` served as Zarr key `key`: 206 or 416 for a
 /// `Range`, 200 otherwise.
-pub fn file_response(bytes: Bytes, etag: &str, key: &str, headers: &HeaderMap) -> Response<Body> {
+pub(crate) fn file_response(
+    bytes: Bytes,
+    etag: &str,
+    key: &str,
+    headers: &HeaderMap,
+) -> Response<Body> {
     let len = bytes.len() as u64;
     let range = headers
         .get(header::RANGE)
@@ -123,7 +128,7 @@ pub fn file_response(bytes: Bytes, etag: &str, key: &str, headers: &HeaderMap) -
 /// The answer for `part`, the bytes `range` picks out of a stored file of `len` bytes served
 /// as Zarr key `key`: 206 (with `Content-Range`) for a part, 416 for an unsatisfiable range,
 /// 200 for the whole file.
-pub fn part_response(
+pub(crate) fn part_response(
     part: Bytes,
     len: u64,
     range: RangeRequest,

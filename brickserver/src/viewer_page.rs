@@ -19,7 +19,7 @@ use tower_http::services::ServeDir;
 pub const VIEWER_BASE: &str = "%VIEWER_BASE%";
 
 /// The path prefix of the viewer's files.
-pub const FILES_PREFIX: &str = "/viewer";
+pub(crate) const FILES_PREFIX: &str = "/viewer";
 
 /// Where the viewer's files are, if they were built.
 #[derive(Clone, Debug, Default)]
@@ -56,7 +56,7 @@ impl ViewerFiles {
     }
 
     /// The message of the 503 answer when the viewer is not built.
-    pub fn not_built_message(&self) -> String {
+    pub(crate) fn not_built_message(&self) -> String {
         let looked = self.dir.as_deref().map_or_else(
             || "no folder: the running executable's folder is unknown".to_string(),
             |d| format!("looked for index.html in {}", d.display()),

@@ -15,9 +15,8 @@
 //! deep, so it is complete when the last column of a group is done. Sums are exact and every
 //! mean is rounded once, so a store made in columns is byte-identical to a whole-plane one.
 
-use crate::partition::PartitionPlan;
-use crate::region_writer::CHUNK_ROWS;
-use crate::regions::CELL;
+use crate::partition::plan::PartitionPlan;
+use crate::regions::{CELL, CHUNK_ROWS};
 use crate::sample_format::FINE_KEYS;
 use crate::source::PlaneRegion;
 
@@ -65,7 +64,7 @@ impl ColumnPlan {
 
 /// A level-0 region of a plane in the voxels of a level `factor` times coarser and `shape`
 /// large: every voxel of that level that sums a voxel of the region.
-pub fn at_level(region: PlaneRegion, factor: [u64; 3], shape: [u64; 3]) -> PlaneRegion {
+pub(crate) fn at_level(region: PlaneRegion, factor: [u64; 3], shape: [u64; 3]) -> PlaneRegion {
     let [y1, x1] = region.end();
     let (y0, x0) = (region.y0 / factor[1], region.x0 / factor[2]);
     PlaneRegion {
@@ -79,7 +78,7 @@ pub fn at_level(region: PlaneRegion, factor: [u64; 3], shape: [u64; 3]) -> Plane
 /// What a pass is: the store's plan, the levels it writes (`0..written`: all of them in one
 /// process, those below the hand-over level in a partition) and its level-0 planes.
 #[derive(Clone, Copy, Debug)]
-pub struct Pass<'a> {
+pub(crate) struct Pass<'a> {
     /// The store's plan.
     pub plan: &'a PartitionPlan,
     /// Bytes of one exact sum (`T::Sum`).
@@ -243,7 +242,7 @@ impl Pass<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::partition::Cuts;
+    use crate::partition::plan::Cuts;
     use crate::pyramid::plan_levels;
     use crate::sample_format::SampleType;
     use crate::store::OmeZarrVersion;

@@ -9,14 +9,12 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use residency_schemas::REGIONS_KEY;
-use residency_schemas::location::{
-    LocationError, ObjectStoreOptions, ROOT_METADATA, StoreLocation,
-};
-use residency_schemas::pyramid::{Pyramid, PyramidError};
+use residency_store::location::{LocationError, ObjectStoreOptions, ROOT_METADATA, StoreLocation};
+use residency_store::pyramid::{Pyramid, PyramidError};
 use zarrs::array::{ArrayError, ArraySubset};
 use zarrs::storage::{ReadableStorageTraits, StoreKey};
 
-use crate::convert::{ChunkWriteError, SlabSink};
+use crate::convert::sink::{ChunkWriteError, SlabSink};
 use crate::region_writer::{
     LevelRegionWriter, RegionWriteError, channel_summaries, region_document,
 };
@@ -126,7 +124,7 @@ fn index_object_store(
         let key = StoreKey::new(name).expect("a valid key");
         let bytes = store.get(&key).map_err(|e| PyramidError::Storage {
             what: format!("{location}/{name}"),
-            reason: e.to_string(),
+            source: e.into(),
         })?;
         if let Some(bytes) = bytes {
             let file = staging.path().join(name);

@@ -4,9 +4,9 @@
 use std::fmt::Write;
 use std::path::PathBuf;
 
-use residency_schemas::location::{LocationError, ObjectStoreOptions, StoreLocation};
-use residency_schemas::pyramid::{Pyramid, PyramidError};
 use residency_schemas::zarr::SHARDING_CODEC;
+use residency_store::location::{LocationError, ObjectStoreOptions, StoreLocation};
+use residency_store::pyramid::{Pyramid, PyramidError};
 use zarrs::array::ArrayMetadata;
 use zarrs::metadata::v3::MetadataV3;
 use zarrs::metadata_ext::chunk_grid::regular::RegularChunkGridConfiguration;

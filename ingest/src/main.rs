@@ -4,15 +4,17 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use anyhow::{Context, Result, bail};
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Parser, Subcommand, ValueEnum};
-use residency_ingest::convert::{ConvertOptions, convert, convert_partition, finalize};
-use residency_ingest::partition::{HANDOFF_FOLDER, Partition};
+use residency_ingest::convert::{ConvertOptions, convert};
+use residency_ingest::partition::{HANDOFF_FOLDER, Partition, convert_partition, finalize};
 use residency_ingest::progress::bytes_bar;
 use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
 use residency_ingest::store::{OmeZarrVersion, directory_bytes, partial_path};
 use residency_ingest::synthetic::{SampleKind, SampleSpec, write_samples};
-use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
+use residency_store::location::{ObjectStoreOptions, StoreLocation};
+use strum::VariantArray;
 
 /// mimalloc keeps freed chunk and slab buffers for reuse instead of returning them to the
 /// kernel, which the system allocator does for every large buffer (measured: most of the
@@ -39,28 +41,34 @@ enum Version {
     V04,
 }
 
-#[derive(Clone, Copy, ValueEnum)]
-enum Kind {
-    /// Light-sheet fluorescence: nuclei (uint16), membranes, filaments (uint8); 96,256,256.
-    Fluorescence,
-    /// Micro-CT of a coiled skeleton, mostly exactly 0 (uint16, 1 channel); 256,256,256.
-    Sparse,
-    /// Mixing fluids filling the volume, no region constant (float32, 1 channel); 256,256,256.
-    Dense,
-    /// Mixing fluids, pure (constant) outside the mixing layer (float32, 1 channel); 256,256,256.
-    Mixing,
-    /// Multiplexed immunofluorescence of a thin section (uint16, 16 markers); 24,256,256.
-    Cycif,
+/// The `--kind` values: every [`SampleKind`] by name, each with its line of `--help`.
+fn sample_kinds() -> impl TypedValueParser<Value = SampleKind> {
+    let values = SampleKind::VARIANTS
+        .iter()
+        .map(|&kind| PossibleValue::new(<&'static str>::from(kind)).help(kind_help(kind)));
+    PossibleValuesParser::new(values).try_map(|name| name.parse::<SampleKind>())
 }
 
-impl From<Kind> for SampleKind {
-    fn from(kind: Kind) -> Self {
-        match kind {
-            Kind::Fluorescence => SampleKind::Fluorescence,
-            Kind::Sparse => SampleKind::Sparse,
-            Kind::Dense => SampleKind::Dense,
-            Kind::Mixing => SampleKind::Mixing,
-            Kind::Cycif => SampleKind::Cycif,
+/// What `ingest sample --help` says of `kind`: its channels, their types and its default
+/// extent.
+fn kind_help(kind: SampleKind) -> &'static str {
+    match kind {
+        SampleKind::Fluorescence => {
+            "Light-sheet fluorescence: nuclei (uint16), membranes, filaments (uint8); 96,256,256"
+        }
+        SampleKind::Sparse => {
+            "Micro-CT of a coiled skeleton, mostly exactly 0 (uint16, 1 channel); 256,256,256"
+        }
+        SampleKind::Dense => {
+            "Mixing fluids filling the volume, no region constant (float32, 1 channel); \
+             256,256,256"
+        }
+        SampleKind::Mixing => {
+            "Mixing fluids, pure (constant) outside the mixing layer (float32, 1 channel); \
+             256,256,256"
+        }
+        SampleKind::Cycif => {
+            "Multiplexed immunofluorescence of a thin section (uint16, 16 markers); 24,256,256"
         }
     }
 }
@@ -165,8 +173,8 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
         /// Which specimen.
-        #[arg(long, value_enum, default_value = "fluorescence")]
-        kind: Kind,
+        #[arg(long, default_value = "fluorescence", value_parser = sample_kinds())]
+        kind: SampleKind,
         /// Extent Z,Y,X in voxels (default: 96,256,256 for fluorescence, 256,256,256 for
         /// sparse, dense and mixing, 24,256,256 for cycif).
         #[arg(long, value_parser = parse_triple_u64)]
@@ -446,7 +454,6 @@ fn run(cli: Cli) -> Result<()> {
             quiet,
         } => {
             set_threads(threads)?;
-            let kind = SampleKind::from(kind);
             let defaults = SampleSpec::new(kind);
             let spec = SampleSpec {
                 kind,
@@ -501,8 +508,40 @@ fn main() -> ExitCode {
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!(
+                "error: {}",
+                residency_schemas::error_chain::join_chain(e.chain())
+            );
             ExitCode::FAILURE
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    use super::*;
+
+    /// The `--kind` of `ingest sample ARGS`, or clap's error.
+    fn kind(args: &[&str]) -> Result<SampleKind, clap::Error> {
+        let argv = ["ingest", "sample", "-o", "out"].iter().chain(args);
+        match Cli::try_parse_from(argv)?.command {
+            Command::Sample { kind, .. } => Ok(kind),
+            _ => unreachable!("the sample command"),
+        }
+    }
+
+    #[test]
+    fn sample_kinds_are_parsed_by_their_names() {
+        Cli::command().debug_assert();
+        assert_eq!(kind(&[]).unwrap(), SampleKind::Fluorescence);
+        for &k in SampleKind::VARIANTS {
+            assert_eq!(kind(&["--kind", k.into()]).unwrap(), k);
+        }
+        for bad in ["Sparse", "ct"] {
+            let e = kind(&["--kind", bad]).unwrap_err();
+            assert_eq!(e.kind(), clap::error::ErrorKind::InvalidValue);
         }
     }
 }

@@ -18,8 +18,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::region_writer::{CHUNK_ROWS, RegionWriteError};
-use crate::regions::{CellGrid, HistogramBlock};
+use crate::regions::{CHUNK_ROWS, CellGrid, HistogramBlock};
 use crate::sample_format::Sample;
 
 /// Where a record lies in its file.
@@ -40,12 +39,41 @@ pub struct LevelRecords {
     pub histograms: Vec<Record>,
 }
 
-fn scratch_error(
+/// A scratch file of region metadata that cannot be written or read back.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: cannot {what} this scratch file of region metadata", path.display())]
+pub struct ScratchError {
+    /// The file.
+    pub path: PathBuf,
+    /// What failed (`create`, `write`, `read`, `open`, `remove`).
+    pub what: &'static str,
+    /// Why.
+    #[source]
+    pub source: ScratchCause,
+}
+
+/// Why a scratch file cannot be used: the file system, or a record that does not encode or
+/// decode.
+#[derive(Debug, thiserror::Error)]
+pub enum ScratchCause {
+    /// What the file system said.
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    /// What postcard said.
+    #[error(transparent)]
+    Record(#[from] postcard::Error),
+}
+
+fn scratch_error<E: Into<ScratchCause>>(
     path: &Path,
     what: &'static str,
-) -> impl FnOnce(std::io::Error) -> RegionWriteError + use<> {
+) -> impl FnOnce(E) -> ScratchError + use<E> {
     let path = path.to_path_buf();
-    move |source| RegionWriteError::Scratch { path, what, source }
+    move |source| ScratchError {
+        path,
+        what,
+        source: source.into(),
+    }
 }
 
 /// Reads the record at `record` of `file` (named `path` in messages).
@@ -53,11 +81,11 @@ fn read_record<R: serde::de::DeserializeOwned>(
     file: &File,
     path: &Path,
     record: Record,
-) -> Result<R, RegionWriteError> {
+) -> Result<R, ScratchError> {
     let mut bytes = vec![0; record.len as usize];
     file.read_exact_at(&mut bytes, record.offset)
         .map_err(scratch_error(path, "read"))?;
-    postcard::from_bytes(&bytes).map_err(|e| scratch_error(path, "read")(std::io::Error::other(e)))
+    postcard::from_bytes(&bytes).map_err(scratch_error(path, "read"))
 }
 
 /// An append-only scratch file of records.
@@ -73,7 +101,7 @@ impl Scratch {
     ///
     /// # Errors
     /// When the folder or the file cannot be created.
-    pub fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
+    pub fn create(path: PathBuf) -> Result<Self, ScratchError> {
         let file = path
             .parent()
             .map_or(Ok(()), std::fs::create_dir_all)
@@ -97,9 +125,8 @@ impl Scratch {
     ///
     /// # Errors
     /// When the file cannot be written.
-    pub fn append(&mut self, value: &impl Serialize) -> Result<Record, RegionWriteError> {
-        let bytes = postcard::to_stdvec(value)
-            .map_err(|e| scratch_error(&self.path, "write")(std::io::Error::other(e)))?;
+    pub fn append(&mut self, value: &impl Serialize) -> Result<Record, ScratchError> {
+        let bytes = postcard::to_stdvec(value).map_err(scratch_error(&self.path, "write"))?;
         self.file
             .write_all(&bytes)
             .map_err(scratch_error(&self.path, "write"))?;
@@ -118,7 +145,7 @@ impl Scratch {
     pub fn read<R: serde::de::DeserializeOwned>(
         &mut self,
         record: Record,
-    ) -> Result<R, RegionWriteError> {
+    ) -> Result<R, ScratchError> {
         self.flush()?;
         read_record(self.file.get_ref(), &self.path, record)
     }
@@ -127,7 +154,7 @@ impl Scratch {
     ///
     /// # Errors
     /// When the file cannot be written.
-    pub fn flush(&mut self) -> Result<(), RegionWriteError> {
+    pub fn flush(&mut self) -> Result<(), ScratchError> {
         self.file
             .flush()
             .map_err(scratch_error(&self.path, "write"))
@@ -137,7 +164,7 @@ impl Scratch {
     ///
     /// # Errors
     /// When the file cannot be removed.
-    pub fn remove(self) -> Result<(), RegionWriteError> {
+    pub fn remove(self) -> Result<(), ScratchError> {
         let Self { path, file, .. } = self;
         drop(file);
         std::fs::remove_file(&path).map_err(scratch_error(&path, "remove"))?;
@@ -161,7 +188,7 @@ struct RecordFiles {
 type FileIndex = usize;
 
 impl RecordFiles {
-    fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
+    fn create(path: PathBuf) -> Result<Self, ScratchError> {
         Ok(Self {
             own: Scratch::create(path)?,
             adopted: Vec::new(),
@@ -169,7 +196,7 @@ impl RecordFiles {
     }
 
     /// Opens another pass's file at `path`; returns its index.
-    fn adopt(&mut self, path: &Path) -> Result<FileIndex, RegionWriteError> {
+    fn adopt(&mut self, path: &Path) -> Result<FileIndex, ScratchError> {
         let file = File::open(path).map_err(scratch_error(path, "open"))?;
         self.adopted.push((path.to_path_buf(), file));
         Ok(self.adopted.len())
@@ -178,7 +205,7 @@ impl RecordFiles {
     fn read<R: serde::de::DeserializeOwned>(
         &mut self,
         (file, record): (FileIndex, Record),
-    ) -> Result<R, RegionWriteError> {
+    ) -> Result<R, ScratchError> {
         if file == 0 {
             self.own.read(record)
         } else {
@@ -205,7 +232,7 @@ impl CellRecords {
     ///
     /// # Errors
     /// When the file cannot be created.
-    pub fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
+    pub fn create(path: PathBuf) -> Result<Self, ScratchError> {
         Ok(Self {
             files: RecordFiles::create(path)?,
             chunks: BTreeMap::new(),
@@ -218,7 +245,7 @@ impl CellRecords {
     ///
     /// # Errors
     /// When the file cannot be written.
-    pub fn spill<T: Sample>(&mut self, block: &CellGrid<T>) -> Result<(), RegionWriteError> {
+    pub fn spill<T: Sample>(&mut self, block: &CellGrid<T>) -> Result<(), ScratchError> {
         let rows = block.rows();
         let mut start = rows.start;
         while start < rows.end {
@@ -236,11 +263,7 @@ impl CellRecords {
     ///
     /// # Errors
     /// When the file cannot be opened.
-    pub fn adopt(
-        &mut self,
-        path: &Path,
-        records: &[(u64, Record)],
-    ) -> Result<(), RegionWriteError> {
+    pub fn adopt(&mut self, path: &Path, records: &[(u64, Record)]) -> Result<(), ScratchError> {
         if records.is_empty() {
             return Ok(());
         }
@@ -259,7 +282,7 @@ impl CellRecords {
         &mut self,
         chunk: u64,
         rows: &mut CellGrid<T>,
-    ) -> Result<(), RegionWriteError> {
+    ) -> Result<(), ScratchError> {
         for record in self.chunks.remove(&chunk).unwrap_or_default() {
             let block: CellGrid<T> = self.files.read(record)?;
             rows.merge(&block);
@@ -272,7 +295,7 @@ impl CellRecords {
     ///
     /// # Errors
     /// When the file cannot be written.
-    pub fn into_records(mut self) -> Result<Vec<(u64, Record)>, RegionWriteError> {
+    pub fn into_records(mut self) -> Result<Vec<(u64, Record)>, ScratchError> {
         self.files.own.flush()?;
         Ok(self.written)
     }
@@ -281,7 +304,7 @@ impl CellRecords {
     ///
     /// # Errors
     /// When the file cannot be removed.
-    pub fn remove(self) -> Result<(), RegionWriteError> {
+    pub fn remove(self) -> Result<(), ScratchError> {
         self.files.own.remove()
     }
 }
@@ -298,7 +321,7 @@ impl HistogramRecords {
     ///
     /// # Errors
     /// When the file cannot be created.
-    pub fn create(path: PathBuf) -> Result<Self, RegionWriteError> {
+    pub fn create(path: PathBuf) -> Result<Self, ScratchError> {
         Ok(Self {
             files: RecordFiles::create(path)?,
             blocks: Vec::new(),
@@ -309,7 +332,7 @@ impl HistogramRecords {
     ///
     /// # Errors
     /// When the file cannot be written.
-    pub fn push(&mut self, block: &HistogramBlock) -> Result<(), RegionWriteError> {
+    pub fn push(&mut self, block: &HistogramBlock) -> Result<(), ScratchError> {
         let record = self.files.own.append(block)?;
         self.blocks.push((0, record));
         Ok(())
@@ -319,7 +342,7 @@ impl HistogramRecords {
     ///
     /// # Errors
     /// When the file cannot be opened.
-    pub fn adopt(&mut self, path: &Path, records: &[Record]) -> Result<(), RegionWriteError> {
+    pub fn adopt(&mut self, path: &Path, records: &[Record]) -> Result<(), ScratchError> {
         if records.is_empty() {
             return Ok(());
         }
@@ -332,10 +355,10 @@ impl HistogramRecords {
     ///
     /// # Errors
     /// When a file cannot be read, a record does not decode, or `each` fails.
-    pub fn for_each(
+    pub fn for_each<E: From<ScratchError>>(
         &mut self,
-        mut each: impl FnMut(HistogramBlock) -> Result<(), RegionWriteError>,
-    ) -> Result<(), RegionWriteError> {
+        mut each: impl FnMut(HistogramBlock) -> Result<(), E>,
+    ) -> Result<(), E> {
         for record in std::mem::take(&mut self.blocks) {
             each(self.files.read(record)?)?;
         }
@@ -347,7 +370,7 @@ impl HistogramRecords {
     ///
     /// # Errors
     /// When the file cannot be written.
-    pub fn into_records(mut self) -> Result<Vec<Record>, RegionWriteError> {
+    pub fn into_records(mut self) -> Result<Vec<Record>, ScratchError> {
         self.files.own.flush()?;
         Ok(self.blocks.into_iter().map(|(_, r)| r).collect())
     }
@@ -356,7 +379,7 @@ impl HistogramRecords {
     ///
     /// # Errors
     /// When the file cannot be removed.
-    pub fn remove(self) -> Result<(), RegionWriteError> {
+    pub fn remove(self) -> Result<(), ScratchError> {
         self.files.own.remove()
     }
 }

@@ -17,9 +17,11 @@ use residency_schemas::{
 use zarrs::array::{Array, ArrayError, ArraySubset};
 
 use crate::ome::ChannelDisplay;
+pub use crate::region_scratch::{ScratchCause, ScratchError};
+
 use crate::region_scratch::{CellRecords, HistogramRecords, LevelRecords};
 use crate::regions::{
-    Binning, CELL, CellGrid, ChannelAccumulator, HALO, HistogramBlock, LevelHistograms,
+    Binning, CELL, CHUNK_ROWS, CellGrid, ChannelAccumulator, HALO, HistogramBlock, LevelHistograms,
 };
 use crate::sample_format::{Sample, SampleType};
 use crate::store::{ArrayLayout, Store, StoreError, StoreWriter};
@@ -31,16 +33,8 @@ pub enum RegionWriteError {
     #[error(transparent)]
     Store(#[from] StoreError),
     /// A scratch file of region metadata cannot be written or read back.
-    #[error("{}: cannot {what} this scratch file of region metadata", path.display())]
-    Scratch {
-        /// The file.
-        path: PathBuf,
-        /// What failed.
-        what: &'static str,
-        /// Why.
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Scratch(#[from] ScratchError),
     /// An array's values cannot be written.
     #[error("{}: cannot write {array}", path.display())]
     WriteArray {
@@ -55,18 +49,15 @@ pub enum RegionWriteError {
 }
 
 /// Percentiles recorded for every channel.
-pub const PERCENTS: [f64; 5] = [0.1, 1.0, 50.0, 99.0, 99.9];
-
-/// Cell rows per chunk of the min/max arrays: the rows written at once.
-pub const CHUNK_ROWS: u64 = 8;
+pub(crate) const PERCENTS: [f64; 5] = [0.1, 1.0, 50.0, 99.0, 99.9];
 
 /// Scratch folder (in the store's temporary folder) of the brick histograms, and of the
 /// columns' cells until their rows are final.
-pub const SCRATCH_FOLDER: &str = ".region-scratch";
+pub(crate) const SCRATCH_FOLDER: &str = ".region-scratch";
 
 /// The channels' statistics, display windows and histogram binnings, from what the pass
 /// gathered.
-pub fn channel_summaries<T: Sample>(
+pub(crate) fn channel_summaries<T: Sample>(
     stats: &[ChannelAccumulator],
     labels: &[String],
 ) -> (Vec<ChannelStatistics>, Vec<ChannelDisplay>, Vec<Binning>) {
@@ -110,7 +101,7 @@ pub fn channel_summaries<T: Sample>(
 }
 
 /// The region metadata document of finished levels.
-pub fn region_document(
+pub(crate) fn region_document(
     levels: Vec<RegionLevel>,
     channels: Vec<ChannelStatistics>,
     brick: [u64; 3],
@@ -144,7 +135,7 @@ struct GridRows<T: Sample> {
 
 /// Writes one level's region metadata as the pass makes it final: rows of min/max cells
 /// (and the coarser grids from them) and rows of brick histograms.
-pub struct LevelRegionWriter<T: Sample> {
+pub(crate) struct LevelRegionWriter<T: Sample> {
     output: PathBuf,
     image: String,
     shape: [u64; 3],
@@ -315,7 +306,8 @@ impl<T: Sample> LevelRegionWriter<T> {
         self.cells
             .as_mut()
             .expect("cell records")
-            .adopt(&folder.join(format!("{stem}.cells")), &records.cells)
+            .adopt(&folder.join(format!("{stem}.cells")), &records.cells)?;
+        Ok(())
     }
 
     /// Takes the rows of `cells` and `histograms` (the pass's windows over the level, or a
@@ -442,7 +434,7 @@ impl<T: Sample> LevelRegionWriter<T> {
     /// # Errors
     /// When the scratch file cannot be written.
     pub fn push_histograms(&mut self, block: &HistogramBlock) -> Result<(), RegionWriteError> {
-        self.histograms.push(block)
+        Ok(self.histograms.push(block)?)
     }
 
     /// Bins the histograms of the scratch file by the channels' `binnings` and writes them

@@ -1,5 +1,6 @@
 //! The arithmetic the pyramid and statistics need on each voxel sample type ([`SampleType`],
-//! defined once in `residency-schemas`).
+//! defined once in `residency-schemas`), and [`PlaneOut`], a plane of any of them that a
+//! source fills.
 
 use std::fmt;
 
@@ -67,7 +68,7 @@ pub trait Sample:
     /// The value of an exact-histogram index (inverse of [`Sample::exact_index`]).
     fn exact_value(index: usize) -> f64;
     /// Wraps a slice of this type as a source's plane destination.
-    fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_>;
+    fn plane_out(out: &mut [Self]) -> PlaneOut<'_>;
 }
 
 fn round_mean(sum: i64, count: u32) -> i64 {
@@ -95,8 +96,8 @@ fn round_mean(sum: i64, count: u32) -> i64 {
 macro_rules! int_sample {
     ($t:ty, $fmt:ident, $key:expr, $edge:expr, $exact:expr, $exact_value:expr) => {
         impl Sample for $t {
-            fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_> {
-                crate::source::PlaneOut::$fmt(out)
+            fn plane_out(out: &mut [Self]) -> PlaneOut<'_> {
+                PlaneOut::$fmt(out)
             }
             #[inline]
             fn exact_index(self) -> Option<usize> {
@@ -212,8 +213,8 @@ fn f32_order_key(v: f32) -> u32 {
 
 impl Sample for f32 {
     const FORMAT: SampleType = SampleType::F32;
-    fn plane_out(out: &mut [Self]) -> crate::source::PlaneOut<'_> {
-        crate::source::PlaneOut::F32(out)
+    fn plane_out(out: &mut [Self]) -> PlaneOut<'_> {
+        PlaneOut::F32(out)
     }
     const LOWEST: Self = f32::NEG_INFINITY;
     const HIGHEST: Self = f32::INFINITY;
@@ -321,6 +322,91 @@ macro_rules! with_sample_type {
             }
         }
     };
+}
+
+/// Where a source writes one z-plane of one channel (`y, x` in C order): a slice of the
+/// converter's sample type, which the source fills converting exactly from its own format.
+pub enum PlaneOut<'a> {
+    /// 8-bit unsigned destination.
+    U8(&'a mut [u8]),
+    /// 16-bit unsigned destination.
+    U16(&'a mut [u16]),
+    /// 16-bit signed destination.
+    I16(&'a mut [i16]),
+    /// 32-bit unsigned destination.
+    U32(&'a mut [u32]),
+    /// 32-bit signed destination.
+    I32(&'a mut [i32]),
+    /// 32-bit float destination.
+    F32(&'a mut [f32]),
+}
+
+impl PlaneOut<'_> {
+    /// Number of samples to write.
+    pub fn len(&self) -> usize {
+        match self {
+            PlaneOut::U8(v) => v.len(),
+            PlaneOut::U16(v) => v.len(),
+            PlaneOut::I16(v) => v.len(),
+            PlaneOut::U32(v) => v.len(),
+            PlaneOut::I32(v) => v.len(),
+            PlaneOut::F32(v) => v.len(),
+        }
+    }
+
+    /// Whether there is nothing to write.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Fills the destination from packed samples of `format` in `bytes`: sample `sample` of
+    /// every pixel of `samples` interleaved samples. Values are converted exactly (the
+    /// converter only asks for promotions that [`SampleType::promote`] allows).
+    pub fn fill_from_bytes(
+        &mut self,
+        bytes: &[u8],
+        format: SampleType,
+        big_endian: bool,
+        samples: usize,
+        sample: usize,
+    ) {
+        fn fill<S: Sample, T: Sample>(
+            bytes: &[u8],
+            big_endian: bool,
+            samples: usize,
+            sample: usize,
+            out: &mut [T],
+        ) {
+            let w = S::FORMAT.bytes();
+            let stride = w * samples;
+            assert_eq!(bytes.len(), out.len() * stride, "decoded plane size");
+            let pixels = bytes.chunks_exact(stride);
+            if S::FORMAT == T::FORMAT {
+                // Same format: decode the bytes as the destination type, bit for bit.
+                for (o, px) in out.iter_mut().zip(pixels) {
+                    *o = T::from_bytes(&px[sample * w..(sample + 1) * w], big_endian);
+                }
+            } else {
+                for (o, px) in out.iter_mut().zip(pixels) {
+                    let s = S::from_bytes(&px[sample * w..(sample + 1) * w], big_endian);
+                    *o = T::from_f64(s.to_f64());
+                }
+            }
+        }
+        macro_rules! dispatch {
+            ($out:expr) => {
+                crate::with_sample_type!(format, S => fill::<S, _>(bytes, big_endian, samples, sample, $out))
+            };
+        }
+        match self {
+            PlaneOut::U8(v) => dispatch!(v),
+            PlaneOut::U16(v) => dispatch!(v),
+            PlaneOut::I16(v) => dispatch!(v),
+            PlaneOut::U32(v) => dispatch!(v),
+            PlaneOut::I32(v) => dispatch!(v),
+            PlaneOut::F32(v) => dispatch!(v),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,8 @@
 //! Serde types for the JSON documents Residency writes or serves.
 //!
-//! Each type here is described by a JSON Schema in `schemas/json/`; the tests check that
-//! documents produced by the real binaries validate against those schemas.
+//! Each document type here is described by a JSON Schema in `schemas/json/`, generated from
+//! the type by `schemars` ([`generate`]); the tests check that documents produced by the real
+//! binaries validate against those schemas.
 //!
 //! The central document is [`RegionMetadata`], stored by `ingest` in the attributes of the
 //! OME-Zarr image group under the key [`REGIONS_KEY`]. It describes the min/max grids and
@@ -9,22 +10,19 @@
 //! [`server`] holds the JSON answers of `brickserver`'s API, and [`wire`] its binary
 //! documents (the min/max hierarchy and brick batches).
 
-#[cfg(feature = "object-store")]
-pub mod aws_profile;
 pub mod dataset;
-#[cfg(feature = "drift")]
-pub mod drift;
+pub mod error_chain;
 pub mod float;
-#[cfg(feature = "object-store")]
-pub mod location;
+pub mod generate;
 pub mod ome;
-#[cfg(feature = "store")]
-pub mod pyramid;
+pub mod sample_kind;
 pub mod sample_type;
 pub mod server;
 pub mod wire;
 pub mod zarr;
 
+pub use error_chain::error_chain;
+pub use sample_kind::SampleKind;
 pub use sample_type::SampleType;
 
 use schemars::JsonSchema;
@@ -42,8 +40,16 @@ pub const HISTOGRAM_BINS: usize = 64;
 /// Region metadata: where the min/max grids and histograms of every pyramid level live,
 /// and how to read them.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(
+    title = "Residency region metadata",
+    description = "Stored by `ingest` under the `residency` key of the OME-Zarr image group's \
+        attributes. Describes the conservative min/max grids and per-brick histograms written as \
+        Zarr arrays under the group's `residency/` subgroup."
+)]
+#[schemars(deny_unknown_fields)]
 pub struct RegionMetadata {
-    /// Layout version, [`REGIONS_VERSION`].
+    /// Layout version, [`REGIONS_VERSION`] (stores of layout `0.1` are still read).
+    #[schemars(extend("enum" = ["0.1", REGIONS_VERSION]))]
     pub version: String,
     /// Path of the group, relative to the image group, holding the metadata arrays.
     pub path: String,
@@ -55,15 +61,19 @@ pub struct RegionMetadata {
     /// Brick (inner chunk) shape of the image arrays, `z, y, x`.
     pub brick_shape: [u64; 3],
     /// Number of histogram bins per brick and channel.
+    #[schemars(range(min = 1))]
     pub histogram_bins: usize,
     /// One entry per pyramid level, finest first.
+    #[schemars(length(min = 1))]
     pub levels: Vec<RegionLevel>,
     /// One entry per channel, in channel order.
+    #[schemars(length(min = 1))]
     pub channels: Vec<ChannelStatistics>,
 }
 
 /// Region metadata of one pyramid level.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct RegionLevel {
     /// Path of the image array of this level (as in `multiscales.datasets[].path`).
     pub image: String,
@@ -73,6 +83,7 @@ pub struct RegionLevel {
     pub factor: [u64; 3],
     /// Min/max grids, finest first. Grid `k` has cells of `cell_shape * 2^k` voxels of this
     /// level; each coarser grid is the min of mins and max of maxes of the finer one.
+    #[schemars(length(min = 1))]
     pub minmax: Vec<MinMaxGrid>,
     /// Exact min/max grids, finest first, over the same cells as `minmax` but without the
     /// halo: each cell's range is that of its own voxels, so region queries over boxes
@@ -91,6 +102,7 @@ pub struct RegionLevel {
 /// Index 0 of the second axis is the minimum, index 1 the maximum. For floating-point data,
 /// NaN voxels are excluded, and a cell whose voxels are all NaN holds NaN.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct MinMaxGrid {
     /// Path of the array, relative to the image group.
     pub path: String,
@@ -102,6 +114,7 @@ pub struct MinMaxGrid {
 
 /// Whole-channel statistics over level 0.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct ChannelStatistics {
     /// Channel label, as in `omero.channels[].label`.
     pub label: String,
@@ -132,14 +145,16 @@ pub struct ChannelStatistics {
     /// is `+inf` itself, is counted in that bin). The edges cover the channel's whole range;
     /// bins past the last edge hold zero. Infinite edges are written as JSON `null`.
     #[serde(deserialize_with = "server::edges_with_infinities")]
-    #[schemars(with = "Vec<Option<f64>>")]
+    #[schemars(with = "Vec<Option<f64>>", length(min = 2))]
     pub histogram_edges: Vec<f64>,
 }
 
 /// A percentile of a channel's values.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct Percentile {
     /// Percent, in `[0, 100]`.
+    #[schemars(range(min = 0, max = 100))]
     pub percent: f64,
     /// Value at that percentile (an infinity is written as a string, see [`float`]).
     #[serde(with = "float")]

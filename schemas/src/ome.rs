@@ -81,13 +81,16 @@ impl ZarrFormat {
 
 /// A problem with a store's OME-Zarr metadata. Every message starts with the document it is
 /// about.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum OmeError {
     /// The document is not JSON of the expected shape.
     #[error("{source_name}: not valid JSON")]
     NotJson {
         /// The document.
         source_name: String,
+        /// What the parser said.
+        #[source]
+        source: serde_json::Error,
     },
     /// A Zarr v3 document that is not a group.
     #[error("{source_name}: not a Zarr group (node_type {node_type})")]
@@ -104,12 +107,13 @@ pub enum OmeError {
         source_name: String,
     },
     /// `multiscales` is there but not of the specification's shape.
-    #[error("{source_name}: malformed multiscales metadata: {reason}")]
+    #[error("{source_name}: malformed multiscales metadata: {source}")]
     BadMultiscales {
         /// The document.
         source_name: String,
         /// What the parser said.
-        reason: String,
+        #[source]
+        source: serde_json::Error,
     },
     /// The axes do not end in `z, y, x`.
     #[error("{source_name}: axes {names:?} do not end in z, y, x")]
@@ -156,12 +160,13 @@ pub enum OmeError {
         scale: [f64; 3],
     },
     /// The region metadata is there but malformed.
-    #[error("{source_name}: malformed '{REGIONS_KEY}' region metadata: {reason}")]
+    #[error("{source_name}: malformed '{REGIONS_KEY}' region metadata: {source}")]
     BadRegions {
         /// The document.
         source_name: String,
         /// What the parser said.
-        reason: String,
+        #[source]
+        source: serde_json::Error,
     },
 }
 
@@ -464,13 +469,13 @@ impl ImageAttributes {
     /// has malformed region metadata.
     pub fn parse(format: ZarrFormat, document: &[u8], source: &str) -> Result<Self, OmeError> {
         let named = |s: &str| s.to_string();
-        let not_json = || OmeError::NotJson {
+        let not_json = |e| OmeError::NotJson {
             source_name: named(source),
+            source: e,
         };
         let attributes = match format {
             ZarrFormat::V3 => {
-                let doc: GroupDocumentIn =
-                    serde_json::from_slice(document).map_err(|_| not_json())?;
+                let doc: GroupDocumentIn = serde_json::from_slice(document).map_err(not_json)?;
                 let node_type = doc.node_type.unwrap_or(serde_json::Value::Null);
                 if node_type != "group" {
                     return Err(OmeError::NotAGroup {
@@ -481,9 +486,9 @@ impl ImageAttributes {
                 doc.attributes
                     .unwrap_or(serde_json::Value::Object(serde_json::Map::new()))
             }
-            ZarrFormat::V2 => serde_json::from_slice(document).map_err(|_| not_json())?,
+            ZarrFormat::V2 => serde_json::from_slice(document).map_err(not_json)?,
         };
-        let attrs: AttributesIn = serde_json::from_value(attributes).map_err(|_| not_json())?;
+        let attrs: AttributesIn = serde_json::from_value(attributes).map_err(not_json)?;
         // The OME keys: under `ome` (0.5), else at the top (0.4 and older).
         let (ome_version, multiscales, omero) = match attrs.ome {
             Some(mut ome) => (
@@ -500,7 +505,7 @@ impl ImageAttributes {
             None | Some(serde_json::Value::Null) => return Err(no_multiscales()),
             Some(m) => serde_json::from_value(m).map_err(|e| OmeError::BadMultiscales {
                 source_name: named(source),
-                reason: e.to_string(),
+                source: e,
             })?,
         };
         if multiscales.is_empty() {
@@ -515,7 +520,7 @@ impl ImageAttributes {
             None | Some(serde_json::Value::Null) => None,
             Some(r) => Some(serde_json::from_value(r).map_err(|e| OmeError::BadRegions {
                 source_name: named(source),
-                reason: e.to_string(),
+                source: e,
             })?),
         };
         Ok(Self {
@@ -720,6 +725,11 @@ mod tests {
             e.to_string()
                 .starts_with("g: malformed 'residency' region metadata: invalid type"),
             "{e}"
+        );
+        let cause = std::error::Error::source(&e).expect("the parser's error is kept");
+        assert_eq!(
+            e.to_string(),
+            format!("g: malformed 'residency' region metadata: {cause}")
         );
     }
 

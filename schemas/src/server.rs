@@ -6,6 +6,13 @@ use serde::{Deserialize, Deserializer, Serialize};
 
 /// `GET /datasets` (and `GET /` but for a browser): the served datasets.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(
+    title = "Served datasets",
+    description = "`GET /datasets` of brickserver (and `GET /` but for a browser): the datasets \
+        it serves, with links that open each in the Residency web viewer, neuroglancer and \
+        vizarr."
+)]
+#[schemars(deny_unknown_fields)]
 pub struct DatasetList {
     /// One entry per dataset, in the order given on the command line.
     pub datasets: Vec<DatasetEntry>,
@@ -13,8 +20,10 @@ pub struct DatasetList {
 
 /// One served dataset.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct DatasetEntry {
     /// URL name: the store is served under `/NAME/`.
+    #[schemars(regex(pattern = r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$"))]
     pub name: String,
     /// URL of the store's root.
     pub url: String,
@@ -28,6 +37,7 @@ pub struct DatasetEntry {
 
 /// An axis-aligned box of voxels of one level, `x, y, z` order, `max` exclusive.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct VoxelBox {
     /// First voxel, `x, y, z`.
     pub min: [u64; 3],
@@ -43,6 +53,16 @@ pub struct VoxelBox {
 /// `histogram.box`. It is never narrower than the truth, and exact (`*_exact: true`) when the
 /// box is aligned to that granularity (or ends at the level's edge).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(
+    title = "Region query answer",
+    description = "`GET /NAME/regions?level=L&channel=C&min=x,y,z&max=x,y,z` of brickserver: the \
+        value range and histogram of a box of voxels of one level, answered from the stored \
+        region metadata without decoding bricks. The answer covers the smallest union of stored \
+        cells (min/max) and bricks (histogram) containing the box: never narrower than the \
+        truth, and exact when the box is aligned to that granularity or ends at the level's \
+        edge."
+)]
+#[schemars(deny_unknown_fields)]
 pub struct RegionAnswer {
     /// Dataset name.
     pub dataset: String,
@@ -74,11 +94,12 @@ pub struct RegionAnswer {
 
 /// The histogram part of a [`RegionAnswer`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct RegionHistogram {
     /// Bin edges of the channel (as in the region metadata): bin `i` counts values `v` with
     /// `edges[i] <= v < edges[i + 1]`. An infinite edge is written as `null`.
     #[serde(deserialize_with = "edges_with_infinities")]
-    #[schemars(with = "Vec<Option<f64>>")]
+    #[schemars(with = "Vec<Option<f64>>", length(min = 2))]
     pub edges: Vec<f64>,
     /// Counts per bin.
     pub counts: Vec<u64>,
@@ -93,8 +114,15 @@ pub struct RegionHistogram {
 
 /// The error answer of the API endpoints.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(
+    title = "API error",
+    description = "Error answer of brickserver's API endpoints (/NAME/regions, /NAME/minmax, \
+        /NAME/bricks)."
+)]
+#[schemars(deny_unknown_fields)]
 pub struct ApiError {
     /// What went wrong, naming the dataset, key or parameter.
+    #[schemars(length(min = 1))]
     pub error: String,
 }
 

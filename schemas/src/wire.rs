@@ -25,6 +25,16 @@ pub const BRICKS_MEDIA_TYPE: &str = "application/x-residency-bricks";
 
 /// Header of a min/max hierarchy document (`GET /NAME/minmax?channel=C`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(
+    title = "Min/max hierarchy header",
+    description = "JSON header of the framed binary document of `GET /NAME/minmax?channel=C` \
+        (media type application/x-residency-minmax): 8 bytes 'RSMINMAX', a little-endian u32 \
+        header length H, H bytes of this header, then the payload. Each grid's block at `offset` \
+        (from the first payload byte) holds gz*gy*gx minima then as many maxima, little-endian \
+        samples of `data_type`, z-major; NaN marks a cell with no non-NaN voxel. These are the \
+        haloed (conservative for trilinear sampling) cells of the region metadata."
+)]
+#[schemars(deny_unknown_fields)]
 pub struct MinMaxHierarchyHeader {
     /// Channel index.
     pub channel: usize,
@@ -39,18 +49,21 @@ pub struct MinMaxHierarchyHeader {
 
 /// The grids of one level in a min/max hierarchy document.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct MinMaxLevelBlock {
     /// Level index.
     pub level: usize,
     /// Level shape `z, y, x`.
     pub shape: [u64; 3],
     /// Grids, finest first; the last has a single cell.
+    #[schemars(length(min = 1))]
     pub grids: Vec<MinMaxGridBlock>,
 }
 
 /// Where one grid's values lie in the payload: `gz·gy·gx` minima, then as many maxima, each a
 /// sample of the header's data type, `z`-major. NaN marks a cell without a non-NaN voxel.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct MinMaxGridBlock {
     /// Cell edge in voxels of the level, `z, y, x`.
     pub cell_shape: [u64; 3],
@@ -88,12 +101,24 @@ pub enum BrickStatus {
 
 /// Header of a brick batch document (`GET /NAME/bricks?b=...`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(
+    title = "Brick batch header",
+    description = "JSON header of the framed binary document of `GET \
+        /NAME/bricks?b=L,C,z,y,x;...` (media type application/x-residency-bricks): 8 bytes \
+        'RSBRICKS', a little-endian u32 header length H, H bytes of this header, then the \
+        payload. An `ok` brick's bytes lie at `offset` (from the first payload byte) for \
+        `length` bytes: with encoding `stored` the brick's encoded bytes exactly as stored \
+        (chunk file, or the inner chunk inside a shard); with `raw` the decoded little-endian \
+        samples of the whole brick shape, z-major."
+)]
+#[schemars(deny_unknown_fields)]
 pub struct BrickBatchHeader {
     /// How bytes are carried.
     pub encoding: BrickEncoding,
     /// Sample type, by its Zarr name.
     pub data_type: SampleType,
     /// Brick shape `z, y, x`.
+    #[schemars(inner(range(min = 1)))]
     pub brick_shape: [u64; 3],
     /// One entry per requested brick, in request order.
     pub bricks: Vec<BrickEntry>,
@@ -101,6 +126,7 @@ pub struct BrickBatchHeader {
 
 /// One brick of a batch.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct BrickEntry {
     /// Pyramid level.
     pub level: u32,
@@ -122,7 +148,7 @@ pub struct BrickEntry {
 }
 
 /// A malformed framed document.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum WireError {
     /// The document does not start with the expected magic.
     #[error("not a {} document (bad magic)", String::from_utf8_lossy(.expected))]
@@ -137,10 +163,11 @@ pub enum WireError {
         length: usize,
     },
     /// The header is not the expected JSON.
-    #[error("bad header: {reason}")]
+    #[error("bad header: {source}")]
     BadHeader {
         /// What the JSON parser said.
-        reason: String,
+        #[source]
+        source: serde_json::Error,
     },
 }
 
@@ -176,9 +203,8 @@ pub fn decode_framed<'a, H: DeserializeOwned>(
         .checked_add(length)
         .filter(|&e| e <= bytes.len())
         .ok_or(WireError::HeaderPastEnd { length })?;
-    let header = serde_json::from_slice(&bytes[12..end]).map_err(|e| WireError::BadHeader {
-        reason: e.to_string(),
-    })?;
+    let header = serde_json::from_slice(&bytes[12..end])
+        .map_err(|source| WireError::BadHeader { source })?;
     Ok((header, &bytes[end..]))
 }
 
@@ -205,11 +231,10 @@ mod tests {
         let doc = encode_framed(BRICKS_MAGIC, &header, &[1, 2, 3]);
         let (back, payload) = decode_framed::<BrickBatchHeader>(BRICKS_MAGIC, &doc).unwrap();
         assert_eq!((back, payload), (header, &[1u8, 2, 3][..]));
-        assert_eq!(
-            decode_framed::<BrickBatchHeader>(MINMAX_MAGIC, &doc).unwrap_err(),
-            WireError::BadMagic {
-                expected: *MINMAX_MAGIC
-            }
+        let e = decode_framed::<BrickBatchHeader>(MINMAX_MAGIC, &doc).unwrap_err();
+        assert!(
+            matches!(e, WireError::BadMagic { expected } if expected == *MINMAX_MAGIC),
+            "{e:?}"
         );
         let mut cut = doc.clone();
         cut.truncate(20);
@@ -225,5 +250,11 @@ mod tests {
                 .to_string(),
             "not a RSMINMAX document (bad magic)"
         );
+        let e =
+            decode_framed::<BrickBatchHeader>(BRICKS_MAGIC, &encode_framed(BRICKS_MAGIC, &1, &[]))
+                .unwrap_err();
+        assert!(e.to_string().starts_with("bad header: invalid type"), "{e}");
+        let cause = std::error::Error::source(&e).expect("the parser's error is kept");
+        assert_eq!(e.to_string(), format!("bad header: {cause}"));
     }
 }

@@ -5,6 +5,7 @@
 use std::num::NonZeroU64;
 
 use serde::Deserialize;
+use zarrs_metadata::ConfigurationError;
 use zarrs_metadata::v2::ArrayMetadataV2;
 use zarrs_metadata::v3::{ArrayMetadataV3, FillValueMetadataV3};
 use zarrs_metadata_ext::chunk_grid::regular::RegularChunkGridConfiguration;
@@ -17,15 +18,31 @@ use crate::ome::ZarrFormat;
 pub const SHARDING_CODEC: &str = "sharding_indexed";
 
 /// A problem with an array's metadata. Every message starts with the document it is about.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, thiserror::Error)]
 pub enum ArrayMetadataError {
     /// Not JSON, or not of the Zarr specification's shape.
-    #[error("{source_name}: not valid Zarr array metadata: {reason}")]
+    #[error("{source_name}: not valid Zarr array metadata: {source}")]
     Malformed {
         /// The document.
         source_name: String,
         /// What the parser said.
-        reason: String,
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A chunk grid's or the sharding codec's configuration that zarrs does not read.
+    #[error("{source_name}: not valid Zarr array metadata: {source}")]
+    BadConfiguration {
+        /// The document.
+        source_name: String,
+        /// What zarrs said of the configuration (boxed: it holds the configuration).
+        #[source]
+        source: Box<ConfigurationError>,
+    },
+    /// A sharding codec configuration of a version zarrs does not know.
+    #[error("{source_name}: not valid Zarr array metadata: unknown sharding configuration")]
+    UnknownSharding {
+        /// The document.
+        source_name: String,
     },
     /// A Zarr v3 document that is not an array.
     #[error("{source_name}: not a Zarr array (node_type {node_type})")]
@@ -105,14 +122,13 @@ impl ArrayDescription {
         source: &str,
     ) -> Result<Self, ArrayMetadataError> {
         let named = || source.to_string();
-        let malformed = |e: &dyn std::fmt::Display| ArrayMetadataError::Malformed {
+        let malformed = |source| ArrayMetadataError::Malformed {
             source_name: named(),
-            reason: e.to_string(),
+            source,
         };
         let description = match format {
             ZarrFormat::V3 => {
-                let header: NodeType =
-                    serde_json::from_slice(document).map_err(|e| malformed(&e))?;
+                let header: NodeType = serde_json::from_slice(document).map_err(malformed)?;
                 let node_type = header.node_type.unwrap_or(serde_json::Value::Null);
                 if node_type != "array" {
                     return Err(ArrayMetadataError::NotAnArray {
@@ -120,13 +136,11 @@ impl ArrayDescription {
                         node_type: node_type.to_string(),
                     });
                 }
-                let meta: ArrayMetadataV3 =
-                    serde_json::from_slice(document).map_err(|e| malformed(&e))?;
+                let meta: ArrayMetadataV3 = serde_json::from_slice(document).map_err(malformed)?;
                 Self::of_v3(&meta, source)?
             }
             ZarrFormat::V2 => {
-                let meta: ArrayMetadataV2 =
-                    serde_json::from_slice(document).map_err(|e| malformed(&e))?;
+                let meta: ArrayMetadataV2 = serde_json::from_slice(document).map_err(malformed)?;
                 Self::of_v2(&meta, source)?
             }
         };
@@ -143,6 +157,10 @@ impl ArrayDescription {
 
     fn of_v3(meta: &ArrayMetadataV3, source: &str) -> Result<Self, ArrayMetadataError> {
         let named = || source.to_string();
+        let bad_configuration = |source| ArrayMetadataError::BadConfiguration {
+            source_name: named(),
+            source: Box::new(source),
+        };
         let name = meta.data_type.name();
         let sample_type = SampleType::from_zarr_name(name).ok_or_else(|| {
             ArrayMetadataError::UnsupportedDataType {
@@ -154,14 +172,10 @@ impl ArrayDescription {
         let (chunk, sharded): (Vec<NonZeroU64>, bool) = if let Some(s) = sharding {
             let ShardingCodecConfiguration::V1(c) = s
                 .to_configuration::<ShardingCodecConfiguration>()
-                .map_err(|e| ArrayMetadataError::Malformed {
-                    source_name: named(),
-                    reason: e.to_string(),
-                })?
+                .map_err(bad_configuration)?
             else {
-                return Err(ArrayMetadataError::Malformed {
+                return Err(ArrayMetadataError::UnknownSharding {
                     source_name: named(),
-                    reason: "unknown sharding configuration".into(),
                 });
             };
             (c.chunk_shape, true)
@@ -172,13 +186,10 @@ impl ArrayDescription {
                     grid: meta.chunk_grid.name().to_string(),
                 });
             }
-            let c: RegularChunkGridConfiguration =
-                meta.chunk_grid
-                    .to_configuration()
-                    .map_err(|e| ArrayMetadataError::Malformed {
-                        source_name: named(),
-                        reason: e.to_string(),
-                    })?;
+            let c: RegularChunkGridConfiguration = meta
+                .chunk_grid
+                .to_configuration()
+                .map_err(bad_configuration)?;
             (c.chunk_shape, false)
         };
         Ok(Self {
@@ -306,6 +317,11 @@ mod tests {
             e.to_string()
                 .starts_with("x: not valid Zarr array metadata: "),
             "{e}"
+        );
+        let cause = std::error::Error::source(&e).expect("the parser's error is kept");
+        assert_eq!(
+            e.to_string(),
+            format!("x: not valid Zarr array metadata: {cause}")
         );
         let flat = array_v2([1, 8, 8, 8], "|u1").replace("[1, 8, 8, 8]", "[8, 8]");
         let e = ArrayDescription::parse(ZarrFormat::V2, flat.as_bytes(), "f").unwrap_err();

@@ -1,119 +1,164 @@
-//! The hand-written JSON Schemas in `schemas/json/` of the server's and the store's documents
-//! (also the component schemas of the server's OpenAPI document, which embeds them) cannot
-//! drift from the Rust types that write the documents: each schema is compared with the one
-//! `schemars` derives from its type, as the type serializes (`residency_schemas::drift` says
-//! what is compared). The viewer's documents are checked the same way in its own tests.
+//! The JSON Schemas in `schemas/json/` of the server's and the store's documents (also the
+//! component schemas of the server's OpenAPI document, which embeds them) are generated from
+//! the Rust types that write the documents (`residency_schemas::generate`): the committed
+//! files must equal the generated text byte for byte. After a type change, regenerate them
+//! with `RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-schemas --test json_schemas`. The
+//! viewer's documents are checked the same way in its own tests.
 
-use residency_schemas::RegionMetadata;
-use residency_schemas::drift::{Node, derived, drift, drift_of_files, hand_written};
-use residency_schemas::server::{ApiError, DatasetList, RegionAnswer};
-use residency_schemas::wire::{BrickBatchHeader, MinMaxHierarchyHeader};
+use residency_schemas::generate::{
+    REGENERATE, SchemaFile, SnapshotError, documents, snapshot, stale, write,
+};
+use residency_schemas::server::RegionAnswer;
+use residency_schemas::wire::BrickBatchHeader;
 use serde_json::{Value, json};
 
-/// Every hand-written schema of a Rust type, with the schema derived from that type.
-fn pairs() -> Vec<(&'static str, Value)> {
-    vec![
-        ("datasets.schema.json", derived::<DatasetList>()),
-        ("region-answer.schema.json", derived::<RegionAnswer>()),
-        ("api-error.schema.json", derived::<ApiError>()),
-        (
-            "minmax-hierarchy.schema.json",
-            derived::<MinMaxHierarchyHeader>(),
-        ),
-        ("brick-batch.schema.json", derived::<BrickBatchHeader>()),
-        ("region-metadata.schema.json", derived::<RegionMetadata>()),
-    ]
+#[test]
+fn schema_files_are_generated_from_the_rust_types() {
+    snapshot(&documents(), REGENERATE);
 }
 
+/// The check is not vacuous: a file whose text differs from the generated one in any way,
+/// or that is missing, is reported by name with the command that regenerates it.
 #[test]
-fn hand_written_schemas_match_the_rust_types() {
-    let failures = drift_of_files(&pairs());
+fn a_stale_schema_file_is_reported() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = documents();
+    write(dir.path(), &files).unwrap();
+    assert!(stale(dir.path(), &files, REGENERATE).is_empty());
+
+    let path = dir.path().join("brick-batch.schema.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let renamed = text.replace("\"offset\"", "\"start\"");
+    assert_ne!(renamed, text);
+    std::fs::write(&path, renamed).unwrap();
+    let found = stale(dir.path(), &files, REGENERATE);
+    assert_eq!(found.len(), 1, "{found:#?}");
+    assert!(matches!(&found[0], SnapshotError::Stale { path: p, .. } if *p == path));
+    assert_eq!(
+        found[0].to_string(),
+        format!(
+            "{} is stale: it differs from the schema generated from its Rust type; regenerate \
+             it with `RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-schemas --test \
+             json_schemas`",
+            path.display()
+        )
+    );
+
+    // A change of layout alone (the trailing newline) is a change too.
+    std::fs::write(&path, text.trim_end()).unwrap();
+    assert_eq!(stale(dir.path(), &files, REGENERATE).len(), 1);
+
+    std::fs::remove_file(&path).unwrap();
+    let found = stale(dir.path(), &files, REGENERATE);
+    assert_eq!(found.len(), 1, "{found:#?}");
+    let message = found[0].to_string();
     assert!(
-        failures.is_empty(),
-        "the JSON Schemas drifted from the Rust types (fix the file or the type):\n{}",
-        failures.join("\n")
+        message.starts_with(&format!(
+            "{} cannot be read; generate it with `",
+            path.display()
+        )),
+        "{message}"
     );
+    assert!(std::error::Error::source(&found[0]).is_some());
+
+    write(dir.path(), &files).unwrap();
+    assert!(stale(dir.path(), &files, REGENERATE).is_empty());
 }
 
-/// The check is not vacuous: every kind of drift in a hand-written schema is reported.
+fn generated<T: schemars::JsonSchema>(name: &'static str) -> Value {
+    serde_json::from_str(&SchemaFile::written::<T>(name).text).unwrap()
+}
+
+/// The generated text is stable: keys sorted, two-space indents, one trailing newline, and
+/// the `$id` and the draft named.
 #[test]
-fn drift_is_reported() {
-    let rust = derived::<BrickBatchHeader>();
-    let file = hand_written("brick-batch.schema.json");
-    assert_eq!(drift(&file, &rust), Vec::<String>::new());
+fn schema_text_is_canonical() {
+    for file in documents() {
+        let value: Value = serde_json::from_str(&file.text).unwrap();
+        let mut again = serde_json::to_string_pretty(&value).unwrap();
+        again.push('\n');
+        assert_eq!(again, file.text, "{}", file.name);
+        assert_eq!(
+            value["$id"],
+            json!(format!("https://residency.invalid/schemas/{}", file.name))
+        );
+        assert_eq!(
+            value["$schema"],
+            json!("https://json-schema.org/draft/2020-12/schema")
+        );
+        assert!(value["title"].is_string(), "{} has a title", file.name);
+        assert_eq!(value["additionalProperties"], json!(false), "{}", file.name);
+    }
+}
 
-    let mut renamed = file.clone();
-    let entry = renamed["properties"]["bricks"]["items"]
-        .as_object_mut()
-        .unwrap();
-    let props = entry["properties"].as_object_mut().unwrap();
-    let offset = props.remove("offset").unwrap();
-    props.insert("start".into(), offset);
-    entry["required"] = json!(["level", "channel", "brick", "status", "start", "length"]);
+/// The strings an enumeration admits, one `const` per variant.
+fn listed(schema: &Value) -> Vec<&str> {
+    schema["oneOf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v["const"].as_str().unwrap())
+        .collect()
+}
+
+/// Fields are required exactly when serde always writes them (an `Option` skipped when
+/// `None` is not), fixed arrays have their length, and enums list what Rust writes.
+#[test]
+fn schemas_describe_what_is_written() {
+    let batch = generated::<BrickBatchHeader>("brick-batch.schema.json");
+    let mut required: Vec<&str> = batch["required"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    required.sort_unstable();
+    assert_eq!(required, ["brick_shape", "bricks", "data_type", "encoding"]);
+    let entry = &batch["properties"]["bricks"]["items"];
+    let mut entry_required: Vec<&str> = entry["required"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    entry_required.sort_unstable();
     assert_eq!(
-        drift(&renamed, &rust),
-        [
-            "#/bricks/[]: property 'start' is in the file, not in the Rust type",
-            "#/bricks/[]: property 'offset' is in the Rust type, not in the file",
-            "#/bricks/[]: the file requires {\"brick\", \"channel\", \"length\", \"level\", \
-             \"start\", \"status\"}, Rust always writes {\"brick\", \"channel\", \"length\", \
-             \"level\", \"offset\", \"status\"}",
-        ]
+        entry_required,
+        ["brick", "channel", "length", "level", "offset", "status"]
     );
-
-    let mut optional = file.clone();
-    optional["required"] = json!(["encoding", "data_type", "bricks"]);
+    assert_eq!(entry["properties"]["error"]["type"], json!("string"));
+    let shape = &batch["properties"]["brick_shape"];
     assert_eq!(
-        drift(&optional, &rust),
-        [
-            "#: the file requires {\"bricks\", \"data_type\", \"encoding\"}, Rust always writes \
-             {\"brick_shape\", \"bricks\", \"data_type\", \"encoding\"}"
-        ]
+        (&shape["minItems"], &shape["maxItems"]),
+        (&json!(3), &json!(3))
     );
-
-    let mut retyped = file.clone();
-    retyped["properties"]["bricks"]["items"]["properties"]["level"] = json!({"type": "string"});
-    retyped["properties"]["brick_shape"]["maxItems"] = json!(4);
-    retyped["properties"]["brick_shape"]["minItems"] = json!(4);
+    assert_eq!(shape["items"]["minimum"], json!(1));
+    assert_eq!(listed(&batch["properties"]["encoding"]), ["stored", "raw"]);
     assert_eq!(
-        drift(&retyped, &rust),
-        [
-            "#/brick_shape: the file's array length is Some(4), Rust's Some(3)",
-            "#/bricks/[]/level: the file admits types {\"string\"}, Rust writes {\"integer\"}",
-        ]
+        listed(&entry["properties"]["status"]),
+        ["ok", "empty", "error"]
     );
-
-    let mut fewer = file.clone();
-    fewer["properties"]["data_type"]["enum"] = json!(["uint8", "uint16"]);
-    fewer["properties"]["encoding"]["enum"] = json!(["stored", "raw", "zstd"]);
-    let found = drift(&fewer, &rust);
-    assert_eq!(found.len(), 2, "{found:#?}");
-    assert!(found[0].starts_with(
-        "#/data_type: the file lists {\"uint16\", \"uint8\"}, the Rust enum writes {"
-    ));
-    assert!(found[1].starts_with("#/encoding: the file lists {\"raw\", \"stored\", \"zstd\"}"));
+    assert_eq!(
+        listed(&batch["properties"]["data_type"]),
+        ["uint8", "uint16", "int16", "uint32", "int32", "float32"]
+    );
 }
 
 /// What the custom serde of the statistics really writes: numbers or the strings of
 /// non-finite values, `null` for "no value", and `null` for infinite histogram edges.
 #[test]
 fn custom_serde_fields_are_described_as_written() {
-    let rust = derived::<RegionAnswer>();
-    let root = Node::document(&rust);
-    let (props, required) = root.object().unwrap();
-    assert!(required.contains("min") && required.contains("max"));
+    let answer = generated::<RegionAnswer>("region-answer.schema.json");
+    let required = answer["required"].as_array().unwrap();
+    assert!(required.contains(&json!("min")) && required.contains(&json!("max")));
     assert_eq!(
-        props["min"].types(),
-        ["null", "number", "string"].map(String::from).into()
+        answer["properties"]["min"]["oneOf"],
+        json!([
+            {"type": "number"},
+            {"type": "string", "enum": ["Infinity", "-Infinity", "NaN"]},
+            {"type": "null"}
+        ])
     );
-    assert_eq!(
-        props["min"].strings(),
-        Some(["-Infinity", "Infinity", "NaN"].map(String::from).into())
-    );
-    let (histogram, _) = props["histogram"].object().unwrap();
-    let (edges, _) = histogram["edges"].array().unwrap();
-    assert_eq!(
-        edges.unwrap().types(),
-        ["null", "number"].map(String::from).into()
-    );
+    let edges = &answer["properties"]["histogram"]["properties"]["edges"];
+    assert_eq!(edges["items"]["type"], json!(["number", "null"]));
 }

@@ -1,6 +1,6 @@
 // Launches Debian's Chromium headless through playwright-core, with WebGPU on Chromium's
 // SwiftShader adapter, and drives pages for the browser tests (tests/python/test_web_viewer.py,
-// tests/python/test_peer_viewers.py; the Python side is tests/python/browser.py).
+// tests/python/test_peer_viewers.py; the Python side is tests/python/support/browser.py).
 //
 //   import { launch, openBrowser, openPage, runSteps, runPage } from "./browser.mjs";
 //

@@ -1,5 +1,5 @@
 // One headless Chromium (browser.mjs) for many pages, so that a test module starts the browser
-// once (tests/python/browser.py, `BrowserSession`):
+// once (tests/python/support/browser.py, `BrowserSession`):
 //
 //   node tests/browser/session.mjs
 //

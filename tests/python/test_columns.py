@@ -4,15 +4,14 @@ one a whole-plane conversion writes, for strip and tiled TIFFs (compressed, floa
 folders, raw files, shards, anisotropic pyramids and partitions; a limit nothing fits is
 refused before anything is written."""
 
-import pathlib
 import re
 
 import numpy as np
 import pytest
 import tifffile
 
-from conftest import run_ingest
-from test_partitions import files, run_partitions
+from support.binaries import run_ingest, run_partitions
+from support.stores import files
 
 SHAPE = (19, 640, 960)
 
@@ -86,6 +85,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_columns_write_the_store_whole_planes_write(inputs, tmp_path, case):
     name, flags, limit, line = CASES[case]

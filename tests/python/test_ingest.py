@@ -2,7 +2,6 @@
 zarr-python reads the output, ome-zarr-models validates it, NumPy is the reference."""
 
 import json
-import os
 import pathlib
 import signal
 import subprocess
@@ -15,16 +14,10 @@ import tifffile
 import zarr
 from ome_zarr_models import open_ome_zarr
 
-from conftest import (
-    BIN,
-    ROOT,
-    assert_pyramid_exact,
-    assert_region_metadata,
-    assert_same_bits,
-    multiscale,
-    root_attributes,
-    run_ingest,
-)
+from support.binaries import run_ingest
+from support.paths import BIN, ROOT
+from support.reference import assert_pyramid_exact, assert_region_metadata, assert_same_bits
+from support.stores import multiscale, root_attributes
 
 RNG = np.random.default_rng(7)
 

@@ -14,7 +14,11 @@ import time
 
 import pytest
 
-from conftest import BIN, run_ingest
+from support.binaries import run_ingest, start_server
+from support.paths import BIN
+from support.stores import files
+
+pytestmark = pytest.mark.s3
 
 KEY = "AKRESIDENCYTEST"
 SECRET = "residency-test-secret-0123456789"
@@ -127,11 +131,6 @@ def test_viewer_renders_the_same_image_from_s3_as_from_the_folder(s3, tmp_path):
                                    "--s3-endpoint", s3["endpoint"])
 
 
-def files(folder: pathlib.Path) -> dict:
-    """Every file under `folder` (relative path → bytes)."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
-
-
 def test_convert_to_s3_writes_the_bytes_of_a_local_convert_root_metadata_last(s3, tmp_path):
     url = "s3://bucket/converted/sample.ome.zarr"
     up = run("ingest", "convert", *s3["inputs"], "-o", url, "--s3-endpoint", s3["endpoint"],
@@ -196,18 +195,6 @@ def test_index_in_s3_writes_what_a_local_index_writes_root_metadata_last(s3, tmp
     assert (remote / "zarr.json").stat().st_mtime_ns >= max(others)
 
 
-def start_brickserver(*args):
-    """`brickserver serve ARGS --bind 127.0.0.1:0` with the test's S3 credentials; returns
-    (process, base URL) once it listens."""
-    proc = subprocess.Popen(
-        [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env())
-    for line in proc.stdout:
-        if line.startswith("listening on "):
-            return proc, line.split("listening on ")[1].strip()
-    raise AssertionError(f"brickserver did not start:\n{proc.stderr.read()}")
-
-
 @pytest.fixture(scope="module")
 def replicas(s3):
     """Two brickserver replicas serving the store in the bucket, one more without a memory cache
@@ -219,7 +206,7 @@ def replicas(s3):
     for name, where, extra in [("a", url, []), ("b", url, []),
                                ("uncached", url, ["--cache-bytes", "0"]),
                                ("local", s3["local"], [])]:
-        proc, base = start_brickserver(where, "--s3-endpoint", s3["endpoint"], *extra)
+        proc, base = start_server(where, "--s3-endpoint", s3["endpoint"], *extra, env=env())
         procs.append(proc)
         bases[name] = base
     yield bases
@@ -370,7 +357,7 @@ def test_partitions_write_into_the_bucket_the_bytes_of_one_local_convert(s3, tmp
               and p.name != "zarr.json"]
     assert (remote / "zarr.json").stat().st_mtime_ns >= max(others)
     # Served from the bucket, it draws the local store's image.
-    proc, base = start_brickserver(url, "--s3-endpoint", s3["endpoint"])
+    proc, base = start_server(url, "--s3-endpoint", s3["endpoint"], env=env())
     try:
         assert_renders_the_local_image(s3, tmp_path, "--server", base, "--dataset", "sample")
     finally:
@@ -405,7 +392,7 @@ def test_files_larger_than_a_part_go_up_in_parts(s3, tmp_path):
     assert files(remote) == files(local)
     key, size = max(((k, len(v)) for k, v in files(local).items()), key=lambda kv: kv[1])
     assert size > 16 << 20 and key.startswith("0/c/")
-    proc, base = start_brickserver(url, "--s3-endpoint", s3["endpoint"])
+    proc, base = start_server(url, "--s3-endpoint", s3["endpoint"], env=env())
     try:
         got = requests.get(f"{base}/noise/{key}")
         assert got.content == (local / key).read_bytes()

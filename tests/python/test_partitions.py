@@ -4,32 +4,16 @@ byte the one a single `ingest convert` writes, for odd shapes, shards, several c
 samples and OME-Zarr 0.4; a failed partition is rerun alone; errors say what is missing."""
 
 import os
-import pathlib
 import subprocess
 
 import pytest
 import zarr
 
-from conftest import BIN, ROOT, run_ingest
+from support.binaries import run_ingest, run_partitions
+from support.paths import BIN, ROOT
+from support.stores import files
 
 CLUSTER = ROOT / "scripts" / "cluster"
-
-
-def files(folder: pathlib.Path) -> dict:
-    """Every file under `folder` (relative path → bytes)."""
-    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
-
-
-def run_partitions(inputs, output, n, *flags, only=None):
-    """Runs partitions `only` (default: all N) of a conversion as separate processes at once."""
-    procs = [subprocess.Popen([str(BIN / "ingest"), "convert", *map(str, inputs), "-o", str(output),
-                               *flags, "--quiet", "--partition", f"{i}/{n}"],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-             for i in (range(n) if only is None else only)]
-    for p in procs:
-        out, err = p.communicate(timeout=300)
-        assert p.returncode == 0, err
-        assert out.startswith("wrote partition "), out
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Any OME-Zarr viewer, shown rather than claimed: stores written by `ingest` (OME-Zarr 0.4 on
 Zarr v2, 0.5 on Zarr v3, 0.5 sharded) and served by `brickserver serve` open in two viewers
-nobody here wrote, in headless Chromium (tests/python/browser.py):
+nobody here wrote, in headless Chromium (tests/python/support/browser.py):
 
 - neuroglancer: the static client of the `neuroglancer` PyPI package, served from loopback,
   opened with the `#!` state of the link that brickserver's /datasets gives (what a user clicks);
@@ -26,9 +26,11 @@ import pytest
 import requests
 import zarr
 
-from browser import StaticServer, browser_session, read_png, require_browser, run_node  # noqa: F401 (fixture)
-from conftest import root_attributes, run_ingest
-from test_server import start_server
+from support.binaries import run_ingest, start_server
+from support.browser import StaticServer, read_png, require_browser, run_node
+from support.stores import root_attributes
+
+pytestmark = pytest.mark.browser
 
 SHAPE = (64, 64, 64)  # z, y, x
 CUBE = (slice(12, 52), slice(4, 28), slice(36, 60))  # top right in an x-right, y-down view
@@ -225,6 +227,7 @@ def neuroglancer_steps(shot):
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(FORMS))
 def test_neuroglancer_opens_the_link_and_shows_the_bright_corner(name, stores, served, neuroglancer_client, browser_session, tmp_path):
     link = served[name]["neuroglancer"]
@@ -271,6 +274,7 @@ def viv_steps(shot):
     ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(FORMS))
 def test_viv_shows_the_bright_corner(name, stores, served, viv_page, browser_session, tmp_path):
     source = served[name]["url"]

@@ -11,14 +11,16 @@ import subprocess
 import sys
 
 import jsonschema
+import pytest
 
-from conftest import BIN, ROOT
+from support.paths import BIN, ROOT
 
 SCHEMA = ROOT / "schemas" / "json" / "render-bench.schema.json"
 # Bytes per sample of each type a results file names.
 SAMPLE_BYTES = {"uint8": 1, "uint16": 2, "int16": 2, "uint32": 4, "int32": 4, "float32": 4}
 
 
+@pytest.mark.slow
 def test_short_mode_runs_every_experiment_and_validates(tmp_path):
     out, data = tmp_path / "report", tmp_path / "data"
     env = dict(os.environ, RESIDENCY_BIN=str(BIN), XDG_RUNTIME_DIR=os.environ.get("XDG_RUNTIME_DIR", "/tmp"))

@@ -4,7 +4,6 @@ requests for headers, and raw requests for path traversal."""
 import http.client
 import json
 import os
-import pathlib
 import signal
 import subprocess
 import urllib.parse
@@ -16,31 +15,10 @@ import tifffile
 import zarr
 from ome_zarr_models import open_ome_zarr
 
-from conftest import BIN, run_ingest
-
-
-def start_server(*args):
-    """Starts `brickserver serve ARGS --bind 127.0.0.1:0`; returns (process, base URL) once
-    it announces that it listens."""
-    proc = subprocess.Popen(
-        [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    for line in proc.stdout:
-        if line.startswith("listening on "):
-            return proc, line.split("listening on ")[1].strip()
-    raise AssertionError(f"brickserver did not start:\n{proc.stderr.read()}")
-
-
-def small_store(tmp_path):
-    """A one-channel store made by `ingest` from a tiny TIFF."""
-    src = tmp_path / "a.tif"
-    tifffile.imwrite(src, np.ones((2, 8, 8), np.uint8), photometric="minisblack")
-    store = tmp_path / "a.ome.zarr"
-    run_ingest("convert", src, "-o", store, "--quiet")
-    return store
+from support.binaries import run_ingest, start_server, stop_server
+from support.paths import BIN
+from support.stores import small_store
+from support.wire import metric
 
 
 @pytest.fixture(scope="module")
@@ -59,9 +37,7 @@ def served(tmp_path_factory):
     os.symlink(d / "secret.txt", store / "escape")
     proc, base = start_server(store)
     yield base, store, proc
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=10)
+    stop_server(proc)
 
 
 def test_zarr_python_reads_every_level_over_http(served):
@@ -256,14 +232,6 @@ def test_empty_token_file_is_refused(tmp_path):
     (tmp_path / "token").write_text("  \n")
     p = subprocess.run([str(BIN / "brickserver"), "serve", str(store), "--token-file", str(tmp_path / "token")], capture_output=True, text=True)
     assert p.returncode != 0 and "token file is empty" in p.stderr
-
-
-def metric(text, name):
-    """The value of the sample `name` (with labels, as written) in OpenMetrics text."""
-    for line in text.splitlines():
-        if line.startswith(name + " "):
-            return float(line.split()[-1])
-    raise AssertionError(f"{name} not in metrics:\n{text}")
 
 
 def test_metrics_count_requests_bytes_and_latency(served):

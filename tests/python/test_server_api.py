@@ -4,12 +4,8 @@ grids, batched bricks against individually fetched ones, the OpenAPI document an
 against real responses, and the limits and faults (timeouts, connection limit, batch caps,
 bounded cache, unreadable and corrupt chunks)."""
 
-import json
-import pathlib
 import shutil
-import signal
 import socket
-import struct
 import time
 
 import jsonschema
@@ -20,20 +16,10 @@ import tifffile
 import zarr
 from openapi_spec_validator import validate as validate_openapi
 
-from conftest import ROOT, root_attributes, run_ingest
-from test_server import metric, start_server
-
-SCHEMAS = ROOT / "schemas" / "json"
-
-
-def schema(name):
-    return json.loads((SCHEMAS / name).read_text())
-
-
-def stop(proc):
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=10)
+from support.binaries import run_ingest, start_server, stop_server
+from support.paths import schema
+from support.stores import root_attributes
+from support.wire import metric, unframe, widen
 
 
 @pytest.fixture(scope="module")
@@ -57,12 +43,7 @@ def stores(tmp_path_factory):
     run_ingest("convert", fsrc, "-o", f32, "--chunk", "8", "--shard", "16", "--quiet")
     proc, base = start_server(u16, f32)
     yield base, {"u16": u16, "f32": f32}
-    stop(proc)
-
-
-def widen(lo, hi, step, size):
-    """[lo, hi) widened to multiples of `step`, clipped to `size` (per axis, x, y, z)."""
-    return [l // s * s for l, s in zip(lo, step)], [min(-(-h // s) * s, n) for h, s, n in zip(hi, step, size)]
+    stop_server(proc)
 
 
 def boxes(shape_zyx, rng, count):
@@ -164,13 +145,7 @@ def test_region_api_without_metadata_or_dataset_is_404(tmp_path):
         r = requests.get(f"{base}/nope/regions", params={"level": 0, "channel": 0, "min": "0,0,0", "max": "1,1,1"})
         assert r.status_code == 404 and r.json() == {"error": "no dataset 'nope'"}
     finally:
-        stop(proc)
-
-
-def unframe(body, magic):
-    assert body[:8] == magic
-    (n,) = struct.unpack("<I", body[8:12])
-    return json.loads(body[12 : 12 + n]), body[12 + n :]
+        stop_server(proc)
 
 
 @pytest.mark.parametrize("name", ["u16", "f32"])
@@ -273,7 +248,7 @@ def test_batch_caps_and_bad_batches(tmp_path, stores):
         assert "brick [99, 0, 0] lies outside level 0" in header["bricks"][0]["error"]
         assert header["bricks"][1]["error"] == "channel 5 does not exist (the dataset has 2)"
     finally:
-        stop(proc)
+        stop_server(proc)
 
 
 def test_corrupt_and_unreadable_chunks_are_named_and_the_rest_still_served(tmp_path, stores):
@@ -302,7 +277,7 @@ def test_corrupt_and_unreadable_chunks_are_named_and_the_rest_still_served(tmp_p
         assert requests.get(f"{base}/broken/{fkey}").content == fine.read_bytes()
         assert requests.get(f"{base}/healthz").text == "ok\n"
     finally:
-        stop(proc)
+        stop_server(proc)
 
 
 def reroot(value, prefix):
@@ -385,7 +360,7 @@ def test_slow_and_idle_clients_are_disconnected(stores):
         assert time.monotonic() - t0 < 4.5
         assert requests.get(f"{base}/healthz").status_code == 200
     finally:
-        stop(proc)
+        stop_server(proc)
 
 
 def test_connection_limit_refuses_with_503_then_recovers(stores):
@@ -408,7 +383,7 @@ def test_connection_limit_refuses_with_503_then_recovers(stores):
             assert s.get(f"{base}/healthz").status_code == 200
             assert metric(s.get(f"{base}/metrics").text, "brickserver_connections_refused_total") == 1
     finally:
-        stop(proc)
+        stop_server(proc)
 
 
 def test_cache_hits_are_counted_and_the_cache_stays_within_budget(stores):
@@ -437,4 +412,4 @@ def test_cache_hits_are_counted_and_the_cache_stays_within_budget(stores):
                 assert 0 < m("brickserver_cache_bytes") <= budget
             assert total > 4 * budget
     finally:
-        stop(proc)
+        stop_server(proc)

@@ -20,15 +20,13 @@ import tifffile
 import zarr
 from ome_zarr_models import open_ome_zarr
 
-from conftest import BIN, ROOT, assert_region_metadata, histogram_bins_of, histogram_edges, level_factors, root_attributes, run_ingest, window_sums
-from test_server import start_server
+from support.binaries import run_ingest, start_server
+from support.paths import BIN, schema
+from support.reference import assert_region_metadata, histogram_bins_of, histogram_edges, window_sums
+from support.stores import level_factors, root_attributes
+from support.wire import unframe, widen
 
-SCHEMAS = ROOT / "schemas" / "json"
 TIMEOUT = 60
-
-
-def schema(name):
-    return json.loads((SCHEMAS / name).read_text())
 
 
 def num(v):
@@ -200,7 +198,7 @@ def _fsum_windows(a, f, axis):
 def assert_pyramid(store, level0):
     """Integers: every level is the exact window mean rounded half away from zero. Floats:
     bit-identical to the exact mean rounded to f32, except where cancellation in the f64 sum
-    allows the documented bound; NaN and infinities follow the README's rule."""
+    allows the documented bound; NaN and infinities follow the rule in docs/ingest.md."""
     g = zarr.open_group(str(store), mode="r")
     for i, f in enumerate(level_factors(store)):
         got = g[str(i)][...]
@@ -279,10 +277,6 @@ def assert_channel_statistics(meta, level0):
 # HTTP: region queries and raw bricks against brute force.
 
 
-def widen(lo, hi, step, size):
-    return [l // s * s for l, s in zip(lo, step)], [min(-(-h // s) * s, n) for h, s, n in zip(hi, step, size)]
-
-
 def boxes(shape_zyx, rng, count):
     nz, ny, nx = shape_zyx
     out = [([0, 0, 0], [nx, ny, nz]), ([nx - 1, ny - 1, nz - 1], [nx, ny, nz])]
@@ -328,12 +322,6 @@ def assert_regions(s, base, name, store):
                 np.add.at(want, histogram_bins_of(edges, vox), 1)
                 assert h["counts"] == want.tolist(), (level, lo, hi)
                 assert h["voxels"] == vox.size
-
-
-def unframe(body, magic):
-    assert body[:8] == magic
-    (n,) = struct.unpack("<I", body[8:12])
-    return json.loads(body[12 : 12 + n]), body[12 + n :]
 
 
 def assert_raw_bricks(s, base, name, store):
@@ -591,7 +579,7 @@ def test_raw_layouts_beyond_2_64_bytes_are_clear_errors(tmp_path, dims, dtype, h
 
 
 def planned_factors(shape, voxel, brick):
-    """The README's pyramid rule: halve an axis (longer than 1) while its spacing is within √2
+    """The pyramid rule of docs/ingest.md: halve an axis (longer than 1) while its spacing is within √2
     of the finest spacing among such axes; stop when a level fits in one brick."""
     shape, voxel, factors = list(shape), list(voxel), [(1, 1, 1)]
     while any(s > b for s, b in zip(shape, brick)):

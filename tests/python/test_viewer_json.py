@@ -8,9 +8,8 @@ import jsonschema
 import numpy as np
 import tifffile
 
-from conftest import BIN, ROOT, run_ingest
-
-SCHEMAS = ROOT / "schemas" / "json"
+from support.binaries import run_ingest
+from support.paths import BIN, SCHEMAS
 
 
 def viewer(*args):

@@ -17,10 +17,12 @@ import urllib.request
 import numpy as np
 import pytest
 
-from browser import require_browser, run_pausing
-from browser import read_png as read_png_channels
-from conftest import BIN, ROOT, run_ingest
-from test_server import start_server
+from support.binaries import run_ingest, start_server
+from support.browser import read_png as read_png_channels
+from support.browser import require_browser, run_pausing
+from support.paths import BIN, ROOT
+
+pytestmark = pytest.mark.browser
 
 DRIVER = ROOT / "tests" / "browser" / "web_viewer.mjs"
 SIZE = 128

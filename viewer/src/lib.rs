@@ -1,6 +1,8 @@
-//! `residency-viewer`: residency-octree volume rendering on wgpu (the renderer of
-//! `../shared/papers/residency-octree.txt`), streamed from a `brickserver` or read from a local
-//! OME-Zarr store, plus an f64 CPU reference ray caster and image comparison.
+//! `residency-viewer`: residency-octree volume rendering on wgpu (the renderer of Herzberger et
+//! al., "Residency Octree: A Hybrid Approach for Scalable Web-Based Multi-Volume Rendering"),
+//! streamed from a `brickserver` or read from a local OME-Zarr store, plus an f64 CPU reference
+//! ray caster and image comparison. The repository's `docs/viewer.md` describes the renderer and
+//! its command line, `docs/architecture.md` where it sits among the crates.
 //!
 //! - [`scene`]: camera, per-channel transfer functions and the compositing rule shared by the
 //!   GPU renderer and the reference;
@@ -12,11 +14,14 @@
 //!   the progressive streaming loop;
 //! - [`defaults`]: the default view of a volume (camera, colours, transfer functions);
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
-//! - [`bench`]: the renderer benchmark suite (`viewer bench`);
+//! - [`bench`](mod@bench): the renderer benchmark suite (`viewer bench`);
+//! - [`names`]: the enums named on the command line and in files, and the one error for an
+//!   unknown name;
 //! - `web` (WebAssembly only): the browser driver, `fetch` and `requestAnimationFrame` over
 //!   the same renderer, with the `window.residency` automation hook.
 //!
-//! One renderer, two drivers: everything but [`bench`], [`reference`], the window and the local
+//! One renderer, two drivers: everything but [`bench`](mod@bench),
+//! [`reference`](mod@reference), the window and the local
 //! and blocking-HTTP sources also compiles for `wasm32-unknown-unknown`. Command-line
 //! flags live in the `viewer` binary only.
 //!
@@ -32,6 +37,7 @@ pub mod gpu;
 pub mod image;
 pub mod interactive;
 pub mod metrics;
+pub mod names;
 pub mod octree;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod reference;
@@ -40,18 +46,9 @@ pub mod source;
 #[cfg(target_arch = "wasm32")]
 pub mod web;
 
-/// `error` and its sources, joined by `": "`: the whole chain on one line, as the binary's
-/// `error: {:#}` line prints it (and the web page, and failed-brick messages).
-pub fn error_chain(error: &dyn std::error::Error) -> String {
-    let mut text = error.to_string();
-    let mut next = error.source();
-    while let Some(e) = next {
-        text.push_str(": ");
-        text.push_str(&e.to_string());
-        next = e.source();
-    }
-    text
-}
+/// `error` and its sources on one line, as the binary's `error: …` line prints it (and the web
+/// page, and failed-brick messages): a cause the message already names is printed once.
+pub use residency_schemas::error_chain::error_chain;
 
 #[cfg(test)]
 mod tests {

@@ -49,7 +49,10 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!(
+                "error: {}",
+                residency_schemas::error_chain::join_chain(e.chain())
+            );
             ExitCode::FAILURE
         }
     }

@@ -69,15 +69,19 @@ pub enum MetricsError {
 
 /// The metrics of one comparison.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, JsonSchema)]
+#[schemars(title = "Image comparison", deny_unknown_fields)]
 pub struct Metrics {
     /// Peak signal-to-noise ratio in dB (`+∞` for identical images; `null` in JSON).
     #[schemars(with = "Option<f64>")]
     pub psnr_db: f64,
     /// Mean structural similarity on luminance, in `[-1, 1]`.
+    #[schemars(range(max = 1))]
     pub ssim: f64,
     /// Largest absolute difference over pixels and channels.
+    #[schemars(range(min = 0))]
     pub max_abs_error: f64,
     /// Mean squared error over pixels and channels.
+    #[schemars(range(min = 0))]
     pub mse: f64,
 }
 

@@ -27,6 +27,8 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::names::{Named, UnknownName};
+
 /// A pinhole camera in world space.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
@@ -40,6 +42,7 @@ pub struct Camera {
     pub up: [f64; 3],
     /// Vertical field of view, degrees.
     #[serde(default = "default_fov")]
+    #[schemars(extend("exclusiveMinimum" = 0, "exclusiveMaximum" = 180))]
     pub fov_y_degrees: f64,
 }
 
@@ -110,6 +113,7 @@ pub struct OpacityPoint {
     /// Data value (in the channel's own units, as stored).
     pub value: f64,
     /// Opacity at the reference step, in `[0, 1]`.
+    #[schemars(range(min = 0, max = 1))]
     pub opacity: f64,
 }
 
@@ -136,6 +140,7 @@ pub struct ChannelStyle {
     #[serde(default = "default_true")]
     pub visible: bool,
     /// Linear RGB emission colour, each in `[0, 1]`.
+    #[schemars(inner(range(min = 0, max = 1)))]
     pub color: [f64; 3],
     /// Opacity control points, ascending in value. Below the first point and above the last,
     /// the end opacities hold.
@@ -182,8 +187,28 @@ impl ChannelStyle {
 
 /// How a sample is reconstructed from the voxels around it. Both filters clamp to the edge
 /// voxels, and every method, the web viewer and the f64 reference follow the same one.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    JsonSchema,
+    strum::EnumCount,
+    strum::EnumString,
+    strum::IntoStaticStr,
+    strum::VariantArray,
+    strum::VariantNames,
+)]
 #[serde(rename_all = "kebab-case")]
+#[strum(
+    serialize_all = "kebab-case",
+    parse_err_ty = UnknownFilter,
+    parse_err_fn = UnknownFilter::new
+)]
 pub enum Filter {
     /// Trilinear interpolation between the 2³ voxel centres around the sample.
     #[default]
@@ -196,15 +221,15 @@ pub enum Filter {
 }
 
 impl Filter {
-    /// Every filter.
-    pub const ALL: [Self; 2] = [Self::Trilinear, Self::Tricubic];
+    /// Every filter (the order of the variants).
+    pub const ALL: [Self; <Self as strum::EnumCount>::COUNT] =
+        *<Self as strum::VariantArray>::VARIANTS
+            .first_chunk()
+            .expect("one entry per variant");
 
     /// The name on the command line and in scene files.
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Trilinear => "trilinear",
-            Self::Tricubic => "tricubic",
-        }
+        self.into()
     }
 
     /// Voxels a sample reads beyond the trilinear footprint on each side: 0, or 1 for the
@@ -219,26 +244,12 @@ impl Filter {
     }
 }
 
+impl Named for Filter {
+    const NOUN: &'static str = "filter";
+}
+
 /// A filter name that is not one of [`Filter::ALL`]'s.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown filter '{name}' (trilinear or tricubic)")]
-pub struct UnknownFilter {
-    /// The name given.
-    pub name: String,
-}
-
-impl std::str::FromStr for Filter {
-    type Err = UnknownFilter;
-
-    fn from_str(s: &str) -> Result<Self, UnknownFilter> {
-        Self::ALL
-            .into_iter()
-            .find(|f| f.name() == s)
-            .ok_or_else(|| UnknownFilter {
-                name: s.to_string(),
-            })
-    }
-}
+pub type UnknownFilter = UnknownName<Filter>;
 
 /// The cubic B-spline weights of the voxels `i − 1, i, i + 1, i + 2` for a sample at
 /// `i + a` (`a` in `[0, 1)`, voxel centres at integers). They are non-negative and sum to 1.
@@ -255,6 +266,7 @@ pub fn bspline_weights(a: f64) -> [f64; 4] {
 /// A whole scene: camera, channel styles and background.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(title = "Viewer scene", example = scene_example())]
 pub struct Scene {
     /// The camera.
     pub camera: Camera,
@@ -262,10 +274,41 @@ pub struct Scene {
     pub channels: Vec<ChannelStyle>,
     /// Linear RGB background.
     #[serde(default)]
+    #[schemars(inner(range(min = 0, max = 1)))]
     pub background: [f64; 3],
     /// The reconstruction filter of every sample.
     #[serde(default)]
     pub filter: Filter,
+}
+
+/// The example of the scene schema (read back by the tests and the fuzzing seeds).
+fn scene_example() -> serde_json::Value {
+    serde_json::json!({
+        "camera": {
+            "eye": [60.0, 40.0, 90.0],
+            "target": [20.0, 24.0, 20.0],
+            "up": [0.0, 1.0, 0.0],
+            "fov_y_degrees": 30.0
+        },
+        "channels": [
+            {
+                "channel": 0,
+                "visible": true,
+                "color": [0.0, 1.0, 1.0],
+                "opacity": [{"value": 200.0, "opacity": 0.0}, {"value": 1500.0, "opacity": 0.08}]
+            },
+            {
+                "channel": 2,
+                "color": [1.0, 1.0, 0.0],
+                "opacity": [
+                    {"value": 20.0, "opacity": 0.0},
+                    {"value": 120.0, "opacity": 0.05},
+                    {"value": 255.0, "opacity": 0.05}
+                ]
+            }
+        ],
+        "background": [0.0, 0.0, 0.0]
+    })
 }
 
 /// Length of the diagonal of a box of `extent`, without overflow or underflow for extents
@@ -410,6 +453,15 @@ mod tests {
             "cubic".parse::<Filter>().unwrap_err().to_string(),
             "unknown filter 'cubic' (trilinear or tricubic)"
         );
+    }
+
+    #[test]
+    fn each_filter_has_one_name_for_strum_and_serde() {
+        assert_eq!(Filter::ALL.map(Filter::name), ["trilinear", "tricubic"]);
+        for f in Filter::ALL {
+            assert_eq!(serde_json::to_value(f).unwrap(), f.name());
+            assert_eq!(f.name().parse::<Filter>(), Ok(f));
+        }
     }
 
     #[test]

@@ -14,10 +14,10 @@ use residency_schemas::server::{DatasetEntry, DatasetList};
 use crate::common::{BROWSER_ACCEPT, get, server, v2_store, v3_store};
 
 /// A router for `cells` (v3, two channels) and `old` (v2, one channel), no viewer.
-fn two_stores(dir: &std::path::Path, options: &ServerOptions) -> axum::Router {
+async fn two_stores(dir: &std::path::Path, options: &ServerOptions) -> axum::Router {
     let cells = v3_store(dir, "cells");
     let old = v2_store(dir, "old");
-    server(&[("cells", &cells), ("old", &old)], options)
+    server(&[("cells", &cells), ("old", &old)], options).await
 }
 
 /// The listing at `path` with `headers`, as JSON.
@@ -31,7 +31,7 @@ async fn listing(router: &axum::Router, path: &str, headers: &[(&str, &str)]) ->
 #[tokio::test]
 async fn json_for_programs_and_html_for_browsers() {
     let dir = tempfile::tempdir().unwrap();
-    let router = two_stores(dir.path(), &ServerOptions::default());
+    let router = two_stores(dir.path(), &ServerOptions::default()).await;
     let host = [("host", "data.lab:8000")];
     let json = listing(&router, "/datasets", &host).await;
     assert_eq!(
@@ -91,7 +91,7 @@ async fn the_page_escapes_what_it_shows() {
         public_url: Some("https://example.org/a&b<c>'".parse::<PublicUrl>().unwrap()),
         ..ServerOptions::default()
     };
-    let router = two_stores(dir.path(), &options);
+    let router = two_stores(dir.path(), &options).await;
     let page = get(&router, "/", &[("accept", "text/html")]).await.text();
     assert!(
         page.contains("href=\"https://example.org/a&amp;b&lt;c&gt;&#39;/cells/\""),
@@ -123,7 +123,7 @@ async fn links_follow_the_public_url_then_forwarded_headers_then_host() {
             assert_eq!(layer.source, format!("{scheme}://{base}/{}/", d.name));
         }
     };
-    let router = two_stores(dir.path(), &ServerOptions::default());
+    let router = two_stores(dir.path(), &ServerOptions::default()).await;
     let cases: [(&[(&str, &str)], &str); 7] = [
         (&[("host", "data.lab:8000")], "http://data.lab:8000"),
         (
@@ -174,7 +174,7 @@ async fn links_follow_the_public_url_then_forwarded_headers_then_host() {
         public_url: Some("https://data.example.org/residency/".parse().unwrap()),
         ..ServerOptions::default()
     };
-    let router = two_stores(dir.path(), &options);
+    let router = two_stores(dir.path(), &options).await;
     let headers = [
         ("host", "127.0.0.1:8000"),
         ("x-forwarded-proto", "http"),
@@ -210,7 +210,7 @@ fn cells_layer(
 #[tokio::test]
 async fn neuroglancer_states_carry_version_dimensions_ranges_and_colours() {
     let dir = tempfile::tempdir().unwrap();
-    let router = two_stores(dir.path(), &ServerOptions::default());
+    let router = two_stores(dir.path(), &ServerOptions::default()).await;
     let items = listing(&router, "/datasets", &[("host", "h:1")]).await;
     let base = "http://h:1";
     // OME-Zarr 0.5 (Zarr v3), two uint16 channels in micrometres: zarr3://, one layer per
@@ -300,7 +300,7 @@ async fn a_store_without_readable_metadata_is_still_listed() {
     let dir = tempfile::tempdir().unwrap();
     let broken = dir.path().join("broken.ome.zarr");
     std::fs::create_dir(&broken).unwrap();
-    let router = server(&[("broken", &broken)], &ServerOptions::default());
+    let router = server(&[("broken", &broken)], &ServerOptions::default()).await;
     let items = listing(&router, "/datasets", &[("host", "h")]).await;
     let state = neuroglancer::parse_link(&items[0].neuroglancer).unwrap();
     // The version is left to neuroglancer (zarr:// reads v2 and v3), with its defaults.
@@ -322,7 +322,7 @@ fn why_level_0_or_a_link_is_unreadable_is_said() {
     let dir = tempfile::tempdir().unwrap();
     let cells = v3_store(dir.path(), "cells");
     let store = || {
-        use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
+        use residency_store::location::{ObjectStoreOptions, StoreLocation};
         let location = StoreLocation::Folder(cells.clone());
         DatasetStore::open(&location, &ObjectStoreOptions::default()).unwrap()
     };

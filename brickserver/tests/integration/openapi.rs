@@ -29,7 +29,7 @@ fn documented(doc: &Value, path: &str, answer: &Answer) {
 async fn the_viewer_routes_and_listing_are_documented_as_answered() {
     let dir = tempfile::tempdir().unwrap();
     let store = v3_store(dir.path(), "cells");
-    let doc = residency_brickserver::openapi::document();
+    let doc = residency_brickserver::openapi_document();
     for path in [
         "/",
         "/datasets",
@@ -43,7 +43,7 @@ async fn the_viewer_routes_and_listing_are_documented_as_answered() {
         viewer_dir: Some(viewer_dir(dir.path())),
         ..ServerOptions::default()
     };
-    let router = server(&[("cells", &store)], &options);
+    let router = server(&[("cells", &store)], &options).await;
     let cases = [
         ("/", "/", vec![]),
         ("/", "/", vec![("accept", BROWSER_ACCEPT)]),
@@ -61,7 +61,7 @@ async fn the_viewer_routes_and_listing_are_documented_as_answered() {
         let answer = get(&router, path, headers).await;
         documented(&doc, documented_path, &answer);
     }
-    let router = server(&[("cells", &store)], &ServerOptions::default());
+    let router = server(&[("cells", &store)], &ServerOptions::default()).await;
     for (documented_path, path) in [
         ("/{name}/view", "/cells/view"),
         ("/viewer/", "/viewer/"),

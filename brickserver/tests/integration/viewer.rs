@@ -11,20 +11,20 @@ use crate::common::{
 };
 
 /// A router for the v3 store `cells` with the test viewer folder, and the folder.
-fn with_viewer(dir: &Path) -> (axum::Router, std::path::PathBuf) {
+async fn with_viewer(dir: &Path) -> (axum::Router, std::path::PathBuf) {
     let store = v3_store(dir, "cells");
     let web = viewer_dir(dir);
     let options = ServerOptions {
         viewer_dir: Some(web.clone()),
         ..ServerOptions::default()
     };
-    (server(&[("cells", &store)], &options), web)
+    (server(&[("cells", &store)], &options).await, web)
 }
 
 #[tokio::test]
 async fn the_page_of_a_dataset_finds_its_files_relative_to_itself() {
     let dir = tempfile::tempdir().unwrap();
-    let (router, _) = with_viewer(dir.path());
+    let (router, _) = with_viewer(dir.path()).await;
     let r = get(&router, "/cells/view", &[]).await;
     assert_eq!(r.status, 200);
     assert_eq!(r.header("content-type"), "text/html; charset=utf-8");
@@ -46,7 +46,7 @@ async fn the_page_of_a_dataset_finds_its_files_relative_to_itself() {
 #[tokio::test]
 async fn an_unknown_dataset_gets_the_page_with_404() {
     let dir = tempfile::tempdir().unwrap();
-    let (router, _) = with_viewer(dir.path());
+    let (router, _) = with_viewer(dir.path()).await;
     let r = get(&router, "/nope/view", &[]).await;
     assert_eq!(r.status, 404);
     assert_eq!(r.header("content-type"), "text/html; charset=utf-8");
@@ -56,7 +56,7 @@ async fn an_unknown_dataset_gets_the_page_with_404() {
 #[tokio::test]
 async fn the_viewer_folder_page_is_relative_to_itself() {
     let dir = tempfile::tempdir().unwrap();
-    let (router, _) = with_viewer(dir.path());
+    let (router, _) = with_viewer(dir.path()).await;
     for path in [
         "/viewer/",
         "/viewer/index.html",
@@ -80,7 +80,7 @@ async fn the_viewer_folder_page_is_relative_to_itself() {
 #[tokio::test]
 async fn files_are_served_with_their_types_and_revalidated() {
     let dir = tempfile::tempdir().unwrap();
-    let (router, web) = with_viewer(dir.path());
+    let (router, web) = with_viewer(dir.path()).await;
     let r = get(&router, "/viewer/residency_viewer_bg.wasm", &[]).await;
     assert_eq!(r.status, 200);
     assert_eq!(r.header("content-type"), "application/wasm");
@@ -117,7 +117,7 @@ async fn files_are_served_with_their_types_and_revalidated() {
 #[tokio::test]
 async fn missing_hidden_and_escaping_files_are_404() {
     let dir = tempfile::tempdir().unwrap();
-    let (router, _) = with_viewer(dir.path());
+    let (router, _) = with_viewer(dir.path()).await;
     write(dir.path(), "secret.txt", "TOP SECRET");
     for path in [
         "/viewer/missing.js",
@@ -181,7 +181,7 @@ async fn without_a_built_viewer_every_viewer_route_says_how_to_build_it() {
             viewer_dir,
             ..ServerOptions::default()
         };
-        let router = server(&[("cells", &store)], &options);
+        let router = server(&[("cells", &store)], &options).await;
         for path in [
             "/cells/view",
             "/nope/view",
@@ -206,7 +206,7 @@ async fn without_a_built_viewer_every_viewer_route_says_how_to_build_it() {
 #[tokio::test]
 async fn store_keys_are_still_served_beside_the_view_route() {
     let dir = tempfile::tempdir().unwrap();
-    let (router, _) = with_viewer(dir.path());
+    let (router, _) = with_viewer(dir.path()).await;
     let store = dir.path().join("cells.ome.zarr");
     let r = get(&router, "/cells/zarr.json", &[]).await;
     assert_eq!(r.status, 200);
@@ -248,7 +248,7 @@ async fn a_v2_store_is_served_beside_the_viewer_too() {
         viewer_dir: Some(web),
         ..ServerOptions::default()
     };
-    let router = server(&[("old", &store)], &options);
+    let router = server(&[("old", &store)], &options).await;
     assert_eq!(get(&router, "/old/.zattrs", &[]).await.status, 200);
     assert_eq!(get(&router, "/old/view", &[]).await.status, 200);
 }

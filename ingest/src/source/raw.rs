@@ -3,8 +3,9 @@
 use std::fs::File;
 use std::path::Path;
 
-use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
-use crate::sample_format::SampleType;
+use super::error::SourceError;
+use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
+use crate::sample_format::{PlaneOut, SampleType};
 
 /// Layout options for raw inputs (`--dims`, `--dtype`, `--endian`, `--header-bytes`).
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -2,8 +2,10 @@
 
 use std::path::{Path, PathBuf};
 
+use super::error::SourceError;
 use super::tiff::{DecodedRegion, check_page, open_decoder, page_format};
-use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
+use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
+use crate::sample_format::PlaneOut;
 
 /// A folder or glob of single-slice TIFF files.
 pub struct SliceFolderSource {

@@ -8,10 +8,11 @@ use std::path::Path;
 use tiff::decoder::{Decoder, Limits};
 use tiff::tags::Tag;
 
+use super::error::SourceError;
 use super::tiff_claims::PageClaims;
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
-use super::{PlaneOut, PlaneRegion, SourceError, SourceInfo, VolumeSource};
-use crate::sample_format::SampleType;
+use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
+use crate::sample_format::{PlaneOut, SampleType};
 
 /// A TIFF file holding a z-stack of one or more channels.
 pub struct TiffSource {
@@ -84,28 +85,6 @@ pub(super) struct TiffFile {
     pub len: u64,
     /// Physical memory of the machine, when known.
     pub memory: Option<u64>,
-}
-
-/// Why the decoder could not read a page's directory (its tags): its own words, except for a
-/// refused value list, where the `tiff` crate's ("decoder limits exceeded") do not say what
-/// was wrong with the file.
-#[derive(Debug, thiserror::Error)]
-pub enum TiffDirectoryError {
-    /// A value list longer than the file could hold (the decoder's limits).
-    #[error("a directory entry claims more values than the file holds (corrupt TIFF)")]
-    TooManyValues,
-    /// Anything else the decoder refused.
-    #[error(transparent)]
-    Decoder(tiff::TiffError),
-}
-
-impl From<tiff::TiffError> for TiffDirectoryError {
-    fn from(error: tiff::TiffError) -> Self {
-        match error {
-            tiff::TiffError::LimitsExceeded => Self::TooManyValues,
-            other => Self::Decoder(other),
-        }
-    }
 }
 
 /// Opens a TIFF decoder. Its limits let a tag's value list be as long as the file could hold

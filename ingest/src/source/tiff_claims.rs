@@ -18,53 +18,15 @@
 //! - and in every case the plane must fit in this machine's physical memory (the only bound
 //!   for codecs without one, such as JPEG).
 
-use std::fmt;
 use std::fs::File;
 use std::io::BufReader;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use tiff::decoder::{ChunkType, Decoder};
 use tiff::tags::Tag;
 
-use super::SourceError;
+use super::error::{PlaneClaim, SourceError};
 use crate::sample_format::SampleType;
-
-/// The plane a page claims, as the messages of [`SourceError`] name it:
-/// `f.tif: page 3: plane 100×10 of uint16 needs 2000 bytes`.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct PlaneClaim {
-    /// The TIFF file.
-    pub path: PathBuf,
-    /// The page, from 0.
-    pub page: u64,
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// Samples per pixel.
-    pub samples: usize,
-    /// Sample format.
-    pub format: SampleType,
-    /// Bytes of the decoded plane.
-    pub bytes: u128,
-}
-
-impl fmt::Display for PlaneClaim {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "{}: page {}: plane {}×{}",
-            self.path.display(),
-            self.page,
-            self.width,
-            self.height
-        )?;
-        if self.samples > 1 {
-            write!(f, "×{}", self.samples)?;
-        }
-        write!(f, " of {} needs {} bytes", self.format, self.bytes)
-    }
-}
 
 /// What one page claims: its plane and its strips or tiles.
 #[derive(Clone, Debug, PartialEq)]

@@ -170,7 +170,7 @@ mod tests {
 
     #[test]
     fn transfer_functions_stay_positive_and_differ() {
-        for k in 0..crate::synthetic::MAX_SAMPLE_CHANNELS {
+        for k in 0..crate::synthetic::error::MAX_SAMPLE_CHANNELS {
             for i in 0..=100 {
                 let rho = DENSITY_RANGE.0 + (DENSITY_RANGE.1 - DENSITY_RANGE.0) * i as f64 / 100.0;
                 let v = map_density(rho, k) as f32;

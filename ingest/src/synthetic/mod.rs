@@ -31,184 +31,45 @@
 
 mod cycif;
 mod dense;
+mod error;
 mod fluorescence;
 mod noise;
 mod ome_tiff;
 mod sparse;
 
-use std::fmt;
-use std::io;
 use std::path::{Path, PathBuf};
 
+pub use residency_schemas::SampleKind;
+
 pub use self::cycif::CYCIF_VOXEL_SIZE;
+pub use self::error::{MAX_SAMPLE_CHANNELS, SampleError};
 pub use self::fluorescence::{SAMPLE_CHANNELS, SAMPLE_VOXEL_SIZE, SampleScene};
 use self::ome_tiff::{Scene, write_scene};
 
-/// Most channels a sample may have (each is one open file while it is written).
-pub const MAX_SAMPLE_CHANNELS: usize = 64;
-
-/// Why a sample cannot be written: a [`SampleSpec`] out of range (the message names the
-/// option, `--size` or `--channels`), or a file that cannot be written (it names the file).
-#[derive(Debug, thiserror::Error)]
-pub enum SampleError {
-    /// An extent of 0.
-    #[error(
-        "--size {},{},{}: every extent must be at least 1 voxel",
-        shape[0], shape[1], shape[2]
-    )]
-    EmptyExtent {
-        /// Extent `z, y, x`.
-        shape: [u64; 3],
-    },
-    /// A plane wider or higher than a TIFF page can be.
-    #[error(
-        "--size {},{},{}: a TIFF page holds at most {} pixels per side",
-        shape[0], shape[1], shape[2], u32::MAX
-    )]
-    PageTooLarge {
-        /// Extent `z, y, x`.
-        shape: [u64; 3],
-    },
-    /// A channel count other than 3 for the fluorescence sample.
-    #[error(
-        "--channels {channels}: the fluorescence sample has exactly 3 channels (nuclei, membranes, filaments); use --kind cycif for many channels"
-    )]
-    FluorescenceChannels {
-        /// The count asked for.
-        channels: usize,
-    },
-    /// A channel count outside `1..=MAX_SAMPLE_CHANNELS`.
-    #[error("--channels {channels}: must be between 1 and {MAX_SAMPLE_CHANNELS}")]
-    ChannelCount {
-        /// The count asked for.
-        channels: usize,
-    },
-    /// Planes too large to hold a few of every channel in memory.
-    #[error(
-        "--size {},{},{}: planes of {}×{} pixels × {channels} channels do not fit in memory",
-        shape[0], shape[1], shape[2], shape[1], shape[2]
-    )]
-    PlanesTooLarge {
-        /// Extent `z, y, x`.
-        shape: [u64; 3],
-        /// Channels.
-        channels: usize,
-    },
-    /// The output folder cannot be created.
-    #[error("{}: cannot create folder", path.display())]
-    CreateFolder {
-        /// The folder.
-        path: PathBuf,
-        /// What the file system said.
-        #[source]
-        source: io::Error,
-    },
-    /// A channel file cannot be created.
-    #[error("{}: cannot create", path.display())]
-    CreateFile {
-        /// The file (its temporary name).
-        path: PathBuf,
-        /// What the file system said.
-        #[source]
-        source: io::Error,
-    },
-    /// The TIFF encoder cannot start a channel file.
-    #[error("{}: cannot start TIFF", path.display())]
-    StartTiff {
-        /// The file (its temporary name).
-        path: PathBuf,
-        /// What the encoder said.
-        #[source]
-        source: tiff::TiffError,
-    },
-    /// A page cannot be written.
-    #[error("{}: cannot write", path.display())]
-    WritePage {
-        /// The file.
-        path: PathBuf,
-        /// What the encoder said.
-        #[source]
-        source: tiff::TiffError,
-    },
-    /// A finished channel file cannot be renamed to its final name.
-    #[error("{}: cannot move into place", path.display())]
-    MoveIntoPlace {
-        /// The file's final name.
-        path: PathBuf,
-        /// What the file system said.
-        #[source]
-        source: io::Error,
-    },
-}
-
-/// Which synthetic specimen `ingest sample` writes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SampleKind {
-    /// Cleared-tissue light-sheet stack: nuclei (uint16), membranes and filaments (uint8).
-    Fluorescence,
-    /// Micro-CT of a coiled skeleton in empty space (uint16), mostly exactly 0.
-    Sparse,
-    /// Rayleigh–Taylor-like mixing fluids (float32) filling the whole volume, no region
-    /// constant.
-    Dense,
-    /// Rayleigh–Taylor-like mixing fluids (float32), pure (constant) outside the mixing layer.
-    Mixing,
-    /// Multiplexed immunofluorescence of a thin tissue section (uint16), many markers.
-    Cycif,
-}
-
-impl SampleKind {
-    /// Every kind, in the order `--kind` lists them.
-    pub const ALL: [SampleKind; 5] = [
-        Self::Fluorescence,
-        Self::Sparse,
-        Self::Dense,
-        Self::Mixing,
-        Self::Cycif,
-    ];
-
-    /// The name `--kind` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Fluorescence => "fluorescence",
-            Self::Sparse => "sparse",
-            Self::Dense => "dense",
-            Self::Mixing => "mixing",
-            Self::Cycif => "cycif",
-        }
-    }
-
-    /// Extent `z, y, x` when `--size` is not given.
-    pub fn default_shape(self) -> [u64; 3] {
-        match self {
-            Self::Fluorescence => [96, 256, 256],
-            Self::Sparse | Self::Dense | Self::Mixing => [256, 256, 256],
-            Self::Cycif => [24, 256, 256],
-        }
-    }
-
-    /// Channel count when `--channels` is not given.
-    pub fn default_channels(self) -> usize {
-        match self {
-            Self::Fluorescence => 3,
-            Self::Sparse | Self::Dense | Self::Mixing => 1,
-            Self::Cycif => 16,
-        }
-    }
-
-    /// Physical voxel size `z, y, x` in micrometres.
-    pub fn voxel_size(self) -> [f64; 3] {
-        match self {
-            Self::Fluorescence => SAMPLE_VOXEL_SIZE,
-            Self::Sparse | Self::Dense | Self::Mixing => [1.0; 3],
-            Self::Cycif => CYCIF_VOXEL_SIZE,
-        }
+/// Extent `z, y, x` of a `kind` sample when `--size` is not given.
+fn default_shape(kind: SampleKind) -> [u64; 3] {
+    match kind {
+        SampleKind::Fluorescence => [96, 256, 256],
+        SampleKind::Sparse | SampleKind::Dense | SampleKind::Mixing => [256, 256, 256],
+        SampleKind::Cycif => [24, 256, 256],
     }
 }
 
-impl fmt::Display for SampleKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
+/// Channel count of a `kind` sample when `--channels` is not given.
+fn default_channels(kind: SampleKind) -> usize {
+    match kind {
+        SampleKind::Fluorescence => 3,
+        SampleKind::Sparse | SampleKind::Dense | SampleKind::Mixing => 1,
+        SampleKind::Cycif => 16,
+    }
+}
+
+/// Physical voxel size `z, y, x` of a `kind` sample, in micrometres.
+fn voxel_size(kind: SampleKind) -> [f64; 3] {
+    match kind {
+        SampleKind::Fluorescence => SAMPLE_VOXEL_SIZE,
+        SampleKind::Sparse | SampleKind::Dense | SampleKind::Mixing => [1.0; 3],
+        SampleKind::Cycif => CYCIF_VOXEL_SIZE,
     }
 }
 
@@ -230,8 +91,8 @@ impl SampleSpec {
     pub fn new(kind: SampleKind) -> Self {
         Self {
             kind,
-            shape: kind.default_shape(),
-            channels: kind.default_channels(),
+            shape: default_shape(kind),
+            channels: default_channels(kind),
             seed: 1,
         }
     }
@@ -299,7 +160,7 @@ pub fn write_samples(
         }
         SampleKind::Cycif => Box::new(cycif::CycifScene::new(shape, channels, seed)),
     };
-    debug_assert_eq!(scene.voxel_size(), kind.voxel_size());
+    debug_assert_eq!(scene.voxel_size(), voxel_size(kind));
     write_scene(dir, scene.as_ref(), progress)
 }
 
@@ -324,6 +185,8 @@ pub fn write_sample(
 
 #[cfg(test)]
 mod tests {
+    use strum::VariantArray;
+
     use super::*;
 
     #[test]
@@ -361,8 +224,14 @@ mod tests {
             "--size 1,2147483648,2147483648: planes of 2147483648×2147483648 pixels × 16 \
              channels do not fit in memory"
         );
-        for kind in SampleKind::ALL {
+        for &kind in SampleKind::VARIANTS {
             SampleSpec::new(kind).validate().unwrap();
         }
+        let names: Vec<&str> = SampleKind::VARIANTS.iter().map(|&k| k.into()).collect();
+        assert_eq!(
+            names,
+            ["fluorescence", "sparse", "dense", "mixing", "cycif"]
+        );
+        assert_eq!(SampleKind::Cycif.to_string(), "cycif");
     }
 }

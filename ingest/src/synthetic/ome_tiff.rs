@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use tiff::encoder::{TiffEncoder, TiffKindBig, colortype};
 use tiff::tags::Tag;
 
-use super::SampleError;
+use super::error::SampleError;
 use crate::sample_format::SampleType;
 
 /// One z-plane (`y, x` in C order) of one channel, in the channel's sample type.

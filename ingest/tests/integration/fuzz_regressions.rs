@@ -1,4 +1,4 @@
-//! Inputs found by fuzzing (tests/fuzz, `scripts/fuzz.sh`; see the README's "Fuzzing" section), minimised and
+//! Inputs found by fuzzing (tests/fuzz, `scripts/fuzz.sh`; see docs/fuzzing.md), minimised and
 //! kept as regressions, end to end through `TiffSource`. Findings fixed inside a parser also
 //! have a unit test beside it (`source::raw`, `source::tiff_claims`, `source::tiff_metadata`).
 //!

@@ -1,4 +1,4 @@
-//! The brick server's query strings, through the real router (`brickserver/src/routes.rs`)
+//! The brick server's query strings, through the real router (`brickserver/src/routes/`)
 //! over a small store that `ingest` writes once per process (40×24×20 uint16, 8³ bricks,
 //! several levels, with region metadata):
 //!
@@ -24,11 +24,11 @@ use libfuzzer_sys::fuzz_target;
 use residency_brickserver::{AppState, Datasets, ServerOptions, router};
 use residency_fuzz::scratch;
 use residency_ingest::{ConvertOptions, convert};
-use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
 use residency_schemas::server::RegionAnswer;
 use residency_schemas::wire::{
     BRICKS_MAGIC, BrickBatchHeader, MINMAX_MAGIC, MinMaxHierarchyHeader, decode_framed,
 };
+use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use tower::ServiceExt;
 
 struct Server {
@@ -53,12 +53,17 @@ fn server() -> &'static Server {
             ConvertOptions::new(vec![input.to_string_lossy().into_owned()], store.clone());
         options.brick = [8, 8, 8];
         convert(&options).expect("ingest converts the fuzz store");
-        let datasets = Datasets::from_args(
-            &[StoreLocation::Folder(store)],
-            &[],
-            &ObjectStoreOptions::default(),
-        )
-        .expect("the store is a dataset");
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .unwrap();
+        let datasets = runtime
+            .block_on(Datasets::from_args(
+                &[StoreLocation::Folder(store)],
+                &[],
+                &ObjectStoreOptions::default(),
+            ))
+            .expect("the store is a dataset");
         // A built web viewer, as `scripts/build-web.sh` leaves one: `/d/view` and `/viewer/...`
         // then answer as they do for users (without one they answer 503 by design, saying how
         // to build it; brickserver's own tests check that).
@@ -75,10 +80,6 @@ fn server() -> &'static Server {
         };
         let state = AppState::new(datasets, &server_options).expect("the server state");
         let router = router(std::sync::Arc::new(state), &server_options);
-        let runtime = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()
-            .unwrap();
         Server { runtime, router }
     })
 }

@@ -7,7 +7,7 @@
 //!
 //! Each entry names the dependency's source file and line as the panic reports them: after an
 //! upgrade the paths no longer match, so a fixed entry is inert and a still-present bug shows
-//! up again. The README's "Fuzzing" section lists them; the panics fixed upstream (tiff 0.11) have
+//! up again. `docs/fuzzing.md` lists them; the panics fixed upstream (tiff 0.11) have
 //! regression tests in `ingest/tests/integration/fuzz_regressions.rs`.
 
 use std::cell::Cell;

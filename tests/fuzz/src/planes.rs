@@ -12,7 +12,7 @@ use residency_ingest::with_sample_type;
 /// targets' `-max_len`) the bounded codecs allow at most 239 MB (LZW, 4096 bytes per 9-bit
 /// code), so only JPEG can give a larger plane, and
 /// allocating it would trip the fuzzer's allocation limit on every such input. The harness
-/// skips such planes; the README's "Fuzzing" section records this as a known, accepted limit.
+/// skips such planes; `docs/fuzzing.md` records this as a known, accepted limit.
 pub const UNBOUNDED_CODEC_PLANE_BYTES: u64 = 256 << 20;
 
 /// Reads every plane of every channel of `source` into one plane buffer sized from its

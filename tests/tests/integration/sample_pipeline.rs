@@ -1,4 +1,4 @@
-//! The README's main job, end to end with the real binaries: generate the sample, convert
+//! The demo's job (`scripts/demo.sh`), end to end with the real binaries: generate the sample, convert
 //! it, inspect it, and check the region metadata through the shared schema types.
 
 use residency_schemas::{HISTOGRAM_BINS, REGIONS_KEY, RegionMetadata};

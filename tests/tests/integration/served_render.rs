@@ -1,4 +1,4 @@
-//! The README's main job over HTTP, with the real binaries: `ingest` the sample, serve it with
+//! The demo's job (`scripts/demo.sh`) over HTTP, with the real binaries: `ingest` the sample, serve it with
 //! `brickserver`, render it with `viewer render` through the server, render the same scene
 //! with `viewer reference`, and compare them with `viewer compare`. The server's metrics show
 //! the renderer used the batched brick endpoint and never decoded data itself for culling.

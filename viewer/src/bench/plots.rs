@@ -24,11 +24,12 @@ fn register_font() {
 /// (the message names the file).
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
-    /// Plotters failed to draw (its message).
-    #[error("plotting: {message}")]
+    /// Plotters failed to draw.
+    #[error("plotting")]
     Draw {
         /// What plotters said.
-        message: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// The drawn buffer does not hold the plot's pixels (a bug).
     #[error("plot buffer size")]
@@ -44,9 +45,10 @@ pub enum PlotError {
     },
 }
 
-fn err<E: std::fmt::Display>(e: E) -> PlotError {
+/// A plotters error as a [`PlotError::Draw`].
+fn err<E: std::error::Error + Send + Sync + 'static>(e: E) -> PlotError {
     PlotError::Draw {
-        message: e.to_string(),
+        source: Box::new(e),
     }
 }
 
@@ -73,7 +75,7 @@ fn png(
 
 /// Draws the legend of `chart` at `position` in DejaVu at `size` px, on a translucent white
 /// box with a black border.
-fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+fn legend<'a, DB: DrawingBackend<ErrorType: 'static> + 'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, DB, CT>,
     position: SeriesLabelPosition,
     size: u32,

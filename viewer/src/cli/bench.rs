@@ -10,7 +10,9 @@ use anyhow::{Context, Result, ensure};
 
 use super::renderer_args::RendererArgs;
 use super::scene_args::{SceneArgs, SourceArgs};
-use residency_viewer::bench::{self, Bench, Experiment, Plan, SweepValues};
+use residency_viewer::bench::{
+    self, Bench, Experiment, MethodConfig, Plan, SweepGroup, SweepValues,
+};
 use residency_viewer::gpu::renderer::Method;
 use residency_viewer::source::BrickSource;
 
@@ -152,18 +154,12 @@ fn experiment_parser() -> impl clap::builder::TypedValueParser<Value = Experimen
         .map(|s| s.parse::<Experiment>().expect("one of the possible values"))
 }
 
-fn parse_method(s: &str) -> Result<(Method, bool)> {
+fn parse_method(s: &str) -> Result<MethodConfig> {
     let s = s.trim();
-    if s == "no-skipping" {
-        return Ok((Method::Residency, false));
-    }
-    match s.parse::<Method>() {
-        Ok(m) => Ok((m, true)),
-        Err(_) => anyhow::bail!(
-            "--methods: unknown method {s:?} (residency, page-table, octree, sparseleap, \
-             rasterize, no-skipping)"
-        ),
-    }
+    s.parse().map_err(|_| {
+        let names = MethodConfig::names().collect::<Vec<_>>().join(", ");
+        anyhow::anyhow!("--methods: unknown method {s:?} ({names})")
+    })
 }
 
 /// The values of a sweep parameter: all of `values` when it is swept (`on`), else none.
@@ -189,7 +185,7 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
         info.levels.len(),
         scene.channels.len(),
     )?;
-    let methods: Vec<(Method, bool)> = args
+    let methods: Vec<MethodConfig> = args
         .methods
         .iter()
         .map(|m| parse_method(m))
@@ -208,24 +204,27 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
         workers: args.renderer.workers,
         methods: methods.clone(),
         sweep: {
-            for p in &args.sweep_params {
-                ensure!(
-                    ["step", "lod-bias", "cache", "leaf", "methods"].contains(&p.as_str()),
-                    "--sweep-params: unknown parameter {p:?} (step, lod-bias, cache, leaf, \
-                     methods)"
-                );
-            }
-            let on = |p: &str| args.sweep_params.iter().any(|x| x == p);
+            let groups = args
+                .sweep_params
+                .iter()
+                .map(|p| {
+                    p.parse::<SweepGroup>().map_err(|_| {
+                        let names = <SweepGroup as strum::VariantNames>::VARIANTS.join(", ");
+                        anyhow::anyhow!("--sweep-params: unknown parameter {p:?} ({names})")
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            let on = |g: SweepGroup| groups.contains(&g);
             SweepValues {
-                steps: swept(on("step"), &args.steps),
-                lod_biases: swept(on("lod-bias"), &args.lod_biases),
-                cache_fractions: swept(on("cache"), &args.cache_fractions),
-                leaf_voxels: swept(on("leaf"), &args.leaf_voxels),
-                methods: if on("methods") {
+                steps: swept(on(SweepGroup::Step), &args.steps),
+                lod_biases: swept(on(SweepGroup::LodBias), &args.lod_biases),
+                cache_fractions: swept(on(SweepGroup::Cache), &args.cache_fractions),
+                leaf_voxels: swept(on(SweepGroup::Leaf), &args.leaf_voxels),
+                methods: if on(SweepGroup::Methods) {
                     methods
                         .iter()
-                        .filter(|&&(m, skipping)| skipping && m != Method::Residency)
-                        .map(|&(m, _)| m)
+                        .filter(|c| c.skipping && c.method != Method::Residency)
+                        .map(|c| c.method)
                         .collect()
                 } else {
                     Vec::new()

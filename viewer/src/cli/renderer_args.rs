@@ -24,7 +24,8 @@ pub struct RendererArgs {
     #[arg(long, default_value_t = 256 << 20)]
     pub cache_bytes: u64,
     /// LOD bias (`log2` scale of the pixel footprint; positive is coarser). The default, −1,
-    /// picks voxels of half a pixel's footprint: see the README's run time against error.
+    /// picks voxels of half a pixel's footprint: see docs/benchmarks/render-analysis.md
+    /// (run time against error).
     #[arg(long, default_value_t = -1.0, allow_hyphen_values = true)]
     pub lod_bias: f32,
     /// Step as a fraction of the smallest voxel edge of the level sampled.

@@ -7,7 +7,7 @@ use std::str::FromStr;
 
 use anyhow::{Result, bail, ensure};
 
-use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
+use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use residency_viewer::defaults::{
     CameraSpec, NumbersError, check_channel, default_channels, default_scene, numbers, read_scene,
 };

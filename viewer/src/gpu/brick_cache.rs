@@ -3,11 +3,11 @@
 //! float data stay exact. Format per sample type: `u8 → R8Uint`, `u16 → R16Uint`,
 //! `i16 → R16Sint`, `u32 → R32Uint`, `i32 → R32Sint`, `f32 → R32Float` (the shader converts
 //! to `f32`; `u32`/`i32` above 2²⁴ lose low bits there). A slot holds a brick and its apron
-//! ([`super::apron`]): [`APRON_VOXELS`] more voxels per axis. Slots are replaced least
+//! (`apron`): `APRON_VOXELS` more voxels per axis. Slots are replaced least
 //! recently used first, where "used" is the shader's per-slot usage feedback.
 
-use super::GpuError;
 use super::apron::APRON_VOXELS;
+use super::error::GpuError;
 use super::page_table::MAX_SLOTS;
 use crate::source::{BrickVoxels, SampleType};
 
@@ -28,7 +28,7 @@ pub enum AtlasKind {
 }
 
 /// Texture format and atlas binding of a sample type.
-pub fn atlas_format(t: SampleType) -> (wgpu::TextureFormat, AtlasKind) {
+pub(crate) fn atlas_format(t: SampleType) -> (wgpu::TextureFormat, AtlasKind) {
     use wgpu::TextureFormat as F;
     match t {
         SampleType::U8 => (F::R8Uint, AtlasKind::Uint),

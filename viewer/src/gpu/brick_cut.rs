@@ -3,11 +3,11 @@
 //! the view frustum or empty under the transfer functions, and refines a brick while its
 //! finer level's voxels would still cover at least `2^lod_bias` pixels, judged from the
 //! projected size of the brick's bounding sphere (the paper's Eq. 1). The bricks of the cut
-//! are the boxes the method rasterises into ray segment lists ([`super::segments`]).
+//! are the boxes the method rasterises into ray segment lists (`segments`).
 //!
 //! Emptiness comes from the residency octree's per-node class words (the region metadata under
 //! the transfer functions, as ours culls with them), over the nodes of the smallest size that
-//! covers a brick. Bricks are widened by [`super::occupancy::HAIR`] of a leaf, so that
+//! covers a brick. Bricks are widened by `occupancy::HAIR` of a leaf, so that
 //! neighbours overlap by a hair and no ray slips between them.
 
 use super::contract::{OCCUPANCY_NONEMPTY, SegmentBox, segment_payload};

@@ -1,9 +1,9 @@
 //! The buffer kinds the GPU passes use, made one way: storage (writable from the CPU),
 //! uniform, and readback (mapped after a copy), plus the device-limit check for a storage
-//! binding.
+//! binding, and the mapping of readback buffers for reading.
 
-use super::GpuError;
 use super::device::Gpu;
+use super::error::GpuError;
 
 /// Errors unless a buffer of `bytes` fits one storage binding and one buffer of `gpu`;
 /// `what` and `hint` say which buffer and what to do.
@@ -57,4 +57,34 @@ pub fn readback_buffer(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     })
+}
+
+/// Maps `buffers` for reading and waits until they are: natively by polling the device, in
+/// the browser by yielding to the event loop until WebGPU calls back.
+pub(super) async fn map_for_reading(
+    device: &wgpu::Device,
+    buffers: &[&wgpu::Buffer],
+) -> Result<(), GpuError> {
+    let mut mapped = Vec::with_capacity(buffers.len());
+    for b in buffers {
+        let (tx, rx) = futures_channel::oneshot::channel();
+        b.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        mapped.push(rx);
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(GpuError::Poll)?;
+    #[cfg(target_arch = "wasm32")]
+    let _ = device;
+    for (i, rx) in mapped.into_iter().enumerate() {
+        match rx.await {
+            Ok(Ok(())) => {}
+            Ok(Err(reason)) => return Err(GpuError::Readback { buffer: i, reason }),
+            Err(_) => return Err(GpuError::DeviceLost { buffer: i }),
+        }
+    }
+    Ok(())
 }

@@ -13,18 +13,16 @@ use bytemuck::{Pod, Zeroable};
 
 use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
+use super::method::Method;
 use super::page_table::{APRON_SHIFT, ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
-use super::renderer::Method;
 use crate::scene::Filter;
 
-/// Most channels rendered at once (the shader keeps one value per channel in registers, each
-/// channel's level in 8 bits of a [`CHANNEL_LEVELS`] value, and a node's class word holds an
-/// empty and a constant bit per channel).
-pub const MAX_CHANNELS: usize = 16;
+// The capacities the prelude gives the shader (see `wgsl_prelude`).
+pub use super::limits::{MAX_CHANNELS, MAX_LEVELS};
 
 /// Where a node's class word keeps its constant bits: bit `c` says channel slot `c` is empty
 /// under its transfer function, bit `CLASS_CONSTANT_SHIFT + c` that it is constant over the
-/// node ([`super::residency::node_class`]).
+/// node (`residency::node_class`).
 pub const CLASS_CONSTANT_SHIFT: u32 = MAX_CHANNELS as u32;
 
 /// The WGSL type of a step's channel levels: 8 bits a channel, four channels a word.
@@ -33,10 +31,6 @@ pub const CHANNEL_LEVELS: &str = "vec4<u32>";
 // The class word's two bits a channel fill one u32; the levels fill the four words of a
 // `vec4<u32>` (the shader's `level_of` and `with_level` pick among exactly four).
 const _: () = assert!(2 * MAX_CHANNELS == 32 && MAX_CHANNELS == 4 * 4);
-
-/// Most pyramid levels a volume may have: the octree's 16-bit residency masks hold one bit
-/// per level, and the scene uniforms one entry.
-pub use crate::octree::MAX_LEVELS;
 
 /// What the shaders share: transfer functions, opacity correction, compositing.
 const TRANSFER: &str = include_str!("../../../shaders/transfer.wgsl");
@@ -47,8 +41,35 @@ const VIEW: &str = include_str!("../../../shaders/view.wgsl");
 /// The ray segment lists' rasteriser as written.
 const SEGMENTS_BODY: &str = include_str!("../../../shaders/segments.wgsl");
 
-/// The ray caster as written.
-const RAYCAST_BODY: &str = include_str!("../../../shaders/raycast.wgsl");
+/// The ray caster as written, in its parts (by path under `shaders/`), joined in this order:
+/// module-scope declarations and table reads, sampling, octree and page-table traversal, ray
+/// segment lists, per-channel sampling, then the ray loop and entry point in `raycast.wgsl`.
+pub const RAYCAST_PARTS: [(&str, &str); 6] = [
+    (
+        "raycast/resources.wgsl",
+        include_str!("../../../shaders/raycast/resources.wgsl"),
+    ),
+    (
+        "raycast/sampling.wgsl",
+        include_str!("../../../shaders/raycast/sampling.wgsl"),
+    ),
+    (
+        "raycast/traversal.wgsl",
+        include_str!("../../../shaders/raycast/traversal.wgsl"),
+    ),
+    (
+        "raycast/segment_lists.wgsl",
+        include_str!("../../../shaders/raycast/segment_lists.wgsl"),
+    ),
+    (
+        "raycast/channels.wgsl",
+        include_str!("../../../shaders/raycast/channels.wgsl"),
+    ),
+    (
+        "raycast.wgsl",
+        include_str!("../../../shaders/raycast.wgsl"),
+    ),
+];
 
 /// The limit probe as written.
 const PROBE_BODY: &str = include_str!("../../../shaders/probe.wgsl");
@@ -154,7 +175,7 @@ gpu_struct! {
         pub start_depth: u32,
         /// Word offset of the classes in the node buffer: for ours, per node, bit `c` where
         /// channel `c` is empty under its transfer function and bit `8 + c` where it is one
-        /// value ([`super::residency::node_class`]); for the baselines, per page-table id, 1
+        /// value (`residency::node_class`); for the baselines, per page-table id, 1
         /// where the brick is empty.
         pub class_offset: u32,
         /// Steps a ray may take per pass (then it is suspended and resumed).
@@ -462,10 +483,15 @@ pub const FLAG_SKIPPING: u32 = 1;
 /// [`Params::flags`] bit: substitute missing bricks from other levels.
 pub const FLAG_SUBSTITUTION: u32 = 2;
 
-/// The ray caster as compiled: [`wgsl_prelude`], `shaders/transfer.wgsl`, then
-/// `shaders/raycast.wgsl`.
+/// The ray caster as compiled: [`wgsl_prelude`], `shaders/transfer.wgsl`,
+/// `shaders/view.wgsl`, then the parts of [`RAYCAST_PARTS`] in order (`shaders/raycast/*.wgsl`,
+/// ending with `shaders/raycast.wgsl`).
 pub fn raycast_source() -> String {
-    [wgsl_prelude().as_str(), TRANSFER, VIEW, RAYCAST_BODY].concat()
+    let mut source = [wgsl_prelude().as_str(), TRANSFER, VIEW].concat();
+    for (_, part) in RAYCAST_PARTS {
+        source.push_str(part);
+    }
+    source
 }
 
 /// The segment lists' rasteriser as compiled: [`wgsl_prelude`], `shaders/view.wgsl`, then

@@ -1,7 +1,7 @@
 //! GPU device creation. Works on any Vulkan/Metal/DX12/GL adapter wgpu finds, including Mesa's
 //! lavapipe software rasteriser (set `XDG_RUNTIME_DIR` when there is no session).
 
-use super::GpuError;
+use super::error::GpuError;
 use super::pipeline::PipelineCache;
 
 /// A device, its queue and what the adapter supports.
@@ -30,14 +30,6 @@ impl std::fmt::Debug for Gpu {
             .finish_non_exhaustive()
     }
 }
-
-/// Why no adapter was found, and what to do.
-#[cfg(not(target_arch = "wasm32"))]
-pub(crate) const NO_ADAPTER: &str = "no GPU adapter found (without a GPU, install Mesa's lavapipe Vulkan \
-                          driver and set XDG_RUNTIME_DIR)";
-#[cfg(target_arch = "wasm32")]
-pub(crate) const NO_ADAPTER: &str = "this browser offers no WebGPU adapter (use a current Chrome, Edge or \
-                          Firefox with WebGPU enabled, on a machine whose GPU it supports)";
 
 impl Gpu {
     /// Opens the best adapter the environment offers (`WGPU_BACKEND`, `WGPU_ADAPTER_NAME` and

@@ -1,275 +1,69 @@
-//! The GPU side of the renderer, one concept per module:
+//! The GPU side of the renderer, one concept per module, listed so that each uses only modules
+//! listed before it (no module uses one that uses it back; `GpuError` is defined below every
+//! module that returns it):
 //!
-//! - [`buffers`]: storage, uniform and readback buffers made one way, and the storage-binding
-//!   limit check;
-//! - [`contract`]: every struct and constant the renderer shares with `raycast.wgsl`, written
-//!   once (`#[repr(C)]` types with WGSL twins checked against naga's layout; a generated WGSL
-//!   prelude of constants; the binding numbers);
-//! - [`device`]: adapter and device creation (lavapipe works), timestamp-query support;
+//! - [`limits`]: the renderer's fixed capacities (channels drawn at once, pyramid levels);
+//! - [`error`]: [`GpuError`], why the GPU side failed;
+//! - [`method`]: [`method::Method`], how the ray caster finds data and skips empty space (ours
+//!   or a baseline), with its names;
+//! - [`options`]: [`options::RenderOptions`], the renderer's settings;
 //! - [`page_table`]: page tables per (channel, level) and the brick ids the shader reports;
-//! - [`apron`]: each slot's one-voxel apron of its neighbours' first voxels, so a trilinear
-//!   sample reads one slot;
+//! - `apron` (internal): each slot's one-voxel apron of its neighbours' first voxels, so a
+//!   trilinear sample reads one slot;
 //! - [`brick_cache`]: the brick cache atlas per sample format, with LRU eviction driven by the
 //!   shader's usage feedback;
-//! - [`tables`]: the scene tables the shader consults (levels, channels, transfer
-//!   functions), rewritten in place when the style changes;
+//! - [`contract`]: every struct and constant the renderer shares with the shaders, written
+//!   once (`#[repr(C)]` types with WGSL twins checked against naga's layout; a generated WGSL
+//!   prelude of constants; the binding numbers), and the shader sources as compiled;
+//! - [`occupancy`]: SparseLeap's occupancy geometry, built on the CPU from the residency
+//!   octree;
+//! - [`brick_cut`]: the rasterize method's cut of bricks, chosen on the CPU each frame;
 //! - [`pipeline`]: the long-lived part, `raycast.wgsl` compiled for one atlas format and one
 //!   method, shared by every renderer on the device;
+//! - [`device`]: adapter and device creation (lavapipe works), timestamp-query support, and
+//!   the pipelines built on the device;
+//! - `buffers` (internal): storage, uniform and readback buffers made one way, the
+//!   storage-binding limit check, and mapping for reading;
+//! - `timer` (internal): GPU time of compute passes from timestamp queries;
 //! - [`residency`]: the residency state of one volume (octree, page tables, cache), which
 //!   changes as bricks arrive and are evicted;
+//! - `tables` (internal): the scene tables the shader consults (levels, channels, transfer
+//!   functions), rewritten in place when the style changes;
+//! - `segments` (internal): the ray segment lists of the SparseLeap and rasterize methods,
+//!   rasterised on the GPU before the ray caster runs;
 //! - [`probe`] (native): the limit probe of `viewer bench`, the same rays through one resident
 //!   level-0 texture with no traversal, for the renderer's fraction of what sampling costs;
 //! - [`renderer`]: one volume and scene: pipeline, residency state, scene tables and the
 //!   per-frame buffers, with one frame's dispatch and readback (image, capped request list,
 //!   usage, statistics);
+//! - [`stop_reason`]: why a progressive render stopped, written as a sentence;
 //! - [`streaming`]: worker threads fetching bricks, and the progressive loop
 //!   render → read requests → fetch → upload → insert into the octree → repeat;
-//! - [`timer`]: GPU time of compute passes from timestamp queries;
-//! - [`synthetic`]: an in-memory brick source for tests and benchmarks.
+//! - [`synthetic`] (native): an in-memory brick source for tests and benchmarks.
 
-pub mod apron;
+pub(crate) mod apron;
 pub mod brick_cache;
 pub mod brick_cut;
-pub mod buffers;
+pub(crate) mod buffers;
 pub mod contract;
 pub mod device;
+pub mod error;
+pub mod limits;
+pub mod method;
 pub mod occupancy;
+pub mod options;
 pub mod page_table;
 pub mod pipeline;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod probe;
 pub mod renderer;
 pub mod residency;
-pub mod segments;
+pub(crate) mod segments;
+pub mod stop_reason;
 pub mod streaming;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod synthetic;
-pub mod tables;
-pub mod timer;
+pub(crate) mod tables;
+pub(crate) mod timer;
 
-use crate::octree::OctreeError;
-use crate::source::{BrickKey, SampleType, SourceError};
-
-/// Why the GPU side failed: no adapter or device, a buffer or texture over the device's
-/// limits, a GPU validation or out-of-memory error, a readback that failed, or a brick that
-/// cannot be uploaded. Messages name the buffer, brick or limit at fault; errors of the
-/// octree and of brick sources are theirs, unchanged.
-#[derive(Debug, thiserror::Error)]
-pub enum GpuError {
-    /// No adapter (message: what to install or use).
-    #[error("{}", device::NO_ADAPTER)]
-    NoAdapter(#[source] wgpu::RequestAdapterError),
-    /// The adapter would not open a device.
-    #[error("cannot open a device on {adapter}")]
-    NoDevice {
-        /// The adapter's name.
-        adapter: String,
-        /// What wgpu said.
-        #[source]
-        source: wgpu::RequestDeviceError,
-    },
-    /// A validation or out-of-memory error raised by work checked with [`device::Gpu::checked`].
-    #[error("{what}: GPU error: {message}")]
-    Validation {
-        /// The work, e.g. `rendering a frame`.
-        what: String,
-        /// What wgpu said.
-        message: String,
-    },
-    /// A buffer over the device's storage-binding (or buffer) limit.
-    #[error(
-        "{what} needs {bytes} bytes, over the device's storage-buffer limit of {limit} bytes; \
-         {hint}"
-    )]
-    BindingTooLarge {
-        /// The buffer, e.g. `the image`.
-        what: String,
-        /// Bytes it needs.
-        bytes: u64,
-        /// The device's storage-binding limit.
-        limit: u64,
-        /// What to do instead.
-        hint: String,
-    },
-    /// More bricks than 32-bit brick ids address.
-    #[error("{total} bricks over all channels and levels: too many for 32-bit brick ids")]
-    TooManyBricks {
-        /// Bricks over all channels and levels.
-        total: u64,
-    },
-    /// A brick larger than the device's 3D textures.
-    #[error("brick {brick:?} exceeds the device's 3D texture limit {limit}")]
-    BrickOverTextureLimit {
-        /// The brick, `x, y, z`.
-        brick: [u32; 3],
-        /// The device's 3D texture limit per axis.
-        limit: u32,
-    },
-    /// A cache budget smaller than one brick.
-    #[error("cache of {cache_bytes} bytes holds no brick of {brick_bytes} bytes")]
-    CacheTooSmall {
-        /// The budget.
-        cache_bytes: u64,
-        /// Bytes of one brick.
-        brick_bytes: u64,
-    },
-    /// An empty brick given to the cache (it takes no slot).
-    #[error("an empty brick takes no cache slot")]
-    EmptyBrickUpload,
-    /// Voxels that are not a full brick of the cache's sample type.
-    #[error(
-        "brick has {samples} samples of the wrong type or count (expected {expected} of \
-         {sample_type:?})"
-    )]
-    WrongBrick {
-        /// Samples given.
-        samples: usize,
-        /// Samples of a brick.
-        expected: usize,
-        /// The cache's sample type.
-        sample_type: SampleType,
-    },
-    /// A brick that could not be uploaded.
-    #[error("brick {key:?}")]
-    Upload {
-        /// The brick.
-        key: BrickKey,
-        /// Why.
-        #[source]
-        source: Box<GpuError>,
-    },
-    /// A brick not in the rendered channels' page tables.
-    #[error("brick {key:?} is not part of the rendered volume")]
-    NotRendered {
-        /// The brick.
-        key: BrickKey,
-    },
-    /// A cache slot whose owner has no page-table key (a bug).
-    #[error("cache slot owner has no key")]
-    SlotWithoutKey,
-    /// More pyramid levels than the renderer's tables hold.
-    #[error(
-        "{volume}: {levels} pyramid levels; the renderer draws volumes of at most {}",
-        contract::MAX_LEVELS
-    )]
-    TooManyLevels {
-        /// The volume.
-        volume: String,
-        /// Its levels.
-        levels: usize,
-    },
-    /// More channels drawn than the renderer draws at once.
-    #[error(
-        "{channels} channels drawn; at most {} render at once",
-        contract::MAX_CHANNELS
-    )]
-    TooManyChannels {
-        /// Channels drawn.
-        channels: usize,
-    },
-    /// More visible channels than the renderer draws at once.
-    #[error(
-        "{channels} visible channels; at most {} render at once",
-        contract::MAX_CHANNELS
-    )]
-    TooManyVisible {
-        /// Visible channels.
-        channels: usize,
-    },
-    /// An image without pixels.
-    #[error("image size {width}×{height} is empty")]
-    EmptyImage {
-        /// Width in pixels.
-        width: u32,
-        /// Height in pixels.
-        height: u32,
-    },
-    /// Rays that did not finish within the renderer's pass limit.
-    #[error("{suspended} rays still marching after {passes} passes of {steps} steps")]
-    RaysStillMarching {
-        /// Rays still suspended.
-        suspended: u32,
-        /// Passes run.
-        passes: u32,
-        /// Steps per pass.
-        steps: u32,
-    },
-    /// A brick id the shader reported that no page table has (a bug).
-    #[error("shader reported an unknown brick id {id}")]
-    UnknownBrickId {
-        /// The id.
-        id: u32,
-    },
-    /// Waiting for the GPU failed.
-    #[error("waiting for the GPU")]
-    Poll(#[source] wgpu::PollError),
-    /// A readback buffer that could not be mapped.
-    #[error("cannot read back GPU buffer {buffer}: {reason}")]
-    Readback {
-        /// The buffer's position among those mapped.
-        buffer: usize,
-        /// What wgpu said.
-        reason: wgpu::BufferAsyncError,
-    },
-    /// The device was lost while a readback buffer was being mapped.
-    #[error("cannot read back GPU buffer {buffer}: the device was lost")]
-    DeviceLost {
-        /// The buffer's position among those mapped.
-        buffer: usize,
-    },
-    /// A mapped buffer's range that cannot be viewed.
-    #[error(transparent)]
-    MapRange(#[from] wgpu::MapRangeError),
-    /// The limit probe's level 0 could not be read.
-    #[error("{volume}: the probe's level 0")]
-    ProbeLevel0 {
-        /// The volume.
-        volume: String,
-        /// Why.
-        #[source]
-        source: Box<SourceError>,
-    },
-    /// The limit probe asked to draw no channel, or too many.
-    #[error(
-        "the limit probe draws 1 to {} channels, not {channels}",
-        contract::MAX_CHANNELS
-    )]
-    ProbeChannels {
-        /// Visible channels.
-        channels: usize,
-    },
-    /// A level 0 over one 3D texture of the device.
-    #[error(
-        "{volume}: the limit probe needs one 3D texture of {}×{}×{} voxels (level 0 of \
-         {channels} channels stacked in z), over the device's limit of {limit} per axis",
-        size[0], size[1], size[2]
-    )]
-    ProbeTexture {
-        /// The volume.
-        volume: String,
-        /// The texture, `x, y, z` (channels stacked in z).
-        size: [u32; 3],
-        /// Channels stacked.
-        channels: usize,
-        /// The device's 3D texture limit per axis.
-        limit: u32,
-    },
-    /// A probe filter the device does not have.
-    #[error("this device has no {filter} probe")]
-    NoProbe {
-        /// The filter's name.
-        filter: &'static str,
-    },
-    /// The residency octree refused the volume or a brick.
-    #[error(transparent)]
-    Octree(#[from] OctreeError),
-    /// A brick could not be fetched.
-    #[error(transparent)]
-    Source(Box<SourceError>),
-}
-
-impl From<SourceError> for GpuError {
-    fn from(e: SourceError) -> Self {
-        Self::Source(Box::new(e))
-    }
-}
+pub use error::GpuError;

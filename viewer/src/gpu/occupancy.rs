@@ -1,11 +1,11 @@
 //! SparseLeap's occupancy geometry (Hadwiger et al. 2018, Secs. 5 and 6), built on the CPU
 //! from the residency octree: the boxes the `sparseleap` method rasterises into ray segment
-//! lists ([`super::segments`]).
+//! lists (`segments`).
 //!
 //! - **Occupancy classes** of the *occupancy leaves*, the octree nodes at depth
 //!   `min(D, MAX_GEOMETRY_DEPTH)`: *empty* where every drawn channel is transparent under its
 //!   transfer function by the node's class word (the one ours culls with,
-//!   [`super::residency::node_class`]), *unknown* where some channel that is not empty has no
+//!   `residency::node_class`), *unknown* where some channel that is not empty has no
 //!   level resident anywhere in the node (or the store has no region metadata), *non-empty*
 //!   otherwise.
 //! - **Occupancy histograms**: every coarser node counts its occupancy leaves per class, and
@@ -15,7 +15,7 @@
 //!   holding a point is then the class of the occupancy leaf there, so the lists are exact, and
 //!   boxes are only emitted where the class changes.
 //!
-//! Boxes that are not empty (and the root) are widened, and empty ones narrowed, by [`HAIR`]
+//! Boxes that are not empty (and the root) are widened, and empty ones narrowed, by `HAIR`
 //! of a leaf, so that a ray running exactly along a shared face is never taken as empty by
 //! rounding. Unknown
 //! and non-empty segments are both sampled (where a brick is missing the ray caster requests
@@ -28,10 +28,10 @@ use super::contract::{
 use crate::octree::{ResidencyOctree, node_index};
 
 /// Deepest octree depth whose nodes are occupancy leaves (8⁶ of them at most).
-pub const MAX_GEOMETRY_DEPTH: u32 = 6;
+pub(crate) const MAX_GEOMETRY_DEPTH: u32 = 6;
 
 /// How far boxes are widened (non-empty, unknown) or narrowed (empty), in leaf units.
-pub const HAIR: f32 = 1e-3;
+pub(crate) const HAIR: f32 = 1e-3;
 
 /// The occupancy geometry of one octree under one set of styles.
 #[derive(Clone, Debug, Default, PartialEq)]

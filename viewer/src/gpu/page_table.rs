@@ -3,10 +3,10 @@
 //! everywhere (it takes no cache slot), [`ENTRY_CLEAR`] when it is never needed (it is
 //! transparent under the transfer function by its haloed range), and `slot + 2` when it is in
 //! cache slot `slot`, with a bit of [`ENTRY_APRON`] set for each way a sample's footprint can
-//! leave the brick that the slot's apron serves ([`super::apron`]). A brick's *id* is its
+//! leave the brick that the slot's apron serves (the `apron` module). A brick's *id* is its
 //! entry's index; the shader reports misses by id.
 
-use super::GpuError;
+use super::error::GpuError;
 use crate::octree::OctreeGeometry;
 use crate::source::BrickKey;
 
@@ -20,18 +20,18 @@ pub const ENTRY_EMPTY: u32 = 1;
 /// the shader takes it as clear without reading a voxel.
 pub const ENTRY_CLEAR: u32 = u32::MAX;
 /// First bit of [`ENTRY_APRON`] in a slot's entry.
-pub const APRON_SHIFT: u32 = 23;
+pub(crate) const APRON_SHIFT: u32 = 23;
 /// The apron bits of a slot's entry: bit `APRON_SHIFT + m - 1` is set when a sample whose
 /// first voxel lies in the brick, and whose footprint crosses into the next bricks along the
 /// axes of *crossing* `m` (bit 0 `x`, 1 `y`, 2 `z`; 1 to 7), finds all eight voxels in the
-/// slot ([`super::apron::servable_crossings`]). All seven: the apron is complete.
+/// slot (`apron::servable_crossings`). All seven: the apron is complete.
 pub const ENTRY_APRON: u32 = 0x7f << APRON_SHIFT;
 /// Most cache slots an entry can name: `slot + 2` must stay below [`ENTRY_APRON`]'s bits.
-pub const MAX_SLOTS: u32 = (1 << APRON_SHIFT) - 2;
+pub(crate) const MAX_SLOTS: u32 = (1 << APRON_SHIFT) - 2;
 
 /// The entry of a brick in cache slot `slot` whose apron serves `crossings` (bit `m - 1`:
 /// crossing `m`).
-pub fn slot_entry(slot: u32, crossings: u8) -> u32 {
+pub(crate) fn slot_entry(slot: u32, crossings: u8) -> u32 {
     (slot + 2) | (u32::from(crossings & 0x7f) << APRON_SHIFT)
 }
 

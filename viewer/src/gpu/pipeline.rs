@@ -8,8 +8,7 @@ use std::sync::{Arc, Mutex};
 
 use super::brick_cache::AtlasKind;
 use super::contract::{binding, raycast_source};
-use super::device::Gpu;
-use super::renderer::Method;
+use super::method::Method;
 use crate::scene::Filter;
 
 /// A compute-stage layout entry of binding `binding`.
@@ -75,7 +74,7 @@ pub(super) fn view_entry(binding: u32, view: &wgpu::TextureView) -> wgpu::BindGr
 }
 
 /// The buffers and atlas views one renderer binds to the pipeline.
-pub struct Bindings<'a> {
+pub(crate) struct Bindings<'a> {
     /// The per-frame uniforms.
     pub params: &'a wgpu::Buffer,
     /// The residency octree's nodes, then the baselines' per-brick ranges.
@@ -179,13 +178,6 @@ impl RaycastPipeline {
         }
     }
 
-    /// The pipeline of `kind`, `method` and `filter` on `gpu`: the one built before, else a
-    /// new one.
-    pub fn shared(gpu: &Gpu, kind: AtlasKind, method: Method, filter: Filter) -> Arc<Self> {
-        gpu.pipelines
-            .get_or_build(&gpu.device, kind, method, filter)
-    }
-
     /// The full pass's compute pipeline.
     pub fn pipeline(&self) -> &wgpu::ComputePipeline {
         &self.pipeline
@@ -195,12 +187,12 @@ impl RaycastPipeline {
     /// first pass, which samples only bricks one cache slot serves whole and leaves every
     /// ray that needs a request, a substitute or a brick's neighbours suspended for the full
     /// pass.
-    pub fn resident_only(&self) -> &wgpu::ComputePipeline {
+    pub(crate) fn resident_only(&self) -> &wgpu::ComputePipeline {
         &self.resident_only
     }
 
     /// Binds one renderer's buffers and atlas.
-    pub fn bind_group(&self, device: &wgpu::Device, b: &Bindings<'_>) -> wgpu::BindGroup {
+    pub(crate) fn bind_group(&self, device: &wgpu::Device, b: &Bindings<'_>) -> wgpu::BindGroup {
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("raycast"),
             layout: &self.layout,
@@ -230,8 +222,9 @@ pub struct PipelineCache {
 }
 
 impl PipelineCache {
-    /// The pipeline of `kind`, `method` and `filter`, built on first use.
-    fn get_or_build(
+    /// The pipeline of `kind`, `method` and `filter` on `device`: the one built before, else a
+    /// new one.
+    pub(crate) fn get_or_build(
         &self,
         device: &wgpu::Device,
         kind: AtlasKind,

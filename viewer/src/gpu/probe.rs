@@ -6,14 +6,13 @@
 //! filtering done by hand (8 texel loads, as the renderer does) and, where the device can
 //! filter `R32Float` textures, by the texture unit.
 
-use super::GpuError;
-use super::buffers::{readback_buffer, storage_buffer, uniform_buffer};
+use super::buffers::{map_for_reading, readback_buffer, storage_buffer, uniform_buffer};
 use super::contract::{FILTER_HARDWARE, FILTER_MANUAL, ProbeParams, probe_binding, probe_source};
 use super::device::Gpu;
+use super::error::GpuError;
 use super::pipeline::{
     buffer_entry, compute_layout, storage_layout, texture_3d_layout, uniform_layout, view_entry,
 };
-use super::renderer::map_for_reading;
 use super::tables::SceneTables;
 use super::timer::PassTimer;
 use crate::scene::{Camera, ChannelStyle, Scene};
@@ -21,9 +20,19 @@ use crate::source::{BrickKey, BrickSource, VolumeInfo};
 
 /// How the probe filters; named as [`ProbeFilter::name`] says in results files.
 #[derive(
-    Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize, schemars::JsonSchema,
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    schemars::JsonSchema,
+    strum::Display,
+    strum::IntoStaticStr,
 )]
 #[serde(rename_all = "lowercase")]
+#[strum(serialize_all = "lowercase")]
 pub enum ProbeFilter {
     /// 8 texel loads and trilinear weights in the shader (the renderer's way).
     Manual,
@@ -34,10 +43,7 @@ pub enum ProbeFilter {
 impl ProbeFilter {
     /// The name in results files.
     pub fn name(self) -> &'static str {
-        match self {
-            Self::Manual => "manual",
-            Self::Hardware => "hardware",
-        }
+        self.into()
     }
 }
 

@@ -1,24 +1,25 @@
 //! The renderer of one volume and one scene: the shared [`RaycastPipeline`], the
-//! [`ResidencyState`] (octree, page tables, cache), the [`SceneTables`], and the per-frame
+//! `ResidencyState` (octree, page tables, cache), the `SceneTables`, and the per-frame
 //! buffers, with one frame's parameters, dispatch and readback (image, capped request list,
 //! slot usage, statistics, GPU time).
 
 use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use std::sync::Arc;
 
-use super::GpuError;
 use super::brick_cache::BrickCache;
 use super::brick_cut::{CutView, brick_cut};
-use super::buffers::{check_binding, readback_buffer, storage_buffer, uniform_buffer};
+use super::buffers::{
+    check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
+};
 use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
 use super::device::Gpu;
+use super::error::GpuError;
 use super::occupancy::occupancy_geometry;
 use super::page_table::PageTables;
 use super::pipeline::{Bindings, RaycastPipeline};
 use super::residency::ResidencyState;
-pub use super::residency::is_clear;
 use super::segments::SegmentStage;
 use super::tables::{SceneTables, channel_level_bounds};
 use super::timer::PassTimer;
@@ -26,7 +27,11 @@ use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
+// The names code outside `gpu` has long found here; each lives in its own module.
 pub use super::contract::MAX_CHANNELS;
+pub use super::method::{Method, UnknownMethod};
+pub use super::options::RenderOptions;
+pub use super::residency::{Inserted, is_clear};
 
 /// Bytes of the counters at the head of the request buffer.
 const COUNTER_BYTES: u64 = size_of::<FrameCounters>() as u64;
@@ -36,149 +41,6 @@ const RAY_STATE_BYTES: u64 = size_of::<RayState>() as u64;
 
 /// Most passes of one frame before the renderer gives up (a ray of a million steps or more).
 const MAX_PASSES: u32 = 100_000;
-
-/// How the ray caster finds data and skips empty space: the residency octree, or one of the
-/// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
-/// functions so that their ratios are fair.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum Method {
-    /// The residency octree: per-channel residency masks and min/max per node, nodes finer
-    /// than a brick, substitution of missing bricks from other resident levels.
-    #[default]
-    Residency,
-    /// Multi-resolution multi-channel page table (MRMCPT): data is read straight through the
-    /// page table; only whole bricks empty in every channel are skipped; a missing brick is a
-    /// hole until it arrives.
-    PageTable,
-    /// Octree of one node per brick (GigaVoxels style): each channel descends from the
-    /// coarsest level to the level it wants, needs every ancestor brick resident, and renders
-    /// from the finest resident ancestor while a brick is missing.
-    Octree,
-    /// SparseLeap (Hadwiger et al. 2018): occupancy geometry (nested octree boxes where the
-    /// occupancy class changes: empty under the transfer functions, non-empty, unknown) is
-    /// rasterised each frame into per-pixel ray segment lists, and the ray caster leaps over
-    /// the empty segments without traversing a hierarchy, sampling the others through the page
-    /// table as ours does.
-    #[serde(rename = "sparseleap")]
-    SparseLeap,
-    /// Octree rasterisation (Wang et al.): the CPU picks a cut of bricks by the projected
-    /// size of each brick's bounding sphere and culls empty ones, the bricks are rasterised
-    /// into per-pixel ray segment lists, and each ray samples every brick on its list at that
-    /// brick's level, skipping empty macrocells (the octree nodes of 8³ voxels of the level)
-    /// inside it.
-    Rasterize,
-}
-
-impl Method {
-    /// Every method, ours first.
-    pub const ALL: [Self; 5] = [
-        Self::Residency,
-        Self::PageTable,
-        Self::Octree,
-        Self::SparseLeap,
-        Self::Rasterize,
-    ];
-
-    /// The name used on the command line and in statistics.
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Residency => "residency",
-            Self::PageTable => "page-table",
-            Self::Octree => "octree",
-            Self::SparseLeap => "sparseleap",
-            Self::Rasterize => "rasterize",
-        }
-    }
-
-    /// Whether the method rasterises boxes into ray segment lists before ray casting.
-    pub fn uses_segment_lists(self) -> bool {
-        matches!(self, Self::SparseLeap | Self::Rasterize)
-    }
-
-    /// Whether the method culls with the residency octree's per-node classes (and never
-    /// fetches bricks that are clear under the transfer functions), rather than with the
-    /// baselines' per-brick classes.
-    pub fn uses_node_classes(self) -> bool {
-        !matches!(self, Self::PageTable | Self::Octree)
-    }
-}
-
-/// A method name that is not one of [`Method::ALL`]'s.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown method '{name}' (residency, page-table, octree, sparseleap or rasterize)")]
-pub struct UnknownMethod {
-    /// The name given.
-    pub name: String,
-}
-
-impl std::str::FromStr for Method {
-    type Err = UnknownMethod;
-
-    fn from_str(s: &str) -> Result<Self, UnknownMethod> {
-        Self::ALL
-            .into_iter()
-            .find(|m| m.name() == s)
-            .ok_or_else(|| UnknownMethod {
-                name: s.to_string(),
-            })
-    }
-}
-
-/// Renderer settings.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RenderOptions {
-    /// Image width in pixels.
-    pub width: u32,
-    /// Image height in pixels.
-    pub height: u32,
-    /// Brick cache budget in bytes.
-    pub cache_bytes: u64,
-    /// LOD bias, `log2` of the pixel footprint scale: positive picks coarser levels. The
-    /// default −1 (voxels of half a pixel footprint) sits on the benchmark's time-error front.
-    pub lod_bias: f32,
-    /// Step length as a fraction of the smallest voxel edge of the level in use.
-    pub step_factor: f32,
-    /// Octree leaf depth; `None` picks leaves of about [`Self::leaf_voxels`] voxels.
-    pub octree_depth: Option<u32>,
-    /// Target leaf edge in level-0 voxels when `octree_depth` is `None`.
-    pub leaf_voxels: u64,
-    /// Depth traversal starts at (and never restarts above).
-    pub start_depth: u32,
-    /// Most brick requests the shader records per frame.
-    pub max_requests: u32,
-    /// `(finest, coarsest)` level bounds per rendered channel, in scene order; missing
-    /// entries allow every level.
-    pub level_bounds: Vec<(u32, u32)>,
-    /// Skip nodes empty under the transfer functions and integrate homogeneous nodes in
-    /// closed form; `false` is the "no skipping" baseline (every node is sampled).
-    pub empty_space_skipping: bool,
-    /// Substitute a missing brick from another resident level (coarser first); `false`
-    /// leaves the sample empty, as a page-table-only renderer would.
-    pub substitution: bool,
-    /// Traversal method: ours or a baseline.
-    pub method: Method,
-}
-
-impl Default for RenderOptions {
-    fn default() -> Self {
-        Self {
-            width: 256,
-            height: 256,
-            cache_bytes: 256 << 20,
-            lod_bias: -1.0,
-            step_factor: 0.5,
-            octree_depth: None,
-            leaf_voxels: 8,
-            start_depth: 0,
-            max_requests: 4096,
-            level_bounds: Vec::new(),
-            empty_space_skipping: true,
-            substitution: true,
-            method: Method::Residency,
-        }
-    }
-}
 
 /// What the shader counted in one frame.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, JsonSchema)]
@@ -210,6 +72,7 @@ pub struct ShaderCounts {
     /// out of steps, and a full pass after any that stopped rays for it (a request, a
     /// substitute or the per-corner path needed). 1 for a converged frame whose rays fit in
     /// one pass.
+    #[schemars(range(min = 1))]
     pub passes: u64,
 }
 
@@ -233,22 +96,6 @@ pub struct FrameOutput {
     pub counts: ShaderCounts,
     /// GPU time of the compute pass in ms, when timestamp queries are supported.
     pub gpu_time_ms: Option<f64>,
-}
-
-/// Outcome of inserting one brick.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Inserted {
-    /// Uploaded into a cache slot, evicting the given brick if any.
-    Uploaded {
-        /// The brick evicted to make room.
-        evicted: Option<BrickKey>,
-    },
-    /// Fill value everywhere: marked resident without a slot.
-    Empty,
-    /// Already resident.
-    AlreadyResident,
-    /// Every slot holds a brick the current frame used: nothing evicted, brick dropped.
-    CacheFull,
 }
 
 /// The staging buffers one frame's results are read back through.
@@ -383,8 +230,12 @@ impl Renderer {
         residency.restyle(&visible);
         let tables = SceneTables::new(gpu, &residency, &options, &visible)?;
         let buffers = FrameBuffers::new(gpu, &options, residency.cache().capacity())?;
-        let pipeline =
-            RaycastPipeline::shared(gpu, residency.cache().kind(), options.method, scene.filter);
+        let pipeline = gpu.pipelines.get_or_build(
+            &gpu.device,
+            residency.cache().kind(),
+            options.method,
+            scene.filter,
+        );
         let atlas = residency.cache().views();
         let bind_group = pipeline.bind_group(
             &gpu.device,
@@ -530,7 +381,7 @@ impl Renderer {
 
     /// Cache slots free or not used by the last frame: how many bricks can be inserted now
     /// without evicting the current working set.
-    pub fn insertable(&self) -> usize {
+    pub(crate) fn insertable(&self) -> usize {
         self.residency.cache().available(self.frame)
     }
 
@@ -539,7 +390,7 @@ impl Renderer {
     /// the wrong size or type is an error and changes nothing.
     ///
     /// # Errors
-    /// As [`ResidencyState::insert`]: a brick not drawn, or one of the wrong size or type.
+    /// As `ResidencyState::insert`: a brick not drawn, or one of the wrong size or type.
     pub fn insert(
         &mut self,
         gpu: &Gpu,
@@ -550,7 +401,7 @@ impl Renderer {
     }
 
     /// Whether the shader reads the bricks' aprons (the default; see
-    /// [`ResidencyState::use_aprons`]).
+    /// `ResidencyState::use_aprons`).
     pub fn use_aprons(&mut self, gpu: &Gpu, used: bool) {
         self.residency.use_aprons(gpu, used);
     }
@@ -850,36 +701,6 @@ impl Renderer {
             gpu_time_ms,
         })
     }
-}
-
-/// Maps `buffers` for reading and waits until they are: natively by polling the device, in
-/// the browser by yielding to the event loop until WebGPU calls back.
-pub(super) async fn map_for_reading(
-    device: &wgpu::Device,
-    buffers: &[&wgpu::Buffer],
-) -> Result<(), GpuError> {
-    let mut mapped = Vec::with_capacity(buffers.len());
-    for b in buffers {
-        let (tx, rx) = futures_channel::oneshot::channel();
-        b.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        mapped.push(rx);
-    }
-    #[cfg(not(target_arch = "wasm32"))]
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(GpuError::Poll)?;
-    #[cfg(target_arch = "wasm32")]
-    let _ = device;
-    for (i, rx) in mapped.into_iter().enumerate() {
-        match rx.await {
-            Ok(Ok(())) => {}
-            Ok(Err(reason)) => return Err(GpuError::Readback { buffer: i, reason }),
-            Err(_) => return Err(GpuError::DeviceLost { buffer: i }),
-        }
-    }
-    Ok(())
 }
 
 /// Distance `D` (world) from the eye to the shader's view point `eye + D·forward`, from which

@@ -3,26 +3,43 @@
 //! the brick cache, and the classes the ray caster culls with (after the nodes): per node for
 //! ours, per brick for the baselines, each "empty" or "constant" per channel under the
 //! transfer functions. It changes as bricks arrive and are evicted, each arrival filling the
-//! aprons it completes ([`super::apron`]); a restyle only redoes the classes, the clear-brick
-//! marks and the aprons that stood in for clear bricks ([`ResidencyState::restyle`]), so
+//! aprons it completes (`apron`); a restyle only redoes the classes, the clear-brick
+//! marks and the aprons that stood in for clear bricks (`ResidencyState::restyle`), so
 //! every resident brick stays.
 
-use super::GpuError;
 use super::apron::{self, Aprons, EntryKind, LowFaces, Part, PartSource};
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, storage_buffer};
 use super::contract::{CLASS_CONSTANT_SHIFT, RECORD_WORDS, SEGMENT_HEADS};
 use super::device::Gpu;
+use super::error::GpuError;
+use super::method::Method;
+use super::options::RenderOptions;
 use super::page_table::{
     ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables, entry_slot, slot_entry,
 };
-use super::renderer::{Inserted, Method, RenderOptions};
 use crate::octree::{OctreeGeometry, ResidencyOctree, f32_down, f32_up};
 use crate::scene::{ChannelStyle, Filter};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
+/// Outcome of inserting one brick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inserted {
+    /// Uploaded into a cache slot, evicting the given brick if any.
+    Uploaded {
+        /// The brick evicted to make room.
+        evicted: Option<BrickKey>,
+    },
+    /// Fill value everywhere: marked resident without a slot.
+    Empty,
+    /// Already resident.
+    AlreadyResident,
+    /// Every slot holds a brick the current frame used: nothing evicted, brick dropped.
+    CacheFull,
+}
+
 /// Octree, page tables, cache and their GPU buffers for the channels one renderer draws.
-pub struct ResidencyState {
+pub(crate) struct ResidencyState {
     info: VolumeInfo,
     method: Method,
     /// The filter the classes and clear marks are widened for.
@@ -38,7 +55,7 @@ pub struct ResidencyState {
     nodes: wgpu::Buffer,
     /// Word offset of the classes in `nodes`.
     class_offset: u32,
-    /// The node classes as uploaded ([`node_class`] of every node; empty for the baselines),
+    /// The node classes as uploaded (`node_class` of every node; empty for the baselines),
     /// kept for the CPU's own culling (SparseLeap's geometry, the rasterize cut).
     classes: Vec<u32>,
     /// Where the ray segment lists lie in `nodes` (SparseLeap and rasterize only).
@@ -67,7 +84,7 @@ struct Pending {
 /// Where the ray segment lists of one renderer lie in its node buffer, after the nodes and
 /// classes: the layout of [`super::contract::SEGMENT_HEADS`], for one image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SegmentArea {
+pub(crate) struct SegmentArea {
     /// Word offset in the node buffer (a multiple of 64 words, so the segment pass can bind
     /// it with the offset alignment WebGPU guarantees).
     pub offset_words: u64,
@@ -170,7 +187,7 @@ pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> RangeClass
     }
 }
 
-/// The class words of every node of `octree` under `styles` ([`node_class`] of each), as a
+/// The class words of every node of `octree` under `styles` (`node_class` of each), as a
 /// renderer of our method uploads them.
 pub fn node_classes(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>]) -> Vec<u32> {
     (0..octree.geometry().node_count())
@@ -180,7 +197,11 @@ pub fn node_classes(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>]) -
 
 /// The class word of node `node` of `octree` under `styles` (one per channel slot): bit `c`
 /// where channel slot `c` is empty, bit [`CLASS_CONSTANT_SHIFT`]` + c` where it is constant.
-pub fn node_class(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>], node: usize) -> u32 {
+pub(crate) fn node_class(
+    octree: &ResidencyOctree,
+    styles: &[Option<ChannelStyle>],
+    node: usize,
+) -> u32 {
     let mut word = 0;
     for (c, style) in styles.iter().enumerate() {
         let (lo, hi) = octree.range(node, c);
@@ -334,7 +355,7 @@ impl ResidencyState {
         std::mem::take(&mut self.pending.occupancy)
     }
 
-    /// The node classes the shader culls with, as of the last flush ([`node_class`] of every
+    /// The node classes the shader culls with, as of the last flush (`node_class` of every
     /// node; empty for the baselines, which cull per brick).
     pub fn classes(&self) -> &[u32] {
         &self.classes
@@ -608,11 +629,11 @@ impl ResidencyState {
 /// The range that decides whether brick `key` is clear under `filter`: its conservative
 /// (haloed) range, widened by twice the filter's reach, so that it holds every voxel of any
 /// footprint of the filter that reaches the brick.
-pub fn clear_range(info: &VolumeInfo, key: &BrickKey, filter: Filter) -> (f64, f64) {
+pub(crate) fn clear_range(info: &VolumeInfo, key: &BrickKey, filter: Filter) -> (f64, f64) {
     info.widened_brick_range(key, 2 * filter.reach())
 }
 
-/// Whether brick `key` is clear under `style` and `filter`: its [`clear_range`], rounded
+/// Whether brick `key` is clear under `style` and `filter`: its `clear_range`, rounded
 /// outward to `f32` as the shader sees values, holds data and is transparent under the
 /// transfer function. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
 /// TF".

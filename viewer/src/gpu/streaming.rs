@@ -25,11 +25,12 @@ use std::time::{Duration, Instant};
 use schemars::JsonSchema;
 use serde::Serialize;
 
-use super::GpuError;
 use super::device::Gpu;
-use super::renderer::{BrickRequest, Inserted, Renderer, ShaderCounts};
+use super::error::GpuError;
+use super::renderer::{BrickRequest, Renderer, ShaderCounts};
+use super::residency::Inserted;
 #[cfg(not(target_arch = "wasm32"))]
-use super::renderer::{Method, RenderOptions};
+use super::{method::Method, options::RenderOptions, stop_reason::StopReason};
 #[cfg(not(target_arch = "wasm32"))]
 use crate::scene::Scene;
 #[cfg(not(target_arch = "wasm32"))]
@@ -165,8 +166,10 @@ impl Default for Budget {
 
 /// Statistics of one frame (the shader's counters plus what streaming did after it).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct FrameStats {
     /// Frame number, from 1.
+    #[schemars(range(min = 1))]
     pub frame: u32,
     /// Shader counters.
     #[serde(flatten)]
@@ -186,6 +189,7 @@ pub struct FrameStats {
     /// GPU time of the ray-casting pass (timestamp queries), `null` when unsupported.
     pub gpu_time_ms: Option<f64>,
     /// Wall time of the frame including fetching and uploading.
+    #[schemars(range(min = 0))]
     pub wall_ms: f64,
 }
 
@@ -204,7 +208,7 @@ pub struct Progressive {
     /// Whether the last frame requested nothing (beyond bricks that failed).
     pub converged: bool,
     /// Why the loop stopped.
-    pub stop_reason: String,
+    pub stop_reason: StopReason,
     /// Every brick requested by the shader, in order of first request.
     pub request_log: Vec<BrickKey>,
     /// Bricks that could not be fetched or uploaded, with the error.
@@ -214,6 +218,7 @@ pub struct Progressive {
 #[cfg(not(target_arch = "wasm32"))]
 /// A brick that could not be fetched or uploaded, in the statistics document.
 #[derive(Clone, Debug, PartialEq, Serialize, JsonSchema)]
+#[schemars(deny_unknown_fields)]
 pub struct FailedBrick {
     /// Which brick: `level L channel C brick zZ yY xX`.
     pub brick: String,
@@ -225,6 +230,7 @@ pub struct FailedBrick {
 /// The statistics document of one progressive render, as `viewer render --stats` writes it
 /// (`schemas/json/render-stats.schema.json`).
 #[derive(Clone, Debug, PartialEq, Serialize, JsonSchema)]
+#[schemars(title = "Render statistics", deny_unknown_fields)]
 pub struct RenderStats {
     /// The dataset's name.
     pub dataset: String,
@@ -237,14 +243,17 @@ pub struct RenderStats {
     /// The graphics backend (`Vulkan`, `Gl`, ...).
     pub backend: String,
     /// Image width.
+    #[schemars(range(min = 1))]
     pub width: u32,
     /// Image height.
+    #[schemars(range(min = 1))]
     pub height: u32,
     /// Whether the last frame requested nothing (beyond bricks that failed).
     pub converged: bool,
     /// Why the loop stopped.
-    pub stop_reason: String,
+    pub stop_reason: StopReason,
     /// Wall time of the whole render, seconds.
+    #[schemars(range(min = 0))]
     pub wall_s: f64,
     /// Bricks fetched, over all frames.
     pub bricks_fetched: u64,
@@ -253,6 +262,7 @@ pub struct RenderStats {
     /// Bricks that could not be fetched or uploaded.
     pub bricks_failed: Vec<FailedBrick>,
     /// Per-frame statistics.
+    #[schemars(length(min = 1))]
     pub frames: Vec<FrameStats>,
 }
 
@@ -277,7 +287,7 @@ impl RenderStats {
             width: result.width,
             height: result.height,
             converged: result.converged,
-            stop_reason: result.stop_reason.clone(),
+            stop_reason: result.stop_reason,
             wall_s,
             bricks_fetched: result.frames.iter().map(|f| f.bricks_fetched).sum(),
             bytes_fetched: result.frames.iter().map(|f| f.bytes_fetched).sum(),
@@ -357,7 +367,7 @@ pub fn coarser_brick(info: &VolumeInfo, key: &BrickKey) -> Option<BrickKey> {
 ///
 /// # Errors
 /// The fetch's [`SourceError`] (as [`GpuError::Source`]) or the upload's [`GpuError`].
-pub fn insert_fetched(
+pub(crate) fn insert_fetched(
     gpu: &Gpu,
     renderer: &mut Renderer,
     key: BrickKey,
@@ -446,7 +456,7 @@ impl StreamState {
         wanted.into_iter().map(|r| r.key).collect()
     }
 
-    /// Files a finished fetch of `key` ([`insert_fetched`]) and returns what the insert did
+    /// Files a finished fetch of `key` (`insert_fetched`) and returns what the insert did
     /// and the brick's decoded bytes; a failure (`None`) is remembered and the next coarser
     /// brick over its region is wanted in its place.
     pub fn arrived(
@@ -515,7 +525,9 @@ pub fn converge(
     let mut frames = Vec::new();
     let mut pixels = Vec::new();
     let mut converged = false;
-    let mut stop_reason = format!("frame budget of {} frames spent", budget.max_frames);
+    let mut stop_reason = StopReason::FrameBudget {
+        max_frames: budget.max_frames,
+    };
     for _ in 0..budget.max_frames.max(1) {
         let frame_start = Instant::now();
         let out = renderer.render(gpu)?;
@@ -532,20 +544,20 @@ pub fn converge(
             stats.wall_ms = wall_ms(frame_start);
             frames.push(stats);
             converged = true;
-            stop_reason = "converged: no brick requested".into();
+            stop_reason = StopReason::Converged;
             break;
         };
         if deadline.is_some_and(|d| Instant::now() >= d) {
             stats.wall_ms = wall_ms(frame_start);
             frames.push(stats);
-            stop_reason = "time budget spent".into();
+            stop_reason = StopReason::TimeBudget;
             break;
         }
         let keys = StreamState::to_fetch(renderer, wanted, &mut stats);
         if keys.is_empty() {
             stats.wall_ms = wall_ms(frame_start);
             frames.push(stats);
-            stop_reason = "cache full: every slot holds a brick the current view uses".into();
+            stop_reason = StopReason::CacheFull;
             break;
         }
         stats.requests_cancelled = fetcher.submit(keys) as u64;

@@ -11,11 +11,11 @@
 //! ([`super::residency::node_class`]), one word read where the shader used to test every
 //! channel's range against a prefix table of the transfer function's bins.
 
-use super::GpuError;
 use super::buffers::{check_binding, storage_buffer, uniform_buffer};
 use super::contract::{ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms};
 use super::device::Gpu;
-use super::renderer::RenderOptions;
+use super::error::GpuError;
+use super::options::RenderOptions;
 use super::residency::ResidencyState;
 use crate::octree::OctreeGeometry;
 use crate::scene::ChannelStyle;

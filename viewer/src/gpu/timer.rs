@@ -2,8 +2,8 @@
 //! is written by the first pass of a frame (the segment lists' render pass where there is one,
 //! else the first compute pass), the end by every compute pass, so the time spans them all.
 
-use super::GpuError;
 use super::device::Gpu;
+use super::error::GpuError;
 
 /// Two timestamps, their resolve buffer and the staging buffer they are read back through.
 pub struct PassTimer {

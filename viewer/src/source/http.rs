@@ -38,7 +38,7 @@ impl Get for Client {
             .read_to_vec()
             .map_err(|e| SourceError::ReadResponse {
                 url: url.to_string(),
-                reason: e.to_string(),
+                source: Box::new(e),
             })?;
         Ok(Reply::new(status, body, self.token.is_some()))
     }

@@ -4,8 +4,8 @@
 use std::path::Path;
 
 use rayon::prelude::*;
-use residency_schemas::location::{ObjectStoreOptions, StoreLocation};
-use residency_schemas::pyramid::{BrickIndex, Pyramid, PyramidError};
+use residency_store::location::{ObjectStoreOptions, StoreLocation};
+use residency_store::pyramid::{BrickIndex, Pyramid, PyramidError};
 use zarrs::array::{Array, ArrayError, CodecOptions, ElementOwned};
 use zarrs::storage::ReadableListableStorageTraits;
 
@@ -66,7 +66,7 @@ impl LocalSource {
             .open_readable(options)
             .map_err(|source| SourceError::CannotOpen {
                 store: shown.clone(),
-                source,
+                source: Box::new(source),
             })?;
         let pyramid = Pyramid::open(store, &shown)?;
         let descriptions: Vec<_> = pyramid

@@ -12,11 +12,11 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use residency_schemas::ome::OmeError;
-#[cfg(not(target_arch = "wasm32"))]
-use residency_schemas::pyramid::PyramidError;
 use residency_schemas::sample_type::PartialSample;
 use residency_schemas::wire::{BrickEncoding, WireError};
 use residency_schemas::zarr::ArrayMetadataError;
+#[cfg(not(target_arch = "wasm32"))]
+use residency_store::pyramid::PyramidError;
 
 #[cfg(not(target_arch = "wasm32"))]
 pub mod http;
@@ -82,7 +82,7 @@ pub enum SourceError {
         store: String,
         /// Why.
         #[source]
-        source: residency_schemas::location::LocationError,
+        source: Box<residency_store::location::LocationError>,
     },
     /// A local pyramid that cannot be opened.
     #[cfg(not(target_arch = "wasm32"))]
@@ -277,12 +277,13 @@ pub enum SourceError {
         reason: String,
     },
     /// A response whose body cannot be read.
-    #[error("{url}: cannot read the response: {reason}")]
+    #[error("{url}: cannot read the response")]
     ReadResponse {
         /// The URL asked for.
         url: String,
         /// What the HTTP client said.
-        reason: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// No browser window to fetch from (web viewer).
     #[error("{url}: no browser window")]

@@ -54,3 +54,35 @@ fn every_wgsl_file_validates() {
     assert_eq!(with(&transfer), ["raycast.wgsl", "probe.wgsl"]);
     assert_eq!(with(&view), ["raycast.wgsl", "segments.wgsl"]);
 }
+
+/// Every file in `shaders/raycast/` is one of `contract::RAYCAST_PARTS` (read from disk as
+/// the part holds it), and the compiled ray caster holds each part's text.
+#[test]
+fn every_raycast_part_is_compiled() {
+    let shaders = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shaders");
+    let parts: Vec<&str> = contract::RAYCAST_PARTS
+        .iter()
+        .map(|(name, _)| *name)
+        .collect();
+    let mut files: Vec<String> = std::fs::read_dir(shaders.join("raycast"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    files.sort();
+    for file in &files {
+        let name = format!("raycast/{file}");
+        assert!(
+            parts.contains(&name.as_str()),
+            "shaders/{name} is not in contract::RAYCAST_PARTS"
+        );
+    }
+    let source = contract::raycast_source();
+    for (name, text) in contract::RAYCAST_PARTS {
+        assert_eq!(
+            std::fs::read_to_string(shaders.join(name)).unwrap(),
+            text,
+            "{name}"
+        );
+        assert!(source.contains(text), "raycast_source() lacks {name}");
+    }
+}

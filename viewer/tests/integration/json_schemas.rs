@@ -1,58 +1,64 @@
-//! The viewer's hand-written JSON Schemas cannot drift from the Rust types that write (or, for
-//! scenes, read) the documents: each is compared with the schema `schemars` derives from its
-//! type (`residency_schemas::drift` says what is compared).
+//! The viewer's JSON Schemas in `schemas/json/` are generated from the Rust types that write
+//! (or, for scenes, read) the documents (`residency_schemas::generate`): the committed files
+//! must equal the generated text byte for byte. After a type change, regenerate them with
+//! `RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas`.
 
-use residency_schemas::drift::{
-    Node, derived, derived_for_reading, drift, drift_of_files, hand_written,
-};
+use residency_schemas::generate::{SchemaFile, snapshot};
 use residency_viewer::bench::BenchResults;
 use residency_viewer::gpu::streaming::RenderStats;
 use residency_viewer::metrics::Metrics;
 use residency_viewer::scene::Scene;
 use serde_json::{Value, json};
 
-/// Every viewer document's schema file, with the schema derived from its type.
-fn pairs() -> Vec<(&'static str, Value)> {
+/// The command regenerating the viewer's schema files.
+const REGENERATE: &str =
+    "RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas";
+
+/// Every viewer document's schema file. Scenes are documents the viewer reads; the others it
+/// writes.
+fn documents() -> Vec<SchemaFile> {
     vec![
-        ("scene.schema.json", derived_for_reading::<Scene>()),
-        ("render-stats.schema.json", derived::<RenderStats>()),
-        ("compare.schema.json", derived::<Metrics>()),
-        ("render-bench.schema.json", derived::<BenchResults>()),
+        SchemaFile::read::<Scene>("scene.schema.json"),
+        SchemaFile::written::<RenderStats>("render-stats.schema.json"),
+        SchemaFile::written::<Metrics>("compare.schema.json"),
+        SchemaFile::written::<BenchResults>("render-bench.schema.json"),
     ]
 }
 
 #[test]
-fn viewer_schemas_match_the_rust_types() {
-    let failures = drift_of_files(&pairs());
-    assert!(
-        failures.is_empty(),
-        "the viewer's JSON Schemas drifted from its Rust types (fix the file or the type):\n{}",
-        failures.join("\n")
-    );
+fn viewer_schema_files_are_generated_from_the_rust_types() {
+    snapshot(&documents(), REGENERATE);
 }
 
-/// Scenes are documents the viewer reads: what the derived schema requires is exactly what
-/// serde cannot default, and a field the file lacks is reported.
-#[test]
-fn scene_schema_is_checked_as_read() {
-    let rust = derived_for_reading::<Scene>();
-    let (props, required) = Node::document(&rust).object().unwrap();
-    assert_eq!(required, ["camera", "channels"].map(String::from).into());
-    let (_, camera_required) = props["camera"].object().unwrap();
-    assert_eq!(camera_required, ["eye", "target"].map(String::from).into());
-
-    let mut file = hand_written("scene.schema.json");
-    file["properties"]
-        .as_object_mut()
+fn required(schema: &Value) -> Vec<&str> {
+    let mut names: Vec<&str> = schema["required"]
+        .as_array()
         .unwrap()
-        .remove("background");
-    file["properties"]["camera"]["required"] = json!(["eye", "target", "up"]);
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    names.sort_unstable();
+    names
+}
+
+/// Scenes are described as the viewer reads them: what the schema requires is exactly what
+/// serde cannot default, where the schema of the scene as written would require every field.
+#[test]
+fn scene_schema_is_generated_as_read() {
+    let read: Value =
+        serde_json::from_str(&SchemaFile::read::<Scene>("scene.schema.json").text).unwrap();
+    assert_eq!(required(&read), ["camera", "channels"]);
+    assert_eq!(required(&read["properties"]["camera"]), ["eye", "target"]);
     assert_eq!(
-        drift(&file, &rust),
-        [
-            "#: property 'background' is in the Rust type, not in the file",
-            "#/camera: the file requires {\"eye\", \"target\", \"up\"}, Rust always writes \
-             {\"eye\", \"target\"}",
-        ]
+        required(&read["properties"]["channels"]["items"]),
+        ["channel", "color", "opacity"]
+    );
+    assert_eq!(read["additionalProperties"], json!(false));
+
+    let written: Value =
+        serde_json::from_str(&SchemaFile::written::<Scene>("scene.schema.json").text).unwrap();
+    assert_eq!(
+        required(&written["properties"]["camera"]),
+        ["eye", "fov_y_degrees", "target", "up"]
     );
 }

@@ -263,7 +263,11 @@ fn cache_too_small_stops_cleanly() {
     };
     let (p, img) = render(&src, &scene, options, 40);
     assert!(!p.converged);
-    assert!(p.stop_reason.starts_with("cache full"), "{}", p.stop_reason);
+    assert!(
+        p.stop_reason.to_string().starts_with("cache full"),
+        "{}",
+        p.stop_reason
+    );
     assert!(img.pixels.iter().all(|q| q.iter().all(|v| v.is_finite())));
     let last = p.frames.last().unwrap();
     assert!(last.shader.bricks_requested > 0);

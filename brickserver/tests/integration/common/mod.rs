@@ -11,7 +11,7 @@ use axum::Router;
 use axum::body::Body;
 use axum::http::{HeaderMap, Request, StatusCode};
 use residency_brickserver::{AppState, Datasets, ServerOptions, router};
-use residency_schemas::location::ObjectStoreOptions;
+use residency_store::location::ObjectStoreOptions;
 use tower::ServiceExt as _;
 
 /// The viewer page of the test folder: it names its files through `%VIEWER_BASE%`.
@@ -122,13 +122,14 @@ pub fn viewer_dir(dir: &Path) -> PathBuf {
 }
 
 /// The router serving `stores` (NAME, path) under `options`.
-pub fn server(stores: &[(&str, &Path)], options: &ServerOptions) -> Router {
+pub async fn server(stores: &[(&str, &Path)], options: &ServerOptions) -> Router {
     let named: Vec<String> = stores
         .iter()
         .map(|(n, p)| format!("{n}={}", p.display()))
         .collect();
-    let datasets =
-        Datasets::from_args(&[], &named, &ObjectStoreOptions::default()).expect("test datasets");
+    let datasets = Datasets::from_args(&[], &named, &ObjectStoreOptions::default())
+        .await
+        .expect("test datasets");
     let state = Arc::new(AppState::new(datasets, options).expect("state"));
     router(state, options)
 }

@@ -1,0 +1,133 @@
+//! `GET /NAME/bricks`: many bricks in one framed binary document.
+
+use std::sync::Arc;
+
+use aide::transform::TransformOperation;
+use axum::body::{Body, Bytes};
+use axum::extract::{Path, Query, RawQuery, State};
+use axum::http::{Response, StatusCode, header};
+use axum::response::IntoResponse;
+use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, BrickEncoding, encode_framed};
+use schemars::JsonSchema;
+
+use super::api_error::{api_error, no_dataset};
+use super::params::DatasetPath;
+use super::state::{AppState, blocking, loaded};
+use crate::bricks::{BatchError, ImageArrays, parse_batch, read_batch};
+use crate::cache::{CacheKey, Cached};
+use crate::openapi::{answer, api_errors, binary, responses, with_content};
+
+/// The query of `/NAME/bricks` as documented; the handler parses the raw query itself
+/// ([`parse_batch`]), to name what is wrong with it.
+#[derive(JsonSchema)]
+#[expect(
+    dead_code,
+    reason = "only its schema is used, to document the query parse_batch reads"
+)]
+pub(super) struct BatchQuery {
+    /// Bricks as L,C,z,y,x separated by ';' (level, channel, brick coordinates).
+    b: String,
+    #[serde(default = "stored")]
+    encoding: BrickEncoding,
+}
+
+/// The encoding of bricks when the query names none.
+fn stored() -> BrickEncoding {
+    BrickEncoding::Stored
+}
+
+/// The documentation of `GET /NAME/bricks`.
+pub(super) fn docs(op: TransformOperation<'_>) -> TransformOperation<'_> {
+    let op = op
+        .summary("Many bricks in one framed binary document")
+        .description(
+            "Framing: 8 bytes 'RSBRICKS', little-endian u32 header length, JSON header (schema \
+             BrickBatchHeader), payload. An unreadable or corrupt brick is an `error` entry \
+             naming its key; the other bricks are still answered.",
+        )
+        .input::<Query<BatchQuery>>();
+    let batch = with_content(
+        answer("The batch"),
+        BRICKS_MEDIA_TYPE,
+        binary(BRICKS_MEDIA_TYPE),
+    );
+    let op = responses(op, [(200, batch)]);
+    api_errors(
+        op,
+        &[
+            (400, "Malformed request"),
+            (404, "No such dataset"),
+            (
+                413,
+                "Too many bricks, or too many decoded bytes, in one batch",
+            ),
+            (500, "Image arrays unreadable"),
+        ],
+    )
+}
+
+/// The answer to a refused batch: 413 over a cap, 400 otherwise.
+fn batch_error(e: &BatchError) -> Response<Body> {
+    let status = if e.is_over_limit() {
+        StatusCode::PAYLOAD_TOO_LARGE
+    } else {
+        StatusCode::BAD_REQUEST
+    };
+    api_error(status, e.to_string())
+}
+
+/// `GET /NAME/bricks`.
+pub(super) async fn bricks(
+    State(state): State<Arc<AppState>>,
+    Path(DatasetPath { name }): Path<DatasetPath>,
+    RawQuery(query): RawQuery,
+) -> Response<Body> {
+    let Some(index) = state.index_of(&name) else {
+        return no_dataset(&name);
+    };
+    let (list, encoding) = match parse_batch(query.as_deref().unwrap_or(""), &state.batch) {
+        Ok(b) => b,
+        Err(e) => return batch_error(&e),
+    };
+    let arrays = loaded(
+        &state,
+        index,
+        |l| &l.arrays,
+        |store| ImageArrays::open(store).map(Arc::new),
+    );
+    let arrays = match arrays.await {
+        Ok(a) => a,
+        Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+    };
+    if let Err(e) = state.batch.check_bytes(list.len(), arrays.brick_bytes()) {
+        return batch_error(&e);
+    }
+    let st = state.clone();
+    let raw = encoding == BrickEncoding::Raw;
+    let body = blocking(move || {
+        let (header, payload) = read_batch(&arrays, &list, encoding, |at| {
+            let key = CacheKey::Brick {
+                dataset: index,
+                at: (at.level, at.channel, at.brick),
+                raw,
+            };
+            if let Some(hit) = st.cache.get(&key) {
+                return Ok((!hit.bytes.is_empty()).then_some(hit.bytes));
+            }
+            let read = arrays.read(at, encoding)?;
+            let bytes = read.map(Bytes::from).unwrap_or_default();
+            let cached = Cached {
+                bytes: bytes.clone(),
+                etag: None,
+            };
+            st.cache.insert(key, cached);
+            Ok((!bytes.is_empty()).then_some(bytes))
+        });
+        for e in header.bricks.iter().filter_map(|b| b.error.as_deref()) {
+            tracing::error!(dataset = %name, "{e}");
+        }
+        encode_framed(BRICKS_MAGIC, &header, &payload)
+    })
+    .await;
+    ([(header::CONTENT_TYPE, BRICKS_MEDIA_TYPE)], body).into_response()
+}

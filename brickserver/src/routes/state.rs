@@ -1,0 +1,176 @@
+//! The options and shared state of the routes, and what every route module uses to reach a
+//! dataset's lazily loaded parts off the async threads.
+
+use std::error::Error;
+use std::path::PathBuf;
+use std::sync::{Arc, OnceLock};
+use std::time::Instant;
+
+use residency_store::location::ObjectStoreOptions;
+
+use crate::bricks::{BatchLimits, ImageArrays};
+use crate::cache::ByteCache;
+use crate::dataset_store::{DatasetStore, OpenError};
+use crate::datasets::Datasets;
+use crate::listing::{PublicUrl, StoreSummary};
+use crate::metrics::Metrics;
+use crate::regions::RegionIndex;
+use crate::viewer_page::ViewerFiles;
+
+/// Server-wide options of the router.
+#[derive(Clone, Debug)]
+pub struct ServerOptions {
+    /// When set, every request but `/healthz` must carry `Authorization: Bearer <token>`.
+    pub token: Option<String>,
+    /// Memory cache budget in bytes (0: no cache).
+    pub cache_bytes: u64,
+    /// Caps on batched brick requests.
+    pub batch: BatchLimits,
+    /// The web viewer's built files (`scripts/build-web.sh`); `None` or a folder without
+    /// `index.html` answers `/NAME/view` and `/viewer/...` with 503 and how to build it.
+    pub viewer_dir: Option<PathBuf>,
+    /// The URL the server is reached at from outside (a reverse proxy's, path prefix
+    /// included): every link in the listing is built on it. `None`: from the request's
+    /// `X-Forwarded-Proto`/`X-Forwarded-Host`, else its `Host`.
+    pub public_url: Option<PublicUrl>,
+    /// How to reach datasets in an object store.
+    pub object_store: ObjectStoreOptions,
+}
+
+impl Default for ServerOptions {
+    fn default() -> Self {
+        Self {
+            token: None,
+            cache_bytes: 256 << 20,
+            batch: BatchLimits::default(),
+            viewer_dir: None,
+            public_url: None,
+            object_store: ObjectStoreOptions::default(),
+        }
+    }
+}
+
+/// A part of a dataset (its region index or image arrays) that could not be loaded; kept, so
+/// every later request is answered the same (500) without trying again.
+#[derive(Clone, Debug, thiserror::Error)]
+#[error("dataset '{dataset}': {source}")]
+pub(crate) struct LoadError {
+    /// The dataset's name.
+    dataset: String,
+    /// Why it could not be loaded (shared: the error is kept, and cloned for each answer).
+    source: Arc<dyn Error + Send + Sync>,
+}
+
+/// What is loaded once per dataset, on first use.
+#[derive(Default)]
+pub(crate) struct Loaded {
+    /// The region index (`None`: the dataset has no region metadata).
+    pub(crate) regions: OnceLock<Result<Option<Arc<RegionIndex>>, LoadError>>,
+    /// The image arrays, for batched bricks.
+    pub(crate) arrays: OnceLock<Result<Arc<ImageArrays>, LoadError>>,
+    /// What the listing says of the store (`None`: its metadata could not be read).
+    pub(crate) summary: OnceLock<Option<Arc<StoreSummary>>>,
+}
+
+/// Shared state of the routes.
+pub struct AppState {
+    /// The served datasets.
+    pub datasets: Datasets,
+    /// The memory cache.
+    pub(crate) cache: ByteCache,
+    /// The metrics.
+    pub metrics: Arc<Metrics>,
+    /// Caps on batched brick requests.
+    pub(crate) batch: BatchLimits,
+    pub(crate) viewer: ViewerFiles,
+    pub(crate) public_url: Option<PublicUrl>,
+    /// What is loaded once per dataset, by dataset index.
+    pub(crate) loaded: Vec<Loaded>,
+    /// Where each dataset's keys are read from, by dataset index.
+    pub(crate) stores: Vec<DatasetStore>,
+    /// The `ETag` of each chunk key served, by dataset index and raw key, with when it was
+    /// seen.
+    pub(crate) etags: quick_cache::sync::Cache<(usize, String), (Arc<str>, Instant)>,
+}
+
+impl AppState {
+    /// State for `datasets` under `options`.
+    ///
+    /// # Errors
+    /// [`OpenError`] when a dataset folder cannot be opened or an object-store client cannot
+    /// be configured.
+    pub fn new(datasets: Datasets, options: &ServerOptions) -> Result<Self, OpenError> {
+        let metrics = Arc::new(Metrics::default());
+        let cache = ByteCache::new(
+            options.cache_bytes,
+            metrics.cache_hits.clone(),
+            metrics.cache_misses.clone(),
+            metrics.cache_bytes.clone(),
+        );
+        let loaded = datasets.0.iter().map(|_| Loaded::default()).collect();
+        let stores = datasets
+            .0
+            .iter()
+            .map(|d| DatasetStore::open(&d.location, &options.object_store))
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            datasets,
+            cache,
+            metrics,
+            batch: options.batch,
+            viewer: ViewerFiles::new(options.viewer_dir.clone()),
+            public_url: options.public_url.clone(),
+            loaded,
+            stores,
+            etags: quick_cache::sync::Cache::new(1 << 16),
+        })
+    }
+
+    /// The web viewer's files.
+    pub fn viewer(&self) -> &ViewerFiles {
+        &self.viewer
+    }
+
+    /// The index of the dataset called `name`.
+    pub(crate) fn index_of(&self, name: &str) -> Option<usize> {
+        self.datasets.0.iter().position(|d| d.name == name)
+    }
+}
+
+/// A once-loaded part of dataset `i` (`cell` picks which): read directly once loaded, else
+/// made by `load` on the blocking pool (the first caller loads, later ones wait for it). A
+/// failure keeps the error, with its causes.
+pub(crate) async fn loaded<T, E>(
+    state: &Arc<AppState>,
+    i: usize,
+    cell: fn(&Loaded) -> &OnceLock<Result<T, LoadError>>,
+    load: fn(&DatasetStore) -> Result<T, E>,
+) -> Result<T, LoadError>
+where
+    T: Clone + Send + Sync + 'static,
+    E: Error + Send + Sync + 'static,
+{
+    if let Some(done) = cell(&state.loaded[i]).get() {
+        return done.clone();
+    }
+    let st = state.clone();
+    blocking(move || {
+        let d = &st.datasets.0[i];
+        cell(&st.loaded[i])
+            .get_or_init(|| {
+                load(&st.stores[i]).map_err(|e| LoadError {
+                    dataset: d.name.clone(),
+                    source: Arc::new(e),
+                })
+            })
+            .clone()
+    })
+    .await
+}
+
+/// Runs blocking work off the async threads.
+pub(crate) async fn blocking<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    tokio::task::spawn_blocking(f)
+        .await
+        .expect("blocking task panicked")
+}

@@ -1,0 +1,245 @@
+//! `GET /NAME/KEY`: a Zarr key of a dataset's store, verbatim, from its folder or its object
+//! store.
+//!
+//! Keys in a folder are read from the page cache on each request (as nginx does), so nothing
+//! is copied twice; chunks of an object store are kept in the memory cache.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use aide::transform::TransformOperation;
+use axum::body::{Body, Bytes};
+use axum::extract::{Path, State};
+use axum::http::{HeaderMap, Response, StatusCode, Uri, header};
+use axum::response::IntoResponse;
+use residency_store::location::object_store::GetRange;
+use schemars::json_schema;
+
+use super::params::KeyPath;
+use super::state::{AppState, blocking};
+use crate::cache::{CacheKey, Cached};
+use crate::dataset_store::{Keys, ObjectKeys, requested_range};
+use crate::openapi::{answer, binary, responses, with_content};
+use crate::responses::{
+    RangeRequest, etag_of, file_response, is_metadata, not_modified, parse_range, part_response,
+};
+use crate::store_keys::{KeyError, RootDir, checked_key, read_cached};
+
+/// How long a remembered chunk `ETag` answers revalidations without a look at the file (as
+/// nginx's `open_file_cache_valid`): chunks are immutable, but a store may be replaced.
+const ETAG_VALID: Duration = Duration::from_mins(1);
+
+/// The documentation of `GET /NAME/KEY`.
+pub(super) fn docs(op: TransformOperation<'_>) -> TransformOperation<'_> {
+    let op = op.summary("A Zarr key of the store, verbatim").description(
+        "zarr.json, .zattrs, .zarray, chunk and shard keys, residency/ arrays. ETag with \
+             If-None-Match (304), single Range (206/416), Cache-Control immutable for chunks \
+             and no-cache for metadata, CORS. A missing chunk is a 404 (the fill value to Zarr \
+             readers).",
+    );
+    let stored = with_content(
+        answer("The stored bytes"),
+        "application/json",
+        json_schema!({"type": "object"}),
+    );
+    let stored = with_content(
+        stored,
+        "application/octet-stream",
+        binary("application/octet-stream"),
+    );
+    responses(
+        op,
+        [
+            (200, stored),
+            (206, answer("A byte range of the stored bytes")),
+            (304, answer("Not modified (If-None-Match matched the ETag)")),
+            (
+                400,
+                answer(
+                    "Refused key: '..', backslash, absolute path, NUL byte, empty segment, or a \
+                     symlink leading out of the dataset",
+                ),
+            ),
+            (
+                404,
+                answer("No such key (a missing chunk reads as the fill value)"),
+            ),
+            (416, answer("Range outside the file")),
+            (
+                500,
+                answer("The key exists but cannot be read; the message names it"),
+            ),
+        ],
+    )
+}
+
+/// `GET /NAME/KEY`.
+pub(super) async fn serve_key(
+    State(state): State<Arc<AppState>>,
+    Path(KeyPath { name, .. }): Path<KeyPath>,
+    uri: Uri,
+    headers: HeaderMap,
+) -> Response<Body> {
+    let Some(index) = state.index_of(&name) else {
+        return (StatusCode::NOT_FOUND, format!("no dataset '{name}'\n")).into_response();
+    };
+    // The raw, still percent-encoded key: everything after "/NAME/".
+    let raw_key = uri
+        .path()
+        .splitn(3, '/')
+        .nth(2)
+        .unwrap_or_default()
+        .to_string();
+    // A revalidation of a chunk whose ETag is remembered needs no system call at all.
+    let chunk = !is_metadata(&raw_key);
+    if chunk && headers.contains_key(header::IF_NONE_MATCH) {
+        let known = state.etags.get(&(index, raw_key.clone()));
+        if let Some((etag, _)) = known.filter(|(_, seen)| seen.elapsed() < ETAG_VALID)
+            && let Some(answer) = not_modified(&raw_key, &etag, &headers)
+        {
+            return answer;
+        }
+    }
+    let answer = match &state.stores[index].keys {
+        Keys::Folder(root) => folder_key(&state, index, root, &raw_key, &headers).await,
+        Keys::Object(objects) => object_key(&state, index, objects, &raw_key, &headers).await,
+    };
+    match answer {
+        Ok(response) => response,
+        Err(KeyError::NotFound) => (
+            StatusCode::NOT_FOUND,
+            format!("no key '{raw_key}' in '{name}'\n"),
+        )
+            .into_response(),
+        Err(KeyError::Refused(why)) => {
+            (StatusCode::BAD_REQUEST, format!("refused: {why}\n")).into_response()
+        }
+        Err(KeyError::Unreadable(why)) => {
+            let message = format!("cannot read key '{raw_key}' of '{name}': {why}");
+            tracing::error!("{message}");
+            (StatusCode::INTERNAL_SERVER_ERROR, format!("{message}\n")).into_response()
+        }
+    }
+}
+
+/// Key `raw_key` of dataset `index`, read from its folder `root`.
+async fn folder_key(
+    state: &AppState,
+    index: usize,
+    root: &RootDir,
+    raw_key: &str,
+    headers: &HeaderMap,
+) -> Result<Response<Body>, KeyError> {
+    // Open beneath the dataset root and read what the page cache holds right here, as nginx
+    // does; only a read that would wait for the disk moves to the blocking pool.
+    let (file, meta) = root.open_key(raw_key)?;
+    let etag = etag_of(&meta);
+    if !is_metadata(raw_key) {
+        state.etags.insert(
+            (index, raw_key.to_string()),
+            (etag.as_str().into(), Instant::now()),
+        );
+    }
+    if let Some(answer) = not_modified(raw_key, &etag, headers) {
+        return Ok(answer);
+    }
+    let len = meta.len() as usize;
+    let (bytes, whole) = read_cached(&file, len);
+    let bytes = if whole {
+        bytes
+    } else {
+        blocking(move || {
+            use std::os::unix::fs::FileExt;
+            let mut bytes = bytes;
+            let done = bytes.len();
+            bytes.resize(len, 0);
+            file.read_exact_at(&mut bytes[done..], done as u64)
+                .map(|()| bytes)
+                .map_err(|e| KeyError::Unreadable(e.into()))
+        })
+        .await?
+    };
+    Ok(file_response(Bytes::from(bytes), &etag, raw_key, headers))
+}
+
+/// Key `raw_key` of dataset `index`, read from the object store: a chunk read whole in the last
+/// [`ETAG_VALID`] is answered from the memory cache; a `Range` becomes a ranged read, so a
+/// shard's index and chunks are read without the rest of the shard.
+async fn object_key(
+    state: &AppState,
+    index: usize,
+    objects: &ObjectKeys,
+    raw_key: &str,
+    headers: &HeaderMap,
+) -> Result<Response<Body>, KeyError> {
+    let key = checked_key(raw_key)?;
+    let chunk = !is_metadata(raw_key);
+    let cache_key = CacheKey::Object {
+        dataset: index,
+        key: raw_key.to_string(),
+    };
+    if chunk
+        && let Some(Cached {
+            bytes,
+            etag: Some((etag, read)),
+        }) = state.cache.get(&cache_key)
+        && read.elapsed() < ETAG_VALID
+    {
+        let answer = not_modified(raw_key, &etag, headers);
+        return Ok(answer.unwrap_or_else(|| file_response(bytes, &etag, raw_key, headers)));
+    }
+    let range_header = headers.get(header::RANGE).and_then(|v| v.to_str().ok());
+    let range = range_header.and_then(requested_range);
+    let ranged = range.is_some();
+    let part = match objects.get(&key, range).await {
+        Ok(part) => part,
+        Err(KeyError::Unreadable(_)) if let Some(value) = range_header.filter(|_| ranged) => {
+            // The store refused the range (past the end, a suffix of nothing): answer as a
+            // file of the object's length would be.
+            let (len, etag) = objects.head(&key).await?;
+            match parse_range(value, len) {
+                RangeRequest::Part(start, end) => {
+                    objects
+                        .get(&key, Some(GetRange::Bounded(start..end)))
+                        .await?
+                }
+                RangeRequest::Whole => objects.get(&key, None).await?,
+                unsatisfiable @ RangeRequest::Unsatisfiable => {
+                    return Ok(part_response(
+                        Bytes::new(),
+                        len,
+                        unsatisfiable,
+                        &etag,
+                        raw_key,
+                    ));
+                }
+            }
+        }
+        Err(e) => return Err(e),
+    };
+    let tag: Arc<str> = part.etag.as_str().into();
+    if chunk {
+        state
+            .etags
+            .insert((index, raw_key.to_string()), (tag.clone(), Instant::now()));
+    }
+    if let Some(answer) = not_modified(raw_key, &part.etag, headers) {
+        return Ok(answer);
+    }
+    let whole = part.range == (0..part.size);
+    if chunk && whole {
+        let cached = Cached {
+            bytes: part.bytes.clone(),
+            etag: Some((tag, Instant::now())),
+        };
+        state.cache.insert(cache_key, cached);
+    }
+    let served = if ranged {
+        RangeRequest::Part(part.range.start, part.range.end)
+    } else {
+        RangeRequest::Whole
+    };
+    Ok(part_response(
+        part.bytes, part.size, served, &part.etag, raw_key,
+    ))
+}

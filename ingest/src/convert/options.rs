@@ -1,0 +1,64 @@
+//! What `ingest convert` is asked to do ([`ConvertOptions`]).
+
+use std::path::PathBuf;
+
+use crate::source::RawOptions;
+use crate::store::OmeZarrVersion;
+
+/// Everything `ingest convert` needs to know.
+#[derive(Clone, Debug)]
+pub struct ConvertOptions {
+    /// Input files, folders or globs; their channels are concatenated in order.
+    pub inputs: Vec<String>,
+    /// Output store path.
+    pub output: PathBuf,
+    /// Layout of raw inputs.
+    pub raw: RawOptions,
+    /// Voxel size `z, y, x` overriding the inputs' metadata.
+    pub voxel_size: Option<[f64; 3]>,
+    /// Physical unit overriding the inputs' metadata.
+    pub unit: Option<String>,
+    /// Brick (chunk, or inner chunk when sharded) shape `z, y, x`.
+    pub brick: [u64; 3],
+    /// Shard shape `z, y, x` (Zarr v3 sharding), a multiple of the brick.
+    pub shard: Option<[u64; 3]>,
+    /// OME-Zarr version.
+    pub version: OmeZarrVersion,
+    /// Number of levels (default: until a level fits in one brick).
+    pub levels: Option<usize>,
+    /// Replace an existing output.
+    pub overwrite: bool,
+    /// Show a progress bar on stderr.
+    pub progress: bool,
+    /// Channel labels overriding the inputs' metadata.
+    pub channel_names: Vec<String>,
+    /// Peak memory to stay within, in bytes (default: [`default_memory_limit`]).
+    pub memory_limit: Option<u64>,
+}
+
+/// The memory a conversion keeps within unless told otherwise: half of this machine's
+/// physical memory (no limit where the system does not say).
+pub fn default_memory_limit() -> u64 {
+    crate::memory::physical_memory().map_or(u64::MAX, |m| m / 2)
+}
+
+impl ConvertOptions {
+    /// Options with defaults for everything but inputs and output.
+    pub fn new(inputs: Vec<String>, output: PathBuf) -> Self {
+        Self {
+            inputs,
+            output,
+            raw: RawOptions::default(),
+            voxel_size: None,
+            unit: None,
+            brick: [64; 3],
+            shard: None,
+            version: OmeZarrVersion::V05,
+            levels: None,
+            overwrite: false,
+            progress: false,
+            channel_names: Vec::new(),
+            memory_limit: None,
+        }
+    }
+}

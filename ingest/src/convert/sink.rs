@@ -1,0 +1,134 @@
+//! Writing a slab of a level and recording its region metadata ([`SlabSink`]): common to
+//! `convert` and `index`.
+
+use std::sync::Mutex;
+
+use rayon::prelude::*;
+use zarrs::array::{Array, ArrayError};
+
+use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
+use crate::sample_format::Sample;
+use crate::source::PlaneRegion;
+use crate::store::Store;
+
+/// A chunk of an image array that cannot be written.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot write chunk {}/{}/{}/{}", chunk[0], chunk[1], chunk[2], chunk[3])]
+pub struct ChunkWriteError {
+    /// Chunk indices `c, z, y, x`.
+    pub chunk: [u64; 4],
+    /// What zarrs said.
+    #[source]
+    pub source: Box<ArrayError>,
+}
+
+/// Reusable per-level context for the slab processing that is common to `convert` and
+/// `index`: histograms, cells, global statistics and (optionally) the image write.
+pub(crate) struct SlabSink<'a> {
+    pub channels: usize,
+    /// The part of each plane a slab holds (chunk-aligned; the whole plane, or a column).
+    pub window: PlaneRegion,
+    pub brick: [u64; 3],
+    pub outer: [u64; 3],
+    pub array: Option<&'a Array<Store>>,
+    pub histograms: &'a LevelHistograms,
+    pub stats: Option<&'a [Mutex<ChannelAccumulator>]>,
+}
+
+impl SlabSink<'_> {
+    /// Writes (when an array is given) the chunks of a slab `[c][nz][y][x]` of the window
+    /// starting at `z0`,
+    /// records brick histograms and statistics, and folds the slab into the min/max `cells`.
+    /// Returns (bricks written, bricks empty).
+    pub fn process<T: Sample>(
+        &self,
+        slab: &[T],
+        z0: u64,
+        nz: u64,
+        cells: &mut CellGrid<T>,
+    ) -> Result<(u64, u64), ChunkWriteError> {
+        let w = self.window;
+        let [ny, nx] = w.end();
+        let [oz, oy, ox] = self.outer;
+        let tasks: Vec<(usize, u64, u64)> = (0..self.channels)
+            .flat_map(|c| {
+                (w.y0 / oy..ny.div_ceil(oy))
+                    .flat_map(move |cy| (w.x0 / ox..nx.div_ceil(ox)).map(move |cx| (c, cy, cx)))
+            })
+            .collect();
+        let chunk_len = (oz * oy * ox) as usize;
+        let counts = tasks
+            .into_par_iter()
+            .map_init(
+                || (StatsScratch::default(), Vec::<T>::new()),
+                |(scratch, chunk), (c, cy, cx)| -> Result<(u64, u64), ChunkWriteError> {
+                    // Gather the outer chunk, padded with the fill value (0).
+                    chunk.clear();
+                    chunk.resize(chunk_len, T::default());
+                    let (y0, x0) = (cy * oy, cx * ox);
+                    let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
+                    let plane = w.area() as usize;
+                    for dz in 0..nz {
+                        for dy in 0..vy {
+                            let src = (c as u64 * nz + dz) as usize * plane
+                                + ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
+                            let dst = ((dz * oy + dy) * ox) as usize;
+                            chunk[dst..dst + vx as usize]
+                                .copy_from_slice(&slab[src..src + vx as usize]);
+                        }
+                    }
+                    let (mut written, mut empty) = (0u64, 0u64);
+                    let [bz, by, bx] = self.brick;
+                    let mut any_data = false;
+                    for iz in 0..nz.div_ceil(bz) {
+                        for iy in 0..vy.div_ceil(by) {
+                            for ix in 0..vx.div_ceil(bx) {
+                                let (zs, ys, xs) = (iz * bz, iy * by, ix * bx);
+                                let (ze, ye, xe) =
+                                    ((zs + bz).min(nz), (ys + by).min(vy), (xs + bx).min(vx));
+                                let chunk: &[T] = chunk;
+                                let rows = (zs..ze).flat_map(|z| {
+                                    (ys..ye).map(move |y| {
+                                        let row = ((z * oy + y) * ox) as usize;
+                                        &chunk[row + xs as usize..row + xe as usize]
+                                    })
+                                });
+                                let stats =
+                                    BrickStats::of_rows(rows, scratch, self.stats.is_some());
+                                if stats.all_fill {
+                                    empty += 1;
+                                } else {
+                                    written += 1;
+                                    any_data = true;
+                                }
+                                let b = [(z0 + zs) / bz, (y0 + ys) / by, (x0 + xs) / bx];
+                                if let Some(all) = self.stats {
+                                    all[c].lock().expect("stats").add(&stats);
+                                }
+                                let index = self.histograms.index(c, b);
+                                self.histograms.fine.lock().expect("histograms")[index] =
+                                    stats.fine;
+                            }
+                        }
+                    }
+                    if let Some(array) = self.array
+                        && any_data
+                    {
+                        let indices = [c as u64, z0 / oz, cy, cx];
+                        array
+                            .store_chunk(&indices, chunk.as_slice())
+                            .map_err(|source| ChunkWriteError {
+                                chunk: indices,
+                                source: Box::new(source),
+                            })?;
+                    }
+                    Ok((written, empty))
+                },
+            )
+            .collect::<Result<Vec<_>, _>>()?;
+        cells.add_slab(slab, z0, nz, w);
+        Ok(counts
+            .into_iter()
+            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))
+    }
+}

@@ -1,0 +1,14 @@
+//! Storage for Residency's stores: where a store lives and how its pyramid is read.
+//!
+//! The format itself (sample types, OME-Zarr and Zarr metadata, region metadata, wire formats)
+//! is `residency-schemas`, which does no I/O and builds for the browser. This crate adds what
+//! touches storage:
+//! - [`location`]: a store's location (a local folder, or a prefix in an S3-compatible bucket)
+//!   opened as one zarrs storage, and publishing, listing and downloading object-store stores;
+//! - [`aws_profile`]: the AWS shared configuration profiles that `object_store` does not read;
+//! - [`pyramid`]: the pyramid reader, bricks and metadata through zarrs' codecs over any
+//!   zarrs storage.
+
+pub mod aws_profile;
+pub mod location;
+pub mod pyramid;

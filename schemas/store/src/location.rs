@@ -1,0 +1,629 @@
+//! Where a store lives: a local folder (a plain path or a `file://` URL) or an S3-compatible
+//! object store (`s3://bucket/prefix/name.ome.zarr`), opened as one zarrs storage either way.
+//!
+//! Object stores are reached through `object_store` (via `zarrs_object_store`). Credentials
+//! and region come from the standard AWS variables (`AWS_ACCESS_KEY_ID`,
+//! `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`, `AWS_REGION`/`AWS_DEFAULT_REGION`), and what
+//! they leave unset from the AWS profile ([`crate::aws_profile`]); a non-AWS server is named by
+//! `AWS_ENDPOINT_URL` (plain `http://` needs `AWS_ALLOW_HTTP=true`), a profile's
+//! `endpoint_url`, or [`ObjectStoreOptions::endpoint`]. Requests are path-style
+//! (`endpoint/bucket/key`).
+//!
+//! Asynchronous programs (brickserver) make one client per store with
+//! [`StoreLocation::object_store`], ask it with [`StoreLocation::exists_in`], and read the
+//! pyramid through the same client with [`object_storage`], whose requests run on their own
+//! runtime ([`BlockOn`]). The synchronous functions ([`StoreLocation::exists`],
+//! [`StoreLocation::open_readable`], publishing and downloading) run theirs on a runtime of
+//! this module's.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::sync::{Arc, OnceLock};
+
+use futures::{StreamExt, TryStreamExt};
+
+use crate::aws_profile::{Profile, ProfileError};
+use zarrs::filesystem::{FilesystemStore, FilesystemStoreCreateError};
+use zarrs::storage::ReadableListableStorageTraits;
+use zarrs::storage::storage_adapter::async_to_sync::{
+    AsyncToSyncBlockOn, AsyncToSyncStorageAdapter,
+};
+use zarrs_object_store::AsyncObjectStore;
+use zarrs_object_store::object_store::aws::{AmazonS3, AmazonS3Builder};
+use zarrs_object_store::object_store::path::Path as ObjectPath;
+use zarrs_object_store::object_store::prefix::PrefixStore;
+use zarrs_object_store::object_store::{ObjectStore, ObjectStoreExt, PutPayload};
+
+/// The `object_store` crate this module reaches object stores with, for callers that make
+/// their own requests (see [`StoreLocation::object_store`]).
+pub use zarrs_object_store::object_store;
+
+/// An object store and the key prefix of a store's root in it.
+pub type ObjectStoreAt = (Arc<dyn ObjectStore>, ObjectPath);
+
+/// The documents at a store's root that say what it is (Zarr v3, then v2): written last when a
+/// store is published, and deleted first when one is replaced.
+pub const ROOT_METADATA: [&str; 3] = ["zarr.json", ".zgroup", ".zattrs"];
+
+/// Objects uploaded at once when a store is published.
+const UPLOADS_IN_FLIGHT: usize = 16;
+
+/// A store's location, parsed from a command-line argument.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum StoreLocation {
+    /// A local folder.
+    Folder(PathBuf),
+    /// A prefix in a bucket of an S3-compatible object store.
+    S3 {
+        /// The bucket.
+        bucket: String,
+        /// The key prefix of the store's root (no leading or trailing `/`).
+        prefix: String,
+    },
+}
+
+/// A location that cannot be parsed or opened. Messages name the location.
+#[derive(Debug, thiserror::Error)]
+pub enum LocationError {
+    /// An `s3://` URL without a bucket or without a key prefix.
+    #[error("{url}: an S3 location is s3://BUCKET/PREFIX (the store's root), with both parts")]
+    S3Url {
+        /// The URL as given.
+        url: String,
+    },
+    /// A URL scheme other than `s3://` and `file://`.
+    #[error("{url}: unknown scheme (stores are local paths, file:// or s3:// URLs)")]
+    Scheme {
+        /// The URL as given.
+        url: String,
+    },
+    /// A local folder zarrs cannot open.
+    #[error("{}: cannot open the store: {source}", path.display())]
+    Folder {
+        /// The folder.
+        path: PathBuf,
+        /// What zarrs said.
+        #[source]
+        source: FilesystemStoreCreateError,
+    },
+    /// The object store client cannot be configured (credentials, region, endpoint), or a
+    /// request failed.
+    #[error("{location}: {source}")]
+    ObjectStore {
+        /// The location (and key) of the request.
+        location: String,
+        /// What `object_store` said.
+        #[source]
+        source: object_store::Error,
+    },
+    /// The AWS profile cannot be read.
+    #[error(transparent)]
+    Profile(#[from] ProfileError),
+    /// A store is already there, and replacing it was not asked for.
+    #[error("{location}: output already exists (pass --overwrite to replace it)")]
+    Exists {
+        /// The location.
+        location: String,
+    },
+    /// A downloaded file cannot be written.
+    #[error("{}: cannot write", path.display())]
+    WriteFile {
+        /// The file.
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A file of the store to publish cannot be read.
+    #[error("{}: cannot read", path.display())]
+    ReadFile {
+        /// The file.
+        path: PathBuf,
+        /// What the file system said.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+impl FromStr for StoreLocation {
+    type Err = LocationError;
+
+    /// `s3://bucket/prefix`, `file:///path`, or a plain path.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if let Some(rest) = s.strip_prefix("s3://") {
+            let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
+            let prefix = prefix.trim_matches('/');
+            if bucket.is_empty() || prefix.is_empty() {
+                return Err(LocationError::S3Url { url: s.to_string() });
+            }
+            return Ok(Self::S3 {
+                bucket: bucket.to_string(),
+                prefix: prefix.to_string(),
+            });
+        }
+        if let Some(path) = s.strip_prefix("file://") {
+            return Ok(Self::Folder(PathBuf::from(path)));
+        }
+        if s.contains("://") {
+            return Err(LocationError::Scheme { url: s.to_string() });
+        }
+        Ok(Self::Folder(PathBuf::from(s)))
+    }
+}
+
+impl fmt::Display for StoreLocation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Folder(path) => write!(f, "{}", path.display()),
+            Self::S3 { bucket, prefix } => write!(f, "s3://{bucket}/{prefix}"),
+        }
+    }
+}
+
+/// How to reach an object store beyond the AWS variables.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct ObjectStoreOptions {
+    /// Endpoint URL of a non-AWS server (overrides `AWS_ENDPOINT_URL`); an `http://`
+    /// endpoint is allowed without `AWS_ALLOW_HTTP`.
+    pub endpoint: Option<String>,
+}
+
+/// The tokio runtime that runs object-store requests for the synchronous functions of this
+/// module ([`StoreLocation::exists`], [`StoreLocation::upload_folder`],
+/// [`StoreLocation::download_prefix`], [`StoreLocation::open_readable`]), which synchronous
+/// programs (ingest, the viewer's `--store s3://`) call. Asynchronous callers use
+/// [`StoreLocation::exists_in`] and [`object_storage`] on their own runtime instead.
+fn runtime() -> &'static tokio::runtime::Runtime {
+    static RUNTIME: OnceLock<tokio::runtime::Runtime> = OnceLock::new();
+    RUNTIME.get_or_init(|| {
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("object-store")
+            .enable_all()
+            .build()
+            .expect("a tokio runtime for object-store requests")
+    })
+}
+
+/// Runs object-store futures for zarrs' synchronous API on a multi-threaded tokio runtime the
+/// caller chose, from synchronous code: a thread outside the runtime, or a blocking task of it
+/// (`spawn_blocking`), never an async task.
+#[derive(Clone, Debug)]
+pub struct BlockOn(tokio::runtime::Handle);
+
+impl BlockOn {
+    /// Runs futures on the runtime of `handle`.
+    pub fn new(handle: tokio::runtime::Handle) -> Self {
+        Self(handle)
+    }
+}
+
+impl AsyncToSyncBlockOn for BlockOn {
+    fn block_on<F: Future>(&self, future: F) -> F::Output {
+        self.0.block_on(future)
+    }
+}
+
+/// The keys under `prefix` in `store` as synchronous zarrs storage, its requests made by that
+/// same client and run by `block_on`: for callers that also make their own requests to
+/// `store` (see [`StoreLocation::object_store`]) and read the pyramid through zarrs.
+pub fn object_storage(
+    store: Arc<dyn ObjectStore>,
+    prefix: &ObjectPath,
+    block_on: BlockOn,
+) -> Arc<dyn ReadableListableStorageTraits> {
+    let store = AsyncObjectStore::new(PrefixStore::new(store, prefix.clone()));
+    Arc::new(AsyncToSyncStorageAdapter::new(Arc::new(store), block_on))
+}
+
+impl StoreLocation {
+    /// The folder, for a local store.
+    pub fn folder(&self) -> Option<&Path> {
+        match self {
+            Self::Folder(path) => Some(path),
+            Self::S3 { .. } => None,
+        }
+    }
+
+    /// The store's name: its last path component (`name.ome.zarr`).
+    pub fn file_name(&self) -> String {
+        match self {
+            Self::Folder(path) => path.file_name().map_or_else(
+                || path.display().to_string(),
+                |n| n.to_string_lossy().into(),
+            ),
+            Self::S3 { prefix, .. } => prefix.rsplit('/').next().unwrap_or(prefix).to_string(),
+        }
+    }
+
+    /// The S3 client of an `s3://` location, and its key prefix.
+    fn s3_client(&self, options: &ObjectStoreOptions) -> Result<(AmazonS3, String), LocationError> {
+        let Self::S3 { bucket, prefix } = self else {
+            unreachable!("called for S3 locations only");
+        };
+        let mut builder = AmazonS3Builder::from_env().with_bucket_name(bucket);
+        // What the environment leaves unset comes from the AWS profile, if there is one.
+        let unset = |name: &str| std::env::var_os(name).is_none_or(|v| v.is_empty());
+        if let Some(profile) = Profile::from_env()? {
+            if unset("AWS_ACCESS_KEY_ID") {
+                if let Some(key) = profile.access_key_id {
+                    builder = builder.with_access_key_id(key);
+                }
+                if let Some(secret) = profile.secret_access_key {
+                    builder = builder.with_secret_access_key(secret);
+                }
+                if let Some(token) = profile.session_token {
+                    builder = builder.with_token(token);
+                }
+            }
+            if let Some(region) = profile.region
+                && unset("AWS_REGION")
+                && unset("AWS_DEFAULT_REGION")
+            {
+                builder = builder.with_region(region);
+            }
+            if let Some(endpoint) = profile.endpoint_url
+                && unset("AWS_ENDPOINT_URL")
+                && options.endpoint.is_none()
+            {
+                builder = builder
+                    .with_allow_http(endpoint.starts_with("http://"))
+                    .with_endpoint(endpoint);
+            }
+        }
+        if let Some(endpoint) = &options.endpoint {
+            builder = builder
+                .with_endpoint(endpoint)
+                .with_allow_http(endpoint.starts_with("http://"));
+        }
+        let s3 = builder
+            .build()
+            .map_err(|source| LocationError::ObjectStore {
+                location: self.to_string(),
+                source,
+            })?;
+        Ok((s3, prefix.clone()))
+    }
+
+    /// The object store and the key prefix of an `s3://` location (`None` for a folder), for
+    /// readers that make their own requests: ranged reads with the store's `ETag`s.
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] when the object-store client cannot be configured.
+    pub fn object_store(
+        &self,
+        options: &ObjectStoreOptions,
+    ) -> Result<Option<ObjectStoreAt>, LocationError> {
+        if self.folder().is_some() {
+            return Ok(None);
+        }
+        let (s3, prefix) = self.s3_client(options)?;
+        Ok(Some((Arc::new(s3), ObjectPath::from(prefix))))
+    }
+
+    /// Whether a store is at this location: its root metadata exists (a folder: the folder
+    /// exists).
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] when the object store cannot be asked.
+    pub fn exists(&self, options: &ObjectStoreOptions) -> Result<bool, LocationError> {
+        let Self::S3 { .. } = self else {
+            return Ok(self.folder().is_some_and(Path::exists));
+        };
+        let (s3, prefix) = self.s3_client(options)?;
+        let at: ObjectStoreAt = (Arc::new(s3), ObjectPath::from(prefix));
+        runtime().block_on(self.exists_in(&at))
+    }
+
+    /// Whether a store is at `prefix` in `store` (this location's object store and key
+    /// prefix, from [`StoreLocation::object_store`]): its root metadata exists. Errors name
+    /// this location.
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] when the object store cannot be asked.
+    pub async fn exists_in(&self, (store, prefix): &ObjectStoreAt) -> Result<bool, LocationError> {
+        for name in ROOT_METADATA {
+            let key = ObjectPath::from(format!("{prefix}/{name}"));
+            match store.head(&key).await {
+                Ok(_) => return Ok(true),
+                Err(object_store::Error::NotFound { .. }) => {}
+                Err(source) => {
+                    return Err(LocationError::ObjectStore {
+                        location: format!("{self}/{name}"),
+                        source,
+                    });
+                }
+            }
+        }
+        Ok(false)
+    }
+
+    /// Refuses a location where a store already is, unless `overwrite`.
+    ///
+    /// # Errors
+    /// [`LocationError::Exists`], or [`LocationError::ObjectStore`] when the object store
+    /// cannot be asked.
+    pub fn check_absent(
+        &self,
+        options: &ObjectStoreOptions,
+        overwrite: bool,
+    ) -> Result<(), LocationError> {
+        if !overwrite && self.exists(options)? {
+            return Err(LocationError::Exists {
+                location: self.to_string(),
+            });
+        }
+        Ok(())
+    }
+
+    /// Uploads every file of `folder` under this object-store location so that a reader never
+    /// takes a partial store for a complete one: the root metadata ([`ROOT_METADATA`]) last.
+    /// The other keys there are kept unless `clear` (replacing a store: then the old root
+    /// metadata is deleted first, then every key under the prefix). Keys under `scratch` (a
+    /// sub-prefix such as `.partitions`) are deleted just before the root metadata goes up.
+    /// `uploaded` is called with each file's bytes. Returns the bytes uploaded.
+    ///
+    /// # Errors
+    /// [`LocationError::ReadFile`] for a file that cannot be read, and
+    /// [`LocationError::ObjectStore`] (naming the key) for a request that failed.
+    pub fn upload_folder(
+        &self,
+        folder: &Path,
+        options: &ObjectStoreOptions,
+        clear: bool,
+        scratch: Option<&str>,
+        uploaded: &(dyn Fn(u64) + Sync),
+    ) -> Result<u64, LocationError> {
+        let (s3, prefix) = self.s3_client(options)?;
+        let mut files = Vec::new();
+        list_files(folder, folder, &mut files)?;
+        let (root, rest): (Vec<String>, Vec<String>) = files
+            .into_iter()
+            .partition(|rel| ROOT_METADATA.contains(&rel.as_str()));
+        let failed = |key: &str, source| LocationError::ObjectStore {
+            location: format!("{self}/{key}"),
+            source,
+        };
+        runtime().block_on(async {
+            if clear {
+                for name in ROOT_METADATA {
+                    let key = ObjectPath::from(format!("{prefix}/{name}"));
+                    match s3.delete(&key).await {
+                        Ok(()) | Err(object_store::Error::NotFound { .. }) => {}
+                        Err(source) => return Err(failed(name, source)),
+                    }
+                }
+                // Then every other key, in bulk requests.
+                delete_under(&s3, &prefix)
+                    .await
+                    .map_err(|source| failed("", source))?;
+            }
+            let upload = |batch: Vec<String>| {
+                let (s3, prefix, failed) = (&s3, &prefix, &failed);
+                futures::stream::iter(batch)
+                    .map(move |rel| async move {
+                        let key = ObjectPath::from(format!("{prefix}/{rel}"));
+                        put_file(s3, &key, &folder.join(&rel), &|source| failed(&rel, source))
+                            .await
+                            .inspect(|&n| uploaded(n))
+                    })
+                    .buffer_unordered(UPLOADS_IN_FLIGHT)
+                    .try_fold(0, |total, n| async move { Ok(total + n) })
+            };
+            let mut total = upload(rest).await?;
+            if let Some(sub) = scratch {
+                delete_under(&s3, &format!("{prefix}/{sub}"))
+                    .await
+                    .map_err(|source| failed(sub, source))?;
+            }
+            total += upload(root).await?;
+            Ok(total)
+        })
+    }
+
+    /// Downloads every object under the sub-prefix `sub` of this object-store location into
+    /// `folder` (created), each as the file at its key below the location. Returns how many.
+    ///
+    /// # Errors
+    /// [`LocationError::ObjectStore`] (naming the key) for a request that failed, and
+    /// [`LocationError::WriteFile`] when a file cannot be written.
+    pub fn download_prefix(
+        &self,
+        sub: &str,
+        folder: &Path,
+        options: &ObjectStoreOptions,
+    ) -> Result<usize, LocationError> {
+        let (s3, prefix) = self.s3_client(options)?;
+        let failed = |key: &str, source| LocationError::ObjectStore {
+            location: format!("{self}/{key}"),
+            source,
+        };
+        runtime().block_on(async {
+            let listed: Vec<_> = s3
+                .list(Some(&ObjectPath::from(format!("{prefix}/{sub}"))))
+                .try_collect()
+                .await
+                .map_err(|source| failed(sub, source))?;
+            for meta in &listed {
+                let key = meta.location.as_ref();
+                let rel = key.strip_prefix(&format!("{prefix}/")).unwrap_or(key);
+                let got = s3
+                    .get(&meta.location)
+                    .await
+                    .map_err(|source| failed(rel, source))?;
+                let bytes = got.bytes().await.map_err(|source| failed(rel, source))?;
+                let path = folder.join(rel);
+                let write = |source| LocationError::WriteFile {
+                    path: path.clone(),
+                    source,
+                };
+                if let Some(parent) = path.parent() {
+                    tokio::fs::create_dir_all(parent).await.map_err(write)?;
+                }
+                tokio::fs::write(&path, bytes).await.map_err(write)?;
+            }
+            Ok(listed.len())
+        })
+    }
+
+    /// Opens the store for reading.
+    ///
+    /// # Errors
+    /// [`LocationError::Folder`] when zarrs cannot open the folder, or
+    /// [`LocationError::ObjectStore`] when the object-store client cannot be configured.
+    /// Whether the store exists is found out by the first read.
+    pub fn open_readable(
+        &self,
+        options: &ObjectStoreOptions,
+    ) -> Result<Arc<dyn ReadableListableStorageTraits>, LocationError> {
+        Ok(match self {
+            Self::Folder(path) => Arc::new(folder_store(path)?),
+            Self::S3 { .. } => {
+                let (s3, prefix) = self.s3_client(options)?;
+                let block_on = BlockOn::new(runtime().handle().clone());
+                object_storage(Arc::new(s3), &ObjectPath::from(prefix), block_on)
+            }
+        })
+    }
+}
+
+/// Deletes every key under `prefix`, in bulk requests.
+async fn delete_under(s3: &AmazonS3, prefix: &str) -> Result<(), object_store::Error> {
+    let listed = s3
+        .list(Some(&ObjectPath::from(prefix)))
+        .map_ok(|meta| meta.location)
+        .boxed();
+    s3.delete_stream(listed).try_collect::<Vec<_>>().await?;
+    Ok(())
+}
+
+/// Files larger than this go up in parts (S3 takes at most 5 GB in one request; the AWS CLI
+/// switches to parts at the same size).
+pub const MULTIPART_THRESHOLD: u64 = 8 << 20;
+
+/// The size of each part of a multipart upload (grown for files of more than 10,000 parts,
+/// S3's limit).
+const PART_BYTES: u64 = 8 << 20;
+
+/// Parts of one file uploaded at once.
+const PARTS_IN_FLIGHT: usize = 4;
+
+/// Uploads the file at `path` to `key`: in one request up to [`MULTIPART_THRESHOLD`], else as
+/// a multipart upload read from the file part by part (aborted if a part fails). Returns its
+/// bytes.
+async fn put_file(
+    s3: &AmazonS3,
+    key: &ObjectPath,
+    path: &Path,
+    failed: &(dyn Fn(object_store::Error) -> LocationError + Sync),
+) -> Result<u64, LocationError> {
+    use tokio::io::AsyncReadExt;
+    let read = |source| LocationError::ReadFile {
+        path: path.to_path_buf(),
+        source,
+    };
+    let len = tokio::fs::metadata(path).await.map_err(read)?.len();
+    if len <= MULTIPART_THRESHOLD {
+        let bytes = tokio::fs::read(path).await.map_err(read)?;
+        s3.put(key, PutPayload::from(bytes)).await.map_err(failed)?;
+        return Ok(len);
+    }
+    let part = PART_BYTES.max(len.div_ceil(10_000)) as usize;
+    let upload = s3.put_multipart(key).await.map_err(failed)?;
+    let mut writer = object_store::WriteMultipart::new_with_chunk_size(upload, part);
+    let mut file = tokio::fs::File::open(path).await.map_err(read)?;
+    let mut buffer = Vec::with_capacity(part);
+    let sent = async {
+        loop {
+            writer
+                .wait_for_capacity(PARTS_IN_FLIGHT)
+                .await
+                .map_err(failed)?;
+            buffer.clear();
+            (&mut file)
+                .take(part as u64)
+                .read_to_end(&mut buffer)
+                .await
+                .map_err(read)?;
+            if buffer.is_empty() {
+                return Ok(());
+            }
+            writer.write(&buffer);
+        }
+    }
+    .await;
+    match sent {
+        Ok(()) => {
+            writer.finish().await.map_err(failed)?;
+            Ok(len)
+        }
+        Err(e) => {
+            let _ = writer.abort().await;
+            Err(e)
+        }
+    }
+}
+
+/// Every file under `dir`, as `/`-separated paths relative to `root`, sorted.
+fn list_files(root: &Path, dir: &Path, out: &mut Vec<String>) -> Result<(), LocationError> {
+    let read = |path: &Path, source| LocationError::ReadFile {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .map_err(|e| read(dir, e))?
+        .collect::<Result<_, _>>()
+        .map_err(|e| read(dir, e))?;
+    entries.sort_by_key(std::fs::DirEntry::path);
+    for entry in entries {
+        let path = entry.path();
+        if entry.file_type().map_err(|e| read(&path, e))?.is_dir() {
+            list_files(root, &path, out)?;
+        } else {
+            let rel = path.strip_prefix(root).unwrap_or(&path);
+            let parts: Vec<_> = rel.iter().map(|p| p.to_string_lossy()).collect();
+            out.push(parts.join("/"));
+        }
+    }
+    Ok(())
+}
+
+fn folder_store(path: &Path) -> Result<FilesystemStore, LocationError> {
+    FilesystemStore::new(path).map_err(|source| LocationError::Folder {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locations_parse_and_print() {
+        let s3: StoreLocation = "s3://bucket/a/b/name.ome.zarr/".parse().unwrap();
+        assert_eq!(
+            s3,
+            StoreLocation::S3 {
+                bucket: "bucket".into(),
+                prefix: "a/b/name.ome.zarr".into()
+            }
+        );
+        assert_eq!(s3.to_string(), "s3://bucket/a/b/name.ome.zarr");
+        assert_eq!(s3.file_name(), "name.ome.zarr");
+        let file: StoreLocation = "file:///data/x.ome.zarr".parse().unwrap();
+        assert_eq!(file.folder(), Some(Path::new("/data/x.ome.zarr")));
+        let plain: StoreLocation = "rel/x.ome.zarr".parse().unwrap();
+        assert_eq!(plain.file_name(), "x.ome.zarr");
+        let err = |s: &str| s.parse::<StoreLocation>().unwrap_err().to_string();
+        assert_eq!(
+            err("s3://bucket"),
+            "s3://bucket: an S3 location is s3://BUCKET/PREFIX (the store's root), with both parts"
+        );
+        assert_eq!(
+            err("gs://b/p"),
+            "gs://b/p: unknown scheme (stores are local paths, file:// or s3:// URLs)"
+        );
+    }
+}

@@ -1,0 +1,396 @@
+//! The pyramid reader: an OME-Zarr image's levels opened once from any zarrs store (Zarr v2 or
+//! v3, sharded or not), and its bricks read by (level, channel, brick) whatever the axis layout.
+//! `brickserver`'s batch endpoint, the viewer's local source and `ingest index` all read
+//! through it.
+
+use std::sync::Arc;
+
+use zarrs::array::{
+    Array, ArrayBytes, ArrayShardedReadableExt, ArrayShardedReadableExtCache, CodecOptions,
+    ElementOwned,
+};
+use zarrs::storage::{ReadableStorageTraits, StoreKey};
+
+use residency_schemas::SampleType;
+use residency_schemas::ome::{ImageAttributes, OmeError, PyramidLayout, ZarrFormat};
+use residency_schemas::zarr::{ArrayDescription, ArrayMetadataError};
+
+/// A problem opening a pyramid or reading one of its bricks. Every message names the store
+/// (and the level or brick) it is about.
+#[derive(Debug, thiserror::Error)]
+pub enum PyramidError {
+    /// Neither `zarr.json` nor `.zattrs` at the store's root.
+    #[error("{store}: not an OME-Zarr image (no zarr.json or .zattrs)")]
+    NotAnImage {
+        /// The store.
+        store: String,
+    },
+    /// The image group's OME metadata is unusable.
+    #[error(transparent)]
+    Ome(#[from] OmeError),
+    /// A level's array metadata is unusable.
+    #[error(transparent)]
+    ArrayMetadata(#[from] ArrayMetadataError),
+    /// A level's metadata document is missing.
+    #[error("{document}: missing (the multiscales list a level that is not in the store)")]
+    MissingLevel {
+        /// The document looked for.
+        document: String,
+    },
+    /// The levels disagree on sample type, brick shape or axes, or hold several channels in
+    /// one brick.
+    #[error("{store}: {problem}")]
+    Inconsistent {
+        /// The store.
+        store: String,
+        /// What disagrees.
+        problem: String,
+    },
+    /// The storage could not be read, or zarrs could not open an array.
+    #[error("{what}: {source}")]
+    Storage {
+        /// The key, array or brick being read.
+        what: String,
+        /// What the storage or zarrs said.
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+    },
+}
+
+/// zarrs cannot open a level's array (the cause of a [`PyramidError::Storage`]).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot open the array: {0}")]
+pub struct CannotOpenArray(#[source] pub zarrs::array::ArrayCreateError);
+
+/// A requested brick the pyramid does not have.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum NoSuchBrick {
+    /// No such pyramid level.
+    #[error("level {level} does not exist (the dataset has {levels})")]
+    Level {
+        /// The level asked for.
+        level: u32,
+        /// Levels of the dataset.
+        levels: usize,
+    },
+    /// No such channel.
+    #[error("channel {channel} does not exist (the dataset has {channels})")]
+    Channel {
+        /// The channel asked for.
+        channel: u32,
+        /// Channels of the dataset.
+        channels: u64,
+    },
+    /// The brick lies outside the level's brick grid.
+    #[error("brick {brick:?} lies outside level {level} ({grid:?} bricks, z, y, x)")]
+    Brick {
+        /// The brick asked for, `z, y, x`.
+        brick: [u64; 3],
+        /// The level.
+        level: u32,
+        /// The level's brick grid, `z, y, x`.
+        grid: [u64; 3],
+    },
+}
+
+/// One brick of one channel at one level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct BrickIndex {
+    /// Pyramid level, 0 the finest.
+    pub level: u32,
+    /// Channel.
+    pub channel: u32,
+    /// Brick coordinates `z, y, x`, in bricks.
+    pub brick: [u64; 3],
+}
+
+/// One opened level.
+pub struct PyramidLevel<S: ?Sized> {
+    /// Path of the level's array (`multiscales[0].datasets[].path`).
+    pub path: String,
+    /// The array, opened by zarrs.
+    pub array: Array<S>,
+    /// What its metadata says.
+    pub description: ArrayDescription,
+    /// Bricks along `z, y, x`.
+    pub grid: [u64; 3],
+    /// zarrs' cache of shard indices for inner-chunk reads.
+    shards: ArrayShardedReadableExtCache,
+}
+
+/// An OME-Zarr image's pyramid, opened for brick reads.
+pub struct Pyramid<S: ?Sized> {
+    /// The store, for reading other arrays of the image (such as the region metadata's).
+    pub store: Arc<S>,
+    /// The store's name in messages (a path or URL).
+    pub name: String,
+    /// Zarr format of the store.
+    pub format: ZarrFormat,
+    /// The image group's attributes.
+    pub attributes: ImageAttributes,
+    /// Axes and levels of the first multiscale.
+    pub layout: PyramidLayout,
+    /// Levels, finest first.
+    pub levels: Vec<PyramidLevel<S>>,
+    /// Sample type shared by every level.
+    pub sample_type: SampleType,
+    /// Brick shape `z, y, x` shared by every level.
+    pub brick_shape: [u64; 3],
+    /// Channels (1 without a `c` axis).
+    pub channels: u64,
+}
+
+impl<S: ?Sized> std::fmt::Debug for Pyramid<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pyramid")
+            .field("name", &self.name)
+            .field("format", &self.format)
+            .field("sample_type", &self.sample_type)
+            .field("brick_shape", &self.brick_shape)
+            .field("channels", &self.channels)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Reads the document at `key`, or `None` when the store has no such key.
+///
+/// # Errors
+/// [`PyramidError::Storage`] when the storage fails.
+pub fn read_key<S: ReadableStorageTraits + ?Sized>(
+    store: &S,
+    key: &str,
+    shown: &str,
+) -> Result<Option<Vec<u8>>, PyramidError> {
+    let storage = |source: Box<dyn std::error::Error + Send + Sync>| PyramidError::Storage {
+        what: shown.to_string(),
+        source,
+    };
+    let key = StoreKey::new(key).map_err(|e| storage(e.into()))?;
+    store
+        .get(&key)
+        .map(|b| b.map(|b| b.to_vec()))
+        .map_err(|e| storage(e.into()))
+}
+
+impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
+    /// Opens the image at the root of `store`, named `name` in messages: its attributes, the
+    /// first multiscale's levels and each level's array. Checks that every level has the same
+    /// sample type, brick shape and dimensionality, and one channel per brick.
+    ///
+    /// # Errors
+    /// [`PyramidError`] naming the store and the document or level at fault.
+    pub fn open(store: Arc<S>, name: &str) -> Result<Self, PyramidError> {
+        let shown = |key: &str| format!("{name}/{key}");
+        let (format, group_document) =
+            if let Some(doc) = read_key(&*store, "zarr.json", &shown("zarr.json"))? {
+                (ZarrFormat::V3, doc)
+            } else if let Some(doc) = read_key(&*store, ".zattrs", &shown(".zattrs"))? {
+                (ZarrFormat::V2, doc)
+            } else {
+                return Err(PyramidError::NotAnImage {
+                    store: name.to_string(),
+                });
+            };
+        let group_source = shown(format.group_key());
+        let attributes = ImageAttributes::parse(format, &group_document, &group_source)?;
+        let layout = PyramidLayout::of(attributes.image(), &group_source)?;
+        let inconsistent = |problem: String| PyramidError::Inconsistent {
+            store: name.to_string(),
+            problem,
+        };
+        let n = layout.axis_names.len();
+        let mut levels: Vec<PyramidLevel<S>> = Vec::new();
+        for path in &layout.level_paths {
+            let key = format!("{path}/{}", format.array_key());
+            let document = read_key(&*store, &key, &shown(&key))?.ok_or_else(|| {
+                PyramidError::MissingLevel {
+                    document: shown(&key),
+                }
+            })?;
+            let description = ArrayDescription::parse(format, &document, &shown(&key))?;
+            if description.shape.len() != n {
+                return Err(inconsistent(format!(
+                    "level '{path}' has {} dimensions for {n} axes",
+                    description.shape.len()
+                )));
+            }
+            if let Some(first) = levels.first() {
+                if description.sample_type != first.description.sample_type {
+                    return Err(inconsistent(format!(
+                        "level '{path}' is {} but level '{}' is {}",
+                        description.sample_type, first.path, first.description.sample_type
+                    )));
+                }
+                if description.brick_shape() != first.description.brick_shape() {
+                    return Err(inconsistent(format!(
+                        "level '{path}' has bricks {:?} but level '{}' has {:?}",
+                        description.brick_shape(),
+                        first.path,
+                        first.description.brick_shape()
+                    )));
+                }
+            }
+            if let Some(c) = layout.channel_axis
+                && description.chunk[c] != 1
+            {
+                return Err(inconsistent(format!(
+                    "level '{path}' has chunks of {} along axis 'c'; one brick must hold one \
+                     channel",
+                    description.chunk[c]
+                )));
+            }
+            let array = Array::open(store.clone(), &format!("/{path}")).map_err(|e| {
+                PyramidError::Storage {
+                    what: shown(&key),
+                    source: CannotOpenArray(e).into(),
+                }
+            })?;
+            let brick = description.brick_shape();
+            let zyx = description.zyx_shape();
+            levels.push(PyramidLevel {
+                path: path.clone(),
+                shards: ArrayShardedReadableExtCache::new(&array),
+                array,
+                grid: std::array::from_fn(|a| zyx[a].div_ceil(brick[a])),
+                description,
+            });
+        }
+        let first = &levels[0].description;
+        let channels = layout.channel_axis.map_or(1, |c| first.shape[c]);
+        Ok(Self {
+            store,
+            name: name.to_string(),
+            format,
+            sample_type: first.sample_type,
+            brick_shape: first.brick_shape(),
+            channels,
+            attributes,
+            layout,
+            levels,
+        })
+    }
+
+    /// Checks that `at` names a brick of the pyramid.
+    ///
+    /// # Errors
+    /// [`NoSuchBrick`] saying which of level, channel or brick is outside.
+    pub fn check(&self, at: &BrickIndex) -> Result<(), NoSuchBrick> {
+        let level = self
+            .levels
+            .get(at.level as usize)
+            .ok_or(NoSuchBrick::Level {
+                level: at.level,
+                levels: self.levels.len(),
+            })?;
+        if u64::from(at.channel) >= self.channels {
+            return Err(NoSuchBrick::Channel {
+                channel: at.channel,
+                channels: self.channels,
+            });
+        }
+        if (0..3).any(|a| at.brick[a] >= level.grid[a]) {
+            return Err(NoSuchBrick::Brick {
+                brick: at.brick,
+                level: at.level,
+                grid: level.grid,
+            });
+        }
+        Ok(())
+    }
+
+    /// Decoded bytes of one full brick.
+    #[must_use]
+    pub fn brick_bytes(&self) -> u64 {
+        self.sample_type.block_bytes(self.brick_shape)
+    }
+
+    /// The array chunk (or inner chunk) indices of a brick.
+    fn indices(&self, at: &BrickIndex) -> Vec<u64> {
+        self.layout.chunk_indices(u64::from(at.channel), at.brick)
+    }
+
+    /// The key or inner chunk a brick lives in, for messages.
+    fn located(&self, at: &BrickIndex) -> String {
+        let level = &self.levels[at.level as usize];
+        let key = if level.shards.array_is_sharded() {
+            format!("an inner chunk of array '{}'", level.path)
+        } else {
+            format!("key '{}'", level.array.chunk_key(&self.indices(at)))
+        };
+        format!(
+            "level {} channel {} brick {:?} ({key})",
+            at.level, at.channel, at.brick
+        )
+    }
+
+    fn brick_error(
+        &self,
+        at: &BrickIndex,
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> PyramidError {
+        PyramidError::Storage {
+            what: self.located(at),
+            source: e.into(),
+        }
+    }
+
+    /// Keeps zarrs' shard-index cache of a level bounded.
+    fn trim_shard_cache(level: &PyramidLevel<S>) {
+        if level.shards.len() > 4096 {
+            level.shards.clear();
+        }
+    }
+
+    /// The decoded samples of a whole brick (its full shape, `z`-major; voxels past the
+    /// volume's edge hold the fill value). The brick must pass [`Pyramid::check`].
+    ///
+    /// # Errors
+    /// [`PyramidError::Storage`] naming the brick when it cannot be read or decoded as `T`.
+    pub fn read_brick<T: ElementOwned>(&self, at: &BrickIndex) -> Result<Vec<T>, PyramidError> {
+        let level = &self.levels[at.level as usize];
+        Self::trim_shard_cache(level);
+        level
+            .array
+            .retrieve_subchunk_opt(&level.shards, &self.indices(at), &CodecOptions::default())
+            .map_err(|e| self.brick_error(at, e))
+    }
+
+    /// The decoded samples of a whole brick as little-endian bytes.
+    ///
+    /// # Errors
+    /// [`PyramidError::Storage`] naming the brick when it cannot be read or decoded.
+    pub fn read_brick_bytes(&self, at: &BrickIndex) -> Result<Vec<u8>, PyramidError> {
+        let level = &self.levels[at.level as usize];
+        Self::trim_shard_cache(level);
+        let bytes: ArrayBytes<'static> = level
+            .array
+            .retrieve_subchunk_opt(&level.shards, &self.indices(at), &CodecOptions::default())
+            .map_err(|e| self.brick_error(at, e))?;
+        Ok(bytes
+            .into_fixed()
+            .map_err(|e| self.brick_error(at, e))?
+            .into_owned())
+    }
+
+    /// A brick's bytes exactly as stored (the chunk file, or the inner chunk's bytes inside its
+    /// shard), or `None` when the brick is not stored.
+    ///
+    /// # Errors
+    /// [`PyramidError::Storage`] naming the brick when the store cannot be read.
+    pub fn read_brick_encoded(&self, at: &BrickIndex) -> Result<Option<Vec<u8>>, PyramidError> {
+        let level = &self.levels[at.level as usize];
+        Self::trim_shard_cache(level);
+        let indices = self.indices(at);
+        if level.shards.array_is_sharded() {
+            level
+                .array
+                .retrieve_encoded_subchunk(&level.shards, &indices)
+                .map_err(|e| self.brick_error(at, e))
+        } else {
+            level
+                .array
+                .retrieve_encoded_chunk(&indices)
+                .map_err(|e| self.brick_error(at, e))
+        }
+    }
+}

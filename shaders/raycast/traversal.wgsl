@@ -1,0 +1,210 @@
+// The ray caster, part 3 of 6 (joined in order by viewer/src/gpu/contract.rs): a ray's
+// position, and what a step does where the ray is under each hierarchy-traversing method.
+
+// ---- ray state ----
+
+struct Ray {
+    cell: vec3<i32>,
+    local: vec3<f32>,
+    t: f32,
+}
+
+fn advance(ray: ptr<function, Ray>, dir: vec3<f32>, dt: f32) {
+    var local = (*ray).local + dir * dt;
+    let f = floor(local);
+    (*ray).cell += vec3<i32>(f);
+    (*ray).local = local - f;
+    (*ray).t += dt;
+}
+
+// World distance from the ray's position to the exit of the node of depth d holding it
+// (`dir`: fine units per world unit). The distance to the far face is taken in integers
+// first, so it stays exact near the face however large the node.
+fn node_exit(ray: Ray, d: u32, dir: vec3<f32>) -> f32 {
+    let s = node_shift(d);
+    let lo = (ray.cell >> s) << s;
+    let far_cells = select(lo - ray.cell, lo + (vec3<i32>(1) << s) - ray.cell, dir > vec3<f32>(0.0));
+    let far = vec3<f32>(far_cells) - ray.local;
+    let tt = far / dir;
+    return max(min(tt.x, min(tt.y, tt.z)), 0.0);
+}
+
+// ---- traversal: what a step does where the ray is ----
+
+const ACTION_SAMPLE: u32 = 0u; // sample the channels not empty here
+const ACTION_SKIP: u32 = 1u; // every channel empty under its TF: skip `skip`
+const ACTION_HOMOGENEOUS: u32 = 2u; // every channel constant over the node: integrate it
+const ACTION_REQUEST: u32 = 3u; // no needed channel mapped: request its bricks and skip
+
+struct Visit {
+    action: u32,
+    node: u32, // the node reached (residency method)
+    depth: u32, // its depth
+    empty: u32, // bits: the channels empty under their TF here
+    skip: f32, // world distance to the exit of the node or brick (ACTION_SKIP, ACTION_REQUEST)
+}
+
+// The residency octree (Algorithm 1, multi-channel): from just above the depth of the last
+// node visited, down to the deepest node whose edge is at least the step, stopping where every
+// channel is empty, or constant, under its TF.
+fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, skipping: bool) -> Visit {
+    let depth = P.leaf_depth;
+    var max_depth = depth;
+    var edge = P.leaf_edge;
+    loop {
+        if max_depth == 0u || edge >= desired_step {
+            break;
+        }
+        max_depth--;
+        edge *= 2.0;
+    }
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 0.0);
+    var d = min(clamp(last_depth, P.start_depth + 1u, depth + 1u) - 1u, max_depth);
+    let all = drawn_channels();
+    var homogeneous = 0u;
+    loop {
+        v.node = node_index(d, ray.cell);
+        // The node's class under the transfer functions, one word for every channel (written
+        // by the CPU on a restyle): bit c empty, bit CLASS_CONSTANT_SHIFT + c constant.
+        if skipping {
+            let word = nodes[P.class_offset + v.node];
+            v.empty = word & all;
+            homogeneous = (word >> CLASS_CONSTANT_SHIFT) & all;
+        }
+        if skipping && v.empty == all {
+            v.action = ACTION_SKIP;
+            break;
+        }
+        if skipping && (v.empty | homogeneous) == all {
+            v.action = ACTION_HOMOGENEOUS;
+            break;
+        }
+        if d >= max_depth {
+            break;
+        }
+        d++;
+    }
+    // Unmapped: no channel that needs data here has a level resident (judged once, after the
+    // descent: on a CPU driver a loop inside the descent would run at every depth).
+    if v.action == ACTION_SAMPLE {
+        var need = all & ~(v.empty | homogeneous);
+        var all_unmapped = true;
+        loop {
+            if need == 0u {
+                break;
+            }
+            let c = take_channel(&need);
+            if node_word(v.node, c, 0u) != 0u {
+                all_unmapped = false;
+            }
+        }
+        if all_unmapped {
+            v.action = ACTION_REQUEST;
+            // The resident-only pass neither requests nor substitutes.
+            if RESIDENT_ONLY {
+                needs_full = true;
+            }
+        }
+    }
+    v.depth = d;
+    if v.action == ACTION_SKIP || v.action == ACTION_REQUEST {
+        v.skip = node_exit(ray, d, dir);
+    }
+    return v;
+}
+
+// The page-table baseline (MRMCPT): per channel, whether the brick of its chosen level at the
+// sample is empty under its TF, judged once per brick the ray enters, as a page-table
+// renderer would (`seen`: the brick of each channel's last sample; `seen_empty`: its bits).
+fn visit_page_table(
+    ray: Ray,
+    chosen: ChannelLevels,
+    seen: ptr<function, array<u32, MAX_CHANNELS>>,
+    seen_empty: ptr<function, u32>,
+    dir: vec3<f32>,
+    skipping: bool,
+) -> Visit {
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
+    var all_empty = true;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let l = level_of(chosen, c);
+        let pos = level_pos(l, ray.cell, ray.local);
+        let b = point_brick(l, pos);
+        let pid = brick_id(c, l, b);
+        let bit = 1u << c;
+        if pid != (*seen)[c] {
+            (*seen)[c] = pid;
+            *seen_empty = select(*seen_empty & ~bit, *seen_empty | bit, skipping && brick_empty(pid));
+        }
+        if (*seen_empty & bit) != 0u {
+            v.empty |= bit;
+            v.skip = min(v.skip, brick_exit(l, b, pos, dir));
+        } else {
+            all_empty = false;
+        }
+    }
+    if all_empty {
+        v.action = ACTION_SKIP;
+    }
+    return v;
+}
+
+// The octree-of-bricks baseline (GigaVoxels style): per channel, descend from the coarsest
+// level; every ancestor must be resident, the first missing one is requested, and the finest
+// resident one is sampled (`chosen` becomes that level, or NO_LEVEL).
+fn visit_brick_octree(
+    ray: Ray,
+    chosen: ptr<function, ChannelLevels>,
+    dir: vec3<f32>,
+    skipping: bool,
+    t: f32,
+) -> Visit {
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
+    var all_empty = true;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let l = level_of(*chosen, c);
+        var k = min(S.channels[c].max_level, P.level_count - 1u);
+        var resident = NO_LEVEL;
+        var missing = 0u;
+        loop {
+            let pos = level_pos(k, ray.cell, ray.local);
+            let b = point_brick(k, pos);
+            let pid = brick_id(c, k, b);
+            if skipping && brick_empty(pid) {
+                v.empty |= 1u << c;
+                v.skip = min(v.skip, brick_exit(k, b, pos, dir));
+                break;
+            }
+            let entry = page_table[pid];
+            if entry == 0u {
+                if RESIDENT_ONLY {
+                    needs_full = true;
+                } else {
+                    request(pid, t);
+                }
+                missing = pid + 1u;
+                break;
+            }
+            if entry != ENTRY_EMPTY {
+                _ = slot_origin(entry);
+            }
+            resident = k;
+            if k <= l {
+                break;
+            }
+            k--;
+        }
+        if (v.empty & (1u << c)) == 0u {
+            all_empty = false;
+            *chosen = with_level(*chosen, c, resident);
+            if !RESIDENT_ONLY && missing != 0u && resident != NO_LEVEL {
+                note_substituted(missing - 1u);
+            }
+        }
+    }
+    if all_empty {
+        v.action = ACTION_SKIP;
+    }
+    return v;
+}
+

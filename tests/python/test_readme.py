@@ -1,0 +1,134 @@
+"""The README's promises about itself: it stays short (at most 400 lines, with the two commands
+first), its ten-minute tour runs as written, and every flag its usage blocks name is one the
+program accepts.
+
+The tour's commands are read from README.md, not copied here, so editing the README edits the
+test. They run in a scratch folder with the built binaries first on the PATH; the server of step
+2 gets a free port in place of the README's 8000. Step 3 (`scripts/build-web.sh`) is left to
+test_web_viewer.py, which builds and opens the page."""
+
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+
+import pytest
+
+from support.binaries import stop_server
+from support.paths import BIN, ROOT
+
+README = ROOT / "README.md"
+
+
+def sections():
+    """README.md as {heading: text} for its `##` and `###` headings."""
+    out, heading = {}, ""
+    for line in README.read_text().splitlines(keepends=True):
+        m = re.match(r"#{2,3} (.*)", line)
+        if m:
+            heading = m.group(1).strip()
+        out[heading] = out.get(heading, "") + line
+    return out
+
+
+def sh_blocks(text):
+    """The ```sh blocks of `text`, each as a list of commands (continuation lines joined,
+    comments dropped)."""
+    blocks = []
+    for body in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
+        commands = []
+        for command in body.replace("\\\n", " ").splitlines():
+            command = re.sub(r"\s+#.*$", "", command).strip()
+            if command:
+                commands.append(command)
+        blocks.append(commands)
+    return blocks
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_the_readme_is_short_and_opens_with_the_two_commands():
+    lines = README.read_text().splitlines()
+    assert len(lines) <= 400, f"README.md has {len(lines)} lines (at most 400): move detail into docs/"
+    assert lines[2:6] == [
+        "```sh",
+        lines[3],
+        lines[4],
+        "```",
+    ] and lines[3].startswith("./scripts/demo.sh ") and lines[4].startswith("./scripts/test.sh "), lines[:6]
+
+
+@pytest.mark.slow
+def test_the_tour_runs_as_written(tmp_path):
+    tour = sections()["A ten-minute tour"]
+    blocks = sh_blocks(tour)
+    assert [b[0].split()[0] for b in blocks] == ["cargo", "ingest", "brickserver", "curl", "scripts/build-web.sh", "viewer"], blocks
+    port = free_port()
+    env = dict(os.environ, PATH=f"{BIN}{os.pathsep}{os.environ['PATH']}")
+
+    def run(command):
+        command = command.replace("127.0.0.1:8000", f"127.0.0.1:{port}")
+        p = subprocess.run(["bash", "-c", command], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, f"README command failed: {command}\n{p.stderr}"
+        return p.stdout
+
+    for command in blocks[1]:
+        run(command)
+    assert "levels" in run("ingest inspect demo/tour/sample.ome.zarr")
+
+    # The inline zarr-python check, with this interpreter in place of .venv/bin/python.
+    inline = re.search(r"\(`(\.venv/bin/python -c .*?)`\n", tour).group(1)
+    shape = run(inline.replace(".venv/bin/python", sys.executable))
+    assert shape.strip() == "(3, 96, 256, 256)", shape
+
+    [serve] = blocks[2]
+    server = subprocess.Popen(["bash", "-c", f"exec {serve} --bind 127.0.0.1:{port}"], cwd=tmp_path, env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        said = [server.stdout.readline() for _ in range(2)]
+        assert said[1] == f"listening on http://127.0.0.1:{port}\n", said
+        assert shutil.which("curl"), "curl is needed to run the tour's step 2 as written"
+        datasets, regions = (run(c) for c in blocks[3])
+        assert '"sample"' in datasets, datasets
+        assert regions.startswith("{") and '"min"' in regions and '"max"' in regions, regions
+        for command in blocks[5]:
+            out = run(command)
+        assert re.search(r"PSNR", out), out
+    finally:
+        stop_server(server)
+    for name in ("served.png", "served-stats.json", "direct.png", "reference.png"):
+        assert (tmp_path / "demo/tour" / name).stat().st_size > 0, name
+
+
+def flags_by_command():
+    """{(program, subcommand...): {flags}} from the usage blocks under "Using the programs"."""
+    usage = {}
+    for heading in ("`ingest`", "`brickserver`", "`viewer`"):
+        for block in sh_blocks(sections()[heading]):
+            for command in block:
+                words = command.split()
+                if words[0] not in ("ingest", "brickserver", "viewer"):
+                    continue
+                sub = [w for w in words[1:3] if re.fullmatch(r"[a-z]+", w)]
+                if words[0] == "viewer" and sub[:1] != ["bench"]:
+                    sub = sub[:1]
+                key = (words[0], *sub)
+                usage.setdefault(key, set()).update(re.findall(r"(?<![\w-])(--[a-z][a-z0-9-]*)", command))
+    return usage
+
+
+def test_every_flag_in_the_usage_blocks_is_accepted():
+    usage = flags_by_command()
+    assert ("ingest", "convert") in usage and ("viewer", "bench", "run") in usage, sorted(usage)
+    assert len(usage) == 12, sorted(usage)
+    for (program, *sub), flags in sorted(usage.items()):
+        p = subprocess.run([str(BIN / program), *sub, "--help"], capture_output=True, text=True)
+        assert p.returncode == 0, p.stderr
+        missing = sorted(f for f in flags if not re.search(rf"(?<![\w-]){re.escape(f)}\b", p.stdout))
+        assert missing == [], f"{program} {' '.join(sub)} --help does not list {missing}"

@@ -1,0 +1,84 @@
+//! Enums named by `strum` on the command line, in scene files and in results files
+//! ([`Named`]), and the one error for a name that is none of theirs ([`UnknownName`]), which
+//! lists the known names from the variants themselves (`strum::VariantNames`). Each such enum
+//! derives `strum::EnumString` with `parse_err_ty = UnknownName<Self>` and
+//! `parse_err_fn = UnknownName::new`, so that `str::parse` gives this error.
+
+use std::fmt;
+use std::marker::PhantomData;
+
+/// An enum whose variants `strum` names (`VariantNames`), with the noun that an unknown name
+/// is reported as (`unknown method 'x' (...)`).
+pub trait Named: strum::VariantNames {
+    /// What one variant is, in error messages: `method`, `experiment`, `filter`, ...
+    const NOUN: &'static str;
+}
+
+/// A name that is none of `E`'s: `unknown NOUN 'name' (a, b or c)`, listing `E`'s names in
+/// the order of its variants.
+#[derive(thiserror::Error)]
+#[error(
+    "unknown {} '{name}' ({})",
+    E::NOUN,
+    one_of(<E as strum::VariantNames>::VARIANTS)
+)]
+pub struct UnknownName<E: Named> {
+    /// The name given.
+    pub name: String,
+    kind: PhantomData<fn() -> E>,
+}
+
+impl<E: Named> UnknownName<E> {
+    /// The error for the name `name`.
+    pub fn new(name: &str) -> Self {
+        Self {
+            name: name.to_string(),
+            kind: PhantomData,
+        }
+    }
+}
+
+impl<E: Named> Clone for UnknownName<E> {
+    fn clone(&self) -> Self {
+        Self::new(&self.name)
+    }
+}
+
+impl<E: Named> fmt::Debug for UnknownName<E> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("UnknownName")
+            .field("noun", &E::NOUN)
+            .field("name", &self.name)
+            .finish()
+    }
+}
+
+impl<E: Named> PartialEq for UnknownName<E> {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name
+    }
+}
+
+impl<E: Named> Eq for UnknownName<E> {}
+
+/// `names` as a list to pick one from: `a, b or c`.
+fn one_of(names: &[&str]) -> String {
+    match names {
+        [] => String::new(),
+        [only] => (*only).to_string(),
+        [rest @ .., last] => format!("{} or {last}", rest.join(", ")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::one_of;
+
+    #[test]
+    fn names_are_listed_with_or_before_the_last() {
+        assert_eq!(one_of(&[]), "");
+        assert_eq!(one_of(&["a"]), "a");
+        assert_eq!(one_of(&["a", "b"]), "a or b");
+        assert_eq!(one_of(&["a", "b", "c"]), "a, b or c");
+    }
+}
