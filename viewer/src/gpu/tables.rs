@@ -19,7 +19,6 @@ use super::options::RenderOptions;
 use super::residency::ResidencyState;
 use crate::octree::OctreeGeometry;
 use crate::scene::ChannelStyle;
-use crate::source::VolumeInfo;
 
 /// Opacity control points per channel the table buffer has room for beyond the scene's own,
 /// so that [`SceneTables::rewrite`] writes a new style in place.
@@ -143,9 +142,10 @@ impl SceneTables {
     /// # Errors
     /// [`GpuError::TooManyChannels`] past [`MAX_CHANNELS`], the octree's refusal of the
     /// volume, or [`GpuError::BindingTooLarge`].
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn level0(
         gpu: &Gpu,
-        info: &VolumeInfo,
+        info: &crate::source::VolumeInfo,
         styles: &[&ChannelStyle],
     ) -> Result<Self, GpuError> {
         if styles.len() > MAX_CHANNELS {

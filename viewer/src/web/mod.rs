@@ -78,7 +78,7 @@ impl From<SourceError> for WebError {
 }
 
 /// An error as the text JavaScript sees: its whole chain.
-fn js_error(e: &dyn std::error::Error) -> JsValue {
+fn js_error(e: &(dyn std::error::Error + 'static)) -> JsValue {
     JsValue::from_str(&error_chain(e))
 }
 
