@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use schemars::JsonSchema;
 use schemars::generate::SchemaSettings;
-use serde_json::{Map, Value};
+use serde_json::Value;
 
 use crate::RegionMetadata;
 use crate::server::{ApiError, DatasetList, RegionAnswer};
@@ -72,29 +72,13 @@ impl SchemaFile {
         if let Value::Object(root) = &mut schema {
             root.insert("$id".into(), format!("{ID_BASE}{name}").into());
         }
+        // Keys in ascending order, whatever map serde_json was built with (`preserve_order`
+        // keeps insertion order).
+        schema.sort_all_objects();
         let mut text =
-            serde_json::to_string_pretty(&sorted(schema)).expect("a JSON value always serializes");
+            serde_json::to_string_pretty(&schema).expect("a JSON value always serializes");
         text.push('\n');
         Self { name, text }
-    }
-}
-
-/// `value` with the keys of every object in ascending order, whatever map serde_json was
-/// built with (`preserve_order` keeps insertion order).
-fn sorted(value: Value) -> Value {
-    match value {
-        Value::Object(map) => {
-            let mut entries: Vec<(String, Value)> = map.into_iter().collect();
-            entries.sort_by(|a, b| a.0.cmp(&b.0));
-            Value::Object(
-                entries
-                    .into_iter()
-                    .map(|(k, v)| (k, sorted(v)))
-                    .collect::<Map<_, _>>(),
-            )
-        }
-        Value::Array(items) => Value::Array(items.into_iter().map(sorted).collect()),
-        other => other,
     }
 }
 

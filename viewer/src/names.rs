@@ -4,7 +4,6 @@
 //! derives `strum::EnumString` with `parse_err_ty = UnknownName<Self>` and
 //! `parse_err_fn = UnknownName::new`, so that `str::parse` gives this error.
 
-use std::fmt;
 use std::marker::PhantomData;
 
 /// An enum whose variants `strum` names (`VariantNames`), with the noun that an unknown name
@@ -16,7 +15,7 @@ pub trait Named: strum::VariantNames {
 
 /// A name that is none of `E`'s: `unknown NOUN 'name' (a, b or c)`, listing `E`'s names in
 /// the order of its variants.
-#[derive(thiserror::Error)]
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
     "unknown {} '{name}' ({})",
     E::NOUN,
@@ -25,7 +24,7 @@ pub trait Named: strum::VariantNames {
 pub struct UnknownName<E: Named> {
     /// The name given.
     pub name: String,
-    kind: PhantomData<fn() -> E>,
+    kind: PhantomData<E>,
 }
 
 impl<E: Named> UnknownName<E> {
@@ -37,29 +36,6 @@ impl<E: Named> UnknownName<E> {
         }
     }
 }
-
-impl<E: Named> Clone for UnknownName<E> {
-    fn clone(&self) -> Self {
-        Self::new(&self.name)
-    }
-}
-
-impl<E: Named> fmt::Debug for UnknownName<E> {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.debug_struct("UnknownName")
-            .field("noun", &E::NOUN)
-            .field("name", &self.name)
-            .finish()
-    }
-}
-
-impl<E: Named> PartialEq for UnknownName<E> {
-    fn eq(&self, other: &Self) -> bool {
-        self.name == other.name
-    }
-}
-
-impl<E: Named> Eq for UnknownName<E> {}
 
 /// `names` as a list to pick one from: `a, b or c`.
 fn one_of(names: &[&str]) -> String {

@@ -150,7 +150,7 @@ pub struct ReportArgs {
 /// Parses one `--experiment` value: one of the library's [`Experiment`] names.
 fn experiment_parser() -> impl clap::builder::TypedValueParser<Value = Experiment> {
     use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(Experiment::ALL.map(Experiment::name))
+    clap::builder::PossibleValuesParser::new(<Experiment as strum::VariantNames>::VARIANTS)
         .map(|s| s.parse::<Experiment>().expect("one of the possible values"))
 }
 

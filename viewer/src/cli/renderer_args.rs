@@ -13,7 +13,7 @@ use residency_viewer::source::BrickSource;
 /// Parses `--method`: one of the library's [`Method`] names.
 pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
     use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(Method::ALL.map(Method::name))
+    clap::builder::PossibleValuesParser::new(<Method as strum::VariantNames>::VARIANTS)
         .map(|s| s.parse::<Method>().expect("one of the possible values"))
 }
 

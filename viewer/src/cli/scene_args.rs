@@ -249,7 +249,7 @@ pub struct SceneArgs {
 /// Parses `--filter`: one of the library's [`Filter`] names.
 pub fn filter_parser() -> impl clap::builder::TypedValueParser<Value = Filter> {
     use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(Filter::ALL.map(Filter::name))
+    clap::builder::PossibleValuesParser::new(<Filter as strum::VariantNames>::VARIANTS)
         .map(|s| s.parse::<Filter>().expect("one of the possible values"))
 }
 
