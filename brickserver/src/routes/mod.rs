@@ -27,9 +27,9 @@ use std::time::Duration;
 use aide::axum::ApiRouter;
 use aide::axum::routing::get_with;
 use aide::openapi::OpenApi;
+use axum::Router;
 use axum::http::{Method, header};
 use axum::middleware;
-use axum::{Extension, Router};
 use serde_json::Value;
 use tower_http::cors::{Any, CorsLayer};
 
@@ -121,10 +121,7 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
         ])
         .max_age(Duration::from_hours(24));
     let metrics = state.metrics.clone();
-    let (routes, document) = documented_routes();
-    let router = routes
-        .layer(Extension(Arc::new(document)))
-        .with_state(state);
+    let router = documented_routes().0.with_state(state);
     // The token check is a layer only when a token is configured.
     let router = match &options.token {
         Some(token) => router.layer(middleware::from_fn_with_state(

@@ -1,13 +1,14 @@
 //! The service's own routes: health (`/healthz`), metrics (`/metrics`), the OpenAPI document
 //! (`/openapi.json`), and the answer to `OPTIONS`.
 
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 use aide::transform::TransformOperation;
 use axum::body::Body;
+use axum::body::Bytes;
 use axum::extract::State;
 use axum::http::{Response, StatusCode, header};
-use axum::response::{Extension, IntoResponse, Json};
+use axum::response::IntoResponse;
 use schemars::json_schema;
 use serde_json::Value;
 
@@ -63,9 +64,16 @@ pub(super) async fn show_metrics(State(state): State<Arc<AppState>>) -> Response
     (content_type, state.metrics.render()).into_response()
 }
 
-/// `GET /openapi.json`: the document made when the router was.
-pub(super) async fn openapi(Extension(document): Extension<Arc<Value>>) -> Json<Value> {
-    Json(Value::clone(&document))
+/// `GET /openapi.json`: the document, generated and serialized on the first request.
+pub(super) async fn openapi() -> Response<Body> {
+    static DOCUMENT: OnceLock<Bytes> = OnceLock::new();
+    let document = DOCUMENT.get_or_init(|| {
+        serde_json::to_vec(&super::openapi_document())
+            .expect("a JSON value always serializes")
+            .into()
+    });
+    let content_type = [(header::CONTENT_TYPE, "application/json")];
+    (content_type, document.clone()).into_response()
 }
 
 /// `OPTIONS` on the API paths: the methods allowed.
