@@ -267,6 +267,23 @@ def cycles(graph: dict) -> list[list]:
     return result
 
 
+def folder_graph(graph: dict) -> dict:
+    """The edges between sibling subtrees: an edge from `a::x::f` to `b::y` becomes one from
+    the folder `a` to the folder `b` (the children of their deepest common ancestor), with the
+    file edge that gave it. A loop here and none among files is a loop between folders."""
+    folders: dict = {}
+    for u, targets in graph.items():
+        for v, line in targets.items():
+            k = 0
+            while k < min(len(u), len(v)) and u[k] == v[k]:
+                k += 1
+            if k < len(u) and k < len(v):
+                a, b = u[: k + 1], v[: k + 1]
+                folders.setdefault(b, {})
+                folders.setdefault(a, {}).setdefault(b, (u, line))
+    return folders
+
+
 def crate_roots(root: Path) -> list[Path]:
     """Every `src/lib.rs` and `src/main.rs` below `root`, outside build and tool folders."""
     found = []
@@ -309,6 +326,19 @@ def loop_problems(root: Path) -> list[str]:
                         lines.append(f"    {src}:{line} uses {'::'.join(('crate',) + target)}")
             names = ", ".join("::".join(("crate",) + m) for m in component)
             problems.append(f"{root_file.relative_to(root)}: import loop between {names}\n" + "\n".join(lines))
+        if problems:
+            continue
+        folders = folder_graph(graph)
+        for component in cycles(folders):
+            members = set(component)
+            lines = []
+            for m in component:
+                for target, (file, line) in sorted(folders[m].items()):
+                    if target in members:
+                        src = crate.files[file].relative_to(root)
+                        lines.append(f"    {src}:{line} uses {'::'.join(('crate',) + target)}")
+            names = ", ".join("::".join(("crate",) + m) for m in component)
+            problems.append(f"{root_file.relative_to(root)}: import loop between folders {names}\n" + "\n".join(lines))
     return problems
 
 
@@ -357,9 +387,21 @@ def self_test() -> None:
     found = loop_problems(cousins)
     assert len(found) == 1 and "crate::a::x, crate::b::y" in found[0], found
 
+    folders = tree({
+        "k/src/lib.rs": "mod convert;\nmod partition;\n",
+        "k/src/convert/mod.rs": "mod pass;\n",
+        "k/src/convert/pass.rs": "use crate::partition::plan::Plan;\n",
+        "k/src/partition/mod.rs": "mod plan;\nmod run;\n",
+        "k/src/partition/plan.rs": "pub struct Plan;\n",
+        "k/src/partition/run.rs": "use crate::convert::pass;\n",
+    })
+    found = loop_problems(folders)
+    assert len(found) == 1 and "import loop between folders crate::convert, crate::partition" in found[0], found
+    assert "k/src/partition/run.rs:1 uses crate::convert" in found[0], found
+
     long = tree({"k/src/lib.rs": "//\n" * (MAX_LINES + 1), "s/x.wgsl": "\n" * MAX_LINES})
     assert long_files(long) == [f"k/src/lib.rs: {MAX_LINES + 1} lines (at most {MAX_LINES}): split it by concept"], long_files(long)
-    print("check_structure self-test: 5 passed, 0 failed")
+    print("check_structure self-test: 6 passed, 0 failed")
 
 
 def main() -> int:

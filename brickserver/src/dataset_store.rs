@@ -12,7 +12,7 @@ use residency_store::location::object_store::{
     self, GetOptions, GetRange, ObjectStore, ObjectStoreExt,
 };
 use residency_store::location::{
-    BlockOn, LocationError, ObjectStoreOptions, StoreLocation, object_storage,
+    BlockOn, LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation, object_storage,
 };
 use zarrs::storage::{ReadableListableStorageTraits, StoreKey};
 
@@ -30,12 +30,18 @@ pub enum OpenError {
         #[source]
         source: std::io::Error,
     },
-    /// The object-store client cannot be configured.
+    /// The folder cannot be opened as zarrs storage.
     #[error(transparent)]
-    ObjectStore(#[from] LocationError),
+    Storage(#[from] LocationError),
     /// An object-store dataset opened outside a tokio runtime, which its reads need.
     #[error("{location}: an object-store dataset is opened on the server's tokio runtime")]
     NoRuntime {
+        /// The dataset's location.
+        location: String,
+    },
+    /// An object-store dataset opened without its client.
+    #[error("{location}: an object-store dataset is opened with its client")]
+    NoClient {
         /// The dataset's location.
         location: String,
     },
@@ -80,28 +86,34 @@ pub(crate) struct ObjectPart {
 }
 
 impl DatasetStore {
-    /// Opens the store at `location` (a folder's canonical path, or an `s3://` location). An
-    /// object store is opened on a tokio runtime (the server's), which runs its requests.
+    /// Opens the store at `location`: a folder's canonical path, or an `s3://` location read
+    /// through `object_store`, its client (from [`StoreLocation::object_store`], the one client
+    /// the dataset has). An object store is opened on a tokio runtime (the server's), which
+    /// runs its requests.
     ///
     /// # Errors
-    /// [`OpenError`] when the folder cannot be opened, the object-store client cannot be
-    /// configured, or an object store is opened outside a runtime.
-    pub fn open(location: &StoreLocation, options: &ObjectStoreOptions) -> Result<Self, OpenError> {
+    /// [`OpenError`] when the folder cannot be opened, or an object store is opened without
+    /// its client or outside a runtime.
+    pub fn open(
+        location: &StoreLocation,
+        object_store: Option<&ObjectStoreAt>,
+    ) -> Result<Self, OpenError> {
         let shown = location.to_string();
         let (keys, zarr) = if let Some(path) = location.folder() {
             let root = RootDir::open(path).map_err(|source| OpenError::Folder {
                 location: shown.clone(),
                 source,
             })?;
-            (Keys::Folder(root), location.open_readable(options)?)
+            let zarr = location.open_readable(&ObjectStoreOptions::default())?;
+            (Keys::Folder(root), zarr)
         } else {
+            let (store, prefix) = object_store.cloned().ok_or_else(|| OpenError::NoClient {
+                location: shown.clone(),
+            })?;
             let runtime =
                 tokio::runtime::Handle::try_current().map_err(|_| OpenError::NoRuntime {
                     location: shown.clone(),
                 })?;
-            let (store, prefix) = location
-                .object_store(options)?
-                .expect("a location is a folder or an object store");
             let zarr = object_storage(store.clone(), &prefix, BlockOn::new(runtime));
             (Keys::Object(ObjectKeys { store, prefix }), zarr)
         };

@@ -3,20 +3,23 @@
 use std::path::Path;
 
 use residency_schemas::dataset::dataset_name;
-use residency_store::location::{LocationError, ObjectStoreOptions, StoreLocation};
+use residency_store::location::{LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation};
 
 /// One served store.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub struct Dataset {
     /// URL name: the store is served under `/NAME/`.
     pub name: String,
     /// Where the store is: a canonical (symlink-free, absolute) root folder, or an object-store
     /// prefix.
     pub location: StoreLocation,
+    /// The client of an object-store location, made once when the store was checked for and
+    /// then used for every read (`None` for a folder).
+    pub object_store: Option<ObjectStoreAt>,
 }
 
 /// All served datasets, in the order given.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default)]
 pub struct Datasets(pub Vec<Dataset>);
 
 fn valid_name(name: &str) -> bool {
@@ -117,7 +120,7 @@ impl Datasets {
             if !valid_name(&name) {
                 return Err(DatasetError::BadName { path: shown, name });
             }
-            let location = if let Some(path) = location.folder() {
+            let (location, object_store) = if let Some(path) = location.folder() {
                 let root = path
                     .canonicalize()
                     .map_err(|source| DatasetError::CannotOpen {
@@ -127,7 +130,7 @@ impl Datasets {
                 if !root.is_dir() {
                     return Err(DatasetError::NotAFolder { path: shown });
                 }
-                StoreLocation::Folder(root)
+                (StoreLocation::Folder(root), None)
             } else {
                 let at = location
                     .object_store(options)?
@@ -135,12 +138,16 @@ impl Datasets {
                 if !location.exists_in(&at).await? {
                     return Err(DatasetError::NoStore { location: shown });
                 }
-                location
+                (location, Some(at))
             };
             if out.iter().any(|d| d.name == name) {
                 return Err(DatasetError::Duplicate { path: shown, name });
             }
-            out.push(Dataset { name, location });
+            out.push(Dataset {
+                name,
+                location,
+                object_store,
+            });
         }
         if out.is_empty() {
             return Err(DatasetError::NoDataset);

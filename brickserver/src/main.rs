@@ -179,8 +179,11 @@ fn main() -> ExitCode {
             max_batch_bricks,
             max_batch_bytes,
         } => (|| {
+            // Each object-store dataset's client is made here, once, and its requests run on
+            // the server's runtime (see `DatasetStore`), so the options carry no runtime.
             let object_store = ObjectStoreOptions {
                 endpoint: s3_endpoint,
+                runtime: None,
             };
             // One runtime for everything the server does, object-store requests included.
             let runtime = tokio::runtime::Runtime::new().context("cannot start the runtime")?;
@@ -202,7 +205,6 @@ fn main() -> ExitCode {
                 },
                 viewer_dir: viewer_dir.or_else(default_viewer_dir),
                 public_url,
-                object_store,
             };
             let limits = ConnectionLimits {
                 max_connections,

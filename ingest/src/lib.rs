@@ -45,5 +45,4 @@ pub mod source;
 pub mod store;
 pub mod synthetic;
 
-pub use convert::{ConvertOptions, ConvertSummary, convert};
-pub use partition::{convert_partition, finalize};
+pub use convert::{ConvertOptions, ConvertSummary, convert, convert_partition, finalize};

@@ -7,12 +7,13 @@ use anyhow::{Context, Result, bail};
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use clap::{Parser, Subcommand, ValueEnum};
 use residency_ingest::convert::{ConvertOptions, convert};
-use residency_ingest::partition::{HANDOFF_FOLDER, Partition, convert_partition, finalize};
+use residency_ingest::partition::{HANDOFF_FOLDER, Partition};
 use residency_ingest::progress::bytes_bar;
 use residency_ingest::sample_format::SampleType;
 use residency_ingest::source::RawOptions;
 use residency_ingest::store::{OmeZarrVersion, directory_bytes, partial_path};
 use residency_ingest::synthetic::{SampleKind, SampleSpec, write_samples};
+use residency_ingest::{convert_partition, finalize};
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use strum::VariantArray;
 
@@ -335,9 +336,7 @@ fn run(cli: Cli) -> Result<()> {
             if levels == Some(0) {
                 bail!("--levels must be at least 1");
             }
-            let s3 = ObjectStoreOptions {
-                endpoint: s3_endpoint,
-            };
+            let s3 = ObjectStoreOptions::for_location(&output, s3_endpoint)?;
             if partition.is_some() {
                 refuse_s3_overwrite(&output, overwrite)?;
             }
@@ -409,9 +408,7 @@ fn run(cli: Cli) -> Result<()> {
             quiet,
         } => {
             set_threads(threads)?;
-            let s3 = ObjectStoreOptions {
-                endpoint: s3_endpoint,
-            };
+            let s3 = ObjectStoreOptions::for_location(&output, s3_endpoint)?;
             let summary = match &output {
                 StoreLocation::Folder(path) => {
                     finalize(path, &path.display().to_string(), overwrite, !quiet)?
@@ -482,16 +479,12 @@ fn run(cli: Cli) -> Result<()> {
             threads,
         } => {
             set_threads(threads)?;
-            let options = ObjectStoreOptions {
-                endpoint: s3_endpoint,
-            };
+            let options = ObjectStoreOptions::for_location(&store, s3_endpoint)?;
             let report = residency_ingest::index::index(&store, &options)?;
             print!("{report}");
         }
         Command::Inspect { store, s3_endpoint } => {
-            let options = ObjectStoreOptions {
-                endpoint: s3_endpoint,
-            };
+            let options = ObjectStoreOptions::for_location(&store, s3_endpoint)?;
             print!("{}", residency_ingest::inspect::inspect(&store, &options)?);
         }
     }

@@ -2,7 +2,8 @@
 //! ([`Named`]), and the one error for a name that is none of theirs ([`UnknownName`]), which
 //! lists the known names from the variants themselves (`strum::VariantNames`). Each such enum
 //! derives `strum::EnumString` with `parse_err_ty = UnknownName<Self>` and
-//! `parse_err_fn = UnknownName::new`, so that `str::parse` gives this error.
+//! `parse_err_fn = UnknownName::new`, so that `str::parse` gives this error, and gets its
+//! inherent `name()` (and `ALL`) from [`strum_names!`](crate::names::strum_names).
 
 use std::marker::PhantomData;
 
@@ -36,6 +37,32 @@ impl<E: Named> UnknownName<E> {
         }
     }
 }
+
+/// Writes the inherent `name()` of an enum that derives `strum::IntoStaticStr` (the name on
+/// the command line, in scene and results files) and, with `all`, its `ALL` (every variant in
+/// the order of declaration, from `strum::VariantArray` and `strum::EnumCount`), so that no
+/// enum writes them out by hand: `strum_names!(Method, all);`.
+macro_rules! strum_names {
+    ($ty:ty) => {
+        impl $ty {
+            /// The variant's name: on the command line, in scene files and in results files.
+            pub fn name(self) -> &'static str {
+                self.into()
+            }
+        }
+    };
+    ($ty:ty, all) => {
+        $crate::names::strum_names!($ty);
+        impl $ty {
+            /// Every variant, in the order of declaration.
+            pub const ALL: [Self; <Self as strum::EnumCount>::COUNT] =
+                *<Self as strum::VariantArray>::VARIANTS
+                    .first_chunk()
+                    .expect("one entry per variant");
+        }
+    };
+}
+pub(crate) use strum_names;
 
 /// `names` as a list to pick one from: `a, b or c`.
 fn one_of(names: &[&str]) -> String {

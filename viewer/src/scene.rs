@@ -220,18 +220,9 @@ pub enum Filter {
     Tricubic,
 }
 
+crate::names::strum_names!(Filter, all);
+
 impl Filter {
-    /// Every filter (the order of the variants).
-    pub const ALL: [Self; <Self as strum::EnumCount>::COUNT] =
-        *<Self as strum::VariantArray>::VARIANTS
-            .first_chunk()
-            .expect("one entry per variant");
-
-    /// The name on the command line and in scene files.
-    pub fn name(self) -> &'static str {
-        self.into()
-    }
-
     /// Voxels a sample reads beyond the trilinear footprint on each side: 0, or 1 for the
     /// tricubic filter (voxels `i − 1` to `i + 2` instead of `i` and `i + 1`). Region ranges
     /// are widened by this many voxels before they classify space, so that the one-voxel

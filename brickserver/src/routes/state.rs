@@ -6,8 +6,6 @@ use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use residency_store::location::ObjectStoreOptions;
-
 use crate::bricks::{BatchLimits, ImageArrays};
 use crate::cache::ByteCache;
 use crate::dataset_store::{DatasetStore, OpenError};
@@ -33,8 +31,6 @@ pub struct ServerOptions {
     /// included): every link in the listing is built on it. `None`: from the request's
     /// `X-Forwarded-Proto`/`X-Forwarded-Host`, else its `Host`.
     pub public_url: Option<PublicUrl>,
-    /// How to reach datasets in an object store.
-    pub object_store: ObjectStoreOptions,
 }
 
 impl Default for ServerOptions {
@@ -45,7 +41,6 @@ impl Default for ServerOptions {
             batch: BatchLimits::default(),
             viewer_dir: None,
             public_url: None,
-            object_store: ObjectStoreOptions::default(),
         }
     }
 }
@@ -111,7 +106,7 @@ impl AppState {
         let stores = datasets
             .0
             .iter()
-            .map(|d| DatasetStore::open(&d.location, &options.object_store))
+            .map(|d| DatasetStore::open(&d.location, d.object_store.as_ref()))
             .collect::<Result<_, _>>()?;
         Ok(Self {
             datasets,

@@ -322,9 +322,9 @@ fn why_level_0_or_a_link_is_unreadable_is_said() {
     let dir = tempfile::tempdir().unwrap();
     let cells = v3_store(dir.path(), "cells");
     let store = || {
-        use residency_store::location::{ObjectStoreOptions, StoreLocation};
+        use residency_store::location::StoreLocation;
         let location = StoreLocation::Folder(cells.clone());
-        DatasetStore::open(&location, &ObjectStoreOptions::default()).unwrap()
+        DatasetStore::open(&location, None).unwrap()
     };
     std::fs::remove_file(cells.join("0/zarr.json")).unwrap();
     let summary = StoreSummary::read(&store()).unwrap();

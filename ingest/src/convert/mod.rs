@@ -11,12 +11,13 @@
 //! [`error`](ConvertError); `inputs` (opened and checked together) and `plan` (the store and
 //! the columns of the pass); `pass`, the streaming pass, with `pyramid_sums` (the exact-sum
 //! downsampling) and `sink` (a slab written and its region metadata recorded); and
-//! [`summary`](ConvertSummary). Partitioned conversions run the same pass (see
-//! [`crate::partition`]).
+//! [`summary`](ConvertSummary). Partitioned conversions run the same pass from `partitioned`
+//! ([`convert_partition`], [`finalize`]; [`crate::partition`] plans their cuts and hand-over).
 
 pub(crate) mod error;
 pub(crate) mod inputs;
 pub(crate) mod options;
+mod partitioned;
 pub(crate) mod pass;
 pub(crate) mod plan;
 pub(crate) mod pyramid_sums;
@@ -27,6 +28,7 @@ use std::time::Instant;
 
 pub use self::error::ConvertError;
 pub use self::options::{ConvertOptions, default_memory_limit};
+pub use self::partitioned::{PartitionSummary, convert_partition, finalize};
 pub use self::sink::ChunkWriteError;
 pub use self::summary::{ConvertSummary, LevelSummary};
 

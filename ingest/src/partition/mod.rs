@@ -25,14 +25,12 @@
 //! the plan the first partition recorded (`plan`, which later partitions must match), and are
 //! removed by `finalize` before the root metadata is written.
 //!
-//! The modules: `plan` (which partition, where they cut, what they agree on), `handoff`
-//! (what a partition leaves for `finalize`) and `run`, the entry points
-//! ([`convert_partition`], [`finalize`]).
+//! The modules: `plan` (which partition, where they cut, what they agree on) and `handoff`
+//! (what a partition leaves for `finalize`). The entry points, which run the conversion's
+//! pass, are beside it: [`crate::convert::convert_partition`] and [`crate::convert::finalize`].
 
 pub(crate) mod handoff;
 pub(crate) mod plan;
-mod run;
 
 pub use self::handoff::{HANDOFF_FOLDER, HandoffError, UnreadableHandoff};
 pub use self::plan::{Partition, PartitionParseError};
-pub use self::run::{PartitionSummary, convert_partition, finalize};

@@ -13,13 +13,14 @@
 //! [`StoreLocation::object_store`], ask it with [`StoreLocation::exists_in`], and read the
 //! pyramid through the same client with [`object_storage`], whose requests run on their own
 //! runtime ([`BlockOn`]). The synchronous functions ([`StoreLocation::exists`],
-//! [`StoreLocation::open_readable`], publishing and downloading) run theirs on a runtime of
-//! this module's.
+//! [`StoreLocation::open_readable`], publishing and downloading) run theirs on the runtime the
+//! caller gives in [`ObjectStoreOptions::runtime`] (synchronous programs start one with
+//! [`ObjectStoreOptions::for_location`]); this crate keeps no runtime of its own.
 
 use std::fmt;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use futures::{StreamExt, TryStreamExt};
 
@@ -100,6 +101,22 @@ pub enum LocationError {
     /// The AWS profile cannot be read.
     #[error(transparent)]
     Profile(#[from] ProfileError),
+    /// A synchronous function was called for an object-store location without a runtime in
+    /// [`ObjectStoreOptions::runtime`] to run its requests.
+    #[error("{location}: object-store requests need a tokio runtime (ObjectStoreOptions::runtime)")]
+    NoRuntime {
+        /// The location.
+        location: String,
+    },
+    /// The runtime for an object-store location's requests cannot be started.
+    #[error("{location}: cannot start a runtime for object-store requests")]
+    Runtime {
+        /// The location.
+        location: String,
+        /// What tokio said.
+        #[source]
+        source: std::io::Error,
+    },
     /// A store is already there, and replacing it was not asked for.
     #[error("{location}: output already exists (pass --overwrite to replace it)")]
     Exists {
@@ -161,47 +178,99 @@ impl fmt::Display for StoreLocation {
     }
 }
 
-/// How to reach an object store beyond the AWS variables.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+/// How to reach an object store beyond the AWS variables, and the caller's runtime that runs
+/// the requests of this module's synchronous functions.
+#[derive(Clone, Debug, Default)]
 pub struct ObjectStoreOptions {
     /// Endpoint URL of a non-AWS server (overrides `AWS_ENDPOINT_URL`); an `http://`
     /// endpoint is allowed without `AWS_ALLOW_HTTP`.
     pub endpoint: Option<String>,
+    /// Runs object-store requests for the synchronous functions ([`StoreLocation::exists`],
+    /// [`StoreLocation::upload_folder`], [`StoreLocation::download_prefix`],
+    /// [`StoreLocation::open_readable`]); without one they refuse object-store locations
+    /// ([`LocationError::NoRuntime`]). Folders need none, and asynchronous callers use
+    /// [`StoreLocation::exists_in`] and [`object_storage`] on their own runtime instead.
+    pub runtime: Option<BlockOn>,
 }
 
-/// The tokio runtime that runs object-store requests for the synchronous functions of this
-/// module ([`StoreLocation::exists`], [`StoreLocation::upload_folder`],
-/// [`StoreLocation::download_prefix`], [`StoreLocation::open_readable`]), which synchronous
-/// programs (ingest, the viewer's `--store s3://`) call. Asynchronous callers use
-/// [`StoreLocation::exists_in`] and [`object_storage`] on their own runtime instead.
-fn runtime() -> &'static tokio::runtime::Runtime {
-    static RUNTIME: OnceLock<tokio::runtime::Runtime> = OnceLock::new();
-    RUNTIME.get_or_init(|| {
-        tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .thread_name("object-store")
-            .enable_all()
-            .build()
-            .expect("a tokio runtime for object-store requests")
-    })
+/// Worker threads of the runtime [`ObjectStoreOptions::for_location`] starts: object-store
+/// requests wait on the network, so two keep many in flight.
+const REQUEST_THREADS: usize = 2;
+
+impl ObjectStoreOptions {
+    /// Options for a synchronous program that reaches `location`: `endpoint`, and for an
+    /// object-store location a runtime started for its requests, which lives as long as these
+    /// options and the storage opened with them. A folder gets no runtime.
+    ///
+    /// # Errors
+    /// [`LocationError::Runtime`] when the runtime cannot be started.
+    pub fn for_location(
+        location: &StoreLocation,
+        endpoint: Option<String>,
+    ) -> Result<Self, LocationError> {
+        let runtime = match location {
+            StoreLocation::Folder(_) => None,
+            StoreLocation::S3 { .. } => Some(BlockOn::start(REQUEST_THREADS).map_err(
+                |source| LocationError::Runtime {
+                    location: location.to_string(),
+                    source,
+                },
+            )?),
+        };
+        Ok(Self { endpoint, runtime })
+    }
+
+    /// The runtime for `location`'s requests.
+    fn runtime_for(&self, location: &StoreLocation) -> Result<&BlockOn, LocationError> {
+        self.runtime
+            .as_ref()
+            .ok_or_else(|| LocationError::NoRuntime {
+                location: location.to_string(),
+            })
+    }
 }
 
 /// Runs object-store futures for zarrs' synchronous API on a multi-threaded tokio runtime the
 /// caller chose, from synchronous code: a thread outside the runtime, or a blocking task of it
 /// (`spawn_blocking`), never an async task.
 #[derive(Clone, Debug)]
-pub struct BlockOn(tokio::runtime::Handle);
+pub struct BlockOn {
+    handle: tokio::runtime::Handle,
+    /// The runtime, when this started it: kept alive until the last clone is dropped.
+    _started: Option<Arc<tokio::runtime::Runtime>>,
+}
 
 impl BlockOn {
-    /// Runs futures on the runtime of `handle`.
+    /// Runs futures on the runtime of `handle`, which the caller keeps running for as long as
+    /// this is used.
     pub fn new(handle: tokio::runtime::Handle) -> Self {
-        Self(handle)
+        Self {
+            handle,
+            _started: None,
+        }
+    }
+
+    /// Starts a multi-threaded runtime of `threads` workers for this alone, stopped when the
+    /// last clone is dropped (from synchronous code, not from inside another runtime).
+    ///
+    /// # Errors
+    /// The I/O error of a runtime that cannot be started.
+    pub fn start(threads: usize) -> std::io::Result<Self> {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(threads)
+            .thread_name("object-store")
+            .enable_all()
+            .build()?;
+        Ok(Self {
+            handle: runtime.handle().clone(),
+            _started: Some(Arc::new(runtime)),
+        })
     }
 }
 
 impl AsyncToSyncBlockOn for BlockOn {
     fn block_on<F: Future>(&self, future: F) -> F::Output {
-        self.0.block_on(future)
+        self.handle.block_on(future)
     }
 }
 
@@ -311,9 +380,10 @@ impl StoreLocation {
         let Self::S3 { .. } = self else {
             return Ok(self.folder().is_some_and(Path::exists));
         };
+        let runtime = options.runtime_for(self)?;
         let (s3, prefix) = self.s3_client(options)?;
         let at: ObjectStoreAt = (Arc::new(s3), ObjectPath::from(prefix));
-        runtime().block_on(self.exists_in(&at))
+        runtime.block_on(self.exists_in(&at))
     }
 
     /// Whether a store is at `prefix` in `store` (this location's object store and key
@@ -375,6 +445,7 @@ impl StoreLocation {
         scratch: Option<&str>,
         uploaded: &(dyn Fn(u64) + Sync),
     ) -> Result<u64, LocationError> {
+        let runtime = options.runtime_for(self)?;
         let (s3, prefix) = self.s3_client(options)?;
         let mut files = Vec::new();
         list_files(folder, folder, &mut files)?;
@@ -385,7 +456,7 @@ impl StoreLocation {
             location: format!("{self}/{key}"),
             source,
         };
-        runtime().block_on(async {
+        runtime.block_on(async {
             if clear {
                 for name in ROOT_METADATA {
                     let key = ObjectPath::from(format!("{prefix}/{name}"));
@@ -434,12 +505,13 @@ impl StoreLocation {
         folder: &Path,
         options: &ObjectStoreOptions,
     ) -> Result<usize, LocationError> {
+        let runtime = options.runtime_for(self)?;
         let (s3, prefix) = self.s3_client(options)?;
         let failed = |key: &str, source| LocationError::ObjectStore {
             location: format!("{self}/{key}"),
             source,
         };
-        runtime().block_on(async {
+        runtime.block_on(async {
             let listed: Vec<_> = s3
                 .list(Some(&ObjectPath::from(format!("{prefix}/{sub}"))))
                 .try_collect()
@@ -480,8 +552,8 @@ impl StoreLocation {
         Ok(match self {
             Self::Folder(path) => Arc::new(folder_store(path)?),
             Self::S3 { .. } => {
+                let block_on = options.runtime_for(self)?.clone();
                 let (s3, prefix) = self.s3_client(options)?;
-                let block_on = BlockOn::new(runtime().handle().clone());
                 object_storage(Arc::new(s3), &ObjectPath::from(prefix), block_on)
             }
         })
@@ -625,5 +697,39 @@ mod tests {
             err("gs://b/p"),
             "gs://b/p: unknown scheme (stores are local paths, file:// or s3:// URLs)"
         );
+    }
+
+    #[test]
+    fn object_store_requests_run_on_the_callers_runtime_only() {
+        let s3: StoreLocation = "s3://bucket/name.ome.zarr".parse().unwrap();
+        let without = ObjectStoreOptions::default();
+        // Refused before any request is made: there is no runtime of this crate's to fall
+        // back on.
+        assert_eq!(
+            s3.exists(&without).unwrap_err().to_string(),
+            "s3://bucket/name.ome.zarr: object-store requests need a tokio runtime \
+             (ObjectStoreOptions::runtime)"
+        );
+        assert!(matches!(
+            s3.open_readable(&without),
+            Err(LocationError::NoRuntime { .. })
+        ));
+        let folder = StoreLocation::Folder(std::env::temp_dir());
+        assert!(
+            ObjectStoreOptions::for_location(&folder, None)
+                .unwrap()
+                .runtime
+                .is_none()
+        );
+        assert!(folder.exists(&without).unwrap());
+        let with =
+            ObjectStoreOptions::for_location(&s3, Some("http://127.0.0.1:9".into())).unwrap();
+        let runtime = with
+            .runtime
+            .clone()
+            .expect("a runtime for an s3:// location");
+        // The runtime is the caller's: it runs futures for as long as a clone of it is held.
+        assert_eq!(runtime.block_on(async { 7 }), 7);
+        assert!(s3.open_readable(&with).is_ok());
     }
 }

@@ -42,18 +42,8 @@ pub enum Experiment {
     Scaling,
 }
 
-impl Experiment {
-    /// Every experiment, in the order `viewer bench run` lists them (that of the variants).
-    pub const ALL: [Self; <Self as strum::EnumCount>::COUNT] =
-        *<Self as strum::VariantArray>::VARIANTS
-            .first_chunk()
-            .expect("one entry per variant");
-
-    /// The name in results files.
-    pub fn name(self) -> &'static str {
-        self.into()
-    }
-}
+// `Experiment::ALL` is the order `viewer bench run` lists them in: that of the variants.
+crate::names::strum_names!(Experiment, all);
 
 impl Named for Experiment {
     const NOUN: &'static str = "experiment";

@@ -254,12 +254,9 @@ impl SweptParameter {
         Self::CacheFraction,
         Self::LeafVoxels,
     ];
-
-    /// The name in results files.
-    pub fn name(self) -> &'static str {
-        self.into()
-    }
 }
+
+crate::names::strum_names!(SweptParameter);
 
 /// A swept parameter and its value.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]

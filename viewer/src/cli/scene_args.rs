@@ -58,9 +58,7 @@ impl SourceArgs {
                 )?))
             }
             (None, None, Some(location)) => {
-                let options = ObjectStoreOptions {
-                    endpoint: self.s3_endpoint.clone(),
-                };
+                let options = ObjectStoreOptions::for_location(location, self.s3_endpoint.clone())?;
                 Ok(Box::new(LocalSource::open_location(location, &options)?))
             }
             _ => bail!("give either --server URL --dataset NAME, or --store PATH"),

@@ -82,7 +82,7 @@ pub(super) async fn map_for_reading(
     for (i, rx) in mapped.into_iter().enumerate() {
         match rx.await {
             Ok(Ok(())) => {}
-            Ok(Err(reason)) => return Err(GpuError::Readback { buffer: i, reason }),
+            Ok(Err(source)) => return Err(GpuError::Readback { buffer: i, source }),
             Err(_) => return Err(GpuError::DeviceLost { buffer: i }),
         }
     }

@@ -30,7 +30,9 @@ pub enum GpuError {
         #[source]
         source: wgpu::RequestDeviceError,
     },
-    /// A validation or out-of-memory error raised by work checked with `Gpu::checked`.
+    /// A validation or out-of-memory error raised by work checked with `Gpu::checked`. wgpu's
+    /// error is kept as its text: it is neither `Send` nor `Sync` on the web, where this error
+    /// also travels.
     #[error("{what}: GPU error: {message}")]
     Validation {
         /// The work, e.g. `rendering a frame`.
@@ -160,12 +162,13 @@ pub enum GpuError {
     #[error("waiting for the GPU")]
     Poll(#[source] wgpu::PollError),
     /// A readback buffer that could not be mapped.
-    #[error("cannot read back GPU buffer {buffer}: {reason}")]
+    #[error("cannot read back GPU buffer {buffer}: {source}")]
     Readback {
         /// The buffer's position among those mapped.
         buffer: usize,
         /// What wgpu said.
-        reason: wgpu::BufferAsyncError,
+        #[source]
+        source: wgpu::BufferAsyncError,
     },
     /// The device was lost while a readback buffer was being mapped.
     #[error("cannot read back GPU buffer {buffer}: the device was lost")]

@@ -62,18 +62,10 @@ pub enum Method {
     Rasterize,
 }
 
+// `Method::ALL` lists ours first: the order of the variants.
+crate::names::strum_names!(Method, all);
+
 impl Method {
-    /// Every method, ours first (the order of the variants).
-    pub const ALL: [Self; <Method as strum::EnumCount>::COUNT] =
-        *<Self as strum::VariantArray>::VARIANTS
-            .first_chunk()
-            .expect("one entry per variant");
-
-    /// The name used on the command line and in statistics.
-    pub fn name(self) -> &'static str {
-        self.into()
-    }
-
     /// Whether the method rasterises boxes into ray segment lists before ray casting.
     pub fn uses_segment_lists(self) -> bool {
         matches!(self, Self::SparseLeap | Self::Rasterize)

@@ -40,12 +40,7 @@ pub enum ProbeFilter {
     Hardware,
 }
 
-impl ProbeFilter {
-    /// The name in results files.
-    pub fn name(self) -> &'static str {
-        self.into()
-    }
-}
+crate::names::strum_names!(ProbeFilter);
 
 /// One probe frame, read back.
 #[derive(Clone, Debug)]

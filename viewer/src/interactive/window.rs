@@ -41,7 +41,8 @@ pub enum ViewError {
     Buffer {
         /// What was being done, e.g. `presenting the frame`.
         what: &'static str,
-        /// What softbuffer said.
+        /// What softbuffer said, as text: its error is not `Send` or `Sync`, which the
+        /// binary's error report needs.
         reason: String,
     },
     /// The renderer failed.

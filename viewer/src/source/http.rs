@@ -28,7 +28,7 @@ impl Get for Client {
         }
         let mut response = request.call().map_err(|e| SourceError::Unreachable {
             url: url.to_string(),
-            reason: e.to_string(),
+            source: e.into(),
         })?;
         let status = response.status().as_u16();
         let body = response

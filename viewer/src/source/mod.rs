@@ -268,13 +268,15 @@ pub enum SourceError {
         #[source]
         source: std::io::Error,
     },
-    /// A brick server that cannot be reached (the transport's message follows).
-    #[error("{url}: cannot reach the brick server: {reason}")]
+    /// A brick server that cannot be reached (the transport's message follows, as the web
+    /// page shows only this message).
+    #[error("{url}: cannot reach the brick server: {source}")]
     Unreachable {
         /// The URL asked for.
         url: String,
         /// What the HTTP client (or the browser) said.
-        reason: String,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
     },
     /// A response whose body cannot be read.
     #[error("{url}: cannot read the response")]

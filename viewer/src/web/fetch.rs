@@ -23,7 +23,7 @@ impl Get for BrowserFetch {
     async fn get(&self, url: &str) -> Result<Reply, SourceError> {
         let unreachable = |e: &wasm_bindgen::JsValue| SourceError::Unreachable {
             url: url.to_string(),
-            reason: js_text(e),
+            source: js_text(e).into(),
         };
         let window = web_sys::window().ok_or_else(|| SourceError::NoWindow {
             url: url.to_string(),

@@ -1,27 +1,27 @@
 //! The entry points of a partitioned conversion: `ingest convert --partition I/N`
 //! ([`convert_partition`]) and `ingest finalize` ([`finalize`]), which run the pass of
 //! [`crate::convert`](mod@crate::convert) over a partition's planes, or from the partitions'
-//! hand-over files.
+//! hand-over files ([`crate::partition`] says where partitions cut and what they hand over).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use super::handoff::{
-    HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, RECORDS_FOLDER,
-    claim_plan, records_stem, write_handoff,
-};
-use super::plan::Partition;
-use crate::columns::ColumnPlan;
-use crate::convert::error::ConvertError;
-use crate::convert::inputs::{Inputs, open_inputs};
-use crate::convert::options::ConvertOptions;
-use crate::convert::pass::{
+use super::error::ConvertError;
+use super::inputs::{Inputs, open_inputs};
+use super::options::ConvertOptions;
+use super::pass::{
     HandedOver, Level, RegionOutput, finish_store, flush_if_full, into_stats, new_stats,
     open_levels, run_pass,
 };
-use crate::convert::plan::{plan_pass, plan_store};
-use crate::convert::pyramid_sums::Accumulator;
-use crate::convert::summary::{ConvertSummary, columns_report};
+use super::plan::{plan_pass, plan_store};
+use super::pyramid_sums::Accumulator;
+use super::summary::{ConvertSummary, columns_report};
+use crate::columns::ColumnPlan;
+use crate::partition::handoff::{
+    HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, RECORDS_FOLDER,
+    claim_plan, records_stem, write_handoff,
+};
+use crate::partition::plan::Partition;
 use crate::regions::ChannelAccumulator;
 use crate::sample_format::Sample;
 use crate::source::PlaneRegion;
