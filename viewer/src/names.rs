@@ -3,7 +3,7 @@
 //! lists the known names from the variants themselves (`strum::VariantNames`). Each such enum
 //! derives `strum::EnumString` with `parse_err_ty = UnknownName<Self>` and
 //! `parse_err_fn = UnknownName::new`, so that `str::parse` gives this error, and gets its
-//! inherent `name()` (and `ALL`) from [`strum_names!`](crate::names::strum_names).
+//! inherent `name()` (and `ALL`) from this module's `strum_names!` macro.
 
 use std::marker::PhantomData;
 
