@@ -39,7 +39,7 @@ fi
 # accept them (the stable toolchain ships the AddressSanitizer runtime).
 export RUSTC_BOOTSTRAP=1
 
-if ! cargo fuzz --version 2>/dev/null | grep -qx "cargo-fuzz $CARGO_FUZZ_VERSION"; then
+if ! cargo fuzz --version 2>/dev/null | grep -x "cargo-fuzz $CARGO_FUZZ_VERSION" >/dev/null; then
     echo "== installing cargo-fuzz $CARGO_FUZZ_VERSION"
     cargo install cargo-fuzz --version "$CARGO_FUZZ_VERSION" --locked
 fi
@@ -52,7 +52,9 @@ mapfile -t ALL < <(cargo fuzz list --fuzz-dir "$FUZZ_DIR")
 if [ "$#" -gt 0 ]; then
     TARGETS=("$@")
     for t in "${TARGETS[@]}"; do
-        if ! printf '%s\n' "${ALL[@]}" | grep -qx "$t"; then
+        # grep -x without -q reads all its input: with -q it may exit at the first match and
+        # printf then dies of SIGPIPE, which pipefail reports as a failure.
+        if ! printf '%s\n' "${ALL[@]}" | grep -x "$t" >/dev/null; then
             echo "unknown fuzz target '$t' (targets: ${ALL[*]})" >&2
             exit 2
         fi

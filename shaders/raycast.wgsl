@@ -1,5 +1,6 @@
-// The ray caster, part 6 of 6: the ray loop, the compute entry point. viewer/src/gpu/contract.rs
-// joins shaders/raycast/{resources,sampling,traversal,segment_lists,channels}.wgsl, then this.
+// The ray caster, part 7 of 7: the ray loop, the compute entry point. viewer/src/gpu/contract.rs
+// joins shaders/raycast/{resources,sampling,traversal,segment_lists,channels,vdi}.wgsl, then
+// this.
 
 // ---- the ray ----
 
@@ -13,6 +14,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if st.status == RAY_DONE {
         return;
     }
+    // A fresh ray, or (VDI) one starting another march.
+    let fresh = st.status == RAY_FRESH || st.status == RAY_RESTART;
     let pray = pixel_ray(gid.x, gid.y);
     let t_plane = pray.t_plane;
     let start = pray.start;
@@ -25,9 +28,13 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     var color = st.color;
     var trans = st.trans;
-    if st.status == RAY_FRESH {
+    if fresh {
         color = vec3<f32>(0.0);
         trans = 1.0;
+    }
+    var vdi = vdi_fresh();
+    if VDI && st.status != RAY_FRESH {
+        vdi = vdi_load(pixel);
     }
     var samples = 0u;
     var skipped = 0u;
@@ -44,7 +51,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         var ray = Ray(st.cell, st.local, st.t);
         var last_depth = st.last_depth;
         var iterations = st.iterations;
-        if st.status == RAY_FRESH {
+        if fresh {
             last_depth = P.start_depth + 1u;
             iterations = 0u;
             ray = Ray(P.view_cell, P.view_frac, 0.0);
@@ -238,8 +245,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     move_by = step;
                 }
             }
-            composite(&color, &trans, mixture(s.have, &values, step), steps);
+            let m = mixture(s.have, &values, step);
+            if VDI {
+                vdi_step(&vdi, pixel, m, steps, ray.t, ray.t + move_by, color, trans, t_plane);
+            }
+            composite(&color, &trans, m, steps);
             advance(&ray, dir, move_by);
+            if VDI && vdi_over(vdi) {
+                break;
+            }
         }
         st.cell = ray.cell;
         st.local = ray.local;
@@ -250,13 +264,27 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     st.color = color;
     st.trans = trans;
     st.status = select(RAY_DONE, RAY_SUSPENDED, suspended);
+    if VDI {
+        if !suspended {
+            vdi_close(&vdi, pixel, color, trans, t_plane);
+            if vdi_next_march(&vdi) {
+                st.status = RAY_RESTART;
+                atomicAdd(&requests.counters.rays_suspended, 1u);
+            } else {
+                vdi_finish(pixel, vdi, vec4<f32>(color + trans * P.background, 1.0 - trans));
+            }
+        }
+        if st.status != RAY_DONE {
+            vdi_store(pixel, vdi);
+        }
+    }
     rays[pixel] = st;
     if suspended {
         atomicAdd(&requests.counters.rays_suspended, 1u);
         if RESIDENT_ONLY && needs_full {
             atomicAdd(&requests.counters.rays_need_full, 1u);
         }
-    } else {
+    } else if !VDI {
         out_color[pixel] = vec4<f32>(color + trans * P.background, 1.0 - trans);
     }
     atomicAdd(&requests.counters.samples, samples);

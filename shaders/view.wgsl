@@ -40,7 +40,7 @@ struct Params {
     fine: vec3<i32>, // F: log2 of fine units per leaf
     segment_capacity: u32, // records the ray segment area holds
     brick: vec3<u32>, // brick edge in voxels
-    pad2: u32,
+    supersegments: u32, // most per pixel of a volumetric depth image (raycast/vdi.wgsl)
 }
 
 // One record of a pixel's ray segment list (segments.wgsl writes them, raycast.wgsl walks

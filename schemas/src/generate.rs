@@ -21,6 +21,7 @@ use serde_json::Value;
 
 use crate::RegionMetadata;
 use crate::server::{ApiError, DatasetList, RegionAnswer};
+use crate::vdi::VdiHeader;
 use crate::wire::{BrickBatchHeader, MinMaxHierarchyHeader};
 
 /// Where the schema files are published: a file's `$id` is this followed by its name.
@@ -93,6 +94,7 @@ pub fn documents() -> Vec<SchemaFile> {
         SchemaFile::written::<MinMaxHierarchyHeader>("minmax-hierarchy.schema.json"),
         SchemaFile::written::<RegionAnswer>("region-answer.schema.json"),
         SchemaFile::written::<RegionMetadata>("region-metadata.schema.json"),
+        SchemaFile::written::<VdiHeader>("vdi-header.schema.json"),
     ]
 }
 

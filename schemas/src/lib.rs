@@ -8,7 +8,8 @@
 //! OME-Zarr image group under the key [`REGIONS_KEY`]. It describes the min/max grids and
 //! the per-brick histograms that `ingest` writes as ordinary Zarr arrays inside the group.
 //! [`server`] holds the JSON answers of `brickserver`'s API, and [`wire`] its binary
-//! documents (the min/max hierarchy and brick batches).
+//! documents (the min/max hierarchy and brick batches). [`vdi`] is the file format of volumetric
+//! depth images (a JSON header and compressed planes), which the viewer generates and renders.
 
 pub mod dataset;
 pub mod error_chain;
@@ -18,6 +19,7 @@ pub mod ome;
 pub mod sample_kind;
 pub mod sample_type;
 pub mod server;
+pub mod vdi;
 pub mod wire;
 pub mod zarr;
 

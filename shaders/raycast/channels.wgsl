@@ -1,4 +1,4 @@
-// The ray caster, part 5 of 6 (joined in order by viewer/src/gpu/contract.rs): sampling
+// The ray caster, part 5 of 7 (joined in order by viewer/src/gpu/contract.rs): sampling
 // every channel at its level, with substitution of missing bricks.
 
 // ---- sampling every channel ----

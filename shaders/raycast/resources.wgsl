@@ -1,4 +1,4 @@
-// The ray caster, part 1 of 6 (joined in order by viewer/src/gpu/contract.rs): its constants,
+// The ray caster, part 1 of 7 (joined in order by viewer/src/gpu/contract.rs): its constants,
 // pipeline constants, the ray state kept between passes, the bindings, and reading the scene
 // tables and the octree's nodes.
 
@@ -45,7 +45,7 @@ const NO_LEVEL: u32 = 0xffffffffu;
 // bounded number of steps per pass and resumed from here.
 struct RayState {
     cell: vec3<i32>,
-    status: u32, // RAY_FRESH (the buffer is cleared per frame), RAY_SUSPENDED, RAY_DONE
+    status: u32, // RAY_FRESH (the buffer is cleared per frame), RAY_SUSPENDED, RAY_DONE, RAY_RESTART
     local: vec3<f32>,
     t: f32,
     color: vec3<f32>,
@@ -59,6 +59,7 @@ struct RayState {
 const RAY_FRESH: u32 = 0u;
 const RAY_SUSPENDED: u32 = 1u;
 const RAY_DONE: u32 = 2u;
+const RAY_RESTART: u32 = 3u; // VDI: marches again from the start (vdi.wgsl)
 
 struct FrameCounters {
     requests: atomic<u32>, // distinct missing bricks (before the cap)

@@ -1,4 +1,4 @@
-// The ray caster, part 2 of 6 (joined in order by viewer/src/gpu/contract.rs): reading the
+// The ray caster, part 2 of 7 (joined in order by viewer/src/gpu/contract.rs): reading the
 // atlas through the page tables, brick requests, filtered samples and the level of detail.
 
 // ---- sampling ----

@@ -1,4 +1,4 @@
-// The ray caster, part 4 of 6 (joined in order by viewer/src/gpu/contract.rs): reading the
+// The ray caster, part 4 of 7 (joined in order by viewer/src/gpu/contract.rs): reading the
 // ray segment lists that segments.wgsl wrote (SparseLeap, rasterize).
 
 // ---- ray segment lists (SparseLeap, rasterize): segments.wgsl wrote them ----

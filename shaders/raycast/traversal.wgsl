@@ -1,4 +1,4 @@
-// The ray caster, part 3 of 6 (joined in order by viewer/src/gpu/contract.rs): a ray's
+// The ray caster, part 3 of 7 (joined in order by viewer/src/gpu/contract.rs): a ray's
 // position, and what a step does where the ray is under each hierarchy-traversing method.
 
 // ---- ray state ----

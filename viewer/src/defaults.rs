@@ -195,14 +195,19 @@ pub fn volume_extent(info: &VolumeInfo) -> [f64; 3] {
 impl CameraSpec {
     /// The camera for `info`'s volume.
     pub fn camera(&self, info: &VolumeInfo, fov_y_degrees: f64) -> Camera {
-        let c = volume_centre(info);
+        self.camera_in_box(volume_extent(info), fov_y_degrees)
+    }
+
+    /// The camera for a volume whose box is `[0, extent]` (world units, `x, y, z`).
+    pub fn camera_in_box(&self, extent: [f64; 3], fov_y_degrees: f64) -> Camera {
+        let c = extent.map(|e| e / 2.0);
         match *self {
             Self::Orbit {
                 azimuth,
                 elevation,
                 distance,
             } => {
-                let e = volume_extent(info);
+                let e = extent;
                 let diagonal = box_diagonal(e);
                 let (a, el) = (azimuth.to_radians(), elevation.to_radians());
                 let dir = [el.cos() * a.sin(), -el.sin(), -el.cos() * a.cos()];

@@ -75,6 +75,18 @@ pub struct RgbImage {
     pub pixels: Vec<[f32; 3]>,
 }
 
+impl RgbImage {
+    /// The RGB of `width × height` linear RGBA pixels (a frame as the renderers read it back;
+    /// alpha dropped: the background is composited already).
+    pub fn from_rgba(width: u32, height: u32, pixels: &[[f32; 4]]) -> Self {
+        Self {
+            width: width as usize,
+            height: height as usize,
+            pixels: pixels.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+        }
+    }
+}
+
 /// File formats of [`RgbImage::write`] and [`RgbImage::read`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageFormat {

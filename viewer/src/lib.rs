@@ -13,10 +13,13 @@
 //! - [`gpu`]: the wgpu renderer: device, brick cache, page tables, the `raycast.wgsl` pass and
 //!   the progressive streaming loop;
 //! - [`defaults`]: the default view of a volume (camera, colours, transfer functions);
+//! - [`frame_rate`]: the PI controller that holds a frame time by the image-space sampling;
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
 //! - [`bench`](mod@bench): the renderer benchmark suite (`viewer bench`);
 //! - [`names`]: the enums named on the command line and in files, and the one error for an
 //!   unknown name;
+//! - `service` (native, `serve` feature): the render service of `viewer serve`, VDIs of a
+//!   dataset's views over HTTP for a page far away;
 //! - `web` (WebAssembly only): the browser driver, `fetch` and `requestAnimationFrame` over
 //!   the same renderer, with the `window.residency` automation hook.
 //!
@@ -33,6 +36,7 @@
 #[cfg(not(target_arch = "wasm32"))]
 pub mod bench;
 pub mod defaults;
+pub mod frame_rate;
 pub mod gpu;
 pub mod image;
 pub mod interactive;
@@ -42,6 +46,8 @@ pub mod octree;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod reference;
 pub mod scene;
+#[cfg(all(feature = "serve", not(target_arch = "wasm32")))]
+pub mod service;
 pub mod source;
 #[cfg(target_arch = "wasm32")]
 pub mod web;

@@ -22,6 +22,11 @@ struct Cli {
 enum Command {
     /// Render a scene on the GPU, progressively, until converged or out of budget.
     Render(cli::render::Args),
+    /// Generate a volumetric depth image of a scene on the GPU, once the view has converged.
+    Vdi(cli::vdi::Args),
+    /// Serve volumetric depth images of a dataset's views over HTTP, for a page far away (the
+    /// remote mode).
+    Serve(Box<cli::serve::Args>),
     /// Render the same scene's ground truth on the CPU in f64 (full resolution, fine step).
     Reference(Box<cli::reference::Args>),
     /// Compare two images: PSNR, SSIM, max abs error, and an EXR error map.
@@ -41,6 +46,8 @@ fn main() -> ExitCode {
         .init();
     let result = match Cli::parse().command {
         Command::Render(args) => cli::render::run(args),
+        Command::Vdi(args) => cli::vdi::run(args),
+        Command::Serve(args) => cli::serve::run(*args),
         Command::Reference(args) => cli::reference::run(*args),
         Command::Compare(args) => cli::compare::run(args),
         Command::View(args) => cli::view::run(*args),

@@ -41,11 +41,7 @@ pub(super) fn finite_psnr(m: &metrics::Metrics) -> Option<f64> {
 
 /// The RGB image of RGBA `pixels`.
 pub(super) fn to_image(width: u32, height: u32, pixels: &[[f32; 4]]) -> RgbImage {
-    RgbImage {
-        width: width as usize,
-        height: height as usize,
-        pixels: pixels.iter().map(|p| [p[0], p[1], p[2]]).collect(),
-    }
+    RgbImage::from_rgba(width, height, pixels)
 }
 
 /// The driver: one source, scene, device, orbit and set of reference images.

@@ -19,7 +19,8 @@
 //! - `channels`: simulated channels ([`vary_transfer_functions`]);
 //! - `paper`: the papers' published numbers; `pareto`: the Pareto front of time against
 //!   error; `plots`: PNG plots (plotters); [`report`]: markdown tables and plots from results
-//!   files.
+//!   files;
+//! - [`vdi`]: `viewer bench vdi`, volumetric depth images against direct volume rendering.
 
 mod channels;
 mod driver;
@@ -33,13 +34,14 @@ mod plan;
 mod plots;
 mod records;
 pub mod report;
+pub mod vdi;
 
 pub use channels::vary_transfer_functions;
 pub use driver::Bench;
 pub use error::BenchError;
 pub use experiment::{Experiment, UnknownExperiment};
 pub use plan::{MethodConfig, Plan, SweepGroup, SweepValues};
-pub use plots::PlotError;
+pub use plots::{Line, PlotError, panels};
 pub use records::{
     BenchResults, DatasetInfo, DeviceInfo, FORMAT, OptionsRecord, ProbeRecord, RunRecord, Settings,
     SkippedRecord, SweepParam, SweptParameter, ViewRecord,

@@ -310,6 +310,72 @@ pub fn scaling(
     })
 }
 
+/// One line of a [`panels`] plot: its legend label and `(x, y)` points, ascending in `x`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Line {
+    /// Legend label.
+    pub label: String,
+    /// Points, ascending in `x`.
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Panels stacked over a shared `x` axis (linear), each with its `y` description and lines.
+///
+/// # Errors
+/// A [`PlotError`]: plotters failed, or the PNG cannot be written to `path`.
+pub fn panels(
+    path: &Path,
+    title: &str,
+    x_desc: &str,
+    panels: &[(&str, Vec<Line>)],
+) -> Result<(), PlotError> {
+    let xs = panels
+        .iter()
+        .flat_map(|(_, lines)| lines.iter().flat_map(|l| l.points.iter().map(|p| p.0)));
+    let (x_lo, x_hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+        (lo.min(x), hi.max(x))
+    });
+    let (x_lo, x_hi) = padded(x_lo, x_hi);
+    png(path, (900, 380 * panels.len().max(1) as u32), |root| {
+        let root = root.titled(title, (FAMILY, 18)).map_err(err)?;
+        for (area, (y_desc, lines)) in root.split_evenly((panels.len(), 1)).iter().zip(panels) {
+            let ys = lines.iter().flat_map(|l| l.points.iter().map(|p| p.1));
+            let (y_lo, y_hi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+                (lo.min(y), hi.max(y))
+            });
+            let (y_lo, y_hi) = padded(y_lo, y_hi);
+            let mut chart = ChartBuilder::on(area)
+                .margin(10)
+                .x_label_area_size(40)
+                .y_label_area_size(70)
+                .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)
+                .map_err(err)?;
+            chart
+                .configure_mesh()
+                .x_desc(x_desc)
+                .y_desc(*y_desc)
+                .label_style((FAMILY, 12))
+                .draw()
+                .map_err(err)?;
+            for (k, line) in lines.iter().enumerate() {
+                let c = PALETTE[k % PALETTE.len()];
+                chart
+                    .draw_series(LineSeries::new(line.points.clone(), c.stroke_width(2)))
+                    .map_err(err)?
+                    .label(line.label.clone())
+                    .legend(move |(x, y)| {
+                        PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2))
+                    });
+                chart
+                    .draw_series(line.points.iter().map(|&p| Circle::new(p, 4, c.filled())))
+                    .map_err(err)?;
+            }
+            legend(&mut chart, SeriesLabelPosition::UpperRight, 12)?;
+        }
+        Ok(())
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

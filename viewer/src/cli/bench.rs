@@ -32,6 +32,53 @@ pub enum Command {
     Run(Box<RunArgs>),
     /// Write markdown tables and PNG plots from results files.
     Report(ReportArgs),
+    /// Volumetric depth images against direct volume rendering: quality and frame time at
+    /// deviations from the camera of generation, sizes and generation time.
+    Vdi(Box<VdiArgs>),
+}
+
+/// Arguments of `viewer bench vdi`.
+#[derive(clap::Args, Debug)]
+pub struct VdiArgs {
+    /// Where the volume comes from.
+    #[command(flatten)]
+    pub source: SourceArgs,
+    /// What to draw; its camera generates the VDIs.
+    #[command(flatten)]
+    pub scene: SceneArgs,
+    /// Renderer settings of the DVR frames and of the VDI pass.
+    #[command(flatten)]
+    pub renderer: RendererArgs,
+    /// Image width in pixels (lists per row of the VDIs).
+    #[arg(long, default_value_t = 128)]
+    pub width: u32,
+    /// Image height in pixels.
+    #[arg(long, default_value_t = 128)]
+    pub height: u32,
+    /// Supersegment counts, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "15,20,30")]
+    pub supersegments: Vec<u32>,
+    /// Deviations from the camera of generation, degrees, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "0,5,10,20,30,40")]
+    pub deviations: Vec<f64>,
+    /// Frames timed per measurement (the median is kept).
+    #[arg(long, default_value_t = 3)]
+    pub timed_frames: usize,
+    /// Most frames to converge one view.
+    #[arg(long, default_value_t = 64)]
+    pub max_frames: u32,
+    /// Dataset label in the tables [default: the dataset name].
+    #[arg(long)]
+    pub label: Option<String>,
+    /// Results file (JSON, `schemas/json/vdi-bench.schema.json`).
+    #[arg(long, value_name = "FILE")]
+    pub out: PathBuf,
+    /// Also write the tables as markdown here.
+    #[arg(long, value_name = "FILE")]
+    pub markdown: Option<PathBuf>,
+    /// Also plot SSIM and frame time against deviation here (PNG).
+    #[arg(long, value_name = "FILE")]
+    pub plot: Option<PathBuf>,
 }
 
 /// Arguments of `viewer bench run`.
@@ -244,10 +291,51 @@ pub fn run_bench(args: RunArgs) -> Result<()> {
     Ok(())
 }
 
+/// Runs `viewer bench vdi`.
+pub fn run_vdi(args: VdiArgs) -> Result<()> {
+    ensure!(
+        args.width >= 11 && args.height >= 11,
+        "--width and --height must be at least 11 (SSIM's window)"
+    );
+    let source: Arc<dyn BrickSource> = Arc::from(args.source.open()?);
+    let info = source.info();
+    let scene = args.scene.scene(info)?;
+    let options = args.renderer.options(
+        args.width,
+        args.height,
+        info.levels.len(),
+        scene.channels.len(),
+    )?;
+    let plan = bench::vdi::VdiPlan {
+        supersegments: args.supersegments.clone(),
+        deviations: args.deviations.clone(),
+        timed_frames: args.timed_frames,
+        max_frames: args.max_frames,
+        workers: args.renderer.workers,
+    };
+    let label = args.label.clone().unwrap_or_else(|| info.name.clone());
+    let gpu = residency_viewer::gpu::device::Gpu::new()?;
+    let results = bench::vdi::run(&gpu, Arc::clone(&source), &scene, options, &plan, &label)
+        .with_context(|| format!("{label}: VDI benchmark"))?;
+    let json = serde_json::to_string_pretty(&results)?;
+    std::fs::write(&args.out, json + "\n")
+        .with_context(|| format!("{}: cannot write the results", args.out.display()))?;
+    if let Some(path) = &args.markdown {
+        std::fs::write(path, bench::vdi::markdown(&results))
+            .with_context(|| format!("{}: cannot write the tables", path.display()))?;
+    }
+    if let Some(path) = &args.plot {
+        bench::vdi::plot(&results, path)?;
+    }
+    tracing::info!("{label}: wrote {}", args.out.display());
+    Ok(())
+}
+
 /// Runs `viewer bench`.
 pub fn run(args: Args) -> Result<()> {
     match args.command {
         Command::Run(a) => run_bench(*a),
+        Command::Vdi(a) => run_vdi(*a),
         Command::Report(a) => {
             let w = bench::report::write(&a.results, &a.out_dir, &a.command)?;
             println!("{}", w.report.display());

@@ -6,4 +6,6 @@ pub mod reference;
 pub mod render;
 pub mod renderer_args;
 pub mod scene_args;
+pub mod serve;
+pub mod vdi;
 pub mod view;

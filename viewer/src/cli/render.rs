@@ -1,18 +1,21 @@
 //! `viewer render`: a progressive GPU render ([`residency_viewer::gpu::streaming`]) until no brick is
 //! outstanding or a frame/time budget runs out, written as PNG or EXR, with per-frame
-//! statistics as JSON.
+//! statistics as JSON; or, with `--vdi`, a volumetric depth image ray cast from the scene's
+//! camera ([`residency_viewer::gpu::vdi_render`]).
 
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::streaming::{Budget, RenderStats, render_progressive};
+use residency_viewer::gpu::vdi_render::VdiRenderer;
 use residency_viewer::image::{ImageFormat, RgbImage};
+use residency_viewer::scene::Camera;
 
 /// Arguments of `viewer render`.
 #[derive(clap::Args, Debug)]
@@ -44,11 +47,22 @@ pub struct Args {
     /// Renderer settings.
     #[command(flatten)]
     pub renderer: RendererArgs,
+    /// Ray cast this volumetric depth image (`viewer vdi`) instead of a volume: the camera is
+    /// the scene's (`--scene`, `--camera`, `--fov`), else the VDI's own.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["server", "dataset", "store"])]
+    pub vdi: Option<PathBuf>,
+    /// With `--vdi`: cross the VDI's empty tiles of lists one by one instead of in one step (a
+    /// baseline).
+    #[arg(long, requires = "vdi")]
+    pub vdi_no_skipping: bool,
 }
 
 /// Runs `viewer render`.
 pub fn run(args: Args) -> Result<()> {
     ImageFormat::of(&args.out)?;
+    if let Some(path) = &args.vdi {
+        return render_vdi(&args, path);
+    }
     let (source, scene, options) = open_scene(
         &args.source,
         &args.scene,
@@ -67,11 +81,7 @@ pub fn run(args: Args) -> Result<()> {
     let gpu = Gpu::new()?;
     let result = render_progressive(&gpu, Arc::clone(&source), &scene, options, &budget)?;
     let wall_s = start.elapsed().as_secs_f64();
-    let image = RgbImage {
-        width: result.width as usize,
-        height: result.height as usize,
-        pixels: result.pixels.iter().map(|p| [p[0], p[1], p[2]]).collect(),
-    };
+    let image = RgbImage::from_rgba(result.width, result.height, &result.pixels);
     image.write(&args.out)?;
     tracing::info!(
         "wrote {} ({}×{}) after {} frames in {wall_s:.2} s: {}",
@@ -93,5 +103,47 @@ pub fn run(args: Args) -> Result<()> {
         std::fs::write(path, json + "\n")
             .with_context(|| format!("{}: cannot write statistics", path.display()))?;
     }
+    Ok(())
+}
+
+/// `viewer render --vdi`: the VDI at `path` ray cast from the scene's camera.
+fn render_vdi(args: &Args, path: &std::path::Path) -> Result<()> {
+    args.scene.refuse_for_vdi()?;
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    let vdi =
+        residency_schemas::vdi::VolumetricDepthImage::decode(&bytes, &path.display().to_string())?;
+    let h = &vdi.header;
+    let extent = std::array::from_fn(|a| h.volume_max[a] - h.volume_min[a]);
+    if h.volume_min != [0.0; 3] {
+        bail!(
+            "{}: a VDI's volume box starts at the origin",
+            path.display()
+        );
+    }
+    let generated = Camera {
+        eye: h.camera.eye,
+        target: h.camera.target,
+        up: h.camera.up,
+        fov_y_degrees: h.camera.fov_y_degrees,
+    };
+    let camera = args.scene.camera_for_vdi(generated, extent)?;
+    let start = Instant::now();
+    let gpu = Gpu::new()?;
+    let renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;
+    let frame = renderer.render(&gpu, &camera, !args.vdi_no_skipping)?;
+    let image = RgbImage::from_rgba(args.width, args.height, &frame.pixels);
+    image.write(&args.out)?;
+    tracing::info!(
+        "wrote {} ({}×{}) from {} in {:.2} s{}",
+        args.out.display(),
+        args.width,
+        args.height,
+        path.display(),
+        start.elapsed().as_secs_f64(),
+        frame
+            .gpu_time_ms
+            .map(|ms| format!(" ({ms:.3} ms on the GPU)"))
+            .unwrap_or_default()
+    );
     Ok(())
 }

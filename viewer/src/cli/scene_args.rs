@@ -252,6 +252,52 @@ pub fn filter_parser() -> impl clap::builder::TypedValueParser<Value = Filter> {
 }
 
 impl SceneArgs {
+    /// The camera to render a volumetric depth image with: the scene file's (else `generated`,
+    /// the VDI's own camera), then `--fov` and `--camera` (an orbit about the VDI's volume box
+    /// `[0, extent]`). The VDI's colours and transfer functions are baked in, so the flags that
+    /// would change them are refused.
+    pub fn camera_for_vdi(
+        &self,
+        generated: residency_viewer::scene::Camera,
+        extent: [f64; 3],
+    ) -> Result<residency_viewer::scene::Camera> {
+        self.refuse_for_vdi()?;
+        let mut camera = match &self.scene {
+            Some(path) => read_scene(path)?.camera,
+            None => generated,
+        };
+        if let Some(fov) = self.fov {
+            ensure!(
+                fov > 0.0 && fov < 180.0,
+                "--fov {fov}: must lie between 0 and 180 degrees"
+            );
+            camera.fov_y_degrees = fov;
+        }
+        if let Some(spec) = &self.camera {
+            camera = spec.camera_in_box(extent, camera.fov_y_degrees);
+        }
+        Ok(camera)
+    }
+
+    /// Refuses the flags that would change what a VDI baked in (colours, transfer functions,
+    /// background, filter).
+    pub fn refuse_for_vdi(&self) -> Result<()> {
+        let baked = [
+            (!self.tf.is_empty(), "--tf"),
+            (!self.color.is_empty(), "--color"),
+            (self.channels.is_some(), "--channels"),
+            (self.background.is_some(), "--background"),
+            (self.filter.is_some(), "--filter"),
+        ];
+        if let Some((_, flag)) = baked.iter().find(|(given, _)| *given) {
+            bail!(
+                "{flag} does not apply to a VDI: its colours, transfer functions, background \
+                 and filter were fixed when it was generated (`viewer vdi`)"
+            );
+        }
+        Ok(())
+    }
+
     /// The scene for `info`'s volume: the scene file (or the defaults), then the flags.
     pub fn scene(&self, info: &VolumeInfo) -> Result<Scene> {
         let mut scene = match &self.scene {

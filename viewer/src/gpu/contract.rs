@@ -43,8 +43,9 @@ const SEGMENTS_BODY: &str = include_str!("../../../shaders/segments.wgsl");
 
 /// The ray caster as written, in its parts (by path under `shaders/`), joined in this order:
 /// module-scope declarations and table reads, sampling, octree and page-table traversal, ray
-/// segment lists, per-channel sampling, then the ray loop and entry point in `raycast.wgsl`.
-pub const RAYCAST_PARTS: [(&str, &str); 6] = [
+/// segment lists, per-channel sampling, volumetric depth images, then the ray loop and entry
+/// point in `raycast.wgsl`.
+pub const RAYCAST_PARTS: [(&str, &str); 7] = [
     (
         "raycast/resources.wgsl",
         include_str!("../../../shaders/raycast/resources.wgsl"),
@@ -66,10 +67,17 @@ pub const RAYCAST_PARTS: [(&str, &str); 6] = [
         include_str!("../../../shaders/raycast/channels.wgsl"),
     ),
     (
+        "raycast/vdi.wgsl",
+        include_str!("../../../shaders/raycast/vdi.wgsl"),
+    ),
+    (
         "raycast.wgsl",
         include_str!("../../../shaders/raycast.wgsl"),
     ),
 ];
+
+/// The VDI ray caster as written.
+const VDI_RENDER_BODY: &str = include_str!("../../../shaders/vdi_render.wgsl");
 
 /// The limit probe as written.
 const PROBE_BODY: &str = include_str!("../../../shaders/probe.wgsl");
@@ -229,10 +237,16 @@ gpu_struct! {
         pub segment_capacity: u32,
         /// Brick edge in voxels, per axis.
         pub brick: [u32; 3],
-        /// Unused (alignment).
-        pub pad2: u32,
+        /// Most supersegments per pixel of a volumetric depth image (the VDI pipeline; 0
+        /// otherwise): see [`VDI_STATE_SLOTS`].
+        pub supersegments: u32,
     }
 }
+
+/// Slots of a pixel's VDI state after its `supersegments` slots in the VDI target
+/// (`shaders/raycast/vdi.wgsl`): the ray's VDI state between passes, then, once it is done,
+/// its DVR colour (slot 0) and its supersegment count, `γ` and marches (slot 1).
+pub const VDI_STATE_SLOTS: u32 = 4;
 
 gpu_struct! {
     /// One pyramid level in the scene uniforms.
@@ -467,6 +481,8 @@ pub fn wgsl_prelude() -> String {
         u("ATLAS_FLOAT", AtlasKind::Float as u32),
         u("FLAG_SKIPPING", FLAG_SKIPPING),
         u("FLAG_SUBSTITUTION", FLAG_SUBSTITUTION),
+        u("VDI_STATE_SLOTS", VDI_STATE_SLOTS),
+        u("VDI_FLAG_SKIPPING", VDI_FLAG_SKIPPING),
         u("FILTER_MANUAL", FILTER_MANUAL),
         u("FILTER_HARDWARE", FILTER_HARDWARE),
     ]
@@ -506,13 +522,93 @@ pub fn probe_source() -> String {
     [wgsl_prelude().as_str(), TRANSFER, PROBE_BODY].concat()
 }
 
+/// The VDI ray caster as compiled: [`wgsl_prelude`], then `shaders/vdi_render.wgsl`.
+pub fn vdi_render_source() -> String {
+    [wgsl_prelude().as_str(), VDI_RENDER_BODY].concat()
+}
+
 /// The WGSL files of `shaders/` as compiled, by file name: every file is part of at least one.
-pub fn sources() -> [(&'static str, String); 3] {
+pub fn sources() -> [(&'static str, String); 4] {
     [
         ("raycast.wgsl", raycast_source()),
         ("segments.wgsl", segments_source()),
         ("probe.wgsl", probe_source()),
+        ("vdi_render.wgsl", vdi_render_source()),
     ]
+}
+
+/// [`VdiView::flags`] bit: cross tiles of lists without supersegments in one step.
+pub const VDI_FLAG_SKIPPING: u32 = 1;
+
+gpu_struct! {
+    /// The VDI ray caster's uniforms (`shaders/vdi_render.wgsl`): the new camera, and the
+    /// camera that generated the VDI (`V_O`), positions relative to `V_O`'s eye.
+    pub struct VdiView {
+        /// Rays cast per row: the new image's width at `D_I` (preview rendering).
+        pub width: u32,
+        /// Rows of rays cast.
+        pub height: u32,
+        /// The VDI's lists per row (`V_O`'s width in pixels).
+        pub lists_x: u32,
+        /// Its rows of lists.
+        pub lists_y: u32,
+        /// The new camera's eye.
+        pub eye: [f32; 3],
+        /// Slots per list (`N_S`).
+        pub supersegments: u32,
+        /// The new camera's forward (unit).
+        pub forward: [f32; 3],
+        /// Lists per tile edge of the skipping grid.
+        pub tile: u32,
+        /// The new camera's right · tan(fov/2) · aspect.
+        pub right: [f32; 3],
+        /// Tiles per row of the skipping grid.
+        pub tiles_x: u32,
+        /// The new camera's up · tan(fov/2).
+        pub up: [f32; 3],
+        /// [`VDI_FLAG_SKIPPING`].
+        pub flags: u32,
+        /// `V_O`'s forward (unit).
+        pub o_forward: [f32; 3],
+        /// `V_O`'s tan(fov/2) · aspect.
+        pub o_tan_x: f32,
+        /// `V_O`'s right (unit).
+        pub o_right: [f32; 3],
+        /// `V_O`'s tan(fov/2).
+        pub o_tan_y: f32,
+        /// `V_O`'s up (unit).
+        pub o_up: [f32; 3],
+        /// The displayed image's width (the rays' image upsampled when smaller).
+        pub out_width: u32,
+        /// The volume's box: lowest corner.
+        pub box_min: [f32; 3],
+        /// The displayed image's height.
+        pub out_height: u32,
+        /// The volume's box: highest corner.
+        pub box_max: [f32; 3],
+        /// Unused (alignment).
+        pub pad2: u32,
+        /// Background colour, linear RGB.
+        pub background: [f32; 3],
+        /// Unused (alignment).
+        pub pad3: u32,
+    }
+}
+
+/// Binding numbers of `vdi_render.wgsl`'s group 0.
+pub mod vdi_binding {
+    /// [`super::VdiView`], uniform.
+    pub const VIEW: u32 = 0;
+    /// Supersegments per list.
+    pub const COUNTS: u32 = 1;
+    /// The lists' slots.
+    pub const SLOTS: u32 = 2;
+    /// The skipping grid: most supersegments per tile of lists.
+    pub const TILES: u32 = 3;
+    /// The rays' image, linear RGBA `f32` per pixel.
+    pub const IMAGE: u32 = 4;
+    /// The displayed image, upsampled from the rays' image (preview rendering).
+    pub const DISPLAY: u32 = 5;
 }
 
 /// Binding numbers of `probe.wgsl`'s group 0.

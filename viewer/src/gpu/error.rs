@@ -161,6 +161,14 @@ pub enum GpuError {
     /// Waiting for the GPU failed.
     #[error("waiting for the GPU")]
     Poll(#[source] wgpu::PollError),
+    /// A supersegment count a volumetric depth image cannot have.
+    #[error("--supersegments {supersegments}: a VDI has 1 to {max} supersegments per pixel")]
+    Supersegments {
+        /// The count asked for.
+        supersegments: u32,
+        /// The most the format allows.
+        max: u32,
+    },
     /// A readback buffer that could not be mapped.
     #[error("cannot read back GPU buffer {buffer}: {source}")]
     Readback {

@@ -65,5 +65,7 @@ pub mod streaming;
 pub mod synthetic;
 pub(crate) mod tables;
 pub(crate) mod timer;
+pub mod vdi;
+pub mod vdi_render;
 
 pub use error::GpuError;

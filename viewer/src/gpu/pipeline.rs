@@ -4,7 +4,7 @@
 //! every renderer of the same format and method, however its scene or volume changes, shares
 //! it.
 
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
 use super::brick_cache::AtlasKind;
 use super::contract::{binding, raycast_source};
@@ -100,14 +100,40 @@ pub(crate) struct Bindings<'a> {
 }
 
 /// `raycast.wgsl` compiled for one atlas format, one method and one filter, as the full pass
-/// and as the resident-only pass.
+/// and as the resident-only pass, and on first use as the pass that writes volumetric depth
+/// images.
 pub struct RaycastPipeline {
     kind: AtlasKind,
     method: Method,
     filter: Filter,
     layout: wgpu::BindGroupLayout,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
     pipeline: wgpu::ComputePipeline,
     resident_only: wgpu::ComputePipeline,
+    vdi: OnceLock<wgpu::ComputePipeline>,
+}
+
+/// Which pass of `raycast.wgsl` a pipeline runs (its pipeline constants beyond format,
+/// method and filter).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Pass {
+    /// The full pass.
+    Full,
+    /// The resident-only pass.
+    ResidentOnly,
+    /// The full pass writing volumetric depth images (`shaders/raycast/vdi.wgsl`).
+    Vdi,
+}
+
+impl Pass {
+    fn label(self) -> &'static str {
+        match self {
+            Self::Full => "raycast",
+            Self::ResidentOnly => "raycast resident-only",
+            Self::Vdi => "raycast vdi",
+        }
+    }
 }
 
 impl RaycastPipeline {
@@ -144,38 +170,49 @@ impl RaycastPipeline {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let build = |resident_only: bool| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(if resident_only {
-                    "raycast resident-only"
-                } else {
-                    "raycast"
-                }),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: wgpu::PipelineCompilationOptions {
-                    constants: &[
-                        ("SAMPLE_KIND", f64::from(kind as u32)),
-                        ("METHOD", f64::from(method as u32)),
-                        ("FILTER", f64::from(filter as u32)),
-                        ("RESIDENT_ONLY", f64::from(u8::from(resident_only))),
-                    ],
-                    ..Default::default()
-                },
-                cache: None,
-            })
-        };
-        let pipeline = build(false);
-        let resident_only = build(true);
         Self {
             kind,
             method,
             filter,
             layout,
-            pipeline,
-            resident_only,
+            pipeline: compile(
+                device,
+                &module,
+                &pipeline_layout,
+                kind,
+                method,
+                filter,
+                Pass::Full,
+            ),
+            resident_only: compile(
+                device,
+                &module,
+                &pipeline_layout,
+                kind,
+                method,
+                filter,
+                Pass::ResidentOnly,
+            ),
+            module,
+            pipeline_layout,
+            vdi: OnceLock::new(),
         }
+    }
+
+    /// The pass that writes volumetric depth images (`VDI` in `raycast.wgsl`), compiled the
+    /// first time it is asked for.
+    pub(crate) fn vdi(&self, device: &wgpu::Device) -> &wgpu::ComputePipeline {
+        self.vdi.get_or_init(|| {
+            compile(
+                device,
+                &self.module,
+                &self.pipeline_layout,
+                self.kind,
+                self.method,
+                self.filter,
+                Pass::Vdi,
+            )
+        })
     }
 
     /// The full pass's compute pipeline.
@@ -213,6 +250,38 @@ impl RaycastPipeline {
             ],
         })
     }
+}
+
+/// `raycast.wgsl`'s entry point compiled with the pipeline constants of `pass`.
+fn compile(
+    device: &wgpu::Device,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    kind: AtlasKind,
+    method: Method,
+    filter: Filter,
+    pass: Pass,
+) -> wgpu::ComputePipeline {
+    device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some(pass.label()),
+        layout: Some(layout),
+        module,
+        entry_point: Some("main"),
+        compilation_options: wgpu::PipelineCompilationOptions {
+            constants: &[
+                ("SAMPLE_KIND", f64::from(kind as u32)),
+                ("METHOD", f64::from(method as u32)),
+                ("FILTER", f64::from(filter as u32)),
+                (
+                    "RESIDENT_ONLY",
+                    f64::from(u8::from(pass == Pass::ResidentOnly)),
+                ),
+                ("VDI", f64::from(u8::from(pass == Pass::Vdi))),
+            ],
+            ..Default::default()
+        },
+        cache: None,
+    })
 }
 
 /// The pipelines a device has built, one per (atlas format, method, filter).

@@ -23,6 +23,7 @@ use super::residency::ResidencyState;
 use super::segments::SegmentStage;
 use super::tables::{SceneTables, channel_level_bounds};
 use super::timer::PassTimer;
+use super::vdi::{VdiGeneration, VdiTarget, read_target};
 use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
@@ -169,7 +170,19 @@ pub struct Renderer {
     bind_group: wgpu::BindGroup,
     /// The ray segment lists (SparseLeap and rasterize).
     segments: Option<SegmentStage>,
+    /// The buffer of the last volumetric depth image generated, and its bind group, kept for
+    /// the next of the same size.
+    vdi: Option<(VdiTarget, wgpu::BindGroup)>,
     frame: u32,
+}
+
+/// What a frame's passes write: the image, or a volumetric depth image's target.
+#[derive(Clone, Copy)]
+enum FrameTarget<'a> {
+    /// The image (`FrameOutput::pixels`).
+    Image,
+    /// A VDI target, with its bind group.
+    Vdi(&'a VdiTarget, &'a wgpu::BindGroup),
 }
 
 impl Renderer {
@@ -272,6 +285,7 @@ impl Renderer {
             buffers,
             bind_group,
             segments,
+            vdi: None,
             frame: 0,
         };
         renderer.flush(gpu);
@@ -539,9 +553,107 @@ impl Renderer {
     }
 
     async fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput, GpuError> {
+        self.run_frame(gpu, FrameTarget::Image).await
+    }
+
+    /// Generates the volumetric depth image of the current view, with at most `supersegments`
+    /// supersegments per pixel (`shaders/raycast/vdi.wgsl`): one frame of the VDI pass over
+    /// the bricks resident now. Render the view until it has converged first (no requests),
+    /// as `viewer vdi` does, so that the VDI holds the data the view needs.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`], and a [`GpuError`] naming the VDI when it is over the
+    /// device's storage-buffer limit or `supersegments` is not in `1..=MAX_SUPERSEGMENTS`.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn generate_vdi(
+        &mut self,
+        gpu: &Gpu,
+        supersegments: u32,
+    ) -> Result<(VdiGeneration, FrameOutput), GpuError> {
+        pollster::block_on(self.generate_vdi_async(gpu, supersegments))
+    }
+
+    /// [`Renderer::generate_vdi`], awaited.
+    ///
+    /// # Errors
+    /// As [`Renderer::generate_vdi`].
+    pub async fn generate_vdi_async(
+        &mut self,
+        gpu: &Gpu,
+        supersegments: u32,
+    ) -> Result<(VdiGeneration, FrameOutput), GpuError> {
+        let max = residency_schemas::vdi::MAX_SUPERSEGMENTS;
+        if !(1..=max).contains(&supersegments) {
+            return Err(GpuError::Supersegments { supersegments, max });
+        }
+        let pixels = u64::from(self.options.width) * u64::from(self.options.height);
+        let (target, bind_group) = match self.vdi.take() {
+            Some(kept) if kept.0.supersegments == supersegments && kept.0.pixels == pixels => kept,
+            _ => {
+                let target = VdiTarget::new(gpu, pixels, supersegments)?;
+                let bind_group = self.bind_vdi(gpu, &target);
+                (target, bind_group)
+            }
+        };
+        let result = gpu
+            .checked_async(
+                "generating a volumetric depth image",
+                self.run_frame(gpu, FrameTarget::Vdi(&target, &bind_group)),
+            )
+            .await;
+        let slots = match result {
+            Ok(out) => read_vdi(gpu, &target).await.map(|slots| (slots, out)),
+            Err(e) => Err(e),
+        };
+        self.vdi = Some((target, bind_group));
+        let (slots, out) = slots?;
+        let info = self.residency.info();
+        let spacing = info.spacing_xyz();
+        let voxels = self.residency.octree().geometry().volume_voxels;
+        let extent = std::array::from_fn(|a| voxels[a] as f64 * spacing[a]);
+        let header = super::vdi::header(
+            &self.scene,
+            self.options.width,
+            self.options.height,
+            supersegments,
+            extent,
+            self.residency.octree().channels().len() as u32,
+        );
+        Ok((read_target(header, &slots), out))
+    }
+
+    /// The bind group of the VDI pass: this renderer's, with `target` as the image.
+    fn bind_vdi(&self, gpu: &Gpu, target: &VdiTarget) -> wgpu::BindGroup {
+        let atlas = self.residency.cache().views();
+        self.pipeline.bind_group(
+            &gpu.device,
+            &Bindings {
+                params: &self.buffers.params,
+                nodes: self.residency.nodes(),
+                scene: self.tables.uniforms(),
+                tables: self.tables.buffer(),
+                pages: self.residency.pages().buffer(),
+                page_flags: self.residency.pages().flags(),
+                requests: &self.buffers.requests,
+                usage: self.residency.cache().usage_buffer(),
+                image: &target.buffer,
+                atlas: &atlas,
+                rays: &self.buffers.rays,
+            },
+        )
+    }
+
+    async fn run_frame(
+        &mut self,
+        gpu: &Gpu,
+        target: FrameTarget<'_>,
+    ) -> Result<FrameOutput, GpuError> {
         self.flush(gpu);
         self.frame += 1;
-        let params = self.params();
+        let mut params = self.params();
+        if let FrameTarget::Vdi(vdi, _) = target {
+            params.supersegments = vdi.supersegments;
+        }
         gpu.queue
             .write_buffer(&self.buffers.params, 0, bytemuck::bytes_of(&params));
         let device = &gpu.device;
@@ -585,12 +697,20 @@ impl Renderer {
                     label: Some("raycast"),
                     timestamp_writes,
                 });
-                pass.set_pipeline(if resident_only {
-                    self.pipeline.resident_only()
-                } else {
-                    self.pipeline.pipeline()
-                });
-                pass.set_bind_group(0, &self.bind_group, &[]);
+                match target {
+                    FrameTarget::Image => {
+                        pass.set_pipeline(if resident_only {
+                            self.pipeline.resident_only()
+                        } else {
+                            self.pipeline.pipeline()
+                        });
+                        pass.set_bind_group(0, &self.bind_group, &[]);
+                    }
+                    FrameTarget::Vdi(_, bind_group) => {
+                        pass.set_pipeline(self.pipeline.vdi(device));
+                        pass.set_bind_group(0, bind_group, &[]);
+                    }
+                }
                 pass.dispatch_workgroups(
                     self.options.width.div_ceil(8),
                     self.options.height.div_ceil(8),
@@ -613,7 +733,9 @@ impl Renderer {
                 0,
                 u64::from(self.residency.cache().capacity()) * 4,
             );
-            encoder.copy_buffer_to_buffer(&buffers.image, 0, &rb.image, 0, image_bytes);
+            if let FrameTarget::Image = target {
+                encoder.copy_buffer_to_buffer(&buffers.image, 0, &rb.image, 0, image_bytes);
+            }
             if let Some(timer) = &rb.timer {
                 timer.resolve(&mut encoder);
             }
@@ -652,8 +774,12 @@ impl Renderer {
 
         let words: Vec<u32> = bytemuck::cast_slice(&rb.requests.get_mapped_range(..)?).to_vec();
         let usage: Vec<u32> = bytemuck::cast_slice(&rb.usage.get_mapped_range(..)?).to_vec();
-        let pixels: Vec<[f32; 4]> =
-            bytemuck::cast_slice(&rb.image.get_mapped_range(0..image_bytes)?).to_vec();
+        let pixels: Vec<[f32; 4]> = match target {
+            FrameTarget::Image => {
+                bytemuck::cast_slice(&rb.image.get_mapped_range(0..image_bytes)?).to_vec()
+            }
+            FrameTarget::Vdi(..) => Vec::new(),
+        };
         let gpu_time_ms = rb.timer.as_ref().map(|t| t.read_ms(gpu)).transpose()?;
         for b in maps {
             b.unmap();
@@ -701,6 +827,21 @@ impl Renderer {
             gpu_time_ms,
         })
     }
+}
+
+/// The VDI target's slots, as the VDI pass left them.
+async fn read_vdi(gpu: &Gpu, target: &VdiTarget) -> Result<Vec<[f32; 4]>, GpuError> {
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("vdi readback"),
+        });
+    encoder.copy_buffer_to_buffer(&target.buffer, 0, &target.readback, 0, target.bytes());
+    gpu.queue.submit([encoder.finish()]);
+    map_for_reading(&gpu.device, &[&target.readback]).await?;
+    let slots = bytemuck::cast_slice(&target.readback.get_mapped_range(..)?).to_vec();
+    target.readback.unmap();
+    Ok(slots)
 }
 
 /// Distance `D` (world) from the eye to the shader's view point `eye + D·forward`, from which

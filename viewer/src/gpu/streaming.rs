@@ -349,6 +349,30 @@ pub fn render_progressive(
     converge(gpu, &mut renderer, &fetcher, budget)
 }
 
+/// Generates the volumetric depth image of `scene` with at most `supersegments` per pixel: a
+/// progressive render until the view has converged (or `budget` runs out), then one frame of
+/// the VDI pass over what is resident (`Renderer::generate_vdi`). Returns the VDI and the
+/// progressive render that led to it.
+///
+/// # Errors
+/// As [`render_progressive`], and the VDI pass's [`GpuError`].
+#[cfg(not(target_arch = "wasm32"))]
+pub fn generate_vdi(
+    gpu: &Gpu,
+    source: Arc<dyn BrickSource>,
+    scene: &Scene,
+    options: RenderOptions,
+    budget: &Budget,
+    supersegments: u32,
+) -> Result<(super::vdi::VdiGeneration, Progressive), GpuError> {
+    let mut renderer = Renderer::new(gpu, source.info(), scene, options)?;
+    let fetcher = Fetcher::new(Arc::clone(&source), budget.workers, budget.batch);
+    let progressive = converge(gpu, &mut renderer, &fetcher, budget)?;
+    let (mut generation, _) = renderer.generate_vdi(gpu, supersegments)?;
+    generation.image.header.dataset = Some(source.info().name.clone());
+    Ok((generation, progressive))
+}
+
 /// The brick of the next coarser level covering `key`'s region, if there is one.
 pub fn coarser_brick(info: &VolumeInfo, key: &BrickKey) -> Option<BrickKey> {
     let l = key.level as usize;

@@ -4,7 +4,7 @@
 
 use residency_viewer::gpu::contract::{
     self, ChannelEntry, FrameCounters, GpuStruct, LevelEntry, Params, ProbeParams, RayState,
-    SceneUniforms, SegmentBox, SegmentRecord,
+    SceneUniforms, SegmentBox, SegmentRecord, VdiView,
 };
 
 fn parse(source: &str) -> naga::Module {
@@ -96,6 +96,8 @@ fn every_shared_struct_matches_its_wgsl_twin() {
         .concat(),
         Vec::<String>::new()
     );
+    let vdi = parse(&contract::vdi_render_source());
+    assert_eq!(disagreements::<VdiView>(&vdi), Vec::<String>::new());
     let segments = parse(&contract::segments_source());
     assert_eq!(
         [
@@ -129,10 +131,11 @@ fn a_disagreement_fails_the_contract() {
         ]
     );
     // A field the shader lacks.
-    let dropped = source.replacen("    pad2: u32,\n}", "}", 1);
+    let dropped = source.replacen("    pad0: u32,\n    pad1: u32,\n}", "    pad0: u32,\n}", 1);
+    assert_ne!(dropped, source);
     assert_eq!(
-        disagreements::<Params>(&parse(&dropped)),
-        ["Params.pad2: not in the shader"]
+        disagreements::<RayState>(&parse(&dropped)),
+        ["RayState.pad1: not in the shader"]
     );
     // A wider type in the shader moves everything after it.
     let wider = source.replacen("    voxel_edge: f32,", "    voxel_edge: vec2<f32>,", 1);
@@ -147,26 +150,33 @@ fn a_disagreement_fails_the_contract() {
 
 #[test]
 fn the_shader_binds_within_webgpu_default_limits() {
-    let module = parse(&contract::raycast_source());
     let limits = wgpu::Limits::default();
-    let count = |space: fn(&naga::AddressSpace) -> bool| {
-        module
+    // The VDI pass writes into the image's binding, so the ray caster binds no more than the
+    // image pass.
+    for (name, source, expected) in [
+        ("raycast.wgsl", contract::raycast_source(), (8, 2, 3)),
+        ("vdi_render.wgsl", contract::vdi_render_source(), (5, 1, 0)),
+    ] {
+        let module = parse(&source);
+        let count = |space: fn(&naga::AddressSpace) -> bool| {
+            module
+                .global_variables
+                .iter()
+                .filter(|(_, g)| space(&g.space))
+                .count() as u32
+        };
+        let storage = count(|s| matches!(s, naga::AddressSpace::Storage { .. }));
+        let uniform = count(|s| matches!(s, naga::AddressSpace::Uniform));
+        let textures = module
             .global_variables
             .iter()
-            .filter(|(_, g)| space(&g.space))
-            .count() as u32
-    };
-    let storage = count(|s| matches!(s, naga::AddressSpace::Storage { .. }));
-    let uniform = count(|s| matches!(s, naga::AddressSpace::Uniform));
-    let textures = module
-        .global_variables
-        .iter()
-        .filter(|(_, g)| matches!(module.types[g.ty].inner, naga::TypeInner::Image { .. }))
-        .count() as u32;
-    assert_eq!((storage, uniform, textures), (8, 2, 3));
-    assert!(storage <= limits.max_storage_buffers_per_shader_stage);
-    assert!(uniform <= limits.max_uniform_buffers_per_shader_stage);
-    assert!(textures <= limits.max_sampled_textures_per_shader_stage);
+            .filter(|(_, g)| matches!(module.types[g.ty].inner, naga::TypeInner::Image { .. }))
+            .count() as u32;
+        assert_eq!((storage, uniform, textures), expected, "{name}");
+        assert!(storage <= limits.max_storage_buffers_per_shader_stage);
+        assert!(uniform <= limits.max_uniform_buffers_per_shader_stage);
+        assert!(textures <= limits.max_sampled_textures_per_shader_stage);
+    }
 }
 
 #[test]
@@ -187,6 +197,8 @@ fn the_prelude_carries_the_rust_constants() {
         "const ATLAS_FLOAT: u32 = 2u;",
         "const FLAG_SUBSTITUTION: u32 = 2u;",
         "const FILTER_HARDWARE: u32 = 1u;",
+        "const VDI_STATE_SLOTS: u32 = 4u;",
+        "const VDI_FLAG_SKIPPING: u32 = 1u;",
     ] {
         assert!(
             prelude.lines().any(|l| l == line),

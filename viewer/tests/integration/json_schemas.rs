@@ -5,23 +5,27 @@
 
 use residency_schemas::generate::{SchemaFile, snapshot};
 use residency_viewer::bench::BenchResults;
+use residency_viewer::bench::vdi::VdiBenchResults;
 use residency_viewer::gpu::streaming::RenderStats;
 use residency_viewer::metrics::Metrics;
 use residency_viewer::scene::Scene;
+use residency_viewer::service::VdiRequest;
 use serde_json::{Value, json};
 
 /// The command regenerating the viewer's schema files.
 const REGENERATE: &str =
     "RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas";
 
-/// Every viewer document's schema file. Scenes are documents the viewer reads; the others it
-/// writes.
+/// Every viewer document's schema file. Scenes and `viewer serve`'s VDI requests are documents
+/// the viewer reads; the others it writes.
 fn documents() -> Vec<SchemaFile> {
     vec![
         SchemaFile::read::<Scene>("scene.schema.json"),
+        SchemaFile::read::<VdiRequest>("vdi-request.schema.json"),
         SchemaFile::written::<RenderStats>("render-stats.schema.json"),
         SchemaFile::written::<Metrics>("compare.schema.json"),
         SchemaFile::written::<BenchResults>("render-bench.schema.json"),
+        SchemaFile::written::<VdiBenchResults>("vdi-bench.schema.json"),
     ]
 }
 
@@ -61,4 +65,14 @@ fn scene_schema_is_generated_as_read() {
         required(&written["properties"]["camera"]),
         ["eye", "fov_y_degrees", "target", "up"]
     );
+}
+
+/// A VDI request needs only its size: the view defaults to the service's scene.
+#[test]
+fn vdi_request_schema_requires_only_the_size() {
+    let read: Value =
+        serde_json::from_str(&SchemaFile::read::<VdiRequest>("vdi-request.schema.json").text)
+            .unwrap();
+    assert_eq!(required(&read), ["height", "width"]);
+    assert_eq!(read["additionalProperties"], json!(false));
 }

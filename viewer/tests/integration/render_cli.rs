@@ -8,7 +8,7 @@ use residency_ingest::ConvertOptions;
 use residency_viewer::image::RgbImage;
 use residency_viewer::metrics;
 
-fn viewer(args: &[&str]) -> std::process::Output {
+pub(crate) fn viewer(args: &[&str]) -> std::process::Output {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_viewer"));
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         cmd.env("XDG_RUNTIME_DIR", "/tmp");
@@ -17,7 +17,7 @@ fn viewer(args: &[&str]) -> std::process::Output {
 }
 
 /// The camera and transfer functions both renders of [`store`] draw.
-const VIEW: [&str; 6] = [
+pub(crate) const VIEW: [&str; 6] = [
     "--camera",
     "-30,-40,70:20,16,24",
     "--tf",
@@ -27,7 +27,7 @@ const VIEW: [&str; 6] = [
 ];
 
 /// Runs `viewer` and fails the test with its stderr unless it succeeds.
-fn viewer_ok(args: &[&str]) {
+pub(crate) fn viewer_ok(args: &[&str]) {
     let out = viewer(args);
     assert!(
         out.status.success(),
@@ -45,7 +45,7 @@ fn assert_matches(label: &str, a: &Path, b: &Path) {
 }
 
 /// 24 × 32 × 40 (z, y, x) u16, two channels, bricks 8³, voxel size 2 × 1 × 1.
-fn store(dir: &Path) -> PathBuf {
+pub(crate) fn store(dir: &Path) -> PathBuf {
     let (nz, ny, nx) = (24u64, 32u64, 40u64);
     let mut inputs = Vec::new();
     for c in 0..2u64 {

@@ -1,0 +1,928 @@
+//! Volumetric depth images (VDIs): the file format, and the in-memory image that the GPU
+//! generator fills and the VDI renderer reads.
+//!
+//! A VDI keeps, for every pixel of a *camera of generation*, a list of up to N_S
+//! *supersegments*, front to back along the pixel's ray: each the premultiplied colour and
+//! opacity that compositing its stretch of the ray gives, with the front and back distance of
+//! that stretch. Fully transparent stretches are left out. Compositing a pixel's supersegments
+//! in order over the background gives the direct volume rendering (DVR) of that pixel
+//! ([`VolumetricDepthImage::composite`]); a renderer can also march other rays through the
+//! lists (Gupta et al., *Efficient Raycasting of Volumetric Depth Images for Remote Data
+//! Visualization*, sections 2.3 to 4).
+//!
+//! # File layout
+//!
+//! This is the one place the layout is written down. Integers and samples are little-endian.
+//!
+//! | Bytes | Content |
+//! |---|---|
+//! | 8 | the magic [`VDI_MAGIC`] |
+//! | 4 | `u32` length `H` of the header, at most [`MAX_HEADER_BYTES`] |
+//! | `H` | the header, a [`VdiHeader`] as UTF-8 JSON (`schemas/json/vdi-header.schema.json`) |
+//! | 8 + `L₁` | the counts plane |
+//! | 8 + `L₂` | the colour plane |
+//! | 8 + `L₃` | the depth plane |
+//!
+//! Nothing follows the depth plane. Each plane is stored as a `u64` length `L` followed by `L`
+//! bytes: with compression `none` the raw plane itself; with `lz4` the raw plane as one LZ4
+//! block behind a `u32` holding the raw plane's length (lz4_flex's `compress_prepend_size`);
+//! with `shuffled_lz4` the same of the raw plane's bytes regrouped by their place in a value
+//! (all first bytes of the plane's values, then all second bytes, ...; a value is one `f16`,
+//! `u16` or `f32`, and a count is one byte), as blosc's byte shuffle does.
+//! The raw planes, lists in row-major order from the top-left pixel (`x` right, `y` down):
+//!
+//! - **counts**: one `u8` per list, its number of supersegments, at most N_S
+//!   (`width·height` bytes);
+//! - **colour**: for each list its used slots only, front to back (`Σ counts` slots in all),
+//!   each premultiplied `[r, g, b, a]` (colour at least 0, and above 1 where channels mix
+//!   additively; opacity in `[0, 1]`) as four IEEE half floats (format `f16`, 8
+//!   bytes) or four `f32` (format `f32`, 16 bytes);
+//! - **depth**: the same slots, each `[front, back]`, distances from the eye along the list's
+//!   ray in world units with `0 ≤ front ≤ back`, as two `f32` (format `f32`, 8 bytes) or two
+//!   `u16` (format `u16`, 4 bytes) quantised linearly between the header's `near` and `far`:
+//!   `q = round((d − near)/(far − near)·65535)`, clamped to `0..=65535`, read back as
+//!   `near + q/65535·(far − near)`.
+//!
+//! # What [`VolumetricDepthImage::decode`] checks
+//!
+//! The magic; a header of at most [`MAX_HEADER_BYTES`] that is valid JSON without unknown
+//! fields; version [`VDI_VERSION`]; `width·height` in `1..=`[`MAX_VDI_PIXELS`], N_S in
+//! `1..=`[`MAX_SUPERSEGMENTS`] and `width·height·N_S` at most [`MAX_VDI_SLOTS`] (which bounds
+//! the memory a file can ask for); a scene hash of 16 lowercase hex digits; finite header
+//! numbers, a field of view in `(0, 180)` degrees, `volume_min ≤ volume_max`, and with `u16`
+//! depth `0 ≤ near < far` and a step `(far − near)/65535` wider than the f32 spacing (ulp) at
+//! `far` (so that every level reads back as an f32 that quantises to it again); every plane's stored
+//! length within the rest of the input, and its raw length (for LZ4 the announced one, checked
+//! before decompressing) exactly what the header and counts imply; counts at most N_S; no
+//! trailing bytes; and in every used slot finite values, a colour of at least 0, an opacity in
+//! `[0, 1]` and
+//! `0 ≤ front ≤ back`.
+//! [`VolumetricDepthImage::encode`] checks the same, so that what it writes always reads back.
+
+use std::borrow::Cow;
+
+use half::f16;
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+mod error;
+
+pub use error::VdiError;
+
+/// Version of the VDI format described in the module documentation.
+pub const VDI_VERSION: u32 = 1;
+
+/// The first 8 bytes of a VDI file.
+pub const VDI_MAGIC: [u8; 8] = *b"RESVDI\0\x01";
+
+/// The most supersegments a list may hold (the largest N_S).
+pub const MAX_SUPERSEGMENTS: u32 = 64;
+
+/// The most pixels (supersegment lists) a VDI may have.
+pub const MAX_VDI_PIXELS: u64 = 8192 * 8192;
+
+/// The most slots (`width·height·N_S`) a VDI may have: the in-memory image holds every slot,
+/// 24 bytes each, so this bounds what a file can make [`VolumetricDepthImage::decode`]
+/// allocate (1 GiB of colour and 512 MiB of depth; 1920×1080 lists of 32 supersegments fit).
+pub const MAX_VDI_SLOTS: u64 = 1 << 26;
+
+/// The longest header, in bytes.
+pub const MAX_HEADER_BYTES: u32 = 1 << 20;
+
+/// What errors name as the file when [`VolumetricDepthImage::encode`] refuses an image.
+const ENCODING: &str = "VDI to encode";
+
+/// The header of a VDI file: the camera of generation, the image's sizes and the formats of
+/// its planes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+#[schemars(
+    title = "Volumetric depth image header",
+    description = "JSON header of a volumetric depth image (VDI) file: 8 bytes 'RESVDI\\0\\x01', \
+        a little-endian u32 header length H (at most 1 MiB), H bytes of this header, then three \
+        planes, each a little-endian u64 stored length and its bytes (with compression `lz4` one \
+        LZ4 block behind a u32 raw length): the u8 supersegment count of every list, row-major \
+        from the top-left pixel; the colour and opacity of the used slots, list by list, front \
+        to back; and their front and back depths. The module documentation of \
+        `residency_schemas::vdi` describes the layout in full."
+)]
+pub struct VdiHeader {
+    /// Format version, [`VDI_VERSION`].
+    #[schemars(range(min = VDI_VERSION, max = VDI_VERSION))]
+    pub version: u32,
+    /// Width of the image in pixels (supersegment lists).
+    #[schemars(range(min = 1))]
+    pub width: u32,
+    /// Height of the image in pixels (supersegment lists).
+    #[schemars(range(min = 1))]
+    pub height: u32,
+    /// N_S: the most supersegments a list holds, and the slots per list in memory.
+    #[schemars(range(min = 1, max = MAX_SUPERSEGMENTS))]
+    pub supersegments: u32,
+    /// The camera of generation, as the scene file writes it.
+    pub camera: VdiCamera,
+    /// How the generator cast the rays of the lists.
+    pub rays: RayBasis,
+    /// World-to-view matrix of the camera of generation, column-major, right-handed.
+    pub view: [f32; 16],
+    /// View-to-clip matrix of the camera of generation, column-major, mapping depths `near`
+    /// to `far` to clip depth 0 to 1 (as wgpu and WebGPU do).
+    pub projection: [f32; 16],
+    /// Near end of the depth range the projection maps (the generator sets `near` and `far`
+    /// to the volume's span along the view); the low end of quantised `u16` depth.
+    pub near: f32,
+    /// Far end of the depth range the projection maps; the high end of quantised `u16` depth.
+    pub far: f32,
+    /// Lowest corner of the volume's box, world units.
+    pub volume_min: [f64; 3],
+    /// Highest corner of the volume's box, world units.
+    pub volume_max: [f64; 3],
+    /// The linear RGB colour the DVR image composites over.
+    pub background: [f32; 3],
+    /// Number of channels mixed into the VDI.
+    pub channels: u32,
+    /// Format of the colour plane.
+    pub colour: ColourFormat,
+    /// Format of the depth plane.
+    pub depth: DepthFormat,
+    /// Compression of the three planes.
+    pub compression: Compression,
+    /// Hash of the scene the VDI was generated from: 16 lowercase hex digits.
+    #[schemars(pattern(r"^[0-9a-f]{16}$"))]
+    pub scene_hash: String,
+    /// Name of the dataset rendered, when known.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dataset: Option<String>,
+}
+
+/// The pinhole camera a VDI was generated from, in world space.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VdiCamera {
+    /// Eye position.
+    pub eye: [f64; 3],
+    /// Point looked at.
+    pub target: [f64; 3],
+    /// Up direction (need not be orthogonal to the view direction).
+    pub up: [f64; 3],
+    /// Vertical field of view, degrees.
+    #[schemars(extend("exclusiveMinimum" = 0, "exclusiveMaximum" = 180))]
+    pub fov_y_degrees: f64,
+}
+
+/// How the generator cast rays: pixel `(x, y)` (`x` right, `y` down, from the top-left) has
+/// the world direction `normalize(forward + ndc_x·right + ndc_y·up)` with `ndc_x = (x +
+/// 0.5)/width·2 − 1` and `ndc_y = 1 − (y + 0.5)/height·2`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct RayBasis {
+    /// Unit view direction.
+    pub forward: [f32; 3],
+    /// Right vector, already scaled by `tan(fov_y/2)·width/height`.
+    pub right: [f32; 3],
+    /// Up vector, already scaled by `tan(fov_y/2)`.
+    pub up: [f32; 3],
+}
+
+/// How the colour plane stores a slot's `[r, g, b, a]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum ColourFormat {
+    /// Four IEEE 754 half floats (8 bytes a slot).
+    F16,
+    /// Four `f32` (16 bytes a slot).
+    F32,
+}
+
+/// How the depth plane stores a slot's `[front, back]`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum DepthFormat {
+    /// Two `f32` distances from the eye along the pixel's ray, world units (8 bytes a slot).
+    F32,
+    /// The same distances as two `u16` quantised linearly between `near` and `far`: `q =
+    /// round((d − near)/(far − near)·65535)`, clamped (4 bytes a slot).
+    U16,
+}
+
+/// How the planes are compressed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Compression {
+    /// Each plane is one LZ4 block behind its raw length as a `u32` (lz4_flex's block
+    /// format, size prepended).
+    Lz4,
+    /// The raw planes.
+    None,
+    /// As [`Compression::Lz4`], of each plane's bytes regrouped by their place in a value
+    /// first (all first bytes, then all second bytes, ...; values of 2 bytes for `f16` and
+    /// `u16`, 4 for `f32`, 1 for the counts), as blosc's shuffle does: the high bytes of
+    /// neighbouring floats repeat, so LZ4 finds them (a third smaller than `lz4` on rendered
+    /// VDIs).
+    ShuffledLz4,
+}
+
+/// `raw`'s bytes regrouped by their place in a value of `width` bytes (the shuffle of
+/// [`Compression::ShuffledLz4`]); `raw` holds whole values.
+fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
+    let n = raw.len() / width;
+    let mut out = vec![0; raw.len()];
+    for (i, value) in raw.chunks_exact(width).enumerate() {
+        for (b, &byte) in value.iter().enumerate() {
+            out[b * n + i] = byte;
+        }
+    }
+    out
+}
+
+/// The inverse of [`shuffle`].
+fn unshuffle(shuffled: &[u8], width: usize) -> Vec<u8> {
+    let n = shuffled.len() / width;
+    let mut out = vec![0; shuffled.len()];
+    for (i, value) in out.chunks_exact_mut(width).enumerate() {
+        for (b, byte) in value.iter_mut().enumerate() {
+            *byte = shuffled[b * n + i];
+        }
+    }
+    out
+}
+
+impl ColourFormat {
+    /// Bytes of one value (a channel of a slot).
+    fn value_bytes(self) -> usize {
+        self.slot_bytes() / 4
+    }
+
+    fn slot_bytes(self) -> usize {
+        match self {
+            Self::F16 => 8,
+            Self::F32 => 16,
+        }
+    }
+}
+
+impl DepthFormat {
+    /// Bytes of one value (a depth of a slot).
+    fn value_bytes(self) -> usize {
+        self.slot_bytes() / 2
+    }
+
+    fn slot_bytes(self) -> usize {
+        match self {
+            Self::F32 => 8,
+            Self::U16 => 4,
+        }
+    }
+}
+
+/// A volumetric depth image: per pixel (a supersegment list) up to N_S supersegments, front to
+/// back.
+#[derive(Clone, Debug, PartialEq)]
+pub struct VolumetricDepthImage {
+    /// The camera of generation, sizes and formats.
+    pub header: VdiHeader,
+    /// Supersegments per list, row-major from the top (width·height entries, each ≤ N_S).
+    pub counts: Vec<u8>,
+    /// Per list N_S slots (index (y·width + x)·N_S + s): premultiplied colour and opacity
+    /// `[r, g, b, a]` of the supersegment (what front-to-back compositing of its samples
+    /// gives: composite the slots in order over the background and you get the DVR pixel);
+    /// slots at s ≥ count are zero.
+    pub colour: Vec<[f32; 4]>,
+    /// Same indexing: `[front, back]` distances from the eye along the list's ray, world
+    /// units, front ≤ back; slots at s ≥ count are zero.
+    pub depth: Vec<[f32; 2]>,
+}
+
+/// The sizes a valid header implies.
+struct Shape {
+    /// `width·height`.
+    lists: usize,
+    /// N_S.
+    slots_per_list: usize,
+}
+
+fn finite<T: Copy + Into<f64>>(values: &[T]) -> bool {
+    values.iter().all(|&v| v.into().is_finite())
+}
+
+/// Checks everything the header alone decides, returning its sizes.
+fn check_header(header: &VdiHeader, file: &str) -> Result<Shape, VdiError> {
+    let field = |field, problem| VdiError::HeaderField {
+        file: file.to_owned(),
+        field,
+        problem,
+    };
+    if header.version != VDI_VERSION {
+        return Err(VdiError::Version {
+            file: file.to_owned(),
+            version: header.version,
+        });
+    }
+    let lists = u64::from(header.width) * u64::from(header.height);
+    if !(1..=MAX_VDI_PIXELS).contains(&lists) {
+        return Err(VdiError::Pixels {
+            file: file.to_owned(),
+            width: header.width,
+            height: header.height,
+        });
+    }
+    if !(1..=MAX_SUPERSEGMENTS).contains(&header.supersegments) {
+        return Err(VdiError::Supersegments {
+            file: file.to_owned(),
+            supersegments: header.supersegments,
+        });
+    }
+    let slots = lists * u64::from(header.supersegments);
+    if slots > MAX_VDI_SLOTS {
+        return Err(VdiError::Slots {
+            file: file.to_owned(),
+            width: header.width,
+            height: header.height,
+            supersegments: header.supersegments,
+            slots,
+        });
+    }
+    let hash = &header.scene_hash;
+    if hash.len() != 16 || !hash.bytes().all(|b| matches!(b, b'0'..=b'9' | b'a'..=b'f')) {
+        return Err(VdiError::SceneHash {
+            file: file.to_owned(),
+            hash: hash.clone(),
+        });
+    }
+    let camera = &header.camera;
+    if ![camera.eye, camera.target, camera.up]
+        .iter()
+        .all(|v| finite(v))
+    {
+        return Err(field("camera", "holds a non-finite number"));
+    }
+    if !(camera.fov_y_degrees > 0.0 && camera.fov_y_degrees < 180.0) {
+        return Err(field("camera.fov_y_degrees", "is not in (0, 180)"));
+    }
+    let rays = &header.rays;
+    if ![rays.forward, rays.right, rays.up]
+        .iter()
+        .all(|v| finite(v))
+    {
+        return Err(field("rays", "holds a non-finite number"));
+    }
+    if !finite(&header.view) {
+        return Err(field("view", "holds a non-finite number"));
+    }
+    if !finite(&header.projection) {
+        return Err(field("projection", "holds a non-finite number"));
+    }
+    if !finite(&[header.near, header.far]) {
+        return Err(field("near or far", "is not finite"));
+    }
+    if header.depth == DepthFormat::U16 && !u16_depth_range(header.near, header.far) {
+        return Err(field(
+            "near and far",
+            "are not 0 ≤ near < far with (far − near)/65535 wider than the f32 spacing at far, \
+             as u16 depth needs",
+        ));
+    }
+    if !finite(&header.volume_min) || !finite(&header.volume_max) {
+        return Err(field(
+            "volume_min or volume_max",
+            "holds a non-finite number",
+        ));
+    }
+    if (0..3).any(|i| header.volume_min[i] > header.volume_max[i]) {
+        return Err(field("volume_min", "is above volume_max"));
+    }
+    if !finite(&header.background) {
+        return Err(field("background", "holds a non-finite number"));
+    }
+    Ok(Shape {
+        lists: lists as usize,
+        slots_per_list: header.supersegments as usize,
+    })
+}
+
+/// Checks one used slot: finite, colour at least 0, opacity in `[0, 1]`, `0 ≤ front ≤ back`.
+fn check_slot(
+    file: &str,
+    (x, y, slot): (u32, u32, u32),
+    colour: [f32; 4],
+    depth: [f32; 2],
+) -> Result<(), VdiError> {
+    let non_finite = |what| VdiError::NonFinite {
+        file: file.to_owned(),
+        x,
+        y,
+        slot,
+        what,
+    };
+    if !finite(&colour) {
+        return Err(non_finite("colour"));
+    }
+    // Channels mix additively, so a premultiplied colour may pass 1; an opacity may not.
+    if colour[..3].iter().any(|&c| c < 0.0) || !(0.0..=1.0).contains(&colour[3]) {
+        return Err(VdiError::ColourRange {
+            file: file.to_owned(),
+            x,
+            y,
+            slot,
+            colour,
+        });
+    }
+    if !finite(&depth) {
+        return Err(non_finite("depth"));
+    }
+    let [front, back] = depth;
+    if !(0.0 <= front && front <= back) {
+        return Err(VdiError::DepthOrder {
+            file: file.to_owned(),
+            x,
+            y,
+            slot,
+            front,
+            back,
+        });
+    }
+    Ok(())
+}
+
+/// Whether `near` and `far` suit quantised `u16` depth: `0 ≤ near < far`, with a quantisation
+/// step `(far − near)/65535` wider than the f32 spacing (ulp) at `far` (by a margin for the f64
+/// arithmetic), so that every level reads back as an f32 within less than half a step of it,
+/// which quantises to the same level: decoding then encoding changes nothing.
+fn u16_depth_range(near: f32, far: f32) -> bool {
+    if !(0.0 <= near && near < far) {
+        return false;
+    }
+    // `far` is finite and positive here, so its bits plus one are the next f32 up.
+    let ulp = f64::from(f32::from_bits(far.to_bits() + 1)) - f64::from(far);
+    (f64::from(far) - f64::from(near)) / 65535.0 >= 1.0001 * ulp
+}
+
+/// The `u16` of distance `d` between `near` and `far`, rounded and clamped.
+fn quantise(d: f32, near: f32, far: f32) -> u16 {
+    let t = (f64::from(d) - f64::from(near)) / (f64::from(far) - f64::from(near));
+    (t * 65535.0).round().clamp(0.0, 65535.0) as u16
+}
+
+/// The distance of quantised depth `q`.
+fn dequantise(q: u16, near: f32, far: f32) -> f32 {
+    let (near, far) = (f64::from(near), f64::from(far));
+    (near + f64::from(q) / 65535.0 * (far - near)) as f32
+}
+
+/// Reads the input front to back, refusing to run past its end.
+struct Reader<'a> {
+    bytes: &'a [u8],
+    file: &'a str,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, needed: u64, what: impl FnOnce() -> String) -> Result<&'a [u8], VdiError> {
+        let available = self.bytes.len() as u64;
+        if needed > available {
+            return Err(VdiError::Truncated {
+                file: self.file.to_owned(),
+                what: what(),
+                needed,
+                available,
+            });
+        }
+        let (taken, rest) = self.bytes.split_at(needed as usize);
+        self.bytes = rest;
+        Ok(taken)
+    }
+
+    fn array<const N: usize>(
+        &mut self,
+        what: impl FnOnce() -> String,
+    ) -> Result<[u8; N], VdiError> {
+        let mut out = [0; N];
+        out.copy_from_slice(self.take(N as u64, what)?);
+        Ok(out)
+    }
+
+    /// One plane of values of `width` bytes, decompressed (and unshuffled), checked to be
+    /// exactly `expected` bytes.
+    fn plane(
+        &mut self,
+        plane: &'static str,
+        compression: Compression,
+        expected: usize,
+        width: usize,
+    ) -> Result<Cow<'a, [u8]>, VdiError> {
+        let stored = u64::from_le_bytes(self.array(|| format!("length of the {plane} plane"))?);
+        let data = self.take(stored, || format!("{plane} plane"))?;
+        let file = self.file;
+        match compression {
+            Compression::None => {
+                if data.len() != expected {
+                    return Err(VdiError::PlaneSize {
+                        file: file.to_owned(),
+                        plane,
+                        stored,
+                        expected: expected as u64,
+                    });
+                }
+                Ok(Cow::Borrowed(data))
+            }
+            Compression::Lz4 | Compression::ShuffledLz4 => {
+                let lz4 = |source| VdiError::Lz4 {
+                    file: file.to_owned(),
+                    plane,
+                    source,
+                };
+                let (announced, block) = lz4_flex::block::uncompressed_size(data).map_err(lz4)?;
+                if announced != expected {
+                    return Err(VdiError::AnnouncedSize {
+                        file: file.to_owned(),
+                        plane,
+                        announced: announced as u64,
+                        expected: expected as u64,
+                    });
+                }
+                let mut raw = vec![0; expected];
+                let actual = lz4_flex::block::decompress_into(block, &mut raw).map_err(lz4)?;
+                if actual != expected {
+                    return Err(VdiError::ShortPlane {
+                        file: file.to_owned(),
+                        plane,
+                        actual: actual as u64,
+                        expected: expected as u64,
+                    });
+                }
+                if compression == Compression::ShuffledLz4 {
+                    raw = unshuffle(&raw, width);
+                }
+                Ok(Cow::Owned(raw))
+            }
+        }
+    }
+}
+
+/// Appends one plane of values of `width` bytes: its stored length, then its bytes,
+/// compressed as the header says.
+fn push_plane(out: &mut Vec<u8>, raw: &[u8], compression: Compression, width: usize) {
+    let stored: Cow<'_, [u8]> = match compression {
+        Compression::None => Cow::Borrowed(raw),
+        Compression::Lz4 => Cow::Owned(lz4_flex::block::compress_prepend_size(raw)),
+        Compression::ShuffledLz4 => {
+            Cow::Owned(lz4_flex::block::compress_prepend_size(&shuffle(raw, width)))
+        }
+    };
+    out.extend_from_slice(&(stored.len() as u64).to_le_bytes());
+    out.extend_from_slice(&stored);
+}
+
+impl VolumetricDepthImage {
+    /// An image of `header`'s sizes with every list empty (all counts and slots zero).
+    ///
+    /// # Panics
+    /// When `width·height·N_S` slots do not fit in memory; [`VolumetricDepthImage::decode`]
+    /// checks a file's header (at most [`MAX_VDI_SLOTS`]) before calling this.
+    pub fn new(header: VdiHeader) -> Self {
+        let lists = header.width as usize * header.height as usize;
+        let slots = lists * header.supersegments as usize;
+        Self {
+            header,
+            counts: vec![0; lists],
+            colour: vec![[0.0; 4]; slots],
+            depth: vec![[0.0; 2]; slots],
+        }
+    }
+
+    /// The colour and depth of the used slots of list `(x, y)`, front to back.
+    ///
+    /// # Panics
+    /// When `(x, y)` is outside the image or the arrays are shorter than the header says.
+    pub fn list(&self, x: u32, y: u32) -> (&[[f32; 4]], &[[f32; 2]]) {
+        assert!(
+            x < self.header.width && y < self.header.height,
+            "list ({x}, {y}) is outside a {}×{} VDI",
+            self.header.width,
+            self.header.height
+        );
+        let index = y as usize * self.header.width as usize + x as usize;
+        let per_list = self.header.supersegments as usize;
+        let used = usize::from(self.counts[index]).min(per_list);
+        let start = index * per_list;
+        (
+            &self.colour[start..start + used],
+            &self.depth[start..start + used],
+        )
+    }
+
+    /// The pixel `(x, y)` as the DVR image has it: the list's supersegments composited front
+    /// to back over the header's background, `rgb = Σ T_j·c_j + T·background` and `a = 1 − T`,
+    /// where `T_j` is the product of `(1 − a_k)` for `k < j` and `T` that of all. Returns
+    /// linear RGB and alpha.
+    ///
+    /// # Panics
+    /// As [`VolumetricDepthImage::list`].
+    pub fn composite(&self, x: u32, y: u32) -> [f32; 4] {
+        let (colour, _) = self.list(x, y);
+        let mut rgb = [0.0f64; 3];
+        let mut transmittance = 1.0f64;
+        for c in colour {
+            for (sum, &channel) in rgb.iter_mut().zip(c) {
+                *sum += transmittance * f64::from(channel);
+            }
+            transmittance *= 1.0 - f64::from(c[3]);
+        }
+        let [r, g, b] = std::array::from_fn(|i| {
+            (rgb[i] + transmittance * f64::from(self.header.background[i])) as f32
+        });
+        [r, g, b, (1.0 - transmittance) as f32]
+    }
+
+    /// The image as a VDI file (the layout in the module documentation).
+    ///
+    /// Slots past a list's count are not written (they read back as zero).
+    ///
+    /// # Errors
+    /// A [`VdiError`] naming `VDI to encode` when the image is one
+    /// [`VolumetricDepthImage::decode`] would refuse: a header out of range, arrays of other
+    /// lengths than the header implies, a count above N_S, or a used slot with a non-finite
+    /// value, a colour below 0, an opacity outside `[0, 1]`, or depths not
+    /// `0 ≤ front ≤ back`.
+    pub fn encode(&self) -> Result<Vec<u8>, VdiError> {
+        let header = &self.header;
+        let shape = check_header(header, ENCODING)?;
+        let slots = shape.lists * shape.slots_per_list;
+        for (array, length, expected) in [
+            ("counts", self.counts.len(), shape.lists),
+            ("colour", self.colour.len(), slots),
+            ("depth", self.depth.len(), slots),
+        ] {
+            if length != expected {
+                return Err(VdiError::Length {
+                    file: ENCODING.to_owned(),
+                    array,
+                    length,
+                    expected: expected as u64,
+                });
+            }
+        }
+        let json = serde_json::to_vec(header).expect("a checked VDI header always serializes");
+        let header_length = json.len() as u64;
+        if header_length > u64::from(MAX_HEADER_BYTES) {
+            return Err(VdiError::HeaderTooLong {
+                file: ENCODING.to_owned(),
+                length: header_length,
+            });
+        }
+        let used: usize = self.counts.iter().map(|&c| usize::from(c)).sum();
+        let mut colour = Vec::with_capacity(used * header.colour.slot_bytes());
+        let mut depth = Vec::with_capacity(used * header.depth.slot_bytes());
+        for (index, &count) in self.counts.iter().enumerate() {
+            let (x, y) = (
+                (index % header.width as usize) as u32,
+                (index / header.width as usize) as u32,
+            );
+            if u32::from(count) > header.supersegments {
+                return Err(VdiError::Count {
+                    file: ENCODING.to_owned(),
+                    x,
+                    y,
+                    count,
+                    supersegments: header.supersegments,
+                });
+            }
+            let start = index * shape.slots_per_list;
+            for s in 0..usize::from(count) {
+                let (c, d) = (self.colour[start + s], self.depth[start + s]);
+                check_slot(ENCODING, (x, y, s as u32), c, d)?;
+                match header.colour {
+                    ColourFormat::F16 => {
+                        for v in c {
+                            colour.extend_from_slice(&f16::from_f32(v).to_le_bytes());
+                        }
+                    }
+                    ColourFormat::F32 => {
+                        for v in c {
+                            colour.extend_from_slice(&v.to_le_bytes());
+                        }
+                    }
+                }
+                match header.depth {
+                    DepthFormat::F32 => {
+                        for v in d {
+                            depth.extend_from_slice(&v.to_le_bytes());
+                        }
+                    }
+                    DepthFormat::U16 => {
+                        for v in d {
+                            depth.extend_from_slice(
+                                &quantise(v, header.near, header.far).to_le_bytes(),
+                            );
+                        }
+                    }
+                }
+            }
+        }
+        let mut out = Vec::with_capacity(
+            12 + json.len() + 24 + self.counts.len() + colour.len() + depth.len(),
+        );
+        out.extend_from_slice(&VDI_MAGIC);
+        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+        out.extend_from_slice(&json);
+        push_plane(&mut out, &self.counts, header.compression, 1);
+        push_plane(
+            &mut out,
+            &colour,
+            header.compression,
+            header.colour.value_bytes(),
+        );
+        push_plane(
+            &mut out,
+            &depth,
+            header.compression,
+            header.depth.value_bytes(),
+        );
+        Ok(out)
+    }
+
+    /// Reads a VDI file (the layout in the module documentation); `source` (the file name or
+    /// URL) starts every error message.
+    ///
+    /// It never panics on any input, and allocates at most what the header's sizes imply
+    /// (bounded by [`MAX_VDI_SLOTS`]) beside what the input itself holds: an LZ4 plane's
+    /// announced size is checked before it is decompressed.
+    ///
+    /// # Errors
+    /// A [`VdiError`] for the first of the checks in the module documentation that fails.
+    pub fn decode(bytes: &[u8], source: &str) -> Result<Self, VdiError> {
+        let file = source;
+        if bytes.get(..VDI_MAGIC.len()) != Some(&VDI_MAGIC[..]) {
+            return Err(VdiError::BadMagic {
+                file: file.to_owned(),
+            });
+        }
+        let mut reader = Reader {
+            bytes: &bytes[VDI_MAGIC.len()..],
+            file,
+        };
+        let length = u32::from_le_bytes(reader.array(|| "header length".to_owned())?);
+        if length > MAX_HEADER_BYTES {
+            return Err(VdiError::HeaderTooLong {
+                file: file.to_owned(),
+                length: u64::from(length),
+            });
+        }
+        let json = reader.take(u64::from(length), || "header".to_owned())?;
+        let header: VdiHeader =
+            serde_json::from_slice(json).map_err(|source| VdiError::BadHeader {
+                file: file.to_owned(),
+                source,
+            })?;
+        let shape = check_header(&header, file)?;
+        let compression = header.compression;
+        let counts = reader.plane("counts", compression, shape.lists, 1)?;
+        let width = header.width as usize;
+        let mut used = 0usize;
+        for (index, &count) in counts.iter().enumerate() {
+            if u32::from(count) > header.supersegments {
+                return Err(VdiError::Count {
+                    file: file.to_owned(),
+                    x: (index % width) as u32,
+                    y: (index / width) as u32,
+                    count,
+                    supersegments: header.supersegments,
+                });
+            }
+            used += usize::from(count);
+        }
+        let colour = reader.plane(
+            "colour",
+            compression,
+            used * header.colour.slot_bytes(),
+            header.colour.value_bytes(),
+        )?;
+        let depth = reader.plane(
+            "depth",
+            compression,
+            used * header.depth.slot_bytes(),
+            header.depth.value_bytes(),
+        )?;
+        if !reader.bytes.is_empty() {
+            return Err(VdiError::Trailing {
+                file: file.to_owned(),
+                extra: reader.bytes.len() as u64,
+            });
+        }
+
+        let mut colours = colour.chunks_exact(header.colour.slot_bytes());
+        let mut depths = depth.chunks_exact(header.depth.slot_bytes());
+        let (near, far) = (header.near, header.far);
+        let (colour_format, depth_format) = (header.colour, header.depth);
+        let mut image = Self::new(header);
+        image.counts.copy_from_slice(&counts);
+        for (index, &count) in counts.iter().enumerate() {
+            let (x, y) = ((index % width) as u32, (index / width) as u32);
+            let start = index * shape.slots_per_list;
+            // The planes hold exactly `Σ counts` slots (checked above), so neither runs out.
+            for (s, (c, d)) in (&mut colours)
+                .zip(&mut depths)
+                .take(usize::from(count))
+                .enumerate()
+            {
+                let c: [f32; 4] = match colour_format {
+                    ColourFormat::F16 => std::array::from_fn(|i| {
+                        f16::from_le_bytes([c[2 * i], c[2 * i + 1]]).to_f32()
+                    }),
+                    ColourFormat::F32 => std::array::from_fn(|i| {
+                        f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]])
+                    }),
+                };
+                let d: [f32; 2] = match depth_format {
+                    DepthFormat::F32 => std::array::from_fn(|i| {
+                        f32::from_le_bytes([d[4 * i], d[4 * i + 1], d[4 * i + 2], d[4 * i + 3]])
+                    }),
+                    DepthFormat::U16 => std::array::from_fn(|i| {
+                        dequantise(u16::from_le_bytes([d[2 * i], d[2 * i + 1]]), near, far)
+                    }),
+                };
+                check_slot(file, (x, y, s as u32), c, d)?;
+                image.colour[start + s] = c;
+                image.depth[start + s] = d;
+            }
+        }
+        Ok(image)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shuffle_groups_bytes_by_their_place_and_is_undone() {
+        let raw = [1, 2, 3, 4, 5, 6];
+        assert_eq!(shuffle(&raw, 2), [1, 3, 5, 2, 4, 6]);
+        assert_eq!(shuffle(&raw, 3), [1, 4, 2, 5, 3, 6]);
+        assert_eq!(shuffle(&raw, 1), raw);
+        assert_eq!(unshuffle(&shuffle(&raw, 2), 2), raw);
+        assert_eq!(unshuffle(&shuffle(&raw, 3), 3), raw);
+        // Neighbouring floats share their high bytes: grouped, LZ4 finds them.
+        let ramp: Vec<u8> = (0..4096)
+            .flat_map(|i| (1.0f32 + i as f32 * 1e-3).to_le_bytes())
+            .collect();
+        let plain = lz4_flex::block::compress_prepend_size(&ramp).len();
+        let grouped = lz4_flex::block::compress_prepend_size(&shuffle(&ramp, 4)).len();
+        assert!(grouped * 2 < plain, "{grouped} shuffled against {plain}");
+    }
+
+    #[test]
+    fn every_u16_level_reads_back_to_itself_where_the_range_is_accepted() {
+        // The last two are just wide enough: (1 − near)/65535 is 1.0002 and 1.00011 f32 steps
+        // at 1.
+        for (near, far) in [
+            (0.0, 1.0),
+            (1.0, 9.0),
+            (100.0, 104.0),
+            (1000.0, 1010.0),
+            (0.0, 1e30),
+            (1.0 - 65535.0 * f32::EPSILON * 1.0002, 1.0),
+            (1.0 - 65535.0 * f32::EPSILON * 1.00011, 1.0),
+        ] {
+            assert!(u16_depth_range(near, far), "{near} {far}");
+            for q in 0..=u16::MAX {
+                assert_eq!(
+                    quantise(dequantise(q, near, far), near, far),
+                    q,
+                    "{near} {far}"
+                );
+            }
+        }
+        // A little narrower than the narrowest of those at 1.0, an empty range, a negative
+        // near, and ranges whose levels f32 cannot tell apart.
+        for (near, far) in [
+            (1.0 - 65535.0 * f32::EPSILON * 0.9999, 1.0),
+            (1.0, 1.0),
+            (-1.0, 1.0),
+            (1000.0, 1000.5),
+            (f32::MAX / 2.0, f32::MAX),
+        ] {
+            assert!(!u16_depth_range(near, far), "{near} {far}");
+        }
+    }
+
+    #[test]
+    fn quantisation_is_within_half_a_step_and_clamps() {
+        let (near, far) = (2.0f32, 10.0f32);
+        let step = f64::from(far - near) / 65535.0;
+        assert_eq!(quantise(near, near, far), 0);
+        assert_eq!(quantise(far, near, far), 65535);
+        assert_eq!(quantise(0.5, near, far), 0);
+        assert_eq!(quantise(1e30, near, far), 65535);
+        assert_eq!(quantise(6.0, near, far), 32768);
+        assert_eq!(dequantise(0, near, far), near);
+        assert_eq!(dequantise(65535, near, far), far);
+        for i in 0..=1000 {
+            let d = near + (far - near) * i as f32 / 1000.0;
+            let back = dequantise(quantise(d, near, far), near, far);
+            assert!(
+                (f64::from(back) - f64::from(d)).abs() <= step / 2.0 + f64::from(d) * 1e-7,
+                "{d} -> {back}"
+            );
+        }
+    }
+}

@@ -1,0 +1,445 @@
+//! `viewer bench vdi`: volumetric depth images against direct volume rendering on one
+//! dataset, one device, one run (issue 30's evidence, the VDI paper's Sec. 5 and Table 2).
+//!
+//! From one camera of generation `V_O` (the scene's), for each supersegment count `N_S` the
+//! renderer converges the view and generates a VDI (timed: the VDI pass alone, bricks
+//! resident). Then, for each deviation (the camera turned about its target, around its own
+//! up axis), the DVR image of the deviated camera is converged and timed, and the VDI is ray
+//! cast from it with and without empty-space skipping (timed); the VDI's image is compared
+//! with the DVR image (SSIM, PSNR). Sizes: the slots as the GPU holds them (16 bytes each,
+//! `N_S` per pixel), the paper's raw layout (24 bytes a slot: RGBA and two depths in `f32`),
+//! and the file (`residency_schemas::vdi`, LZ4), beside the volume's bytes.
+
+use std::fmt::Write;
+use std::sync::Arc;
+use std::time::Instant;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+use super::driver::{median, to_image};
+use super::plots::{Line, PlotError, panels};
+use super::records::DeviceInfo;
+use crate::gpu::device::Gpu;
+use crate::gpu::error::GpuError;
+use crate::gpu::renderer::{RenderOptions, Renderer};
+use crate::gpu::streaming::{Budget, Fetcher, converge};
+use crate::gpu::vdi_render::VdiRenderer;
+use crate::metrics::{self, MetricsError};
+use crate::scene::{Camera, Scene};
+use crate::source::BrickSource;
+
+/// Bytes of one slot in the paper's raw VDIs: RGBA and front and back depth in `f32` (950 MiB
+/// at 1920×1080 with 20 supersegments).
+pub const PAPER_SLOT_BYTES: u64 = 24;
+
+/// The paper's compressed VDI at 1920×1080 and `N_S` = 20: 225 MiB (Sec. 5), per pixel.
+pub const PAPER_COMPRESSED_BYTES_PER_PIXEL: f64 = 225.0 * 1048576.0 / (1920.0 * 1080.0);
+
+/// The image-space sampling `D_I` of the preview measurement.
+pub const PREVIEW_SCALE: f64 = 0.5;
+
+/// What `viewer bench vdi` measures.
+#[derive(Clone, Debug)]
+pub struct VdiPlan {
+    /// Supersegment counts (`N_S`).
+    pub supersegments: Vec<u32>,
+    /// Deviations from the camera of generation, degrees.
+    pub deviations: Vec<f64>,
+    /// Frames timed per measurement (the median is kept).
+    pub timed_frames: usize,
+    /// Most frames to converge a view.
+    pub max_frames: u32,
+    /// Fetch workers.
+    pub workers: usize,
+}
+
+/// A bench failure.
+#[derive(Debug, thiserror::Error)]
+pub enum VdiBenchError {
+    /// The renderer failed.
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    /// Two images could not be compared.
+    #[error(transparent)]
+    Metrics(#[from] MetricsError),
+    /// A view did not converge within the frame budget.
+    #[error("the view at {degrees}° did not converge in {frames} frames ({reason})")]
+    NotConverged {
+        /// The deviation.
+        degrees: f64,
+        /// The frame budget.
+        frames: u32,
+        /// Why the loop stopped.
+        reason: String,
+    },
+    /// The VDI could not be encoded.
+    #[error(transparent)]
+    Vdi(#[from] residency_schemas::vdi::VdiError),
+}
+
+/// One VDI of the run: its size and generation.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VdiSizeRecord {
+    /// Most supersegments per pixel.
+    pub supersegments: u32,
+    /// Mean supersegments per pixel.
+    pub mean_supersegments: f64,
+    /// Marches per ray of the generation (1 where every ray fits at the first `γ`).
+    pub marches_per_ray: f64,
+    /// Wall milliseconds of the VDI pass (bricks resident, readback included).
+    pub generation_ms: f64,
+    /// Bytes of the slots as the GPU holds them (16 a slot, `N_S` per pixel).
+    pub gpu_bytes: u64,
+    /// Bytes of the same VDI in the paper's raw layout (24 a slot).
+    pub paper_raw_bytes: u64,
+    /// Bytes of the `.vdi` file.
+    pub file_bytes: u64,
+}
+
+/// One deviation of one VDI: its image against DVR there, and the frame times.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VdiViewRecord {
+    /// Most supersegments per pixel.
+    pub supersegments: u32,
+    /// Degrees from the camera of generation.
+    pub deviation_degrees: f64,
+    /// SSIM of the VDI's image against the DVR image of the same camera.
+    pub ssim: f64,
+    /// PSNR of the same, dB (`null` for identical images).
+    #[schemars(with = "Option<f64>")]
+    pub psnr_db: f64,
+    /// Median wall ms of a VDI frame with empty-space skipping (readback included).
+    pub vdi_ms: f64,
+    /// Median GPU ms of the same, where timestamps exist.
+    pub vdi_gpu_ms: Option<f64>,
+    /// Median wall ms of a VDI frame without skipping.
+    pub vdi_no_skip_ms: f64,
+    /// Median GPU ms of the same.
+    pub vdi_no_skip_gpu_ms: Option<f64>,
+    /// SSIM against DVR of the preview (rays at `D_I` = [`PREVIEW_SCALE`], upsampled).
+    pub preview_ssim: f64,
+    /// Median wall ms of a preview frame (with skipping).
+    pub preview_ms: f64,
+    /// Median GPU ms of the same.
+    pub preview_gpu_ms: Option<f64>,
+    /// Median wall ms of a converged DVR frame of the same camera.
+    pub dvr_ms: f64,
+    /// Median GPU ms of the same.
+    pub dvr_gpu_ms: Option<f64>,
+}
+
+/// The results of `viewer bench vdi` on one dataset.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VdiBenchResults {
+    /// The dataset's label.
+    pub label: String,
+    /// The device.
+    pub device: DeviceInfo,
+    /// Image width (lists per row).
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Channels drawn into the VDIs.
+    pub channels: usize,
+    /// Bytes of the volume's level 0, every channel.
+    pub volume_bytes: u64,
+    /// One per supersegment count.
+    pub sizes: Vec<VdiSizeRecord>,
+    /// One per supersegment count and deviation.
+    pub views: Vec<VdiViewRecord>,
+}
+
+/// `camera` turned by `degrees` about its target, around its own up axis.
+pub fn turned(camera: &Camera, degrees: f64) -> Camera {
+    let axis = glam::DVec3::from(camera.basis().2);
+    let target = glam::DVec3::from(camera.target);
+    let arm = glam::DVec3::from(camera.eye) - target;
+    let turned = glam::DQuat::from_axis_angle(axis, degrees.to_radians()) * arm;
+    Camera {
+        eye: (target + turned).to_array(),
+        ..camera.clone()
+    }
+}
+
+/// The median wall ms and median GPU ms (where reported) of `frames` runs of `frame` after an
+/// untimed one, and the last run's output.
+fn timed<T>(
+    frames: usize,
+    mut frame: impl FnMut() -> Result<(T, Option<f64>), GpuError>,
+) -> Result<(T, f64, Option<f64>), GpuError> {
+    let (mut wall, mut gpu) = (Vec::new(), Vec::new());
+    // One frame untimed: the first dispatch of a pipeline pays for its compilation.
+    let mut last = Some(frame()?.0);
+    for _ in 0..frames.max(1) {
+        let start = Instant::now();
+        let (out, gpu_ms) = frame()?;
+        wall.push(start.elapsed().as_secs_f64() * 1e3);
+        gpu.extend(gpu_ms);
+        last = Some(out);
+    }
+    let gpu = (!gpu.is_empty()).then(|| median(&mut gpu));
+    Ok((last.expect("at least one frame"), median(&mut wall), gpu))
+}
+
+/// Runs the VDI experiment: `scene` (its camera is `V_O`) over `source`, at the size and with
+/// the settings of `options`.
+///
+/// # Errors
+/// A [`VdiBenchError`]: the renderer failed, a view did not converge, or two images could not
+/// be compared.
+pub fn run(
+    gpu: &Gpu,
+    source: Arc<dyn BrickSource>,
+    scene: &Scene,
+    options: RenderOptions,
+    plan: &VdiPlan,
+    label: &str,
+) -> Result<VdiBenchResults, VdiBenchError> {
+    let (width, height) = (options.width, options.height);
+    let info = source.info().clone();
+    let mut renderer = Renderer::new(gpu, &info, scene, options)?;
+    let fetcher = Fetcher::new(Arc::clone(&source), plan.workers, 16);
+    let budget = Budget {
+        max_frames: plan.max_frames,
+        workers: plan.workers,
+        ..Default::default()
+    };
+    let settle = |renderer: &mut Renderer, camera: &Camera, degrees: f64| {
+        renderer.set_camera(camera.clone());
+        let p = converge(gpu, renderer, &fetcher, &budget)?;
+        if p.converged {
+            Ok(())
+        } else {
+            Err(VdiBenchError::NotConverged {
+                degrees,
+                frames: plan.max_frames,
+                reason: p.stop_reason.to_string(),
+            })
+        }
+    };
+    // The truth at every deviation: converged DVR, timed.
+    let mut truths = Vec::new();
+    for &degrees in &plan.deviations {
+        let camera = turned(&scene.camera, degrees);
+        settle(&mut renderer, &camera, degrees)?;
+        let (pixels, ms, gpu_ms) = timed(plan.timed_frames, || {
+            let out = renderer.render(gpu)?;
+            Ok((out.pixels, out.gpu_time_ms))
+        })?;
+        truths.push((camera, to_image(width, height, &pixels), ms, gpu_ms));
+    }
+    let mut sizes = Vec::new();
+    let mut views = Vec::new();
+    // The VDI pass is compiled on first use: once before anything is timed.
+    settle(&mut renderer, &scene.camera, 0.0)?;
+    renderer.generate_vdi(gpu, plan.supersegments.first().copied().unwrap_or(1))?;
+    for &n in &plan.supersegments {
+        settle(&mut renderer, &scene.camera, 0.0)?;
+        let start = Instant::now();
+        let (generation, _) = renderer.generate_vdi(gpu, n)?;
+        let generation_ms = start.elapsed().as_secs_f64() * 1e3;
+        let vdi = &generation.image;
+        let pixels = vdi.counts.len() as u64;
+        let used: u64 = vdi.counts.iter().map(|&c| u64::from(c)).sum();
+        sizes.push(VdiSizeRecord {
+            supersegments: n,
+            mean_supersegments: used as f64 / pixels as f64,
+            marches_per_ray: generation.marches as f64 / pixels as f64,
+            generation_ms,
+            gpu_bytes: pixels * u64::from(n) * 16,
+            paper_raw_bytes: pixels * u64::from(n) * PAPER_SLOT_BYTES,
+            file_bytes: vdi.encode()?.len() as u64,
+        });
+        let vdi_renderer = VdiRenderer::new(gpu, vdi, width, height)?;
+        for (&degrees, (camera, truth, dvr_ms, dvr_gpu_ms)) in plan.deviations.iter().zip(&truths) {
+            let cast = |skipping: bool, scale: f64| {
+                timed(plan.timed_frames, || {
+                    let frame = vdi_renderer.render_preview(gpu, camera, skipping, scale)?;
+                    Ok((frame.pixels, frame.gpu_time_ms))
+                })
+            };
+            let (image, vdi_ms, vdi_gpu_ms) = cast(true, 1.0)?;
+            let (_, vdi_no_skip_ms, vdi_no_skip_gpu_ms) = cast(false, 1.0)?;
+            let (preview, preview_ms, preview_gpu_ms) = cast(true, PREVIEW_SCALE)?;
+            let m = metrics::compare(&to_image(width, height, &image), truth)?;
+            let p = metrics::compare(&to_image(width, height, &preview), truth)?;
+            views.push(VdiViewRecord {
+                supersegments: n,
+                deviation_degrees: degrees,
+                ssim: m.ssim,
+                psnr_db: m.psnr_db,
+                vdi_ms,
+                vdi_gpu_ms,
+                vdi_no_skip_ms,
+                vdi_no_skip_gpu_ms,
+                preview_ssim: p.ssim,
+                preview_ms,
+                preview_gpu_ms,
+                dvr_ms: *dvr_ms,
+                dvr_gpu_ms: *dvr_gpu_ms,
+            });
+        }
+    }
+    let channels = renderer.octree().channels().len();
+    let level0 = &info.levels[0];
+    let volume_bytes = info.sample_type.block_bytes(level0.shape) * info.channels.len() as u64;
+    Ok(VdiBenchResults {
+        label: label.to_string(),
+        device: DeviceInfo::of(gpu),
+        width,
+        height,
+        channels,
+        volume_bytes,
+        sizes,
+        views,
+    })
+}
+
+/// The results as markdown: the size table and the quality and speed table, with the paper's
+/// figures beside ours.
+pub fn markdown(r: &VdiBenchResults) -> String {
+    let mut out = String::new();
+    let pixels = f64::from(r.width) * f64::from(r.height);
+    write!(
+        out,
+        "### {} ({}×{}, {} channel{}, volume {:.1} MiB; {})\n\n",
+        r.label,
+        r.width,
+        r.height,
+        r.channels,
+        if r.channels == 1 { "" } else { "s" },
+        r.volume_bytes as f64 / 1048576.0,
+        r.device.adapter
+    )
+    .expect("writing to a String cannot fail");
+    write!(
+        out,
+        "| N_S | supersegments / pixel | marches / ray | generation ms | GPU B/px | paper raw B/px | \
+         file B/px (paper: {PAPER_COMPRESSED_BYTES_PER_PIXEL:.1} at N_S 20) | file / volume |\n\
+         |---|---|---|---|---|---|---|---|\n",
+    )
+    .expect("writing to a String cannot fail");
+    for s in &r.sizes {
+        writeln!(
+            out,
+            "| {} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} |",
+            s.supersegments,
+            s.mean_supersegments,
+            s.marches_per_ray,
+            s.generation_ms,
+            s.gpu_bytes as f64 / pixels,
+            s.paper_raw_bytes as f64 / pixels,
+            s.file_bytes as f64 / pixels,
+            s.file_bytes as f64 / r.volume_bytes.max(1) as f64,
+        )
+        .expect("writing to a String cannot fail");
+    }
+    out.push_str(
+        "\n| N_S | deviation | SSIM (goal ≥ 0.97 within 10°, ≥ 0.94 at 30°) | PSNR dB | VDI ms | \
+         VDI ms, no skipping | DVR ms | DVR / VDI (goal ≥ 3 within 10°) | preview SSIM | preview \
+         ms |\n|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for v in &r.views {
+        let ms = |wall: f64, gpu: Option<f64>| gpu.unwrap_or(wall);
+        let (vdi, dvr) = (ms(v.vdi_ms, v.vdi_gpu_ms), ms(v.dvr_ms, v.dvr_gpu_ms));
+        writeln!(
+            out,
+            "| {} | {}° | {:.4} | {:.2} | {:.3} | {:.3} | {:.3} | {:.2}× | {:.4} | {:.3} |",
+            v.supersegments,
+            v.deviation_degrees,
+            v.ssim,
+            v.psnr_db,
+            vdi,
+            ms(v.vdi_no_skip_ms, v.vdi_no_skip_gpu_ms),
+            dvr,
+            dvr / vdi.max(1e-9),
+            v.preview_ssim,
+            ms(v.preview_ms, v.preview_gpu_ms),
+        )
+        .expect("writing to a String cannot fail");
+    }
+    let timing = if r.views.iter().all(|v| v.vdi_gpu_ms.is_some()) {
+        "GPU time (timestamp queries)"
+    } else {
+        "wall time, readback included"
+    };
+    write!(
+        out,
+        "\nTimes are medians of {timing}. The preview casts rays for D_I = {PREVIEW_SCALE} of the \
+         width and height and upsamples them (the paper's Sec. 4.4: 150 fps at SSIM 0.94 with \
+         D_I = 0.6 and D_R = 0.14). The paper (RTX 3090, 1920×1080, N_S = 20): SSIM 0.97 \
+         near the viewpoint of generation, a minor loss up to 40°, about 45 fps.\n"
+    )
+    .expect("writing to a String cannot fail");
+    out
+}
+
+/// The plot of `r`: SSIM against deviation (one line per `N_S`, and the goals) and ms per
+/// frame (the VDI per `N_S`, and DVR), written as PNG to `path`.
+///
+/// # Errors
+/// A [`PlotError`] when the plot cannot be drawn or written.
+pub fn plot(r: &VdiBenchResults, path: &std::path::Path) -> Result<(), PlotError> {
+    let ms = |wall: f64, gpu: Option<f64>| gpu.unwrap_or(wall);
+    let per_count = |value: &dyn Fn(&VdiViewRecord) -> f64| -> Vec<Line> {
+        r.sizes
+            .iter()
+            .map(|s| Line {
+                label: format!("VDI, N_S {}", s.supersegments),
+                points: r
+                    .views
+                    .iter()
+                    .filter(|v| v.supersegments == s.supersegments)
+                    .map(|v| (v.deviation_degrees, value(v)))
+                    .collect(),
+            })
+            .collect()
+    };
+    let mut ssim = per_count(&|v| v.ssim);
+    ssim.push(Line {
+        label: "goal".into(),
+        points: vec![(0.0, 0.97), (10.0, 0.97), (30.0, 0.94), (40.0, 0.94)],
+    });
+    let mut times = per_count(&|v| ms(v.vdi_ms, v.vdi_gpu_ms));
+    if let Some(first) = r.sizes.first() {
+        times.push(Line {
+            label: "DVR".into(),
+            points: r
+                .views
+                .iter()
+                .filter(|v| v.supersegments == first.supersegments)
+                .map(|v| (v.deviation_degrees, ms(v.dvr_ms, v.dvr_gpu_ms)))
+                .collect(),
+        });
+    }
+    panels(
+        path,
+        &format!("{}: VDI against DVR ({}×{})", r.label, r.width, r.height),
+        "degrees from the camera of generation",
+        &[("SSIM against DVR", ssim), ("ms per frame", times)],
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn turning_keeps_the_distance_and_the_target() {
+        let camera = Camera {
+            eye: [10.0, 0.0, 0.0],
+            target: [0.0; 3],
+            up: [0.0, 0.0, 1.0],
+            fov_y_degrees: 30.0,
+        };
+        let t = turned(&camera, 90.0);
+        assert!((t.eye[0]).abs() < 1e-12 && (t.eye[1].abs() - 10.0).abs() < 1e-12);
+        assert_eq!(t.eye[2], 0.0);
+        assert_eq!(t.target, camera.target);
+        assert_eq!(turned(&camera, 0.0).eye, camera.eye);
+    }
+}

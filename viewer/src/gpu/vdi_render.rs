@@ -1,0 +1,350 @@
+//! Rendering a volumetric depth image from any nearby viewpoint on the GPU
+//! (`shaders/vdi_render.wgsl`, the VDI paper's Sec. 4): the VDI uploaded once (its counts, its
+//! supersegments as the generator packs them, and the skipping grid derived from the counts),
+//! then one compute pass per frame for a camera; for preview rendering (the paper's Sec. 4.4)
+//! rays are cast for a fraction `D_I` of the width and height and a second pass upsamples
+//! them (`crate::frame_rate` picks `D_I` to hold a frame time).
+
+use residency_schemas::vdi::VolumetricDepthImage;
+
+use super::buffers::{
+    check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
+};
+use super::contract::{VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source};
+use super::device::Gpu;
+use super::error::GpuError;
+use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
+use super::timer::PassTimer;
+use crate::scene::Camera;
+
+/// Lists per tile edge of the skipping grid.
+pub const SKIP_TILE: u32 = 8;
+
+/// One frame of a VDI rendered for a camera.
+#[derive(Clone, Debug)]
+pub struct VdiFrame {
+    /// Linear RGBA per pixel, row-major from the top; alpha is `1 − T`.
+    pub pixels: Vec<[f32; 4]>,
+    /// Rays cast per row and rows (the image's size at the frame's `D_I`).
+    pub rays: (u32, u32),
+    /// GPU time of the pass in ms, when timestamp queries are supported.
+    pub gpu_time_ms: Option<f64>,
+}
+
+/// The most supersegments of each `SKIP_TILE × SKIP_TILE` tile of `vdi`'s lists, row-major,
+/// and the tiles per row.
+pub fn skipping_grid(vdi: &VolumetricDepthImage) -> (Vec<u32>, u32) {
+    let (w, h) = (vdi.header.width, vdi.header.height);
+    let tiles_x = w.div_ceil(SKIP_TILE);
+    let tiles_y = h.div_ceil(SKIP_TILE);
+    let mut tiles = vec![0u32; (tiles_x * tiles_y) as usize];
+    for y in 0..h {
+        for x in 0..w {
+            let t = ((y / SKIP_TILE) * tiles_x + x / SKIP_TILE) as usize;
+            let count = u32::from(vdi.counts[(y * w + x) as usize]);
+            tiles[t] = tiles[t].max(count);
+        }
+    }
+    (tiles, tiles_x)
+}
+
+/// The slots of `vdi` as the generator's pass writes them: per list `N_S` of
+/// `vec4(pack2x16float(r, g), pack2x16float(b, a), front, back)`.
+fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
+    let pack = |a: f32, b: f32| {
+        let lo = u32::from(half::f16::from_f32(a).to_bits());
+        let hi = u32::from(half::f16::from_f32(b).to_bits());
+        f32::from_bits(lo | hi << 16)
+    };
+    vdi.colour
+        .iter()
+        .zip(&vdi.depth)
+        .map(|(c, d)| [pack(c[0], c[1]), pack(c[2], c[3]), d[0], d[1]])
+        .collect()
+}
+
+/// A VDI on the GPU, with the pipeline and image of one output size.
+pub struct VdiRenderer {
+    vdi_header: residency_schemas::vdi::VdiHeader,
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    pipeline: wgpu::ComputePipeline,
+    upsample: wgpu::ComputePipeline,
+    view: wgpu::Buffer,
+    image: wgpu::Buffer,
+    display: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    timer: Option<PassTimer>,
+}
+
+impl VdiRenderer {
+    /// Uploads `vdi` and builds the pass for `width × height` images.
+    ///
+    /// # Errors
+    /// [`GpuError::EmptyImage`] for an empty image, a [`GpuError`] naming the buffer over the
+    /// device's storage-buffer limit, or a GPU error while setting up.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn new(
+        gpu: &Gpu,
+        vdi: &VolumetricDepthImage,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, GpuError> {
+        pollster::block_on(Self::create(gpu, vdi, width, height))
+    }
+
+    /// [`VdiRenderer::new`], awaited (the browser).
+    ///
+    /// # Errors
+    /// As [`VdiRenderer::new`].
+    pub async fn create(
+        gpu: &Gpu,
+        vdi: &VolumetricDepthImage,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, GpuError> {
+        if width == 0 || height == 0 {
+            return Err(GpuError::EmptyImage { width, height });
+        }
+        gpu.checked_async("setting up the VDI renderer", async {
+            Self::build(gpu, vdi, width, height)
+        })
+        .await
+    }
+
+    fn build(
+        gpu: &Gpu,
+        vdi: &VolumetricDepthImage,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, GpuError> {
+        let slots = packed_slots(vdi);
+        let slot_bytes = (slots.len() * 16) as u64;
+        check_binding(
+            gpu,
+            "the VDI's supersegments",
+            slot_bytes,
+            "use a smaller VDI",
+        )?;
+        let pixels = u64::from(width) * u64::from(height);
+        check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
+        let device = &gpu.device;
+        let upload = |label: &str, bytes: &[u8]| {
+            let buffer =
+                storage_buffer(gpu, label, bytes.len() as u64, wgpu::BufferUsages::empty());
+            gpu.queue.write_buffer(&buffer, 0, bytes);
+            buffer
+        };
+        let counts: Vec<u32> = vdi.counts.iter().map(|&c| u32::from(c)).collect();
+        let counts = upload("vdi counts", bytemuck::cast_slice(&counts));
+        let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
+        let (tiles, tiles_x) = skipping_grid(vdi);
+        let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
+        let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
+        let image = storage_buffer(gpu, "vdi image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
+        let display = storage_buffer(
+            gpu,
+            "vdi display",
+            pixels * 16,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let readback = readback_buffer(gpu, "vdi image readback", pixels * 16);
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("vdi_render.wgsl"),
+            source: wgpu::ShaderSource::Wgsl(vdi_render_source().into()),
+        });
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("vdi render"),
+            entries: &[
+                uniform_layout(vdi_binding::VIEW),
+                storage_layout(vdi_binding::COUNTS, true),
+                storage_layout(vdi_binding::SLOTS, true),
+                storage_layout(vdi_binding::TILES, true),
+                storage_layout(vdi_binding::IMAGE, false),
+                storage_layout(vdi_binding::DISPLAY, false),
+            ],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("vdi render"),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let entry = |name: &str| {
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(name),
+                layout: Some(&pipeline_layout),
+                module: &module,
+                entry_point: Some(name),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                cache: None,
+            })
+        };
+        let (pipeline, upsample) = (entry("main"), entry("upsample"));
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vdi render"),
+            layout: &layout,
+            entries: &[
+                buffer_entry(vdi_binding::VIEW, &view),
+                buffer_entry(vdi_binding::COUNTS, &counts),
+                buffer_entry(vdi_binding::SLOTS, &slots),
+                buffer_entry(vdi_binding::TILES, &tiles),
+                buffer_entry(vdi_binding::IMAGE, &image),
+                buffer_entry(vdi_binding::DISPLAY, &display),
+            ],
+        });
+        Ok(Self {
+            vdi_header: vdi.header.clone(),
+            width,
+            height,
+            tiles_x,
+            pipeline,
+            upsample,
+            view,
+            image,
+            display,
+            readback,
+            bind_group,
+            timer: PassTimer::new(gpu, "vdi render"),
+        })
+    }
+
+    /// The uniforms of a frame for `camera` with `rays` cast: positions relative to the
+    /// generating eye.
+    fn view(&self, camera: &Camera, skipping: bool, rays: (u32, u32)) -> VdiView {
+        let h = &self.vdi_header;
+        let origin = h.camera.eye;
+        let rel = |p: [f64; 3]| std::array::from_fn(|a| (p[a] - origin[a]) as f32);
+        let (forward, right, up) = camera.basis();
+        let tan_half = (camera.fov_y_degrees.to_radians() / 2.0).tan();
+        let aspect = f64::from(self.width) / f64::from(self.height);
+        let f3 = |v: [f64; 3]| v.map(|x| x as f32);
+        let generating = Camera {
+            eye: h.camera.eye,
+            target: h.camera.target,
+            up: h.camera.up,
+            fov_y_degrees: h.camera.fov_y_degrees,
+        };
+        let (o_forward, o_right, o_up) = generating.basis();
+        let o_tan = (h.camera.fov_y_degrees.to_radians() / 2.0).tan();
+        let o_aspect = f64::from(h.width) / f64::from(h.height);
+        VdiView {
+            width: rays.0,
+            height: rays.1,
+            out_width: self.width,
+            out_height: self.height,
+            lists_x: h.width,
+            lists_y: h.height,
+            eye: rel(camera.eye),
+            supersegments: h.supersegments,
+            forward: f3(forward),
+            tile: SKIP_TILE,
+            right: f3(right.map(|x| x * tan_half * aspect)),
+            tiles_x: self.tiles_x,
+            up: f3(up.map(|x| x * tan_half)),
+            flags: if skipping { VDI_FLAG_SKIPPING } else { 0 },
+            o_forward: f3(o_forward),
+            o_tan_x: (o_tan * o_aspect) as f32,
+            o_right: f3(o_right),
+            o_tan_y: o_tan as f32,
+            o_up: f3(o_up),
+            box_min: rel(h.volume_min),
+            box_max: rel(h.volume_max),
+            background: h.background,
+            ..VdiView::default()
+        }
+    }
+
+    /// Renders the VDI for `camera` (with or without skipping empty tiles of lists) and reads
+    /// the image back.
+    ///
+    /// # Errors
+    /// A [`GpuError`]: a GPU error while rendering, or a readback that failed.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn render(&self, gpu: &Gpu, camera: &Camera, skipping: bool) -> Result<VdiFrame, GpuError> {
+        self.render_preview(gpu, camera, skipping, 1.0)
+    }
+
+    /// [`VdiRenderer::render`] with rays cast for the fraction `scale` (`D_I`, clamped to
+    /// `(0, 1]`, at least one ray a row and column) of the width and height, upsampled to the
+    /// full image.
+    ///
+    /// # Errors
+    /// As [`VdiRenderer::render`].
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn render_preview(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        skipping: bool,
+        scale: f64,
+    ) -> Result<VdiFrame, GpuError> {
+        pollster::block_on(gpu.checked_async(
+            "rendering a VDI",
+            self.render_async(gpu, camera, skipping, scale),
+        ))
+    }
+
+    /// The rays cast at `D_I` = `scale`.
+    fn rays(&self, scale: f64) -> (u32, u32) {
+        let scale = if scale > 0.0 { scale.min(1.0) } else { 1.0 };
+        let of = |n: u32| ((f64::from(n) * scale).round() as u32).clamp(1, n);
+        (of(self.width), of(self.height))
+    }
+
+    /// [`VdiRenderer::render_preview`], awaited.
+    ///
+    /// # Errors
+    /// As [`VdiRenderer::render`].
+    pub async fn render_async(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        skipping: bool,
+        scale: f64,
+    ) -> Result<VdiFrame, GpuError> {
+        let rays = self.rays(scale);
+        let full = rays == (self.width, self.height);
+        let view = self.view(camera, skipping, rays);
+        gpu.queue
+            .write_buffer(&self.view, 0, bytemuck::bytes_of(&view));
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("vdi frame"),
+            });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                label: Some("vdi render"),
+                timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
+            });
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);
+            if !full {
+                pass.set_pipeline(&self.upsample);
+                pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
+            }
+        }
+        let shown = if full { &self.image } else { &self.display };
+        encoder.copy_buffer_to_buffer(shown, 0, &self.readback, 0, shown.size());
+        let mut maps = vec![&self.readback];
+        if let Some(timer) = &self.timer {
+            timer.resolve(&mut encoder);
+            maps.push(timer.staging());
+        }
+        gpu.queue.submit([encoder.finish()]);
+        map_for_reading(&gpu.device, &maps).await?;
+        let pixels = bytemuck::cast_slice(&self.readback.get_mapped_range(..)?).to_vec();
+        let gpu_time_ms = self.timer.as_ref().map(|t| t.read_ms(gpu)).transpose()?;
+        for b in maps {
+            b.unmap();
+        }
+        Ok(VdiFrame {
+            pixels,
+            rays,
+            gpu_time_ms,
+        })
+    }
+}

@@ -1,0 +1,134 @@
+//! `viewer vdi` and `viewer render --vdi` end to end on a store written by `ingest`: the VDI
+//! file composites back to `viewer render`'s image of the same view, ray casting it from its
+//! own camera gives that image again, and bad input fails with a message naming the problem.
+
+use std::path::Path;
+
+use crate::render_cli::{VIEW, store, viewer, viewer_ok};
+use residency_schemas::vdi::VolumetricDepthImage;
+use residency_viewer::image::RgbImage;
+use residency_viewer::metrics;
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// The stderr of a `viewer` run that must fail.
+fn fails(args: &[&str]) -> String {
+    let out = viewer(args);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+#[test]
+fn a_vdi_file_gives_back_the_image_of_its_view() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = s(&store(dir.path()));
+    let (vdi, dvr, cast) = (
+        s(&dir.path().join("blob.vdi")),
+        s(&dir.path().join("dvr.exr")),
+        s(&dir.path().join("cast.exr")),
+    );
+    let size = ["--width", "40", "--height", "32", "--max-level", "0"];
+    let mut args = vec![
+        "vdi",
+        "--store",
+        &store,
+        "--supersegments",
+        "12",
+        "--out",
+        &vdi,
+    ];
+    args.extend(VIEW);
+    args.extend(size);
+    viewer_ok(&args);
+    let mut args = vec!["render", "--store", &store, "--out", &dvr];
+    args.extend(VIEW);
+    args.extend(size);
+    viewer_ok(&args);
+    viewer_ok(&[
+        "render", "--vdi", &vdi, "--width", "40", "--height", "32", "--out", &cast,
+    ]);
+
+    let image = VolumetricDepthImage::decode(&std::fs::read(&vdi).unwrap(), &vdi).unwrap();
+    let h = &image.header;
+    assert_eq!(
+        (h.width, h.height, h.supersegments, h.channels),
+        (40, 32, 12, 2)
+    );
+    assert_eq!(h.dataset.as_deref(), Some("blob"));
+    assert_eq!(h.camera.eye, [-30.0, -40.0, 70.0]);
+    assert!(image.counts.iter().any(|&c| c > 1));
+    // No partial file is left beside it.
+    let names: Vec<String> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.contains("vdi"))
+        .collect();
+    assert_eq!(names, ["blob.vdi"]);
+
+    let dvr = RgbImage::read(Path::new(&dvr)).unwrap();
+    let composited = RgbImage {
+        width: 40,
+        height: 32,
+        pixels: (0..32)
+            .flat_map(|y| (0..40).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let [r, g, b, _] = image.composite(x, y);
+                [r, g, b]
+            })
+            .collect(),
+    };
+    let m = metrics::compare(&composited, &dvr).unwrap();
+    assert!(m.max_abs_error <= 5e-3, "composited VDI vs DVR: {m:?}");
+    let m = metrics::compare(&RgbImage::read(Path::new(&cast)).unwrap(), &dvr).unwrap();
+    assert!(
+        m.max_abs_error <= 5e-3,
+        "VDI ray cast from its camera vs DVR: {m:?}"
+    );
+}
+
+#[test]
+fn bad_vdi_input_fails_with_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = s(&store(dir.path()));
+    let png = s(&dir.path().join("x.png"));
+    let err = fails(&["vdi", "--store", &store, "--out", &png]);
+    assert!(
+        err.contains(&format!("error: {png}: a VDI is written as a .vdi file")),
+        "{err}"
+    );
+    let vdi = s(&dir.path().join("x.vdi"));
+    let err = fails(&[
+        "vdi",
+        "--store",
+        &store,
+        "--supersegments",
+        "0",
+        "--out",
+        &vdi,
+    ]);
+    assert!(
+        err.contains("error: --supersegments 0: a VDI has 1 to 64 supersegments per pixel"),
+        "{err}"
+    );
+    assert!(!Path::new(&vdi).exists());
+    std::fs::write(&vdi, b"not a vdi at all").unwrap();
+    let err = fails(&["render", "--vdi", &vdi, "--out", &png]);
+    assert!(
+        err.contains(&format!("error: {vdi}: not a VDI (bad magic)")),
+        "{err}"
+    );
+    let err = fails(&["render", "--vdi", &vdi, "--tf", "0:1:2:0.5", "--out", &png]);
+    assert!(
+        err.contains(
+            "error: --tf does not apply to a VDI: its colours, transfer functions, background \
+             and filter were fixed when it was generated (`viewer vdi`)"
+        ),
+        "{err}"
+    );
+    let err = fails(&["render", "--vdi", &vdi, "--store", &store, "--out", &png]);
+    assert!(err.contains("cannot be used with"), "{err}");
+}
