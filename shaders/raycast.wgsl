@@ -247,7 +247,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             let m = mixture(s.have, &values, step);
             if VDI {
-                vdi_step(&vdi, pixel, m, steps, ray.t, ray.t + move_by, color, trans, t_plane);
+                // A step may end past the volume's face: the supersegment ends there.
+                let t1 = min(ray.t + move_by, t_exit);
+                vdi_step(&vdi, pixel, m, steps, ray.t, t1, color, trans, t_plane);
             }
             composite(&color, &trans, m, steps);
             advance(&ray, dir, move_by);
