@@ -126,6 +126,17 @@ pub struct ApiError {
     pub error: String,
 }
 
+/// Whether an `Authorization` header's value presents `token` as our servers ask for it
+/// (`Bearer TOKEN`, brickserver's `--token-file` and `viewer serve`'s `--serve-token-file`).
+/// The comparison takes constant time, so the token cannot be guessed byte by byte from
+/// timings (only its length can be learnt).
+pub fn bearer_token_matches(authorization: Option<&str>, token: &str) -> bool {
+    use subtle::ConstantTimeEq;
+    authorization
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .is_some_and(|given| bool::from(given.as_bytes().ct_eq(token.as_bytes())))
+}
+
 /// Reads ascending bin edges where JSON `null` stands for an infinity (serde_json writes
 /// infinities as `null`): `-inf` first, `+inf` anywhere else.
 ///
@@ -163,5 +174,15 @@ mod tests {
         let text = serde_json::to_string(&h).unwrap();
         assert!(text.contains("\"edges\":[null,0.0,null]"), "{text}");
         assert_eq!(serde_json::from_str::<RegionHistogram>(&text).unwrap(), h);
+    }
+
+    #[test]
+    fn a_bearer_token_matches_only_as_bearer_and_whole() {
+        assert!(bearer_token_matches(Some("Bearer s3cret"), "s3cret"));
+        assert!(!bearer_token_matches(Some("Bearer s3cre"), "s3cret"));
+        assert!(!bearer_token_matches(Some("Bearer s3cretx"), "s3cret"));
+        assert!(!bearer_token_matches(Some("bearer s3cret"), "s3cret"));
+        assert!(!bearer_token_matches(Some("s3cret"), "s3cret"));
+        assert!(!bearer_token_matches(None, "s3cret"));
     }
 }

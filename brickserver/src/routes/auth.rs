@@ -7,7 +7,7 @@ use axum::extract::{Request, State};
 use axum::http::{Method, Response, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::IntoResponse;
-use subtle::ConstantTimeEq;
+use residency_schemas::server::bearer_token_matches;
 
 /// Refuses requests without the configured bearer token (401), except health checks and
 /// CORS preflights, which browsers send without credentials.
@@ -26,12 +26,8 @@ pub(super) async fn require_token(
     let given = request
         .headers()
         .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    // Compare in constant time so the token cannot be guessed byte by byte from timings
-    // (only its length can be learnt).
-    let ok = given.is_some_and(|g| bool::from(g.as_bytes().ct_eq(token.as_bytes())));
-    if ok {
+        .and_then(|v| v.to_str().ok());
+    if bearer_token_matches(given, &token) {
         next.run(request).await
     } else {
         (

@@ -153,16 +153,10 @@ pub struct VdiBenchResults {
     pub views: Vec<VdiViewRecord>,
 }
 
-/// `camera` turned by `degrees` about its target, around its own up axis.
+/// `camera` turned by `degrees` about its target, around its own up axis: `viewer view`'s
+/// orbit by a horizontal drag.
 pub fn turned(camera: &Camera, degrees: f64) -> Camera {
-    let axis = glam::DVec3::from(camera.basis().2);
-    let target = glam::DVec3::from(camera.target);
-    let arm = glam::DVec3::from(camera.eye) - target;
-    let turned = glam::DQuat::from_axis_angle(axis, degrees.to_radians()) * arm;
-    Camera {
-        eye: (target + turned).to_array(),
-        ..camera.clone()
-    }
+    crate::interactive::camera_control::orbit(camera, -degrees.to_radians(), 0.0, 1.0)
 }
 
 /// The median wall ms and median GPU ms (where reported) of `frames` runs of `frame` after an

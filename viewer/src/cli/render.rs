@@ -5,14 +5,14 @@
 
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 
-use super::renderer_args::{RendererArgs, open_scene};
+use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
-use residency_viewer::gpu::streaming::{Budget, RenderStats, render_progressive};
+use residency_viewer::gpu::streaming::{RenderStats, render_progressive};
 use residency_viewer::gpu::vdi_render::VdiRenderer;
 use residency_viewer::image::{ImageFormat, RgbImage};
 use residency_viewer::scene::Camera;
@@ -38,12 +38,9 @@ pub struct Args {
     /// Write per-frame statistics here as JSON.
     #[arg(long, value_name = "FILE")]
     pub stats: Option<PathBuf>,
-    /// Most frames to render.
-    #[arg(long, default_value_t = 64)]
-    pub max_frames: u32,
-    /// Wall-clock budget in seconds.
-    #[arg(long, value_name = "S")]
-    pub time_budget_s: Option<f64>,
+    /// How long the view may take to converge.
+    #[command(flatten)]
+    pub converge: ConvergeArgs,
     /// Renderer settings.
     #[command(flatten)]
     pub renderer: RendererArgs,
@@ -70,12 +67,7 @@ pub fn run(args: Args) -> Result<()> {
         args.width,
         args.height,
     )?;
-    let budget = Budget {
-        max_frames: args.max_frames,
-        time: args.time_budget_s.map(Duration::from_secs_f64),
-        workers: args.renderer.workers,
-        ..Default::default()
-    };
+    let budget = args.converge.budget(args.renderer.workers)?;
     let (method, empty_space_skipping) = (options.method, options.empty_space_skipping);
     let start = Instant::now();
     let gpu = Gpu::new()?;
@@ -120,13 +112,7 @@ fn render_vdi(args: &Args, path: &std::path::Path) -> Result<()> {
             path.display()
         );
     }
-    let generated = Camera {
-        eye: h.camera.eye,
-        target: h.camera.target,
-        up: h.camera.up,
-        fov_y_degrees: h.camera.fov_y_degrees,
-    };
-    let camera = args.scene.camera_for_vdi(generated, extent)?;
+    let camera = args.scene.camera_for_vdi(Camera::from(&h.camera), extent)?;
     let start = Instant::now();
     let gpu = Gpu::new()?;
     let renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;

@@ -7,6 +7,7 @@ use anyhow::{Result, ensure};
 
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::renderer::{Method, RenderOptions};
+use residency_viewer::gpu::streaming::Budget;
 use residency_viewer::scene::Scene;
 use residency_viewer::source::BrickSource;
 
@@ -15,6 +16,36 @@ pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
     use clap::builder::TypedValueParser;
     clap::builder::PossibleValuesParser::new(<Method as strum::VariantNames>::VARIANTS)
         .map(|s| s.parse::<Method>().expect("one of the possible values"))
+}
+
+/// How long a view may take to converge (flattened into `viewer render`, `viewer vdi` and
+/// `viewer serve`).
+#[derive(clap::Args, Debug)]
+pub struct ConvergeArgs {
+    /// Most frames to render while a view converges.
+    #[arg(long, default_value_t = 64)]
+    pub max_frames: u32,
+    /// Wall-clock budget in seconds for a view to converge.
+    #[arg(long, value_name = "S")]
+    pub time_budget_s: Option<f64>,
+}
+
+impl ConvergeArgs {
+    /// The streaming budget of these flags, fetching with `workers` threads.
+    pub fn budget(&self, workers: usize) -> Result<Budget> {
+        if let Some(s) = self.time_budget_s {
+            ensure!(
+                s > 0.0 && s.is_finite(),
+                "--time-budget-s {s} must be positive"
+            );
+        }
+        Ok(Budget {
+            max_frames: self.max_frames,
+            time: self.time_budget_s.map(std::time::Duration::from_secs_f64),
+            workers,
+            ..Default::default()
+        })
+    }
 }
 
 /// Renderer flags (flattened into `viewer render` and `viewer view`).

@@ -10,6 +10,7 @@ use anyhow::{Result, bail, ensure};
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use residency_viewer::defaults::{
     CameraSpec, NumbersError, check_channel, default_channels, default_scene, numbers, read_scene,
+    volume_extent,
 };
 use residency_viewer::scene::{Filter, OpacityPoint, Scene};
 use residency_viewer::source::{BrickSource, HttpSource, LocalSource, VolumeInfo, read_token_file};
@@ -262,10 +263,19 @@ impl SceneArgs {
         extent: [f64; 3],
     ) -> Result<residency_viewer::scene::Camera> {
         self.refuse_for_vdi()?;
-        let mut camera = match &self.scene {
+        let camera = match &self.scene {
             Some(path) => read_scene(path)?.camera,
             None => generated,
         };
+        self.camera_flags(camera, extent)
+    }
+
+    /// `camera` with `--fov`, then `--camera` (about a volume box `[0, extent]`), applied.
+    fn camera_flags(
+        &self,
+        mut camera: residency_viewer::scene::Camera,
+        extent: [f64; 3],
+    ) -> Result<residency_viewer::scene::Camera> {
         if let Some(fov) = self.fov {
             ensure!(
                 fov > 0.0 && fov < 180.0,
@@ -308,16 +318,7 @@ impl SceneArgs {
         for s in &scene.channels {
             check(s.channel, "scene file")?;
         }
-        if let Some(fov) = self.fov {
-            ensure!(
-                fov > 0.0 && fov < 180.0,
-                "--fov {fov}: must lie between 0 and 180 degrees"
-            );
-            scene.camera.fov_y_degrees = fov;
-        }
-        if let Some(spec) = &self.camera {
-            scene.camera = spec.camera(info, scene.camera.fov_y_degrees);
-        }
+        scene.camera = self.camera_flags(scene.camera, volume_extent(info))?;
         // A channel named by a flag but absent from the scene file gets its default style.
         let style = |scene: &mut Scene, c: usize| -> usize {
             if let Some(i) = scene.channels.iter().position(|s| s.channel == c) {

@@ -4,15 +4,13 @@
 
 use std::net::SocketAddr;
 use std::path::PathBuf;
-use std::time::Duration;
 
 use anyhow::{Result, ensure};
 
-use super::renderer_args::{RendererArgs, open_scene};
+use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_schemas::vdi::MAX_SUPERSEGMENTS;
 use residency_viewer::gpu::device::Gpu;
-use residency_viewer::gpu::streaming::Budget;
 use residency_viewer::service::{Limits, ServiceOptions, serve};
 use residency_viewer::source::read_token_file;
 
@@ -52,12 +50,9 @@ pub struct Args {
     /// more are answered 429.
     #[arg(long, value_name = "R", default_value_t = 20.0)]
     pub max_requests_per_second: f64,
-    /// Most frames to render while a requested view converges.
-    #[arg(long, default_value_t = 64)]
-    pub max_frames: u32,
-    /// Wall-clock budget in seconds for a requested view to converge.
-    #[arg(long, value_name = "S")]
-    pub time_budget_s: Option<f64>,
+    /// How long each requested view may take to converge.
+    #[command(flatten)]
+    pub converge: ConvergeArgs,
     /// Renderer settings.
     #[command(flatten)]
     pub renderer: RendererArgs,
@@ -76,12 +71,6 @@ pub fn run(args: Args) -> Result<()> {
         "--max-requests-per-second {} must be positive",
         args.max_requests_per_second
     );
-    if let Some(s) = args.time_budget_s {
-        ensure!(
-            s > 0.0 && s.is_finite(),
-            "--time-budget-s {s} must be positive"
-        );
-    }
     let token = match &args.serve_token_file {
         Some(path) => {
             let token = read_token_file(path)?;
@@ -93,12 +82,7 @@ pub fn run(args: Args) -> Result<()> {
     // The width and height of each request replace these.
     let (source, default_scene, render) =
         open_scene(&args.source, &args.scene, &args.renderer, 1, 1)?;
-    let budget = Budget {
-        max_frames: args.max_frames,
-        time: args.time_budget_s.map(Duration::from_secs_f64),
-        workers: args.renderer.workers,
-        ..Default::default()
-    };
+    let budget = args.converge.budget(args.renderer.workers)?;
     let gpu = Gpu::new()?;
     tracing::info!(
         "serving VDIs of {} on {} ({:?})",

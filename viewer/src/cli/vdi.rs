@@ -4,14 +4,14 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 
-use super::renderer_args::{RendererArgs, open_scene};
+use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
-use residency_viewer::gpu::streaming::{Budget, generate_vdi};
+use residency_viewer::gpu::streaming::generate_vdi;
 use residency_viewer::gpu::vdi::VdiGeneration;
 
 /// Arguments of `viewer vdi`.
@@ -35,12 +35,9 @@ pub struct Args {
     /// Output file (`.vdi`).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-    /// Most frames to render while the view converges.
-    #[arg(long, default_value_t = 64)]
-    pub max_frames: u32,
-    /// Wall-clock budget in seconds for the view to converge.
-    #[arg(long, value_name = "S")]
-    pub time_budget_s: Option<f64>,
+    /// How long the view may take to converge.
+    #[command(flatten)]
+    pub converge: ConvergeArgs,
     /// Renderer settings.
     #[command(flatten)]
     pub renderer: RendererArgs,
@@ -58,12 +55,7 @@ pub fn run(args: Args) -> Result<()> {
         args.width,
         args.height,
     )?;
-    let budget = Budget {
-        max_frames: args.max_frames,
-        time: args.time_budget_s.map(Duration::from_secs_f64),
-        workers: args.renderer.workers,
-        ..Default::default()
-    };
+    let budget = args.converge.budget(args.renderer.workers)?;
     let start = Instant::now();
     let gpu = Gpu::new()?;
     let (generation, progressive) = generate_vdi(

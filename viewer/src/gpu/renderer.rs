@@ -670,7 +670,12 @@ impl Renderer {
         encoder.clear_buffer(&buffers.rays, 0, None);
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
         let rb = &buffers.readback;
-        let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage, &rb.image];
+        // The image is copied and mapped for an image frame only: a VDI pass reads its
+        // target back once, after its last round.
+        let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage];
+        if let FrameTarget::Image = target {
+            maps.push(&rb.image);
+        }
         if let Some(timer) = &rb.timer {
             maps.push(timer.staging());
         }

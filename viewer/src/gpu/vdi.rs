@@ -14,7 +14,7 @@ use super::buffers::{check_binding, readback_buffer, storage_buffer};
 use super::contract::VDI_STATE_SLOTS;
 use super::device::Gpu;
 use super::error::GpuError;
-use crate::scene::Scene;
+use crate::scene::{Camera, Scene};
 
 /// Bytes of one slot of the VDI target (a `vec4<f32>`).
 const SLOT_BYTES: u64 = 16;
@@ -151,12 +151,7 @@ pub(crate) fn header(
         width,
         height,
         supersegments,
-        camera: VdiCamera {
-            eye: cam.eye,
-            target: cam.target,
-            up: cam.up,
-            fov_y_degrees: cam.fov_y_degrees,
-        },
+        camera: cam.into(),
         rays: RayBasis {
             forward: f3(forward),
             right: f3(right.map(|x| x * tan_half * aspect)),
@@ -175,6 +170,28 @@ pub(crate) fn header(
         compression: Compression::ShuffledLz4,
         scene_hash: scene_hash(scene),
         dataset: None,
+    }
+}
+
+impl From<&Camera> for VdiCamera {
+    fn from(c: &Camera) -> Self {
+        Self {
+            eye: c.eye,
+            target: c.target,
+            up: c.up,
+            fov_y_degrees: c.fov_y_degrees,
+        }
+    }
+}
+
+impl From<&VdiCamera> for Camera {
+    fn from(c: &VdiCamera) -> Self {
+        Self {
+            eye: c.eye,
+            target: c.target,
+            up: c.up,
+            fov_y_degrees: c.fov_y_degrees,
+        }
     }
 }
 

@@ -220,15 +220,14 @@ impl VdiRenderer {
         let tan_half = (camera.fov_y_degrees.to_radians() / 2.0).tan();
         let aspect = f64::from(self.width) / f64::from(self.height);
         let f3 = |v: [f64; 3]| v.map(|x| x as f32);
-        let generating = Camera {
-            eye: h.camera.eye,
-            target: h.camera.target,
-            up: h.camera.up,
-            fov_y_degrees: h.camera.fov_y_degrees,
+        // The generating camera's rays as the header records them: `right` and `up` scaled
+        // by the tangents of the half fields of view.
+        let unit = |v: [f32; 3]| {
+            let v = glam::Vec3::from(v);
+            (v.normalize().to_array(), v.length())
         };
-        let (o_forward, o_right, o_up) = generating.basis();
-        let o_tan = (h.camera.fov_y_degrees.to_radians() / 2.0).tan();
-        let o_aspect = f64::from(h.width) / f64::from(h.height);
+        let (o_right, o_tan_x) = unit(h.rays.right);
+        let (o_up, o_tan_y) = unit(h.rays.up);
         VdiView {
             width: rays.0,
             height: rays.1,
@@ -244,11 +243,11 @@ impl VdiRenderer {
             tiles_x: self.tiles_x,
             up: f3(up.map(|x| x * tan_half)),
             flags: if skipping { VDI_FLAG_SKIPPING } else { 0 },
-            o_forward: f3(o_forward),
-            o_tan_x: (o_tan * o_aspect) as f32,
-            o_right: f3(o_right),
-            o_tan_y: o_tan as f32,
-            o_up: f3(o_up),
+            o_forward: h.rays.forward,
+            o_tan_x,
+            o_right,
+            o_tan_y,
+            o_up,
             box_min: rel(h.volume_min),
             box_max: rel(h.volume_max),
             background: h.background,

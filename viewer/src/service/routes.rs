@@ -10,8 +10,7 @@ use axum::http::{HeaderName, HeaderValue, Method, Response, StatusCode, header};
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Json};
 use axum::routing::{get, post};
-use residency_schemas::server::ApiError;
-use subtle::ConstantTimeEq;
+use residency_schemas::server::{ApiError, bearer_token_matches};
 use tower_http::cors::{Any, CorsLayer};
 
 use super::rate::Bucket;
@@ -172,8 +171,7 @@ async fn healthz() -> &'static str {
 }
 
 /// Refuses requests without the bearer token `token` (401), but health checks and CORS
-/// preflights, which browsers send without credentials. The comparison takes constant time,
-/// so the token cannot be guessed byte by byte from timings (only its length can be learnt).
+/// preflights, which browsers send without credentials (brickserver's rule and comparison).
 async fn require_token(
     State(token): State<Arc<String>>,
     request: Request,
@@ -189,9 +187,8 @@ async fn require_token(
     let given = request
         .headers()
         .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "));
-    if given.is_some_and(|g| bool::from(g.as_bytes().ct_eq(token.as_bytes()))) {
+        .and_then(|v| v.to_str().ok());
+    if bearer_token_matches(given, &token) {
         next.run(request).await
     } else {
         error_answer(&ServiceError::Unauthorized, None)
