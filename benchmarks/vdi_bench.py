@@ -3,6 +3,7 @@ and writes docs/benchmarks/vdi-bench.md (the tables, the paper's figures beside 
 raw JSON results (`schemas/json/vdi-bench.schema.json`).
 
     python3 benchmarks/vdi_bench.py [--short] [--docs] [--out-dir DIR] [--data-dir DIR] [--size N]
+                                    [--width W --height H] [--volume N]
 
 For each dataset, from the scene's camera (the camera of generation), for N_S = 15, 20, 30:
 the VDI's generation time and sizes (as the GPU holds it, in the paper's raw layout, and as a
@@ -17,7 +18,9 @@ multi-channel store mixed into one VDI (the paper's are single-channel).
 
 Builds nothing: it needs `target/release/ingest` and `target/release/viewer`, or the folder
 named by RESIDENCY_BIN. `--short` runs tiny sizes (CI's mode; it asserts nothing about speed);
-`--size` sets the image edge (128 by default; 1080 for the paper's HD figures on a GPU).
+`--size` sets the image edge (128 by default); `--width 1920 --height 1080` gives the paper's HD
+frames on a GPU. `--volume N` sets the edge of the sparse and mixing volumes (128 by default) and
+the CyCIF store's plane (24×2N×2N).
 """
 
 import argparse
@@ -32,12 +35,12 @@ from docs_page import point_page_at, write_result  # noqa: E402
 from render_bench import BIN, ROOT, Data, ingest_has_kind, run  # noqa: E402
 
 
-def plan(short: bool):
+def plan(short: bool, edge: int):
     """(label, kind, size, chunk, repeat, sample channels, extra flags) per dataset."""
     if short:
         s, cy, chunk = (32, 32, 32), (8, 64, 64), 16
     else:
-        s, cy, chunk = (128, 128, 128), (24, 256, 256), 32
+        s, cy, chunk = (edge, edge, edge), (24, 2 * edge, 2 * edge), 32
     bone = ["--tf", "0:800:6000:0.6"]
     window = [a for c in range(16) for a in ("--tf", f"{c}:200:3000:0.6")]
     return [
@@ -54,6 +57,9 @@ def main():
     ap.add_argument("--out-dir", type=pathlib.Path, help="report folder [docs/benchmarks, or benchmarks/data/short-report with --short]")
     ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data", help="scratch folder for datasets")
     ap.add_argument("--size", type=int, help="image edge in pixels [128; 32 with --short]")
+    ap.add_argument("--width", type=int, help="image width in pixels [--size]")
+    ap.add_argument("--height", type=int, help="image height in pixels [--size]")
+    ap.add_argument("--volume", type=int, default=128, help="edge of the sparse and mixing volumes [128]")
     ap.add_argument("--timed-frames", type=int, help="frames timed per measurement [3; 1 with --short]")
     args = ap.parse_args()
     for exe in ("ingest", "viewer"):
@@ -65,17 +71,18 @@ def main():
     for old in [*raw.glob("*.json"), *raw.glob("*.md"), *raw.glob("*.png")]:  # a stale file would be mistaken for this run's
         old.unlink()
     size = args.size or (32 if args.short else 128)
+    width, height = args.width or size, args.height or size
     frames = args.timed_frames or (1 if args.short else 3)
     data = Data(args.data_dir, ingest_has_kind())
     started = time.time()
     tables = []
-    datasets = plan(args.short)
+    datasets = plan(args.short, args.volume)
     for i, (label, kind, shape, chunk, repeat, channels, extra) in enumerate(datasets):
         store = data.store(kind, shape, chunk, repeat, channels)
         slug = "-".join(label.replace("³", "").replace("×", "x").replace("(", "").replace(")", "").split())
         result, markdown, plot = (raw / f"{i:02d}-{slug}.{ext}" for ext in ("json", "md", "png"))
         cmd = [BIN / "viewer", "bench", "vdi", "--store", store, "--label", label, "--camera", "30,20,1.5",
-               "--width", size, "--height", size, "--timed-frames", frames, "--out", result,
+               "--width", width, "--height", height, "--timed-frames", frames, "--out", result,
                "--markdown", markdown, "--plot", plot, *extra]
         if args.short:
             cmd += ["--supersegments", "20", "--deviations", "0,10"]
@@ -88,7 +95,7 @@ def main():
     stamp = datetime.date.today().isoformat()
     mode = " --short" if args.short else ""
     header = (f"Measured {stamp} on {device['adapter']} ({device['backend']}; CPU {device['cpu']}, "
-              f"{device['cores']} cores) by `benchmarks/vdi_bench.py{mode}`, {size}×{size} images.")
+              f"{device['cores']} cores) by `benchmarks/vdi_bench.py{mode}`, {width}×{height} images.")
     report = "\n".join([
         header,
         "",

@@ -10,9 +10,11 @@
 // each crossing found exactly where the ray meets the plane of a grid line through V_O's eye.
 // In each list it meets the supersegments whose depth span overlaps its own, found by a
 // search that starts from the previous list's index (the data are smooth from list to list),
-// and composites each with its opacity corrected to the length the ray spends in it. Tiles of
-// lists that hold no supersegment are crossed in one step (empty-space skipping), and the ray
-// stops once transmittance falls below 1/255.
+// and composites each with its opacity corrected to the length the ray spends in it.
+// Empty-space skipping (the paper's Sec. 4.3) uses a grid over V_O's frustum: tiles of lists
+// by bins of depth along V_O's forward (planes, so a ray meets each bin's faces once). A cell
+// that no supersegment reaches is crossed in one step, to the first face of its tile or bin
+// the ray meets. The ray stops once transmittance falls below 1/255.
 //
 // Positions are relative to V_O's eye, in world units.
 
@@ -22,7 +24,7 @@ struct VdiView {
     lists_x: u32, // the VDI's lists (V_O's pixels)
     lists_y: u32,
     eye: vec3<f32>, // the new camera's eye
-    supersegments: u32, // N_S: slots per list
+    supersegments: u32, // N_S: most supersegments per list
     forward: vec3<f32>, // the new camera: forward (unit)
     tile: u32, // lists per tile edge of the skipping grid
     right: vec3<f32>, // right · tan(fov/2) · aspect
@@ -38,20 +40,23 @@ struct VdiView {
     box_min: vec3<f32>, // the volume's box
     out_height: u32,
     box_max: vec3<f32>,
-    pad2: u32,
+    grid_near: f32, // the skipping grid's nearest depth along V_O's forward
     background: vec3<f32>, // linear RGB
-    pad3: u32,
+    grid_bin: f32, // depth per bin of the skipping grid
 }
 
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
 const MAX_LIST_STEPS: u32 = 65535u; // loop guard per ray
 
 @group(0) @binding(0) var<uniform> V: VdiView;
-// Supersegments per list, row-major from the top.
-@group(0) @binding(1) var<storage, read> counts: array<u32>;
-// Per list N_S slots: vec4(pack2x16float(r, g), pack2x16float(b, a), front, back).
+// Where each list's supersegments begin in `slots`, lists row-major from the top; one more
+// entry than lists (the last is the total), so list i holds starts[i + 1] − starts[i].
+@group(0) @binding(1) var<storage, read> starts: array<u32>;
+// The lists' supersegments one list after the other, each list's front to back:
+// vec4(pack2x16float(r, g), pack2x16float(b, a), front, back).
 @group(0) @binding(2) var<storage, read> slots: array<vec4<f32>>;
-// Per tile of V.tile × V.tile lists, the most supersegments of its lists (0: empty).
+// Per tile of V.tile × V.tile lists, bit b set where a supersegment of its lists reaches depth
+// bin b: [grid_near + b·grid_bin, grid_near + (b + 1)·grid_bin] (VDI_DEPTH_BINS bins).
 @group(0) @binding(3) var<storage, read> tiles: array<u32>;
 @group(0) @binding(4) var<storage, read_write> image: array<vec4<f32>>;
 // The displayed image, out_width × out_height, upsampled from `image` (entry `upsample`).
@@ -113,10 +118,15 @@ fn supersegment(i: u32) -> Supersegment {
     return Supersegment(vec3<f32>(rg, ba.x), ba.y, s.z, s.w);
 }
 
-fn tile_empty(ix: i32, iy: i32) -> bool {
+fn tile_mask(ix: i32, iy: i32) -> u32 {
     let tx = u32(ix) / V.tile;
     let ty = u32(iy) / V.tile;
-    return tiles[ty * V.tiles_x + tx] == 0u;
+    return tiles[ty * V.tiles_x + tx];
+}
+
+// The skipping grid's depth bin of depth `z`, clamped to the grid.
+fn depth_bin(z: f32) -> i32 {
+    return clamp(i32(floor((z - V.grid_near) / V.grid_bin)), 0, i32(VDI_DEPTH_BINS) - 1);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -154,25 +164,46 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let step_x = select(-1, 1, probe.x >= 0.0);
         let step_y = select(1, -1, probe.y >= 0.0); // list rows grow downwards
         let dz = dot(r.d, V.o_forward);
+        let step_z = select(-1, 1, dz >= 0.0);
         let skipping = (V.flags & VDI_FLAG_SKIPPING) != 0u;
         var t = span.x;
         let first = ndc_at(r, t);
         var ix = clamp(i32(floor((first.x + 1.0) * 0.5 * f32(w))), 0, w - 1);
         var iy = clamp(i32(floor((1.0 - first.y) * 0.5 * f32(h))), 0, h - 1);
+        var iz = depth_bin(depth_at(r, t));
         var previous = 0u;
         for (var n = 0u; n < MAX_LIST_STEPS; n++) {
-            // The cell the ray crosses next: a list, or (skipping) a whole empty tile.
+            // The cell the ray crosses next: a list, or (skipping) a cell of the grid that
+            // no supersegment reaches: a tile of lists over one bin of depth, or over every
+            // bin when the tile holds none.
             var lo_x = ix;
             var hi_x = ix + 1;
             var lo_y = iy;
             var hi_y = iy + 1;
-            let empty_tile = skipping && tile_empty(ix, iy);
+            var mask = 0xffffffffu;
+            if skipping {
+                mask = tile_mask(ix, iy);
+            }
+            let empty_tile = (mask & (1u << u32(iz))) == 0u;
+            // Where the ray leaves the cell's bin of depth (none for a tile without
+            // supersegments, or past the grid's last bin).
+            var tz = 3.0e38;
             if empty_tile {
                 let e = i32(V.tile);
                 lo_x = ix / e * e;
                 hi_x = min(lo_x + e, w);
                 lo_y = iy / e * e;
                 hi_y = min(lo_y + e, h);
+                let next_z = iz + step_z;
+                if mask != 0u && next_z >= 0 && next_z < i32(VDI_DEPTH_BINS) && abs(dz) > 1e-30 {
+                    let face = V.grid_near + f32(select(iz, iz + 1, step_z > 0)) * V.grid_bin;
+                    tz = (face - dot(r.o, V.o_forward)) / dz;
+                    if tz <= t {
+                        // Already on the face (rounding): into the next bin without a step.
+                        iz = next_z;
+                        continue;
+                    }
+                }
             }
             let edge_x = select(lo_x, hi_x, step_x > 0);
             let edge_y = select(lo_y, hi_y, step_y > 0);
@@ -182,10 +213,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var ty = crossing(r, V.o_up, V.o_tan_y, ky);
             tx = select(3.0e38, tx, tx > t);
             ty = select(3.0e38, ty, ty > t);
-            let t_next = min(min(tx, ty), span.y);
+            let t_next = min(min(min(tx, ty), tz), span.y);
             if !empty_tile {
                 let list = u32(iy) * V.lists_x + u32(ix);
-                let count = counts[list];
+                let base = starts[list];
+                let count = starts[list + 1u] - base;
                 if count > 0u {
                     // The list's ray: depth = distance · cos, its angle off V_O's forward.
                     let centre = vec2<f32>(
@@ -198,7 +230,6 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let zb = depth_at(r, t_next);
                     let z_lo = min(za, zb);
                     let z_hi = max(za, zb);
-                    let base = list * V.supersegments;
                     let forward = dz >= 0.0;
                     // Start from the previous list's index, then walk to the first
                     // supersegment the ray meets here, in the order it meets them.
@@ -264,13 +295,38 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             t = t_next;
+            // Across a skipped cell the ray moved over several lists: the list it reached,
+            // found a little past the face it left by, so that rounding never puts it in a
+            // list it has already left.
+            var reached = vec2<i32>(ix, iy);
+            if empty_tile {
+                let at = ndc_at(r, t + 1e-3 * (min(min(tx, ty), span.y) - t));
+                reached = vec2<i32>(
+                    clamp(i32(floor((at.x + 1.0) * 0.5 * f32(w))), lo_x, hi_x - 1),
+                    clamp(i32(floor((1.0 - at.y) * 0.5 * f32(h))), lo_y, hi_y - 1),
+                );
+            }
+            if tz < min(tx, ty) {
+                // Into the next bin of depth, in the same tile.
+                iz += step_z;
+                ix = reached.x;
+                iy = reached.y;
+                continue;
+            }
             if tx <= ty {
                 ix = select(lo_x - 1, hi_x, step_x > 0);
+                iy = reached.y;
             } else {
                 iy = select(lo_y - 1, hi_y, step_y > 0);
+                ix = reached.x;
             }
             if ix < 0 || ix >= w || iy < 0 || iy >= h {
                 break;
+            }
+            if skipping && (!empty_tile || mask == 0u) {
+                // Across a list, or a tile skipped at every depth, the depth moved on by any
+                // amount: its bin again.
+                iz = depth_bin(depth_at(r, t));
             }
         }
     }

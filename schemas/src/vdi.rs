@@ -283,13 +283,14 @@ pub struct VolumetricDepthImage {
     pub header: VdiHeader,
     /// Supersegments per list, row-major from the top (width·height entries, each ≤ N_S).
     pub counts: Vec<u8>,
-    /// Per list N_S slots (index (y·width + x)·N_S + s): premultiplied colour and opacity
-    /// `[r, g, b, a]` of the supersegment (what front-to-back compositing of its samples
-    /// gives: composite the slots in order over the background and you get the DVR pixel);
-    /// slots at s ≥ count are zero.
+    /// The supersegments of every list, lists in row-major order from the top, each list's
+    /// front to back (`Σ counts` entries, as the file stores them; [`Self::starts`] gives
+    /// where each list begins): premultiplied colour and opacity `[r, g, b, a]` (what
+    /// front-to-back compositing of its samples gives: composite a list's supersegments in
+    /// order over the background and you get the DVR pixel).
     pub colour: Vec<[f32; 4]>,
-    /// Same indexing: `[front, back]` distances from the eye along the list's ray, world
-    /// units, front ≤ back; slots at s ≥ count are zero.
+    /// The same supersegments' `[front, back]`: distances from the eye along the list's ray,
+    /// world units, front ≤ back.
     pub depth: Vec<[f32; 2]>,
 }
 
@@ -297,12 +298,29 @@ pub struct VolumetricDepthImage {
 struct Shape {
     /// `width·height`.
     lists: usize,
-    /// N_S.
-    slots_per_list: usize,
 }
 
 fn finite<T: Copy + Into<f64>>(values: &[T]) -> bool {
     values.iter().all(|&v| v.into().is_finite())
+}
+
+/// The supersegments `counts` hold in all, each count checked to be at most the header's N_S.
+fn used_slots(counts: &[u8], header: &VdiHeader, file: &str) -> Result<usize, VdiError> {
+    let width = header.width as usize;
+    let mut used = 0usize;
+    for (index, &count) in counts.iter().enumerate() {
+        if u32::from(count) > header.supersegments {
+            return Err(VdiError::Count {
+                file: file.to_owned(),
+                x: (index % width) as u32,
+                y: (index / width) as u32,
+                count,
+                supersegments: header.supersegments,
+            });
+        }
+        used += usize::from(count);
+    }
+    Ok(used)
 }
 
 /// Checks everything the header alone decides, returning its sizes.
@@ -396,7 +414,6 @@ fn check_header(header: &VdiHeader, file: &str) -> Result<Shape, VdiError> {
     }
     Ok(Shape {
         lists: lists as usize,
-        slots_per_list: header.supersegments as usize,
     })
 }
 
@@ -573,26 +590,36 @@ fn push_plane(out: &mut Vec<u8>, raw: &[u8], compression: Compression, width: us
 }
 
 impl VolumetricDepthImage {
-    /// An image of `header`'s sizes with every list empty (all counts and slots zero).
-    ///
-    /// # Panics
-    /// When `width·height·N_S` slots do not fit in memory; [`VolumetricDepthImage::decode`]
-    /// checks a file's header (at most [`MAX_VDI_SLOTS`]) before calling this.
+    /// An image of `header`'s sizes with every list empty (all counts zero, no
+    /// supersegments).
     pub fn new(header: VdiHeader) -> Self {
         let lists = header.width as usize * header.height as usize;
-        let slots = lists * header.supersegments as usize;
         Self {
             header,
             counts: vec![0; lists],
-            colour: vec![[0.0; 4]; slots],
-            depth: vec![[0.0; 2]; slots],
+            colour: Vec::new(),
+            depth: Vec::new(),
         }
     }
 
-    /// The colour and depth of the used slots of list `(x, y)`, front to back.
+    /// Where each list's supersegments begin in `colour` and `depth`: `width·height + 1`
+    /// prefix sums of the counts (the last is `Σ counts`).
+    pub fn starts(&self) -> Vec<usize> {
+        let mut starts = Vec::with_capacity(self.counts.len() + 1);
+        let mut sum = 0usize;
+        starts.push(0);
+        for &count in &self.counts {
+            sum += usize::from(count);
+            starts.push(sum);
+        }
+        starts
+    }
+
+    /// The colour and depth of list `(x, y)`'s supersegments, front to back. It sums the
+    /// counts before the list: for many lists, index with [`Self::starts`].
     ///
     /// # Panics
-    /// When `(x, y)` is outside the image or the arrays are shorter than the header says.
+    /// When `(x, y)` is outside the image or the arrays are shorter than the counts say.
     pub fn list(&self, x: u32, y: u32) -> (&[[f32; 4]], &[[f32; 2]]) {
         assert!(
             x < self.header.width && y < self.header.height,
@@ -601,13 +628,9 @@ impl VolumetricDepthImage {
             self.header.height
         );
         let index = y as usize * self.header.width as usize + x as usize;
-        let per_list = self.header.supersegments as usize;
-        let used = usize::from(self.counts[index]).min(per_list);
-        let start = index * per_list;
-        (
-            &self.colour[start..start + used],
-            &self.depth[start..start + used],
-        )
+        let start: usize = self.counts[..index].iter().map(|&c| usize::from(c)).sum();
+        let end = start + usize::from(self.counts[index]);
+        (&self.colour[start..end], &self.depth[start..end])
     }
 
     /// The pixel `(x, y)` as the DVR image has it: the list's supersegments composited front
@@ -618,7 +641,22 @@ impl VolumetricDepthImage {
     /// # Panics
     /// As [`VolumetricDepthImage::list`].
     pub fn composite(&self, x: u32, y: u32) -> [f32; 4] {
-        let (colour, _) = self.list(x, y);
+        self.composite_list(self.list(x, y).0)
+    }
+
+    /// Every list's colour and depth, row-major from the top, in one pass.
+    pub fn lists(&self) -> impl Iterator<Item = (&[[f32; 4]], &[[f32; 2]])> {
+        let mut start = 0usize;
+        self.counts.iter().map(move |&count| {
+            let end = start + usize::from(count);
+            let list = (&self.colour[start..end], &self.depth[start..end]);
+            start = end;
+            list
+        })
+    }
+
+    /// The supersegments `colour` of one list composited as [`Self::composite`] does.
+    pub fn composite_list(&self, colour: &[[f32; 4]]) -> [f32; 4] {
         let mut rgb = [0.0f64; 3];
         let mut transmittance = 1.0f64;
         for c in colour {
@@ -635,8 +673,6 @@ impl VolumetricDepthImage {
 
     /// The image as a VDI file (the layout in the module documentation).
     ///
-    /// Slots past a list's count are not written (they read back as zero).
-    ///
     /// # Errors
     /// A [`VdiError`] naming `VDI to encode` when the image is one
     /// [`VolumetricDepthImage::decode`] would refuse: a header out of range, arrays of other
@@ -646,19 +682,19 @@ impl VolumetricDepthImage {
     pub fn encode(&self) -> Result<Vec<u8>, VdiError> {
         let header = &self.header;
         let shape = check_header(header, ENCODING)?;
-        let slots = shape.lists * shape.slots_per_list;
-        for (array, length, expected) in [
-            ("counts", self.counts.len(), shape.lists),
-            ("colour", self.colour.len(), slots),
-            ("depth", self.depth.len(), slots),
-        ] {
-            if length != expected {
-                return Err(VdiError::Length {
-                    file: ENCODING.to_owned(),
-                    array,
-                    length,
-                    expected: expected as u64,
-                });
+        let length_error = |array, length, expected: usize| VdiError::Length {
+            file: ENCODING.to_owned(),
+            array,
+            length,
+            expected: expected as u64,
+        };
+        if self.counts.len() != shape.lists {
+            return Err(length_error("counts", self.counts.len(), shape.lists));
+        }
+        let slots = used_slots(&self.counts, header, ENCODING)?;
+        for (array, length) in [("colour", self.colour.len()), ("depth", self.depth.len())] {
+            if length != slots {
+                return Err(length_error(array, length, slots));
             }
         }
         let json = serde_json::to_vec(header).expect("a checked VDI header always serializes");
@@ -669,24 +705,14 @@ impl VolumetricDepthImage {
                 length: header_length,
             });
         }
-        let used: usize = self.counts.iter().map(|&c| usize::from(c)).sum();
-        let mut colour = Vec::with_capacity(used * header.colour.slot_bytes());
-        let mut depth = Vec::with_capacity(used * header.depth.slot_bytes());
+        let mut colour = Vec::with_capacity(slots * header.colour.slot_bytes());
+        let mut depth = Vec::with_capacity(slots * header.depth.slot_bytes());
+        let mut start = 0usize;
         for (index, &count) in self.counts.iter().enumerate() {
             let (x, y) = (
                 (index % header.width as usize) as u32,
                 (index / header.width as usize) as u32,
             );
-            if u32::from(count) > header.supersegments {
-                return Err(VdiError::Count {
-                    file: ENCODING.to_owned(),
-                    x,
-                    y,
-                    count,
-                    supersegments: header.supersegments,
-                });
-            }
-            let start = index * shape.slots_per_list;
             for s in 0..usize::from(count) {
                 let (c, d) = (self.colour[start + s], self.depth[start + s]);
                 check_slot(ENCODING, (x, y, s as u32), c, d)?;
@@ -717,6 +743,7 @@ impl VolumetricDepthImage {
                     }
                 }
             }
+            start += usize::from(count);
         }
         let mut out = Vec::with_capacity(
             12 + json.len() + 24 + self.counts.len() + colour.len() + depth.len(),
@@ -777,19 +804,7 @@ impl VolumetricDepthImage {
         let compression = header.compression;
         let counts = reader.plane("counts", compression, shape.lists, 1)?;
         let width = header.width as usize;
-        let mut used = 0usize;
-        for (index, &count) in counts.iter().enumerate() {
-            if u32::from(count) > header.supersegments {
-                return Err(VdiError::Count {
-                    file: file.to_owned(),
-                    x: (index % width) as u32,
-                    y: (index / width) as u32,
-                    count,
-                    supersegments: header.supersegments,
-                });
-            }
-            used += usize::from(count);
-        }
+        let used = used_slots(&counts, &header, file)?;
         let colour = reader.plane(
             "colour",
             compression,
@@ -815,9 +830,10 @@ impl VolumetricDepthImage {
         let (colour_format, depth_format) = (header.colour, header.depth);
         let mut image = Self::new(header);
         image.counts.copy_from_slice(&counts);
+        image.colour.reserve_exact(used);
+        image.depth.reserve_exact(used);
         for (index, &count) in counts.iter().enumerate() {
             let (x, y) = ((index % width) as u32, (index / width) as u32);
-            let start = index * shape.slots_per_list;
             // The planes hold exactly `Σ counts` slots (checked above), so neither runs out.
             for (s, (c, d)) in (&mut colours)
                 .zip(&mut depths)
@@ -841,8 +857,8 @@ impl VolumetricDepthImage {
                     }),
                 };
                 check_slot(file, (x, y, s as u32), c, d)?;
-                image.colour[start + s] = c;
-                image.depth[start + s] = d;
+                image.colour.push(c);
+                image.depth.push(d);
             }
         }
         Ok(image)

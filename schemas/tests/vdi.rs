@@ -55,9 +55,11 @@ fn sample(
         for s in 0..usize::from(count) {
             let a = 0.1 + 0.2 * s as f32 + 0.01 * i as f32;
             let tint = [0.3 + 0.1 * i as f32, 0.77, 0.123];
-            image.colour[i * 4 + s] = [a * tint[0], a * tint[1], a * tint[2], a];
+            image
+                .colour
+                .push([a * tint[0], a * tint[1], a * tint[2], a]);
             let front = 1.0 + 0.37 * (i + 1) as f32 + 0.9 * s as f32;
-            image.depth[i * 4 + s] = [front, front + 0.41];
+            image.depth.push([front, front + 0.41]);
         }
     }
     image
@@ -106,7 +108,8 @@ fn every_format_round_trips_within_its_precision() {
                 let case = format!("{colour:?} {depth:?} {compression:?}");
                 assert_eq!(back.header, image.header, "{case}");
                 assert_eq!(back.counts, image.counts, "{case}");
-                assert_eq!(back.colour.len(), 24, "{case}");
+                assert_eq!((back.colour.len(), back.depth.len()), (11, 11), "{case}");
+                assert_eq!(back.starts(), [0, 2, 2, 6, 7, 10, 11], "{case}");
                 for (i, (b, a)) in back.colour.iter().zip(&image.colour).enumerate() {
                     for (&b, &a) in b.iter().zip(a) {
                         match colour {
@@ -130,9 +133,7 @@ fn every_format_round_trips_within_its_precision() {
                         }
                     }
                 }
-                // Unused slots read back as zero, and a second trip changes nothing.
-                assert_eq!(back.colour[4..8], [[0.0; 4]; 4]);
-                assert_eq!(back.depth[5..8], [[0.0; 2]; 3]);
+                // A second trip changes nothing.
                 let again = VolumetricDepthImage::decode(&back.encode().unwrap(), FILE).unwrap();
                 assert_eq!(again, back, "{case}");
             }
@@ -149,8 +150,8 @@ fn lz4_planes_are_smaller_and_size_prepended() {
     image.header.height = 100;
     let mut big = VolumetricDepthImage::new(image.header.clone());
     big.counts[..6].copy_from_slice(&image.counts);
-    big.colour[..24].copy_from_slice(&image.colour);
-    big.depth[..24].copy_from_slice(&image.depth);
+    big.colour.clone_from(&image.colour);
+    big.depth.clone_from(&image.depth);
     let lz4 = big.encode().unwrap();
     big.header.compression = Compression::None;
     let raw = big.encode().unwrap();
@@ -175,8 +176,8 @@ fn the_layout_is_as_documented() {
     h.dataset = None;
     let mut image = VolumetricDepthImage::new(h.clone());
     image.counts[0] = 1;
-    image.colour[0] = [0.25, 0.5, 0.125, 0.75];
-    image.depth[0] = [2.0, 3.5];
+    image.colour.push([0.25, 0.5, 0.125, 0.75]);
+    image.depth.push([2.0, 3.5]);
     let json = serde_json::to_vec(&h).unwrap();
     assert!(!String::from_utf8_lossy(&json).contains("dataset"));
     let mut expected = b"RESVDI\0\x01".to_vec();
@@ -223,10 +224,8 @@ fn composite_blends_front_to_back_over_the_background() {
         Compression::None,
     ));
     image.counts[4] = 2;
-    image.colour[16] = [0.25, 0.5, 0.125, 0.5];
-    image.colour[17] = [0.5, 0.25, 0.75, 0.75];
-    image.depth[16] = [1.0, 2.0];
-    image.depth[17] = [2.5, 4.0];
+    image.colour = vec![[0.25, 0.5, 0.125, 0.5], [0.5, 0.25, 0.75, 0.75]];
+    image.depth = vec![[1.0, 2.0], [2.5, 4.0]];
     // rgb = c0 + 0.5·c1 + 0.5·0.25·background, a = 1 − 0.5·0.25.
     assert_eq!(image.composite(1, 1), [0.53125, 0.6875, 0.625, 0.875]);
     assert_eq!(image.composite(0, 0), [0.25, 0.5, 1.0, 0.0]);
@@ -234,6 +233,19 @@ fn composite_blends_front_to_back_over_the_background() {
     assert_eq!(colour, [[0.25, 0.5, 0.125, 0.5], [0.5, 0.25, 0.75, 0.75]]);
     assert_eq!(depth, [[1.0, 2.0], [2.5, 4.0]]);
     assert_eq!(image.list(2, 1), (&[][..], &[][..]));
+    // In one pass, the same lists and composites.
+    let lists: Vec<_> = image.lists().collect();
+    assert_eq!(lists.len(), 6);
+    for (i, list) in lists.iter().enumerate() {
+        let (x, y) = (i as u32 % 3, i as u32 / 3);
+        assert_eq!(*list, image.list(x, y), "list {i}");
+        assert_eq!(
+            image.composite_list(list.0),
+            image.composite(x, y),
+            "list {i}"
+        );
+    }
+    assert_eq!(image.starts(), [0, 0, 0, 0, 0, 2, 2]);
 }
 
 #[test]
@@ -513,10 +525,10 @@ fn encode_refuses_what_decode_would() {
     image.colour.pop();
     assert_eq!(
         image.encode().unwrap_err().to_string(),
-        "VDI to encode: colour has 23 entries, the header's sizes imply 24"
+        "VDI to encode: colour has 10 entries, the header and counts imply 11"
     );
     let mut image = good.clone();
-    image.colour[9] = [0.5, 0.5, 0.5, 1.25];
+    image.colour[3] = [0.5, 0.5, 0.5, 1.25];
     assert_eq!(
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (2, 0) supersegment 1 has colour and opacity [0.5, 0.5, 0.5, 1.25]: \
@@ -524,25 +536,27 @@ fn encode_refuses_what_decode_would() {
     );
     // Channels mix additively: a premultiplied colour past 1 is kept.
     let mut image = good.clone();
-    image.colour[9] = [1.5, 0.5, 2.25, 1.0];
+    image.colour[3] = [1.5, 0.5, 2.25, 1.0];
     let back = VolumetricDepthImage::decode(&image.encode().unwrap(), "a.vdi").unwrap();
-    assert_eq!(back.colour[9], [1.5, 0.5, 2.25, 1.0]);
+    assert_eq!(back.colour[3], [1.5, 0.5, 2.25, 1.0]);
     let mut image = good.clone();
-    image.colour[9] = [-0.25, 0.5, 0.5, 1.0];
+    image.colour[3] = [-0.25, 0.5, 0.5, 1.0];
     assert_eq!(
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (2, 0) supersegment 1 has colour and opacity [-0.25, 0.5, 0.5, 1.0]: \
          a colour below 0 or an opacity outside [0, 1]"
     );
     let mut image = good.clone();
-    image.depth[12] = [f32::NAN, 1.0];
+    image.depth[6] = [f32::NAN, 1.0];
     assert_eq!(
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (0, 1) supersegment 0 has a non-finite depth"
     );
-    // Slots past a list's count are not written, whatever they hold.
+    // A count that the arrays do not hold is refused, not read past.
     let mut image = good.clone();
-    image.colour[5] = [f32::NAN; 4];
-    let back = VolumetricDepthImage::decode(&image.encode().unwrap(), FILE).unwrap();
-    assert_eq!(back.colour[5], [0.0; 4]);
+    image.counts[1] = 1;
+    assert_eq!(
+        image.encode().unwrap_err().to_string(),
+        "VDI to encode: colour has 11 entries, the header and counts imply 12"
+    );
 }

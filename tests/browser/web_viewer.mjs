@@ -1,5 +1,5 @@
 // Drives the Residency web viewer page in headless Chromium (WebGPU on SwiftShader) for
-// tests/python/test_web_viewer.py.
+// tests/python/test_web_viewer.py and tests/python/test_web_remote.py.
 //
 //   node tests/browser/web_viewer.mjs '<JSON spec>'
 //
@@ -8,14 +8,19 @@
 //   {"do": "converge"}                 wait until state().converged or state().error
 //   {"do": "opened"}                   wait until the page has opened its dataset (info())
 //   {"do": "state"}                    window.residency.state()
+//   {"do": "waitState", "when": EXPR}  wait until EXPR, a JavaScript expression of `s` (the
+//                                      state), is true (or s.error is set); return the state
 //   {"do": "snapshot", "path": P}      window.residency.snapshot() written to P as PNG
 //   {"do": "setScene", "scene": S}     window.residency.setScene(S)
-//   {"do": "drag", "dx": X, "dy": Y}   a left-button mouse drag across the canvas
+//   {"do": "drag", "dx": X, "dy": Y, "moves": N, "delay_ms": D}
+//                                      a left-button mouse drag across the canvas in N moves
+//                                      (default 5), D ms apart (default 0)
 //   {"do": "pinch", "scale": S}        a two-finger touch pinch on the canvas (pointer events
 //                                      of type touch), the fingers' distance times S
 //   {"do": "clickLink", "row": NAME, "text": T}
 //                                      on brickserver's dataset list, click the link T in the
 //                                      row of dataset NAME, and wait for the page it opens
+//   {"do": "click", "selector": S}     click the element S (a button, a checkbox), as a person does
 //   {"do": "location"}                 location.pathname + location.search
 //   {"do": "hash", "not": H}           location.hash, once it differs from H (if given)
 //   {"do": "goto", "url": U}           open another URL in the same page
@@ -63,6 +68,12 @@ try {
       case "state":
         results.push(await page.evaluate(() => window.residency.state()));
         break;
+      case "waitState":
+        results.push(await until(() => page.evaluate((when) => {
+          const s = window.residency?.state();
+          return s && (s.error || new Function("s", `return (${when});`)(s)) ? s : null;
+        }, step.when)));
+        break;
       case "snapshot": {
         const url = await page.evaluate(() => window.residency.snapshot());
         writeFileSync(step.path, Buffer.from(url.split(",")[1], "base64"));
@@ -78,7 +89,11 @@ try {
         const x = box.x + box.width / 2, y = box.y + box.height / 2;
         await page.mouse.move(x, y);
         await page.mouse.down();
-        await page.mouse.move(x + step.dx, y + step.dy, { steps: 5 });
+        const moves = step.moves ?? 5;
+        for (let i = 1; i <= moves; i++) {
+          await page.mouse.move(x + (step.dx * i) / moves, y + (step.dy * i) / moves);
+          if (step.delay_ms) await page.waitForTimeout(step.delay_ms);
+        }
         await page.mouse.up();
         results.push(null);
         break;
@@ -125,6 +140,10 @@ try {
       case "hash":
         // The fragment follows the view once the next frame renders.
         results.push(await until(() => page.evaluate((old) => (location.hash && location.hash !== old ? location.hash : null), step.not ?? null)));
+        break;
+      case "click":
+        await page.click(step.selector);
+        results.push(null);
         break;
       case "select":
         // Picks an option of a <select> on the page, as a person does.

@@ -49,6 +49,7 @@ pub mod scene;
 #[cfg(all(feature = "serve", not(target_arch = "wasm32")))]
 pub mod service;
 pub mod source;
+pub mod vdi_service;
 #[cfg(target_arch = "wasm32")]
 pub mod web;
 

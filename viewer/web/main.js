@@ -5,6 +5,14 @@
 // opens one on another brickserver. `?width=W&height=H` fixes the image size in pixels (else
 // the canvas fills the window when the page opens). `#scene=` followed by URI-encoded scene
 // JSON (schemas/json/scene.schema.json) sets the view; the page keeps it up to date.
+//
+// Remote mode: `?render=URL` names a render service (`viewer serve`) serving the same dataset
+// (`?render_token=TOKEN`: its bearer token, when it runs with --serve-token-file). The *Remote*
+// switch then starts on: the page streams no bricks but asks the service for volumetric depth
+// images (VDIs) of its view (POST URL/vdi) and ray casts the newest one for its own camera
+// (viewer/src/web/remote.rs decides when to ask; only the latest request matters: a newer one
+// aborts the fetch in flight). `?target_fps=N` is the frame rate its frame-rate controller holds
+// while the camera moves (default 60).
 
 import init, { Viewer } from "./residency_viewer.js";
 
@@ -49,6 +57,86 @@ let viewer = null;
 let lastScene = "";
 let failure = null;
 
+/** The render service of the remote mode: {url, token, frameMs (NaN: the default)}, or null. */
+function renderService() {
+  const params = new URLSearchParams(location.search);
+  const url = params.get("render");
+  if (!url) return null;
+  const fps = parseFloat(params.get("target_fps") ?? "");
+  return { url: url.replace(/\/+$/, ""), token: params.get("render_token"), frameMs: fps > 0 ? 1000 / fps : NaN };
+}
+
+const service = renderService();
+/** The fetch of the request in flight: {sequence, abort: AbortController}. */
+let inFlight = null;
+/** The remote mode's error is on show (hidden again once a VDI is drawn). */
+let remoteShown = false;
+
+function serviceHeaders(json) {
+  const headers = {};
+  if (service.token) headers.authorization = `Bearer ${service.token}`;
+  if (json) headers["content-type"] = "application/json";
+  return headers;
+}
+
+/** The error message of a failed service answer: its JSON `error`, else the status. */
+async function serviceError(response) {
+  try {
+    const body = await response.json();
+    if (typeof body.error === "string") return body.error;
+  } catch {
+    // not JSON
+  }
+  return `HTTP ${response.status} ${response.statusText}`.trim();
+}
+
+/** Reads the service's /info and hands it to the viewer (errors become the remote error). */
+async function openService() {
+  try {
+    const r = await fetch(`${service.url}/info`, { headers: serviceHeaders(false) });
+    if (!r.ok) {
+      viewer.remote_failed(0, r.status, await serviceError(r));
+      return;
+    }
+    viewer.remote_info(await r.text());
+  } catch (e) {
+    // remote_info records its own errors; a fetch that failed is the service unreachable.
+    if (e instanceof TypeError) viewer.remote_failed(0, 0, `cannot reach the render service: ${e.message}`);
+  }
+}
+
+/** Aborts the request in flight, if any (the viewer has forgotten it already). */
+function abortInFlight() {
+  if (inFlight) inFlight.abort.abort();
+  inFlight = null;
+}
+
+/** Sends the request the viewer wants now, if any, superseding the one in flight. */
+function remoteTick() {
+  const body = viewer.remote_request();
+  if (body == null) return;
+  abortInFlight();
+  const sequence = JSON.parse(body).request;
+  const mine = { sequence, abort: new AbortController() };
+  inFlight = mine;
+  fetch(`${service.url}/vdi`, { method: "POST", headers: serviceHeaders(true), body, signal: mine.abort.signal })
+    .then(async (r) => {
+      if (r.ok) {
+        const bytes = new Uint8Array(await r.arrayBuffer());
+        if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes);
+      } else {
+        const message = await serviceError(r);
+        if (!mine.abort.signal.aborted) viewer.remote_failed(sequence, r.status, message);
+      }
+    })
+    .catch((e) => {
+      if (!mine.abort.signal.aborted) viewer.remote_failed(sequence, 0, `cannot reach the render service: ${e.message}`);
+    })
+    .finally(() => {
+      if (inFlight === mine) inFlight = null;
+    });
+}
+
 function draw() {
   const w = viewer.width(), h = viewer.height();
   const rgba = viewer.rgba();
@@ -75,8 +163,23 @@ function showStats() {
     `in flight ${s.requests_in_flight} requests · failed ${s.bricks_failed}\n` +
     `fetched ${mib} MiB\n` +
     (s.gpu_time_ms != null ? `GPU ${s.gpu_time_ms.toFixed(2)} ms/frame\n` : "GPU time: no timestamp queries\n");
+  const r = s.remote;
+  if (r) {
+    stats.textContent +=
+      `remote: ${r.mode}${r.converged ? " (converged)" : ""}\n` +
+      `VDIs received ${r.vdis_received} · requests ${r.requests_sent} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
+      `D_I ${r.d_i.toFixed(2)}` + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
+      (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n";
+  }
   if (s.error) {
-    show(`Error: ${s.error}\n\nIs the brick server still running? Reload the page to try again.`);
+    const hint = r && r.mode !== "off" ? "" : "Is the brick server still running? ";
+    show(`Error: ${s.error}\n\n${hint}Reload the page to try again.`);
+  } else if (r && r.mode !== "off" && r.last_error) {
+    show(`Render service ${r.service}: ${r.last_error}`);
+    remoteShown = true;
+  } else if (remoteShown) {
+    show(null);
+    remoteShown = false;
   }
 }
 
@@ -254,6 +357,23 @@ function listen() {
   showFilter();
   filter.addEventListener("change", (e) => viewer.set_filter(e.target.value));
   const reset = () => { viewer.reset(); buildControls(JSON.parse(viewer.info_json())); showFilter(); };
+  // The remote switch: only with a render service (?render=URL).
+  const remote = document.getElementById("remote");
+  remote.disabled = !service;
+  remote.checked = service != null;
+  remote.parentElement.title = service
+    ? `VDIs of the view from the render service ${service.url}, ray cast here`
+    : "needs a render service: open the page with ?render=URL (viewer serve)";
+  remote.addEventListener("change", (e) => {
+    if (!e.target.checked) abortInFlight();
+    viewer.set_remote(e.target.checked);
+    // Refused or unreachable before: read its /info again.
+    if (e.target.checked && state().remote?.mode === "starting") openService();
+    if (!e.target.checked && remoteShown) {
+      show(null);
+      remoteShown = false;
+    }
+  });
   document.getElementById("reset").addEventListener("click", reset);
   window.addEventListener("keydown", (e) => {
     if ((e.key === "r" || e.key === "R") && e.target.tagName !== "INPUT") reset();
@@ -262,6 +382,7 @@ function listen() {
 
 async function loop() {
   try {
+    if (service) remoteTick();
     if (await viewer.step()) {
       draw();
       keepSceneInUrl();
@@ -280,7 +401,9 @@ window.residency = {
     viewer.set_scene_json(JSON.stringify(scene));
     buildControls(JSON.parse(viewer.info_json()));
   },
-  /** {frame, converged, bricks_fetched, bytes_fetched, error, ...}. */
+  /** {frame, converged, bricks_fetched, bytes_fetched, error, ..., remote: {mode,
+   * requests_sent, requests_aborted, answers_dropped, vdis_received, last_error, d_i,
+   * vdi_camera, converged, ...} with a render service, else null}. */
   state,
   /** The current frame as a PNG data URL (8-bit sRGB, like `viewer render`'s PNG). */
   async snapshot() {
@@ -328,6 +451,10 @@ async function main() {
   }
   buildControls(JSON.parse(viewer.info_json()));
   listen();
+  if (service) {
+    viewer.remote_begin(service.url, service.frameMs);
+    await openService();
+  }
   requestAnimationFrame(loop);
 }
 

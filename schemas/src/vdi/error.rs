@@ -104,7 +104,7 @@ pub enum VdiError {
         problem: &'static str,
     },
     /// An in-memory array's length does not match the header (only from `encode`).
-    #[error("{file}: {array} has {length} entries, the header's sizes imply {expected}")]
+    #[error("{file}: {array} has {length} entries, the header and counts imply {expected}")]
     Length {
         /// The file.
         file: String,
@@ -112,7 +112,8 @@ pub enum VdiError {
         array: &'static str,
         /// Its length.
         length: usize,
-        /// The length the header implies.
+        /// The length the header (counts: one per list) or the counts (colour, depth: their
+        /// sum) imply.
         expected: u64,
     },
     /// An uncompressed plane's stored length differs from what the header and counts imply.

@@ -211,6 +211,7 @@ impl Bench {
         let p = converge(gpu, renderer, fetcher, &self.budget())?;
         let mut gpu_ms = Vec::new();
         let mut wall_ms = Vec::new();
+        let mut without_readback_ms = Vec::new();
         let mut last = None;
         for _ in 0..self.plan.timed_frames {
             let t = Instant::now();
@@ -220,6 +221,10 @@ impl Bench {
                 gpu_ms.push(g);
             }
             last = Some(out);
+            // The same frame again, its image left on the GPU.
+            let t = Instant::now();
+            renderer.render_without_pixels(gpu)?;
+            without_readback_ms.push(t.elapsed().as_secs_f64() * 1e3);
         }
         let out = last.ok_or(BenchError::NoFrameTimed)?;
         let o = renderer.options();
@@ -244,6 +249,7 @@ impl Bench {
             requested_empty: self.requested_empty(&p),
             gpu_ms: (!gpu_ms.is_empty()).then(|| median(&mut gpu_ms)),
             wall_ms: median(&mut wall_ms),
+            wall_ms_without_readback: Some(median(&mut without_readback_ms)),
             bricks_used: out.counts.bricks_used,
             resident_bytes: out.counts.bricks_used * slot,
             samples: out.counts.samples,
@@ -310,6 +316,11 @@ impl Bench {
             converged_views: views.iter().filter(|v| v.converged).count(),
             gpu_ms: (gpu.len() == views.len()).then(|| gpu.iter().sum::<f64>() / n),
             wall_ms: mean(&|v| v.wall_ms),
+            wall_ms_without_readback: views
+                .iter()
+                .map(|v| v.wall_ms_without_readback)
+                .sum::<Option<f64>>()
+                .map(|sum| sum / n),
             resident_bytes: mean(&|v| v.resident_bytes as f64),
             bricks_used: mean(&|v| v.bricks_used as f64),
             cold_bytes_fetched: views[0].bytes_fetched,

@@ -198,6 +198,13 @@ pub struct ViewRecord {
     /// Median wall ms per converged frame (render, read back).
     #[schemars(range(min = 0))]
     pub wall_ms: f64,
+    /// Median wall ms per converged frame rendered without reading the image back (as
+    /// `viewer view` renders for presenting on the GPU), timed alternately with `wall_ms`'s
+    /// frames on the same view; `wall_ms` minus this is the readback's cost. Absent from
+    /// results files older than this field.
+    #[serde(default)]
+    #[schemars(range(min = 0))]
+    pub wall_ms_without_readback: Option<f64>,
     /// Distinct cache slots the converged frame read.
     pub bricks_used: u64,
     /// `bricks_used` × slot bytes.
@@ -294,6 +301,11 @@ pub struct RunRecord {
     /// Mean over views of the median wall ms per converged frame.
     #[schemars(range(min = 0))]
     pub wall_ms: f64,
+    /// Mean over views of the median wall ms per converged frame rendered without reading
+    /// the image back (`null` when a view lacks it: results files older than this field).
+    #[serde(default)]
+    #[schemars(range(min = 0))]
+    pub wall_ms_without_readback: Option<f64>,
     /// Mean over views of the bytes the cache needs resident.
     #[schemars(range(min = 0))]
     pub resident_bytes: f64,
@@ -447,6 +459,7 @@ mod tests {
             converged_views: 0,
             gpu_ms: None,
             wall_ms: 1.0,
+            wall_ms_without_readback: Some(0.5),
             resident_bytes: 0.0,
             bricks_used: 0.0,
             cold_bytes_fetched: 0,

@@ -90,6 +90,9 @@ pub struct VdiSizeRecord {
     pub marches_per_ray: f64,
     /// Wall milliseconds of the VDI pass (bricks resident, readback included).
     pub generation_ms: f64,
+    /// GPU milliseconds of its compute passes, where the device has timestamp queries: the
+    /// rest of `generation_ms` is the readback and the unpacking on the CPU.
+    pub generation_gpu_ms: Option<f64>,
     /// Bytes of the slots as the GPU holds them (16 a slot, `N_S` per pixel).
     pub gpu_bytes: u64,
     /// Bytes of the same VDI in the paper's raw layout (24 a slot).
@@ -234,7 +237,7 @@ pub fn run(
     for &n in &plan.supersegments {
         settle(&mut renderer, &scene.camera, 0.0)?;
         let start = Instant::now();
-        let (generation, _) = renderer.generate_vdi(gpu, n)?;
+        let (generation, out) = renderer.generate_vdi(gpu, n)?;
         let generation_ms = start.elapsed().as_secs_f64() * 1e3;
         let vdi = &generation.image;
         let pixels = vdi.counts.len() as u64;
@@ -244,6 +247,7 @@ pub fn run(
             mean_supersegments: used as f64 / pixels as f64,
             marches_per_ray: generation.marches as f64 / pixels as f64,
             generation_ms,
+            generation_gpu_ms: out.gpu_time_ms,
             gpu_bytes: pixels * u64::from(n) * 16,
             paper_raw_bytes: pixels * u64::from(n) * PAPER_SLOT_BYTES,
             file_bytes: vdi.encode()?.len() as u64,
@@ -312,19 +316,21 @@ pub fn markdown(r: &VdiBenchResults) -> String {
     .expect("writing to a String cannot fail");
     write!(
         out,
-        "| N_S | supersegments / pixel | marches / ray | generation ms | GPU B/px | paper raw B/px | \
-         file B/px (paper: {PAPER_COMPRESSED_BYTES_PER_PIXEL:.1} at N_S 20) | file / volume |\n\
-         |---|---|---|---|---|---|---|---|\n",
+        "| N_S | supersegments / pixel | marches / ray | generation ms | of which GPU ms | GPU B/px | \
+         paper raw B/px | file B/px (paper: {PAPER_COMPRESSED_BYTES_PER_PIXEL:.1} at N_S 20) | \
+         file / volume |\n|---|---|---|---|---|---|---|---|---|\n",
     )
     .expect("writing to a String cannot fail");
     for s in &r.sizes {
         writeln!(
             out,
-            "| {} | {:.2} | {:.2} | {:.1} | {:.1} | {:.1} | {:.1} | {:.3} |",
+            "| {} | {:.2} | {:.2} | {:.1} | {} | {:.1} | {:.1} | {:.1} | {:.3} |",
             s.supersegments,
             s.mean_supersegments,
             s.marches_per_ray,
             s.generation_ms,
+            s.generation_gpu_ms
+                .map_or_else(|| "–".to_owned(), |ms| format!("{ms:.1}")),
             s.gpu_bytes as f64 / pixels,
             s.paper_raw_bytes as f64 / pixels,
             s.file_bytes as f64 / pixels,

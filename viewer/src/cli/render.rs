@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 
 use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
@@ -15,7 +15,6 @@ use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::streaming::{RenderStats, render_progressive};
 use residency_viewer::gpu::vdi_render::VdiRenderer;
 use residency_viewer::image::{ImageFormat, RgbImage};
-use residency_viewer::scene::Camera;
 
 /// Arguments of `viewer render`.
 #[derive(clap::Args, Debug)]
@@ -50,7 +49,7 @@ pub struct Args {
     pub vdi: Option<PathBuf>,
     /// With `--vdi`: cross the VDI's empty tiles of lists one by one instead of in one step (a
     /// baseline).
-    #[arg(long, requires = "vdi")]
+    #[arg(long)]
     pub vdi_no_skipping: bool,
 }
 
@@ -60,6 +59,11 @@ pub fn run(args: Args) -> Result<()> {
     if let Some(path) = &args.vdi {
         return render_vdi(&args, path);
     }
+    // (clap's `requires` does not hold it here: the flag is refused by hand, as `view`'s.)
+    anyhow::ensure!(
+        !args.vdi_no_skipping,
+        "--vdi-no-skipping applies to a VDI only (with --vdi)"
+    );
     let (source, scene, options) = open_scene(
         &args.source,
         &args.scene,
@@ -100,19 +104,7 @@ pub fn run(args: Args) -> Result<()> {
 
 /// `viewer render --vdi`: the VDI at `path` ray cast from the scene's camera.
 fn render_vdi(args: &Args, path: &std::path::Path) -> Result<()> {
-    args.scene.refuse_for_vdi()?;
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    let vdi =
-        residency_schemas::vdi::VolumetricDepthImage::decode(&bytes, &path.display().to_string())?;
-    let h = &vdi.header;
-    let extent = std::array::from_fn(|a| h.volume_max[a] - h.volume_min[a]);
-    if h.volume_min != [0.0; 3] {
-        bail!(
-            "{}: a VDI's volume box starts at the origin",
-            path.display()
-        );
-    }
-    let camera = args.scene.camera_for_vdi(Camera::from(&h.camera), extent)?;
+    let (vdi, camera) = args.scene.open_vdi(path)?;
     let start = Instant::now();
     let gpu = Gpu::new()?;
     let renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;

@@ -5,7 +5,8 @@
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use anyhow::{Result, bail, ensure};
+use anyhow::{Context, Result, bail, ensure};
+use residency_schemas::vdi::VolumetricDepthImage;
 
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use residency_viewer::defaults::{
@@ -253,6 +254,28 @@ pub fn filter_parser() -> impl clap::builder::TypedValueParser<Value = Filter> {
 }
 
 impl SceneArgs {
+    /// Reads the volumetric depth image at `path` (`viewer render --vdi`, `viewer view --vdi`)
+    /// and the camera to ray cast it from ([`SceneArgs::camera_for_vdi`]).
+    pub fn open_vdi(
+        &self,
+        path: &std::path::Path,
+    ) -> Result<(VolumetricDepthImage, residency_viewer::scene::Camera)> {
+        self.refuse_for_vdi()?;
+        let bytes =
+            std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
+        let vdi = VolumetricDepthImage::decode(&bytes, &path.display().to_string())?;
+        let h = &vdi.header;
+        if h.volume_min != [0.0; 3] {
+            bail!(
+                "{}: a VDI's volume box starts at the origin",
+                path.display()
+            );
+        }
+        let extent = std::array::from_fn(|a| h.volume_max[a] - h.volume_min[a]);
+        let camera = self.camera_for_vdi((&h.camera).into(), extent)?;
+        Ok((vdi, camera))
+    }
+
     /// The camera to render a volumetric depth image with: the scene file's (else `generated`,
     /// the VDI's own camera), then `--fov` and `--camera` (an orbit about the VDI's volume box
     /// `[0, extent]`). The VDI's colours and transfer functions are baked in, so the flags that

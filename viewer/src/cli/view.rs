@@ -1,13 +1,17 @@
-//! `viewer view`: the interactive window ([`residency_viewer::interactive`]).
+//! `viewer view`: the interactive window ([`residency_viewer::interactive`]), of a volume or,
+//! with `--vdi`, of a volumetric depth image.
 
+use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use anyhow::{Result, ensure};
+use anyhow::{Result, bail, ensure};
 
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
+use residency_viewer::interactive::display::PresentPath;
 use residency_viewer::interactive::session::Session;
+use residency_viewer::interactive::vdi_window::{self, VdiViewConfig};
 use residency_viewer::interactive::window::{self, ViewConfig};
 
 /// The mouse and key controls, shown by `viewer view --help`.
@@ -35,7 +39,12 @@ Keys:
 The panel and the window title show the frame number, samples, bricks requested, fetched
 and substituted, bytes fetched and the GPU time of the last frame. A change of channel
 styles or window size restarts streaming (the renderer is rebuilt); camera changes reuse
-the bricks already resident.";
+the bricks already resident.
+With --vdi: orbit, pan, zoom, r, h, q and Esc as above (the VDI's colours are fixed); the
+panel shows D_I, the rays cast and the frame time.";
+
+/// The frame rate `view --vdi` holds while the camera moves, unless `--target-fps` says.
+const DEFAULT_TARGET_FPS: f64 = 60.0;
 
 /// Arguments of `viewer view`.
 #[derive(clap::Args, Debug)]
@@ -68,6 +77,24 @@ pub struct Args {
     /// quitting.
     #[arg(long, value_name = "MS", default_value_t = 0)]
     pub exit_delay_ms: u64,
+    /// How frames reach the window: `gpu` (a surface, presented with no readback), `cpu` (each
+    /// frame read back and blitted, as under an X server the GPU cannot present to), or
+    /// `auto` (the GPU where a surface can be made, else the CPU).
+    #[arg(long, value_name = "PATH", default_value_t = PresentPath::Auto)]
+    pub present: PresentPath,
+    /// Show this volumetric depth image (`viewer vdi`) instead of a volume, ray cast on the
+    /// GPU for the window's camera: first the scene's (`--scene`, `--camera`, `--fov`), else
+    /// the VDI's own.
+    #[arg(long, value_name = "FILE", conflicts_with_all = ["server", "dataset", "store"])]
+    pub vdi: Option<PathBuf>,
+    /// With `--vdi`: the frame rate to hold while the camera moves, by rendering a fraction
+    /// `D_I` of the rays (at least a quarter of each side) and upsampling; at rest, full
+    /// resolution. Default: 60.
+    #[arg(long, value_name = "FPS")]
+    pub target_fps: Option<f64>,
+    /// With `--vdi`: cross the VDI's empty tiles of lists one by one (a baseline).
+    #[arg(long)]
+    pub vdi_no_skipping: bool,
 }
 
 /// Runs `viewer view`.
@@ -83,6 +110,16 @@ pub fn run(args: Args) -> Result<()> {
         args.width,
         args.height
     );
+    if let Some(path) = &args.vdi {
+        return view_vdi(&args, path);
+    }
+    let vdi_only = [
+        (args.target_fps.is_some(), "--target-fps"),
+        (args.vdi_no_skipping, "--vdi-no-skipping"),
+    ];
+    if let Some((_, flag)) = vdi_only.iter().find(|(given, _)| *given) {
+        bail!("{flag} applies to a VDI only (with --vdi)");
+    }
     let (source, scene, options) = open_scene(
         &args.source,
         &args.scene,
@@ -107,6 +144,47 @@ pub fn run(args: Args) -> Result<()> {
             render_scale: args.render_scale,
             exit_after_frames: args.exit_after_frames,
             exit_delay: Duration::from_millis(args.exit_delay_ms),
+            present: args.present,
+        },
+    )?;
+    Ok(())
+}
+
+/// `viewer view --vdi`: the VDI at `path` in a window.
+fn view_vdi(args: &Args, path: &Path) -> Result<()> {
+    let fps = args.target_fps.unwrap_or(DEFAULT_TARGET_FPS);
+    ensure!(
+        fps > 0.0 && fps.is_finite(),
+        "--target-fps {fps} must be positive"
+    );
+    let (vdi, camera) = args.scene.open_vdi(path)?;
+    let h = &vdi.header;
+    let gpu = Gpu::new()?;
+    let name = path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into(),
+    );
+    tracing::info!(
+        "{name}: {}×{} lists of {} supersegments, GPU {} ({:?})",
+        h.width,
+        h.height,
+        h.supersegments,
+        gpu.adapter_info.name,
+        gpu.adapter_info.backend
+    );
+    vdi_window::run(
+        gpu,
+        vdi,
+        name,
+        camera,
+        VdiViewConfig {
+            window_size: (args.width, args.height),
+            render_scale: args.render_scale,
+            target_ms: 1000.0 / fps,
+            skipping: !args.vdi_no_skipping,
+            exit_after_frames: args.exit_after_frames,
+            exit_delay: Duration::from_millis(args.exit_delay_ms),
+            present: args.present,
         },
     )?;
     Ok(())

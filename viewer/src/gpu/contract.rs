@@ -79,6 +79,12 @@ pub const RAYCAST_PARTS: [(&str, &str); 7] = [
 /// The VDI ray caster as written.
 const VDI_RENDER_BODY: &str = include_str!("../../../shaders/vdi_render.wgsl");
 
+/// The VDI compaction as written (it needs no prelude).
+const VDI_COMPACT_BODY: &str = include_str!("../../../shaders/vdi_compact.wgsl");
+
+/// The present pass as written (it needs no prelude).
+const PRESENT_BODY: &str = include_str!("../../../shaders/present.wgsl");
+
 /// The limit probe as written.
 const PROBE_BODY: &str = include_str!("../../../shaders/probe.wgsl");
 
@@ -483,6 +489,7 @@ pub fn wgsl_prelude() -> String {
         u("FLAG_SUBSTITUTION", FLAG_SUBSTITUTION),
         u("VDI_STATE_SLOTS", VDI_STATE_SLOTS),
         u("VDI_FLAG_SKIPPING", VDI_FLAG_SKIPPING),
+        u("VDI_DEPTH_BINS", VDI_DEPTH_BINS),
         u("FILTER_MANUAL", FILTER_MANUAL),
         u("FILTER_HARDWARE", FILTER_HARDWARE),
     ]
@@ -527,18 +534,34 @@ pub fn vdi_render_source() -> String {
     [wgsl_prelude().as_str(), VDI_RENDER_BODY].concat()
 }
 
+/// The VDI compaction (`shaders/vdi_compact.wgsl`, `crate::gpu::vdi`) as compiled.
+pub fn vdi_compact_source() -> String {
+    VDI_COMPACT_BODY.to_owned()
+}
+
+/// The present pass (`shaders/present.wgsl`, `crate::gpu::present`) as compiled.
+pub fn present_source() -> String {
+    PRESENT_BODY.to_owned()
+}
+
 /// The WGSL files of `shaders/` as compiled, by file name: every file is part of at least one.
-pub fn sources() -> [(&'static str, String); 4] {
+pub fn sources() -> [(&'static str, String); 6] {
     [
         ("raycast.wgsl", raycast_source()),
         ("segments.wgsl", segments_source()),
         ("probe.wgsl", probe_source()),
         ("vdi_render.wgsl", vdi_render_source()),
+        ("vdi_compact.wgsl", vdi_compact_source()),
+        ("present.wgsl", present_source()),
     ]
 }
 
-/// [`VdiView::flags`] bit: cross tiles of lists without supersegments in one step.
+/// [`VdiView::flags`] bit: cross cells of the skipping grid (a tile of lists over a bin of
+/// depth) that no supersegment reaches in one step.
 pub const VDI_FLAG_SKIPPING: u32 = 1;
+
+/// Bins of depth per tile of the skipping grid: the bits of one `u32` mask.
+pub const VDI_DEPTH_BINS: u32 = 32;
 
 gpu_struct! {
     /// The VDI ray caster's uniforms (`shaders/vdi_render.wgsl`): the new camera, and the
@@ -586,12 +609,12 @@ gpu_struct! {
         pub out_height: u32,
         /// The volume's box: highest corner.
         pub box_max: [f32; 3],
-        /// Unused (alignment).
-        pub pad2: u32,
+        /// The skipping grid's nearest depth along `V_O`'s forward (the header's `near`).
+        pub grid_near: f32,
         /// Background colour, linear RGB.
         pub background: [f32; 3],
-        /// Unused (alignment).
-        pub pad3: u32,
+        /// Depth along `V_O`'s forward per bin of the skipping grid.
+        pub grid_bin: f32,
     }
 }
 
@@ -599,16 +622,45 @@ gpu_struct! {
 pub mod vdi_binding {
     /// [`super::VdiView`], uniform.
     pub const VIEW: u32 = 0;
-    /// Supersegments per list.
-    pub const COUNTS: u32 = 1;
-    /// The lists' slots.
+    /// Where each list's supersegments begin in `SLOTS` (`width·height + 1` prefix sums of
+    /// the counts).
+    pub const STARTS: u32 = 1;
+    /// The lists' supersegments, one list after the other.
     pub const SLOTS: u32 = 2;
-    /// The skipping grid: most supersegments per tile of lists.
+    /// The skipping grid: per tile of lists, a mask of the depth bins its supersegments reach.
     pub const TILES: u32 = 3;
     /// The rays' image, linear RGBA `f32` per pixel.
     pub const IMAGE: u32 = 4;
     /// The displayed image, upsampled from the rays' image (preview rendering).
     pub const DISPLAY: u32 = 5;
+}
+
+gpu_struct! {
+    /// The uniforms of the VDI compaction (`shaders/vdi_compact.wgsl`).
+    pub struct VdiCompactParams {
+        /// Pixels of the VDI target.
+        pub pixels: u32,
+        /// Most supersegments per pixel (`N_S`).
+        pub supersegments: u32,
+        /// Slots per pixel in the target: `N_S`, then [`VDI_STATE_SLOTS`].
+        pub stride: u32,
+        /// Pixels per row of the dispatch grid (workgroups along x × 256).
+        pub row: u32,
+    }
+}
+
+/// Binding numbers of `vdi_compact.wgsl`'s group 0.
+pub mod vdi_compact_binding {
+    /// [`super::VdiCompactParams`], uniform.
+    pub const PARAMS: u32 = 0;
+    /// The VDI pass's target.
+    pub const TARGET: u32 = 1;
+    /// Per pixel its two state slots (`gather` writes them).
+    pub const STATE: u32 = 2;
+    /// Per pixel where its supersegments begin in `PACKED`.
+    pub const STARTS: u32 = 3;
+    /// The used slots, one pixel after the other (`scatter` writes them).
+    pub const PACKED: u32 = 4;
 }
 
 /// Binding numbers of `probe.wgsl`'s group 0.

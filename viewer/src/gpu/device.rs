@@ -4,8 +4,14 @@
 use super::error::GpuError;
 use super::pipeline::PipelineCache;
 
-/// A device, its queue and what the adapter supports.
+/// A device, its queue and what the adapter supports, with the instance and adapter they
+/// came from (a window's surface is made on the same instance and checked against the same
+/// adapter).
 pub struct Gpu {
+    /// The instance the adapter was found on.
+    pub instance: wgpu::Instance,
+    /// The adapter the device was opened on.
+    pub adapter: wgpu::Adapter,
     /// The logical device.
     pub device: wgpu::Device,
     /// Its queue.
@@ -89,6 +95,8 @@ impl Gpu {
             adapter_info.backend
         );
         Ok(Self {
+            instance,
+            adapter,
             device,
             queue,
             adapter_info,

@@ -33,6 +33,8 @@
 //!   rasterised on the GPU before the ray caster runs;
 //! - [`probe`] (native): the limit probe of `viewer bench`, the same rays through one resident
 //!   level-0 texture with no traversal, for the renderer's fraction of what sampling costs;
+//! - [`present`]: the present pass, the rendered image put on a surface or texture on the
+//!   GPU with the CPU path's sRGB encoding and the statistics panel, without a readback;
 //! - [`renderer`]: one volume and scene: pipeline, residency state, scene tables and the
 //!   per-frame buffers, with one frame's dispatch and readback (image, capped request list,
 //!   usage, statistics);
@@ -54,6 +56,7 @@ pub mod occupancy;
 pub mod options;
 pub mod page_table;
 pub mod pipeline;
+pub mod present;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod probe;
 pub mod renderer;

@@ -23,7 +23,7 @@ use super::residency::ResidencyState;
 use super::segments::SegmentStage;
 use super::tables::{SceneTables, channel_level_bounds};
 use super::timer::PassTimer;
-use super::vdi::{VdiGeneration, VdiTarget, read_target};
+use super::vdi::{VdiCompactor, VdiGeneration, VdiTarget};
 use crate::octree::ResidencyOctree;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
@@ -89,7 +89,8 @@ pub struct BrickRequest {
 /// One rendered frame, read back.
 #[derive(Clone, Debug)]
 pub struct FrameOutput {
-    /// Linear RGBA per pixel, row-major from the top; alpha is `1 − T`.
+    /// Linear RGBA per pixel, row-major from the top; alpha is `1 − T`. Empty for a frame
+    /// rendered without its pixels ([`Renderer::render_without_pixels`]).
     pub pixels: Vec<[f32; 4]>,
     /// Missing bricks (distinct, at most the cap).
     pub requests: Vec<BrickRequest>,
@@ -173,14 +174,22 @@ pub struct Renderer {
     /// The buffer of the last volumetric depth image generated, and its bind group, kept for
     /// the next of the same size.
     vdi: Option<(VdiTarget, wgpu::BindGroup)>,
+    /// The compaction of a VDI before its readback, compiled at the first VDI.
+    vdi_compactor: Option<VdiCompactor>,
     frame: u32,
+    /// Images read back so far (one per frame that wanted its pixels).
+    image_readbacks: u64,
 }
 
 /// What a frame's passes write: the image, or a volumetric depth image's target.
 #[derive(Clone, Copy)]
 enum FrameTarget<'a> {
-    /// The image (`FrameOutput::pixels`).
-    Image,
+    /// The image, read back into `FrameOutput::pixels` when `pixels` (once, after the
+    /// frame's last pass), else left on the GPU ([`Renderer::image_buffer`]).
+    Image {
+        /// Whether to read the image back.
+        pixels: bool,
+    },
     /// A VDI target, with its bind group.
     Vdi(&'a VdiTarget, &'a wgpu::BindGroup),
 }
@@ -286,7 +295,9 @@ impl Renderer {
             bind_group,
             segments,
             vdi: None,
+            vdi_compactor: None,
             frame: 0,
+            image_readbacks: 0,
         };
         renderer.flush(gpu);
         Ok(renderer)
@@ -553,7 +564,47 @@ impl Renderer {
     }
 
     async fn render_frame(&mut self, gpu: &Gpu) -> Result<FrameOutput, GpuError> {
-        self.run_frame(gpu, FrameTarget::Image).await
+        self.run_frame(gpu, FrameTarget::Image { pixels: true })
+            .await
+    }
+
+    /// [`Renderer::render`] without reading the image back: the frame's image stays in
+    /// [`Renderer::image_buffer`] (for presenting on the GPU) and `FrameOutput::pixels` is
+    /// empty; the requests, usage feedback and counters are read back as by `render`.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn render_without_pixels(&mut self, gpu: &Gpu) -> Result<FrameOutput, GpuError> {
+        pollster::block_on(self.render_without_pixels_async(gpu))
+    }
+
+    /// [`Renderer::render_without_pixels`], awaited.
+    ///
+    /// # Errors
+    /// As [`Renderer::render`].
+    pub async fn render_without_pixels_async(
+        &mut self,
+        gpu: &Gpu,
+    ) -> Result<FrameOutput, GpuError> {
+        gpu.checked_async(
+            "rendering a frame",
+            self.run_frame(gpu, FrameTarget::Image { pixels: false }),
+        )
+        .await
+    }
+
+    /// The image of the last frame on the GPU: linear RGBA `vec4<f32>` per pixel, `width ×
+    /// height` of the options, row-major from the top, composited over the background (what
+    /// [`crate::gpu::present::Presenter::encode`] takes).
+    pub fn image_buffer(&self) -> &wgpu::Buffer {
+        &self.buffers.image
+    }
+
+    /// Images read back so far: one per frame rendered with its pixels, none for
+    /// [`Renderer::render_without_pixels`] or a VDI.
+    pub fn image_readbacks(&self) -> u64 {
+        self.image_readbacks
     }
 
     /// Generates the volumetric depth image of the current view, with at most `supersegments`
@@ -601,25 +652,38 @@ impl Renderer {
                 self.run_frame(gpu, FrameTarget::Vdi(&target, &bind_group)),
             )
             .await;
-        let slots = match result {
-            Ok(out) => read_vdi(gpu, &target).await.map(|slots| (slots, out)),
+        let header = self.vdi_header(supersegments);
+        let compactor = self
+            .vdi_compactor
+            .get_or_insert_with(|| VdiCompactor::new(gpu));
+        let generation = match result {
+            Ok(out) => gpu
+                .checked_async(
+                    "reading a volumetric depth image back",
+                    compactor.read(gpu, &target, header),
+                )
+                .await
+                .map(|vdi| (vdi, out)),
             Err(e) => Err(e),
         };
         self.vdi = Some((target, bind_group));
-        let (slots, out) = slots?;
+        generation
+    }
+
+    /// The header of a VDI of the current view with at most `supersegments` per list.
+    fn vdi_header(&self, supersegments: u32) -> residency_schemas::vdi::VdiHeader {
         let info = self.residency.info();
         let spacing = info.spacing_xyz();
         let voxels = self.residency.octree().geometry().volume_voxels;
         let extent = std::array::from_fn(|a| voxels[a] as f64 * spacing[a]);
-        let header = super::vdi::header(
+        super::vdi::header(
             &self.scene,
             self.options.width,
             self.options.height,
             supersegments,
             extent,
             self.residency.octree().channels().len() as u32,
-        );
-        Ok((read_target(header, &slots), out))
+        )
     }
 
     /// The bind group of the VDI pass: this renderer's, with `target` as the image.
@@ -670,12 +734,10 @@ impl Renderer {
         encoder.clear_buffer(&buffers.rays, 0, None);
         let image_bytes = self.options.width as u64 * self.options.height as u64 * 16;
         let rb = &buffers.readback;
-        // The image is copied and mapped for an image frame only: a VDI pass reads its
-        // target back once, after its last round.
+        // The image is copied and mapped once, after the last round, and only for an image
+        // frame that wants its pixels: a VDI pass reads its target back once, after its last
+        // round, too.
         let mut maps: Vec<&wgpu::Buffer> = vec![&rb.requests, &rb.usage];
-        if let FrameTarget::Image = target {
-            maps.push(&rb.image);
-        }
         if let Some(timer) = &rb.timer {
             maps.push(timer.staging());
         }
@@ -703,7 +765,7 @@ impl Renderer {
                     timestamp_writes,
                 });
                 match target {
-                    FrameTarget::Image => {
+                    FrameTarget::Image { .. } => {
                         pass.set_pipeline(if resident_only {
                             self.pipeline.resident_only()
                         } else {
@@ -738,9 +800,6 @@ impl Renderer {
                 0,
                 u64::from(self.residency.cache().capacity()) * 4,
             );
-            if let FrameTarget::Image = target {
-                encoder.copy_buffer_to_buffer(&buffers.image, 0, &rb.image, 0, image_bytes);
-            }
             if let Some(timer) = &rb.timer {
                 timer.resolve(&mut encoder);
             }
@@ -777,11 +836,26 @@ impl Renderer {
             });
         }
 
+        let read_image = matches!(target, FrameTarget::Image { pixels: true });
+        if read_image {
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("image readback"),
+            });
+            encoder.copy_buffer_to_buffer(&buffers.image, 0, &rb.image, 0, image_bytes);
+            gpu.queue.submit([encoder.finish()]);
+            map_for_reading(device, &[&rb.image]).await?;
+            maps.push(&rb.image);
+        }
         let words: Vec<u32> = bytemuck::cast_slice(&rb.requests.get_mapped_range(..)?).to_vec();
         let usage: Vec<u32> = bytemuck::cast_slice(&rb.usage.get_mapped_range(..)?).to_vec();
         let pixels: Vec<[f32; 4]> = match target {
-            FrameTarget::Image => {
-                bytemuck::cast_slice(&rb.image.get_mapped_range(0..image_bytes)?).to_vec()
+            // Not read back: left on the GPU (`image_buffer`).
+            FrameTarget::Image { pixels } => {
+                if pixels {
+                    bytemuck::cast_slice(&rb.image.get_mapped_range(0..image_bytes)?).to_vec()
+                } else {
+                    Vec::new()
+                }
             }
             FrameTarget::Vdi(..) => Vec::new(),
         };
@@ -789,6 +863,7 @@ impl Renderer {
         for b in maps {
             b.unmap();
         }
+        self.image_readbacks += u64::from(read_image);
         self.residency.cache_mut().note_usage(&usage);
         let bricks_used = usage.iter().filter(|&&u| u == self.frame).count() as u64;
 
@@ -832,21 +907,6 @@ impl Renderer {
             gpu_time_ms,
         })
     }
-}
-
-/// The VDI target's slots, as the VDI pass left them.
-async fn read_vdi(gpu: &Gpu, target: &VdiTarget) -> Result<Vec<[f32; 4]>, GpuError> {
-    let mut encoder = gpu
-        .device
-        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-            label: Some("vdi readback"),
-        });
-    encoder.copy_buffer_to_buffer(&target.buffer, 0, &target.readback, 0, target.bytes());
-    gpu.queue.submit([encoder.finish()]);
-    map_for_reading(&gpu.device, &[&target.readback]).await?;
-    let slots = bytemuck::cast_slice(&target.readback.get_mapped_range(..)?).to_vec();
-    target.readback.unmap();
-    Ok(slots)
 }
 
 /// Distance `D` (world) from the eye to the shader's view point `eye + D·forward`, from which

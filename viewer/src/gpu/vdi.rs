@@ -10,17 +10,20 @@ use residency_schemas::vdi::{
     VolumetricDepthImage,
 };
 
-use super::buffers::{check_binding, readback_buffer, storage_buffer};
-use super::contract::VDI_STATE_SLOTS;
+use super::buffers::{
+    check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
+};
+use super::contract::{VDI_STATE_SLOTS, VdiCompactParams, vdi_compact_binding, vdi_compact_source};
 use super::device::Gpu;
 use super::error::GpuError;
+use super::pipeline::buffer_entry;
 use crate::scene::{Camera, Scene};
 
 /// Bytes of one slot of the VDI target (a `vec4<f32>`).
 const SLOT_BYTES: u64 = 16;
 
-/// The buffer the VDI pass writes (bound as the image) and its readback, for one image size
-/// and supersegment count.
+/// The buffer the VDI pass writes (bound as the image), for one image size and supersegment
+/// count.
 pub(crate) struct VdiTarget {
     /// Most supersegments per pixel.
     pub supersegments: u32,
@@ -28,8 +31,6 @@ pub(crate) struct VdiTarget {
     pub pixels: u64,
     /// Per pixel `supersegments + VDI_STATE_SLOTS` slots.
     pub buffer: wgpu::Buffer,
-    /// Its readback.
-    pub readback: wgpu::Buffer,
 }
 
 impl VdiTarget {
@@ -48,15 +49,187 @@ impl VdiTarget {
         Ok(Self {
             supersegments,
             pixels,
-            buffer: storage_buffer(gpu, "vdi target", bytes, wgpu::BufferUsages::COPY_SRC),
-            readback: readback_buffer(gpu, "vdi readback", bytes),
+            buffer: storage_buffer(gpu, "vdi target", bytes, wgpu::BufferUsages::empty()),
         })
     }
+}
 
-    /// Its size in bytes.
-    pub fn bytes(&self) -> u64 {
-        self.buffer.size()
+/// Threads per workgroup of `vdi_compact.wgsl`.
+const COMPACT_WORKGROUP: u64 = 256;
+
+/// The compaction of a VDI target on the GPU (`shaders/vdi_compact.wgsl`), so that only each
+/// pixel's state and its used supersegments are read back: compiled once per renderer.
+pub(crate) struct VdiCompactor {
+    gather: wgpu::ComputePipeline,
+    scatter: wgpu::ComputePipeline,
+    params: wgpu::Buffer,
+}
+
+impl VdiCompactor {
+    /// Compiles the two passes.
+    pub fn new(gpu: &Gpu) -> Self {
+        let module = gpu
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("vdi_compact.wgsl"),
+                source: wgpu::ShaderSource::Wgsl(vdi_compact_source().into()),
+            });
+        let entry = |name: &str| {
+            gpu.device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some(name),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some(name),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    cache: None,
+                })
+        };
+        Self {
+            gather: entry("gather"),
+            scatter: entry("scatter"),
+            params: uniform_buffer(
+                gpu,
+                "vdi compact params",
+                size_of::<VdiCompactParams>() as u64,
+            ),
+        }
     }
+
+    /// Reads `target`, as the VDI pass left it, into the VDI of `header`: the pixels' state
+    /// first, then only the supersegments in use.
+    ///
+    /// # Errors
+    /// A [`GpuError`] naming a buffer over the device's limits, or a readback that failed.
+    pub async fn read(
+        &self,
+        gpu: &Gpu,
+        target: &VdiTarget,
+        header: VdiHeader,
+    ) -> Result<VdiGeneration, GpuError> {
+        let pixels = target.pixels;
+        let n = target.supersegments;
+        let groups = pixels.div_ceil(COMPACT_WORKGROUP).max(1);
+        let groups_x = groups.min(u64::from(gpu.limits.max_compute_workgroups_per_dimension));
+        let grid = (groups_x as u32, groups.div_ceil(groups_x) as u32);
+        let params = VdiCompactParams {
+            pixels: pixels as u32,
+            supersegments: n,
+            stride: n + VDI_STATE_SLOTS,
+            row: (groups_x * COMPACT_WORKGROUP) as u32,
+        };
+        gpu.queue
+            .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
+        let state_bytes = pixels * 2 * SLOT_BYTES;
+        check_binding(
+            gpu,
+            "the VDI's pixel state",
+            state_bytes,
+            "generate a smaller image",
+        )?;
+        let state = storage_buffer(gpu, "vdi state", state_bytes, wgpu::BufferUsages::COPY_SRC);
+        let bind = |pipeline: &wgpu::ComputePipeline, entries: &[wgpu::BindGroupEntry<'_>]| {
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("vdi compact"),
+                layout: &pipeline.get_bind_group_layout(0),
+                entries,
+            })
+        };
+        let gather = bind(
+            &self.gather,
+            &[
+                buffer_entry(vdi_compact_binding::PARAMS, &self.params),
+                buffer_entry(vdi_compact_binding::TARGET, &target.buffer),
+                buffer_entry(vdi_compact_binding::STATE, &state),
+            ],
+        );
+        let slots = read_back(gpu, &self.gather, &gather, grid, &state).await?;
+        let mut generation = VdiGeneration {
+            image: VolumetricDepthImage::new(header),
+            dvr: Vec::with_capacity(pixels as usize),
+            gamma: Vec::with_capacity(pixels as usize),
+            marches: 0,
+        };
+        let mut starts = Vec::with_capacity(pixels as usize);
+        let mut used = 0u32;
+        for (p, pair) in slots.chunks_exact(2).enumerate() {
+            let count = pair[1][0].to_bits().min(n);
+            generation.dvr.push(pair[0]);
+            generation.gamma.push(pair[1][1]);
+            generation.marches += u64::from(pair[1][2].to_bits());
+            generation.image.counts[p] = count as u8;
+            starts.push(used);
+            used += count;
+        }
+        let starts_buffer =
+            storage_buffer(gpu, "vdi starts", pixels * 4, wgpu::BufferUsages::empty());
+        gpu.queue
+            .write_buffer(&starts_buffer, 0, bytemuck::cast_slice(&starts));
+        let packed_bytes = u64::from(used) * SLOT_BYTES;
+        check_binding(
+            gpu,
+            "the VDI's supersegments",
+            packed_bytes,
+            "generate a smaller image",
+        )?;
+        let packed = storage_buffer(
+            gpu,
+            "vdi packed",
+            packed_bytes,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let scatter = bind(
+            &self.scatter,
+            &[
+                buffer_entry(vdi_compact_binding::PARAMS, &self.params),
+                buffer_entry(vdi_compact_binding::TARGET, &target.buffer),
+                buffer_entry(vdi_compact_binding::STARTS, &starts_buffer),
+                buffer_entry(vdi_compact_binding::PACKED, &packed),
+            ],
+        );
+        let slots = read_back(gpu, &self.scatter, &scatter, grid, &packed).await?;
+        let image = &mut generation.image;
+        image.colour.reserve_exact(used as usize);
+        image.depth.reserve_exact(used as usize);
+        for slot in &slots[..used as usize] {
+            let [r, g] = unpack_half2(slot[0]);
+            let [b, a] = unpack_half2(slot[1]);
+            image.colour.push([r, g, b, a]);
+            image.depth.push([slot[2], slot[3]]);
+        }
+        Ok(generation)
+    }
+}
+
+/// Runs `pipeline` over the grid and reads `output` back.
+async fn read_back(
+    gpu: &Gpu,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    grid: (u32, u32),
+    output: &wgpu::Buffer,
+) -> Result<Vec<[f32; 4]>, GpuError> {
+    let readback = readback_buffer(gpu, "vdi compact readback", output.size());
+    let mut encoder = gpu
+        .device
+        .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+            label: Some("vdi compact"),
+        });
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("vdi compact"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, bind_group, &[]);
+        pass.dispatch_workgroups(grid.0, grid.1, 1);
+    }
+    encoder.copy_buffer_to_buffer(output, 0, &readback, 0, output.size());
+    gpu.queue.submit([encoder.finish()]);
+    map_for_reading(&gpu.device, &[&readback]).await?;
+    let slots = bytemuck::cast_slice(&readback.get_mapped_range(..)?).to_vec();
+    readback.unmap();
+    Ok(slots)
 }
 
 /// What the VDI pass found for one image, beside the VDI itself.
@@ -71,38 +244,6 @@ pub struct VdiGeneration {
     pub gamma: Vec<f32>,
     /// Marches the rays took in all (one per ray when every ray fits at the first `γ`).
     pub marches: u64,
-}
-
-/// Reads the VDI target's slots (`slots`, as the pass left them) into the image of `header`.
-pub(crate) fn read_target(header: VdiHeader, slots: &[[f32; 4]]) -> VdiGeneration {
-    let n = header.supersegments as usize;
-    let stride = n + VDI_STATE_SLOTS as usize;
-    let mut image = VolumetricDepthImage::new(header);
-    let pixels = image.counts.len();
-    let mut dvr = Vec::with_capacity(pixels);
-    let mut gamma = Vec::with_capacity(pixels);
-    let mut marches = 0u64;
-    for p in 0..pixels {
-        let at = &slots[p * stride..(p + 1) * stride];
-        let (segments, state) = at.split_at(n);
-        dvr.push(state[0]);
-        let count = state[1][0].to_bits().min(n as u32) as usize;
-        gamma.push(state[1][1]);
-        marches += u64::from(state[1][2].to_bits());
-        image.counts[p] = count as u8;
-        for (s, slot) in segments[..count].iter().enumerate() {
-            let [r, g] = unpack_half2(slot[0]);
-            let [b, a] = unpack_half2(slot[1]);
-            image.colour[p * n + s] = [r, g, b, a];
-            image.depth[p * n + s] = [slot[2], slot[3]];
-        }
-    }
-    VdiGeneration {
-        image,
-        dvr,
-        gamma,
-        marches,
-    }
 }
 
 /// WGSL's `unpack2x16float` of the bits of `word`.

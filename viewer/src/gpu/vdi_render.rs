@@ -1,16 +1,16 @@
 //! Rendering a volumetric depth image from any nearby viewpoint on the GPU
 //! (`shaders/vdi_render.wgsl`, the VDI paper's Sec. 4): the VDI uploaded once (its counts, its
-//! supersegments as the generator packs them, and the skipping grid derived from the counts),
+//! supersegments as the generator packs them, and the skipping grid derived from them),
 //! then one compute pass per frame for a camera; for preview rendering (the paper's Sec. 4.4)
 //! rays are cast for a fraction `D_I` of the width and height and a second pass upsamples
 //! them (`crate::frame_rate` picks `D_I` to hold a frame time).
 
-use residency_schemas::vdi::VolumetricDepthImage;
+use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
 
 use super::buffers::{
     check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
 };
-use super::contract::{VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source};
+use super::contract::{VDI_DEPTH_BINS, VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
@@ -31,25 +31,59 @@ pub struct VdiFrame {
     pub gpu_time_ms: Option<f64>,
 }
 
-/// The most supersegments of each `SKIP_TILE × SKIP_TILE` tile of `vdi`'s lists, row-major,
-/// and the tiles per row.
+/// The skipping grid of `vdi` (the paper's Sec. 4.3): per `SKIP_TILE × SKIP_TILE` tile of
+/// lists, row-major, a mask whose bit `b` is set where a supersegment of the tile reaches
+/// depth bin `b` of [`grid_bins`]; and the tiles per row.
+///
+/// A supersegment's depth is its distance along its list's ray times the cosine of that ray
+/// off `V_O`'s forward, as the shader computes it; each reaches the bins of its depth span
+/// widened by a hundredth of a bin, so that rounding in the shader never skips it.
 pub fn skipping_grid(vdi: &VolumetricDepthImage) -> (Vec<u32>, u32) {
-    let (w, h) = (vdi.header.width, vdi.header.height);
+    let h = &vdi.header;
+    let (w, rows) = (h.width, h.height);
+    let starts = vdi.starts();
     let tiles_x = w.div_ceil(SKIP_TILE);
-    let tiles_y = h.div_ceil(SKIP_TILE);
+    let tiles_y = rows.div_ceil(SKIP_TILE);
     let mut tiles = vec![0u32; (tiles_x * tiles_y) as usize];
-    for y in 0..h {
+    let (near, bin) = grid_bins(h);
+    let tan_x = glam::Vec3::from(h.rays.right).length();
+    let tan_y = glam::Vec3::from(h.rays.up).length();
+    let last = VDI_DEPTH_BINS as f32 - 1.0;
+    let bin_of = |z: f32| ((z - near) / bin).floor().clamp(0.0, last) as u32;
+    for y in 0..rows {
+        let oy = (1.0 - (y as f32 + 0.5) / rows as f32 * 2.0) * tan_y;
         for x in 0..w {
-            let t = ((y / SKIP_TILE) * tiles_x + x / SKIP_TILE) as usize;
-            let count = u32::from(vdi.counts[(y * w + x) as usize]);
-            tiles[t] = tiles[t].max(count);
+            let list = (y * w + x) as usize;
+            let (first, end) = (starts[list], starts[list + 1]);
+            if first == end {
+                continue;
+            }
+            let ox = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan_x;
+            let cos = (1.0 + ox * ox + oy * oy).sqrt().recip();
+            let mut mask = 0u32;
+            for [front, back] in &vdi.depth[first..end] {
+                let lo = bin_of(front * cos - 0.01 * bin);
+                let hi = bin_of(back * cos + 0.01 * bin).max(lo);
+                mask |= (u32::MAX >> (31 - (hi - lo))) << lo;
+            }
+            tiles[((y / SKIP_TILE) * tiles_x + x / SKIP_TILE) as usize] |= mask;
         }
     }
     (tiles, tiles_x)
 }
 
-/// The slots of `vdi` as the generator's pass writes them: per list `N_S` of
-/// `vec4(pack2x16float(r, g), pack2x16float(b, a), front, back)`.
+/// The skipping grid's depth bins for a VDI of `header`: the nearest depth and the depth per
+/// bin, [`VDI_DEPTH_BINS`] bins from the header's `near` to its `far`.
+pub fn grid_bins(header: &VdiHeader) -> (f32, f32) {
+    let span = (header.far - header.near)
+        .max(header.far * 1e-6)
+        .max(f32::MIN_POSITIVE);
+    (header.near, span / VDI_DEPTH_BINS as f32)
+}
+
+/// The supersegments of `vdi`, lists one after the other as the file holds them, each as the
+/// generator's pass writes a slot: `vec4(pack2x16float(r, g), pack2x16float(b, a), front,
+/// back)`; one zero slot for a VDI without any (a binding is never empty).
 fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
     let pack = |a: f32, b: f32| {
         let lo = u32::from(half::f16::from_f32(a).to_bits());
@@ -60,12 +94,13 @@ fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
         .iter()
         .zip(&vdi.depth)
         .map(|(c, d)| [pack(c[0], c[1]), pack(c[2], c[3]), d[0], d[1]])
+        .chain(vdi.colour.is_empty().then_some([0.0; 4]))
         .collect()
 }
 
 /// A VDI on the GPU, with the pipeline and image of one output size.
 pub struct VdiRenderer {
-    vdi_header: residency_schemas::vdi::VdiHeader,
+    vdi_header: VdiHeader,
     width: u32,
     height: u32,
     tiles_x: u32,
@@ -137,8 +172,9 @@ impl VdiRenderer {
             gpu.queue.write_buffer(&buffer, 0, bytes);
             buffer
         };
-        let counts: Vec<u32> = vdi.counts.iter().map(|&c| u32::from(c)).collect();
-        let counts = upload("vdi counts", bytemuck::cast_slice(&counts));
+        // Σ counts ≤ MAX_VDI_SLOTS fits a u32.
+        let starts: Vec<u32> = vdi.starts().iter().map(|&s| s as u32).collect();
+        let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
         let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
         let (tiles, tiles_x) = skipping_grid(vdi);
         let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
@@ -159,7 +195,7 @@ impl VdiRenderer {
             label: Some("vdi render"),
             entries: &[
                 uniform_layout(vdi_binding::VIEW),
-                storage_layout(vdi_binding::COUNTS, true),
+                storage_layout(vdi_binding::STARTS, true),
                 storage_layout(vdi_binding::SLOTS, true),
                 storage_layout(vdi_binding::TILES, true),
                 storage_layout(vdi_binding::IMAGE, false),
@@ -187,7 +223,7 @@ impl VdiRenderer {
             layout: &layout,
             entries: &[
                 buffer_entry(vdi_binding::VIEW, &view),
-                buffer_entry(vdi_binding::COUNTS, &counts),
+                buffer_entry(vdi_binding::STARTS, &starts),
                 buffer_entry(vdi_binding::SLOTS, &slots),
                 buffer_entry(vdi_binding::TILES, &tiles),
                 buffer_entry(vdi_binding::IMAGE, &image),
@@ -228,6 +264,7 @@ impl VdiRenderer {
         };
         let (o_right, o_tan_x) = unit(h.rays.right);
         let (o_up, o_tan_y) = unit(h.rays.up);
+        let (grid_near, grid_bin) = grid_bins(h);
         VdiView {
             width: rays.0,
             height: rays.1,
@@ -251,7 +288,8 @@ impl VdiRenderer {
             box_min: rel(h.volume_min),
             box_max: rel(h.volume_max),
             background: h.background,
-            ..VdiView::default()
+            grid_near,
+            grid_bin,
         }
     }
 
@@ -292,27 +330,23 @@ impl VdiRenderer {
         (of(self.width), of(self.height))
     }
 
-    /// [`VdiRenderer::render_preview`], awaited.
-    ///
-    /// # Errors
-    /// As [`VdiRenderer::render`].
-    pub async fn render_async(
+    /// Records the passes of a frame for `camera` at `D_I` = `scale` into `encoder`, timed
+    /// where the device has timestamp queries, and returns the buffer that then holds the
+    /// image (linear RGBA `vec4<f32>` per pixel, `width × height`, row-major from the top),
+    /// for presenting on the GPU without a readback, and the rays cast.
+    pub fn encode(
         &self,
         gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
         camera: &Camera,
         skipping: bool,
         scale: f64,
-    ) -> Result<VdiFrame, GpuError> {
+    ) -> (&wgpu::Buffer, (u32, u32)) {
         let rays = self.rays(scale);
         let full = rays == (self.width, self.height);
         let view = self.view(camera, skipping, rays);
         gpu.queue
             .write_buffer(&self.view, 0, bytemuck::bytes_of(&view));
-        let mut encoder = gpu
-            .device
-            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
-                label: Some("vdi frame"),
-            });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("vdi render"),
@@ -326,7 +360,26 @@ impl VdiRenderer {
                 pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
             }
         }
-        let shown = if full { &self.image } else { &self.display };
+        (if full { &self.image } else { &self.display }, rays)
+    }
+
+    /// [`VdiRenderer::render_preview`], awaited.
+    ///
+    /// # Errors
+    /// As [`VdiRenderer::render`].
+    pub async fn render_async(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        skipping: bool,
+        scale: f64,
+    ) -> Result<VdiFrame, GpuError> {
+        let mut encoder = gpu
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("vdi frame"),
+            });
+        let (shown, rays) = self.encode(gpu, &mut encoder, camera, skipping, scale);
         encoder.copy_buffer_to_buffer(shown, 0, &self.readback, 0, shown.size());
         let mut maps = vec![&self.readback];
         if let Some(timer) = &self.timer {
@@ -345,5 +398,10 @@ impl VdiRenderer {
             rays,
             gpu_time_ms,
         })
+    }
+
+    /// The output size, `(width, height)`.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
     }
 }

@@ -4,20 +4,15 @@
 
 use font8x8::UnicodeFonts;
 
-use crate::image::linear_to_srgb8;
+use crate::gpu::present::{SRGB_TABLE_ENTRIES as TABLE, srgb_table};
 
-/// Linear light to 8-bit sRGB through a table (4096 entries: under one 8-bit step of error).
+/// Linear light to 8-bit sRGB through a table (4096 entries: under one 8-bit step of error),
+/// the one the GPU's present pass uses too ([`srgb_table`]).
 pub struct SrgbTable(Vec<u8>);
-
-const TABLE: usize = 4096;
 
 impl Default for SrgbTable {
     fn default() -> Self {
-        Self(
-            (0..TABLE)
-                .map(|i| linear_to_srgb8(i as f32 / (TABLE - 1) as f32))
-                .collect(),
-        )
+        Self(srgb_table())
     }
 }
 
@@ -111,20 +106,57 @@ impl Canvas<'_> {
 
     /// Draws `lines` (text and colour) in a shaded panel at the top-left corner.
     pub fn panel(&mut self, lines: &[(String, u32)], scale: usize) {
+        let (w, h) = panel_size(lines, scale);
+        self.shade(0, 0, w, h);
+        self.panel_text(lines, scale);
+    }
+
+    /// The text of [`Canvas::panel`], without the shading.
+    fn panel_text(&mut self, lines: &[(String, u32)], scale: usize) {
         let scale = scale.max(1);
         let margin = 4 * scale;
-        let chars = lines
-            .iter()
-            .map(|(t, _)| t.chars().count())
-            .max()
-            .unwrap_or(0);
-        let w = chars * 8 * scale + 2 * margin;
-        let h = lines.len() * LINE_HEIGHT * scale + 2 * margin - 2 * scale;
-        self.shade(0, 0, w, h);
         for (i, (t, rgb)) in lines.iter().enumerate() {
             self.text(margin, margin + i * LINE_HEIGHT * scale, t, *rgb, scale);
         }
     }
+}
+
+/// The size in pixels of the panel [`Canvas::panel`] draws for `lines` at `scale`.
+pub fn panel_size(lines: &[(String, u32)], scale: usize) -> (usize, usize) {
+    let scale = scale.max(1);
+    let margin = 4 * scale;
+    let chars = lines
+        .iter()
+        .map(|(t, _)| t.chars().count())
+        .max()
+        .unwrap_or(0);
+    let w = chars * 8 * scale + 2 * margin;
+    let h = lines.len() * LINE_HEIGHT * scale + 2 * margin - 2 * scale;
+    (w, h)
+}
+
+/// The panel [`Canvas::panel`] draws, as the GPU's present pass takes it
+/// ([`crate::gpu::present::Presenter::set_panel`]): `(width, height, RGBA bytes)`, the text
+/// pixels in their colour with alpha 255, the shaded rest all 0.
+pub fn panel_rgba(lines: &[(String, u32)], scale: usize) -> (u32, u32, Vec<u8>) {
+    /// A value no text colour (`0x00RRGGBB`) has.
+    const SHADED: u32 = 0xff00_0000;
+    let (w, h) = panel_size(lines, scale);
+    let mut pixels = vec![SHADED; w * h];
+    Canvas {
+        pixels: &mut pixels,
+        width: w,
+        height: h,
+    }
+    .panel_text(lines, scale);
+    let rgba = pixels
+        .iter()
+        .flat_map(|&p| match p {
+            SHADED => [0; 4],
+            p => [(p >> 16) as u8, (p >> 8) as u8, p as u8, 255],
+        })
+        .collect();
+    (w as u32, h as u32, rgba)
 }
 
 /// A linear RGB colour as a bright `0x00RRGGBB` text colour (at least a third grey, so a

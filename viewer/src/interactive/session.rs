@@ -62,8 +62,12 @@ pub struct Session {
     pending: FrameStats,
     last: Option<FrameStats>,
     pixels: Vec<[f32; 4]>,
-    /// Size of `pixels`.
+    /// Size of the last frame (of `pixels` where they are read back).
     image_size: (u32, u32),
+    /// Whether frames are read back into `pixels` (a CPU blit), or left on the GPU.
+    read_pixels: bool,
+    /// With no channel visible and frames left on the GPU: the background image there.
+    blank: Option<wgpu::Buffer>,
     size: (u32, u32),
     status: String,
     totals: Totals,
@@ -97,6 +101,8 @@ impl Session {
             last: None,
             pixels: Vec::new(),
             image_size: (0, 0),
+            read_pixels: true,
+            blank: None,
             size,
             status: "starting".into(),
             totals: Totals::default(),
@@ -168,9 +174,30 @@ impl Session {
         self.size
     }
 
-    /// The last frame: `(width, height, linear RGBA pixels)`.
+    /// The last frame: `(width, height, linear RGBA pixels)` (no pixels while frames are
+    /// left on the GPU, see [`Session::set_read_pixels`]).
     pub fn image(&self) -> (u32, u32, &[[f32; 4]]) {
         (self.image_size.0, self.image_size.1, &self.pixels)
+    }
+
+    /// Whether frames are read back to [`Session::image`] (`true`, the default: a CPU blit
+    /// shows them) or left on the GPU for presenting there ([`Session::gpu_image`]).
+    pub fn set_read_pixels(&mut self, read: bool) {
+        if read != self.read_pixels {
+            self.read_pixels = read;
+            self.rebuild = true;
+            self.render_needed = true;
+        }
+    }
+
+    /// The last frame on the GPU: the buffer (linear RGBA `vec4<f32>` per pixel, row-major
+    /// from the top) and its size; `None` before the first frame.
+    pub fn gpu_image(&self) -> Option<(&wgpu::Buffer, (u32, u32))> {
+        match (&self.renderer, &self.blank) {
+            (Some(r), _) if r.frames() > 0 => Some((r.image_buffer(), self.image_size)),
+            (None, Some(blank)) => Some((blank, self.image_size)),
+            _ => None,
+        }
     }
 
     /// Statistics of the last frame rendered.
@@ -192,6 +219,7 @@ impl Session {
         self.rebuild = false;
         self.render_needed = true;
         self.renderer = None;
+        self.blank = None;
         // Queued requests were for the old renderer; fetches under way still complete and
         // are inserted if their channel is still drawn.
         self.fetcher.submit(Vec::new());
@@ -208,6 +236,17 @@ impl Session {
             let (w, h) = self.size;
             self.pixels = vec![[bg[0], bg[1], bg[2], 0.0]; (w * h) as usize];
             self.image_size = (w, h);
+            if !self.read_pixels {
+                let bytes: &[u8] = bytemuck::cast_slice(&self.pixels);
+                let blank = crate::gpu::buffers::storage_buffer(
+                    &self.gpu,
+                    "background image",
+                    bytes.len() as u64,
+                    wgpu::BufferUsages::COPY_SRC,
+                );
+                self.gpu.queue.write_buffer(&blank, 0, bytes);
+                self.blank = Some(blank);
+            }
             self.status = "no channel visible".into();
             return Ok(());
         }
@@ -285,7 +324,11 @@ impl Session {
             return Ok(if drained { Step::Idle } else { Step::Waiting });
         }
         self.render_needed = false;
-        let out = renderer.render(&self.gpu)?;
+        let out = if self.read_pixels {
+            renderer.render(&self.gpu)?
+        } else {
+            renderer.render_without_pixels(&self.gpu)?
+        };
         self.pixels = out.pixels;
         self.image_size = (renderer.options().width, renderer.options().height);
         self.totals.frames += 1;

@@ -1,9 +1,9 @@
-//! The window: a winit 0.30 event loop that steps the [`Session`], shows each new frame with
-//! `softbuffer` (a CPU blit: works on any X11 server, Xvfb included) under a statistics
-//! panel, and turns pointer and key input into camera and channel-style changes.
+//! The window: a winit 0.30 event loop that steps the [`Session`], shows each new frame under a
+//! statistics panel ([`super::display`]: on the GPU through a surface, no readback; else by a
+//! `softbuffer` CPU blit, which works on any X11 server), and turns pointer and key input into
+//! camera and channel-style changes.
 
 use std::io::Write;
-use std::num::NonZeroU32;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -17,10 +17,12 @@ use winit::window::{Window, WindowId};
 
 use super::camera_control::{orbit, pan, zoom};
 use super::controls::{self, End, KEY_STEP};
-use super::overlay::{Canvas, SrgbTable, text_colour};
+use super::display::{Display, DisplayError, Frame, PresentPath};
+use super::overlay::text_colour;
 use super::session::{Session, Step};
 use crate::defaults::volume_extent;
 use crate::gpu::GpuError;
+use crate::gpu::device::Gpu;
 use crate::scene::{Camera, Scene};
 
 /// Why the window stopped with an error: no X11 display, a window or frame buffer that cannot
@@ -36,15 +38,9 @@ pub enum ViewError {
     /// The window cannot be created.
     #[error("cannot create the window")]
     CreateWindow(#[source] OsError),
-    /// `softbuffer` failed to set up, size, fill or present the window's frame buffer.
-    #[error("{what}: {reason}")]
-    Buffer {
-        /// What was being done, e.g. `presenting the frame`.
-        what: &'static str,
-        /// What softbuffer said, as text: its error is not `Send` or `Sync`, which the
-        /// binary's error report needs.
-        reason: String,
-    },
+    /// Frames cannot be shown (no surface or frame buffer, or presenting failed).
+    #[error(transparent)]
+    Display(#[from] DisplayError),
     /// The renderer failed.
     #[error(transparent)]
     Gpu(Box<GpuError>),
@@ -53,14 +49,6 @@ pub enum ViewError {
 impl From<GpuError> for ViewError {
     fn from(e: GpuError) -> Self {
         Self::Gpu(Box::new(e))
-    }
-}
-
-/// A softbuffer error as [`ViewError::Buffer`].
-fn buffer_error(what: &'static str) -> impl FnOnce(softbuffer::SoftBufferError) -> ViewError {
-    move |e| ViewError::Buffer {
-        what,
-        reason: e.to_string(),
     }
 }
 
@@ -77,6 +65,8 @@ pub struct ViewConfig {
     pub exit_after_frames: Option<u64>,
     /// How long a settled view waits for input before quitting (with `exit_after_frames`).
     pub exit_delay: Duration,
+    /// How frames reach the window.
+    pub present: PresentPath,
 }
 
 /// How long one step waits for bricks when there is nothing new to render.
@@ -96,8 +86,7 @@ struct App {
     config: ViewConfig,
     home: Camera,
     window: Option<Arc<Window>>,
-    surface: Option<softbuffer::Surface<Arc<Window>, Arc<Window>>>,
-    srgb: SrgbTable,
+    display: Option<Display>,
     modifiers: ModifiersState,
     cursor: Option<PhysicalPosition<f64>>,
     drag: Option<(MouseButton, DragMode)>,
@@ -138,8 +127,7 @@ pub fn run(session: Session, config: ViewConfig) -> Result<(), ViewError> {
         config,
         home,
         window: None,
-        surface: None,
-        srgb: SrgbTable::default(),
+        display: None,
         modifiers: ModifiersState::empty(),
         cursor: None,
         drag: None,
@@ -162,6 +150,35 @@ pub fn run(session: Session, config: ViewConfig) -> Result<(), ViewError> {
 }
 
 /// A value in at most about six characters.
+/// The image size for a window of `size` at `scale` render pixels per window pixel (at least
+/// one pixel each way).
+pub(super) fn render_size(size: PhysicalSize<u32>, scale: f64) -> (u32, u32) {
+    (
+        ((f64::from(size.width) * scale).round() as u32).max(1),
+        ((f64::from(size.height) * scale).round() as u32).max(1),
+    )
+}
+
+/// Opens a window titled `title` of `size` (at least 1×1) and how frames reach it.
+pub(super) fn open_window(
+    event_loop: &ActiveEventLoop,
+    title: String,
+    (w, h): (u32, u32),
+    gpu: &Gpu,
+    present: PresentPath,
+) -> Result<(Arc<Window>, Display), ViewError> {
+    let attributes = Window::default_attributes()
+        .with_title(title)
+        .with_inner_size(PhysicalSize::new(w.max(1), h.max(1)));
+    let window = Arc::new(
+        event_loop
+            .create_window(attributes)
+            .map_err(ViewError::CreateWindow)?,
+    );
+    let display = Display::new(gpu, Arc::clone(&window), present)?;
+    Ok((window, display))
+}
+
 fn short(v: f64) -> String {
     let a = v.abs();
     if a == 0.0 || (1e-3..1e5).contains(&a) {
@@ -178,6 +195,15 @@ fn short(v: f64) -> String {
     }
 }
 
+/// The panel's glyph scale in a window of `size`: doubled on large windows.
+fn panel_scale(size: PhysicalSize<u32>) -> usize {
+    if size.width >= 1400 && size.height >= 900 {
+        2
+    } else {
+        1
+    }
+}
+
 fn mib(bytes: u64) -> f64 {
     bytes as f64 / (1u64 << 20) as f64
 }
@@ -191,11 +217,7 @@ impl App {
     }
 
     fn render_size(&self, size: PhysicalSize<u32>) -> (u32, u32) {
-        let s = self.config.render_scale;
-        (
-            ((size.width as f64 * s).round() as u32).max(1),
-            ((size.height as f64 * s).round() as u32).max(1),
-        )
+        render_size(size, self.config.render_scale)
     }
 
     fn window_height(&self) -> f64 {
@@ -326,37 +348,24 @@ impl App {
 
     fn present(&mut self) -> Result<(), ViewError> {
         let lines = self.overlay.then(|| self.stats_lines());
-        let (Some(window), Some(surface)) = (&self.window, &mut self.surface) else {
+        let (Some(window), Some(display)) = (&self.window, &mut self.display) else {
             return Ok(());
         };
         let size = window.inner_size();
-        let (Some(w), Some(h)) = (NonZeroU32::new(size.width), NonZeroU32::new(size.height)) else {
+        let panel = lines.map(|lines| (lines, panel_scale(size)));
+        let frame = if display.on_gpu() {
+            match self.session.gpu_image() {
+                Some((buffer, size)) => Frame::Gpu(buffer, size),
+                None => return Ok(()),
+            }
+        } else {
+            let (iw, ih, pixels) = self.session.image();
+            Frame::Cpu(pixels, (iw, ih))
+        };
+        if !display.show(self.session.gpu(), frame, panel)? {
+            window.request_redraw();
             return Ok(());
-        };
-        surface
-            .resize(w, h)
-            .map_err(buffer_error("resizing the window buffer"))?;
-        let mut buffer = surface
-            .buffer_mut()
-            .map_err(buffer_error("window buffer"))?;
-        let mut canvas = Canvas {
-            pixels: &mut buffer,
-            width: size.width as usize,
-            height: size.height as usize,
-        };
-        let (iw, ih, pixels) = self.session.image();
-        canvas.blit(pixels, iw as usize, ih as usize, &self.srgb);
-        if let Some(lines) = lines {
-            let scale = if size.width >= 1400 && size.height >= 900 {
-                2
-            } else {
-                1
-            };
-            canvas.panel(&lines, scale);
         }
-        buffer
-            .present()
-            .map_err(buffer_error("presenting the frame"))?;
         let frame = self.session.totals().frames;
         if frame != self.last_shown {
             self.last_shown = frame;
@@ -480,24 +489,20 @@ impl ApplicationHandler for App {
         if self.window.is_some() {
             return;
         }
-        let (w, h) = self.config.window_size;
-        let attributes = Window::default_attributes()
-            .with_title(format!("viewer: {}", self.session.info().name))
-            .with_inner_size(PhysicalSize::new(w.max(1), h.max(1)));
+        let title = format!("viewer: {}", self.session.info().name);
         let result = (|| -> Result<(), ViewError> {
-            let window = Arc::new(
-                event_loop
-                    .create_window(attributes)
-                    .map_err(ViewError::CreateWindow)?,
-            );
-            let context = softbuffer::Context::new(Arc::clone(&window))
-                .map_err(buffer_error("softbuffer context"))?;
-            let surface = softbuffer::Surface::new(&context, Arc::clone(&window))
-                .map_err(buffer_error("softbuffer surface"))?;
+            let (window, display) = open_window(
+                event_loop,
+                title,
+                self.config.window_size,
+                self.session.gpu(),
+                self.config.present,
+            )?;
+            self.session.set_read_pixels(!display.on_gpu());
             let size = self.render_size(window.inner_size());
             self.session.set_size(size.0, size.1);
             self.window = Some(window);
-            self.surface = Some(surface);
+            self.display = Some(display);
             Ok(())
         })();
         if let Err(e) = result {

@@ -21,10 +21,9 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 
 use axum::http::StatusCode;
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
 
-pub use request::{RequestError, ServiceInfo, VdiRequest};
+pub use crate::vdi_service::{Limits, ServiceInfo, VdiRequest};
+pub use request::RequestError;
 
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
@@ -32,19 +31,6 @@ use crate::gpu::renderer::RenderOptions;
 use crate::gpu::streaming::Budget;
 use crate::scene::Scene;
 use crate::source::BrickSource;
-
-/// The bounds every request is held to.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct Limits {
-    /// Most pixels (width × height) of one VDI.
-    pub max_pixels: u64,
-    /// Most supersegments per pixel (N_S) of one VDI.
-    pub max_supersegments: u32,
-    /// Most `POST /vdi` requests per second, all clients together (a burst of as many is
-    /// allowed).
-    pub max_requests_per_second: f64,
-}
 
 /// How the service runs: where it listens, its token, its limits and how it renders.
 #[derive(Clone, Debug)]

@@ -9,9 +9,12 @@
 //! visibility changes rewrite the scene tables in place ([`Renderer::restyle`]): nothing is
 //! rebuilt or fetched again.
 //!
-//! - [`fetch`]: the browser's `fetch` as the protocol's transport.
+//! - [`fetch`]: the browser's `fetch` as the protocol's transport;
+//! - [`remote`]: the remote mode, VDIs of a render service (`viewer serve`) ray cast for the
+//!   page's camera instead of bricks streamed.
 
 pub mod fetch;
+pub mod remote;
 
 use std::cell::RefCell;
 use std::collections::HashSet;
@@ -96,6 +99,8 @@ struct Totals {
     gpu_time_ms: Option<f64>,
     renderer_builds: u32,
     error: Option<String>,
+    /// The remote mode's counters, when a render service is given.
+    remote: Option<remote::RemoteReport>,
 }
 
 /// What the viewer of one dataset holds between steps.
@@ -122,6 +127,8 @@ struct Inner {
     /// The last frame as 8-bit sRGB RGBA (alpha 255), ready for `putImageData`.
     rgba: Vec<u8>,
     totals: Totals,
+    /// The remote mode, when the page has a render service.
+    remote: Option<remote::Remote>,
 }
 
 /// The residency-octree viewer of one brickserver dataset, drawn by the page.
@@ -196,6 +203,7 @@ impl Viewer {
                 render_needed: true,
                 rgba: Vec::new(),
                 totals: Totals::default(),
+                remote: None,
             })),
         })
     }
@@ -363,11 +371,17 @@ impl Viewer {
     }
 
     /// `{frame, converged, bricks_requested, bricks_fetched, bytes_fetched, bricks_failed,
-    /// bricks_resident, requests_in_flight, gpu_time_ms, renderer_builds, error}` as JSON.
-    /// `converged`: the last frame requested no brick and none is on its way, as
-    /// `viewer render` means it.
+    /// bricks_resident, requests_in_flight, gpu_time_ms, renderer_builds, error, remote}` as
+    /// JSON. `converged`: the last frame requested no brick and none is on its way, as
+    /// `viewer render` means it; in the remote mode, the VDI drawn is of the current view at
+    /// full resolution ([`remote::RemoteReport`], `remote`).
     pub fn state_json(&self) -> String {
-        serde_json::to_string(&self.inner.borrow().totals).expect("totals serialize")
+        let inner = self.inner.borrow();
+        let totals = Totals {
+            remote: inner.remote_report(),
+            ..inner.totals.clone()
+        };
+        serde_json::to_string(&totals).expect("totals serialize")
     }
 }
 
@@ -463,12 +477,19 @@ async fn renderer_for(
 }
 
 async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
-    let (current, rebuild) = {
+    let remote_on = {
         let mut i = inner.borrow_mut();
         if i.stepping {
             return Ok(false);
         }
         i.stepping = true;
+        i.remote_on()
+    };
+    if remote_on {
+        return remote::step(inner).await;
+    }
+    let (current, rebuild) = {
+        let mut i = inner.borrow_mut();
         let rebuild = i.renderer.is_none() || std::mem::take(&mut i.scene_changed);
         (i.renderer.take(), rebuild)
     };

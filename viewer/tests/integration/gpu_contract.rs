@@ -98,6 +98,11 @@ fn every_shared_struct_matches_its_wgsl_twin() {
     );
     let vdi = parse(&contract::vdi_render_source());
     assert_eq!(disagreements::<VdiView>(&vdi), Vec::<String>::new());
+    let compact = parse(&contract::vdi_compact_source());
+    assert_eq!(
+        disagreements::<contract::VdiCompactParams>(&compact),
+        Vec::<String>::new()
+    );
     let segments = parse(&contract::segments_source());
     assert_eq!(
         [
@@ -205,4 +210,28 @@ fn the_prelude_carries_the_rust_constants() {
             "{line} not in\n{prelude}"
         );
     }
+}
+
+#[test]
+fn the_present_pass_uniforms_match_their_wgsl_twin() {
+    use residency_viewer::gpu::present::PresentParams;
+    let source = contract::present_source();
+    let module = parse(&source);
+    naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .unwrap_or_else(|e| panic!("{}", e.emit_to_string_with_path(&source, "present.wgsl")));
+    assert_eq!(
+        disagreements::<PresentParams>(&module),
+        Vec::<String>::new()
+    );
+    assert_eq!(size_of::<PresentParams>(), 32);
+    // Checked the other way too: a twin of another layout disagrees.
+    let wrong = source.replace("    encode: u32,\n", "    encode: vec2<u32>,\n");
+    assert_ne!(
+        disagreements::<PresentParams>(&parse(&wrong)),
+        Vec::<String>::new()
+    );
 }

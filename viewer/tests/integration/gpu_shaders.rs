@@ -34,10 +34,12 @@ fn every_wgsl_file_validates() {
     assert_eq!(
         files,
         [
+            "present.wgsl",
             "probe.wgsl",
             "raycast.wgsl",
             "segments.wgsl",
             "transfer.wgsl",
+            "vdi_compact.wgsl",
             "vdi_render.wgsl",
             "view.wgsl"
         ]

@@ -131,4 +131,16 @@ fn bad_vdi_input_fails_with_a_clear_error() {
     );
     let err = fails(&["render", "--vdi", &vdi, "--store", &store, "--out", &png]);
     assert!(err.contains("cannot be used with"), "{err}");
+    let err = fails(&[
+        "render",
+        "--store",
+        &store,
+        "--vdi-no-skipping",
+        "--out",
+        &png,
+    ]);
+    assert!(
+        err.contains("error: --vdi-no-skipping applies to a VDI only (with --vdi)"),
+        "{err}"
+    );
 }

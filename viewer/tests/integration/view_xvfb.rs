@@ -18,7 +18,7 @@ use x11rb::protocol::xproto::{
 use x11rb::protocol::xtest::ConnectionExt as _;
 
 /// Kills (and reaps) a child process when dropped.
-struct Reaped(Child);
+pub(crate) struct Reaped(pub(crate) Child);
 
 impl Drop for Reaped {
     fn drop(&mut self) {
@@ -27,11 +27,45 @@ impl Drop for Reaped {
     }
 }
 
-const SCREEN: (u16, u16) = (480, 360);
+/// Starts `cmd` (reaped on drop) with its stdout's lines sent to a channel as they come and
+/// its stderr gathered by a thread (joined for the whole text).
+pub(crate) fn spawn_with_lines(
+    cmd: &mut Command,
+) -> (
+    Reaped,
+    std::sync::mpsc::Receiver<String>,
+    std::thread::JoinHandle<String>,
+) {
+    let child = cmd
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut child = Reaped(child);
+    let stdout = child.0.stdout.take().unwrap();
+    let mut stderr = child.0.stderr.take().unwrap();
+    let err_thread = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = stderr.read_to_string(&mut s);
+        s
+    });
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines() {
+            let Ok(line) = line else { break };
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    (child, rx, err_thread)
+}
+
+pub(crate) const SCREEN: (u16, u16) = (480, 360);
 const WINDOW: (u32, u32) = (320, 240);
 
 /// The built-in synthetic sample (3 channels, 32 × 64 × 64), bricks of 16³.
-fn store(dir: &Path) -> PathBuf {
+pub(crate) fn store(dir: &Path) -> PathBuf {
     let tiffs =
         residency_ingest::synthetic::write_sample(&dir.join("sample"), [32, 64, 64], 1, false)
             .unwrap();
@@ -49,7 +83,7 @@ fn store(dir: &Path) -> PathBuf {
 }
 
 /// Starts Xvfb on a free display (it picks one and reports it with `-displayfd`).
-fn xvfb() -> (Reaped, String) {
+pub(crate) fn xvfb() -> (Reaped, String) {
     let mut child = Command::new("Xvfb")
         .args(["-displayfd", "1", "-nolisten", "tcp", "-br", "-screen", "0"])
         .arg(format!("{}x{}x24", SCREEN.0, SCREEN.1))
@@ -69,20 +103,20 @@ fn xvfb() -> (Reaped, String) {
 }
 
 /// An X connection to the test's display.
-struct X {
+pub(crate) struct X {
     conn: x11rb::rust_connection::RustConnection,
     root: u32,
 }
 
 impl X {
-    fn open(display: &str) -> Self {
+    pub(crate) fn open(display: &str) -> Self {
         let (conn, screen) = x11rb::connect(Some(display)).unwrap();
         let root = conn.setup().roots[screen].root;
         Self { conn, root }
     }
 
     /// The root window's pixels as RGB, row-major.
-    fn screenshot(&self) -> Vec<[u8; 3]> {
+    pub(crate) fn screenshot(&self) -> Vec<[u8; 3]> {
         let setup = self.conn.setup();
         let (w, h) = SCREEN;
         let image = self
@@ -152,7 +186,7 @@ impl X {
 
     /// Moves the pointer to `(x, y)`, and gives the keyboard focus to the window titled
     /// `viewer: ...` (there is no window manager to do it).
-    fn point(&self, x: i16, y: i16) {
+    pub(crate) fn point(&self, x: i16, y: i16) {
         self.fake(MOTION_NOTIFY_EVENT, 0, x, y);
         let tree = self.conn.query_tree(self.root).unwrap().reply().unwrap();
         let window = tree
@@ -177,7 +211,7 @@ impl X {
     }
 
     /// Presses and releases the key that types `ch`.
-    fn type_char(&self, ch: char) {
+    pub(crate) fn type_char(&self, ch: char) {
         let setup = self.conn.setup();
         let (min, max) = (setup.min_keycode, setup.max_keycode);
         let map = self
@@ -204,7 +238,7 @@ impl X {
     }
 
     /// Drags with pointer button `b` from `from` to `to`, in a few motions.
-    fn drag(&self, b: u8, from: (i16, i16), to: (i16, i16)) {
+    pub(crate) fn drag(&self, b: u8, from: (i16, i16), to: (i16, i16)) {
         self.fake(MOTION_NOTIFY_EVENT, 0, from.0, from.1);
         self.fake(BUTTON_PRESS_EVENT, b, 0, 0);
         for i in 1..=4 {
@@ -288,8 +322,7 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         cmd.env("XDG_RUNTIME_DIR", "/tmp");
     }
-    let viewer = cmd
-        .env("DISPLAY", &display)
+    cmd.env("DISPLAY", &display)
         .env("RUST_LOG", "warn")
         .args(["view", "--store", store.to_str().unwrap()])
         // Nuclei (cyan), membranes (magenta), filaments (yellow), the last made bolder.
@@ -298,28 +331,8 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
         .args(["--height", &WINDOW.1.to_string()])
         // A small image keeps lavapipe quick; it is scaled up to the window.
         .args(["--render-scale", "0.5"])
-        .args(["--exit-after-frames", "40", "--exit-delay-ms", "8000"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut viewer = Reaped(viewer);
-    let stdout = viewer.0.stdout.take().unwrap();
-    let mut stderr = viewer.0.stderr.take().unwrap();
-    let err_thread = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = stderr.read_to_string(&mut s);
-        s
-    });
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines() {
-            let Ok(line) = line else { break };
-            if tx.send(line).is_err() {
-                break;
-            }
-        }
-    });
+        .args(["--exit-after-frames", "40", "--exit-delay-ms", "8000"]);
+    let (mut viewer, rx, err_thread) = spawn_with_lines(&mut cmd);
     // A summary line comes each time the view settles (converged here); the window then
     // waits 8 s for input before quitting.
     let settle = |what: &str| -> String {

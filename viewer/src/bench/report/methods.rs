@@ -280,3 +280,38 @@ pub(super) fn seed_table(out: &mut String, all: &[BenchResults], summary: bool) 
         }
     }
 }
+
+/// Our converged frame's wall time with the image read back (as `viewer render` and the CPU
+/// blit need it) and without (as `viewer view` presents on the GPU), per dataset with both:
+/// what the readback costs. Nothing when no results file has the second.
+pub(super) fn readback_table(out: &mut String, all: &[BenchResults]) {
+    let rows: Vec<(&BenchResults, &RunRecord, f64)> = all
+        .iter()
+        .filter_map(|r| {
+            let x = r
+                .runs
+                .iter()
+                .find(|x| x.experiment == Experiment::Table1 && x.label == "residency")?;
+            Some((r, x, x.wall_ms_without_readback?))
+        })
+        .collect();
+    if rows.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        out,
+        "| Dataset | pixels | wall ms with readback | wall ms without | readback share |\n|---|---|---|---|---|"
+    );
+    for (r, x, without) in rows {
+        let share = if x.wall_ms > 0.0 {
+            format!("{:.0} %", 100.0 * (x.wall_ms - without) / x.wall_ms)
+        } else {
+            "–".into()
+        };
+        let _ = writeln!(
+            out,
+            "| {} | {}×{} | {:.2} | {:.2} | {share} |",
+            r.dataset.label, r.settings.width, r.settings.height, x.wall_ms, without
+        );
+    }
+}

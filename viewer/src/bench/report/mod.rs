@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use self::format::{dataset_line, device_line};
-use self::methods::{probe_table, seed_table, table1, table1_rows};
+use self::methods::{probe_table, readback_table, seed_table, table1, table1_rows};
 use self::scaling::scaling;
 use self::skipped::{SkippedTotals, skipped};
 use self::sweep::{sweep, write_verdicts};
@@ -181,6 +181,14 @@ pub fn write(inputs: &[PathBuf], dir: &Path, command: &str) -> Result<Written, R
             "\n### Ours against the limit probe\n\nThe limit probe (`viewer/src/gpu/probe.rs`, `shaders/probe.wgsl`) casts the same rays with the same transfer functions, compositing and step (at level 0) through one resident texture of level 0, with no traversal, page tables or residency: the samples per second sampling alone reaches on this device, by hand (8 texel loads, as the renderer) and with the texture unit's filtering where `R32Float` is filterable. Ours is the residency run of Table 1: samples per converged frame over its GPU ms. A sample is one step of all drawn channels.\n"
         );
         probe_table(&mut out, &all);
+        let mut readback = String::new();
+        readback_table(&mut readback, &all);
+        if !readback.is_empty() {
+            let _ = writeln!(
+                out,
+                "\n### The image readback\n\nOurs (the residency run of Table 1), each converged frame timed in wall ms twice on the same view: rendered and its image read back to the CPU (16 bytes a pixel, as `viewer render` and the CPU blit need), and rendered with the image left on the GPU (as `viewer view` renders for presenting on the GPU). The difference is the readback's cost (copy, map, transfer), which GPU timestamps do not show.\n\n{readback}"
+            );
+        }
     }
     let sweeps: Vec<&BenchResults> = all
         .iter()

@@ -1,0 +1,236 @@
+"""The web page's remote mode in a real browser (Debian's Chromium, headless, WebGPU on
+SwiftShader, driven by tests/browser/web_viewer.mjs): `brickserver serve` serves the page and
+the dataset's metadata, `viewer serve` (on lavapipe) renders VDIs of the page's views, both on
+loopback. The page opened with `?render=URL&render_token=TOKEN` streams no bricks: it asks the
+service for VDIs and ray casts them itself (viewer/src/web/remote.rs).
+
+Needs the release binaries and the web build (scripts/build-web.sh)."""
+
+import json
+import subprocess
+import threading
+import urllib.parse
+
+import numpy as np
+import pytest
+
+from support.binaries import run_ingest, start_server, stop_server
+from support.browser import read_png, require_browser, run_pausing
+from support.paths import BIN, ROOT
+
+pytestmark = pytest.mark.browser
+
+DRIVER = ROOT / "tests" / "browser" / "web_viewer.mjs"
+SIZE = 96
+TOKEN = "remote-s3cret"
+ENV = {"XDG_RUNTIME_DIR": "/tmp", "PATH": "/usr/bin:/bin"}
+
+
+@pytest.fixture(autouse=True)
+def browser_and_web_build():
+    """Fails (skips with RESIDENCY_SKIP_BROWSER=1) without Chromium and Node; fails without
+    the web build."""
+    require_browser()
+    assert (BIN / "web" / "index.html").exists(), f"{BIN}/web not built: run scripts/build-web.sh"
+
+
+def drive(url, steps):
+    """Runs the page driver; returns (results, console messages)."""
+    last, code, err = run_pausing(DRIVER, {"url": url, "steps": steps}, None, 600)
+    assert code == 0, f"browser driver failed:\n{last}\n{err}"
+    out = json.loads(last)
+    return out["results"], out["console"]
+
+
+def errors(console, expected=()):
+    """Console errors and page errors, but those containing a string of `expected`."""
+    return [m for m in console
+            if (m.startswith("error") or m.startswith("pageerror")) and not any(e in m for e in expected)]
+
+
+def scene_of(fragment):
+    """The scene JSON of a `#scene=...` fragment."""
+    assert fragment.startswith("#scene="), fragment
+    return json.loads(urllib.parse.unquote(fragment[len("#scene="):]))
+
+
+def dvr(store, scene, out):
+    """`viewer render` (DVR, converged) of `scene` on `store`, SIZE × SIZE, as a PNG."""
+    path = out.with_suffix(".scene.json")
+    path.write_text(json.dumps(scene))
+    p = subprocess.run(
+        [str(BIN / "viewer"), "render", "--store", str(store), "--scene", str(path),
+         "--width", str(SIZE), "--height", str(SIZE), "--out", str(out)],
+        capture_output=True, text=True, env=ENV,
+    )
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+def assert_matches_dvr(image, reference):
+    """The page's 8-bit image equals `viewer render`'s within the supersegment approximation:
+    no channel off by more than 2 of 255, PSNR ≥ 60 dB and SSIM ≥ 0.9999 (`viewer compare`;
+    measured: 1 of 255, 77–86 dB), and it is not blank."""
+    p = subprocess.run([str(BIN / "viewer"), "compare", "--json", str(image), str(reference)],
+                       capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    m = json.loads(p.stdout)
+    a = read_png(image)[:, :, :3].astype(int)
+    b = read_png(reference)[:, :, :3].astype(int)
+    assert np.abs(a - b).max() <= 2, np.abs(a - b).max()
+    assert m["psnr_db"] >= 60.0 and m["ssim"] >= 0.9999, m
+    assert (a.max(axis=2) > 16).mean() > 0.1
+
+
+def start_service(store, token_file):
+    """Starts `viewer serve --store STORE --bind 127.0.0.1:0` with a token; returns (process,
+    base URL) once it logs the address it listens on."""
+    proc = subprocess.Popen(
+        [str(BIN / "viewer"), "serve", "--store", str(store), "--serve-token-file", str(token_file),
+         "--bind", "127.0.0.1:0"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=ENV,
+    )
+    for line in proc.stderr:
+        if "listening on http://" in line:
+            # Its log is drained, so that it never blocks on a full pipe.
+            threading.Thread(target=proc.stderr.read, daemon=True).start()
+            return proc, "http://" + line.split("listening on http://")[1].strip().split()[0]
+    raise AssertionError(f"viewer serve did not start (exit {proc.wait()})")
+
+
+@pytest.fixture(scope="module")
+def stores(tmp_path_factory):
+    """Two tiny stores: three u16 channels, and one u8."""
+    d = tmp_path_factory.mktemp("remote")
+    run_ingest("sample", "-o", d / "fl", "--size", "24,40,40")
+    run_ingest("convert", *(d / "fl" / f"{n}.ome.tif" for n in ("nuclei", "membranes", "filaments")),
+               "-o", d / "u16x3.ome.zarr")
+    run_ingest("convert", d / "fl" / "membranes.ome.tif", "-o", d / "u8.ome.zarr")
+    return {"u16x3": d / "u16x3.ome.zarr", "u8": d / "u8.ome.zarr", "dir": d}
+
+
+@pytest.fixture(scope="module")
+def servers(stores):
+    """brickserver with both stores, and a render service of u16x3 guarded by TOKEN."""
+    token_file = stores["dir"] / "token.txt"
+    token_file.write_text(TOKEN + "\n")
+    brick, base = start_server(stores["u16x3"], stores["u8"])
+    service, url = start_service(stores["u16x3"], token_file)
+    yield base, url
+    stop_server(brick)
+    service.terminate()
+    service.wait(timeout=10)
+
+
+def page(base, name, service, token=TOKEN, extra=""):
+    return (f"{base}/{name}/view?width={SIZE}&height={SIZE}&render={urllib.parse.quote(service)}"
+            f"&render_token={token}{extra}")
+
+
+def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(servers, stores, tmp_path):
+    base, service = servers
+    # A frame rate no device holds: while the camera moves, D_I drops below 1.
+    results, console = drive(
+        page(base, "u16x3", service, extra="&target_fps=1000"),
+        [
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "snapshot", "path": str(tmp_path / "first.png")},
+            # 40 px: 23° of orbit, past the 10° threshold during the drag, in moves 50 ms apart
+            # (a frame each, the camera moving).
+            {"do": "drag", "dx": 40, "dy": 0, "moves": 8, "delay_ms": 50},
+            {"do": "waitState", "when": "s.remote.requests_sent >= 2"},
+            {"do": "converge"},
+            {"do": "hash", "not": None},
+            {"do": "snapshot", "path": str(tmp_path / "orbited.png")},
+        ],
+    )
+    first, first_hash, orbited, orbited_hash = results[0], results[1], results[5], results[6]
+    assert first["error"] is None and first["converged"], first
+    remote = first["remote"]
+    assert remote["mode"] == "on" and remote["converged"] and remote["last_error"] is None, remote
+    assert (remote["requests_sent"], remote["vdis_received"], remote["requests_aborted"]) == (1, 1, 0)
+    # No brick streamed: the page draws the service's VDIs only.
+    assert first["bricks_requested"] == 0 and first["bricks_fetched"] == 0, first
+    assert remote["d_i"] == 1.0
+    scene = scene_of(first_hash)
+    assert remote["vdi_camera"] == scene["camera"]
+    assert_matches_dvr(tmp_path / "first.png", dvr(stores["u16x3"], scene, tmp_path / "dvr1.png"))
+
+    # After the orbit: asked again, and the VDI drawn is the newest, of the rested camera.
+    assert orbited["error"] is None and orbited["converged"], orbited
+    remote = orbited["remote"]
+    moved = scene_of(orbited_hash)
+    assert moved["camera"] != scene["camera"]
+    assert remote["vdi_camera"] == moved["camera"]
+    assert remote["requests_sent"] >= 2 and remote["vdis_received"] >= 2, remote
+    assert remote["drawn_request"] == remote["requests_sent"], remote
+    # Subsampled while moving, full resolution at rest.
+    assert remote["frames_subsampled"] >= 1 and remote["d_i"] == 1.0, remote
+    assert orbited["bricks_fetched"] == 0
+    assert_matches_dvr(tmp_path / "orbited.png", dvr(stores["u16x3"], moved, tmp_path / "dvr2.png"))
+    assert errors(console) == []
+
+
+def test_a_newer_request_aborts_the_one_in_flight_and_service_errors_show(servers, stores, tmp_path):
+    """Hiding a channel makes the service build a new renderer and fetch its bricks (seconds on
+    lavapipe); a colour change sent meanwhile supersedes that request: its fetch is aborted and
+    only the newer VDI is drawn. Then a scene the service refuses shows its message."""
+    base, service = servers
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    scene = scene_of(results[1])
+    hidden = json.loads(json.dumps(scene))
+    hidden["channels"][1]["visible"] = False
+    recoloured = json.loads(json.dumps(hidden))
+    recoloured["channels"][0]["color"] = [1.0, 0.25, 0.0]
+    nothing = json.loads(json.dumps(recoloured))
+    for c in nothing["channels"]:
+        c["visible"] = False
+    results, console = drive(
+        page(base, "u16x3", service),
+        [
+            {"do": "converge"},
+            {"do": "setScene", "scene": hidden},
+            {"do": "waitState", "when": "s.remote.in_flight === 2"},
+            {"do": "setScene", "scene": recoloured},
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "snapshot", "path": str(tmp_path / "recoloured.png")},
+            {"do": "setScene", "scene": nothing},
+            {"do": "waitMessage"},
+            {"do": "state"},
+        ],
+    )
+    state, fragment, message, failed = results[4], results[5], results[8], results[9]
+    assert state["error"] is None and state["converged"], state
+    remote = state["remote"]
+    assert (remote["requests_sent"], remote["requests_aborted"], remote["vdis_received"]) == (3, 1, 2), remote
+    assert remote["drawn_request"] == 3 and remote["scene_current"], remote
+    assert scene_of(fragment) == recoloured
+    assert_matches_dvr(tmp_path / "recoloured.png", dvr(stores["u16x3"], recoloured, tmp_path / "dvr.png"))
+    assert message == f"Render service {service}: scene: no channel is visible"
+    assert failed["remote"]["last_error"] == "scene: no channel is visible"
+    # The VDI of the last good scene stays drawn, no longer current.
+    assert failed["remote"]["drawn_request"] == 3 and not failed["remote"]["scene_current"]
+    # Chromium logs the refused request itself.
+    assert errors(console, ["the server responded with a status of 400 (Bad Request)"]) == []
+
+
+def test_a_wrong_token_and_another_dataset_show_the_service_message(servers):
+    """The service's refusal shows on the page; switching *Remote* off, the page streams bricks
+    and renders them itself."""
+    base, service = servers
+    results, _ = drive(
+        page(base, "u16x3", service, token="wrong"),
+        [{"do": "waitMessage"}, {"do": "state"}, {"do": "click", "selector": "#remote"},
+         {"do": "converge"}, {"do": "message"}],
+    )
+    assert results[0] == f"Render service {service}: missing or wrong bearer token"
+    assert results[1]["remote"]["mode"] == "starting" and results[1]["remote"]["requests_sent"] == 0
+    assert results[1]["bricks_requested"] == 0
+    local = results[3]
+    assert local["error"] is None and local["converged"] and local["bricks_fetched"] > 0, local
+    assert local["remote"]["mode"] == "off" and local["remote"]["requests_sent"] == 0
+    assert results[4] is None
+    results, _ = drive(page(base, "u8", service), [{"do": "waitMessage"}])
+    assert results[0] == f"Render service {service}: it serves dataset 'u16x3', not 'u8'"

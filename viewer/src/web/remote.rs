@@ -1,0 +1,703 @@
+//! The page's remote mode: instead of streaming bricks, the page asks a render service
+//! (`viewer serve`, `crate::service` natively) for volumetric depth images of its view, and
+//! ray casts the newest one it holds for its own camera on its own WebGPU device.
+//!
+//! The page's JavaScript owns the network (`fetch` with an `AbortController`, the token); this
+//! module owns the decisions and the drawing:
+//!
+//! - [`Viewer::remote_request`] says when to ask and what: at once when there is no VDI or the
+//!   scene's style (channels, background, filter) changed, when the camera has moved past a
+//!   threshold from the camera of the latest request ([`ORBIT_DEGREES`], [`ZOOM_FRACTION`],
+//!   [`PAN_FRACTION`]) and none is in flight, or when the camera has rested for [`REST_MS`]
+//!   away from it. A new request supersedes the one in flight (the page aborts its fetch).
+//! - [`Viewer::remote_answer`] files an answer: only the answer to the latest request is kept,
+//!   and never one older than the VDI drawn; [`Viewer::remote_failed`] files the service's
+//!   error, which the page shows.
+//! - [`step`] draws: the newest VDI ray cast for the current camera, at the image-space
+//!   sampling `D_I` a [`FrameRateController`] picks while the camera moves, at full resolution
+//!   once it rests.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use residency_schemas::vdi::{VdiError, VolumetricDepthImage};
+use serde::Serialize;
+use wasm_bindgen::prelude::*;
+
+use super::{Inner, Viewer};
+use crate::error_chain;
+use crate::frame_rate::FrameRateController;
+use crate::gpu::GpuError;
+use crate::gpu::vdi_render::VdiRenderer;
+use crate::image::linear_to_srgb8;
+use crate::scene::{Camera, Scene};
+use crate::vdi_service::{ServiceInfo, VdiRequest};
+
+/// Supersegments per pixel (N_S) asked for, unless the service allows fewer.
+const SUPERSEGMENTS: u32 = 20;
+
+/// A camera this many degrees of orbit (or roll) away from the latest request's asks again.
+pub const ORBIT_DEGREES: f64 = 10.0;
+
+/// A camera whose distance to its target changed by more than this fraction asks again.
+pub const ZOOM_FRACTION: f64 = 0.1;
+
+/// A camera whose target moved by more than this fraction of its distance asks again.
+pub const PAN_FRACTION: f64 = 0.1;
+
+/// The camera rests once it has not moved for this long (ms): a rested view away from the
+/// latest request's asks again, and is drawn at full resolution.
+pub const REST_MS: f64 = 250.0;
+
+/// The least time between two requests (ms): a slider dragged through many styles asks at
+/// most this often, well within the service's default rate.
+const MIN_INTERVAL_MS: f64 = 100.0;
+
+/// The frame time the controller holds while the camera moves unless the page says otherwise
+/// (ms): 60 frames a second.
+pub const TARGET_FRAME_MS: f64 = 1000.0 / 60.0;
+
+/// The smallest `D_I` the controller may choose.
+const MIN_SCALE: f64 = 0.25;
+
+/// Why the remote mode cannot use the service or an answer of it. Shown on the page as the
+/// service's own errors are.
+#[derive(Debug, thiserror::Error)]
+pub enum RemoteError {
+    /// `GET /info` did not answer a service description.
+    #[error("its /info is not a render service description")]
+    Info(#[source] serde_json::Error),
+    /// The service (or a VDI of it) renders another dataset.
+    #[error("it serves dataset '{served}', not '{page}'")]
+    OtherDataset {
+        /// The service's dataset.
+        served: String,
+        /// The page's.
+        page: String,
+    },
+    /// The page's image is over the service's `--max-pixels`.
+    #[error(
+        "this page draws {width} × {height} = {pixels} pixels, over the service's limit of \
+         {limit} (--max-pixels): open it with a smaller ?width=&height="
+    )]
+    TooManyPixels {
+        /// The page's width.
+        width: u32,
+        /// The page's height.
+        height: u32,
+        /// Their product.
+        pixels: u64,
+        /// The service's limit.
+        limit: u64,
+    },
+    /// The answer is not a VDI.
+    #[error("its answer is not a VDI")]
+    Decode(#[source] VdiError),
+    /// The VDI answered has another size than the page's image.
+    #[error("its VDI is {vdi_width} × {vdi_height}, the page draws {width} × {height}")]
+    WrongSize {
+        /// The VDI's width.
+        vdi_width: u32,
+        /// The VDI's height.
+        vdi_height: u32,
+        /// The page's width.
+        width: u32,
+        /// The page's height.
+        height: u32,
+    },
+    /// The VDI cannot be drawn on the page's device.
+    #[error("cannot draw its VDI")]
+    Gpu(#[source] Box<GpuError>),
+}
+
+/// A request sent and not yet answered.
+#[derive(Clone, Debug)]
+struct Flight {
+    sequence: u32,
+    scene: Scene,
+}
+
+/// An answer decoded, waiting for the next step to upload it.
+struct Arrived {
+    sequence: u32,
+    scene: Scene,
+    vdi: VolumetricDepthImage,
+}
+
+/// The VDI drawn.
+struct Drawn {
+    sequence: u32,
+    /// The scene it was requested for (its camera is the camera of generation).
+    scene: Scene,
+    renderer: Rc<VdiRenderer>,
+}
+
+/// Where the remote mode stands.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RemoteMode {
+    /// The switch is off: the page streams bricks and renders them itself.
+    Off,
+    /// On, waiting for the service's `/info` (or refused by it: `last_error` says why).
+    #[default]
+    Starting,
+    /// On, asking the service for VDIs and drawing them.
+    On,
+}
+
+/// What `state()` reports of the remote mode (`remote` in [`Viewer::state_json`]).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RemoteReport {
+    /// The render service's base URL.
+    service: String,
+    /// The switch and the service's state.
+    mode: RemoteMode,
+    /// `POST /vdi` requests sent.
+    requests_sent: u64,
+    /// Requests superseded by a newer one while in flight (the page aborted their fetch).
+    requests_aborted: u64,
+    /// Answers not drawn: not the latest request's, older than the VDI drawn, or superseded
+    /// at the service (409).
+    answers_dropped: u64,
+    /// VDIs received and drawn.
+    vdis_received: u64,
+    /// Frames ray cast from VDIs.
+    frames: u64,
+    /// Of those, the frames cast at `D_I` below 1 (while the camera moved).
+    frames_subsampled: u64,
+    /// The sequence number of the request in flight.
+    in_flight: Option<u32>,
+    /// The sequence number of the request whose VDI is drawn.
+    drawn_request: Option<u32>,
+    /// The last error of the service or of its answers, until a VDI is drawn again.
+    last_error: Option<String>,
+    /// `D_I` of the last frame.
+    d_i: f64,
+    /// Time of the last frame (ray cast and readback), ms.
+    frame_ms: Option<f64>,
+    /// The camera of generation of the VDI drawn.
+    vdi_camera: Option<Camera>,
+    /// The VDI drawn was made for the page's current style (channels, background, filter).
+    scene_current: bool,
+    /// The VDI drawn was made for the page's current scene, camera included, and the last
+    /// frame drew it at full resolution; no request is in flight.
+    converged: bool,
+}
+
+/// The remote mode's state, in the page's viewer.
+pub(super) struct Remote {
+    report: RemoteReport,
+    /// The service's `/info` was read and fits the page.
+    ready: bool,
+    supersegments: u32,
+    next_sequence: u32,
+    in_flight: Option<Flight>,
+    /// The scene of the latest request answered (a VDI or an error): no need to ask for it
+    /// again.
+    settled: Option<Scene>,
+    arrived: Option<Arrived>,
+    drawn: Option<Drawn>,
+    controller: FrameRateController,
+    /// The camera last seen, and when it last changed (ms, `performance.now()`).
+    camera: Option<Camera>,
+    changed_ms: f64,
+    last_sent_ms: f64,
+    /// The camera and `D_I` of the last frame.
+    frame: Option<(Camera, f64)>,
+    need_frame: bool,
+}
+
+/// The page's clock, ms.
+fn now_ms() -> f64 {
+    web_sys::window()
+        .and_then(|w| w.performance())
+        .map_or(0.0, |p| p.now())
+}
+
+/// Whether `a` and `b` draw alike but for the camera.
+fn same_style(a: &Scene, b: &Scene) -> bool {
+    a.channels == b.channels && a.background == b.background && a.filter == b.filter
+}
+
+/// The angle between `a` and `b` in degrees (0 for a zero vector).
+fn degrees_between(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let dot: f64 = (0..3).map(|i| a[i] * b[i]).sum();
+    let norm = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let n = norm(a) * norm(b);
+    if n == 0.0 {
+        return 0.0;
+    }
+    (dot / n).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+/// Whether `now` has moved past a threshold from `then`: orbit or roll beyond
+/// [`ORBIT_DEGREES`], the distance changed beyond [`ZOOM_FRACTION`], the target beyond
+/// [`PAN_FRACTION`] of the distance, or another field of view.
+fn moved_past_threshold(then: &Camera, now: &Camera) -> bool {
+    let offset = |c: &Camera| std::array::from_fn::<f64, 3, _>(|i| c.eye[i] - c.target[i]);
+    let length = |v: [f64; 3]| v.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let (a, b) = (offset(then), offset(now));
+    let distance = length(a);
+    let pan = length(std::array::from_fn(|i| now.target[i] - then.target[i]));
+    degrees_between(a, b) > ORBIT_DEGREES
+        || degrees_between(then.up, now.up) > ORBIT_DEGREES
+        || (length(b) / distance - 1.0).abs() > ZOOM_FRACTION
+        || pan > PAN_FRACTION * distance
+        || then.fov_y_degrees != now.fov_y_degrees
+}
+
+impl Remote {
+    fn new(service: String, target_frame_ms: f64) -> Self {
+        Self {
+            report: RemoteReport {
+                service,
+                d_i: 1.0,
+                ..RemoteReport::default()
+            },
+            ready: false,
+            supersegments: SUPERSEGMENTS,
+            next_sequence: 0,
+            in_flight: None,
+            settled: None,
+            arrived: None,
+            drawn: None,
+            controller: FrameRateController::new(target_frame_ms, MIN_SCALE),
+            camera: None,
+            changed_ms: f64::NEG_INFINITY,
+            last_sent_ms: f64::NEG_INFINITY,
+            frame: None,
+            need_frame: false,
+        }
+    }
+
+    /// Notes the camera at `now`: when it last changed decides whether it rests.
+    fn observe(&mut self, camera: &Camera, now: f64) {
+        if self.camera.as_ref() != Some(camera) {
+            self.camera = Some(camera.clone());
+            self.changed_ms = now;
+        }
+    }
+
+    fn resting(&self, now: f64) -> bool {
+        now - self.changed_ms >= REST_MS
+    }
+
+    /// Whether to ask for a VDI of `scene` at `now` (see the module documentation).
+    fn wants(&self, scene: &Scene, now: f64) -> bool {
+        if now - self.last_sent_ms < MIN_INTERVAL_MS {
+            return false;
+        }
+        let latest = self
+            .in_flight
+            .as_ref()
+            .map(|f| &f.scene)
+            .or(self.settled.as_ref());
+        let Some(latest) = latest else {
+            return true;
+        };
+        if !same_style(latest, scene) {
+            return true;
+        }
+        if latest.camera == scene.camera {
+            return false;
+        }
+        self.resting(now)
+            || (self.in_flight.is_none() && moved_past_threshold(&latest.camera, &scene.camera))
+    }
+
+    /// Forgets the request in flight (its fetch is aborted).
+    fn abort(&mut self) {
+        if self.in_flight.take().is_some() {
+            self.report.requests_aborted += 1;
+        }
+    }
+
+    /// The request `sequence`, when it is the one in flight: it is answered now.
+    fn settle(&mut self, sequence: u32) -> Option<Flight> {
+        match &self.in_flight {
+            Some(f) if f.sequence == sequence => {
+                let flight = self.in_flight.take();
+                self.settled = flight.as_ref().map(|f| f.scene.clone());
+                flight
+            }
+            _ => {
+                self.report.answers_dropped += 1;
+                None
+            }
+        }
+    }
+
+    fn fail(&mut self, error: &(dyn std::error::Error + 'static)) {
+        self.report.last_error = Some(error_chain(error));
+    }
+
+    /// Whether the VDI drawn is of `scene` at full resolution, nothing in flight or pending.
+    fn converged(&self, scene: &Scene) -> bool {
+        self.drawn.as_ref().is_some_and(|d| d.scene == *scene)
+            && self
+                .frame
+                .as_ref()
+                .is_some_and(|(c, s)| *c == scene.camera && *s == 1.0)
+            && self.in_flight.is_none()
+            && self.arrived.is_none()
+            && !self.need_frame
+    }
+
+    /// The report, brought up to date for `scene`.
+    fn report(&self, scene: &Scene) -> RemoteReport {
+        RemoteReport {
+            in_flight: self.in_flight.as_ref().map(|f| f.sequence),
+            drawn_request: self.drawn.as_ref().map(|d| d.sequence),
+            vdi_camera: self.drawn.as_ref().map(|d| d.scene.camera.clone()),
+            scene_current: self
+                .drawn
+                .as_ref()
+                .is_some_and(|d| same_style(&d.scene, scene)),
+            converged: self.converged(scene),
+            ..self.report.clone()
+        }
+    }
+}
+
+impl Inner {
+    /// The remote mode, when a service is given and the switch is on.
+    pub(super) fn remote_on(&self) -> bool {
+        self.remote
+            .as_ref()
+            .is_some_and(|r| r.report.mode != RemoteMode::Off)
+    }
+
+    /// The remote mode's report for `state()`.
+    pub(super) fn remote_report(&self) -> Option<RemoteReport> {
+        self.remote.as_ref().map(|r| r.report(&self.scene))
+    }
+}
+
+#[wasm_bindgen]
+impl Viewer {
+    /// Uses the render service at `service` (its base URL, for the report): the remote mode,
+    /// switched on, its frame-rate controller holding `target_frame_ms` per frame while the
+    /// camera moves ([`TARGET_FRAME_MS`] when it is not a positive number). It asks nothing
+    /// until [`Viewer::remote_info`] has the service's description.
+    pub fn remote_begin(&self, service: String, target_frame_ms: f64) {
+        let target = if target_frame_ms > 0.0 && target_frame_ms.is_finite() {
+            target_frame_ms
+        } else {
+            TARGET_FRAME_MS
+        };
+        let mut inner = self.inner.borrow_mut();
+        inner.remote = Some(Remote::new(service, target));
+        inner.totals.converged = false;
+    }
+
+    /// Takes the service's `GET /info` answer (JSON): it must serve the page's dataset and
+    /// take the page's image size; N_S is capped at its limit.
+    ///
+    /// # Errors
+    /// The [`RemoteError`]'s message (also the remote mode's `last_error`): not a service
+    /// description, another dataset, an image over its `--max-pixels`; or without
+    /// [`Viewer::remote_begin`].
+    pub fn remote_info(&self, json: &str) -> Result<(), JsValue> {
+        let mut inner = self.inner.borrow_mut();
+        let (width, height) = (inner.options.width, inner.options.height);
+        let page = inner.info.name.clone();
+        let Some(remote) = inner.remote.as_mut() else {
+            return Err(JsValue::from_str("no render service given"));
+        };
+        let checked = serde_json::from_str::<ServiceInfo>(json)
+            .map_err(RemoteError::Info)
+            .and_then(|info| {
+                let pixels = u64::from(width) * u64::from(height);
+                if info.dataset != page {
+                    Err(RemoteError::OtherDataset {
+                        served: info.dataset,
+                        page,
+                    })
+                } else if pixels > info.limits.max_pixels {
+                    Err(RemoteError::TooManyPixels {
+                        width,
+                        height,
+                        pixels,
+                        limit: info.limits.max_pixels,
+                    })
+                } else {
+                    Ok(info.limits.max_supersegments)
+                }
+            });
+        match checked {
+            Ok(most) => {
+                remote.supersegments = SUPERSEGMENTS.min(most).max(1);
+                remote.ready = true;
+                remote.report.mode = RemoteMode::On;
+                Ok(())
+            }
+            Err(e) => {
+                remote.fail(&e);
+                Err(JsValue::from_str(&error_chain(&e)))
+            }
+        }
+    }
+
+    /// Switches the remote mode on or off (off: the page streams bricks and renders them
+    /// itself; a request in flight is forgotten, and the page aborts it). Returns whether it
+    /// is on: never without a render service.
+    pub fn set_remote(&self, on: bool) -> bool {
+        let mut inner = self.inner.borrow_mut();
+        let Some(remote) = inner.remote.as_mut() else {
+            return false;
+        };
+        remote.report.mode = match (on, remote.ready) {
+            (false, _) => RemoteMode::Off,
+            (true, false) => RemoteMode::Starting,
+            (true, true) => RemoteMode::On,
+        };
+        remote.need_frame = true;
+        if !on {
+            remote.abort();
+        }
+        inner.render_needed = true;
+        inner.totals.converged = false;
+        on
+    }
+
+    /// The body of the `POST /vdi` request to send now (JSON, its `request` the sequence
+    /// number to answer with), or nothing to ask. A request in flight is superseded: the page
+    /// aborts its fetch.
+    pub fn remote_request(&self) -> Option<String> {
+        let now = now_ms();
+        let mut inner = self.inner.borrow_mut();
+        let inner = &mut *inner;
+        let (width, height) = (inner.options.width, inner.options.height);
+        let scene = &inner.scene;
+        let remote = inner.remote.as_mut()?;
+        if remote.report.mode != RemoteMode::On {
+            return None;
+        }
+        remote.observe(&scene.camera, now);
+        if !remote.wants(scene, now) {
+            return None;
+        }
+        remote.abort();
+        remote.next_sequence += 1;
+        let sequence = remote.next_sequence;
+        let body = VdiRequest {
+            scene: Some(scene.clone()),
+            camera: None,
+            width,
+            height,
+            supersegments: Some(remote.supersegments),
+            request: Some(u64::from(sequence)),
+        };
+        let json = serde_json::to_string(&body).expect("requests serialize");
+        remote.in_flight = Some(Flight {
+            sequence,
+            scene: scene.clone(),
+        });
+        remote.last_sent_ms = now;
+        remote.report.requests_sent += 1;
+        Some(json)
+    }
+
+    /// Files the VDI answering request `sequence` (the encoded bytes): kept when it answers
+    /// the request in flight, uploaded and drawn at the next step; else dropped. An answer
+    /// that is no VDI, or a VDI of another size or dataset, becomes the remote mode's error.
+    pub fn remote_answer(&self, sequence: u32, bytes: &[u8]) {
+        let mut inner = self.inner.borrow_mut();
+        let (width, height) = (inner.options.width, inner.options.height);
+        let page = inner.info.name.clone();
+        let Some(remote) = inner.remote.as_mut() else {
+            return;
+        };
+        let Some(flight) = remote.settle(sequence) else {
+            return;
+        };
+        let checked = VolumetricDepthImage::decode(bytes, "the render service's answer")
+            .map_err(RemoteError::Decode)
+            .and_then(|vdi| {
+                let h = &vdi.header;
+                if (h.width, h.height) != (width, height) {
+                    return Err(RemoteError::WrongSize {
+                        vdi_width: h.width,
+                        vdi_height: h.height,
+                        width,
+                        height,
+                    });
+                }
+                match &h.dataset {
+                    Some(served) if *served != page => Err(RemoteError::OtherDataset {
+                        served: served.clone(),
+                        page,
+                    }),
+                    _ => Ok(vdi),
+                }
+            });
+        match checked {
+            Ok(vdi) => {
+                if remote.arrived.is_some() {
+                    // An earlier answer not yet uploaded: this newer one takes its place.
+                    remote.report.answers_dropped += 1;
+                }
+                remote.arrived = Some(Arrived {
+                    sequence,
+                    scene: flight.scene,
+                    vdi,
+                });
+            }
+            Err(e) => remote.fail(&e),
+        }
+    }
+
+    /// Files the failure of request `sequence` (0: the `GET /info` request): HTTP `status`
+    /// (0 when the service could not be reached) and the service's `message`. A request
+    /// superseded at the service (409) is a dropped answer, asked for again; any other failure
+    /// of the latest request becomes the remote mode's error, shown by the page.
+    pub fn remote_failed(&self, sequence: u32, status: u16, message: String) {
+        let mut inner = self.inner.borrow_mut();
+        let Some(remote) = inner.remote.as_mut() else {
+            return;
+        };
+        if sequence == 0 {
+            remote.report.last_error = Some(message);
+            return;
+        }
+        if status == 409 {
+            if remote
+                .in_flight
+                .as_ref()
+                .is_some_and(|f| f.sequence == sequence)
+            {
+                remote.in_flight = None;
+            }
+            remote.report.answers_dropped += 1;
+            return;
+        }
+        if remote.settle(sequence).is_some() {
+            remote.report.last_error = Some(message);
+        }
+    }
+}
+
+/// One step of the remote mode: uploads a VDI that arrived, then ray casts the newest VDI for
+/// the current camera when the camera, the VDI or the resolution changed. Resolves to whether
+/// a new frame is ready.
+///
+/// # Errors
+/// A [`GpuError`] while rendering (a VDI that cannot be uploaded is the remote mode's error
+/// instead, and the previous one stays drawn).
+pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
+    upload(inner).await;
+    let now = now_ms();
+    let (gpu, renderer, camera, scale, moving) = {
+        let mut i = inner.borrow_mut();
+        let i = &mut *i;
+        let scene = &i.scene;
+        let Some(remote) = i.remote.as_mut() else {
+            return Ok(false);
+        };
+        remote.observe(&scene.camera, now);
+        let moving = !remote.resting(now);
+        let Some(drawn) = &remote.drawn else {
+            i.totals.converged = false;
+            return Ok(false);
+        };
+        let due = remote.need_frame
+            || match &remote.frame {
+                Some((c, s)) => *c != scene.camera || (!moving && *s < 1.0),
+                None => true,
+            };
+        if !due {
+            i.totals.converged = remote.converged(scene);
+            return Ok(false);
+        }
+        let scale = if moving {
+            remote.controller.scale()
+        } else {
+            1.0
+        };
+        (
+            Rc::clone(&i.gpu),
+            Rc::clone(&drawn.renderer),
+            scene.camera.clone(),
+            scale,
+            moving,
+        )
+    };
+    let start = now_ms();
+    let frame = gpu
+        .checked_async(
+            "rendering a VDI",
+            renderer.render_async(&gpu, &camera, true, scale),
+        )
+        .await?;
+    let ms = now_ms() - start;
+    let mut i = inner.borrow_mut();
+    let i = &mut *i;
+    i.rgba.clear();
+    i.rgba.extend(frame.pixels.iter().flat_map(|p| {
+        [
+            linear_to_srgb8(p[0]),
+            linear_to_srgb8(p[1]),
+            linear_to_srgb8(p[2]),
+            255,
+        ]
+    }));
+    i.totals.gpu_time_ms = frame.gpu_time_ms;
+    let Some(remote) = i.remote.as_mut() else {
+        return Ok(true);
+    };
+    if moving {
+        remote.controller.update(ms);
+    }
+    remote.need_frame = false;
+    remote.frame = Some((camera, scale));
+    remote.report.frames += 1;
+    if scale < 1.0 {
+        remote.report.frames_subsampled += 1;
+    }
+    remote.report.d_i = scale;
+    remote.report.frame_ms = Some(ms);
+    i.totals.converged = remote.converged(&i.scene);
+    Ok(true)
+}
+
+/// Uploads the VDI that arrived, if any, in place of the one drawn.
+async fn upload(inner: &Rc<RefCell<Inner>>) {
+    let (gpu, arrived, width, height) = {
+        let mut i = inner.borrow_mut();
+        let Some(arrived) = i.remote.as_mut().and_then(|r| r.arrived.take()) else {
+            return;
+        };
+        (
+            Rc::clone(&i.gpu),
+            arrived,
+            i.options.width,
+            i.options.height,
+        )
+    };
+    let created = VdiRenderer::create(&gpu, &arrived.vdi, width, height).await;
+    let mut i = inner.borrow_mut();
+    let Some(remote) = i.remote.as_mut() else {
+        return;
+    };
+    match created {
+        Ok(renderer) => {
+            if remote
+                .drawn
+                .as_ref()
+                .is_some_and(|d| d.sequence >= arrived.sequence)
+            {
+                remote.report.answers_dropped += 1;
+                return;
+            }
+            remote.drawn = Some(Drawn {
+                sequence: arrived.sequence,
+                scene: arrived.scene,
+                renderer: Rc::new(renderer),
+            });
+            remote.report.vdis_received += 1;
+            remote.report.last_error = None;
+            remote.need_frame = true;
+        }
+        Err(e) => remote.fail(&RemoteError::Gpu(Box::new(e))),
+    }
+}
