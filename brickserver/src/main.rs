@@ -205,6 +205,7 @@ fn main() -> ExitCode {
                 },
                 viewer_dir: viewer_dir.or_else(default_viewer_dir),
                 public_url,
+                ..ServerOptions::default()
             };
             let limits = ConnectionLimits {
                 max_connections,

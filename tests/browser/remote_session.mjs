@@ -20,7 +20,9 @@
 // byte counts then. Last, it prints {"scene", "adapter", "start", "end", "final", "samples",
 // "draws", "rested", "console"} as JSON: each sample {t (scheduled), late_ms, camera (the path's
 // at t), state (window.residency.state()), bytes (fetch() body bytes so far per origin), png
-// (the canvas as a PNG data URL)}; draws: the times (s) the page drew a frame into its canvas;
+// (window.residency.snapshot(): the frame on show as a PNG data URL, read back on the page's
+// GPU path)}; draws: the times (s) the page drew a frame into its canvas (a putImageData on the
+// CPU path, a WebGPU canvas texture acquired on the GPU path);
 // rested: per segment, seconds from the end of its move until the page was converged on the
 // rested camera (null if it was not before the segment ended); final {waited_s, state, png}:
 // the page once converged on the last camera, off the schedule; start/end: the page's state
@@ -34,7 +36,8 @@ const deadline = Date.now() + (spec.timeout_s ?? 300) * 1000;
 const { browser, page, consoleMessages } = await launch(spec.viewport ?? {});
 
 // Counts the body bytes of every fetch() by origin (the page's bricks and VDIs, both fetched
-// with fetch()), and timestamps every frame drawn into the canvas.
+// with fetch()), and timestamps every frame drawn into the canvas (putImageData on the page's CPU
+// path; getCurrentTexture of its WebGPU canvas context, once a frame, on the GPU path).
 await page.addInitScript(() => {
   const rs = { draws: [], bytes: {}, fetches: {}, failed: {} };
   window.__session = rs;
@@ -57,6 +60,13 @@ await page.addInitScript(() => {
     rs.draws.push(performance.now());
     return put.apply(this, args);
   };
+  if (window.GPUCanvasContext) {
+    const acquire = GPUCanvasContext.prototype.getCurrentTexture;
+    GPUCanvasContext.prototype.getCurrentTexture = function (...args) {
+      rs.draws.push(performance.now());
+      return acquire.apply(this, args);
+    };
+  }
 });
 
 const stdin = createInterface({ input: process.stdin })[Symbol.asyncIterator]();
@@ -135,7 +145,7 @@ try {
     const t0 = performance.now();
     const drawsFrom = rs.draws.length;
     await new Promise((done) => {
-      function tick() {
+      async function tick() {
         const now = performance.now();
         const t = (now - t0) / 1000;
         const p = pose(Math.min(t, total));
@@ -153,16 +163,20 @@ try {
             rested[i] = t - g.move_end;
           }
         });
-        while (next < samples.length && t >= samples[next]) {
-          records.push({
-            t: samples[next],
-            late_ms: (t - samples[next]) * 1000,
-            camera: camera(pose(samples[next])),
-            state: s,
-            bytes: { ...rs.bytes },
-            png: document.getElementById("canvas").toDataURL("image/png"),
-          });
-          next++;
+        if (next < samples.length && t >= samples[next]) {
+          const bytes = { ...rs.bytes };
+          const png = await window.residency.snapshot();
+          while (next < samples.length && t >= samples[next]) {
+            records.push({
+              t: samples[next],
+              late_ms: (t - samples[next]) * 1000,
+              camera: camera(pose(samples[next])),
+              state: s,
+              bytes,
+              png,
+            });
+            next++;
+          }
         }
         if (t >= total && next >= samples.length) done();
         else requestAnimationFrame(tick);
@@ -185,7 +199,7 @@ try {
   const final = {
     waited_s: (Date.now() - waitFrom) / 1000,
     state: settled,
-    png: await page.evaluate(() => document.getElementById("canvas").toDataURL("image/png")),
+    png: await page.evaluate(() => window.residency.snapshot()),
   };
   const end = await counters();
   await mark("end", { state: end.state });

@@ -3,7 +3,8 @@
 //
 //   node tests/browser/web_viewer.mjs '<JSON spec>'
 //
-// The spec: {"url": PAGE_URL, "noWebGPU": false, "timeout_s": 240, "viewport": {"width": W,
+// The spec: {"url": PAGE_URL, "noWebGPU": false, "noWebGPUCanvas": false (canvases refuse a
+// "webgpu" context, WebGPU itself stays), "timeout_s": 240, "viewport": {"width": W,
 // "height": H} (default 1024×768), "steps": [STEP...]}, where a STEP is one of
 //   {"do": "converge"}                 wait until state().converged or state().error
 //   {"do": "opened"}                   wait until the page has opened its dataset (info())
@@ -11,6 +12,8 @@
 //   {"do": "waitState", "when": EXPR}  wait until EXPR, a JavaScript expression of `s` (the
 //                                      state), is true (or s.error is set); return the state
 //   {"do": "snapshot", "path": P}      window.residency.snapshot() written to P as PNG
+//   {"do": "presented", "path": P}     window.residency.presented() (what the canvas shows)
+//                                      written to P as PNG
 //   {"do": "setScene", "scene": S}     window.residency.setScene(S)
 //   {"do": "drag", "dx": X, "dy": Y, "moves": N, "delay_ms": D}
 //                                      a left-button mouse drag across the canvas in N moves
@@ -39,6 +42,14 @@ const deadline = Date.now() + (spec.timeout_s ?? 240) * 1000;
 const { browser, page, consoleMessages } = await launch(spec.viewport ?? {});
 if (spec.noWebGPU) {
   await page.addInitScript(() => Object.defineProperty(Navigator.prototype, "gpu", { get: () => undefined }));
+}
+if (spec.noWebGPUCanvas) {
+  await page.addInitScript(() => {
+    const getContext = HTMLCanvasElement.prototype.getContext;
+    HTMLCanvasElement.prototype.getContext = function (kind, ...rest) {
+      return kind === "webgpu" ? null : getContext.call(this, kind, ...rest);
+    };
+  });
 }
 
 async function until(check) {
@@ -74,6 +85,12 @@ try {
           return s && (s.error || new Function("s", `return (${when});`)(s)) ? s : null;
         }, step.when)));
         break;
+      case "presented": {
+        const url = await page.evaluate(() => window.residency.presented());
+        writeFileSync(step.path, Buffer.from(url.split(",")[1], "base64"));
+        results.push(step.path);
+        break;
+      }
       case "snapshot": {
         const url = await page.evaluate(() => window.residency.snapshot());
         writeFileSync(step.path, Buffer.from(url.split(",")[1], "base64"));

@@ -13,10 +13,21 @@
 // (viewer/src/web/remote.rs decides when to ask; only the latest request matters: a newer one
 // aborts the fetch in flight). `?target_fps=N` is the frame rate its frame-rate controller holds
 // while the camera moves (default 60).
+//
+// Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
+// each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
+// readback). Where no WebGPU canvas context can be made the page falls back to the CPU path:
+// each frame read back, encoded to sRGB in the viewer and drawn with putImageData on a 2D
+// canvas. `?present=auto|gpu|cpu` picks (auto, the default: the GPU where it can; gpu: an error
+// where it cannot; cpu: the CPU path always). `state().present` says which is in use, and
+// `state().image_readbacks` counts the images read back (one a frame on the CPU path, one a
+// `snapshot()` on the GPU path).
 
 import init, { Viewer } from "./residency_viewer.js";
 
-const canvas = document.getElementById("canvas");
+// Replaced by a fresh element when a WebGPU context was made but cannot be used (a canvas with
+// a WebGPU context cannot also hold the CPU path's 2D context).
+let canvas = document.getElementById("canvas");
 const message = document.getElementById("message");
 const stats = document.getElementById("stats");
 
@@ -56,6 +67,16 @@ const fromHex = (h) => [1, 3, 5].map((i) => toLinear(parseInt(h.slice(i, i + 2),
 let viewer = null;
 let lastScene = "";
 let failure = null;
+/** Frames are presented on the GPU (a WebGPU canvas context), not by putImageData. */
+let onGpu = false;
+/** snapshot() and presented() calls waiting for the loop, between two steps: {kind, resolve, reject}. */
+const waiting = [];
+
+/** `?present=`: how frames reach the canvas ("auto", "gpu" or "cpu"), or null for another value. */
+function presentWanted() {
+  const value = new URLSearchParams(location.search).get("present") ?? "auto";
+  return ["auto", "gpu", "cpu"].includes(value) ? value : null;
+}
 
 /** The render service of the remote mode: {url, token, frameMs (NaN: the default)}, or null. */
 function renderService() {
@@ -138,6 +159,7 @@ function remoteTick() {
 }
 
 function draw() {
+  if (onGpu) return; // drawn on the GPU by the step
   const w = viewer.width(), h = viewer.height();
   const rgba = viewer.rgba();
   if (rgba.length !== w * h * 4) return;
@@ -380,6 +402,40 @@ function listen() {
   });
 }
 
+/** 8-bit sRGB RGBA pixels of the image size as a PNG data URL, as the CPU path's canvas encodes them. */
+function pngOf(rgba) {
+  const w = viewer.width(), h = viewer.height();
+  const c = document.createElement("canvas");
+  c.width = w;
+  c.height = h;
+  if (rgba.length === w * h * 4) {
+    c.getContext("2d").putImageData(new ImageData(new Uint8ClampedArray(rgba.buffer, rgba.byteOffset, rgba.length), w, h), 0, 0);
+  }
+  return c.toDataURL("image/png");
+}
+
+/** What the WebGPU canvas shows, as a PNG data URL: the frame presented again and copied in the same task. */
+function presentedPng() {
+  viewer.repaint();
+  const c = document.createElement("canvas");
+  c.width = canvas.width;
+  c.height = canvas.height;
+  c.getContext("2d").drawImage(canvas, 0, 0);
+  return c.toDataURL("image/png");
+}
+
+/** Answers the snapshot() and presented() calls waiting, between two steps. */
+async function answerWaiting() {
+  while (waiting.length) {
+    const { kind, resolve, reject } = waiting.shift();
+    try {
+      resolve(kind === "snapshot" ? pngOf(await viewer.snapshot_rgba()) : presentedPng());
+    } catch (e) {
+      reject(new Error(String(e)));
+    }
+  }
+}
+
 async function loop() {
   try {
     if (service) remoteTick();
@@ -390,6 +446,7 @@ async function loop() {
   } catch (e) {
     failure = String(e);
   }
+  await answerWaiting();
   showStats();
   requestAnimationFrame(loop);
 }
@@ -405,9 +462,17 @@ window.residency = {
    * requests_sent, requests_aborted, answers_dropped, vdis_received, last_error, d_i,
    * vdi_camera, converged, ...} with a render service, else null}. */
   state,
-  /** The current frame as a PNG data URL (8-bit sRGB, like `viewer render`'s PNG). */
+  /** The current frame as a PNG data URL (8-bit sRGB, like `viewer render`'s PNG). On the GPU
+   * path it is read back for this call (state().image_readbacks counts it). */
   async snapshot() {
-    return canvas.toDataURL("image/png");
+    if (!viewer || !onGpu) return canvas.toDataURL("image/png");
+    return new Promise((resolve, reject) => waiting.push({ kind: "snapshot", resolve, reject }));
+  },
+  /** What the canvas shows, as a PNG data URL (on the GPU path the WebGPU canvas copied into
+   * a 2D canvas; for tests that compare it with snapshot()). */
+  async presented() {
+    if (!viewer || !onGpu) return canvas.toDataURL("image/png");
+    return new Promise((resolve, reject) => waiting.push({ kind: "presented", resolve, reject }));
   },
   /** The dataset's description (channels, display hints, levels, adapter). */
   info() {
@@ -447,6 +512,29 @@ async function main() {
       viewer.set_scene_json(decodeURIComponent(location.hash.slice("#scene=".length)));
     } catch (e) {
       show(`The link's #scene is not a valid scene (${e}); showing the default view.`);
+    }
+  }
+  const present = presentWanted();
+  if (present == null) {
+    failure = `?present= must be auto, gpu or cpu, not '${new URLSearchParams(location.search).get("present")}'`;
+    show(failure);
+    return;
+  }
+  if (present !== "cpu") {
+    try {
+      const format = await viewer.present_on(canvas);
+      onGpu = true;
+      console.info(`presenting on the GPU (a ${format} WebGPU canvas context)`);
+    } catch (e) {
+      if (present === "gpu") {
+        failure = `cannot present on the GPU (?present=gpu): ${e}`;
+        show(failure);
+        return;
+      }
+      console.warn(`no WebGPU canvas context (${e}): presenting by the CPU path (putImageData)`);
+      const fresh = canvas.cloneNode(false);
+      canvas.replaceWith(fresh);
+      canvas = fresh;
     }
   }
   buildControls(JSON.parse(viewer.info_json()));

@@ -3,8 +3,8 @@
 
 use std::error::Error;
 use std::path::PathBuf;
-use std::sync::{Arc, OnceLock};
-use std::time::Instant;
+use std::sync::{Arc, Mutex, OnceLock, PoisonError};
+use std::time::{Duration, Instant};
 
 use crate::bricks::{BatchLimits, ImageArrays};
 use crate::cache::ByteCache;
@@ -31,6 +31,10 @@ pub struct ServerOptions {
     /// included): every link in the listing is built on it. `None`: from the request's
     /// `X-Forwarded-Proto`/`X-Forwarded-Host`, else its `Host`.
     pub public_url: Option<PublicUrl>,
+    /// How long a dataset's region index or image arrays that could not be loaded are
+    /// answered with the same error before the next request tries again (a store that failed
+    /// may recover).
+    pub load_retry: Duration,
 }
 
 impl Default for ServerOptions {
@@ -41,12 +45,17 @@ impl Default for ServerOptions {
             batch: BatchLimits::default(),
             viewer_dir: None,
             public_url: None,
+            load_retry: LOAD_RETRY,
         }
     }
 }
 
-/// A part of a dataset (its region index or image arrays) that could not be loaded; kept, so
-/// every later request is answered the same (500) without trying again.
+/// [`ServerOptions::load_retry`] by default.
+pub const LOAD_RETRY: Duration = Duration::from_secs(5);
+
+/// A part of a dataset (its region index or image arrays) that could not be loaded; kept for
+/// [`ServerOptions::load_retry`], so the requests meanwhile are answered the same (500)
+/// without trying again.
 #[derive(Clone, Debug, thiserror::Error)]
 #[error("dataset '{dataset}': {source}")]
 pub(crate) struct LoadError {
@@ -56,13 +65,37 @@ pub(crate) struct LoadError {
     source: Arc<dyn Error + Send + Sync>,
 }
 
+/// A part of a dataset loaded on first use: kept once loaded; a failure is kept with when it
+/// happened, and tried again by the first request after [`ServerOptions::load_retry`].
+pub(crate) struct LoadCell<T>(Mutex<Option<(Result<T, LoadError>, Instant)>>);
+
+impl<T> Default for LoadCell<T> {
+    fn default() -> Self {
+        Self(Mutex::new(None))
+    }
+}
+
+impl<T: Clone> LoadCell<T> {
+    /// What is held, unless it is a failure older than `retry` (or nothing is held).
+    fn current(
+        held: Option<&(Result<T, LoadError>, Instant)>,
+        retry: Duration,
+    ) -> Option<Result<T, LoadError>> {
+        match held {
+            Some((Ok(v), _)) => Some(Ok(v.clone())),
+            Some((Err(e), at)) if at.elapsed() < retry => Some(Err(e.clone())),
+            _ => None,
+        }
+    }
+}
+
 /// What is loaded once per dataset, on first use.
 #[derive(Default)]
 pub(crate) struct Loaded {
     /// The region index (`None`: the dataset has no region metadata).
-    pub(crate) regions: OnceLock<Result<Option<Arc<RegionIndex>>, LoadError>>,
+    pub(crate) regions: LoadCell<Option<Arc<RegionIndex>>>,
     /// The image arrays, for batched bricks.
-    pub(crate) arrays: OnceLock<Result<Arc<ImageArrays>, LoadError>>,
+    pub(crate) arrays: LoadCell<Arc<ImageArrays>>,
     /// What the listing says of the store (`None`: its metadata could not be read).
     pub(crate) summary: OnceLock<Option<Arc<StoreSummary>>>,
 }
@@ -81,6 +114,8 @@ pub struct AppState {
     pub(crate) public_url: Option<PublicUrl>,
     /// What is loaded once per dataset, by dataset index.
     pub(crate) loaded: Vec<Loaded>,
+    /// How long a failed load is answered before it is tried again.
+    pub(crate) load_retry: Duration,
     /// Where each dataset's keys are read from, by dataset index.
     pub(crate) stores: Vec<DatasetStore>,
     /// The `ETag` of each chunk key served, by dataset index and raw key, with when it was
@@ -116,6 +151,7 @@ impl AppState {
             viewer: ViewerFiles::new(options.viewer_dir.clone()),
             public_url: options.public_url.clone(),
             loaded,
+            load_retry: options.load_retry,
             stores,
             etags: quick_cache::sync::Cache::new(1 << 16),
         })
@@ -134,31 +170,41 @@ impl AppState {
 
 /// A once-loaded part of dataset `i` (`cell` picks which): read directly once loaded, else
 /// made by `load` on the blocking pool (the first caller loads, later ones wait for it). A
-/// failure keeps the error, with its causes.
+/// failure keeps the error, with its causes, for [`ServerOptions::load_retry`]; the first
+/// request after that loads again.
 pub(crate) async fn loaded<T, E>(
     state: &Arc<AppState>,
     i: usize,
-    cell: fn(&Loaded) -> &OnceLock<Result<T, LoadError>>,
+    cell: fn(&Loaded) -> &LoadCell<T>,
     load: fn(&DatasetStore) -> Result<T, E>,
 ) -> Result<T, LoadError>
 where
     T: Clone + Send + Sync + 'static,
     E: Error + Send + Sync + 'static,
 {
-    if let Some(done) = cell(&state.loaded[i]).get() {
-        return done.clone();
+    let retry = state.load_retry;
+    // Without waiting: a load in progress holds the lock, and is waited for below.
+    if let Ok(held) = cell(&state.loaded[i]).0.try_lock()
+        && let Some(done) = LoadCell::current(held.as_ref(), retry)
+    {
+        return done;
     }
     let st = state.clone();
     blocking(move || {
         let d = &st.datasets.0[i];
-        cell(&st.loaded[i])
-            .get_or_init(|| {
-                load(&st.stores[i]).map_err(|e| LoadError {
-                    dataset: d.name.clone(),
-                    source: Arc::new(e),
-                })
-            })
-            .clone()
+        let mut held = cell(&st.loaded[i])
+            .0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        if let Some(done) = LoadCell::current(held.as_ref(), retry) {
+            return done;
+        }
+        let result = load(&st.stores[i]).map_err(|e| LoadError {
+            dataset: d.name.clone(),
+            source: Arc::new(e),
+        });
+        *held = Some((result.clone(), Instant::now()));
+        result
     })
     .await
 }

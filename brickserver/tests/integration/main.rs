@@ -7,5 +7,6 @@ mod common;
 
 mod binary;
 mod listing;
+mod loads;
 mod openapi;
 mod viewer;

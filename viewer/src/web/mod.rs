@@ -10,10 +10,13 @@
 //! rebuilt or fetched again.
 //!
 //! - [`fetch`]: the browser's `fetch` as the protocol's transport;
+//! - [`present`]: frames onto the page's canvas, on the GPU (WebGPU canvas context) or by
+//!   the CPU path;
 //! - [`remote`]: the remote mode, VDIs of a render service (`viewer serve`) ray cast for the
 //!   page's camera instead of bricks streamed.
 
 pub mod fetch;
+pub mod present;
 pub mod remote;
 
 use std::cell::RefCell;
@@ -30,7 +33,6 @@ use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{FrameStats, StreamState};
-use crate::image::linear_to_srgb8;
 use crate::interactive::{camera_control, controls};
 use crate::scene::{Filter, Scene};
 use crate::source::{BrickKey, BrickVoxels, SourceError, VolumeInfo, server};
@@ -99,6 +101,14 @@ struct Totals {
     gpu_time_ms: Option<f64>,
     renderer_builds: u32,
     error: Option<String>,
+    /// How frames reach the canvas: `"gpu"` (presented from the image buffer) or `"cpu"`
+    /// (read back and drawn with `putImageData`).
+    present: &'static str,
+    /// Why the page presents by the CPU path where it tried the GPU.
+    present_error: Option<String>,
+    /// Images read back from the GPU so far: one a frame by the CPU path, one a
+    /// `snapshot()` on the GPU path.
+    image_readbacks: u64,
     /// The remote mode's counters, when a render service is given.
     remote: Option<remote::RemoteReport>,
 }
@@ -124,8 +134,13 @@ struct Inner {
     /// Fetch results filed since the last frame (reported with the next one).
     pending: FrameStats,
     render_needed: bool,
-    /// The last frame as 8-bit sRGB RGBA (alpha 255), ready for `putImageData`.
+    /// The last frame as 8-bit sRGB RGBA (alpha 255), ready for `putImageData` (the CPU
+    /// path only).
     rgba: Vec<u8>,
+    /// The canvas surface, when frames are presented on the GPU.
+    canvas: Option<present::CanvasPresenter>,
+    /// The frame on the canvas (the GPU path), for `snapshot()`.
+    shown: Option<present::Shown>,
     totals: Totals,
     /// The remote mode, when the page has a render service.
     remote: Option<remote::Remote>,
@@ -202,7 +217,12 @@ impl Viewer {
                 pending: FrameStats::default(),
                 render_needed: true,
                 rgba: Vec::new(),
-                totals: Totals::default(),
+                canvas: None,
+                shown: None,
+                totals: Totals {
+                    present: "cpu",
+                    ..Totals::default()
+                },
                 remote: None,
             })),
         })
@@ -365,9 +385,93 @@ impl Viewer {
     }
 
     /// The last frame as 8-bit sRGB RGBA, row-major from the top, as `viewer render`'s PNG
-    /// encodes it (alpha 255).
+    /// encodes it (alpha 255): the CPU path's frame (empty while presenting on the GPU).
     pub fn rgba(&self) -> js_sys::Uint8Array {
         js_sys::Uint8Array::from(&self.inner.borrow().rgba[..])
+    }
+
+    /// Presents frames on `canvas` on the GPU from now on (a WebGPU canvas context of the
+    /// canvas, its size as it is now); resolves to the surface's format, e.g. `"Bgra8Unorm"`.
+    /// Once it has resolved, [`Viewer::rgba`] stays empty: read frames with
+    /// [`Viewer::snapshot_rgba`].
+    ///
+    /// # Errors
+    /// Rejects with the [`present::CanvasError`]'s message (also `state().present_error`);
+    /// frames then go on by the CPU path, on a canvas that may hold a WebGPU context now.
+    pub fn present_on(&self, canvas: web_sys::HtmlCanvasElement) -> js_sys::Promise {
+        let inner = Rc::clone(&self.inner);
+        wasm_bindgen_futures::future_to_promise(async move {
+            let gpu = Rc::clone(&inner.borrow().gpu);
+            let made = present::CanvasPresenter::new(&gpu, canvas).await;
+            let mut i = inner.borrow_mut();
+            match made {
+                Ok(c) => {
+                    let format = format!("{:?}", c.format());
+                    i.canvas = Some(c);
+                    i.totals.present = "gpu";
+                    i.totals.present_error = None;
+                    i.render_needed = true;
+                    if let Some(r) = i.remote.as_mut() {
+                        r.need_frame = true;
+                    }
+                    Ok(JsValue::from_str(&format))
+                }
+                Err(e) => {
+                    let message = error_chain(&e);
+                    i.totals.present_error = Some(message.clone());
+                    Err(JsValue::from_str(&message))
+                }
+            }
+        })
+    }
+
+    /// Presents the frame on show again, now (the GPU path): what the page's canvas shows
+    /// until the browser composites it, for a test to copy it in the same task. Returns
+    /// whether there was a frame to present.
+    ///
+    /// # Errors
+    /// The [`present::CanvasError`]'s message when presenting fails.
+    pub fn repaint(&self) -> Result<bool, JsValue> {
+        let mut i = self.inner.borrow_mut();
+        let i = &mut *i;
+        let gpu = Rc::clone(&i.gpu);
+        let size = (i.options.width, i.options.height);
+        let (Some(canvas), Some(shown)) = (i.canvas.as_mut(), i.shown.as_ref()) else {
+            return Ok(false);
+        };
+        let mut encoder = present::frame_encoder(&gpu);
+        let shown = match shown {
+            present::Shown::Local => match &i.renderer {
+                Some(r) => canvas.show(&gpu, encoder, r.image_buffer(), size),
+                None => return Ok(false),
+            },
+            present::Shown::Remote(vdi, camera, scale) => {
+                let (image, _) = vdi.encode(&gpu, &mut encoder, camera, true, *scale);
+                canvas.show(&gpu, encoder, image, size)
+            }
+        };
+        shown.map_err(|e| js_error(&e))
+    }
+
+    /// The frame on show as 8-bit sRGB RGBA (as [`Viewer::rgba`]): on the GPU path read back
+    /// now (the local renderer's image buffer, or the VDI ray cast again for the frame's
+    /// camera and `D_I`, which gives the same pixels), one readback; on the CPU path the last
+    /// frame's pixels, no readback. Resolves to an empty array before the first frame.
+    ///
+    /// # Errors
+    /// Rejects with the [`GpuError`]'s message when the readback fails.
+    pub fn snapshot_rgba(&self) -> js_sys::Promise {
+        let inner = Rc::clone(&self.inner);
+        wasm_bindgen_futures::future_to_promise(async move {
+            let read = snapshot(&inner).await;
+            match read {
+                Ok(()) => {
+                    let i = inner.borrow();
+                    Ok(js_sys::Uint8Array::from(&i.rgba[..]).into())
+                }
+                Err(e) => Err(js_error(&e)),
+            }
+        })
     }
 
     /// `{frame, converged, bricks_requested, bricks_fetched, bytes_fetched, bricks_failed,
@@ -518,17 +622,28 @@ async fn render_and_request(
     };
     let camera = inner.borrow().scene.camera.clone();
     renderer.set_camera(camera);
-    let out = renderer.render_async(&gpu).await?;
+    let on_gpu = inner.borrow().canvas.is_some();
+    let out = if on_gpu {
+        renderer.render_without_pixels_async(&gpu).await?
+    } else {
+        renderer.render_async(&gpu).await?
+    };
     let mut i = inner.borrow_mut();
-    i.rgba.clear();
-    i.rgba.extend(out.pixels.iter().flat_map(|p| {
-        [
-            linear_to_srgb8(p[0]),
-            linear_to_srgb8(p[1]),
-            linear_to_srgb8(p[2]),
-            255,
-        ]
-    }));
+    let i = &mut *i;
+    match i.canvas.as_mut() {
+        Some(canvas) if on_gpu => {
+            let size = (i.options.width, i.options.height);
+            let encoder = present::frame_encoder(&gpu);
+            canvas
+                .show(&gpu, encoder, renderer.image_buffer(), size)
+                .map_err(|e| present_failed(&e))?;
+            i.shown = Some(present::Shown::Local);
+        }
+        _ => {
+            present::srgb_rgba(&out.pixels, &mut i.rgba);
+            i.totals.image_readbacks += 1;
+        }
+    }
     let mut stats = FrameStats {
         frame: renderer.frames(),
         shader: out.counts,
@@ -557,7 +672,7 @@ async fn render_and_request(
     let batch = PAGE_BATCH.min(server::batch_size(&i.info));
     let room = MAX_REQUESTS_IN_FLIGHT.saturating_sub(i.requests_in_flight) * batch;
     for chunk in keys[..keys.len().min(room)].chunks(batch) {
-        send(inner, &mut i, chunk.to_vec());
+        send(inner, i, chunk.to_vec());
     }
     if keys.len() > room || over_cap > 0 {
         // More to ask for once these arrive: the next frame asks again.
@@ -565,6 +680,59 @@ async fn render_and_request(
     }
     i.totals.requests_in_flight = i.requests_in_flight;
     Ok(true)
+}
+
+/// A failure to present as the [`GpuError`] a step reports.
+fn present_failed(e: &present::CanvasError) -> GpuError {
+    GpuError::Validation {
+        what: "presenting the frame on the canvas".into(),
+        message: error_chain(e),
+    }
+}
+
+/// Reads the frame on show into `rgba` (see [`Viewer::snapshot_rgba`]). Holds the step
+/// (`stepping`) while it reads.
+async fn snapshot(inner: &Rc<RefCell<Inner>>) -> Result<(), GpuError> {
+    let (gpu, shown, renderer, pixels) = {
+        let mut i = inner.borrow_mut();
+        if i.canvas.is_none() || i.stepping {
+            return Ok(());
+        }
+        let Some(shown) = i.shown.take() else {
+            return Ok(());
+        };
+        i.stepping = true;
+        let pixels = u64::from(i.options.width) * u64::from(i.options.height);
+        (Rc::clone(&i.gpu), shown, i.renderer.take(), pixels)
+    };
+    let read = match (&shown, &renderer) {
+        (present::Shown::Local, Some(r)) => {
+            Some(present::read_image(&gpu, r.image_buffer(), pixels).await)
+        }
+        (present::Shown::Remote(vdi, camera, scale), _) => Some(
+            gpu.checked_async(
+                "rendering a VDI",
+                vdi.render_async(&gpu, camera, true, *scale),
+            )
+            .await
+            .map(|f| f.pixels),
+        ),
+        (present::Shown::Local, None) => None,
+    };
+    let mut i = inner.borrow_mut();
+    i.stepping = false;
+    if i.renderer.is_none() {
+        i.renderer = renderer;
+    }
+    if i.shown.is_none() {
+        i.shown = Some(shown);
+    }
+    if let Some(read) = read {
+        let pixels = read?;
+        present::srgb_rgba(&pixels, &mut i.rgba);
+        i.totals.image_readbacks += 1;
+    }
+    Ok(())
 }
 
 /// Sends one `/bricks` request; its answer lands in `arrived` and asks for a frame.

@@ -24,12 +24,11 @@ use residency_schemas::vdi::{VdiError, VolumetricDepthImage};
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
-use super::{Inner, Viewer};
+use super::{Inner, Viewer, present};
 use crate::error_chain;
 use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::VdiRenderer;
-use crate::image::linear_to_srgb8;
 use crate::scene::{Camera, Scene};
 use crate::vdi_service::{ServiceInfo, VdiRequest};
 
@@ -204,7 +203,7 @@ pub(super) struct Remote {
     last_sent_ms: f64,
     /// The camera and `D_I` of the last frame.
     frame: Option<(Camera, f64)>,
-    need_frame: bool,
+    pub(super) need_frame: bool,
 }
 
 /// The page's clock, ms.
@@ -623,25 +622,50 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         )
     };
     let start = now_ms();
-    let frame = gpu
-        .checked_async(
-            "rendering a VDI",
-            renderer.render_async(&gpu, &camera, true, scale),
+    let on_gpu = inner.borrow().canvas.is_some();
+    let frame = if on_gpu {
+        // Presented from the VDI renderer's image, no readback: the frame time waits for the
+        // GPU's work instead.
+        gpu.checked_async("rendering a VDI", async {
+            let mut encoder = present::frame_encoder(&gpu);
+            let (image, _) = renderer.encode(&gpu, &mut encoder, &camera, true, scale);
+            let size = renderer.size();
+            {
+                let mut i = inner.borrow_mut();
+                if let Some(canvas) = i.canvas.as_mut() {
+                    canvas
+                        .show(&gpu, encoder, image, size)
+                        .map_err(|e| super::present_failed(&e))?;
+                }
+                i.shown = Some(present::Shown::Remote(
+                    Rc::clone(&renderer),
+                    camera.clone(),
+                    scale,
+                ));
+            }
+            present::work_done(&gpu).await;
+            Ok(None)
+        })
+        .await?
+    } else {
+        Some(
+            gpu.checked_async(
+                "rendering a VDI",
+                renderer.render_async(&gpu, &camera, true, scale),
+            )
+            .await?,
         )
-        .await?;
+    };
     let ms = now_ms() - start;
     let mut i = inner.borrow_mut();
     let i = &mut *i;
-    i.rgba.clear();
-    i.rgba.extend(frame.pixels.iter().flat_map(|p| {
-        [
-            linear_to_srgb8(p[0]),
-            linear_to_srgb8(p[1]),
-            linear_to_srgb8(p[2]),
-            255,
-        ]
-    }));
-    i.totals.gpu_time_ms = frame.gpu_time_ms;
+    if let Some(frame) = frame {
+        present::srgb_rgba(&frame.pixels, &mut i.rgba);
+        i.totals.image_readbacks += 1;
+        i.totals.gpu_time_ms = frame.gpu_time_ms;
+    } else {
+        i.totals.gpu_time_ms = None;
+    }
     let Some(remote) = i.remote.as_mut() else {
         return Ok(true);
     };

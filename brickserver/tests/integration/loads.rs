@@ -1,0 +1,42 @@
+//! The parts of a dataset loaded on first use (its image arrays for `/NAME/bricks`, its region
+//! index): a failure is answered the same for `ServerOptions::load_retry`, then the next
+//! request loads again, so a store that recovers is served again without a restart; once
+//! loaded, a part is kept.
+
+use std::time::Duration;
+
+use residency_brickserver::ServerOptions;
+
+use crate::common::{get, server, v3_store};
+
+#[tokio::test]
+async fn a_failed_load_is_answered_the_same_then_tried_again_after_the_retry_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = v3_store(dir.path(), "cells");
+    let options = ServerOptions {
+        load_retry: Duration::from_millis(400),
+        ..ServerOptions::default()
+    };
+    let router = server(&[("cells", &store)], &options).await;
+    let level = store.join("0/zarr.json");
+    let good = std::fs::read(&level).unwrap();
+    std::fs::write(&level, "not json").unwrap();
+    let path = "/cells/bricks?b=0,0,0,0,0&encoding=raw";
+    let failed = get(&router, path, &[]).await;
+    assert_eq!(failed.status, 500);
+    let message = failed.text();
+    assert!(message.contains("dataset 'cells'"), "{message}");
+    // The store recovers; within the retry time the answer is the same, without a load.
+    std::fs::write(&level, &good).unwrap();
+    let again = get(&router, path, &[]).await;
+    assert_eq!((again.status, again.text()), (failed.status, message));
+    // After it, the next request loads again.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let served = get(&router, path, &[]).await;
+    assert_eq!(served.status, 200, "{}", served.text());
+    // Once loaded, the arrays are kept: a later fault of the file changes nothing.
+    std::fs::write(&level, "not json").unwrap();
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let kept = get(&router, path, &[]).await;
+    assert_eq!((kept.status, kept.body), (served.status, served.body));
+}
