@@ -7,8 +7,10 @@
 //!   opened as one zarrs storage, and publishing, listing and downloading object-store stores;
 //! - [`aws_profile`]: the AWS shared configuration profiles that `object_store` does not read;
 //! - [`pyramid`]: the pyramid reader, bricks and metadata through zarrs' codecs over any
-//!   zarrs storage.
+//!   zarrs storage;
+//! - [`ranged`]: an object store read by zarrs with one ranged `GET` per read (no `HEAD`).
 
 pub mod aws_profile;
 pub mod location;
 pub mod pyramid;
+pub mod ranged;

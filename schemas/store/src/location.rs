@@ -25,12 +25,12 @@ use std::sync::Arc;
 use futures::{StreamExt, TryStreamExt};
 
 use crate::aws_profile::{Profile, ProfileError};
+use crate::ranged::RangedObjectStore;
 use zarrs::filesystem::{FilesystemStore, FilesystemStoreCreateError};
 use zarrs::storage::ReadableListableStorageTraits;
 use zarrs::storage::storage_adapter::async_to_sync::{
     AsyncToSyncBlockOn, AsyncToSyncStorageAdapter,
 };
-use zarrs_object_store::AsyncObjectStore;
 use zarrs_object_store::object_store::aws::{AmazonS3, AmazonS3Builder};
 use zarrs_object_store::object_store::path::Path as ObjectPath;
 use zarrs_object_store::object_store::prefix::PrefixStore;
@@ -282,7 +282,7 @@ pub fn object_storage(
     prefix: &ObjectPath,
     block_on: BlockOn,
 ) -> Arc<dyn ReadableListableStorageTraits> {
-    let store = AsyncObjectStore::new(PrefixStore::new(store, prefix.clone()));
+    let store = RangedObjectStore::new(Arc::new(PrefixStore::new(store, prefix.clone())));
     Arc::new(AsyncToSyncStorageAdapter::new(Arc::new(store), block_on))
 }
 
