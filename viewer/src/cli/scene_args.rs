@@ -255,7 +255,8 @@ pub fn filter_parser() -> impl clap::builder::TypedValueParser<Value = Filter> {
 
 impl SceneArgs {
     /// Reads the volumetric depth image at `path` (`viewer render --vdi`, `viewer view --vdi`)
-    /// and the camera to ray cast it from ([`SceneArgs::camera_for_vdi`]).
+    /// and the camera to ray cast it from ([`SceneArgs::camera_for_vdi`]). The flags that
+    /// would change what the VDI baked in are refused first, before the file is read.
     pub fn open_vdi(
         &self,
         path: &std::path::Path,
@@ -278,14 +279,12 @@ impl SceneArgs {
 
     /// The camera to render a volumetric depth image with: the scene file's (else `generated`,
     /// the VDI's own camera), then `--fov` and `--camera` (an orbit about the VDI's volume box
-    /// `[0, extent]`). The VDI's colours and transfer functions are baked in, so the flags that
-    /// would change them are refused.
-    pub fn camera_for_vdi(
+    /// `[0, extent]`).
+    fn camera_for_vdi(
         &self,
         generated: residency_viewer::scene::Camera,
         extent: [f64; 3],
     ) -> Result<residency_viewer::scene::Camera> {
-        self.refuse_for_vdi()?;
         let camera = match &self.scene {
             Some(path) => read_scene(path)?.camera,
             None => generated,
@@ -314,7 +313,7 @@ impl SceneArgs {
 
     /// Refuses the flags that would change what a VDI baked in (colours, transfer functions,
     /// background, filter).
-    pub fn refuse_for_vdi(&self) -> Result<()> {
+    fn refuse_for_vdi(&self) -> Result<()> {
         let baked = [
             (!self.tf.is_empty(), "--tf"),
             (!self.color.is_empty(), "--color"),

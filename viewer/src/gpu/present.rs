@@ -310,6 +310,25 @@ impl Presenter {
         }
     }
 
+    /// [`Presenter::encode`] onto a surface's texture (a window's or a canvas's), at its size.
+    ///
+    /// # Errors
+    /// As [`Presenter::encode`].
+    pub fn encode_to_surface(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        image: &wgpu::Buffer,
+        image_size: (u32, u32),
+        surface: &wgpu::SurfaceTexture,
+    ) -> Result<(), PresentError> {
+        let view = surface
+            .texture
+            .create_view(&wgpu::TextureViewDescriptor::default());
+        let size = (surface.texture.width(), surface.texture.height());
+        self.encode(gpu, encoder, image, image_size, &view, size)
+    }
+
     /// Records the pass drawing `image` (`image_size`, linear RGBA `vec4<f32>` per pixel) onto
     /// `target` (`target_size`, of this presenter's format) into `encoder`.
     ///

@@ -261,22 +261,13 @@ impl GpuDisplay {
                 })));
             }
         };
-        let view = texture
-            .texture
-            .create_view(&wgpu::TextureViewDescriptor::default());
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("present"),
             });
-        self.presenter.encode(
-            gpu,
-            &mut encoder,
-            image,
-            image_size,
-            &view,
-            (self.config.width, self.config.height),
-        )?;
+        self.presenter
+            .encode_to_surface(gpu, &mut encoder, image, image_size, &texture)?;
         gpu.queue.submit([encoder.finish()]);
         self.window.pre_present_notify();
         gpu.queue.present(texture);

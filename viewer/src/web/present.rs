@@ -142,17 +142,8 @@ impl CanvasPresenter {
                 })));
             }
         };
-        let view = texture
-            .texture
-            .create_view(&wgpu::TextureViewDescriptor::default());
-        self.presenter.encode(
-            gpu,
-            &mut encoder,
-            image,
-            image_size,
-            &view,
-            (self.config.width, self.config.height),
-        )?;
+        self.presenter
+            .encode_to_surface(gpu, &mut encoder, image, image_size, &texture)?;
         gpu.queue.submit([encoder.finish()]);
         gpu.queue.present(texture);
         Ok(true)

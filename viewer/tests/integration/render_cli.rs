@@ -36,6 +36,20 @@ pub(crate) fn viewer_ok(args: &[&str]) {
     );
 }
 
+/// The stderr of a `viewer` run that must fail (and must not panic).
+pub(crate) fn fails(args: &[&str]) -> String {
+    let out = viewer(args);
+    assert!(!out.status.success(), "{args:?} succeeded");
+    let err = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+/// `p` as an argument.
+pub(crate) fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
 /// Asserts the images at `a` and `b` agree as a converged render and its reference do
 /// (PSNR ≥ 40 dB, SSIM ≥ 0.99).
 fn assert_matches(label: &str, a: &Path, b: &Path) {

@@ -5,11 +5,10 @@
 //! answers CORS preflights.
 
 use std::io::{BufRead, BufReader, Read};
-use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 
-use crate::render_cli::{store, viewer, viewer_ok};
+use crate::render_cli::{s, store, viewer, viewer_ok};
 use residency_schemas::vdi::VolumetricDepthImage;
 use serde_json::{Value, json};
 
@@ -134,10 +133,6 @@ impl Server {
         let answer: Value = serde_json::from_slice(&bytes).unwrap();
         (status, answer["error"].as_str().unwrap().to_string())
     }
-}
-
-fn s(p: &Path) -> String {
-    p.to_str().unwrap().to_string()
 }
 
 /// The scene both `viewer vdi` (as `--scene`) and the request draw: `render_cli::VIEW`'s

@@ -4,23 +4,10 @@
 
 use std::path::Path;
 
-use crate::render_cli::{VIEW, store, viewer, viewer_ok};
+use crate::render_cli::{VIEW, fails, s, store, viewer_ok};
 use residency_schemas::vdi::VolumetricDepthImage;
 use residency_viewer::image::RgbImage;
 use residency_viewer::metrics;
-
-fn s(p: &Path) -> String {
-    p.to_str().unwrap().to_string()
-}
-
-/// The stderr of a `viewer` run that must fail.
-fn fails(args: &[&str]) -> String {
-    let out = viewer(args);
-    assert!(!out.status.success(), "{args:?} succeeded");
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!err.contains("panicked"), "{err}");
-    err
-}
 
 #[test]
 fn a_vdi_file_gives_back_the_image_of_its_view() {

@@ -4,11 +4,10 @@
 //! resolution), compared on real screenshots below the statistics panel. Also: `view --vdi`
 //! refuses what does not apply to a VDI with a message naming it.
 
-use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use crate::render_cli::{VIEW, viewer, viewer_ok};
+use crate::render_cli::{VIEW, fails, s, viewer_ok};
 use crate::view_xvfb::{SCREEN, X, spawn_with_lines, store, xvfb};
 
 const WINDOW: (u32, u32) = (320, 240);
@@ -16,10 +15,6 @@ const WINDOW: (u32, u32) = (320, 240);
 /// Rows of the window at the top that the statistics panel may cover (its numbers differ
 /// from run to run).
 const PANEL_ROWS: usize = 100;
-
-fn s(p: &Path) -> String {
-    p.to_str().unwrap().to_string()
-}
 
 /// Runs `viewer view ARGS --present PATH` on `display` until its view settles, takes a
 /// screenshot, quits it with `q`, and returns its stderr (logged at info) and the window's
@@ -102,15 +97,6 @@ fn view_presents_the_same_pixels_on_the_gpu_as_by_the_cpu_blit_under_xvfb() {
     args.extend(["--width", "64", "--height", "48", "--max-level", "0"]);
     viewer_ok(&args);
     same_on_both_paths(&display, &["--vdi", &vdi, "--render-scale", "0.5"]);
-}
-
-/// The stderr of a `viewer` run that must fail.
-fn fails(args: &[&str]) -> String {
-    let out = viewer(args);
-    assert!(!out.status.success(), "{args:?} succeeded");
-    let err = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert!(!err.contains("panicked"), "{err}");
-    err
 }
 
 #[test]
