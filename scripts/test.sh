@@ -6,6 +6,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
+# The disk this run has, and what the build folders take, printed at the start and before the
+# external-client tests: a full disk fails every test after it, and this says how close it was.
+disk() {
+  echo "== disk ($1): $(df -h --output=avail . | tail -1 | tr -d ' ') free; target $(du -sh target 2>/dev/null | cut -f1), tests/fuzz/target $(du -sh tests/fuzz/target 2>/dev/null | cut -f1)"
+}
+disk start
 # A real S3 server for the object-storage tests (tests/python/test_object_store.py): s3s-fs, the
 # s3s project's S3 protocol server over a local folder, built once into ~/.cargo/bin (about
 # 2 minutes on 2 cores). Garage would take an estimated 20-40 minutes to build here; see
@@ -32,4 +38,5 @@ bash scripts/build-web.sh
 cargo test --release --workspace
 # A short run (10 s) of every fuzz target: the corpora and seeds must still run clean.
 bash scripts/fuzz.sh 10
+disk "before the external-client tests"
 RESIDENCY_BIN="$PWD/target/release" .venv/bin/python -m pytest -q tests/python
