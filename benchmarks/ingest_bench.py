@@ -11,6 +11,11 @@ anisotropy-aware pyramid is the same isotropic one). Each run is a separate proc
 GNU time after `sync`; the peers read the TIFF with tifffile. zarrs_ome reads a Zarr array, so
 it gets the stack pre-converted to a plain Zarr v3 array (that conversion is not timed).
 
+Beside each size, the limit probes of benchmarks/ingest_limits.py (reading the input, encoding
+level 0 with the same codec on all cores, writing the store's files, the pyramid's arithmetic
+alone) say how far ingest is from what the machine allows: ingest's fraction of the limit is the
+slowest probe's time over ingest's wall time.
+
 Results go to docs/benchmarks/ingest.md (with --docs, docs/benchmarks.md links to them between
 its `ingest-bench` markers).
 """
@@ -27,6 +32,7 @@ import subprocess
 import sys
 
 from docs_page import point_page_at, write_result
+from ingest_limits import limits
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 INGEST = ROOT / "target" / "release" / "ingest"
@@ -64,6 +70,7 @@ def bench(size_mib, work):
     ours = d / "ingest.ome.zarr"
     rows["ingest"] = timed([INGEST, "convert", src, "-o", ours, "--voxel-size", "1,1,1", "--quiet"], ours)
     levels = levels_of(ours)
+    probes = limits(src, ours)
     for tool in ["tensorstore", "ngff-zarr", "ome-zarr"]:
         rows[tool] = timed([PY, PEERS, tool, src, d / f"{tool}.zarr", levels], d / f"{tool}.zarr")
     if os.path.exists(ZARRS_OME):
@@ -76,12 +83,12 @@ def bench(size_mib, work):
         )
     else:
         rows["zarrs_ome"] = "not run: zarrs_ome not installed (cargo install zarrs_tools --features ome)"
-    return input_mb, levels, rows
+    return input_mb, levels, rows, probes
 
 
 def table(results):
     lines = []
-    for size, (input_mb, levels, rows) in results.items():
+    for size, (input_mb, levels, rows, probes) in results.items():
         base = rows["ingest"]
         lines.append(f"\n**{size} MiB** ({input_mb:.0f} MB of uint16, {levels} levels)\n")
         lines.append("| Tool | Wall s | MB/s | Peak RSS MB | CPU | Time vs ingest | RSS vs ingest |")
@@ -94,7 +101,20 @@ def table(results):
             ratio_t = wall / base[0] if not isinstance(base, str) else float("nan")
             ratio_m = rss / base[1] if not isinstance(base, str) else float("nan")
             lines.append(f"| {tool} | {wall:.2f} | {input_mb / wall:.0f} | {rss:.0f} | {cpu} | {ratio_t:.2f}x | {ratio_m:.2f}x |")
+        lines.append("")
+        lines.append(limits_line(probes, base))
     return "\n".join(lines)
+
+
+def limits_line(probes, ingest):
+    """The limit probes of one size, and ingest's fraction of the limit."""
+    p = probes["probes"]
+    parts = ", ".join(f"{name} {p[name]:.3f} s" for name in ("read", "encode", "write", "pyramid"))
+    text = (f"Limit probes on {probes['cores']} cores ([ingest_limits.py](../../benchmarks/ingest_limits.py)): {parts}; "
+            f"the limit is {probes['slowest']}, {probes['limit']:.3f} s (all four one after the other: {probes['serial']:.3f} s).")
+    if not isinstance(ingest, str):
+        text += f" ingest runs at {probes['limit'] / ingest[0]:.0%} of the limit (the limit's time over ingest's wall time)."
+    return text
 
 
 def main():

@@ -1,9 +1,14 @@
 """Server benchmark: `brickserver` against nginx serving the same store directory, in one run,
-with `oha` as the load generator on the same machine (client and servers share the cores).
+with `wrk` (default) or `oha` as the load generator on the same machine (client and servers
+share the cores).
 
-    python3 benchmarks/server_bench.py [--duration 10] [--soak 300] [--docs]
+    python3 benchmarks/server_bench.py [--client wrk|oha] [--duration 10] [--soak 300] [--docs]
 
-Needs `oha` (`cargo install oha`), nginx (Debian `nginx-light`) and a release build. Loads:
+Needs `wrk` (Debian `wrk`; random keys from benchmarks/wrk_random_keys.lua) or `oha`
+(`cargo install oha`), nginx (Debian `nginx-light`) and a release build. nginx, with
+`sendfile`, is the loopback ceiling: the fastest static file server at hand. Beside requests/s
+and latency, each row gives the CPU time each server spent per request (user + system, from
+/proc/PID/stat over the run). Loads:
 
 Both servers run at once; each load runs on one, then the other, `--repeat` times, and the
 median run is reported, so background load hits both alike.
@@ -47,6 +52,8 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 BIN = ROOT / "target" / "release"
 GRID = (20, 25, 40)  # 20,000 chunks, z, y, x
 OHA = shutil.which("oha") or str(pathlib.Path.home() / ".cargo" / "bin" / "oha")
+WRK_SCRIPT = pathlib.Path(__file__).resolve().parent / "wrk_random_keys.lua"
+CLIENT = "wrk"  # set from --client in main()
 
 
 def make_store(path: pathlib.Path):
@@ -92,6 +99,53 @@ def rss_mb(pids) -> float:
 
 def current_rss_mb(pids) -> float:
     return status_mb(pids, "VmRSS")
+
+
+def cpu_seconds(pids) -> float:
+    """User + system CPU time of `pids` (and their waited-for children), in seconds."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0
+    for pid in pids:
+        try:
+            fields = pathlib.Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += sum(int(f) for f in fields[11:15])
+        except FileNotFoundError:
+            pass
+    return total / tick
+
+
+def wrk(base, connections, seconds, etag=None):
+    """Random chunk GETs under `base` (scheme://host:port/PREFIX), or with `etag` revalidations
+    of one chunk, with wrk for `seconds` at `connections` connections."""
+    origin, prefix = base.split("/", 3)[2], "/" + base.split("/", 3)[3]
+    cmd = ["wrk", f"-t{min(2, connections)}", f"-c{connections}", f"-d{seconds}s", "--latency",
+           "-s", str(WRK_SCRIPT), f"http://{origin}", "--", prefix, *map(str, GRID)]
+    if etag:
+        cmd.append(etag)
+    out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+    line = next(l for l in out.splitlines() if l.startswith("RESULT "))
+    r = {k: int(v) for k, v in (kv.split("=") for kv in line.split()[1:])}
+    secs = r["duration_us"] / 1e6
+    expected = 304 if etag else 200
+    bad = r["errors"]
+    return {
+        "rps": r["requests"] / secs,
+        "mbps": r["bytes"] / secs / 1e6,
+        "p50_ms": r["p50_us"] / 1e3,
+        "p99_ms": r["p99_us"] / 1e3,
+        # wrk counts answers that are not 2xx/3xx, and transport errors, together.
+        "codes": {expected: r["requests"] - bad, 0: bad} if bad else {expected: r["requests"]},
+        "errors": 0,
+    }
+
+
+def chunk_load(base, connections, seconds, etag=None):
+    """One chunk load with the chosen client (see `wrk`)."""
+    if CLIENT == "wrk":
+        return wrk(base, connections, seconds, etag)
+    if etag:
+        return oha(f"{base}/0/c/0/0/0/0", connections, seconds, headers=[f"If-None-Match: {etag}"], regex=False)
+    return oha(key_regex(base), connections, seconds)
 
 
 def oha(url, connections, seconds, headers=(), regex=True):
@@ -178,10 +232,11 @@ def median_run(runs):
     return sorted(runs, key=lambda r: r["rps"])[len(runs) // 2]
 
 
-def loads(bases, seconds, repeat):
+def loads(bases, seconds, repeat, pids):
     """The shared loads against every server in `bases` (name -> URL ending in the dataset
     path), interleaved: each load runs on each server in turn, `repeat` times, so a change in
-    background load hits both alike. Returns name -> load -> the median run."""
+    background load hits both alike. Returns name -> load -> the median run, with the server's
+    CPU time per request (`pids`: name -> its processes)."""
     out = {name: {} for name in bases}
     etags = {name: etag_of(f"{b}/0/c/0/0/0/0") for name, b in bases.items()}
     plan = [(f"GET, {c} conn", c, None) for c in (256, 16, 1)] + [("304, 256 conn", 256, "304")]
@@ -189,10 +244,9 @@ def loads(bases, seconds, repeat):
         runs = {name: [] for name in bases}
         for _ in range(repeat):
             for name, b in bases.items():
-                if kind == "304":
-                    r = oha(f"{b}/0/c/0/0/0/0", c, seconds, headers=[f"If-None-Match: {etags[name]}"], regex=False)
-                else:
-                    r = oha(key_regex(b), c, seconds)
+                before = cpu_seconds(pids[name])
+                r = chunk_load(b, c, seconds, etags[name] if kind == "304" else None)
+                r["cpu_us"] = (cpu_seconds(pids[name]) - before) / max(r["rps"] * seconds, 1) * 1e6
                 runs[name].append(r)
         for name in bases:
             out[name][load] = median_run(runs[name])
@@ -208,7 +262,10 @@ def main():
     ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
     ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     ap.add_argument("--s3", action="store_true", help="brickserver from an S3 server (s3s-fs) against from disk")
+    ap.add_argument("--client", choices=["wrk", "oha"], default="wrk", help="the load generator of the chunk loads")
     a = ap.parse_args()
+    global CLIENT
+    CLIENT = a.client
     work = pathlib.Path(a.work)
     store = work / "www" / "bench"
     store.mkdir(parents=True, exist_ok=True)
@@ -255,8 +312,9 @@ def run_loads(a, work, store, region_store):
     bs, bs_pids, bs_base = start_brickserver(store, "bench")
     try:
         # Warm the page cache once for both (they serve the same files).
-        oha(key_regex(f"{ng_base}/bench"), 16, 3)
-        results = loads({"nginx": f"{ng_base}/bench", "brickserver": f"{bs_base}/bench"}, a.duration, a.repeat)
+        chunk_load(f"{ng_base}/bench", 16, 3)
+        results = loads({"nginx": f"{ng_base}/bench", "brickserver": f"{bs_base}/bench"}, a.duration, a.repeat,
+                        {"nginx": ng_pids, "brickserver": bs_pids})
         results["nginx"]["rss"] = rss_mb(ng_pids)
         results["brickserver"]["rss"] = rss_mb(bs_pids)
     finally:
@@ -265,6 +323,9 @@ def run_loads(a, work, store, region_store):
         bs.send_signal(signal.SIGTERM)
         bs.wait(timeout=20)
 
+    if not pathlib.Path(OHA).exists():
+        print("oha not installed: no region query loads (they need oha's random URLs)")
+        return results
     rs, rs_pids, rs_base = start_brickserver(region_store, "regions")
     try:
         url = f"{rs_base}/regions/regions\\?level=0&channel=[01]&min=[0-9]{{1,2}},[0-9]{{1,2}},[0-9]{{1,2}}&max=2[0-4][0-9],2[0-4][0-9],12[0-8]"
@@ -423,16 +484,24 @@ def cpu_name():
     return platform.processor()
 
 
+def client_version(client):
+    """The load generator and its version, as it reports it."""
+    if client == "wrk":
+        out = subprocess.run(["wrk", "--version"], capture_output=True, text=True)
+        return (out.stdout + out.stderr).split(" [")[0].strip() or "wrk"
+    return "oha " + subprocess.run([OHA, "--version"], capture_output=True, text=True).stdout.split()[-1]
+
+
 def render(results, a):
     lines = [
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
-        f"by `benchmarks/server_bench.py --duration {a.duration} --repeat {a.repeat}`: oha {subprocess.run([OHA, '--version'], capture_output=True, text=True).stdout.split()[-1]} "
+        f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)} "
         "on the same machine as the servers (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         "each load ran on nginx and brickserver in turn, repeatedly, and the median run of each is shown. "
         "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",
         "",
-        "| Load | nginx req/s | brickserver req/s | ratio | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| Load | nginx req/s | brickserver req/s | ratio | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio | CPU µs/req nginx / brickserver |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     ng, bs = results["nginx"], results["brickserver"]
     for load in ng:
@@ -441,12 +510,15 @@ def render(results, a):
         n, b = ng[load], bs[load]
         lines.append(
             f"| {load} | {n['rps']:,.0f} | {b['rps']:,.0f} | {b['rps'] / n['rps']:.2f}x | {n['mbps']:,.0f} | {b['mbps']:,.0f} | "
-            f"{n['p50_ms']:.2f} / {n['p99_ms']:.2f} | {b['p50_ms']:.2f} / {b['p99_ms']:.2f} | {b['p99_ms'] / max(n['p99_ms'], 1e-9):.2f}x |"
+            f"{n['p50_ms']:.2f} / {n['p99_ms']:.2f} | {b['p50_ms']:.2f} / {b['p99_ms']:.2f} | {b['p99_ms'] / max(n['p99_ms'], 1e-9):.2f}x | "
+            f"{n.get('cpu_us', 0):.0f} / {b.get('cpu_us', 0):.0f} |"
         )
     lines.append("")
     lines.append(f"Peak RSS under these loads: nginx {ng['rss']:.0f} MB (all processes), brickserver {bs['rss']:.0f} MB (default settings; both read the ~1 GB of chunks from the page cache).")
     bad = {k: {c: n for c, n in v["codes"].items() if c not in (200, 304)} for k, v in {**ng, **bs}.items() if k != "rss"}
     lines.append(f"Answers other than 200/304: {sum(sum(v.values()) for v in bad.values())}; transport errors: nginx {sum(v['errors'] for k, v in ng.items() if k != 'rss')}, brickserver {sum(v['errors'] for k, v in bs.items() if k != 'rss')}.")
+    if "regions" not in results:
+        return "\n".join(lines) + "\n"
     r, r1 = results["regions"], results["regions_1"]
     lines.append("")
     lines.append(

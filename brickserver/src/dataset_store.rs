@@ -16,7 +16,7 @@ use residency_store::location::{
 };
 use zarrs::storage::{ReadableListableStorageTraits, StoreKey};
 
-use crate::store_keys::{KeyError, RootDir, checked_key, resolve};
+use crate::store_keys::{KeyError, RootDir, StoreFailure, checked_key, resolve};
 
 /// Why a dataset's store cannot be opened.
 #[derive(Debug, thiserror::Error)]
@@ -150,10 +150,16 @@ impl DatasetStore {
             Keys::Object(_) => {
                 let key = checked_key(&raw)?;
                 let key = StoreKey::new(key).map_err(|_| KeyError::Refused("not a store key"))?;
+                // zarrs gives the object store's error as text: a store that failed.
                 self.zarr
                     .get(&key)
                     .map(|found| found.map(|bytes| bytes.to_vec()))
-                    .map_err(|e| KeyError::Unreadable(e.into()))
+                    .map_err(|e| {
+                        KeyError::Unreadable(Box::new(StoreFailure {
+                            unreachable: false,
+                            source: e.into(),
+                        }))
+                    })
             }
         }
     }
@@ -182,8 +188,9 @@ impl ObjectKeys {
     /// Reads `range` of the object at `key` (decoded, checked), or all of it.
     ///
     /// # Errors
-    /// [`KeyError::NotFound`] when there is no such object, [`KeyError::Unreadable`] when the
-    /// request fails (an unsatisfiable range among others: see [`ObjectKeys::head`]).
+    /// [`KeyError::NotFound`] when there is no such object, [`KeyError::Unreadable`] holding a
+    /// [`StoreFailure`] when the request fails after the client's retries (an unsatisfiable
+    /// range among others: see [`ObjectKeys::head`]).
     pub async fn get(&self, key: &str, range: Option<GetRange>) -> Result<ObjectPart, KeyError> {
         let path = self.path(key)?;
         let options = GetOptions {
@@ -229,11 +236,29 @@ pub(crate) fn requested_range(value: &str) -> Option<GetRange> {
     })
 }
 
+/// The key error of a failed object-store request: a missing object, or a [`StoreFailure`]
+/// (the client has tried again already), unreachable when the connection failed, was reset
+/// or timed out, and an error answer otherwise (a 5xx, a refusal, a malformed answer).
 fn failed(e: object_store::Error) -> KeyError {
-    match e {
-        object_store::Error::NotFound { .. } => KeyError::NotFound,
-        other => KeyError::Unreadable(other.into()),
+    if let object_store::Error::NotFound { .. } = e {
+        return KeyError::NotFound;
     }
+    let mut unreachable = false;
+    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(&e);
+    while let Some(c) = cause {
+        if let Some(http) = c.downcast_ref::<object_store::client::HttpError>() {
+            use object_store::client::HttpErrorKind as Kind;
+            unreachable |= matches!(
+                http.kind(),
+                Kind::Connect | Kind::Request | Kind::Timeout | Kind::Interrupted
+            );
+        }
+        cause = c.source();
+    }
+    KeyError::Unreadable(Box::new(StoreFailure {
+        unreachable,
+        source: e.into(),
+    }))
 }
 
 #[cfg(test)]
@@ -267,6 +292,41 @@ mod tests {
         assert_eq!(entity_tag(&meta(Some("W/\"abc\""))), "W/\"abc\"");
         assert_eq!(entity_tag(&meta(Some("abc"))), "\"abc\"");
         assert_eq!(entity_tag(&meta(None)), "\"ff-0\"");
+    }
+
+    #[test]
+    fn store_failures_are_unreachable_only_for_transport_errors() {
+        use object_store::client::{HttpError, HttpErrorKind};
+        let generic = |source: Box<dyn std::error::Error + Send + Sync>| {
+            failed(object_store::Error::Generic {
+                store: "S3",
+                source,
+            })
+        };
+        let transport = |kind| generic(Box::new(HttpError::new(kind, std::io::Error::other("x"))));
+        let unreachable = |e: &KeyError| StoreFailure::of(e).map(|f| f.unreachable);
+        for kind in [
+            HttpErrorKind::Connect,
+            HttpErrorKind::Request,
+            HttpErrorKind::Timeout,
+            HttpErrorKind::Interrupted,
+        ] {
+            assert_eq!(unreachable(&transport(kind)), Some(true), "{kind:?}");
+        }
+        assert_eq!(unreachable(&transport(HttpErrorKind::Decode)), Some(false));
+        let answered = generic("503 Service Unavailable: SlowDown".into());
+        assert_eq!(unreachable(&answered), Some(false));
+        assert_eq!(
+            answered.to_string(),
+            "the object store answered an error (Generic S3 error: 503 Service Unavailable: \
+             SlowDown)"
+        );
+        let missing = failed(object_store::Error::NotFound {
+            path: "a".into(),
+            source: "gone".into(),
+        });
+        assert!(matches!(missing, KeyError::NotFound));
+        assert_eq!(unreachable(&missing), None);
     }
 
     fn chrono_epoch() -> chrono::DateTime<chrono::Utc> {

@@ -17,13 +17,15 @@
 //! - [`viewer_page`]: the Residency web viewer's page and files (`/NAME/view`, `/viewer/`);
 //! - `routes`: the axum router, one module per API, and the OpenAPI document generated
 //!   from it;
-//! - [`listener`]: connections, with a header timeout, a connection limit and graceful
-//!   shutdown.
+//! - [`listener`]: accepting connections, with a connection limit and graceful shutdown;
+//! - `http1`: each connection's requests and answers (HTTP/1.1, header timeout), chunk keys
+//!   of folder stores answered straight from the connection with `sendfile`.
 
 pub mod bricks;
 mod cache;
 pub mod dataset_store;
 pub mod datasets;
+mod http1;
 pub mod listener;
 pub mod listing;
 pub mod metrics;
@@ -36,6 +38,7 @@ pub mod store_keys;
 pub mod viewer_page;
 
 pub use datasets::{Dataset, Datasets};
+pub use http1::App;
 pub use listener::{ConnectionLimits, serve};
 pub use listing::PublicUrl;
 pub use routes::{AppState, ServerOptions, openapi_document, router};

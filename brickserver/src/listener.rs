@@ -1,19 +1,17 @@
-//! Accepting connections: HTTP/1.1 over hyper with a header-read timeout (so a slow or idle
-//! client cannot hold a connection forever), a connection limit (connections past it get a
-//! `503` and are closed), and graceful shutdown (in-flight requests finish).
+//! Accepting connections: each served by [`crate::http1`] (HTTP/1.1 with a header-read
+//! timeout, so a slow or idle client cannot hold a connection forever), a connection limit
+//! (connections past it get a `503` and are closed), and graceful shutdown (in-flight
+//! requests finish).
 
 use std::future::Future;
 use std::sync::Arc;
 use std::time::Duration;
 
-use axum::Router;
-use hyper_util::rt::{TokioIo, TokioTimer};
-use hyper_util::server::graceful::GracefulShutdown;
-use hyper_util::service::TowerToHyperService;
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
-use tokio::sync::Semaphore;
+use tokio::sync::{Semaphore, watch};
 
+use crate::http1::{App, connection};
 use crate::metrics::Metrics;
 
 /// Connection-level limits.
@@ -41,17 +39,13 @@ const TOO_MANY: &[u8] = b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\n
 /// breaks off) are logged, and serving goes on.
 pub async fn serve(
     listener: TcpListener,
-    app: Router,
+    app: App,
     limits: ConnectionLimits,
     metrics: Arc<Metrics>,
     shutdown: impl Future<Output = ()>,
 ) {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
-    let graceful = GracefulShutdown::new();
-    let mut http = hyper::server::conn::http1::Builder::new();
-    http.timer(TokioTimer::new())
-        .header_read_timeout(limits.header_timeout)
-        .keep_alive(true);
+    let (stopping, stop) = watch::channel(false);
     tokio::pin!(shutdown);
     loop {
         let (mut stream, peer) = tokio::select! {
@@ -76,13 +70,11 @@ pub async fn serve(
             continue;
         };
         let _ = stream.set_nodelay(true);
-        let service = TowerToHyperService::new(app.clone());
-        let conn = http.serve_connection(TokioIo::new(stream), service);
-        let watched = graceful.watch(conn);
         let open = metrics.connections.clone();
         open.inc();
+        let (app, stop) = (app.clone(), stop.clone());
         tokio::spawn(async move {
-            if let Err(e) = watched.await {
+            if let Err(e) = connection(stream, app, limits.header_timeout, stop).await {
                 tracing::debug!(%peer, "connection ended: {e}");
             }
             open.dec();
@@ -90,8 +82,11 @@ pub async fn serve(
         });
     }
     drop(listener);
+    // Connections close once their request in progress is answered; idle ones at once.
+    let _ = stopping.send(true);
+    let all = u32::try_from(limits.max_connections).unwrap_or(u32::MAX);
     tokio::select! {
-        () = graceful.shutdown() => {},
+        _ = permits.acquire_many(all) => {},
         () = tokio::time::sleep(Duration::from_secs(10)) => {
             tracing::warn!("connections still open after 10 s; closing them");
         }

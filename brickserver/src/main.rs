@@ -11,7 +11,7 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use residency_brickserver::bricks::BatchLimits;
 use residency_brickserver::{
-    AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, router, serve,
+    App, AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, serve,
 };
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 
@@ -153,7 +153,8 @@ async fn run(
         (None, None) => tracing::warn!("no web viewer folder: /NAME/view answers 503"),
     }
     let metrics = state.metrics.clone();
-    serve(listener, router(state, &options), limits, metrics, shutdown).await;
+    let app = App::new(state, &options).await;
+    serve(listener, app, limits, metrics, shutdown).await;
     Ok(())
 }
 

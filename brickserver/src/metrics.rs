@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use axum::body::{Body, HttpBody};
 use axum::extract::{Request, State};
-use axum::http::{Response, header};
+use axum::http::{Response, StatusCode, header};
 use axum::middleware::Next;
 use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::encoding::text::encode;
@@ -116,6 +116,17 @@ impl Default for Metrics {
 }
 
 impl Metrics {
+    /// Records an answer with `status` and `body_bytes` body bytes (`None`: no body sent)
+    /// to a request that arrived at `started`.
+    pub(crate) fn record(&self, status: StatusCode, body_bytes: Option<u64>, started: Instant) {
+        self.latency.observe(started.elapsed().as_secs_f64());
+        let class = (status.as_u16() / 100).clamp(1, 5) as usize - 1;
+        self.by_class[class].inc();
+        if let Some(len) = body_bytes {
+            self.bytes.inc_by(len);
+        }
+    }
+
     /// The metrics as OpenMetrics text.
     pub(crate) fn render(&self) -> String {
         let mut out = String::new();
@@ -133,20 +144,15 @@ pub(crate) async fn track(
     let started = Instant::now();
     let head = request.method() == axum::http::Method::HEAD;
     let response = next.run(request).await;
-    metrics.latency.observe(started.elapsed().as_secs_f64());
-    let class = (response.status().as_u16() / 100).clamp(1, 5) as usize - 1;
-    metrics.by_class[class].inc();
     let announced = response
         .headers()
         .get(header::CONTENT_LENGTH)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.parse::<u64>().ok());
     // HEAD answers announce a length but send no body.
-    if let Some(len) = announced
+    let sent = announced
         .or_else(|| response.body().size_hint().exact())
-        .filter(|_| !head)
-    {
-        metrics.bytes.inc_by(len);
-    }
+        .filter(|_| !head);
+    metrics.record(response.status(), sent, started);
     response
 }

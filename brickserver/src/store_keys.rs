@@ -24,6 +24,30 @@ pub enum KeyError {
     Unreadable(Box<dyn std::error::Error + Send + Sync>),
 }
 
+/// An object store that failed a request after its client's retries, kept in
+/// [`KeyError::Unreadable`]: not the server's fault, so answered 502 (the store answered an
+/// error) or 503 (it could not be reached or did not answer in time), naming the key.
+#[derive(Debug, thiserror::Error)]
+#[error("{} ({source})", if *unreachable { "the object store did not answer" } else { "the object store answered an error" })]
+pub struct StoreFailure {
+    /// Whether the store could not be reached or timed out (503), rather than answered an
+    /// error (502).
+    pub unreachable: bool,
+    /// What the object-store client said.
+    #[source]
+    pub source: Box<dyn std::error::Error + Send + Sync>,
+}
+
+impl StoreFailure {
+    /// The failure a key error stands for, if it is one.
+    pub fn of(e: &KeyError) -> Option<&Self> {
+        match e {
+            KeyError::Unreadable(source) => source.downcast_ref::<Self>(),
+            _ => None,
+        }
+    }
+}
+
 /// Decodes a raw (still percent-encoded) key and refuses any spelling that could leave the
 /// dataset: `..` and `.` segments, empty segments, backslashes, absolute paths, NUL bytes.
 ///

@@ -5,37 +5,24 @@ buckets and whose files are the objects. What they read or serve over S3 must eq
 read or serve from a folder, and what `convert` writes must be byte for byte what it writes to a
 folder."""
 
-import os
 import pathlib
 import shutil
-import socket
 import subprocess
-import time
 
 import pytest
 
 from support.binaries import run_ingest, start_server
 from support.paths import BIN
+from support.s3 import KEY, SECRET, env, run, start_s3
 from support.stores import files
 
 pytestmark = pytest.mark.s3
-
-KEY = "AKRESIDENCYTEST"
-SECRET = "residency-test-secret-0123456789"
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @pytest.fixture(scope="module")
 def s3(tmp_path_factory):
     """An s3s-fs server on loopback with bucket `bucket` holding `sample.ome.zarr` (a sparse
     32³ u16 store with 16³ bricks), and that store's local copy."""
-    exe = shutil.which("s3s-fs")
-    assert exe, "s3s-fs not installed: run scripts/test.sh (it installs it)"
     tmp = tmp_path_factory.mktemp("s3")
     samples = tmp / "samples"  # also the converts' input
     run_ingest("sample", "-o", samples, "--kind", "sparse", "--size", "32,32,32", "--quiet")
@@ -43,39 +30,11 @@ def s3(tmp_path_factory):
     run_ingest("convert", *sorted(samples.glob("*.tif")), "-o", local, "--chunk", "16", "--quiet")
     root = tmp / "root"
     shutil.copytree(local, root / "bucket" / "sample.ome.zarr")
-    port = free_port()
-    server = subprocess.Popen(
-        [exe, "--host", "127.0.0.1", "--port", str(port), "--access-key", KEY,
-         "--secret-key", SECRET, str(root)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 30
-    while True:
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=1).close()
-            break
-        except OSError:
-            assert server.poll() is None, "s3s-fs exited"
-            assert time.time() < deadline, "s3s-fs did not listen within 30 s"
-            time.sleep(0.1)
-    yield {"endpoint": f"http://127.0.0.1:{port}", "local": local, "root": root,
+    server, endpoint = start_s3(root)
+    yield {"endpoint": endpoint, "local": local, "root": root,
            "inputs": sorted(samples.glob("*.tif"))}
     server.terminate()
     server.wait(timeout=10)
-
-
-def env(secret=SECRET):
-    e = dict(os.environ)
-    for k in list(e):
-        if k.startswith("AWS_"):
-            del e[k]
-    e.update(AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=secret)
-    e.setdefault("XDG_RUNTIME_DIR", "/tmp")
-    return e
-
-
-def run(exe, *args, secret=SECRET):
-    return subprocess.run([str(BIN / exe), *map(str, args)], capture_output=True, text=True,
-                          env=env(secret), timeout=300)
 
 
 def test_inspect_over_s3_reports_what_the_folder_holds(s3):

@@ -2,7 +2,8 @@
 //! (`/NAME/regions`, `/NAME/minmax`: [`region_api`]; `/NAME/bricks`: [`bricks`]), the Residency
 //! web viewer (`/NAME/view`, `/viewer/FILE`: [`viewer`]), the dataset listing ([`listing`]),
 //! and health, metrics and the OpenAPI document ([`service`]); the bearer token check is
-//! [`auth`]. Here the router is assembled, and with it the OpenAPI document, from the same
+//! [`auth`]; chunk keys of folder stores answered straight from the connection with
+//! `sendfile` ([`chunk_files`]). Here the router is assembled, and with it the OpenAPI document, from the same
 //! route list.
 //!
 //! The three API paths and `view` never collide with a Zarr key: a Zarr node at a store's
@@ -13,6 +14,7 @@
 mod api_error;
 mod auth;
 mod bricks;
+mod chunk_files;
 mod listing;
 mod params;
 mod region_api;
@@ -36,6 +38,7 @@ use tower_http::cors::{Any, CorsLayer};
 use crate::metrics::track;
 use crate::openapi;
 
+pub(crate) use chunk_files::{FolderChunks, RequestHead};
 pub use state::{AppState, ServerOptions};
 
 /// Every route, with its documentation.
@@ -107,9 +110,9 @@ pub fn openapi_document() -> Value {
     documented_routes().1
 }
 
-/// The router serving `state`'s datasets.
-pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
-    let cors = CorsLayer::new()
+/// The CORS layer: any origin may read, with the fields a Zarr reader needs exposed.
+pub(crate) fn cors() -> CorsLayer {
+    CorsLayer::new()
         .allow_origin(Any)
         .allow_methods([Method::GET, Method::HEAD, Method::OPTIONS])
         .allow_headers(Any)
@@ -119,7 +122,11 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
             header::CONTENT_LENGTH,
             header::ACCEPT_RANGES,
         ])
-        .max_age(Duration::from_hours(24));
+        .max_age(Duration::from_hours(24))
+}
+
+/// The router serving `state`'s datasets.
+pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
     let metrics = state.metrics.clone();
     let router = documented_routes().0.with_state(state);
     // The token check is a layer only when a token is configured.
@@ -132,7 +139,7 @@ pub fn router(state: Arc<AppState>, options: &ServerOptions) -> Router {
     };
     router
         .layer(middleware::from_fn_with_state(metrics, track))
-        .layer(cors)
+        .layer(cors())
 }
 
 #[cfg(test)]

@@ -5,7 +5,7 @@
 //! is copied twice; chunks of an object store are kept in the memory cache.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use aide::transform::TransformOperation;
 use axum::body::{Body, Bytes};
@@ -15,19 +15,16 @@ use axum::response::IntoResponse;
 use residency_store::location::object_store::GetRange;
 use schemars::json_schema;
 
+use super::chunk_files::{ETAG_VALID, OpenedKey, open_folder_key, remembered_not_modified};
 use super::params::KeyPath;
 use super::state::{AppState, blocking};
 use crate::cache::{CacheKey, Cached};
 use crate::dataset_store::{Keys, ObjectKeys, requested_range};
 use crate::openapi::{answer, binary, responses, with_content};
 use crate::responses::{
-    RangeRequest, etag_of, file_response, is_metadata, not_modified, parse_range, part_response,
+    RangeRequest, file_response, is_metadata, not_modified, parse_range, part_response,
 };
 use crate::store_keys::{KeyError, RootDir, checked_key, read_cached};
-
-/// How long a remembered chunk `ETag` answers revalidations without a look at the file (as
-/// nginx's `open_file_cache_valid`): chunks are immutable, but a store may be replaced.
-const ETAG_VALID: Duration = Duration::from_mins(1);
 
 /// The documentation of `GET /NAME/KEY`.
 pub(super) fn docs(op: TransformOperation<'_>) -> TransformOperation<'_> {
@@ -69,6 +66,20 @@ pub(super) fn docs(op: TransformOperation<'_>) -> TransformOperation<'_> {
                 500,
                 answer("The key exists but cannot be read; the message names it"),
             ),
+            (
+                502,
+                answer(
+                    "The object store answered an error for the key; the message names the key \
+                     and quotes the store's answer",
+                ),
+            ),
+            (
+                503,
+                answer(
+                    "The object store could not be reached (connection refused or reset, \
+                     timeout), with Retry-After",
+                ),
+            ),
         ],
     )
 }
@@ -91,14 +102,8 @@ pub(super) async fn serve_key(
         .unwrap_or_default()
         .to_string();
     // A revalidation of a chunk whose ETag is remembered needs no system call at all.
-    let chunk = !is_metadata(&raw_key);
-    if chunk && headers.contains_key(header::IF_NONE_MATCH) {
-        let known = state.etags.get(&(index, raw_key.clone()));
-        if let Some((etag, _)) = known.filter(|(_, seen)| seen.elapsed() < ETAG_VALID)
-            && let Some(answer) = not_modified(&raw_key, &etag, &headers)
-        {
-            return answer;
-        }
+    if let Some(answer) = remembered_not_modified(&state, index, &raw_key, &headers) {
+        return answer;
     }
     let answer = match &state.stores[index].keys {
         Keys::Folder(root) => folder_key(&state, index, root, &raw_key, &headers).await,
@@ -116,8 +121,7 @@ pub(super) async fn serve_key(
         }
         Err(KeyError::Unreadable(why)) => {
             let message = format!("cannot read key '{raw_key}' of '{name}': {why}");
-            tracing::error!("{message}");
-            (StatusCode::INTERNAL_SERVER_ERROR, format!("{message}\n")).into_response()
+            super::api_error::unreadable_key(&message, &*why)
         }
     }
 }
@@ -132,17 +136,10 @@ async fn folder_key(
 ) -> Result<Response<Body>, KeyError> {
     // Open beneath the dataset root and read what the page cache holds right here, as nginx
     // does; only a read that would wait for the disk moves to the blocking pool.
-    let (file, meta) = root.open_key(raw_key)?;
-    let etag = etag_of(&meta);
-    if !is_metadata(raw_key) {
-        state.etags.insert(
-            (index, raw_key.to_string()),
-            (etag.as_str().into(), Instant::now()),
-        );
-    }
-    if let Some(answer) = not_modified(raw_key, &etag, headers) {
-        return Ok(answer);
-    }
+    let (file, meta, etag) = match open_folder_key(state, index, root, raw_key, headers)? {
+        OpenedKey::NotModified(answer) => return Ok(answer),
+        OpenedKey::File(file, meta, etag) => (file, meta, etag),
+    };
     let len = meta.len() as usize;
     let (bytes, whole) = read_cached(&file, len);
     let bytes = if whole {

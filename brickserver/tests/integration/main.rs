@@ -6,6 +6,7 @@
 mod common;
 
 mod binary;
+mod connections;
 mod listing;
 mod loads;
 mod openapi;

@@ -1,0 +1,665 @@
+//! HTTP/1.1 connections, served here rather than by hyper so that chunk files can go to the
+//! socket with `sendfile` (hyper only writes bytes it holds): request heads are parsed with
+//! `httparse`; a GET or HEAD of a chunk of a folder store is answered by `routes::chunk_files`
+//! without reading the file into memory; every other request goes to the router, and its
+//! response is written back here. Keep-alive, pipelined requests, HTTP/1.0 clients, a
+//! header-read timeout (a slow or idle client cannot hold a connection forever) and graceful
+//! shutdown (a request being answered is finished) are handled here.
+
+use std::fmt::Write as _;
+use std::io;
+use std::os::fd::AsRawFd;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime};
+
+use axum::Router;
+use axum::body::{Body, HttpBody};
+use axum::http::header::{self, HeaderMap, HeaderName, HeaderValue};
+use axum::http::{Method, Request, Response, StatusCode, Version};
+use bytes::{Buf, BytesMut};
+use hyper::service::Service as _;
+use hyper_util::service::TowerToHyperService;
+use tokio::io::{AsyncReadExt, AsyncWriteExt, Interest};
+use tokio::net::TcpStream;
+use tokio::sync::watch;
+
+use crate::metrics::Metrics;
+use crate::routes::{self, AppState, FolderChunks, RequestHead, ServerOptions};
+
+/// The longest request head (request line and header fields) read: longer ones get a `431`.
+const MAX_HEAD: usize = 64 << 10;
+/// The most header fields in a request: more get a `431`.
+const MAX_FIELDS: usize = 100;
+/// The largest request body read (no route takes one; a body is read and passed on so that
+/// the connection stays in step): larger ones get a `413` and the connection is closed.
+const MAX_BODY: u64 = 1 << 20;
+/// A response body up to this size is sent in the same write as its head.
+const COALESCE: usize = 64 << 10;
+
+/// What a connection serves: the router, and the direct path for chunk files.
+#[derive(Clone)]
+pub struct App {
+    /// Every request the direct path does not answer.
+    pub(crate) router: Router,
+    /// Chunk keys of folder stores, answered with `sendfile`.
+    pub(crate) chunks: FolderChunks,
+    /// Where both record what they answer.
+    pub(crate) metrics: Arc<Metrics>,
+}
+
+impl App {
+    /// What the listener serves for `state`'s datasets: the router, and the direct path for
+    /// chunk keys of folder stores, which adds the same CORS fields as the router (read from
+    /// the router's CORS layer's answer to a `GET`).
+    pub async fn new(state: Arc<AppState>, options: &ServerOptions) -> Self {
+        let router = routes::router(state.clone(), options);
+        let probe = Request::get("/")
+            .body(Body::empty())
+            .expect("a valid request");
+        let with_cors = Router::new()
+            .route("/", axum::routing::get(|| async {}))
+            .layer(routes::cors());
+        let answer = match TowerToHyperService::new(with_cors).call(probe).await {
+            Ok(answer) => answer,
+            Err(never) => match never {},
+        };
+        let mut cors = Vec::new();
+        for (name, value) in answer.headers() {
+            if name.as_str().starts_with("access-control-") || name == header::VARY {
+                cors.extend_from_slice(name.as_str().as_bytes());
+                cors.extend_from_slice(b": ");
+                cors.extend_from_slice(value.as_bytes());
+                cors.extend_from_slice(b"\r\n");
+            }
+        }
+        Self {
+            router,
+            chunks: FolderChunks::new(state.clone(), options.token.as_deref(), cors),
+            metrics: state.metrics.clone(),
+        }
+    }
+}
+
+/// A parsed request head.
+#[derive(Debug)]
+pub(crate) struct Head {
+    /// The method.
+    pub(crate) method: Method,
+    /// The request target as sent: path and query, still percent-encoded.
+    pub(crate) target: String,
+    /// HTTP/1.0 or HTTP/1.1.
+    pub(crate) version: Version,
+    /// The header fields.
+    pub(crate) headers: HeaderMap,
+    /// The body's length (`Content-Length`; 0 without one).
+    pub(crate) body_len: u64,
+}
+
+/// What reading a request head gave.
+#[derive(Debug)]
+enum Step {
+    /// A complete head.
+    Head(Head),
+    /// The client closed the connection, stayed silent past the timeout between requests, or
+    /// the server is shutting down: close without an answer.
+    Close,
+    /// A head that cannot be served: answer this status with this message, then close.
+    Refuse(StatusCode, &'static str),
+}
+
+/// Serves requests on `stream` until the client closes it, a request asks to close it, the
+/// header timeout passes or `shutdown` turns true between requests.
+///
+/// # Errors
+/// The I/O error that ended the connection (a client that breaks off, a file that shrank
+/// while it was being sent).
+pub(crate) async fn connection(
+    mut stream: TcpStream,
+    app: App,
+    header_timeout: Duration,
+    mut shutdown: watch::Receiver<bool>,
+) -> io::Result<()> {
+    let mut buf = BytesMut::with_capacity(8 << 10);
+    let mut out = Vec::with_capacity(1 << 10);
+    loop {
+        let head = match read_head(&mut stream, &mut buf, header_timeout, &mut shutdown).await? {
+            Step::Head(head) => head,
+            Step::Close => return Ok(()),
+            Step::Refuse(status, why) => {
+                app.metrics
+                    .record(status, Some(why.len() as u64), Instant::now());
+                let response = (status, why).into_response_body();
+                out.clear();
+                write_head(&mut out, &response, Version::HTTP_11, false, b"");
+                out.extend_from_slice(why.as_bytes());
+                stream.write_all(&out).await?;
+                return stream.shutdown().await;
+            }
+        };
+        let started = Instant::now();
+        let keep_alive = keeps_alive(&head) && !*shutdown.borrow();
+        let body = read_body(&mut stream, &mut buf, head.body_len).await?;
+        let asked = RequestHead {
+            method: &head.method,
+            target: &head.target,
+            headers: &head.headers,
+            body_len: head.body_len,
+        };
+        if let Some(answer) = app.chunks.answer(&asked) {
+            out.clear();
+            let head_only = head.method == Method::HEAD;
+            // With the CORS fields the router's layer adds to every answer.
+            let cors = app.chunks.cors();
+            write_head(&mut out, &answer.response, head.version, keep_alive, cors);
+            let sent = if let Some((file, start, end)) = answer.body.filter(|_| !head_only) {
+                set_cork(&stream, true)?;
+                stream.write_all(&out).await?;
+                send_file(&stream, &file, start, end).await?;
+                Some(end - start)
+            } else {
+                stream.write_all(&out).await?;
+                None
+            };
+            app.metrics.record(answer.response.status(), sent, started);
+        } else {
+            let method = head.method.clone();
+            let version = head.version;
+            let response = match to_request(head, body) {
+                Ok(request) => {
+                    let service = TowerToHyperService::new(app.router.clone());
+                    match service.call(request).await {
+                        Ok(response) => response,
+                        Err(never) => match never {},
+                    }
+                }
+                Err(why) => {
+                    let response = (StatusCode::BAD_REQUEST, why).into_response_body();
+                    write_response(&mut stream, &mut out, response, &method, version, false)
+                        .await?;
+                    return stream.shutdown().await;
+                }
+            };
+            let keep_alive = write_response(
+                &mut stream,
+                &mut out,
+                response,
+                &method,
+                version,
+                keep_alive,
+            )
+            .await?;
+            if !keep_alive {
+                return stream.shutdown().await;
+            }
+            continue;
+        }
+        if !keep_alive {
+            return stream.shutdown().await;
+        }
+    }
+}
+
+/// A plain-text answer with `status`.
+trait IntoResponseBody {
+    fn into_response_body(self) -> Response<Body>;
+}
+
+impl IntoResponseBody for (StatusCode, &'static str) {
+    fn into_response_body(self) -> Response<Body> {
+        let mut response = Response::new(Body::from(self.1));
+        *response.status_mut() = self.0;
+        response.headers_mut().insert(
+            header::CONTENT_TYPE,
+            HeaderValue::from_static("text/plain; charset=utf-8"),
+        );
+        response
+            .headers_mut()
+            .insert(header::CONTENT_LENGTH, HeaderValue::from(self.1.len()));
+        response
+    }
+}
+
+/// Reads until `buf` holds a complete request head, waiting at most `timeout`.
+async fn read_head(
+    stream: &mut TcpStream,
+    buf: &mut BytesMut,
+    timeout: Duration,
+    shutdown: &mut watch::Receiver<bool>,
+) -> io::Result<Step> {
+    let deadline = tokio::time::Instant::now() + timeout;
+    loop {
+        if !buf.is_empty() {
+            match parse_head(buf) {
+                Ok(Some(head)) => return Ok(Step::Head(head)),
+                Ok(None) if buf.len() >= MAX_HEAD => {
+                    return Ok(Step::Refuse(
+                        StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+                        "request head too large\n",
+                    ));
+                }
+                Ok(None) => {}
+                Err((status, why)) => return Ok(Step::Refuse(status, why)),
+            }
+        }
+        if buf.is_empty() && *shutdown.borrow() {
+            return Ok(Step::Close);
+        }
+        buf.reserve(8 << 10);
+        tokio::select! {
+            read = stream.read_buf(buf) => {
+                if read? == 0 {
+                    return Ok(Step::Close);
+                }
+            }
+            () = tokio::time::sleep_until(deadline) => return Ok(Step::Close),
+            _ = shutdown.changed(), if buf.is_empty() => return Ok(Step::Close),
+        }
+    }
+}
+
+/// Why a request head is refused: the status and the message answered.
+type Refusal = (StatusCode, &'static str);
+
+/// The request head at the start of `buf`, removed from it; `None` while it is incomplete.
+fn parse_head(buf: &mut BytesMut) -> Result<Option<Head>, Refusal> {
+    let bad = |why| (StatusCode::BAD_REQUEST, why);
+    let mut fields = [httparse::EMPTY_HEADER; MAX_FIELDS];
+    let mut request = httparse::Request::new(&mut fields);
+    let len = match request.parse(buf) {
+        Ok(httparse::Status::Complete(len)) => len,
+        Ok(httparse::Status::Partial) => return Ok(None),
+        Err(httparse::Error::TooManyHeaders) => {
+            return Err((
+                StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+                "too many header fields\n",
+            ));
+        }
+        Err(_) => return Err(bad("malformed request head\n")),
+    };
+    let method = Method::from_bytes(request.method.unwrap_or_default().as_bytes())
+        .map_err(|_| bad("malformed method\n"))?;
+    let version = match request.version {
+        Some(0) => Version::HTTP_10,
+        _ => Version::HTTP_11,
+    };
+    let target = request.path.unwrap_or_default().to_string();
+    let mut headers = HeaderMap::with_capacity(request.headers.len());
+    for field in request.headers.iter() {
+        let name = HeaderName::from_bytes(field.name.as_bytes())
+            .map_err(|_| bad("malformed header field name\n"))?;
+        let value =
+            HeaderValue::from_bytes(field.value).map_err(|_| bad("malformed header field\n"))?;
+        headers.append(name, value);
+    }
+    if headers.contains_key(header::TRANSFER_ENCODING) {
+        // No route takes a body; one of unknown length cannot be skipped safely.
+        return Err((
+            StatusCode::LENGTH_REQUIRED,
+            "request bodies need a Content-Length\n",
+        ));
+    }
+    let mut lengths = headers.get_all(header::CONTENT_LENGTH).iter();
+    let body_len = match (lengths.next(), lengths.next()) {
+        (None, _) => 0,
+        (Some(value), None) => value
+            .to_str()
+            .ok()
+            .and_then(|v| v.trim().parse::<u64>().ok())
+            .ok_or_else(|| bad("malformed Content-Length\n"))?,
+        (Some(_), Some(_)) => return Err(bad("more than one Content-Length\n")),
+    };
+    if body_len > MAX_BODY {
+        return Err((StatusCode::PAYLOAD_TOO_LARGE, "request body too large\n"));
+    }
+    buf.advance(len);
+    Ok(Some(Head {
+        method,
+        target,
+        version,
+        headers,
+        body_len,
+    }))
+}
+
+/// Whether the connection stays open after answering `head`: HTTP/1.1 unless it says
+/// `Connection: close`, HTTP/1.0 only if it says `Connection: keep-alive`.
+fn keeps_alive(head: &Head) -> bool {
+    let says = |token: &str| {
+        head.headers.get_all(header::CONNECTION).iter().any(|v| {
+            v.to_str()
+                .is_ok_and(|v| v.split(',').any(|t| t.trim().eq_ignore_ascii_case(token)))
+        })
+    };
+    match head.version {
+        Version::HTTP_10 => says("keep-alive"),
+        _ => !says("close"),
+    }
+}
+
+/// The request's body: `len` bytes, from what `buf` holds and then the socket.
+async fn read_body(stream: &mut TcpStream, buf: &mut BytesMut, len: u64) -> io::Result<Body> {
+    if len == 0 {
+        return Ok(Body::empty());
+    }
+    let len = len as usize;
+    while buf.len() < len {
+        buf.reserve(len - buf.len());
+        if stream.read_buf(buf).await? == 0 {
+            return Err(io::ErrorKind::UnexpectedEof.into());
+        }
+    }
+    Ok(Body::from(buf.split_to(len).freeze()))
+}
+
+/// The router's request for `head`.
+fn to_request(head: Head, body: Body) -> Result<Request<Body>, &'static str> {
+    let mut request = Request::builder()
+        .method(head.method)
+        .uri(head.target.as_str())
+        .version(head.version)
+        .body(body)
+        .map_err(|_| "malformed request target\n")?;
+    *request.headers_mut() = head.headers;
+    Ok(request)
+}
+
+/// Appends the status line and header fields of `response` to `out`, with a `Date`, the
+/// `Connection` field the client needs to know whether the connection stays open, and the
+/// blank line; `extra` holds more fields, each ending in CRLF.
+fn write_head(
+    out: &mut Vec<u8>,
+    response: &Response<Body>,
+    version: Version,
+    keep_alive: bool,
+    extra: &[u8],
+) {
+    let status = response.status();
+    out.extend_from_slice(b"HTTP/1.1 ");
+    out.extend_from_slice(status.as_str().as_bytes());
+    out.push(b' ');
+    out.extend_from_slice(status.canonical_reason().unwrap_or("").as_bytes());
+    out.extend_from_slice(b"\r\n");
+    for (name, value) in response.headers() {
+        out.extend_from_slice(name.as_str().as_bytes());
+        out.extend_from_slice(b": ");
+        out.extend_from_slice(value.as_bytes());
+        out.extend_from_slice(b"\r\n");
+    }
+    if !response.headers().contains_key(header::DATE) {
+        out.extend_from_slice(b"date: ");
+        out.extend_from_slice(&http_date());
+        out.extend_from_slice(b"\r\n");
+    }
+    if !keep_alive {
+        out.extend_from_slice(b"connection: close\r\n");
+    } else if version == Version::HTTP_10 {
+        out.extend_from_slice(b"connection: keep-alive\r\n");
+    }
+    out.extend_from_slice(extra);
+    out.extend_from_slice(b"\r\n");
+}
+
+/// Writes the router's `response` to a request with `method` and `version`: with the length
+/// it announces or its body's exact size, else chunked (HTTP/1.1) or delimited by closing the
+/// connection (HTTP/1.0). Returns whether the connection stays open.
+async fn write_response(
+    stream: &mut TcpStream,
+    out: &mut Vec<u8>,
+    mut response: Response<Body>,
+    method: &Method,
+    version: Version,
+    mut keep_alive: bool,
+) -> io::Result<bool> {
+    let status = response.status();
+    let no_body = *method == Method::HEAD
+        || status.is_informational()
+        || status == StatusCode::NO_CONTENT
+        || status == StatusCode::NOT_MODIFIED;
+    if status == StatusCode::NOT_MODIFIED {
+        // A 304's length would be the representation's, not 0 (RFC 9110, 8.6): say none.
+        response.headers_mut().remove(header::CONTENT_LENGTH);
+    }
+    let announced = response.headers().contains_key(header::CONTENT_LENGTH);
+    let mut chunked = false;
+    if !announced && !no_body {
+        if let Some(len) = response.body().size_hint().exact() {
+            response
+                .headers_mut()
+                .insert(header::CONTENT_LENGTH, HeaderValue::from(len));
+        } else if version == Version::HTTP_11 {
+            response.headers_mut().insert(
+                header::TRANSFER_ENCODING,
+                HeaderValue::from_static("chunked"),
+            );
+            chunked = true;
+        } else {
+            keep_alive = false;
+        }
+    }
+    out.clear();
+    write_head(out, &response, version, keep_alive, b"");
+    if no_body {
+        stream.write_all(out).await?;
+        return Ok(keep_alive);
+    }
+    let mut body = response.into_body();
+    loop {
+        let frame = std::future::poll_fn(|cx| Pin::new(&mut body).poll_frame(cx)).await;
+        let Some(frame) = frame else { break };
+        let frame = frame.map_err(io::Error::other)?;
+        let Ok(data) = frame.into_data() else {
+            continue;
+        };
+        if data.is_empty() {
+            continue;
+        }
+        if chunked {
+            let _ = write!(ChunkSize(out), "{:x}\r\n", data.len());
+        }
+        if out.len() + data.len() <= COALESCE {
+            out.extend_from_slice(&data);
+        } else {
+            stream.write_all(out).await?;
+            out.clear();
+            stream.write_all(&data).await?;
+        }
+        if chunked {
+            out.extend_from_slice(b"\r\n");
+        }
+    }
+    if chunked {
+        out.extend_from_slice(b"0\r\n\r\n");
+    }
+    if !out.is_empty() {
+        stream.write_all(out).await?;
+    }
+    Ok(keep_alive)
+}
+
+/// `fmt::Write` into a byte buffer, for a chunk's size line.
+struct ChunkSize<'a>(&'a mut Vec<u8>);
+
+impl std::fmt::Write for ChunkSize<'_> {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        self.0.extend_from_slice(s.as_bytes());
+        Ok(())
+    }
+}
+
+/// Sets or clears `TCP_CORK` on `stream`: while set, the kernel holds partial segments, so
+/// that a head and the start of its file leave together (as nginx's `tcp_nopush` does).
+fn set_cork(stream: &TcpStream, on: bool) -> io::Result<()> {
+    let value: libc::c_int = on.into();
+    // SAFETY: a valid socket and a pointer to an int of the size given.
+    let done = unsafe {
+        libc::setsockopt(
+            stream.as_raw_fd(),
+            libc::IPPROTO_TCP,
+            libc::TCP_CORK,
+            (&raw const value).cast(),
+            size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    if done == 0 {
+        Ok(())
+    } else {
+        Err(io::Error::last_os_error())
+    }
+}
+
+/// Sends bytes `start..end` of `file` to `stream` with `sendfile`: from the page cache to
+/// the socket, never through this process's memory. Then clears the cork (see [`set_cork`]).
+///
+/// # Errors
+/// The socket's error, or `UnexpectedEof` when the file is shorter than `end`.
+async fn send_file(
+    stream: &TcpStream,
+    file: &std::fs::File,
+    start: u64,
+    end: u64,
+) -> io::Result<()> {
+    let mut offset = start as libc::off_t;
+    let end = end as libc::off_t;
+    while offset < end {
+        stream.writable().await?;
+        let sent = stream.try_io(Interest::WRITABLE, || {
+            let count = (end - offset).min(1 << 30) as usize;
+            // SAFETY: two open descriptors and a pointer to the offset, which the kernel
+            // advances by what it sent.
+            let n = unsafe {
+                libc::sendfile(stream.as_raw_fd(), file.as_raw_fd(), &raw mut offset, count)
+            };
+            if n < 0 {
+                Err(io::Error::last_os_error())
+            } else {
+                Ok(n)
+            }
+        });
+        match sent {
+            Ok(0) => {
+                return Err(io::Error::new(
+                    io::ErrorKind::UnexpectedEof,
+                    "the file is shorter than when it was opened",
+                ));
+            }
+            Ok(_) => {}
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {}
+            Err(e) => return Err(e),
+        }
+    }
+    set_cork(stream, false)
+}
+
+/// Today's `Date` field value, formatted once a second per thread.
+fn http_date() -> [u8; 29] {
+    thread_local! {
+        static DATE: std::cell::Cell<(u64, [u8; 29])> = const { std::cell::Cell::new((0, [0; 29])) };
+    }
+    let now = SystemTime::now();
+    let second = now
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    DATE.with(|cell| {
+        let (at, text) = cell.get();
+        if at == second && text[0] != 0 {
+            return text;
+        }
+        let mut text = [0u8; 29];
+        let formatted = httpdate::fmt_http_date(now);
+        text.copy_from_slice(&formatted.as_bytes()[..29]);
+        cell.set((second, text));
+        text
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parsed(text: &str) -> Result<Option<Head>, Refusal> {
+        let mut buf = BytesMut::from(text.as_bytes());
+        parse_head(&mut buf)
+    }
+
+    fn refusal(text: &str) -> Refusal {
+        match parsed(text) {
+            Err(refusal) => refusal,
+            Ok(_) => panic!("{text:?} was not refused"),
+        }
+    }
+
+    #[test]
+    fn heads_parse_with_their_fields_and_leave_what_follows() {
+        let mut buf = BytesMut::from(
+            &b"GET /d/0/c/0/0/0?x=1 HTTP/1.1\r\nHost: a\r\nX-Two: 1\r\nX-Two: 2\r\n\r\nGET /next"[..],
+        );
+        let head = parse_head(&mut buf).unwrap().unwrap();
+        assert_eq!(head.method, Method::GET);
+        assert_eq!(head.target, "/d/0/c/0/0/0?x=1");
+        assert_eq!(head.version, Version::HTTP_11);
+        assert_eq!(head.body_len, 0);
+        let twos: Vec<_> = head.headers.get_all("x-two").iter().collect();
+        assert_eq!(twos, ["1", "2"]);
+        assert_eq!(&buf[..], b"GET /next");
+        assert!(
+            parsed("GET /d/x HTTP/1.1\r\nHost: a\r\n")
+                .unwrap()
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn heads_that_cannot_be_served_are_refused_with_the_reason() {
+        assert_eq!(
+            refusal("GET /x HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n"),
+            (
+                StatusCode::LENGTH_REQUIRED,
+                "request bodies need a Content-Length\n"
+            )
+        );
+        assert_eq!(
+            refusal("GET /x HTTP/1.1\r\nContent-Length: 1\r\nContent-Length: 2\r\n\r\n"),
+            (StatusCode::BAD_REQUEST, "more than one Content-Length\n")
+        );
+        assert_eq!(
+            refusal("GET /x HTTP/1.1\r\nContent-Length: x\r\n\r\n"),
+            (StatusCode::BAD_REQUEST, "malformed Content-Length\n")
+        );
+        assert_eq!(
+            refusal("GET /x HTTP/1.1\r\nContent-Length: 1048577\r\n\r\n"),
+            (StatusCode::PAYLOAD_TOO_LARGE, "request body too large\n")
+        );
+        assert_eq!(
+            refusal("GET /x HTTP/1.1\r\nBad Name: x\r\n\r\n"),
+            (StatusCode::BAD_REQUEST, "malformed request head\n")
+        );
+        let many = "X-Many: 1\r\n".repeat(MAX_FIELDS + 1);
+        assert_eq!(
+            refusal(&format!("GET /x HTTP/1.1\r\n{many}\r\n")),
+            (
+                StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+                "too many header fields\n"
+            )
+        );
+    }
+
+    #[test]
+    fn keep_alive_follows_the_version_and_the_connection_field() {
+        let keeps = |text: &str| keeps_alive(&parsed(text).unwrap().unwrap());
+        assert!(keeps("GET / HTTP/1.1\r\n\r\n"));
+        assert!(!keeps("GET / HTTP/1.1\r\nConnection: Close\r\n\r\n"));
+        assert!(!keeps("GET / HTTP/1.1\r\nConnection: te, close\r\n\r\n"));
+        assert!(!keeps("GET / HTTP/1.0\r\n\r\n"));
+        assert!(keeps("GET / HTTP/1.0\r\nConnection: keep-alive\r\n\r\n"));
+    }
+
+    #[test]
+    fn the_date_is_an_http_date_of_now() {
+        let text = http_date();
+        let text = std::str::from_utf8(&text).unwrap();
+        let parsed = httpdate::parse_http_date(text).unwrap();
+        let age = SystemTime::now().duration_since(parsed).unwrap();
+        assert!(age < Duration::from_secs(2), "{text}");
+    }
+}

@@ -1,0 +1,468 @@
+//! Connections as clients make them, over TCP to `serve` in process: chunk keys of a folder
+//! store answered directly (with `sendfile`) give the router's answer field for field and byte
+//! for byte; keep-alive, pipelining, HTTP/1.0, refused heads, the header timeout, metrics and
+//! graceful shutdown.
+
+use std::io::{BufRead, BufReader, Read, Write};
+use std::net::TcpStream;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use residency_brickserver::{App, AppState, ConnectionLimits, Datasets, ServerOptions, serve};
+use residency_store::location::ObjectStoreOptions;
+use tokio::sync::oneshot;
+
+use crate::common::{self, CHUNK, v3_store};
+
+/// A server on a loopback port, in its own runtime; dropping it shuts it down gracefully.
+struct Served {
+    addr: String,
+    stop: Option<oneshot::Sender<()>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+    router: axum::Router,
+    runtime: Arc<tokio::runtime::Runtime>,
+}
+
+impl Served {
+    /// Shuts the server down and waits until `serve` returns; how long that took.
+    fn stop(&mut self) -> Duration {
+        let started = Instant::now();
+        if let Some(stop) = self.stop.take() {
+            let _ = stop.send(());
+        }
+        if let Some(thread) = self.thread.take() {
+            thread.join().unwrap();
+        }
+        started.elapsed()
+    }
+
+    /// The router's own answer to `GET path` with `headers`.
+    fn router_get(&self, path: &str, headers: &[(&str, &str)]) -> common::Answer {
+        self.runtime
+            .block_on(common::get(&self.router, path, headers))
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// Serves `stores` (NAME, path) on a loopback port with `limits`.
+fn start(stores: &[(&str, &Path)], options: ServerOptions, limits: ConnectionLimits) -> Served {
+    let runtime = Arc::new(
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap(),
+    );
+    let named: Vec<String> = stores
+        .iter()
+        .map(|(n, p)| format!("{n}={}", p.display()))
+        .collect();
+    let (app, router, listener) = runtime.block_on(async {
+        let datasets = Datasets::from_args(&[], &named, &ObjectStoreOptions::default())
+            .await
+            .unwrap();
+        let state = Arc::new(AppState::new(datasets, &options).unwrap());
+        let router = residency_brickserver::router(state.clone(), &options);
+        let app = App::new(state, &options).await;
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        (app, router, listener)
+    });
+    let addr = listener.local_addr().unwrap().to_string();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let rt = runtime.clone();
+    let metrics = Arc::new(residency_brickserver::metrics::Metrics::default());
+    let thread = std::thread::spawn(move || {
+        rt.block_on(serve(listener, app, limits, metrics, async {
+            let _ = stopped.await;
+        }));
+    });
+    Served {
+        addr,
+        stop: Some(stop),
+        thread: Some(thread),
+        router,
+        runtime,
+    }
+}
+
+/// A response read off a connection.
+#[derive(Debug)]
+struct Reply {
+    status: u16,
+    /// Header fields, names lowercased, in order.
+    fields: Vec<(String, String)>,
+    body: Vec<u8>,
+}
+
+impl Reply {
+    fn field(&self, name: &str) -> Option<&str> {
+        self.fields
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+/// Reads one response to a request with `method` (a `HEAD`'s has no body).
+fn read_reply(reader: &mut BufReader<TcpStream>, method: &str) -> Reply {
+    let mut line = String::new();
+    reader.read_line(&mut line).unwrap();
+    assert!(line.starts_with("HTTP/1.1 "), "status line {line:?}");
+    let status = line[9..12].parse().unwrap();
+    let mut fields = Vec::new();
+    loop {
+        let mut line = String::new();
+        reader.read_line(&mut line).unwrap();
+        let line = line.trim_end();
+        if line.is_empty() {
+            break;
+        }
+        let (name, value) = line.split_once(": ").expect("a field");
+        fields.push((name.to_ascii_lowercase(), value.to_string()));
+    }
+    let mut reply = Reply {
+        status,
+        fields,
+        body: Vec::new(),
+    };
+    if method == "HEAD" || status == 304 {
+        return reply;
+    }
+    if reply.field("transfer-encoding") == Some("chunked") {
+        loop {
+            let mut size = String::new();
+            reader.read_line(&mut size).unwrap();
+            let size = usize::from_str_radix(size.trim_end(), 16).unwrap();
+            let mut chunk = vec![0; size + 2];
+            reader.read_exact(&mut chunk).unwrap();
+            if size == 0 {
+                break;
+            }
+            reply.body.extend_from_slice(&chunk[..size]);
+        }
+    } else if let Some(len) = reply.field("content-length") {
+        let mut body = vec![0; len.parse().unwrap()];
+        reader.read_exact(&mut body).unwrap();
+        reply.body = body;
+    } else {
+        reader.read_to_end(&mut reply.body).unwrap();
+    }
+    reply
+}
+
+/// A connection to `served`, with a reader over it.
+fn connect(served: &Served) -> (TcpStream, BufReader<TcpStream>) {
+    let stream = TcpStream::connect(&served.addr).unwrap();
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .unwrap();
+    let reader = BufReader::new(stream.try_clone().unwrap());
+    (stream, reader)
+}
+
+/// Sends `request` (a whole request head) on a new connection and reads the reply.
+fn exchange(served: &Served, method: &str, request: &str) -> Reply {
+    let (mut stream, mut reader) = connect(served);
+    stream.write_all(request.as_bytes()).unwrap();
+    read_reply(&mut reader, method)
+}
+
+/// Whether the server closed the connection (a read gives end of file).
+fn closed(reader: &mut BufReader<TcpStream>) -> bool {
+    let mut rest = Vec::new();
+    matches!(reader.read_to_end(&mut rest), Ok(0))
+}
+
+fn served_store(dir: &Path) -> Served {
+    let store = v3_store(dir, "cells");
+    common::write(&store, "0/c/1/0/0/0", vec![7u8; 100_000]);
+    start(
+        &[("cells", &store)],
+        ServerOptions::default(),
+        ConnectionLimits::default(),
+    )
+}
+
+/// The fields an answer over the wire has beyond the router's: `date`, `connection`.
+fn router_fields(reply: &Reply) -> Vec<(String, String)> {
+    reply
+        .fields
+        .iter()
+        .filter(|(n, _)| n != "date" && n != "connection")
+        .cloned()
+        .collect()
+}
+
+#[test]
+fn chunks_sent_directly_are_the_routers_answers_field_for_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = served_store(dir.path());
+    let etag = served.router_get("/cells/0/c/0/0/0/0", &[]);
+    let etag = etag.header("etag").to_string();
+    // (method, extra request fields) for each kind of answer: 200, 206, 416, 304, HEAD.
+    let cases: [(&str, &[(&str, &str)]); 5] = [
+        ("GET", &[]),
+        ("GET", &[("range", "bytes=4-9")]),
+        ("GET", &[("range", "bytes=900-")]),
+        ("GET", &[("if-none-match", etag.as_str())]),
+        ("HEAD", &[]),
+    ];
+    for (method, fields) in cases {
+        let mut request = format!("{method} /cells/0/c/0/0/0/0 HTTP/1.1\r\nHost: x\r\n");
+        for (name, value) in fields {
+            request.push_str(&[*name, ": ", *value, "\r\n"].concat());
+        }
+        request.push_str("\r\n");
+        let direct = exchange(&served, method, &request);
+        let routed = if method == "HEAD" {
+            served.runtime.block_on(common::request(
+                &served.router,
+                "HEAD",
+                "/cells/0/c/0/0/0/0",
+                fields,
+            ))
+        } else {
+            served.router_get("/cells/0/c/0/0/0/0", fields)
+        };
+        // A 304 announces no length on the wire (the router's says 0, which the connection
+        // drops).
+        let routed_fields: Vec<(String, String)> = routed
+            .headers
+            .iter()
+            .filter(|(n, _)| routed.status != 304 || *n != "content-length")
+            .map(|(n, v)| (n.to_string(), v.to_str().unwrap().to_string()))
+            .collect();
+        let mut wire = router_fields(&direct);
+        let mut expected = routed_fields;
+        wire.sort();
+        expected.sort();
+        assert_eq!(direct.status, routed.status.as_u16(), "{method} {fields:?}");
+        assert_eq!(wire, expected, "{method} {fields:?}");
+        assert_eq!(direct.body, routed.body, "{method} {fields:?}");
+        assert!(direct.field("date").is_some());
+    }
+    // What each answered, exactly.
+    let whole = exchange(&served, "GET", "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n");
+    assert_eq!((whole.status, whole.body.as_slice()), (200, CHUNK));
+    assert_eq!(whole.field("access-control-allow-origin"), Some("*"));
+    let part = exchange(
+        &served,
+        "GET",
+        "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nRange: bytes=4-9\r\n\r\n",
+    );
+    assert_eq!((part.status, part.body.as_slice()), (206, &CHUNK[4..10]));
+    assert_eq!(part.field("content-range"), Some("bytes 4-9/39"));
+    // A larger chunk, sent in more than one piece of the socket's buffer.
+    let big = exchange(&served, "GET", "GET /cells/0/c/1/0/0/0 HTTP/1.1\r\n\r\n");
+    assert_eq!(big.body, vec![7u8; 100_000]);
+}
+
+#[test]
+fn other_requests_reach_the_router_on_the_same_connection() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = served_store(dir.path());
+    let (mut stream, mut reader) = connect(&served);
+    // Pipelined: a chunk (direct), metadata, a missing chunk and the listing (routed), and a
+    // chunk again, in one write, answered in order.
+    stream
+        .write_all(
+            b"GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n\
+              GET /cells/zarr.json HTTP/1.1\r\n\r\n\
+              GET /cells/0/c/0/1/1/1 HTTP/1.1\r\n\r\n\
+              GET /datasets HTTP/1.1\r\nAccept: application/json\r\n\r\n\
+              GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n",
+        )
+        .unwrap();
+    let first = read_reply(&mut reader, "GET");
+    assert_eq!((first.status, first.body.as_slice()), (200, CHUNK));
+    let meta = read_reply(&mut reader, "GET");
+    assert_eq!(meta.status, 200);
+    assert_eq!(
+        meta.body,
+        std::fs::read(dir.path().join("cells.ome.zarr/zarr.json")).unwrap()
+    );
+    assert_eq!(meta.field("cache-control"), Some("public, no-cache"));
+    let missing = read_reply(&mut reader, "GET");
+    assert_eq!(missing.status, 404);
+    assert_eq!(missing.body, b"no key '0/c/0/1/1/1' in 'cells'\n");
+    let listing = read_reply(&mut reader, "GET");
+    assert_eq!(listing.status, 200);
+    assert!(String::from_utf8_lossy(&listing.body).contains("\"cells\""));
+    let again = read_reply(&mut reader, "GET");
+    assert_eq!((again.status, again.body.as_slice()), (200, CHUNK));
+    // A query string goes to the router, which serves the key all the same.
+    let queried = exchange(
+        &served,
+        "GET",
+        "GET /cells/0/c/0/0/0/0?v=1 HTTP/1.1\r\n\r\n",
+    );
+    assert_eq!((queried.status, queried.body.as_slice()), (200, CHUNK));
+}
+
+#[test]
+fn connections_close_when_asked_and_after_http_1_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = served_store(dir.path());
+    for (request, connection) in [
+        ("GET /cells/0/c/0/0/0/0 HTTP/1.0\r\n\r\n", "close"),
+        ("GET /cells/zarr.json HTTP/1.0\r\n\r\n", "close"),
+        (
+            "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nConnection: close\r\n\r\n",
+            "close",
+        ),
+    ] {
+        let (mut stream, mut reader) = connect(&served);
+        stream.write_all(request.as_bytes()).unwrap();
+        let reply = read_reply(&mut reader, "GET");
+        assert_eq!(reply.status, 200, "{request}");
+        assert_eq!(reply.field("connection"), Some(connection), "{request}");
+        assert!(closed(&mut reader), "{request}");
+    }
+    // HTTP/1.0 with keep-alive stays open, and says so.
+    let (mut stream, mut reader) = connect(&served);
+    for _ in 0..2 {
+        stream
+            .write_all(b"GET /cells/0/c/0/0/0/0 HTTP/1.0\r\nConnection: keep-alive\r\n\r\n")
+            .unwrap();
+        let reply = read_reply(&mut reader, "GET");
+        assert_eq!(reply.body, CHUNK);
+        assert_eq!(reply.field("connection"), Some("keep-alive"));
+    }
+}
+
+#[test]
+fn heads_that_cannot_be_served_get_their_status_and_the_connection_closes() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = served_store(dir.path());
+    for (request, status, message) in [
+        (
+            "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nTransfer-Encoding: chunked\r\n\r\n0\r\n\r\n",
+            411,
+            "request bodies need a Content-Length\n",
+        ),
+        (
+            "GET /x HTTP/1.1\r\nBad Field\r\n\r\n",
+            400,
+            "malformed request head\n",
+        ),
+        ("GET\0 / HTTP/1.1\r\n\r\n", 400, "malformed request head\n"),
+    ] {
+        let (mut stream, mut reader) = connect(&served);
+        stream.write_all(request.as_bytes()).unwrap();
+        let reply = read_reply(&mut reader, "GET");
+        assert_eq!(
+            (reply.status, String::from_utf8_lossy(&reply.body).as_ref()),
+            (status, message),
+            "{request:?}"
+        );
+        assert_eq!(reply.field("connection"), Some("close"));
+        assert!(closed(&mut reader), "{request:?}");
+    }
+    // A request with a body (which no route reads) keeps the connection in step.
+    let (mut stream, mut reader) = connect(&served);
+    stream
+        .write_all(
+            b"GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nContent-Length: 5\r\n\r\nhello\
+              GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n",
+        )
+        .unwrap();
+    for _ in 0..2 {
+        assert_eq!(read_reply(&mut reader, "GET").body, CHUNK);
+    }
+}
+
+#[test]
+fn a_silent_client_is_closed_after_the_header_timeout() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = v3_store(dir.path(), "cells");
+    let limits = ConnectionLimits {
+        header_timeout: Duration::from_millis(300),
+        ..ConnectionLimits::default()
+    };
+    let served = start(&[("cells", &store)], ServerOptions::default(), limits);
+    let (mut stream, mut reader) = connect(&served);
+    let started = Instant::now();
+    stream
+        .write_all(b"GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nHo")
+        .unwrap();
+    assert!(closed(&mut reader));
+    let waited = started.elapsed();
+    assert!(waited >= Duration::from_millis(290), "{waited:?}");
+    assert!(waited < Duration::from_secs(5), "{waited:?}");
+}
+
+#[test]
+fn shutdown_closes_idle_connections_and_returns() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut served = served_store(dir.path());
+    let (mut stream, mut reader) = connect(&served);
+    stream
+        .write_all(b"GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n")
+        .unwrap();
+    assert_eq!(read_reply(&mut reader, "GET").body, CHUNK);
+    // The connection is idle, kept alive; shutting down closes it rather than waiting.
+    let took = served.stop();
+    assert!(took < Duration::from_secs(5), "{took:?}");
+    assert!(closed(&mut reader));
+}
+
+#[test]
+fn the_token_is_asked_for_on_the_direct_path_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = v3_store(dir.path(), "cells");
+    let options = ServerOptions {
+        token: Some("s3cret".into()),
+        ..ServerOptions::default()
+    };
+    let served = start(&[("cells", &store)], options, ConnectionLimits::default());
+    let refused = exchange(&served, "GET", "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n");
+    assert_eq!(refused.status, 401);
+    assert_eq!(refused.body, b"missing or wrong bearer token\n");
+    let wrong = exchange(
+        &served,
+        "GET",
+        "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nAuthorization: Bearer nope\r\n\r\n",
+    );
+    assert_eq!(wrong.status, 401);
+    let given = exchange(
+        &served,
+        "GET",
+        "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nAuthorization: Bearer s3cret\r\n\r\n",
+    );
+    assert_eq!((given.status, given.body.as_slice()), (200, CHUNK));
+}
+
+#[test]
+fn answers_of_both_paths_are_counted_in_the_metrics() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = served_store(dir.path());
+    let (mut stream, mut reader) = connect(&served);
+    stream
+        .write_all(
+            b"GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n\
+              GET /cells/0/c/9/9/9/9 HTTP/1.1\r\n\r\n",
+        )
+        .unwrap();
+    read_reply(&mut reader, "GET");
+    read_reply(&mut reader, "GET");
+    stream.write_all(b"GET /metrics HTTP/1.1\r\n\r\n").unwrap();
+    let text = String::from_utf8(read_reply(&mut reader, "GET").body).unwrap();
+    let count = |line: &str| {
+        text.lines()
+            .find_map(|l| l.strip_prefix(line))
+            .unwrap_or_else(|| panic!("no {line} in\n{text}"))
+            .trim()
+            .to_string()
+    };
+    assert_eq!(count("brickserver_requests_total{class=\"2xx\"}"), "1");
+    assert_eq!(count("brickserver_requests_total{class=\"4xx\"}"), "1");
+    // The chunk's bytes and the 404's message.
+    let bytes = CHUNK.len() + "no key '0/c/9/9/9/9' in 'cells'\n".len();
+    assert_eq!(count("brickserver_response_bytes_total"), bytes.to_string());
+}
