@@ -114,15 +114,23 @@ def cpu_seconds(pids) -> float:
     return total / tick
 
 
-def wrk(base, connections, seconds, etag=None):
-    """Random chunk GETs under `base` (scheme://host:port/PREFIX), or with `etag` revalidations
-    of one chunk, with wrk for `seconds` at `connections` connections."""
+def wrk_command(base, connections, seconds, etag=None):
+    """The wrk command of random chunk GETs under `base` (scheme://host:port/PREFIX), or with
+    `etag` revalidations of one chunk, for `seconds` at `connections` connections."""
     origin, prefix = base.split("/", 3)[2], "/" + base.split("/", 3)[3]
     cmd = ["wrk", f"-t{min(2, connections)}", f"-c{connections}", f"-d{seconds}s", "--latency",
            "-s", str(WRK_SCRIPT), f"http://{origin}", "--", prefix, *map(str, GRID)]
-    if etag:
-        cmd.append(etag)
-    out = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout
+    return cmd + [etag] if etag else cmd
+
+
+def wrk(base, connections, seconds, etag=None):
+    """One wrk load (see `wrk_command`), its results as `oha` gives them."""
+    out = subprocess.run(wrk_command(base, connections, seconds, etag), capture_output=True, text=True, check=True).stdout
+    return wrk_result(out, etag)
+
+
+def wrk_result(out, etag=None):
+    """The results of wrk's output `out` (the script's RESULT line)."""
     line = next(l for l in out.splitlines() if l.startswith("RESULT "))
     r = {k: int(v) for k, v in (kv.split("=") for kv in line.split()[1:])}
     secs = r["duration_us"] / 1e6
@@ -452,25 +460,30 @@ def run_soak(a, store):
         bs, bs_pids, bs_base = start_brickserver(store, "bench")
         samples = []
         try:
-            proc = subprocess.Popen(
-                [OHA, "-z", f"{a.soak}s", "-c", "256", "--no-tui", "--output-format", "json", "--rand-regex-url", key_regex(f"{bs_base}/bench")],
-                stdout=subprocess.PIPE,
-                text=True,
-            )
+            if CLIENT == "wrk":
+                cmd = wrk_command(f"{bs_base}/bench", 256, a.soak)
+            else:
+                cmd = [OHA, "-z", f"{a.soak}s", "-c", "256", "--no-tui", "--output-format", "json", "--rand-regex-url", key_regex(f"{bs_base}/bench")]
+            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
             t0 = time.time()
             while proc.poll() is None:
                 samples.append((round(time.time() - t0), current_rss_mb(bs_pids)))
                 time.sleep(5)
-            r = json.loads(proc.stdout.read())
-            codes = {int(k): v for k, v in r.get("statusCodeDistribution", {}).items()}
-            soak = {
-                "seconds": a.soak,
-                "requests": sum(codes.values()),
-                "non_200": sum(v for k, v in codes.items() if k != 200),
-                "errors": sum(v for k, v in r.get("errorDistribution", {}).items() if "deadline" not in k),
-                "rps": r["summary"]["requestsPerSec"],
-                "rss_samples": samples,
-            }
+            if CLIENT == "wrk":
+                r = wrk_result(proc.stdout.read())
+                soak = {"seconds": a.soak, "requests": sum(r["codes"].values()), "non_200": r["codes"].get(0, 0),
+                        "errors": 0, "rps": r["rps"], "rss_samples": samples}
+            else:
+                r = json.loads(proc.stdout.read())
+                codes = {int(k): v for k, v in r.get("statusCodeDistribution", {}).items()}
+                soak = {
+                    "seconds": a.soak,
+                    "requests": sum(codes.values()),
+                    "non_200": sum(v for k, v in codes.items() if k != 200),
+                    "errors": sum(v for k, v in r.get("errorDistribution", {}).items() if "deadline" not in k),
+                    "rps": r["summary"]["requestsPerSec"],
+                    "rss_samples": samples,
+                }
         finally:
             bs.send_signal(signal.SIGTERM)
             bs.wait(timeout=20)
@@ -535,9 +548,10 @@ def render_soak(soak, a):
     at60 = rss[min(12, len(rss) - 1)]
     return (
         f"Soak measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) by "
-        f"`benchmarks/server_bench.py --soak {soak['seconds']} --soak-only`: {soak['seconds']} s of random chunk GETs "
-        f"at 256 connections (oha on the same machine), {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
-        f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors. Server RSS sampled every 5 s: "
+        f"`benchmarks/server_bench.py --client {a.client} --soak {soak['seconds']} --soak-only`: {soak['seconds']} s of random chunk GETs "
+        f"at 256 connections ({client_version(a.client)} on the same machine), {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
+        f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors"
+        f"{' (wrk counts both as errors)' if a.client == 'wrk' else ''}. Server RSS sampled every 5 s: "
         f"first {rss[0]:.0f} MB, at 60 s {at60:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB.\n"
     )
 

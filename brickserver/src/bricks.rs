@@ -15,7 +15,23 @@ use residency_schemas::wire::{BrickBatchHeader, BrickEncoding, BrickEntry, Brick
 use residency_store::pyramid::{Pyramid, PyramidError};
 use zarrs::storage::ReadableListableStorageTraits;
 
-use crate::dataset_store::DatasetStore;
+use crate::dataset_store::{DatasetStore, Keys};
+
+/// Threads that read the bricks of batches from object stores: such reads wait on the network,
+/// not the CPU, so a batch's bricks are fetched this many at a time rather than one per core.
+const REMOTE_READS: usize = 32;
+
+/// The thread pool of [`REMOTE_READS`] threads, made on first use.
+fn remote_reads() -> &'static rayon::ThreadPool {
+    static POOL: std::sync::OnceLock<rayon::ThreadPool> = std::sync::OnceLock::new();
+    POOL.get_or_init(|| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(REMOTE_READS)
+            .thread_name(|i| format!("remote-bricks-{i}"))
+            .build()
+            .expect("a thread pool")
+    })
+}
 
 /// Caps on one batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -203,6 +219,8 @@ pub(crate) struct ImageArrays {
     pub data_type: SampleType,
     /// Brick shape `z, y, x`.
     pub brick_shape: [u64; 3],
+    /// Whether the store is an object store (its reads wait on the network).
+    remote: bool,
 }
 
 impl ImageArrays {
@@ -216,6 +234,7 @@ impl ImageArrays {
             data_type: pyramid.sample_type,
             brick_shape: pyramid.brick_shape,
             pyramid,
+            remote: matches!(dataset.keys, Keys::Object(_)),
         })
     }
 
@@ -263,22 +282,30 @@ pub(crate) enum BrickReadError {
     Store(#[from] PyramidError),
 }
 
-/// Reads a whole batch (in parallel) into its header and payload, given a brick reader
-/// (which may consult a cache). A brick that cannot be read gets an error entry with the
-/// reason; the rest of the batch is still answered.
+/// Reads a whole batch (in parallel: one brick per core from a folder, [`REMOTE_READS`] at a
+/// time from an object store) into its header and payload, given a brick reader (which may
+/// consult a cache). A brick that cannot be read gets an error entry with the reason; the
+/// rest of the batch is still answered.
 pub(crate) fn read_batch(
     arrays: &ImageArrays,
     bricks: &[BrickAt],
     encoding: BrickEncoding,
     read: impl Fn(&BrickAt) -> Result<Option<Bytes>, BrickReadError> + Sync,
 ) -> (BrickBatchHeader, Vec<u8>) {
-    let results: Vec<Result<Option<Bytes>, BrickReadError>> = bricks
-        .par_iter()
-        .map(|at| {
-            arrays.check(at)?;
-            read(at)
-        })
-        .collect();
+    let read_all = || -> Vec<Result<Option<Bytes>, BrickReadError>> {
+        bricks
+            .par_iter()
+            .map(|at| {
+                arrays.check(at)?;
+                read(at)
+            })
+            .collect()
+    };
+    let results = if arrays.remote {
+        remote_reads().install(read_all)
+    } else {
+        read_all()
+    };
     let mut payload = Vec::new();
     let entries = bricks
         .iter()

@@ -18,6 +18,12 @@ use residency_store::location::{ObjectStoreOptions, StoreLocation};
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+/// mimalloc gives freed memory back and commits arenas page by page, so that the server's RSS
+/// is what it holds (see `residency_store::allocator`); set before `main`.
+#[used]
+#[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
+static RETURN_FREED_MEMORY: extern "C" fn() = residency_store::allocator::return_freed_memory;
+
 #[derive(Parser)]
 #[command(
     name = "brickserver",
@@ -158,6 +164,9 @@ async fn run(
     Ok(())
 }
 
+/// Most threads of the runtime's blocking pool.
+const BLOCKING_THREADS: usize = 64;
+
 fn main() -> ExitCode {
     tracing_subscriber::fmt()
         .with_env_filter(
@@ -187,7 +196,14 @@ fn main() -> ExitCode {
                 runtime: None,
             };
             // One runtime for everything the server does, object-store requests included.
-            let runtime = tokio::runtime::Runtime::new().context("cannot start the runtime")?;
+            // Blocking threads read files the page cache does not hold and run zarrs' reads:
+            // disk- and network-bound, so a few dozen keep a disk or a store busy, where
+            // tokio's default of 512 would each hold a stack and an allocator heap.
+            let runtime = tokio::runtime::Builder::new_multi_thread()
+                .enable_all()
+                .max_blocking_threads(BLOCKING_THREADS)
+                .build()
+                .context("cannot start the runtime")?;
             let datasets =
                 runtime.block_on(Datasets::from_args(&datasets, &named, &object_store))?;
             if !(request_timeout > 0.0 && request_timeout.is_finite()) {

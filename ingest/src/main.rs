@@ -23,6 +23,12 @@ use strum::VariantArray;
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
+/// mimalloc gives freed memory back and commits arenas page by page, so that the peak RSS
+/// stays within `--memory-limit` (see `residency_store::allocator`); set before `main`.
+#[used]
+#[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
+static RETURN_FREED_MEMORY: extern "C" fn() = residency_store::allocator::return_freed_memory;
+
 #[derive(Parser)]
 #[command(
     name = "ingest",

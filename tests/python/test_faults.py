@@ -258,3 +258,27 @@ def test_the_proxy_is_seeded_and_counts_what_it_does(s3):
         FaultProxy(s3["endpoint"], error_rate=1.5)
     with pytest.raises(ValueError, match="the rates add up to more than 1"):
         FaultProxy(s3["endpoint"], error_rate=0.6, reset_rate=0.6)
+
+
+def test_a_batch_of_bricks_is_fetched_from_the_store_concurrently(s3):
+    """Every request to the store held 0.4 s: the 8 level-0 bricks of a batch are all in
+    flight at once (brickserver reads an object store's bricks 32 at a time, not one per
+    core), and the batch answers the local copy's bytes."""
+    proxy = FaultProxy(s3["endpoint"], stall_rate=1.0, stall_s=0.4, seed=1).start()
+    faulty, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
+                                "--cache-bytes", "0", env=env())
+    local, local_base = start_server(s3["local"])
+    try:
+        batch = "bricks?" + "&".join(f"b=0,0,{z},{y},{x}" for z in (0, 1) for y in (0, 1)
+                                     for x in (0, 1)) + "&encoding=stored"
+        # The first query opens the pyramid (its metadata reads, one after the other).
+        assert requests.get(f"{base}/{NAME}/bricks?b=1,0,0,0,0", timeout=60).status_code == 200
+        assert proxy.stats()["max_in_flight"] == 1
+        remote = requests.get(f"{base}/{NAME}/{batch}", timeout=60)
+        local_answer = requests.get(f"{local_base}/{NAME}/{batch}", timeout=60)
+        assert (remote.status_code, remote.content) == (200, local_answer.content)
+        assert proxy.stats()["max_in_flight"] == 8, proxy.stats()
+    finally:
+        stop_server(faulty)
+        stop_server(local)
+        proxy.stop()

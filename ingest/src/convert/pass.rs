@@ -238,7 +238,8 @@ pub(crate) fn open_levels<T: Sample>(
 }
 
 /// Reads `region` of level-0 planes `planes` of the inputs slab by slab (a reader thread
-/// decodes slab k+1 while slab k is written) and sends each up the pyramid.
+/// decodes slab k+1 while slab k is written) and sends each up the pyramid. The two slabs
+/// come from `spare` and go back to it, so the columns of a pass reuse the same memory.
 #[allow(clippy::too_many_arguments)]
 fn read_level0<T: Sample>(
     sources: &mut [Box<dyn VolumeSource>],
@@ -249,6 +250,7 @@ fn read_level0<T: Sample>(
     handed_over: &mut HandedOver<T>,
     stats: &[Mutex<ChannelAccumulator>],
     bar: &indicatif::ProgressBar,
+    spare: &mut Vec<Vec<T>>,
 ) -> Result<(), ConvertError> {
     let channels = plan.labels.len();
     let plane = region.area() as usize;
@@ -258,6 +260,7 @@ fn read_level0<T: Sample>(
         let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);
         // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
         let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
+        let mut own = std::mem::take(spare);
         let reader = scope.spawn(move || {
             let mut z0 = planes.start;
             let mut allocated = 0;
@@ -266,11 +269,11 @@ fn read_level0<T: Sample>(
                 // At most two slabs exist: the one being processed and the one being read.
                 let mut slab = if allocated < 2 {
                     allocated += 1;
-                    Vec::new()
+                    own.pop().unwrap_or_default()
                 } else {
                     match recycle_rx.recv() {
                         Ok(slab) => slab,
-                        Err(_) => return,
+                        Err(_) => return (own, recycle_rx),
                     }
                 };
                 slab.resize(channels * nz as usize * plane, T::default());
@@ -299,10 +302,11 @@ fn read_level0<T: Sample>(
                     });
                 let failed = result.is_err();
                 if tx.send(result.map(|()| (z0, nz, slab))).is_err() || failed {
-                    return;
+                    return (own, recycle_rx);
                 }
                 z0 += nz;
             }
+            (own, recycle_rx)
         });
 
         let result = (|| -> Result<(), ConvertError> {
@@ -317,7 +321,8 @@ fn read_level0<T: Sample>(
         // Unblock the reader whether it waits to send a slab or to get one back.
         drop(rx);
         drop(recycle_tx);
-        reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
+        let (own, recycled) = reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
+        spare.extend(own.into_iter().chain(recycled.try_iter()));
         result
     })
 }
@@ -348,6 +353,8 @@ pub(crate) fn run_pass<T: Sample>(
     let group_depth = levels.get(local).map_or(planes.end - planes.start, |l| {
         plan.outer[0] * l.plan.factor[0]
     });
+    // The level-0 slabs, kept from column to column.
+    let mut spare = Vec::new();
     let mut start = planes.start;
     while start < planes.end {
         let group = start..(start + group_depth.max(1)).min(planes.end);
@@ -365,7 +372,7 @@ pub(crate) fn run_pass<T: Sample>(
                 let z0 = group.start / f[0];
                 if l > 0 && (level.acc.window, level.acc.z0) != (level.window, z0) {
                     let depth = plan.outer[0].min(level.plan.shape[0]);
-                    level.acc = Accumulator::new(channels, z0, depth, level.window);
+                    restart(&mut level.acc, channels, z0, depth, level.window);
                 }
             }
             if split {
@@ -388,6 +395,7 @@ pub(crate) fn run_pass<T: Sample>(
                 into,
                 stats,
                 &bar,
+                &mut spare,
             )?;
             if split {
                 // The rest of the column's blocks of region metadata.
@@ -412,6 +420,24 @@ pub(crate) fn run_pass<T: Sample>(
     }
     bar.finish_and_clear();
     Ok(())
+}
+
+/// Makes `acc` hold zeroed sums for `depth` planes from `z0` of `channels` channels over
+/// `window`, as [`Accumulator::new`] does, in the memory it holds (a column's accumulator is
+/// the previous column's, not a fresh allocation).
+fn restart<T: Sample>(
+    acc: &mut Accumulator<T>,
+    channels: usize,
+    z0: u64,
+    depth: u64,
+    window: PlaneRegion,
+) {
+    let len = channels * (depth * window.area()) as usize;
+    acc.sum.clear();
+    acc.sum.resize(len, T::Sum::default());
+    acc.count.clear();
+    acc.count.resize(len, 0);
+    (acc.z0, acc.depth, acc.window) = (z0, depth, window);
 }
 
 pub(crate) fn new_stats(channels: usize) -> Vec<Mutex<ChannelAccumulator>> {

@@ -10,6 +10,8 @@
 //!   zarrs storage;
 //! - [`ranged`]: an object store read by zarrs with one ranged `GET` per read (no `HEAD`).
 
+#[cfg(feature = "mimalloc")]
+pub mod allocator;
 pub mod aws_profile;
 pub mod location;
 pub mod pyramid;

@@ -101,6 +101,8 @@ class FaultProxy:
         self._rng = random.Random(seed)
         self._lock = threading.Lock()
         self._counts = dict.fromkeys(COUNTERS, 0)
+        self._in_flight = 0
+        self._max_in_flight = 0
         self._mode = "faults"
         self._fail_kind = "503"
         self.set_mode(mode, fail_kind)
@@ -139,13 +141,24 @@ class FaultProxy:
 
     def stats(self) -> dict:
         """The counters (see `COUNTERS`), with `faults`: all requests the proxy failed or
-        stalled, and the mode."""
+        stalled, the mode, and `max_in_flight`: the most requests it held at once (a client
+        that fetches concurrently shows here)."""
         with self._lock:
             counts = dict(self._counts)
             mode = self._mode
+            counts["max_in_flight"] = self._max_in_flight
         counts["faults"] = sum(counts[k] for k in COUNTERS[2:])
         counts["mode"] = mode
         return counts
+
+    def _enter(self):
+        with self._lock:
+            self._in_flight += 1
+            self._max_in_flight = max(self._max_in_flight, self._in_flight)
+
+    def _leave(self):
+        with self._lock:
+            self._in_flight -= 1
 
     def _count(self, name: str):
         with self._lock:
@@ -308,10 +321,13 @@ def _handler_for(proxy: FaultProxy):
             self.wfile.write(data)
 
         def _serve(self):
+            proxy._enter()
             try:
                 self._handle()
             except (BrokenPipeError, ConnectionResetError):
                 self.close_connection = True
+            finally:
+                proxy._leave()
 
         do_GET = do_HEAD = do_PUT = do_POST = do_DELETE = _serve
 
