@@ -299,7 +299,9 @@ def main():
     soak = run_soak(a, store) if a.soak else None
     sections = []
     if results:
-        sections.append(("server-bench", render(results, a), "server"))
+        # One result per client: wrk's is the default, oha's sits beside it.
+        suffix = "" if a.client == "wrk" else f"-{a.client}"
+        sections.append((f"server-bench{suffix}", render(results, a), f"server{suffix}"))
     if soak:
         sections.append(("server-soak", render_soak(soak, a), "server-soak"))
     for marker, report, name in sections:
@@ -308,7 +310,7 @@ def main():
         if a.docs:
             point_page_at(marker, result, report)
     if results:
-        write_result("server.json", json.dumps(results, indent=1))
+        write_result(f"server{'' if a.client == 'wrk' else '-' + a.client}.json", json.dumps(results, indent=1))
     if soak:
         write_result("server-soak.json", json.dumps(soak, indent=1))
 

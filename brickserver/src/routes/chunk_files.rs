@@ -24,6 +24,17 @@ use crate::store_keys::{KeyError, RootDir};
 /// nginx's `open_file_cache_valid`): chunks are immutable, but a store may be replaced.
 pub(crate) const ETAG_VALID: Duration = Duration::from_mins(1);
 
+/// A borrowed key of [`AppState::etags`] (dataset index, raw key): hashes and compares as the
+/// owned `(usize, String)`, so a look-up allocates nothing.
+#[derive(Hash)]
+struct EtagKey<'a>(usize, &'a str);
+
+impl quick_cache::Equivalent<(usize, String)> for EtagKey<'_> {
+    fn equivalent(&self, key: &(usize, String)) -> bool {
+        self.0 == key.0 && self.1 == key.1
+    }
+}
+
 /// The paths under `/NAME/` that are the server's API, not Zarr keys.
 const API_PATHS: [&str; 4] = ["regions", "minmax", "bricks", "view"];
 
@@ -38,7 +49,7 @@ pub(crate) fn remembered_not_modified(
     if is_metadata(raw_key) || !headers.contains_key(header::IF_NONE_MATCH) {
         return None;
     }
-    let (etag, seen) = state.etags.get(&(index, raw_key.to_string()))?;
+    let (etag, seen) = state.etags.get(&EtagKey(index, raw_key))?;
     if seen.elapsed() >= ETAG_VALID {
         return None;
     }
@@ -67,7 +78,11 @@ pub(crate) fn open_folder_key(
 ) -> Result<OpenedKey, KeyError> {
     let (file, meta) = root.open_key(raw_key)?;
     let etag = etag_of(&meta);
-    if !is_metadata(raw_key) {
+    // Remembered anew when unknown, changed, or seen more than half its validity ago (an
+    // insert costs more than the look-up, and most chunks are asked for again).
+    let known = state.etags.get(&EtagKey(index, raw_key));
+    let fresh = known.is_some_and(|(t, seen)| *t == *etag && seen.elapsed() < ETAG_VALID / 2);
+    if !is_metadata(raw_key) && !fresh {
         state.etags.insert(
             (index, raw_key.to_string()),
             (etag.as_str().into(), Instant::now()),
@@ -257,6 +272,15 @@ mod tests {
     use std::os::fd::AsRawFd;
 
     use super::*;
+
+    #[test]
+    fn borrowed_etag_keys_find_the_owned_ones() {
+        let cache = quick_cache::sync::Cache::<(usize, String), u8>::new(16);
+        cache.insert((3, "0/c/0/1/2/3".to_string()), 7);
+        assert_eq!(cache.get(&EtagKey(3, "0/c/0/1/2/3")), Some(7));
+        assert_eq!(cache.get(&EtagKey(2, "0/c/0/1/2/3")), None);
+        assert_eq!(cache.get(&EtagKey(3, "0/c/0/1/2/4")), None);
+    }
 
     #[test]
     fn pages_dropped_from_the_cache_are_seen_as_not_cached() {
