@@ -1,7 +1,7 @@
-//! Accepting connections: each served by [`crate::http1`] (HTTP/1.1 with a header-read
-//! timeout, so a slow or idle client cannot hold a connection forever), a connection limit
-//! (connections past it get a `503` and are closed), and graceful shutdown (in-flight
-//! requests finish).
+//! Accepting connections: each served by the crate's `http1` module (HTTP/1.1 with a
+//! header-read timeout, so a slow or idle client cannot hold a connection forever), a
+//! connection limit (connections past it get a `503` and are closed), and graceful shutdown
+//! (in-flight requests finish).
 
 use std::future::Future;
 use std::sync::Arc;
