@@ -17,6 +17,7 @@ use axum::Router;
 use axum::body::{Body, HttpBody};
 use axum::http::header::{self, HeaderMap, HeaderName, HeaderValue};
 use axum::http::{Method, Request, Response, StatusCode, Version};
+use axum::response::IntoResponse;
 use bytes::{Buf, BytesMut};
 use hyper::service::Service as _;
 use hyper_util::service::TowerToHyperService;
@@ -25,7 +26,7 @@ use tokio::net::TcpStream;
 use tokio::sync::watch;
 
 use crate::metrics::Metrics;
-use crate::routes::{self, AppState, FolderChunks, RequestHead, ServerOptions};
+use crate::routes::{self, AppState, FolderChunks, ServerOptions};
 
 /// The longest request head (request line and header fields) read: longer ones get a `431`.
 const MAX_HEAD: usize = 64 << 10;
@@ -83,17 +84,17 @@ impl App {
 
 /// A parsed request head.
 #[derive(Debug)]
-pub(crate) struct Head {
+struct Head {
     /// The method.
-    pub(crate) method: Method,
+    method: Method,
     /// The request target as sent: path and query, still percent-encoded.
-    pub(crate) target: String,
+    target: String,
     /// HTTP/1.0 or HTTP/1.1.
-    pub(crate) version: Version,
+    version: Version,
     /// The header fields.
-    pub(crate) headers: HeaderMap,
+    headers: HeaderMap,
     /// The body's length (`Content-Length`; 0 without one).
-    pub(crate) body_len: u64,
+    body_len: u64,
 }
 
 /// What reading a request head gave.
@@ -127,60 +128,59 @@ pub(crate) async fn connection(
             Step::Head(head) => head,
             Step::Close => return Ok(()),
             Step::Refuse(status, why) => {
+                let answer = (status, why).into_response();
+                write_response(
+                    &mut stream,
+                    &mut out,
+                    answer,
+                    &Method::GET,
+                    Version::HTTP_11,
+                    false,
+                )
+                .await?;
                 app.metrics
                     .record(status, Some(why.len() as u64), Instant::now());
-                let response = (status, why).into_response_body();
-                out.clear();
-                write_head(&mut out, &response, Version::HTTP_11, false, b"");
-                out.extend_from_slice(why.as_bytes());
-                stream.write_all(&out).await?;
                 return stream.shutdown().await;
             }
         };
         let started = Instant::now();
         let keep_alive = keeps_alive(&head) && !*shutdown.borrow();
         let body = read_body(&mut stream, &mut buf, head.body_len).await?;
-        let asked = RequestHead {
-            method: &head.method,
-            target: &head.target,
-            headers: &head.headers,
-            body_len: head.body_len,
-        };
-        if let Some(answer) = app.chunks.answer(&asked) {
+        let direct = (head.body_len == 0)
+            .then(|| app.chunks.answer(&head.method, &head.target, &head.headers))
+            .flatten();
+        let keep_alive = if let Some(answer) = direct {
             out.clear();
-            let head_only = head.method == Method::HEAD;
             // With the CORS fields the router's layer adds to every answer.
             let cors = app.chunks.cors();
             write_head(&mut out, &answer.response, head.version, keep_alive, cors);
-            let sent = if let Some((file, start, end)) = answer.body.filter(|_| !head_only) {
-                set_cork(&stream, true)?;
-                stream.write_all(&out).await?;
-                send_file(&stream, &file, start, end).await?;
-                Some(end - start)
-            } else {
-                stream.write_all(&out).await?;
-                None
+            let sent = match answer.body {
+                Some((file, start, end)) if head.method != Method::HEAD => {
+                    set_cork(&stream, true)?;
+                    stream.write_all(&out).await?;
+                    send_file(&stream, &file, start, end).await?;
+                    Some(end - start)
+                }
+                _ => {
+                    stream.write_all(&out).await?;
+                    None
+                }
             };
             app.metrics.record(answer.response.status(), sent, started);
+            keep_alive
         } else {
-            let method = head.method.clone();
-            let version = head.version;
-            let response = match to_request(head, body) {
+            let (method, version) = (head.method.clone(), head.version);
+            let (response, keep_alive) = match to_request(head, body) {
                 Ok(request) => {
                     let service = TowerToHyperService::new(app.router.clone());
                     match service.call(request).await {
-                        Ok(response) => response,
+                        Ok(response) => (response, keep_alive),
                         Err(never) => match never {},
                     }
                 }
-                Err(why) => {
-                    let response = (StatusCode::BAD_REQUEST, why).into_response_body();
-                    write_response(&mut stream, &mut out, response, &method, version, false)
-                        .await?;
-                    return stream.shutdown().await;
-                }
+                Err(why) => ((StatusCode::BAD_REQUEST, why).into_response(), false),
             };
-            let keep_alive = write_response(
+            write_response(
                 &mut stream,
                 &mut out,
                 response,
@@ -188,35 +188,11 @@ pub(crate) async fn connection(
                 version,
                 keep_alive,
             )
-            .await?;
-            if !keep_alive {
-                return stream.shutdown().await;
-            }
-            continue;
-        }
+            .await?
+        };
         if !keep_alive {
             return stream.shutdown().await;
         }
-    }
-}
-
-/// A plain-text answer with `status`.
-trait IntoResponseBody {
-    fn into_response_body(self) -> Response<Body>;
-}
-
-impl IntoResponseBody for (StatusCode, &'static str) {
-    fn into_response_body(self) -> Response<Body> {
-        let mut response = Response::new(Body::from(self.1));
-        *response.status_mut() = self.0;
-        response.headers_mut().insert(
-            header::CONTENT_TYPE,
-            HeaderValue::from_static("text/plain; charset=utf-8"),
-        );
-        response
-            .headers_mut()
-            .insert(header::CONTENT_LENGTH, HeaderValue::from(self.1.len()));
-        response
     }
 }
 

@@ -94,18 +94,6 @@ pub(crate) fn open_folder_key(
     })
 }
 
-/// What the direct path reads of a request.
-pub(crate) struct RequestHead<'a> {
-    /// The method.
-    pub(crate) method: &'a Method,
-    /// The request target as sent: path and query, still percent-encoded.
-    pub(crate) target: &'a str,
-    /// The header fields.
-    pub(crate) headers: &'a HeaderMap,
-    /// The body's length.
-    pub(crate) body_len: u64,
-}
-
 /// A direct answer: the response's head, and the file bytes `start..end` that follow it.
 pub(crate) struct ChunkAnswer {
     /// Status and header fields (its body is empty: the bytes come from the file).
@@ -141,14 +129,20 @@ impl FolderChunks {
         &self.cors
     }
 
-    /// The answer to `head` if it is a `GET` or `HEAD` without a body of an existing chunk
-    /// key of a folder store, with the token if one is needed; `None` for every other request
-    /// (and for errors, which the router answers with its messages).
-    pub(crate) fn answer(&self, head: &RequestHead<'_>) -> Option<ChunkAnswer> {
-        if !(*head.method == Method::GET || *head.method == Method::HEAD) || head.body_len > 0 {
+    /// The answer to a request (without a body) with `method`, `target` (path and query as
+    /// sent) and `headers`, if it is a `GET` or `HEAD` of an existing chunk key of a folder
+    /// store, with the token if one is needed; `None` for every other request (and for errors,
+    /// which the router answers with its messages).
+    pub(crate) fn answer(
+        &self,
+        method: &Method,
+        target: &str,
+        headers: &HeaderMap,
+    ) -> Option<ChunkAnswer> {
+        if !(*method == Method::GET || *method == Method::HEAD) {
             return None;
         }
-        let (name, raw_key) = head.target.strip_prefix('/')?.split_once('/')?;
+        let (name, raw_key) = target.strip_prefix('/')?.split_once('/')?;
         if raw_key.is_empty()
             || name.contains('%')
             || raw_key.contains('?')
@@ -158,8 +152,7 @@ impl FolderChunks {
             return None;
         }
         if let Some(token) = &self.token {
-            let given = head
-                .headers
+            let given = headers
                 .get(header::AUTHORIZATION)
                 .and_then(|v| v.to_str().ok());
             if !bearer_token_matches(given, token) {
@@ -171,25 +164,23 @@ impl FolderChunks {
         let Keys::Folder(root) = &state.stores[index].keys else {
             return None;
         };
-        if let Some(answer) = remembered_not_modified(state, index, raw_key, head.headers) {
+        if let Some(answer) = remembered_not_modified(state, index, raw_key, headers) {
             return Some(ChunkAnswer {
                 response: answer,
                 body: None,
             });
         }
-        let (file, meta, etag) =
-            match open_folder_key(state, index, root, raw_key, head.headers).ok()? {
-                OpenedKey::NotModified(answer) => {
-                    return Some(ChunkAnswer {
-                        response: answer,
-                        body: None,
-                    });
-                }
-                OpenedKey::File(file, meta, etag) => (file, meta, etag),
-            };
+        let (file, meta, etag) = match open_folder_key(state, index, root, raw_key, headers).ok()? {
+            OpenedKey::NotModified(answer) => {
+                return Some(ChunkAnswer {
+                    response: answer,
+                    body: None,
+                });
+            }
+            OpenedKey::File(file, meta, etag) => (file, meta, etag),
+        };
         let len = meta.len();
-        let range = head
-            .headers
+        let range = headers
             .get(header::RANGE)
             .and_then(|v| v.to_str().ok())
             .map_or(RangeRequest::Whole, |v| parse_range(v, len));
@@ -238,6 +229,14 @@ struct Cachestat {
     nr_recently_evicted: u64,
 }
 
+/// The system's page size, the unit `cachestat` counts in (read once).
+fn page_size() -> u64 {
+    static PAGE: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
+    // SAFETY: `sysconf` only reads a system constant.
+    *PAGE
+        .get_or_init(|| u64::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).unwrap_or(4096))
+}
+
 /// Whether bytes `start..end` of `file` are all in the page cache (`cachestat`, one system
 /// call), so that sending them cannot wait for the disk. Kernels without `cachestat` (before
 /// 6.5) say yes: the file is sent as nginx sends it, reading the disk if it must.
@@ -246,7 +245,7 @@ fn in_page_cache(file: &File, start: u64, end: u64) -> bool {
     if end <= start {
         return true;
     }
-    let page = 4096;
+    let page = page_size();
     let range = CachestatRange {
         off: start / page * page,
         len: end.div_ceil(page) * page - start / page * page,

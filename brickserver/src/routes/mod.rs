@@ -38,7 +38,7 @@ use tower_http::cors::{Any, CorsLayer};
 use crate::metrics::track;
 use crate::openapi;
 
-pub(crate) use chunk_files::{FolderChunks, RequestHead};
+pub(crate) use chunk_files::FolderChunks;
 pub use state::{AppState, ServerOptions};
 
 /// Every route, with its documentation.

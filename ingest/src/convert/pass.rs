@@ -372,7 +372,7 @@ pub(crate) fn run_pass<T: Sample>(
                 let z0 = group.start / f[0];
                 if l > 0 && (level.acc.window, level.acc.z0) != (level.window, z0) {
                     let depth = plan.outer[0].min(level.plan.shape[0]);
-                    restart(&mut level.acc, channels, z0, depth, level.window);
+                    level.acc.restart(channels, z0, depth, level.window);
                 }
             }
             if split {
@@ -420,24 +420,6 @@ pub(crate) fn run_pass<T: Sample>(
     }
     bar.finish_and_clear();
     Ok(())
-}
-
-/// Makes `acc` hold zeroed sums for `depth` planes from `z0` of `channels` channels over
-/// `window`, as [`Accumulator::new`] does, in the memory it holds (a column's accumulator is
-/// the previous column's, not a fresh allocation).
-fn restart<T: Sample>(
-    acc: &mut Accumulator<T>,
-    channels: usize,
-    z0: u64,
-    depth: u64,
-    window: PlaneRegion,
-) {
-    let len = channels * (depth * window.area()) as usize;
-    acc.sum.clear();
-    acc.sum.resize(len, T::Sum::default());
-    acc.count.clear();
-    acc.count.resize(len, 0);
-    (acc.z0, acc.depth, acc.window) = (z0, depth, window);
 }
 
 pub(crate) fn new_stats(channels: usize) -> Vec<Mutex<ChannelAccumulator>> {

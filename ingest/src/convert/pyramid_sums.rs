@@ -29,7 +29,8 @@ impl<T: Sample> Accumulator<T> {
         Self::new(0, 0, 0, PlaneRegion::whole([0, 0]))
     }
 
-    /// Zeroed sums for `depth` planes from `z0` of `channels` channels over `window`.
+    /// Zeroed sums for `depth` planes from `z0` of `channels` channels over `window` (freshly
+    /// allocated zeroed memory, which the allocator gets zeroed from the kernel).
     pub(crate) fn new(channels: usize, z0: u64, depth: u64, window: PlaneRegion) -> Self {
         let len = channels * (depth * window.area()) as usize;
         Self {
@@ -39,6 +40,17 @@ impl<T: Sample> Accumulator<T> {
             sum: vec![T::Sum::default(); len],
             count: vec![0; len],
         }
+    }
+
+    /// Makes this accumulator hold what [`Accumulator::new`] would, in the memory it already
+    /// holds (a column's accumulator is the previous column's, not a fresh allocation).
+    pub(crate) fn restart(&mut self, channels: usize, z0: u64, depth: u64, window: PlaneRegion) {
+        let len = channels * (depth * window.area()) as usize;
+        self.sum.clear();
+        self.sum.resize(len, T::Sum::default());
+        self.count.clear();
+        self.count.resize(len, 0);
+        (self.z0, self.depth, self.window) = (z0, depth, window);
     }
 }
 

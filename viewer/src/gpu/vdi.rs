@@ -23,7 +23,8 @@ use crate::scene::{Camera, Scene};
 const SLOT_BYTES: u64 = 16;
 
 /// The buffer the VDI pass writes (bound as the image), for one image size and supersegment
-/// count.
+/// count, and the buffers of the same size that its compaction reads it through ([`VdiCompactor`]),
+/// made once with it and kept while the renderer keeps the target.
 pub(crate) struct VdiTarget {
     /// Most supersegments per pixel.
     pub supersegments: u32,
@@ -31,13 +32,20 @@ pub(crate) struct VdiTarget {
     pub pixels: u64,
     /// Per pixel `supersegments + VDI_STATE_SLOTS` slots.
     pub buffer: wgpu::Buffer,
+    /// Each pixel's two state slots, gathered.
+    state: wgpu::Buffer,
+    /// Where `state` is read back.
+    state_readback: wgpu::Buffer,
+    /// Each pixel's first slot in the packed supersegments.
+    starts: wgpu::Buffer,
 }
 
 impl VdiTarget {
     /// The target of `pixels` pixels of at most `supersegments` supersegments.
     ///
     /// # Errors
-    /// A [`GpuError`] naming the target when it is over the device's storage-buffer limit.
+    /// A [`GpuError`] naming the target, or the pixels' state, when it is over the device's
+    /// storage-buffer limit.
     pub fn new(gpu: &Gpu, pixels: u64, supersegments: u32) -> Result<Self, GpuError> {
         let bytes = pixels * u64::from(supersegments + VDI_STATE_SLOTS) * SLOT_BYTES;
         check_binding(
@@ -46,10 +54,20 @@ impl VdiTarget {
             bytes,
             "generate a smaller image or with fewer supersegments",
         )?;
+        let state_bytes = pixels * 2 * SLOT_BYTES;
+        check_binding(
+            gpu,
+            "the VDI's pixel state",
+            state_bytes,
+            "generate a smaller image",
+        )?;
         Ok(Self {
             supersegments,
             pixels,
             buffer: storage_buffer(gpu, "vdi target", bytes, wgpu::BufferUsages::empty()),
+            state: storage_buffer(gpu, "vdi state", state_bytes, wgpu::BufferUsages::COPY_SRC),
+            state_readback: readback_buffer(gpu, "vdi state readback", state_bytes),
+            starts: storage_buffer(gpu, "vdi starts", pixels * 4, wgpu::BufferUsages::empty()),
         })
     }
 }
@@ -120,14 +138,6 @@ impl VdiCompactor {
         };
         gpu.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let state_bytes = pixels * 2 * SLOT_BYTES;
-        check_binding(
-            gpu,
-            "the VDI's pixel state",
-            state_bytes,
-            "generate a smaller image",
-        )?;
-        let state = storage_buffer(gpu, "vdi state", state_bytes, wgpu::BufferUsages::COPY_SRC);
         let bind = |pipeline: &wgpu::ComputePipeline, entries: &[wgpu::BindGroupEntry<'_>]| {
             gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
                 label: Some("vdi compact"),
@@ -140,10 +150,11 @@ impl VdiCompactor {
             &[
                 buffer_entry(vdi_compact_binding::PARAMS, &self.params),
                 buffer_entry(vdi_compact_binding::TARGET, &target.buffer),
-                buffer_entry(vdi_compact_binding::STATE, &state),
+                buffer_entry(vdi_compact_binding::STATE, &target.state),
             ],
         );
-        let slots = read_back(gpu, &self.gather, &gather, grid, &state).await?;
+        let (state, readback) = (&target.state, &target.state_readback);
+        let slots = read_back(gpu, &self.gather, &gather, grid, state, readback).await?;
         let mut generation = VdiGeneration {
             image: VolumetricDepthImage::new(header),
             dvr: Vec::with_capacity(pixels as usize),
@@ -161,10 +172,8 @@ impl VdiCompactor {
             starts.push(used);
             used += count;
         }
-        let starts_buffer =
-            storage_buffer(gpu, "vdi starts", pixels * 4, wgpu::BufferUsages::empty());
         gpu.queue
-            .write_buffer(&starts_buffer, 0, bytemuck::cast_slice(&starts));
+            .write_buffer(&target.starts, 0, bytemuck::cast_slice(&starts));
         let packed_bytes = u64::from(used) * SLOT_BYTES;
         check_binding(
             gpu,
@@ -183,11 +192,12 @@ impl VdiCompactor {
             &[
                 buffer_entry(vdi_compact_binding::PARAMS, &self.params),
                 buffer_entry(vdi_compact_binding::TARGET, &target.buffer),
-                buffer_entry(vdi_compact_binding::STARTS, &starts_buffer),
+                buffer_entry(vdi_compact_binding::STARTS, &target.starts),
                 buffer_entry(vdi_compact_binding::PACKED, &packed),
             ],
         );
-        let slots = read_back(gpu, &self.scatter, &scatter, grid, &packed).await?;
+        let readback = readback_buffer(gpu, "vdi packed readback", packed.size());
+        let slots = read_back(gpu, &self.scatter, &scatter, grid, &packed, &readback).await?;
         let image = &mut generation.image;
         image.colour.reserve_exact(used as usize);
         image.depth.reserve_exact(used as usize);
@@ -201,15 +211,15 @@ impl VdiCompactor {
     }
 }
 
-/// Runs `pipeline` over the grid and reads `output` back.
+/// Runs `pipeline` over the grid and reads `output` back through `readback` (of its size).
 async fn read_back(
     gpu: &Gpu,
     pipeline: &wgpu::ComputePipeline,
     bind_group: &wgpu::BindGroup,
     grid: (u32, u32),
     output: &wgpu::Buffer,
+    readback: &wgpu::Buffer,
 ) -> Result<Vec<[f32; 4]>, GpuError> {
-    let readback = readback_buffer(gpu, "vdi compact readback", output.size());
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -224,9 +234,9 @@ async fn read_back(
         pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(grid.0, grid.1, 1);
     }
-    encoder.copy_buffer_to_buffer(output, 0, &readback, 0, output.size());
+    encoder.copy_buffer_to_buffer(output, 0, readback, 0, output.size());
     gpu.queue.submit([encoder.finish()]);
-    map_for_reading(&gpu.device, &[&readback]).await?;
+    map_for_reading(&gpu.device, &[readback]).await?;
     let slots = bytemuck::cast_slice(&readback.get_mapped_range(..)?).to_vec();
     readback.unmap();
     Ok(slots)

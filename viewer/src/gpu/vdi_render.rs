@@ -39,9 +39,13 @@ pub struct VdiFrame {
 /// off `V_O`'s forward, as the shader computes it; each reaches the bins of its depth span
 /// widened by a hundredth of a bin, so that rounding in the shader never skips it.
 pub fn skipping_grid(vdi: &VolumetricDepthImage) -> (Vec<u32>, u32) {
+    skipping_grid_of(vdi, &vdi.starts())
+}
+
+/// [`skipping_grid`] given the VDI's list starts ([`VolumetricDepthImage::starts`]).
+fn skipping_grid_of(vdi: &VolumetricDepthImage, starts: &[usize]) -> (Vec<u32>, u32) {
     let h = &vdi.header;
     let (w, rows) = (h.width, h.height);
-    let starts = vdi.starts();
     let tiles_x = w.div_ceil(SKIP_TILE);
     let tiles_y = rows.div_ceil(SKIP_TILE);
     let mut tiles = vec![0u32; (tiles_x * tiles_y) as usize];
@@ -172,11 +176,12 @@ impl VdiRenderer {
             gpu.queue.write_buffer(&buffer, 0, bytes);
             buffer
         };
+        let list_starts = vdi.starts();
         // Σ counts ≤ MAX_VDI_SLOTS fits a u32.
-        let starts: Vec<u32> = vdi.starts().iter().map(|&s| s as u32).collect();
+        let starts: Vec<u32> = list_starts.iter().map(|&s| s as u32).collect();
         let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
         let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
-        let (tiles, tiles_x) = skipping_grid(vdi);
+        let (tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
         let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
         let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let image = storage_buffer(gpu, "vdi image", pixels * 16, wgpu::BufferUsages::COPY_SRC);

@@ -18,7 +18,7 @@ use winit::window::{Window, WindowId};
 
 use super::camera_control::{orbit, pan, zoom};
 use super::display::{Display, Frame, PresentPath};
-use super::window::{ViewError, open_window, render_size};
+use super::window::{ViewError, open_window, panel_scale, render_size};
 use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
 use crate::gpu::vdi_render::VdiRenderer;
@@ -87,8 +87,6 @@ struct App {
     last_input: Option<Instant>,
     /// The view changed since the last frame.
     dirty: bool,
-    /// The last frame was at full resolution.
-    full: bool,
     overlay: bool,
     frames: u64,
     /// Frames shown since the last input.
@@ -133,7 +131,6 @@ pub fn run(
         drag: None,
         last_input: None,
         dirty: true,
-        full: false,
         overlay: true,
         frames: 0,
         frames_since_input: 0,
@@ -149,6 +146,11 @@ pub fn run(
 }
 
 impl App {
+    /// Whether the last frame was at full resolution.
+    fn full(&self) -> bool {
+        self.shown.scale >= 1.0
+    }
+
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: ViewError) {
         if self.error.is_none() {
             self.error = Some(e);
@@ -205,14 +207,7 @@ impl App {
             self.renderer = None;
             self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?);
         }
-        let panel = self.overlay.then(|| {
-            let scale = if win.width >= 1400 && win.height >= 900 {
-                2
-            } else {
-                1
-            };
-            (self.panel_lines(), scale)
-        });
+        let panel = self.overlay.then(|| (self.panel_lines(), panel_scale(win)));
         let (Some(window), Some(display), Some(renderer)) =
             (&self.window, &mut self.display, &self.renderer)
         else {
@@ -249,7 +244,6 @@ impl App {
         self.frames += 1;
         self.frames_since_input += 1;
         self.dirty = false;
-        self.full = scale >= 1.0;
         Ok(())
     }
 
@@ -354,7 +348,7 @@ impl ApplicationHandler for App {
             return;
         }
         let moving = self.moving();
-        if self.dirty || !self.full && !moving {
+        if self.dirty || !self.full() && !moving {
             let scale = if moving { self.controller.scale() } else { 1.0 };
             if let Err(e) = self.frame(scale) {
                 return self.fail(event_loop, e);
@@ -369,7 +363,7 @@ impl ApplicationHandler for App {
         if let Some(n) = self.config.exit_after_frames {
             // At rest with a frame at full resolution, or `n` frames shown since the last
             // input (not while a drag goes on: the motion is still to come).
-            let at_rest = self.full && !self.moving();
+            let at_rest = self.full() && !self.moving();
             let settled =
                 self.drag.is_none() && self.frames > 0 && (at_rest || self.frames_since_input >= n);
             if self.settled_at.is_none() && settled {
@@ -391,7 +385,7 @@ impl ApplicationHandler for App {
                 wake = Some(wake.map_or(at, |w| w.min(at)));
             }
         }
-        let busy = self.dirty || (!self.full && !self.moving());
+        let busy = self.dirty || (!self.full() && !self.moving());
         event_loop.set_control_flow(match wake {
             _ if busy => ControlFlow::Poll,
             Some(at) => ControlFlow::WaitUntil(at),

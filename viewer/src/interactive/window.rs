@@ -196,7 +196,7 @@ fn short(v: f64) -> String {
 }
 
 /// The panel's glyph scale in a window of `size`: doubled on large windows.
-fn panel_scale(size: PhysicalSize<u32>) -> usize {
+pub(super) fn panel_scale(size: PhysicalSize<u32>) -> usize {
     if size.width >= 1400 && size.height >= 900 {
         2
     } else {

@@ -30,10 +30,7 @@ use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::VdiRenderer;
 use crate::scene::{Camera, Scene};
-use crate::vdi_service::{ServiceInfo, VdiRequest};
-
-/// Supersegments per pixel (N_S) asked for, unless the service allows fewer.
-const SUPERSEGMENTS: u32 = 20;
+use crate::vdi_service::{DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
 /// A camera this many degrees of orbit (or roll) away from the latest request's asks again.
 pub const ORBIT_DEGREES: f64 = 10.0;
@@ -254,7 +251,7 @@ impl Remote {
                 ..RemoteReport::default()
             },
             ready: false,
-            supersegments: SUPERSEGMENTS,
+            supersegments: DEFAULT_SUPERSEGMENTS,
             next_sequence: 0,
             in_flight: None,
             settled: None,
@@ -425,7 +422,7 @@ impl Viewer {
             });
         match checked {
             Ok(most) => {
-                remote.supersegments = SUPERSEGMENTS.min(most).max(1);
+                remote.supersegments = DEFAULT_SUPERSEGMENTS.min(most).max(1);
                 remote.ready = true;
                 remote.report.mode = RemoteMode::On;
                 Ok(())
