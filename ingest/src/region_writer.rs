@@ -9,6 +9,7 @@
 //! final rows go to a scratch file in the store's temporary folder, and are binned and written
 //! row by row when the pass ends.
 
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 use residency_schemas::{
@@ -176,31 +177,35 @@ impl<T: Sample> LevelRegionWriter<T> {
         writer.write_group(&format!("residency/{index}"))?;
         writer.write_group(&format!("residency/{index}/minmax"))?;
         writer.write_group(&format!("residency/{index}/range"))?;
-        let mut grids = Vec::new();
-        let mut g = shape.map(|s| s.div_ceil(CELL));
-        for k in 0.. {
-            let layout = ArrayLayout {
-                shape: vec![channels as u64, 2, g[0], g[1], g[2]],
-                chunk: vec![1, 2, g[0].min(CHUNK_ROWS), g[1].min(64), g[2].min(64)],
-                inner_chunk: None,
-                format: T::FORMAT,
-                dimension_names: None,
-            };
-            let minmax_path = format!("residency/{index}/minmax/{k}");
-            let range_path = format!("residency/{index}/range/{k}");
-            grids.push(GridRows {
-                grid: g,
-                minmax: writer.create_array(&format!("/{minmax_path}"), &layout)?,
-                range: writer.create_array(&format!("/{range_path}"), &layout)?,
-                minmax_path,
-                range_path,
-                pending: CellGrid::window(channels, [g[1], g[2]], 0..0, g[0]),
-            });
-            if g == [1, 1, 1] {
-                break;
-            }
-            g = g.map(|s| s.div_ceil(2));
+        // The grids' shapes, finest first, down to one cell.
+        let mut shapes = vec![shape.map(|s| s.div_ceil(CELL))];
+        while let Some(&g) = shapes.last().filter(|&&g| g != [1, 1, 1]) {
+            shapes.push(g.map(|s| s.div_ceil(2)));
         }
+        // Their arrays are made on every core: each is a few folders and a file.
+        let grids = shapes
+            .into_par_iter()
+            .enumerate()
+            .map(|(k, g)| -> Result<GridRows<T>, RegionWriteError> {
+                let layout = ArrayLayout {
+                    shape: vec![channels as u64, 2, g[0], g[1], g[2]],
+                    chunk: vec![1, 2, g[0].min(CHUNK_ROWS), g[1].min(64), g[2].min(64)],
+                    inner_chunk: None,
+                    format: T::FORMAT,
+                    dimension_names: None,
+                };
+                let minmax_path = format!("residency/{index}/minmax/{k}");
+                let range_path = format!("residency/{index}/range/{k}");
+                Ok(GridRows {
+                    grid: g,
+                    minmax: writer.create_array(&format!("/{minmax_path}"), &layout)?,
+                    range: writer.create_array(&format!("/{range_path}"), &layout)?,
+                    minmax_path,
+                    range_path,
+                    pending: CellGrid::window(channels, [g[1], g[2]], 0..0, g[0]),
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let bricks: [u64; 3] = std::array::from_fn(|a| shape[a].div_ceil(brick[a]));
         let histogram_path = format!("residency/{index}/histogram");
         let histogram = writer.create_array(
@@ -386,46 +391,60 @@ impl<T: Sample> LevelRegionWriter<T> {
         self.push_grid(0, rows)
     }
 
+    /// Adds rows of cells to grid `k` and writes its whole chunks of rows, and the rows they
+    /// coarsen into in the coarser grids; the arrays' writes go to every core.
     fn push_grid(&mut self, k: usize, rows: &CellGrid<T>) -> Result<(), RegionWriteError> {
-        let grid = &mut self.grids[k];
-        debug_assert_eq!(rows.z0, grid.pending.rows().end);
-        grid.pending.extend_to(rows.rows().end);
-        grid.pending.merge(rows);
-        let held = grid.pending.rows();
-        // Whole chunks, or everything at the level's end.
-        let end = if held.end == grid.grid[0] {
-            held.end
-        } else {
-            held.end / CHUNK_ROWS * CHUNK_ROWS
-        };
-        if end <= held.start {
-            return Ok(());
+        // (grid, exact, rows written, their ranges)
+        let mut writes: Vec<(usize, bool, ArraySubset, Vec<T>)> = Vec::new();
+        let mut next = Some((k, std::borrow::Cow::Borrowed(rows)));
+        while let Some((k, rows)) = next.take() {
+            let grid = &mut self.grids[k];
+            debug_assert_eq!(rows.z0, grid.pending.rows().end);
+            grid.pending.extend_to(rows.rows().end);
+            grid.pending.merge(&rows);
+            let held = grid.pending.rows();
+            // Whole chunks, or everything at the level's end.
+            let end = if held.end == grid.grid[0] {
+                held.end
+            } else {
+                held.end / CHUNK_ROWS * CHUNK_ROWS
+            };
+            if end <= held.start {
+                break;
+            }
+            let done = grid.pending.split_before(end);
+            let subset = ArraySubset::new_with_ranges(&[
+                0..self.channels as u64,
+                0..2,
+                done.rows(),
+                0..grid.grid[1],
+                0..grid.grid[2],
+            ]);
+            for exact in [false, true] {
+                writes.push((k, exact, subset.clone(), done.to_min_max_array(exact)));
+            }
+            if k + 1 < self.grids.len() {
+                // Chunks hold an even number of rows, so the written rows coarsen whole.
+                next = Some((k + 1, std::borrow::Cow::Owned(done.coarsen())));
+            }
         }
-        let done = grid.pending.split_before(end);
-        let subset = ArraySubset::new_with_ranges(&[
-            0..self.channels as u64,
-            0..2,
-            done.rows(),
-            0..grid.grid[1],
-            0..grid.grid[2],
-        ]);
-        for (array, path, exact) in [
-            (&grid.minmax, &grid.minmax_path, false),
-            (&grid.range, &grid.range_path, true),
-        ] {
-            array
-                .store_array_subset(&subset, done.to_min_max_array(exact).as_slice())
-                .map_err(|source| RegionWriteError::WriteArray {
-                    path: self.output.clone(),
-                    array: path.clone(),
-                    source: Box::new(source),
-                })?;
-        }
-        if k + 1 < self.grids.len() {
-            // Chunks hold an even number of rows, so the written rows coarsen whole.
-            self.push_grid(k + 1, &done.coarsen())?;
-        }
-        Ok(())
+        writes
+            .into_par_iter()
+            .try_for_each(|(k, exact, subset, values)| {
+                let grid = &self.grids[k];
+                let (array, path) = if exact {
+                    (&grid.range, &grid.range_path)
+                } else {
+                    (&grid.minmax, &grid.minmax_path)
+                };
+                array
+                    .store_array_subset(&subset, values.as_slice())
+                    .map_err(|source| RegionWriteError::WriteArray {
+                        path: self.output.clone(),
+                        array: path.clone(),
+                        source: Box::new(source),
+                    })
+            })
     }
 
     /// Takes final brick histograms (a block of bricks no later plane reaches) into the

@@ -13,6 +13,7 @@ pub const FINE_KEYS: usize = 4096;
 /// A voxel sample type, with the exact arithmetic the pyramid and statistics need.
 pub trait Sample:
     Copy
+    + bytemuck::Pod
     + Send
     + Sync
     + PartialOrd
@@ -31,6 +32,9 @@ pub trait Sample:
     const LOWEST: Self;
     /// Largest representable value (infinity for floats): the identity of `min`.
     const HIGHEST: Self;
+    /// Whether some values (NaN) do not count towards means: when false, the pyramid counts
+    /// the level-0 voxels under a voxel from the geometry instead of voxel by voxel.
+    const HAS_NAN: bool;
     /// Exact accumulator for sums of many samples.
     type Sum: Copy
         + Send
@@ -48,6 +52,13 @@ pub trait Sample:
     /// The mean `sum / count`, rounded to nearest once (halves away from zero) for integers.
     /// A zero count gives NaN for floats and 0 for integers.
     fn from_mean(sum: Self::Sum, count: u32) -> Self;
+    /// [`Sample::from_mean`] of each sum in `sums` over the same `count`, into `out`.
+    #[inline]
+    fn means(out: &mut [Self], sums: &[Self::Sum], count: u32) {
+        for (o, &s) in out.iter_mut().zip(sums) {
+            *o = Self::from_mean(s, count);
+        }
+    }
     /// The sum as f64 (for statistics).
     fn sum_to_f64(sum: Self::Sum) -> f64;
     /// The value as f64.
@@ -69,6 +80,38 @@ pub trait Sample:
     fn exact_value(index: usize) -> f64;
     /// Wraps a slice of this type as a source's plane destination.
     fn plane_out(out: &mut [Self]) -> PlaneOut<'_>;
+}
+
+/// The smaller of two samples (`a` when they are unordered).
+#[inline]
+pub(crate) fn min_of<T: Sample>(a: T, b: T) -> T {
+    if b < a { b } else { a }
+}
+
+/// The larger of two samples (`a` when they are unordered).
+#[inline]
+pub(crate) fn max_of<T: Sample>(a: T, b: T) -> T {
+    if b > a { b } else { a }
+}
+
+/// [`round_mean`] of each of `sums` over `count`, converted by `to`: a power-of-two count
+/// (every interior voxel of a pyramid level) rounds with a shift, which gives the same value
+/// as the division.
+#[inline]
+fn round_means<T>(sums: &[i64], count: u32, out: &mut [T], to: impl Fn(i64) -> T) {
+    const SAFE: u64 = 1 << 60;
+    if !count.is_power_of_two() || sums.iter().any(|s| s.unsigned_abs() >= SAFE) {
+        for (o, &s) in out.iter_mut().zip(sums) {
+            *o = to(round_mean(s, count));
+        }
+        return;
+    }
+    let (c, shift) = (i64::from(count), count.trailing_zeros() + 1);
+    for (o, &s) in out.iter_mut().zip(sums) {
+        // (2|s| + c) / 2c, the sign put back: halves away from zero, as `round_mean`.
+        let r = (2 * s.abs() + c) >> shift;
+        *o = to(if s < 0 { -r } else { r });
+    }
 }
 
 fn round_mean(sum: i64, count: u32) -> i64 {
@@ -111,6 +154,7 @@ macro_rules! int_sample {
             const FORMAT: SampleType = SampleType::$fmt;
             const LOWEST: Self = <$t>::MIN;
             const HIGHEST: Self = <$t>::MAX;
+            const HAS_NAN: bool = false;
             type Sum = i64;
             #[inline]
             fn to_sum(self) -> i64 {
@@ -123,6 +167,10 @@ macro_rules! int_sample {
             #[inline]
             fn from_mean(sum: i64, count: u32) -> Self {
                 round_mean(sum, count) as $t
+            }
+            #[inline]
+            fn means(out: &mut [Self], sums: &[i64], count: u32) {
+                round_means(sums, count, out, |m| m as $t);
             }
             fn sum_to_f64(sum: i64) -> f64 {
                 sum as f64
@@ -218,6 +266,7 @@ impl Sample for f32 {
     }
     const LOWEST: Self = f32::NEG_INFINITY;
     const HIGHEST: Self = f32::INFINITY;
+    const HAS_NAN: bool = true;
     type Sum = f64;
     #[inline]
     fn to_sum(self) -> f64 {
@@ -381,7 +430,10 @@ impl PlaneOut<'_> {
             let stride = w * samples;
             assert_eq!(bytes.len(), out.len() * stride, "decoded plane size");
             let pixels = bytes.chunks_exact(stride);
-            if S::FORMAT == T::FORMAT {
+            if S::FORMAT == T::FORMAT && samples == 1 && big_endian == cfg!(target_endian = "big") {
+                // The bytes are the destination's own.
+                bytemuck::cast_slice_mut::<T, u8>(out).copy_from_slice(bytes);
+            } else if S::FORMAT == T::FORMAT {
                 // Same format: decode the bytes as the destination type, bit for bit.
                 for (o, px) in out.iter_mut().zip(pixels) {
                     *o = T::from_bytes(&px[sample * w..(sample + 1) * w], big_endian);
@@ -412,6 +464,27 @@ impl PlaneOut<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn means_of_a_row_equal_the_mean_of_each_sum() {
+        // Powers of two (the shift), other counts (the division), negative sums, halves, and
+        // sums too large for the shift.
+        let sums: Vec<i64> = (-300..300)
+            .chain([i64::MAX / 2, i64::MIN / 2, (1 << 60) + 3, -(1 << 60) - 5])
+            .collect();
+        for count in [1, 2, 3, 4, 6, 8, 12, 64, 512, 1 << 20, 3 << 20] {
+            let mut out = vec![0i64; sums.len()];
+            round_means(&sums, count, &mut out, |m| m);
+            let each: Vec<i64> = sums.iter().map(|&s| round_mean(s, count)).collect();
+            assert_eq!(out, each, "count {count}");
+        }
+        let mut u = [0u16; 3];
+        u16::means(&mut u, &[4, 11, 12], 8);
+        assert_eq!(u, [1, 1, 2]);
+        let mut f = [0f32; 2];
+        f32::means(&mut f, &[3.0, -1.0], 2);
+        assert_eq!(f, [1.5, -0.5]);
+    }
 
     #[test]
     fn integer_means_round_half_away_from_zero() {

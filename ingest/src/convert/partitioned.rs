@@ -268,7 +268,9 @@ fn feed_sums<T: Sample>(
             let dst = (c * acc.depth as usize + zi) * plane;
             let src = (c * sums.depth as usize + p as usize) * plane;
             acc.sum[dst..dst + plane].copy_from_slice(&sums.sum[src..src + plane]);
-            acc.count[dst..dst + plane].copy_from_slice(&sums.count[src..src + plane]);
+            if T::HAS_NAN {
+                acc.count[dst..dst + plane].copy_from_slice(&sums.count[src..src + plane]);
+            }
         }
         flush_if_full(levels, &mut None, h, ((z + 1) * step).min(below_depth))?;
     }

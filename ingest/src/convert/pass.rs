@@ -13,7 +13,7 @@ use zarrs::array::Array;
 
 use super::error::ConvertError;
 use super::options::ConvertOptions;
-use super::pyramid_sums::{Accumulator, SlabRows, Sums, Values, accumulate};
+use super::pyramid_sums::{Accumulator, SlabRows, Sums, Values, accumulate, covered};
 use super::sink::SlabSink;
 use super::summary::{ConvertSummary, LevelSummary};
 use crate::columns::{ColumnPlan, at_level};
@@ -276,7 +276,9 @@ fn read_level0<T: Sample>(
                         Err(_) => return (own, recycle_rx),
                     }
                 };
-                slab.resize(channels * nz as usize * plane, T::default());
+                if slab.len() != channels * nz as usize * plane {
+                    crate::memory::filled(&mut slab, channels * nz as usize * plane, T::default());
+                }
                 let mut rest: &mut [T] = &mut slab;
                 let mut parts = Vec::new();
                 for s in sources.iter_mut() {
@@ -498,6 +500,42 @@ pub(crate) fn finish_store<T: Sample>(
     })
 }
 
+/// The rounded means of the first `nz` planes of a level's accumulator, `[c][nz][y][x]`, into
+/// `values`. Sample types without NaN count the level-0 voxels under each voxel from the
+/// level's factor and the level-0 extent `full` (see [`covered`]); the others kept counts.
+fn mean_slab<T: Sample>(
+    acc: &Accumulator<T>,
+    level: &LevelPlan,
+    full: [u64; 3],
+    nz: u64,
+    values: &mut [T],
+) {
+    let w = acc.window;
+    let row = w.nx as usize;
+    let f = level.factor;
+    values.par_chunks_mut(row).enumerate().for_each(|(i, out)| {
+        let (y, z) = (i as u64 % w.ny, i as u64 / w.ny % nz);
+        let c = i as u64 / w.ny / nz;
+        let start = ((c * acc.depth + z) * w.ny + y) as usize * row;
+        let sum = &acc.sum[start..start + row];
+        if T::HAS_NAN {
+            for ((o, &s), &n) in out.iter_mut().zip(sum).zip(&acc.count[start..]) {
+                *o = T::from_mean(s, n);
+            }
+            return;
+        }
+        let zy = covered(acc.z0 + z, f[0], full[0]) * covered(w.y0 + y, f[1], full[1]);
+        // Every voxel of the row covers `f[2]` columns but the level's last one.
+        let last = level.shape[2] - 1;
+        let inner = if w.x0 + w.nx > last { row - 1 } else { row };
+        T::means(&mut out[..inner], &sum[..inner], zy * f[2] as u32);
+        for x in inner..row {
+            let n = zy * covered(w.x0 + x as u64, f[2], full[2]);
+            T::means(&mut out[x..=x], &sum[x..=x], n);
+        }
+    });
+}
+
 /// The accumulator of the level a partition hands over to `finalize` (the first level it does
 /// not write), with that level's plan.
 pub(crate) type HandedOver<T> = Option<(LevelPlan, Accumulator<T>)>;
@@ -561,21 +599,16 @@ pub(crate) fn flush_if_full<T: Sample>(
     // Means of the slab: rounded once, from exact sums.
     let slab_len = nz as usize * plane;
     let mut values = std::mem::take(&mut levels[l].values);
-    values.resize(channels * slab_len, T::default());
-    {
-        let acc = &levels[l].acc;
-        values
-            .par_chunks_mut(slab_len)
-            .enumerate()
-            .for_each(|(c, out)| {
-                let start = c * acc.depth as usize * plane;
-                let sum = &acc.sum[start..start + slab_len];
-                let count = &acc.count[start..start + slab_len];
-                for ((o, &s), &n) in out.iter_mut().zip(sum).zip(count) {
-                    *o = T::from_mean(s, n);
-                }
-            });
+    if values.len() != channels * slab_len {
+        crate::memory::filled(&mut values, channels * slab_len, T::default());
     }
+    mean_slab(
+        &levels[l].acc,
+        &levels[l].plan,
+        levels[0].plan.shape,
+        nz,
+        &mut values,
+    );
     levels[l].write_slab(&values, z0, nz, None)?;
     levels[l].values = values;
     let acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());

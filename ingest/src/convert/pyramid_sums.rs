@@ -4,6 +4,7 @@
 
 use rayon::prelude::*;
 
+use crate::memory::filled;
 use crate::pyramid::LevelPlan;
 use crate::sample_format::Sample;
 use crate::source::PlaneRegion;
@@ -29,29 +30,41 @@ impl<T: Sample> Accumulator<T> {
         Self::new(0, 0, 0, PlaneRegion::whole([0, 0]))
     }
 
-    /// Zeroed sums for `depth` planes from `z0` of `channels` channels over `window` (freshly
-    /// allocated zeroed memory, which the allocator gets zeroed from the kernel).
+    /// Zeroed sums for `depth` planes from `z0` of `channels` channels over `window`, and
+    /// their counts when the sample type has NaN (see [`Sample::HAS_NAN`]).
     pub(crate) fn new(channels: usize, z0: u64, depth: u64, window: PlaneRegion) -> Self {
-        let len = channels * (depth * window.area()) as usize;
-        Self {
+        let mut acc = Self {
             z0,
             depth,
             window,
-            sum: vec![T::Sum::default(); len],
-            count: vec![0; len],
-        }
+            sum: Vec::new(),
+            count: Vec::new(),
+        };
+        acc.restart(channels, z0, depth, window);
+        acc
     }
 
     /// Makes this accumulator hold what [`Accumulator::new`] would, in the memory it already
     /// holds (a column's accumulator is the previous column's, not a fresh allocation).
+    ///
+    /// The zeros are written, never taken from the allocator as zeroed memory: the first
+    /// `+=` on a page the kernel lent zeroed reads it (the shared zero page) and then writes
+    /// it, a second fault that flushes every core's TLB.
     pub(crate) fn restart(&mut self, channels: usize, z0: u64, depth: u64, window: PlaneRegion) {
         let len = channels * (depth * window.area()) as usize;
-        self.sum.clear();
-        self.sum.resize(len, T::Sum::default());
+        filled(&mut self.sum, len, T::Sum::default());
         self.count.clear();
-        self.count.resize(len, 0);
+        if T::HAS_NAN {
+            filled(&mut self.count, len, 0);
+        }
         (self.z0, self.depth, self.window) = (z0, depth, window);
     }
+}
+
+/// Level-0 voxels under each voxel of a level, along one axis: a voxel `i` of a level with
+/// factor `f` covers level-0 voxels `i·f..(i + 1)·f`, cut at the level-0 extent `n0`.
+pub(crate) fn covered(i: u64, f: u64, n0: u64) -> u32 {
+    ((i + 1) * f).min(n0).saturating_sub(i * f) as u32
 }
 
 /// A slab of one level, as the next level's accumulator reads it: rows of `x` values.
@@ -68,22 +81,33 @@ impl<T: Sample> SlabRows<T> for Values<'_, T> {
     fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
         let row = &self.0[base..base + sx];
         if step_x == 1 {
-            for ((s, n), &v) in sum.iter_mut().zip(count.iter_mut()).zip(row) {
+            for (s, &v) in sum.iter_mut().zip(row) {
                 *s += v.to_sum();
-                *n += v.counts() as u32;
+            }
+            if T::HAS_NAN {
+                for (n, &v) in count.iter_mut().zip(row) {
+                    *n += v.counts() as u32;
+                }
             }
         } else {
             let pairs = row.chunks_exact(2);
             let tail = pairs.remainder();
-            for ((s, n), p) in sum.iter_mut().zip(count.iter_mut()).zip(pairs) {
-                *s += p[0].to_sum();
-                *s += p[1].to_sum();
-                *n += p[0].counts() as u32 + p[1].counts() as u32;
+            for (s, p) in sum.iter_mut().zip(pairs.clone()) {
+                let mut pair = p[0].to_sum();
+                pair += p[1].to_sum();
+                *s += pair;
+            }
+            if T::HAS_NAN {
+                for (n, p) in count.iter_mut().zip(pairs) {
+                    *n += p[0].counts() as u32 + p[1].counts() as u32;
+                }
             }
             if let [v] = tail {
                 let last = sx / 2;
                 sum[last] += v.to_sum();
-                count[last] += v.counts() as u32;
+                if T::HAS_NAN {
+                    count[last] += v.counts() as u32;
+                }
             }
         }
     }
@@ -101,7 +125,12 @@ pub(crate) struct Sums<'a, T: Sample> {
 impl<T: Sample> SlabRows<T> for Sums<'_, T> {
     fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
         let j = base / self.nz_plane * self.oz_plane + base % self.nz_plane;
-        let (src_sum, src_count) = (&self.sum[j..j + sx], &self.count[j..j + sx]);
+        let src_sum = &self.sum[j..j + sx];
+        let src_count = if T::HAS_NAN {
+            &self.count[j..j + sx]
+        } else {
+            &[]
+        };
         if step_x == 1 {
             for (d, &v) in sum.iter_mut().zip(src_sum) {
                 *d += v;
@@ -110,11 +139,23 @@ impl<T: Sample> SlabRows<T> for Sums<'_, T> {
                 *d += v;
             }
         } else {
-            for (x, (&v, &n)) in src_sum.iter().zip(src_count).enumerate() {
-                sum[x / 2] += v;
-                count[x / 2] += n;
-            }
+            add_pairs(sum, src_sum);
+            add_pairs(count, src_count);
         }
+    }
+}
+
+/// Adds each pair of `src` into one element of `dst` (a lone last element into the last).
+fn add_pairs<S: Copy + std::ops::AddAssign>(dst: &mut [S], src: &[S]) {
+    let pairs = src.chunks_exact(2);
+    let tail = pairs.remainder();
+    for (d, p) in dst.iter_mut().zip(pairs) {
+        let mut pair = p[0];
+        pair += p[1];
+        *d += pair;
+    }
+    if let [v] = tail {
+        dst[src.len() / 2] += *v;
     }
 }
 
@@ -138,39 +179,72 @@ pub(crate) fn accumulate<T: Sample>(
     let [src_y1, _] = window.end();
     // The first column of the destination this window sums into.
     let offset = (window.x0 / step[2] - dst.x0) as usize;
-    next.sum
-        .par_chunks_mut(dst.nx as usize)
-        .zip(next.count.par_chunks_mut(dst.nx as usize))
-        .enumerate()
-        .for_each(|(row, (sum, count))| {
-            let row = row as u64;
-            let y = dst.y0 + row % dst.ny;
-            let zi = (row / dst.ny) % oz;
-            let c = (row / dst.ny / oz) as usize;
-            if c >= channels {
-                return;
+    let add_rows = |row: usize, sum: &mut [T::Sum], count: &mut [u32]| {
+        let row = row as u64;
+        let y = dst.y0 + row % dst.ny;
+        let zi = (row / dst.ny) % oz;
+        let c = (row / dst.ny / oz) as usize;
+        if c >= channels {
+            return;
+        }
+        let z = a0 + zi;
+        // Counts are kept only for sample types with NaN.
+        let count = if count.is_empty() {
+            count
+        } else {
+            &mut count[offset..]
+        };
+        for dz in 0..step[0] {
+            let szz = z * step[0] + dz;
+            if szz < src_z0 || szz >= src_z0 + nz {
+                continue;
             }
-            let z = a0 + zi;
-            for dz in 0..step[0] {
-                let szz = z * step[0] + dz;
-                if szz < src_z0 || szz >= src_z0 + nz {
+            for dy in 0..step[1] {
+                let syy = y * step[1] + dy;
+                if syy < window.y0 || syy >= src_y1 {
                     continue;
                 }
-                for dy in 0..step[1] {
-                    let syy = y * step[1] + dy;
-                    if syy < window.y0 || syy >= src_y1 {
-                        continue;
-                    }
-                    let base = (c as u64 * nz + (szz - src_z0)) as usize * src_plane
-                        + ((syy - window.y0) * window.nx) as usize;
-                    src.add_row(
-                        base,
-                        window.nx as usize,
-                        step[2],
-                        &mut sum[offset..],
-                        &mut count[offset..],
-                    );
-                }
+                let base = (c as u64 * nz + (szz - src_z0)) as usize * src_plane
+                    + ((syy - window.y0) * window.nx) as usize;
+                src.add_row(base, window.nx as usize, step[2], &mut sum[offset..], count);
             }
-        });
+        }
+    };
+    let row_len = dst.nx as usize;
+    if T::HAS_NAN {
+        next.sum
+            .par_chunks_mut(row_len)
+            .zip(next.count.par_chunks_mut(row_len))
+            .enumerate()
+            .for_each(|(row, (sum, count))| add_rows(row, sum, count));
+    } else {
+        next.sum
+            .par_chunks_mut(row_len)
+            .enumerate()
+            .for_each(|(row, sum)| add_rows(row, sum, &mut []));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covered_counts_the_level0_voxels_under_a_voxel() {
+        // 10 level-0 voxels, factor 4: voxels 0..4, 4..8 and 8..10.
+        assert_eq!([0, 1, 2].map(|i| covered(i, 4, 10)), [4, 4, 2]);
+        // Factor 1 (an axis never halved) and an exact fit.
+        assert_eq!([covered(5, 1, 6), covered(1, 8, 16)], [1, 8]);
+        // Past the extent: nothing.
+        assert_eq!(covered(3, 4, 10), 0);
+    }
+
+    #[test]
+    fn integer_accumulators_keep_no_counts_and_floats_do() {
+        let w = PlaneRegion::whole([3, 5]);
+        let a = Accumulator::<u16>::new(2, 0, 4, w);
+        assert_eq!((a.sum.len(), a.count.len()), (120, 0));
+        let f = Accumulator::<f32>::new(2, 0, 4, w);
+        assert_eq!((f.sum.len(), f.count.len()), (120, 120));
+    }
 }

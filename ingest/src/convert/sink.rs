@@ -22,6 +22,20 @@ pub struct ChunkWriteError {
     pub source: Box<ArrayError>,
 }
 
+/// A worker thread's brick statistics tables and outer-chunk memory (as words, so that any
+/// sample type's values fit aligned), kept from slab to slab: fresh memory per chunk is
+/// zeroed by the kernel on every use.
+#[derive(Default)]
+struct SinkScratch {
+    stats: StatsScratch,
+    words: Vec<u64>,
+}
+
+thread_local! {
+    /// This thread's [`SinkScratch`], absent while a task uses it.
+    static SCRATCH: std::cell::Cell<Option<Box<SinkScratch>>> = const { std::cell::Cell::new(None) };
+}
+
 /// Reusable per-level context for the slab processing that is common to `convert` and
 /// `index`: histograms, cells, global statistics and (optionally) the image write.
 pub(crate) struct SlabSink<'a> {
@@ -59,76 +73,98 @@ impl SlabSink<'_> {
         let chunk_len = (oz * oy * ox) as usize;
         let counts = tasks
             .into_par_iter()
-            .map_init(
-                || (StatsScratch::default(), Vec::<T>::new()),
-                |(scratch, chunk), (c, cy, cx)| -> Result<(u64, u64), ChunkWriteError> {
-                    // Gather the outer chunk, padded with the fill value (0).
-                    chunk.clear();
-                    chunk.resize(chunk_len, T::default());
-                    let (y0, x0) = (cy * oy, cx * ox);
-                    let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
-                    let plane = w.area() as usize;
-                    for dz in 0..nz {
-                        for dy in 0..vy {
-                            let src = (c as u64 * nz + dz) as usize * plane
-                                + ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
-                            let dst = ((dz * oy + dy) * ox) as usize;
-                            chunk[dst..dst + vx as usize]
-                                .copy_from_slice(&slab[src..src + vx as usize]);
-                        }
+            .map(|(c, cy, cx)| -> Result<(u64, u64), ChunkWriteError> {
+                // This thread's tables and chunk memory, taken while in use (a task that
+                // runs while this one waits inside zarrs makes its own).
+                let mut kept = SCRATCH.take().unwrap_or_default();
+                let SinkScratch {
+                    stats: scratch,
+                    words,
+                } = &mut *kept;
+                words.resize((chunk_len * size_of::<T>()).div_ceil(8), 0);
+                let chunk = &mut bytemuck::cast_slice_mut::<u64, T>(words)[..chunk_len];
+                let (y0, x0) = (cy * oy, cx * ox);
+                let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
+                // Gather the outer chunk, padded with the fill value (0) past the slab.
+                if (nz, vy, vx) != (oz, oy, ox) {
+                    chunk.fill(T::default());
+                }
+                let plane = w.area() as usize;
+                for dz in 0..nz {
+                    for dy in 0..vy {
+                        let src = (c as u64 * nz + dz) as usize * plane
+                            + ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
+                        let dst = ((dz * oy + dy) * ox) as usize;
+                        chunk[dst..dst + vx as usize]
+                            .copy_from_slice(&slab[src..src + vx as usize]);
                     }
-                    let (mut written, mut empty) = (0u64, 0u64);
-                    let [bz, by, bx] = self.brick;
-                    let mut any_data = false;
-                    for iz in 0..nz.div_ceil(bz) {
-                        for iy in 0..vy.div_ceil(by) {
-                            for ix in 0..vx.div_ceil(bx) {
-                                let (zs, ys, xs) = (iz * bz, iy * by, ix * bx);
-                                let (ze, ye, xe) =
-                                    ((zs + bz).min(nz), (ys + by).min(vy), (xs + bx).min(vx));
-                                let chunk: &[T] = chunk;
-                                let rows = (zs..ze).flat_map(|z| {
-                                    (ys..ye).map(move |y| {
-                                        let row = ((z * oy + y) * ox) as usize;
-                                        &chunk[row + xs as usize..row + xe as usize]
-                                    })
-                                });
-                                let stats =
-                                    BrickStats::of_rows(rows, scratch, self.stats.is_some());
-                                if stats.all_fill {
-                                    empty += 1;
-                                } else {
-                                    written += 1;
-                                    any_data = true;
-                                }
-                                let b = [(z0 + zs) / bz, (y0 + ys) / by, (x0 + xs) / bx];
-                                if let Some(all) = self.stats {
-                                    all[c].lock().expect("stats").add(&stats);
-                                }
-                                let index = self.histograms.index(c, b);
-                                self.histograms.fine.lock().expect("histograms")[index] =
-                                    stats.fine;
-                            }
-                        }
-                    }
-                    if let Some(array) = self.array
-                        && any_data
-                    {
-                        let indices = [c as u64, z0 / oz, cy, cx];
-                        array
-                            .store_chunk(&indices, chunk.as_slice())
-                            .map_err(|source| ChunkWriteError {
-                                chunk: indices,
-                                source: Box::new(source),
-                            })?;
-                    }
-                    Ok((written, empty))
-                },
-            )
+                }
+                let result =
+                    self.process_chunk(chunk, scratch, [c as u64, z0, cy, cx], [nz, vy, vx]);
+                SCRATCH.set(Some(kept));
+                result
+            })
             .collect::<Result<Vec<_>, _>>()?;
         cells.add_slab(slab, z0, nz, w);
         Ok(counts
             .into_iter()
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))
+    }
+
+    /// Records the bricks of one gathered outer chunk (channel `c`, first plane `z0`, chunk
+    /// column `cy, cx`; `nz, vy, vx` voxels of it inside the level) and writes the chunk
+    /// unless every brick is empty. Returns (bricks written, bricks empty).
+    fn process_chunk<T: Sample>(
+        &self,
+        chunk: &[T],
+        scratch: &mut StatsScratch,
+        [c, z0, cy, cx]: [u64; 4],
+        [nz, vy, vx]: [u64; 3],
+    ) -> Result<(u64, u64), ChunkWriteError> {
+        let [oz, oy, ox] = self.outer;
+        let (y0, x0) = (cy * oy, cx * ox);
+        let c = c as usize;
+        let (mut written, mut empty) = (0u64, 0u64);
+        let [bz, by, bx] = self.brick;
+        let mut any_data = false;
+        for iz in 0..nz.div_ceil(bz) {
+            for iy in 0..vy.div_ceil(by) {
+                for ix in 0..vx.div_ceil(bx) {
+                    let (zs, ys, xs) = (iz * bz, iy * by, ix * bx);
+                    let (ze, ye, xe) = ((zs + bz).min(nz), (ys + by).min(vy), (xs + bx).min(vx));
+                    let rows = (zs..ze).flat_map(|z| {
+                        (ys..ye).map(move |y| {
+                            let row = ((z * oy + y) * ox) as usize;
+                            &chunk[row + xs as usize..row + xe as usize]
+                        })
+                    });
+                    let stats = BrickStats::of_rows(rows, scratch, self.stats.is_some());
+                    if stats.all_fill {
+                        empty += 1;
+                    } else {
+                        written += 1;
+                        any_data = true;
+                    }
+                    let b = [(z0 + zs) / bz, (y0 + ys) / by, (x0 + xs) / bx];
+                    if let Some(all) = self.stats {
+                        all[c].lock().expect("stats").add(&stats);
+                    }
+                    let index = self.histograms.index(c, b);
+                    self.histograms.fine.lock().expect("histograms")[index] = stats.fine;
+                }
+            }
+        }
+        if let Some(array) = self.array
+            && any_data
+        {
+            let indices = [c as u64, z0 / oz, cy, cx];
+            array
+                .store_chunk(&indices, chunk)
+                .map_err(|source| ChunkWriteError {
+                    chunk: indices,
+                    source: Box::new(source),
+                })?;
+        }
+        Ok((written, empty))
     }
 }

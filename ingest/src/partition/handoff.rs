@@ -54,7 +54,8 @@ pub struct LevelSums<T: Sample> {
     pub depth: u64,
     /// Sums.
     pub sum: Vec<T::Sum>,
-    /// Counts of non-NaN voxels.
+    /// Counts of non-NaN voxels (empty for sample types without NaN, whose counts follow
+    /// from the geometry).
     pub count: Vec<u32>,
 }
 

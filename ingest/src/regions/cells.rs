@@ -2,7 +2,7 @@
 //! range (culling) and the *exact* range (region queries), gathered slab by slab, window by
 //! window; and how many rows of cells are written at once ([`CHUNK_ROWS`]).
 
-use crate::sample_format::Sample;
+use crate::sample_format::{Sample, max_of, min_of};
 use crate::source::PlaneRegion;
 
 /// Edge of a min/max cell in voxels of its level.
@@ -49,6 +49,30 @@ impl<T: Sample> Ranges<T> {
         if mx > self.max[i] {
             self.max[i] = mx;
         }
+    }
+
+    /// Folds a row of values into this row of ranges, element by element.
+    #[inline]
+    fn fold_row(&mut self, values: &[T]) {
+        for ((mn, mx), &v) in self.min.iter_mut().zip(&mut self.max).zip(values) {
+            (*mn, *mx) = (min_of(*mn, v), max_of(*mx, v));
+        }
+    }
+
+    /// The range of ranges `i` (the identity when empty).
+    #[inline]
+    fn range_of(&self, i: std::ops::Range<usize>) -> (T, T) {
+        let mn = self.min[i.clone()]
+            .iter()
+            .fold(T::HIGHEST, |a, &v| min_of(a, v));
+        let mx = self.max[i].iter().fold(T::LOWEST, |a, &v| max_of(a, v));
+        (mn, mx)
+    }
+
+    /// Sets range `i`.
+    #[inline]
+    fn set(&mut self, i: usize, (mn, mx): (T, T)) {
+        (self.min[i], self.max[i]) = (mn, mx);
     }
 
     /// Folds cells `from` of another grid's ranges onto this grid's cells from `offset`.
@@ -336,6 +360,10 @@ struct SliceCells<T: Sample> {
 /// Min/max cells of one window of a slice (`window.ny × window.nx` values) of a level whose
 /// planes have `grid` = `gy, gx` cells: haloed in x and y, and exact, over the cells the
 /// window's voxels reach.
+///
+/// Each row of cells is folded column by column first (the rows of a cell, then its halo
+/// rows: whole rows of values at once, which the compiler vectorizes), and each cell's
+/// columns of the result are folded after.
 fn slice_cells<T: Sample>(slice: &[T], window: PlaneRegion, [gy, gx]: [u64; 2]) -> SliceCells<T> {
     let [y1, x1] = window.end();
     let haloed_cells = [
@@ -355,58 +383,46 @@ fn slice_cells<T: Sample>(slice: &[T], window: PlaneRegion, [gy, gx]: [u64; 2]) 
         haloed_cells,
         exact_cells,
     };
-    let mut exact_row = Ranges::<T>::new(ew);
-    let mut haloed_row = Ranges::<T>::new(hw);
-    let nx = window.nx;
-    for y in window.y0..y1 {
-        exact_row.min.fill(T::HIGHEST);
-        exact_row.max.fill(T::LOWEST);
-        let row = (y - window.y0) * nx;
-        let values = &slice[row as usize..(row + nx) as usize];
-        // Exact ranges of the row's part of each cell (the window may start mid-cell).
-        let mut i = 0;
-        let mut cx = window.x0 / CELL;
-        while i < nx {
-            let end = ((cx + 1) * CELL - window.x0).min(nx);
-            let (mut mn, mut mx) = (T::HIGHEST, T::LOWEST);
-            for &v in &values[i as usize..end as usize] {
-                if v < mn {
-                    mn = v;
-                }
-                if v > mx {
-                    mx = v;
-                }
-            }
-            exact_row.fold((cx - ex0) as usize, mn, mx);
-            i = end;
-            cx += 1;
+    let nx = window.nx as usize;
+    let row = |y: u64| &slice[(y - window.y0) as usize * nx..][..nx];
+    // The voxels of `first..end` (level coordinates along one axis) inside `window`'s
+    // `start..stop`, relative to `start`.
+    let inside = |first: u64, end: u64, start: u64, stop: u64| {
+        let lo = first.clamp(start, stop) - start;
+        lo as usize..(end.clamp(start, stop) - start).max(lo) as usize
+    };
+    let mut column = Ranges::<T>::new(nx);
+    let mut haloed = Ranges::<T>::new(nx);
+    for cy in out.haloed_cells[0].clone() {
+        // The cell row's own rows, then its halo rows.
+        column.min.fill(T::HIGHEST);
+        column.max.fill(T::LOWEST);
+        for y in inside(cy * CELL, (cy + 1) * CELL, window.y0, y1) {
+            column.fold_row(row(window.y0 + y as u64));
         }
-        let base = ((y / CELL - out.exact_cells[0].start) * ew as u64) as usize;
-        for i in 0..ew {
-            out.exact.fold(base + i, exact_row.min[i], exact_row.max[i]);
-        }
-        // Haloed: each cell's own part, and the voxel just left of and just right of it.
-        haloed_row.min.fill(T::HIGHEST);
-        haloed_row.max.fill(T::LOWEST);
-        for cx in out.haloed_cells[1].clone() {
-            let h = (cx - hx0) as usize;
-            if out.exact_cells[1].contains(&cx) {
-                let e = (cx - ex0) as usize;
-                haloed_row.fold(h, exact_row.min[e], exact_row.max[e]);
-            }
-            for x in [(cx * CELL).wrapping_sub(1), (cx + 1) * CELL] {
-                if (window.x0..x1).contains(&x) {
-                    let v = values[(x - window.x0) as usize];
-                    haloed_row.fold(h, v, v);
-                }
+        if out.exact_cells[0].contains(&cy) {
+            let base = (cy - out.exact_cells[0].start) as usize * ew;
+            for (i, cx) in out.exact_cells[1].clone().enumerate() {
+                let xs = inside(cx * CELL, (cx + 1) * CELL, window.x0, x1);
+                out.exact.set(base + i, column.range_of(xs));
             }
         }
-        for cy in cells_of(y, gy) {
-            let base = ((cy - out.haloed_cells[0].start) * hw as u64) as usize;
-            for i in 0..hw {
-                out.haloed
-                    .fold(base + i, haloed_row.min[i], haloed_row.max[i]);
+        haloed.min.copy_from_slice(&column.min);
+        haloed.max.copy_from_slice(&column.max);
+        for y in [(cy * CELL).wrapping_sub(HALO), (cy + 1) * CELL + HALO - 1] {
+            if (window.y0..y1).contains(&y) {
+                haloed.fold_row(row(y));
             }
+        }
+        let base = (cy - out.haloed_cells[0].start) as usize * hw;
+        for (i, cx) in out.haloed_cells[1].clone().enumerate() {
+            let xs = inside(
+                (cx * CELL).saturating_sub(HALO),
+                (cx + 1) * CELL + HALO,
+                window.x0,
+                x1,
+            );
+            out.haloed.set(base + i, haloed.range_of(xs));
         }
     }
     out

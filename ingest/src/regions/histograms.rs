@@ -6,7 +6,7 @@ use std::sync::Mutex;
 
 use residency_schemas::HISTOGRAM_BINS;
 
-use crate::sample_format::{FINE_KEYS, Sample};
+use crate::sample_format::{FINE_KEYS, Sample, max_of, min_of};
 
 /// Fine-key counts of one brick and channel, stored from the first to the last non-zero key.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -39,11 +39,15 @@ pub struct StatsScratch {
 }
 
 impl Default for StatsScratch {
+    /// Tables whose zeros are written, not lent zeroed by the kernel: the counts read and
+    /// write each entry, and a page first read as the shared zero page faults again, with a
+    /// TLB flush on every core, when it is written.
     fn default() -> Self {
-        Self {
-            keys: Box::new([0; FINE_KEYS]),
-            exact: vec![0; 1 << 16],
-        }
+        let mut exact = Vec::new();
+        crate::memory::filled(&mut exact, 1 << 16, 0);
+        let mut keys: Box<[u32; FINE_KEYS]> = Box::new([1; FINE_KEYS]);
+        keys.fill(0);
+        Self { keys, exact }
     }
 }
 
@@ -81,15 +85,24 @@ impl BrickStats {
             let exact = &mut scratch.exact;
             let mut total = 0u64;
             for row in rows {
+                let Some(&first) = row.first() else {
+                    continue;
+                };
                 total += row.len() as u64;
+                // A row of one value (the background of most bricks) is one count.
+                if row
+                    .chunks(64)
+                    .all(|part| part.iter().filter(|&&v| v != first).count() == 0)
+                {
+                    exact[first.exact_index().unwrap_or(0)] += row.len() as u32;
+                    (mn, mx) = (min_of(mn, first), max_of(mx, first));
+                    continue;
+                }
                 for &v in row {
                     exact[v.exact_index().unwrap_or(0)] += 1;
-                    if v < mn {
-                        mn = v;
-                    }
-                    if v > mx {
-                        mx = v;
-                    }
+                }
+                for &v in row {
+                    (mn, mx) = (min_of(mn, v), max_of(mx, v));
                 }
             }
             if total == 0 {
