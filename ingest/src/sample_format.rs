@@ -391,6 +391,31 @@ pub enum PlaneOut<'a> {
 }
 
 impl PlaneOut<'_> {
+    /// The destination's sample format.
+    pub fn format(&self) -> SampleType {
+        match self {
+            PlaneOut::U8(_) => SampleType::U8,
+            PlaneOut::U16(_) => SampleType::U16,
+            PlaneOut::I16(_) => SampleType::I16,
+            PlaneOut::U32(_) => SampleType::U32,
+            PlaneOut::I32(_) => SampleType::I32,
+            PlaneOut::F32(_) => SampleType::F32,
+        }
+    }
+
+    /// The destination's memory as bytes (samples in native byte order), for decoders that
+    /// write samples of the destination's own format straight into it.
+    pub fn bytes_mut(&mut self) -> &mut [u8] {
+        match self {
+            PlaneOut::U8(v) => v,
+            PlaneOut::U16(v) => bytemuck::cast_slice_mut(v),
+            PlaneOut::I16(v) => bytemuck::cast_slice_mut(v),
+            PlaneOut::U32(v) => bytemuck::cast_slice_mut(v),
+            PlaneOut::I32(v) => bytemuck::cast_slice_mut(v),
+            PlaneOut::F32(v) => bytemuck::cast_slice_mut(v),
+        }
+    }
+
     /// Number of samples to write.
     pub fn len(&self) -> usize {
         match self {

@@ -59,6 +59,7 @@ impl DecodedRegion {
     ) -> Result<(), SourceError> {
         self.held = None;
         let (pixels, chunk) = (&mut self.pixels, &mut self.chunk);
+        pixels.resize(region.area() as usize * samples.1 * samples.0.bytes(), 0);
         decode_region(
             decoder, path, page, file, samples, extent, region, pixels, chunk,
         )?;
@@ -191,8 +192,8 @@ pub(super) fn page_format(
     Ok((format, samples))
 }
 
-/// Decodes the current page of `decoder` into `buffer` (native byte order), reusing its
-/// memory, once [`check_page`] has found that the file can hold the plane it claims.
+/// Decodes the current page of `decoder` into `buffer` (native byte order; as long as the
+/// page's pixels), once [`check_page`] has found that the file can hold the plane it claims.
 fn decode_page(
     decoder: &mut Decoder<BufReader<File>>,
     path: &Path,
@@ -200,11 +201,9 @@ fn decode_page(
     file: TiffFile,
     format: SampleType,
     samples: usize,
-    buffer: &mut Vec<u8>,
+    buffer: &mut [u8],
 ) -> Result<(), SourceError> {
     check_page(decoder, path, page, file, format, samples)?;
-    let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
-    buffer.resize(w as usize * h as usize * samples * format.bytes(), 0);
     decoder
         .read_image_bytes(buffer)
         .map_err(|source| SourceError::Decode {
@@ -215,9 +214,10 @@ fn decode_page(
 }
 
 /// Decodes `region` of the current page (`page` of `path`, planes of `plane` = `y, x`
-/// voxels) into `buffer`, as [`decode_page`] does the whole page: rows of `region.nx` pixels
-/// of `samples` interleaved samples, in native byte order. A region smaller than the page
-/// decodes only the strips or tiles it meets, each into `chunk` first.
+/// voxels) into `buffer` (as long as the region's pixels), as [`decode_page`] does the whole
+/// page: rows of `region.nx` pixels of `samples` interleaved samples, in native byte order. A
+/// region smaller than the page decodes only the strips or tiles it meets, each into `chunk`
+/// first (uncompressed ones are read where they lie).
 #[allow(clippy::too_many_arguments)]
 fn decode_region(
     decoder: &mut Decoder<BufReader<File>>,
@@ -227,7 +227,7 @@ fn decode_region(
     (format, samples): (SampleType, usize),
     plane: [u64; 2],
     region: PlaneRegion,
-    buffer: &mut Vec<u8>,
+    buffer: &mut [u8],
     chunk: &mut Vec<u8>,
 ) -> Result<(), SourceError> {
     if region.is_whole(plane) {
@@ -240,7 +240,6 @@ fn decode_region(
         source,
     };
     let pixel = samples * format.bytes();
-    buffer.resize(region.area() as usize * pixel, 0);
     // Strips are chunks as wide as the page.
     let (cw, ch) = decoder.chunk_dimensions();
     let (cw, ch) = (u64::from(cw), u64::from(ch));
@@ -507,6 +506,21 @@ impl VolumeSource for TiffSource {
                     expected_samples: spp,
                     expected_format: self.info.format,
                 });
+            }
+            if spp == 1 && out.format() == format {
+                // The page's samples are the destination's: decoded straight into it.
+                self.decoded.held = None;
+                return decode_region(
+                    &mut self.decoder,
+                    &path,
+                    page,
+                    self.file,
+                    (format, spp),
+                    [ey, ex],
+                    region,
+                    out.bytes_mut(),
+                    &mut self.decoded.chunk,
+                );
             }
             self.decoded.decode(
                 page,
