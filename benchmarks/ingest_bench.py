@@ -152,7 +152,7 @@ def flame(size_mib, work):
     folded = subprocess.run([collapse], input=script, check=True, capture_output=True).stdout
     name = f"ingest-flame-{size_mib}.svg"
     svg = subprocess.run([draw, "--title", f"ingest convert, {size_mib} MiB u16 OME-TIFF, {os.cpu_count()} cores",
-                          "--minwidth", "0.2"], input=folded, check=True, capture_output=True).stdout
+                          "--minwidth", "0.5"], input=folded, check=True, capture_output=True).stdout
     (ROOT / "docs" / "benchmarks" / name).write_bytes(svg)
     data.unlink()
     shutil.rmtree(out)

@@ -150,16 +150,11 @@ impl DatasetStore {
             Keys::Object(_) => {
                 let key = checked_key(&raw)?;
                 let key = StoreKey::new(key).map_err(|_| KeyError::Refused("not a store key"))?;
-                // zarrs gives the object store's error as text: a store that failed.
+                // zarrs' error holds the object store's failure among its causes.
                 self.zarr
                     .get(&key)
                     .map(|found| found.map(|bytes| bytes.to_vec()))
-                    .map_err(|e| {
-                        KeyError::Unreadable(Box::new(StoreFailure {
-                            unreachable: false,
-                            source: e.into(),
-                        }))
-                    })
+                    .map_err(|e| KeyError::Unreadable(Box::new(e)))
             }
         }
     }
@@ -243,27 +238,13 @@ fn failed(e: object_store::Error) -> KeyError {
     if let object_store::Error::NotFound { .. } = e {
         return KeyError::NotFound;
     }
-    let mut unreachable = false;
-    let mut cause: Option<&(dyn std::error::Error + 'static)> = Some(&e);
-    while let Some(c) = cause {
-        if let Some(http) = c.downcast_ref::<object_store::client::HttpError>() {
-            use object_store::client::HttpErrorKind as Kind;
-            unreachable |= matches!(
-                http.kind(),
-                Kind::Connect | Kind::Request | Kind::Timeout | Kind::Interrupted
-            );
-        }
-        cause = c.source();
-    }
-    KeyError::Unreadable(Box::new(StoreFailure {
-        unreachable,
-        source: e.into(),
-    }))
+    KeyError::Unreadable(Box::new(StoreFailure::of_request(e)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::store_keys::failure_of;
 
     #[test]
     fn ranges_for_the_object_store() {
@@ -304,7 +285,7 @@ mod tests {
             })
         };
         let transport = |kind| generic(Box::new(HttpError::new(kind, std::io::Error::other("x"))));
-        let unreachable = |e: &KeyError| StoreFailure::of(e).map(|f| f.unreachable);
+        let unreachable = |e: &KeyError| failure_of(e).map(|f| f.unreachable);
         for kind in [
             HttpErrorKind::Connect,
             HttpErrorKind::Request,

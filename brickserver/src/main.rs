@@ -80,6 +80,10 @@ enum Command {
         /// Most decoded bytes in one batched request.
         #[arg(long, default_value_t = 64 << 20)]
         max_batch_bytes: u64,
+        /// Seconds a dataset part (image arrays, region metadata) that could not be loaded
+        /// is answered from the failure before a request tries again.
+        #[arg(long, default_value_t = 5.0)]
+        load_retry: f64,
     },
 }
 
@@ -188,6 +192,7 @@ fn main() -> ExitCode {
             request_timeout,
             max_batch_bricks,
             max_batch_bytes,
+            load_retry,
         } => (|| {
             // Each object-store dataset's client is made here, once, and its requests run on
             // the server's runtime (see `DatasetStore`), so the options carry no runtime.
@@ -222,7 +227,8 @@ fn main() -> ExitCode {
                 },
                 viewer_dir: viewer_dir.or_else(default_viewer_dir),
                 public_url,
-                ..ServerOptions::default()
+                load_retry: Duration::try_from_secs_f64(load_retry)
+                    .context("--load-retry must be a number of seconds, 0 or more")?,
             };
             let limits = ConnectionLimits {
                 max_connections,

@@ -24,27 +24,16 @@ pub enum KeyError {
     Unreadable(Box<dyn std::error::Error + Send + Sync>),
 }
 
-/// An object store that failed a request after its client's retries, kept in
-/// [`KeyError::Unreadable`]: not the server's fault, so answered 502 (the store answered an
-/// error) or 503 (it could not be reached or did not answer in time), naming the key.
-#[derive(Debug, thiserror::Error)]
-#[error("{} ({source})", if *unreachable { "the object store did not answer" } else { "the object store answered an error" })]
-pub struct StoreFailure {
-    /// Whether the store could not be reached or timed out (503), rather than answered an
-    /// error (502).
-    pub unreachable: bool,
-    /// What the object-store client said.
-    #[source]
-    pub source: Box<dyn std::error::Error + Send + Sync>,
-}
+pub use residency_store::failure::StoreFailure;
 
-impl StoreFailure {
-    /// The failure a key error stands for, if it is one.
-    pub fn of(e: &KeyError) -> Option<&Self> {
-        match e {
-            KeyError::Unreadable(source) => source.downcast_ref::<Self>(),
-            _ => None,
-        }
+/// The object-store failure a key error stands for, if it is one (kept in
+/// [`KeyError::Unreadable`], directly or among the causes of a zarrs error): not the
+/// server's fault, so answered 502 (the store answered an error) or 503 (it could not be
+/// reached or did not answer in time), naming the key.
+pub fn failure_of(e: &KeyError) -> Option<&StoreFailure> {
+    match e {
+        KeyError::Unreadable(source) => StoreFailure::in_chain(source.as_ref()),
+        _ => None,
     }
 }
 

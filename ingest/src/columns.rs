@@ -80,12 +80,18 @@ pub(crate) fn at_level(region: PlaneRegion, factor: [u64; 3], shape: [u64; 3]) -
 
 /// What a pass is: the store's plan, the levels it writes (`0..written`: all of them in one
 /// process, those below the hand-over level in a partition) and its level-0 planes.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy)]
 pub(crate) struct Pass<'a> {
     /// The store's plan.
     pub plan: &'a PartitionPlan,
     /// Bytes of one exact sum (`T::Sum`).
     pub sum_bytes: u64,
+    /// Bytes of one voxel count (4 for sample types with NaN, 0 for the others, which count
+    /// from the geometry).
+    pub count_bytes: u64,
+    /// Bytes the inputs' decoders hold while reading a column (see
+    /// [`VolumeSource::decoder_bytes`](crate::source::VolumeSource::decoder_bytes)).
+    pub decoders: &'a dyn Fn(PlaneRegion) -> u64,
     /// Levels the pass writes.
     pub written: usize,
     /// Level-0 planes of the pass.
@@ -130,8 +136,13 @@ impl Pass<'_> {
         let oz = plan.outer[0];
         let slab = channels * oz.min(depth) * column.area() * sample;
         let chunk = plan.outer.iter().product::<u64>() * sample;
-        // Two slabs, the decoders' planes, the cell scratch of a slab (a sixteenth).
-        let slabs = 2 * slab + channels * column.area() * sample + slab / 16 + self.threads * chunk;
+        // Two slabs, the decoders' planes and strips, the cell scratch of a slab (a
+        // sixteenth), a chunk per thread.
+        let slabs = 2 * slab
+            + channels * column.area() * sample
+            + (self.decoders)(column)
+            + slab / 16
+            + self.threads * chunk;
         let mut pyramid = 0;
         let mut regions = 0;
         for (l, level) in plan.levels.iter().enumerate().take(self.written) {
@@ -142,7 +153,8 @@ impl Pass<'_> {
                 ly * lx
             };
             if l > 0 {
-                pyramid += channels * oz.min(lz) * area * (self.sum_bytes + 4 + sample);
+                pyramid +=
+                    channels * oz.min(lz) * area * (self.sum_bytes + self.count_bytes + sample);
             }
             let cells = level.shape.map(|s| s.div_ceil(CELL));
             let bricks: [u64; 3] = std::array::from_fn(|a| level.shape[a].div_ceil(plan.brick[a]));
@@ -179,8 +191,11 @@ impl Pass<'_> {
         if let Some(level) = plan.levels.get(self.written) {
             // A partition's hand-over level: sums over all its planes.
             let [_, ly, lx] = level.shape;
-            pyramid +=
-                channels * self.planes.div_ceil(level.factor[0]) * ly * lx * (self.sum_bytes + 4);
+            pyramid += channels
+                * self.planes.div_ceil(level.factor[0])
+                * ly
+                * lx
+                * (self.sum_bytes + self.count_bytes);
         }
         MemoryEstimate {
             slabs,
@@ -272,10 +287,31 @@ mod tests {
         Pass {
             plan,
             sum_bytes: 8,
+            count_bytes: 0,
+            decoders: &|_| 0,
             written: plan.levels.len(),
             planes: plan.shape[0],
             threads: 2,
         }
+    }
+
+    #[test]
+    fn the_decoders_and_counts_add_to_the_estimate() {
+        let plan = plan([64, 1024, 1024]);
+        let base = pass(&plan);
+        let strips = |c: PlaneRegion| 1000 + c.nx;
+        let with = Pass {
+            decoders: &strips,
+            count_bytes: 4,
+            ..base
+        };
+        let (a, b) = (base.estimate([256, 256], 1), with.estimate([256, 256], 1));
+        assert_eq!(b.slabs - a.slabs, 1256);
+        // Levels 1 to 4 are made from whole planes: 32 × 512², 16 × 256², 8 × 128², 4 × 64²
+        // counts of 4 bytes.
+        assert_eq!(plan.levels.len(), 5);
+        let counts = 4 * (32 * 512 * 512 + 16 * 256 * 256 + 8 * 128 * 128 + 4 * 64 * 64);
+        assert_eq!(b.pyramid - a.pyramid, counts);
     }
 
     #[test]

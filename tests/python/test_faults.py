@@ -7,6 +7,7 @@ metadata; brickserver recovers when the store does. Every test checks that fault
 really injected."""
 
 import concurrent.futures
+import time
 import shutil
 
 import pytest
@@ -167,8 +168,7 @@ def test_brickserver_answers_502_or_503_naming_the_key_while_the_store_is_down_t
     def get(key):
         return requests.get(f"{base}/{NAME}/{key}", timeout=60)
 
-    # The dataset's image arrays are loaded (a load that fails is still a 500: see
-    # docs/storage.md).
+    # The dataset's image arrays are loaded (see the next test for loads that fail).
     assert get(BRICKS).status_code == 200
     try:
         # A store that answers every request with an error: 502, the store's answer quoted,
@@ -203,6 +203,36 @@ def test_brickserver_answers_502_or_503_naming_the_key_while_the_store_is_down_t
     # The store is back: so are the answers, byte for byte.
     with requests.Session() as http:
         assert_answers_the_local_bytes(s3, base, local_base, http, every=5)
+
+
+def test_a_dataset_that_cannot_be_loaded_answers_502_or_503_then_loads(s3, served):
+    # A server of its own, whose image arrays and region metadata are first needed while the
+    # store is down; failed loads are tried again after 1 s.
+    proxy, _, local_base = served
+    server, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
+                                "--cache-bytes", "0", "--load-retry", "1",
+                                env=env(AWS_TIMEOUT="1s"))
+    try:
+        proxy.set_mode("fail", "503")
+        answered = requests.get(f"{base}/{NAME}/{REGIONS}", timeout=60)
+        proxy.set_mode("fail", "reset")
+        gone = requests.get(f"{base}/{NAME}/{BRICKS}", timeout=60)
+        proxy.set_mode("healthy")
+        assert answered.status_code == 502, answered.text
+        assert answered.json()["error"].startswith(f"dataset '{NAME}': "), answered.text
+        assert "the object store answered an error (" in answered.json()["error"], answered.text
+        assert "Retry-After" not in answered.headers
+        assert gone.status_code == 503, gone.text
+        assert "the object store did not answer (" in gone.json()["error"], gone.text
+        assert gone.headers["Retry-After"] == "5"
+        time.sleep(1.2)
+        for path in [REGIONS, BRICKS]:
+            remote = requests.get(f"{base}/{NAME}/{path}", timeout=60)
+            local = requests.get(f"{local_base}/{NAME}/{path}", timeout=60)
+            assert (remote.status_code, remote.content) == (200, local.content), path
+    finally:
+        proxy.set_mode("healthy")
+        stop_server(server)
 
 
 def test_viewer_renders_through_faults_the_image_of_the_local_store(s3, tmp_path):

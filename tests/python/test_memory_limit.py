@@ -1,7 +1,7 @@
 """`ingest convert --memory-limit` is a promise: the peak resident set of the process (its
 `ru_maxrss`, from `wait4`) stays within the limit for every input kind ingest reads (strips,
-one strip per page, tiles, zlib strips, zlib with a predictor, a tiled zlib BigTIFF, raw, a
-slice folder), for each process of a partitioned conversion and for a store written to S3, at
+one strip per page, tiles, zlib strips, zlib with a predictor, one zlib strip per page, a tiled
+zlib BigTIFF, raw, a slice folder), for each process of a partitioned conversion and for a store written to S3, at
 a limit whole planes do not fit, so the conversion must cut them into columns; and the store it
 writes is byte for byte the one written in whole planes (which peaks above the limit)."""
 
@@ -34,7 +34,7 @@ LIMIT_BYTES = 96 << 20
 def inputs(tmp_path_factory):
     """The same volume in every kind of input: strips of 16 rows, one strip per page, 256²
     tiles, zlib strips (tifffile's default of about 256 KB each), zlib strips with the
-    horizontal predictor, a zlib BigTIFF in 256² tiles, a raw file, and a folder of one TIFF
+    horizontal predictor, one zlib strip per page, a zlib BigTIFF in 256² tiles, a raw file, and a folder of one TIFF
     per plane."""
     d = tmp_path_factory.mktemp("memory")
     z, y, x = SHAPE
@@ -52,6 +52,9 @@ def inputs(tmp_path_factory):
                      **gray)
     tifffile.imwrite(d / "predictor.tif", vol, compression="zlib", predictor=True,
                      compressionargs={"level": 1}, **gray)
+    # A page in one compressed strip decodes whole, however narrow the column.
+    tifffile.imwrite(d / "zlib-one-strip.tif", vol, rowsperstrip=y, compression="zlib",
+                     compressionargs={"level": 1}, **gray)
     tifffile.imwrite(d / "bigtiff.tif", vol, bigtiff=True, tile=(256, 256), compression="zlib",
                      compressionargs={"level": 1}, **gray)
     vol.tofile(d / f"vol_{x}x{y}x{z}_uint16.raw")
@@ -64,6 +67,7 @@ def inputs(tmp_path_factory):
         "tiled": d / "tiled.tif",
         "zlib": d / "zlib.tif",
         "predictor": d / "predictor.tif",
+        "zlib-one-strip": d / "zlib-one-strip.tif",
         "bigtiff": d / "bigtiff.tif",
         "raw": d / f"vol_{x}x{y}x{z}_uint16.raw",
         "slices": d / "slices",
@@ -115,7 +119,7 @@ def assert_within_limit(tmp_path, *args, env=None):
     return out
 
 
-@pytest.mark.parametrize("kind", ["strips", "one-strip", "tiled", "zlib", "predictor",
+@pytest.mark.parametrize("kind", ["strips", "one-strip", "tiled", "zlib", "predictor", "zlib-one-strip",
                                   "bigtiff", "raw", "slices"])
 def test_every_input_kind_peaks_within_the_limit(inputs, tmp_path, kind):
     assert_within_limit(tmp_path, inputs[kind], "-o", tmp_path / "x.ome.zarr", *FLAGS,

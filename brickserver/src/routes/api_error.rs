@@ -16,18 +16,11 @@ pub(super) const RETRY_AFTER_S: &str = "5";
 /// answer, 502 when it answered an error (a [`StoreFailure`] anywhere in `why`'s chain), else
 /// 500 (the server's own fault).
 pub(super) fn failure_status(why: &(dyn std::error::Error + 'static)) -> StatusCode {
-    let mut cause = Some(why);
-    while let Some(c) = cause {
-        if let Some(failure) = c.downcast_ref::<StoreFailure>() {
-            return if failure.unreachable {
-                StatusCode::SERVICE_UNAVAILABLE
-            } else {
-                StatusCode::BAD_GATEWAY
-            };
-        }
-        cause = c.source();
+    match StoreFailure::in_chain(why) {
+        Some(failure) if failure.unreachable => StatusCode::SERVICE_UNAVAILABLE,
+        Some(_) => StatusCode::BAD_GATEWAY,
+        None => StatusCode::INTERNAL_SERVER_ERROR,
     }
-    StatusCode::INTERNAL_SERVER_ERROR
 }
 
 /// The text answer for a key that cannot be read because of `why`: `message` (which names the
@@ -43,6 +36,23 @@ pub(super) fn unreadable_key(
         tracing::warn!("{message}");
     }
     let mut answer = (status, format!("{message}\n")).into_response();
+    if status == StatusCode::SERVICE_UNAVAILABLE {
+        answer.headers_mut().insert(
+            header::RETRY_AFTER,
+            header::HeaderValue::from_static(RETRY_AFTER_S),
+        );
+    }
+    answer
+}
+
+/// The JSON answer for a dataset whose arrays or region metadata cannot be loaded because of
+/// `why`: [`failure_status`], with `Retry-After` on a 503.
+pub(super) fn load_failed(why: &(dyn std::error::Error + 'static)) -> Response<Body> {
+    let status = failure_status(why);
+    if status != StatusCode::INTERNAL_SERVER_ERROR {
+        tracing::warn!("{why}");
+    }
+    let mut answer = api_error(status, why.to_string());
     if status == StatusCode::SERVICE_UNAVAILABLE {
         answer.headers_mut().insert(
             header::RETRY_AFTER,
@@ -90,6 +100,19 @@ mod tests {
         assert_eq!(
             failure_status(&Wrapped(failure(true))),
             StatusCode::SERVICE_UNAVAILABLE
+        );
+        // Inside a zarrs storage error, as an array or region metadata load meets it.
+        let loading = failure(true).into_storage();
+        let answer = load_failed(&loading);
+        assert_eq!(answer.status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert_eq!(answer.headers()[header::RETRY_AFTER], "5");
+        assert_eq!(
+            load_failed(&failure(false).into_storage()).status(),
+            StatusCode::BAD_GATEWAY
+        );
+        assert_eq!(
+            load_failed(&std::io::Error::other("disk")).status(),
+            StatusCode::INTERNAL_SERVER_ERROR
         );
     }
 }

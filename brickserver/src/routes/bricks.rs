@@ -10,7 +10,7 @@ use axum::response::IntoResponse;
 use residency_schemas::wire::{BRICKS_MAGIC, BRICKS_MEDIA_TYPE, BrickEncoding, encode_framed};
 use schemars::JsonSchema;
 
-use super::api_error::{api_error, no_dataset};
+use super::api_error::{api_error, load_failed, no_dataset};
 use super::params::DatasetPath;
 use super::state::{AppState, blocking, loaded};
 use crate::bricks::{BatchError, ImageArrays, parse_batch, read_batch};
@@ -97,7 +97,7 @@ pub(super) async fn bricks(
     );
     let arrays = match arrays.await {
         Ok(a) => a,
-        Err(e) => return api_error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string()),
+        Err(e) => return load_failed(&e),
     };
     if let Err(e) = state.batch.check_bytes(list.len(), arrays.brick_bytes()) {
         return batch_error(&e);

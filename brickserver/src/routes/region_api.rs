@@ -14,7 +14,7 @@ use residency_schemas::wire::MINMAX_MEDIA_TYPE;
 use schemars::JsonSchema;
 use serde::Deserialize;
 
-use super::api_error::{api_error, no_dataset};
+use super::api_error::{api_error, load_failed, no_dataset};
 use super::params::DatasetPath;
 use super::state::{AppState, loaded};
 use crate::openapi::{answer, api_errors, binary, json, responses, with_content};
@@ -132,7 +132,7 @@ async fn region_index(
                  min/max and histograms are unknown"
             ),
         )),
-        Err(e) => Err(api_error(StatusCode::INTERNAL_SERVER_ERROR, e.to_string())),
+        Err(e) => Err(load_failed(&e)),
     }
 }
 

@@ -54,8 +54,8 @@ impl Default for ServerOptions {
 pub const LOAD_RETRY: Duration = Duration::from_secs(5);
 
 /// A part of a dataset (its region index or image arrays) that could not be loaded; kept for
-/// [`ServerOptions::load_retry`], so the requests meanwhile are answered the same (500)
-/// without trying again.
+/// [`ServerOptions::load_retry`], so the requests meanwhile are answered the same (500, or
+/// 502/503 when the object store failed) without trying again.
 #[derive(Clone, Debug, thiserror::Error)]
 #[error("dataset '{dataset}': {source}")]
 pub(crate) struct LoadError {

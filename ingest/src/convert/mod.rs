@@ -66,7 +66,13 @@ fn convert_typed<T: Sample>(
     let started = Instant::now();
     let plan = plan_store::<T>(options, &inputs, 1)?;
     let depth = plan.shape[0];
-    let columns = plan_pass::<T>(options, &plan, plan.levels.len(), &(0..depth))?;
+    let columns = plan_pass::<T>(
+        options,
+        &plan,
+        &inputs.sources,
+        plan.levels.len(),
+        &(0..depth),
+    )?;
     let writer = StoreWriter::create(&options.output, options.version, options.overwrite)?;
     let column_levels = if columns.is_whole([plan.shape[1], plan.shape[2]]) {
         0

@@ -97,7 +97,7 @@ fn partition_typed<T: Sample>(
     let plan = plan_store::<T>(options, &inputs, partition.count)?;
     let planes = plan.cuts.planes(partition.index, plan.shape[0]);
     let written = plan.cuts.handoff_level;
-    let columns = plan_pass::<T>(options, &plan, written, &planes)?;
+    let columns = plan_pass::<T>(options, &plan, &inputs.sources, written, &planes)?;
     let writer = StoreWriter::shared(&options.output, options.version, options.overwrite)?;
     claim_plan(
         &writer.partial,

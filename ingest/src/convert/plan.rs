@@ -9,6 +9,7 @@ use crate::columns::{ColumnPlan, Pass};
 use crate::partition::plan::{Cuts, PartitionPlan};
 use crate::pyramid::plan_levels;
 use crate::sample_format::Sample;
+use crate::source::{PlaneRegion, VolumeSource};
 use crate::store::OmeZarrVersion;
 
 /// Checks the options against the inputs and plans the store: brick and shard shapes, levels,
@@ -80,12 +81,17 @@ pub(crate) fn plan_store<T: Sample>(
 pub(crate) fn plan_pass<T: Sample>(
     options: &ConvertOptions,
     plan: &PartitionPlan,
+    sources: &[Box<dyn VolumeSource>],
     written: usize,
     planes: &std::ops::Range<u64>,
 ) -> Result<ColumnPlan, ConvertError> {
+    // The sources are read at once, each with its own decoder.
+    let decoders = |column: PlaneRegion| sources.iter().map(|s| s.decoder_bytes(column)).sum();
     let pass = Pass {
         plan,
         sum_bytes: size_of::<T::Sum>() as u64,
+        count_bytes: if T::HAS_NAN { 4 } else { 0 },
+        decoders: &decoders,
         written,
         planes: planes.end - planes.start,
         threads: rayon::current_num_threads() as u64,

@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use super::error::SourceError;
-use super::tiff::{DecodedRegion, check_page, open_decoder, page_format};
+use super::tiff::{DecodeUnit, DecodedRegion, check_page, open_decoder, page_format};
 use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
 use crate::sample_format::PlaneOut;
 
@@ -14,6 +14,8 @@ pub struct SliceFolderSource {
     samples_per_pixel: usize,
     /// The slice and region decoded last.
     decoded: DecodedRegion,
+    /// What decoding the first slice holds (the slices are taken to be alike).
+    unit: DecodeUnit,
 }
 
 fn is_tiff(path: &Path) -> bool {
@@ -71,7 +73,7 @@ impl SliceFolderSource {
             })?;
         let (format, samples_per_pixel) = page_format(&mut decoder, first)?;
         // The shape comes from the first slice: check it can hold the plane it claims.
-        check_page(&mut decoder, first, 0, tiff, format, samples_per_pixel)?;
+        let unit = check_page(&mut decoder, first, 0, tiff, format, samples_per_pixel)?;
         Ok(Self {
             info: SourceInfo {
                 path: origin.to_path_buf(),
@@ -85,6 +87,7 @@ impl SliceFolderSource {
             files,
             samples_per_pixel,
             decoded: DecodedRegion::default(),
+            unit,
         })
     }
 }
@@ -92,6 +95,10 @@ impl SliceFolderSource {
 impl VolumeSource for SliceFolderSource {
     fn info(&self) -> &SourceInfo {
         &self.info
+    }
+
+    fn decoder_bytes(&self, _region: PlaneRegion) -> u64 {
+        self.unit.bytes()
     }
 
     fn read_region(

@@ -23,6 +23,8 @@ pub struct TiffSource {
     file: TiffFile,
     /// The page and region decoded last.
     decoded: DecodedRegion,
+    /// The most that decoding any page holds.
+    unit: DecodeUnit,
 }
 
 /// The region of a plane decoded last (native byte order, samples interleaved), kept so the
@@ -118,7 +120,7 @@ pub(super) fn open_decoder(
 }
 
 /// Checks what the current page (`page` of `path`) claims about its pixel data against what
-/// the file and the machine can hold (see [`PageClaims`]).
+/// the file and the machine can hold (see [`PageClaims`]); returns what decoding it holds.
 pub(super) fn check_page(
     decoder: &mut Decoder<BufReader<File>>,
     path: &Path,
@@ -126,14 +128,57 @@ pub(super) fn check_page(
     file: TiffFile,
     format: SampleType,
     samples: usize,
-) -> Result<(), SourceError> {
-    PageClaims::read(decoder, format, samples)
-        .map_err(|e| SourceError::Strips {
-            path: path.to_path_buf(),
-            page,
-            source: e.into(),
-        })?
-        .check(path, page, file.len, file.memory)
+) -> Result<DecodeUnit, SourceError> {
+    let claims = PageClaims::read(decoder, format, samples).map_err(|e| SourceError::Strips {
+        path: path.to_path_buf(),
+        page,
+        source: e.into(),
+    })?;
+    claims.check(path, page, file.len, file.memory)?;
+    let (columns, rows) = decoder.chunk_dimensions();
+    let predictor = decoder
+        .find_tag_unsigned::<u16>(Tag::Predictor)
+        .ok()
+        .flatten()
+        .unwrap_or(1);
+    Ok(DecodeUnit {
+        decoded: if claims.compression == 1 && predictor == 1 {
+            // Read where it lies, straight into the destination.
+            0
+        } else {
+            u64::from(columns) * u64::from(rows) * (samples * format.bytes()) as u64
+        },
+        stored: if claims.compression == 1 {
+            0
+        } else {
+            claims.chunks.iter().map(|&(_, n)| n).max().unwrap_or(0)
+        },
+    })
+}
+
+/// What decoding a page holds besides its destination: one strip or tile decoded (0 when
+/// they are read where they lie, uncompressed) and one as stored (compressed).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(super) struct DecodeUnit {
+    /// Bytes of a decoded strip or tile.
+    pub decoded: u64,
+    /// Bytes of the largest stored strip or tile.
+    pub stored: u64,
+}
+
+impl DecodeUnit {
+    /// The larger of each part of two units (the most any page of a file holds).
+    pub(super) fn max(self, other: Self) -> Self {
+        Self {
+            decoded: self.decoded.max(other.decoded),
+            stored: self.stored.max(other.stored),
+        }
+    }
+
+    /// Bytes held while decoding.
+    pub(super) fn bytes(self) -> u64 {
+        self.decoded + self.stored
+    }
 }
 
 /// The sample format of the current page, or an error naming what is unsupported.
@@ -366,7 +411,7 @@ impl TiffSource {
             .flatten()
             .and_then(rational);
         // Every page's claims are checked now, before the converter sizes anything from them.
-        check_page(&mut decoder, path, 0, file, format, samples_per_pixel)?;
+        let mut unit = check_page(&mut decoder, path, 0, file, format, samples_per_pixel)?;
         let mut pages = 1u64;
         while decoder.more_images() {
             decoder.next_image().map_err(|e| SourceError::Directory {
@@ -376,7 +421,14 @@ impl TiffSource {
             })?;
             // Pages of another size or format are refused when read; check what they claim.
             if let Ok((format, samples)) = page_format(&mut decoder, path) {
-                check_page(&mut decoder, path, pages, file, format, samples)?;
+                unit = unit.max(check_page(
+                    &mut decoder,
+                    path,
+                    pages,
+                    file,
+                    format,
+                    samples,
+                )?);
             }
             pages += 1;
         }
@@ -458,6 +510,7 @@ impl TiffSource {
             samples_per_pixel,
             file,
             decoded: DecodedRegion::default(),
+            unit,
         })
     }
 }
@@ -465,6 +518,10 @@ impl TiffSource {
 impl VolumeSource for TiffSource {
     fn info(&self) -> &SourceInfo {
         &self.info
+    }
+
+    fn decoder_bytes(&self, _region: PlaneRegion) -> u64 {
+        self.unit.bytes()
     }
 
     fn read_region(

@@ -84,6 +84,14 @@ pub trait VolumeSource: Send {
         out: PlaneOut<'_>,
     ) -> Result<(), SourceError>;
 
+    /// Bytes this source's decoder holds, besides the destination, while it reads `region` of
+    /// a plane: the strips or tiles of a compressed TIFF page, as stored and decoded (a page in
+    /// one compressed strip decodes whole, however narrow the region). For the memory limit.
+    fn decoder_bytes(&self, region: PlaneRegion) -> u64 {
+        let _ = region;
+        0
+    }
+
     /// Reads the whole plane at depth `z` of channel `channel` into `out`.
     ///
     /// # Errors

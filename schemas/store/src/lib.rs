@@ -6,6 +6,8 @@
 //! - [`location`]: a store's location (a local folder, or a prefix in an S3-compatible bucket)
 //!   opened as one zarrs storage, and publishing, listing and downloading object-store stores;
 //! - [`aws_profile`]: the AWS shared configuration profiles that `object_store` does not read;
+//! - [`failure`]: an object store that failed a request, told apart from one not reached,
+//!   through whatever layers carry it;
 //! - [`pyramid`]: the pyramid reader, bricks and metadata through zarrs' codecs over any
 //!   zarrs storage;
 //! - [`ranged`]: an object store read by zarrs with one ranged `GET` per read (no `HEAD`).
@@ -13,6 +15,7 @@
 #[cfg(feature = "mimalloc")]
 pub mod allocator;
 pub mod aws_profile;
+pub mod failure;
 pub mod location;
 pub mod pyramid;
 pub mod ranged;

@@ -2,11 +2,13 @@
 //! asks for (a brick, a shard index, a suffix) is one ranged `GET`. `zarrs_object_store`
 //! asks for the object's size with a `HEAD` before every partial read, so a brick of a sharded
 //! store cost a `HEAD` and a `GET` for the shard index and again for the brick. Listing is
-//! `zarrs_object_store`'s.
+//! `zarrs_object_store`'s. A failed request is a [`StoreFailure`] inside zarrs' error.
 
 use std::sync::Arc;
 
 use futures::{StreamExt, TryStreamExt, stream};
+
+use crate::failure::StoreFailure;
 use zarrs_object_store::AsyncObjectStore;
 use zarrs_object_store::object_store::path::Path as ObjectPath;
 use zarrs_object_store::object_store::{GetOptions, GetRange, ObjectStore};
@@ -56,20 +58,25 @@ impl RangedObjectStore {
         {
             Ok(got) => got,
             Err(zarrs_object_store::object_store::Error::NotFound { .. }) => return Ok(None),
-            Err(e) => return Err(StorageError::Other(e.to_string())),
+            Err(e) => return Err(StoreFailure::of_request(e).into_storage()),
         };
         let bytes = got
             .bytes()
             .await
-            .map_err(|e| StorageError::Other(e.to_string()))?;
+            .map_err(|e| StoreFailure::of_request(e).into_storage())?;
         // A bounded range past the end, or a suffix longer than the object, comes back short.
         if let Some(n) = expected
             && bytes.len() as u64 != n
         {
-            return Err(StorageError::Other(format!(
-                "{key}: asked for {n} bytes, the store answered {}",
-                bytes.len()
-            )));
+            return Err(StoreFailure {
+                unreachable: false,
+                source: format!(
+                    "{key}: asked for {n} bytes, the store answered {}",
+                    bytes.len()
+                )
+                .into(),
+            }
+            .into_storage());
         }
         Ok(Some(bytes))
     }
@@ -289,8 +296,10 @@ mod tests {
             .unwrap_err();
         assert_eq!(
             err.to_string(),
-            "a/c/0: asked for 20 bytes, the store answered 10"
+            "the object store answered an error (a/c/0: asked for 20 bytes, the store answered 10)"
         );
+        let failure = StoreFailure::in_chain(&err).expect("a store failure");
+        assert!(!failure.unreachable);
         // The size is the one read that asks for it.
         assert_eq!(storage.size_key(&key).unwrap(), Some(100));
         assert_eq!(counts(), (1, 8));
