@@ -142,6 +142,7 @@ impl VolumeSource for SliceFolderSource {
                 (format, spp),
                 [ey, ex],
                 region,
+                None,
             )?;
         }
         self.decoded

@@ -46,7 +46,8 @@ impl DecodedRegion {
 
     /// Decodes `region` of the decoder's current page (`page` of `path`, with `samples` and
     /// `extent` checked against the stack's) as the region of plane `plane`: see
-    /// [`decode_region`].
+    /// [`decode_region`]. Into `into` when given (the destination's own bytes, then held
+    /// nowhere here), else into the region kept here.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn decode(
         &mut self,
@@ -58,14 +59,23 @@ impl DecodedRegion {
         samples: (SampleType, usize),
         extent: [u64; 2],
         region: PlaneRegion,
+        into: Option<&mut [u8]>,
     ) -> Result<(), SourceError> {
         self.held = None;
+        let held_elsewhere = into.is_some();
         let (pixels, chunk) = (&mut self.pixels, &mut self.chunk);
-        pixels.resize(region.area() as usize * samples.1 * samples.0.bytes(), 0);
+        let into = if let Some(destination) = into {
+            destination
+        } else {
+            pixels.resize(region.area() as usize * samples.1 * samples.0.bytes(), 0);
+            pixels
+        };
         decode_region(
-            decoder, path, page, file, samples, extent, region, pixels, chunk,
+            decoder, path, page, file, samples, extent, region, into, chunk,
         )?;
-        self.held = Some((plane, region));
+        if !held_elsewhere {
+            self.held = Some((plane, region));
+        }
         Ok(())
     }
 
@@ -564,21 +574,8 @@ impl VolumeSource for TiffSource {
                     expected_format: self.info.format,
                 });
             }
-            if spp == 1 && out.format() == format {
-                // The page's samples are the destination's: decoded straight into it.
-                self.decoded.held = None;
-                return decode_region(
-                    &mut self.decoder,
-                    &path,
-                    page,
-                    self.file,
-                    (format, spp),
-                    [ey, ex],
-                    region,
-                    out.bytes_mut(),
-                    &mut self.decoded.chunk,
-                );
-            }
+            // The page's samples are the destination's: decoded straight into it.
+            let direct = spp == 1 && out.format() == format;
             self.decoded.decode(
                 page,
                 &mut self.decoder,
@@ -588,7 +585,11 @@ impl VolumeSource for TiffSource {
                 (format, spp),
                 [ey, ex],
                 region,
+                direct.then(|| out.bytes_mut()),
             )?;
+            if direct {
+                return Ok(());
+            }
         }
         self.decoded
             .fill(&mut out, self.info.format, spp, channel % spp);
