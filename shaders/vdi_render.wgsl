@@ -24,7 +24,7 @@ struct VdiView {
     lists_x: u32, // the VDI's lists (V_O's pixels)
     lists_y: u32,
     eye: vec3<f32>, // the new camera's eye
-    supersegments: u32, // N_S: most supersegments per list
+    pad0: u32, // padding: lists are indexed by their starts
     forward: vec3<f32>, // the new camera: forward (unit)
     tile: u32, // lists per tile edge of the skipping grid
     right: vec3<f32>, // right · tan(fov/2) · aspect

@@ -61,7 +61,7 @@ pub fn readback_buffer(gpu: &Gpu, label: &str, size: u64) -> wgpu::Buffer {
 
 /// Maps `buffers` for reading and waits until they are: natively by polling the device, in
 /// the browser by yielding to the event loop until WebGPU calls back.
-pub(super) async fn map_for_reading(
+pub(crate) async fn map_for_reading(
     device: &wgpu::Device,
     buffers: &[&wgpu::Buffer],
 ) -> Result<(), GpuError> {

@@ -9,7 +9,7 @@
 //!   ([`wgsl_prelude`]), so the shader has no copy of them;
 //! - the bindings of its bind group ([`binding`]).
 
-use bytemuck::{Pod, Zeroable};
+use bytemuck::Pod;
 
 use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
@@ -147,12 +147,12 @@ macro_rules! gpu_struct {
     ) => {
         $(#[$meta])*
         #[repr(C)]
-        #[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
         pub struct $name {
             $( $(#[$field_meta])* pub $field: $ty ),*
         }
 
-        impl GpuStruct for $name {
+        impl $crate::gpu::contract::GpuStruct for $name {
             const WGSL_NAME: &'static str = stringify!($name);
             fn fields() -> Vec<(&'static str, usize, usize)> {
                 vec![$(
@@ -166,6 +166,9 @@ macro_rules! gpu_struct {
         }
     };
 }
+
+/// [`gpu_struct!`] for the other GPU modules (each struct beside the pass that uses it).
+pub(crate) use gpu_struct;
 
 gpu_struct! {
     /// The per-frame uniforms. Positions are in "leaf units" (octree leaves) or fine units
@@ -577,8 +580,8 @@ gpu_struct! {
         pub lists_y: u32,
         /// The new camera's eye.
         pub eye: [f32; 3],
-        /// Slots per list (`N_S`).
-        pub supersegments: u32,
+        /// Padding (lists are indexed by their starts, not by `N_S` slots each).
+        pub pad0: u32,
         /// The new camera's forward (unit).
         pub forward: [f32; 3],
         /// Lists per tile edge of the skipping grid.

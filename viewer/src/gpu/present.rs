@@ -13,10 +13,8 @@
 //! Nothing here reads back: the target is a surface texture, or a texture a test copies out.
 //! Target-agnostic (a canvas surface in the browser works the same).
 
-use bytemuck::{Pod, Zeroable};
-
 use super::buffers::{storage_buffer, uniform_buffer};
-use super::contract::{GpuStruct, present_source};
+use super::contract::{gpu_struct, present_source};
 use super::device::Gpu;
 use crate::image::linear_to_srgb8;
 
@@ -31,50 +29,25 @@ pub fn srgb_table() -> Vec<u8> {
         .collect()
 }
 
-/// The present pass's uniforms (`PresentParams` in `shaders/present.wgsl`).
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
-pub struct PresentParams {
-    /// The image's width in pixels.
-    pub image_width: u32,
-    /// The image's height in pixels.
-    pub image_height: u32,
-    /// The target's width in pixels.
-    pub target_width: u32,
-    /// The target's height in pixels.
-    pub target_height: u32,
-    /// The panel's width in pixels (0: no panel).
-    pub panel_width: u32,
-    /// The panel's height in pixels.
-    pub panel_height: u32,
-    /// 1: write sRGB codes (a `*Unorm` target); 0: write linear light (a `*Srgb` target).
-    pub encode: u32,
-    /// Entries of the sRGB table ([`SRGB_TABLE_ENTRIES`]).
-    pub table_entries: u32,
-}
-
-impl GpuStruct for PresentParams {
-    const WGSL_NAME: &'static str = "PresentParams";
-    fn fields() -> Vec<(&'static str, usize, usize)> {
-        macro_rules! field {
-            ($f:ident) => {
-                (
-                    stringify!($f),
-                    std::mem::offset_of!(PresentParams, $f),
-                    size_of::<u32>(),
-                )
-            };
-        }
-        vec![
-            field!(image_width),
-            field!(image_height),
-            field!(target_width),
-            field!(target_height),
-            field!(panel_width),
-            field!(panel_height),
-            field!(encode),
-            field!(table_entries),
-        ]
+gpu_struct! {
+    /// The present pass's uniforms (`PresentParams` in `shaders/present.wgsl`).
+    pub struct PresentParams {
+        /// The image's width in pixels.
+        pub image_width: u32,
+        /// The image's height in pixels.
+        pub image_height: u32,
+        /// The target's width in pixels.
+        pub target_width: u32,
+        /// The target's height in pixels.
+        pub target_height: u32,
+        /// The panel's width in pixels (0: no panel).
+        pub panel_width: u32,
+        /// The panel's height in pixels.
+        pub panel_height: u32,
+        /// 1: write sRGB codes (a `*Unorm` target); 0: write linear light (a `*Srgb` target).
+        pub encode: u32,
+        /// Entries of the sRGB table ([`SRGB_TABLE_ENTRIES`]).
+        pub table_entries: u32,
     }
 }
 
@@ -143,6 +116,9 @@ pub struct Presenter {
     /// The panel texture (`Rgba8Uint`, alpha 0 where the panel is only darkened), at least
     /// 1 × 1, and the panel's size (0 × 0: none).
     panel: (wgpu::TextureView, (u32, u32)),
+    /// The bind group of the last image presented (its buffer and bytes read), made again only
+    /// when the image buffer, its size or the panel changes.
+    bound: std::sync::Mutex<Option<(wgpu::Buffer, u64, wgpu::BindGroup)>>,
 }
 
 impl std::fmt::Debug for Presenter {
@@ -267,6 +243,7 @@ impl Presenter {
             params,
             table,
             panel: (panel_texture(gpu, 1, 1, &[0; 4]), (0, 0)),
+            bound: std::sync::Mutex::new(None),
         })
     }
 
@@ -300,6 +277,7 @@ impl Presenter {
             return Ok(());
         }
         self.panel = (panel_texture(gpu, width, height, rgba), (width, height));
+        self.unbind();
         Ok(())
     }
 
@@ -307,7 +285,16 @@ impl Presenter {
     pub fn clear_panel(&mut self, gpu: &Gpu) {
         if self.panel.1 != (0, 0) {
             self.panel = (panel_texture(gpu, 1, 1, &[0; 4]), (0, 0));
+            self.unbind();
         }
+    }
+
+    /// Forgets the bind group (the panel it binds is gone).
+    fn unbind(&mut self) {
+        *self
+            .bound
+            .get_mut()
+            .unwrap_or_else(std::sync::PoisonError::into_inner) = None;
     }
 
     /// [`Presenter::encode`] onto a surface's texture (a window's or a canvas's), at its size.
@@ -375,32 +362,44 @@ impl Presenter {
         };
         gpu.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
-        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("present"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: binding::PARAMS,
-                    resource: self.params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: binding::IMAGE,
-                    resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                        buffer: image,
-                        offset: 0,
-                        size: std::num::NonZeroU64::new(needed),
-                    }),
-                },
-                wgpu::BindGroupEntry {
-                    binding: binding::TABLE,
-                    resource: self.table.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: binding::PANEL,
-                    resource: wgpu::BindingResource::TextureView(&self.panel.0),
-                },
-            ],
-        });
+        let mut bound = self
+            .bound
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let bind_group = match &*bound {
+            Some((buffer, bytes, group)) if buffer == image && *bytes == needed => group.clone(),
+            _ => {
+                let group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("present"),
+                    layout: &self.layout,
+                    entries: &[
+                        wgpu::BindGroupEntry {
+                            binding: binding::PARAMS,
+                            resource: self.params.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: binding::IMAGE,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: image,
+                                offset: 0,
+                                size: std::num::NonZeroU64::new(needed),
+                            }),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: binding::TABLE,
+                            resource: self.table.as_entire_binding(),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: binding::PANEL,
+                            resource: wgpu::BindingResource::TextureView(&self.panel.0),
+                        },
+                    ],
+                });
+                *bound = Some((image.clone(), needed, group.clone()));
+                group
+            }
+        };
+        drop(bound);
         let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("present"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {

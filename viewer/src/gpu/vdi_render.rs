@@ -111,11 +111,22 @@ pub struct VdiRenderer {
     pipeline: wgpu::ComputePipeline,
     upsample: wgpu::ComputePipeline,
     view: wgpu::Buffer,
+    /// The VDI's list starts, slots and skipping grid, uploaded once.
+    vdi: [wgpu::Buffer; 3],
+    layout: wgpu::BindGroupLayout,
     image: wgpu::Buffer,
     display: wgpu::Buffer,
     readback: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     timer: Option<PassTimer>,
+}
+
+/// The buffers of one output size, and the bind group over them and the VDI.
+struct Sized {
+    image: wgpu::Buffer,
+    display: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
 }
 
 impl VdiRenderer {
@@ -167,8 +178,6 @@ impl VdiRenderer {
             slot_bytes,
             "use a smaller VDI",
         )?;
-        let pixels = u64::from(width) * u64::from(height);
-        check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
         let device = &gpu.device;
         let upload = |label: &str, bytes: &[u8]| {
             let buffer =
@@ -184,14 +193,6 @@ impl VdiRenderer {
         let (tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
         let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
         let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
-        let image = storage_buffer(gpu, "vdi image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
-        let display = storage_buffer(
-            gpu,
-            "vdi display",
-            pixels * 16,
-            wgpu::BufferUsages::COPY_SRC,
-        );
-        let readback = readback_buffer(gpu, "vdi image readback", pixels * 16);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vdi_render.wgsl"),
             source: wgpu::ShaderSource::Wgsl(vdi_render_source().into()),
@@ -223,18 +224,8 @@ impl VdiRenderer {
             })
         };
         let (pipeline, upsample) = (entry("main"), entry("upsample"));
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("vdi render"),
-            layout: &layout,
-            entries: &[
-                buffer_entry(vdi_binding::VIEW, &view),
-                buffer_entry(vdi_binding::STARTS, &starts),
-                buffer_entry(vdi_binding::SLOTS, &slots),
-                buffer_entry(vdi_binding::TILES, &tiles),
-                buffer_entry(vdi_binding::IMAGE, &image),
-                buffer_entry(vdi_binding::DISPLAY, &display),
-            ],
-        });
+        let vdi_buffers = [starts, slots, tiles];
+        let sized = Self::sized(gpu, &layout, &view, &vdi_buffers, width, height)?;
         Ok(Self {
             vdi_header: vdi.header.clone(),
             width,
@@ -243,12 +234,74 @@ impl VdiRenderer {
             pipeline,
             upsample,
             view,
+            vdi: vdi_buffers,
+            layout,
+            image: sized.image,
+            display: sized.display,
+            readback: sized.readback,
+            bind_group: sized.bind_group,
+            timer: PassTimer::new(gpu, "vdi render"),
+        })
+    }
+
+    /// The image buffers of `width × height` images and the bind group over them, the
+    /// uniforms `view` and the VDI's buffers `[starts, slots, tiles]`.
+    fn sized(
+        gpu: &Gpu,
+        layout: &wgpu::BindGroupLayout,
+        view: &wgpu::Buffer,
+        [starts, slots, tiles]: &[wgpu::Buffer; 3],
+        width: u32,
+        height: u32,
+    ) -> Result<Sized, GpuError> {
+        let pixels = u64::from(width) * u64::from(height);
+        check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
+        let image = storage_buffer(gpu, "vdi image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
+        let display = storage_buffer(
+            gpu,
+            "vdi display",
+            pixels * 16,
+            wgpu::BufferUsages::COPY_SRC,
+        );
+        let readback = readback_buffer(gpu, "vdi image readback", pixels * 16);
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("vdi render"),
+            layout,
+            entries: &[
+                buffer_entry(vdi_binding::VIEW, view),
+                buffer_entry(vdi_binding::STARTS, starts),
+                buffer_entry(vdi_binding::SLOTS, slots),
+                buffer_entry(vdi_binding::TILES, tiles),
+                buffer_entry(vdi_binding::IMAGE, &image),
+                buffer_entry(vdi_binding::DISPLAY, &display),
+            ],
+        });
+        Ok(Sized {
             image,
             display,
             readback,
             bind_group,
-            timer: PassTimer::new(gpu, "vdi render"),
         })
+    }
+
+    /// Makes this renderer draw `width × height` images, keeping the VDI where it is on the
+    /// GPU (only the image buffers are made again).
+    ///
+    /// # Errors
+    /// [`GpuError::EmptyImage`] for an empty image, or a [`GpuError`] naming the image over
+    /// the device's storage-buffer limit.
+    pub fn resize(&mut self, gpu: &Gpu, width: u32, height: u32) -> Result<(), GpuError> {
+        if width == 0 || height == 0 {
+            return Err(GpuError::EmptyImage { width, height });
+        }
+        if (width, height) == (self.width, self.height) {
+            return Ok(());
+        }
+        let sized = Self::sized(gpu, &self.layout, &self.view, &self.vdi, width, height)?;
+        (self.image, self.display, self.readback, self.bind_group) =
+            (sized.image, sized.display, sized.readback, sized.bind_group);
+        (self.width, self.height) = (width, height);
+        Ok(())
     }
 
     /// The uniforms of a frame for `camera` with `rays` cast: positions relative to the
@@ -278,7 +331,7 @@ impl VdiRenderer {
             lists_x: h.width,
             lists_y: h.height,
             eye: rel(camera.eye),
-            supersegments: h.supersegments,
+            pad0: 0,
             forward: f3(forward),
             tile: SKIP_TILE,
             right: f3(right.map(|x| x * tan_half * aspect)),

@@ -11,14 +11,14 @@ use std::time::{Duration, Instant};
 use residency_schemas::vdi::VolumetricDepthImage;
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
-use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event::{ElementState, MouseButton, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
 use super::camera_control::{orbit, pan, zoom};
 use super::display::{Display, Frame, PresentPath};
-use super::window::{ViewError, open_window, panel_scale, render_size};
+use super::window::{ViewError, open_window, panel_scale, render_size, wheel_steps};
 use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
 use crate::gpu::vdi_render::VdiRenderer;
@@ -203,9 +203,9 @@ impl App {
             return Ok(());
         };
         let size = self.render_size(win);
-        if self.renderer.as_ref().is_none_or(|r| r.size() != size) {
-            self.renderer = None;
-            self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?);
+        match &mut self.renderer {
+            Some(renderer) => renderer.resize(&self.gpu, size.0, size.1)?,
+            None => self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?),
         }
         let panel = self.overlay.then(|| (self.panel_lines(), panel_scale(win)));
         let (Some(window), Some(display), Some(renderer)) =
@@ -328,11 +328,7 @@ impl ApplicationHandler for App {
             }
             WindowEvent::CursorLeft { .. } => self.cursor = None,
             WindowEvent::MouseWheel { delta, .. } => {
-                let steps = match delta {
-                    MouseScrollDelta::LineDelta(_, y) => f64::from(y),
-                    MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
-                };
-                self.camera = zoom(&self.camera, steps, 1e-3 * self.diagonal);
+                self.camera = zoom(&self.camera, wheel_steps(delta), 1e-3 * self.diagonal);
                 self.input();
             }
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {

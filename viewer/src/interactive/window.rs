@@ -149,6 +149,14 @@ pub fn run(session: Session, config: ViewConfig) -> Result<(), ViewError> {
     }
 }
 
+/// Zoom steps of a wheel turn: lines as they come, pixels (touchpads) 40 to a step.
+pub(super) fn wheel_steps(delta: MouseScrollDelta) -> f64 {
+    match delta {
+        MouseScrollDelta::LineDelta(_, y) => f64::from(y),
+        MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
+    }
+}
+
 /// A value in at most about six characters.
 /// The image size for a window of `size` at `scale` render pixels per window pixel (at least
 /// one pixel each way).
@@ -558,10 +566,7 @@ impl ApplicationHandler for App {
             }
             WindowEvent::CursorLeft { .. } => self.cursor = None,
             WindowEvent::MouseWheel { delta, .. } => {
-                let steps = match delta {
-                    MouseScrollDelta::LineDelta(_, y) => y as f64,
-                    MouseScrollDelta::PixelDelta(p) => p.y / 40.0,
-                };
+                let steps = wheel_steps(delta);
                 let e = volume_extent(self.session.info());
                 let diagonal = (e[0] * e[0] + e[1] * e[1] + e[2] * e[2]).sqrt();
                 let cam = zoom(&self.session.scene().camera, steps, 1e-3 * diagonal);

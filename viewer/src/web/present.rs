@@ -11,7 +11,7 @@
 use std::rc::Rc;
 
 use crate::gpu::GpuError;
-use crate::gpu::buffers::readback_buffer;
+use crate::gpu::buffers::{map_for_reading, readback_buffer};
 use crate::gpu::device::Gpu;
 use crate::gpu::present::{PresentError, Presenter, surface_format};
 use crate::gpu::vdi_render::VdiRenderer;
@@ -182,15 +182,7 @@ pub(super) async fn read_image(
         let mut encoder = frame_encoder(gpu);
         encoder.copy_buffer_to_buffer(image, 0, &readback, 0, bytes);
         gpu.queue.submit([encoder.finish()]);
-        let (tx, rx) = futures_channel::oneshot::channel();
-        readback.map_async(wgpu::MapMode::Read, ..bytes, move |r| {
-            let _ = tx.send(r);
-        });
-        match rx.await {
-            Ok(Ok(())) => {}
-            Ok(Err(source)) => return Err(GpuError::Readback { buffer: 0, source }),
-            Err(_) => return Err(GpuError::DeviceLost { buffer: 0 }),
-        }
+        map_for_reading(&gpu.device, &[&readback]).await?;
         let out = bytemuck::cast_slice(&readback.get_mapped_range(..bytes)?).to_vec();
         readback.unmap();
         Ok(out)

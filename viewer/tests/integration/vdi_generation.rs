@@ -256,6 +256,33 @@ fn ray_casting_a_vdi_from_its_own_viewpoint_gives_back_the_dvr_image() {
 }
 
 #[test]
+fn a_resized_vdi_renderer_draws_what_a_new_one_of_that_size_draws() {
+    let scene = scene(2);
+    let (w, h) = (48, 40);
+    let (_, generation) = generate(&scene, full_res(w, h), 20);
+    let camera = turned(&scene.camera, 5.0);
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    for (rw, rh) in [(30, 22), (64, 50), (w, h)] {
+        renderer.resize(gpu(), rw, rh).expect("resize");
+        assert_eq!(renderer.size(), (rw, rh));
+        let resized = renderer.render(gpu(), &camera, true).expect("render");
+        let fresh = VdiRenderer::new(gpu(), &generation.image, rw, rh)
+            .expect("vdi renderer")
+            .render(gpu(), &camera, true)
+            .expect("render");
+        assert_eq!(resized.pixels.len(), (rw * rh) as usize);
+        assert_eq!(resized.pixels, fresh.pixels, "{rw}×{rh}");
+    }
+    assert_eq!(
+        renderer.resize(gpu(), 0, 4).unwrap_err().to_string(),
+        VdiRenderer::new(gpu(), &generation.image, 0, 4)
+            .err()
+            .expect("an empty image is refused")
+            .to_string()
+    );
+}
+
+#[test]
 fn a_vdi_seen_from_nearby_is_closer_to_dvr_there_than_the_image_it_came_from() {
     let scene = scene(2);
     let (w, h) = (48, 40);
