@@ -448,15 +448,18 @@ pub(crate) fn finish_store<T: Sample>(
 ) -> Result<ConvertSummary, ConvertError> {
     let channels = plan.labels.len();
     let (channel_stats, displays, binnings) = channel_summaries::<T>(stats, &plan.labels);
-    let mut region_levels = Vec::new();
-    for level in levels.iter_mut() {
-        level.release(u64::MAX)?;
-        let regions = level
-            .regions
-            .take()
-            .expect("a store's levels write their regions");
-        region_levels.push(regions.finish(&binnings, level.written, level.empty)?);
-    }
+    // The levels' last rows and binned histograms, every level at once.
+    let region_levels = levels
+        .par_iter_mut()
+        .map(|level| -> Result<_, ConvertError> {
+            level.release(u64::MAX)?;
+            let regions = level
+                .regions
+                .take()
+                .expect("a store's levels write their regions");
+            Ok(regions.finish(&binnings, level.written, level.empty)?)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let regions = region_document(region_levels, channel_stats, plan.brick);
     let name = dataset_name(&writer.output);
     let metadata_bytes = serde_json::to_vec_pretty(&regions)?.len() as u64;
