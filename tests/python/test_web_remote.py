@@ -10,6 +10,7 @@ import json
 import subprocess
 import threading
 import urllib.parse
+import urllib.request
 
 import numpy as np
 import pytest
@@ -17,6 +18,7 @@ import pytest
 from support.binaries import run_ingest, start_server, stop_server
 from support.browser import read_png, require_browser, run_pausing
 from support.paths import BIN, ROOT
+from support.service_proxy import INJECTED_ERROR, ServiceProxy
 
 pytestmark = pytest.mark.browser
 
@@ -234,3 +236,89 @@ def test_a_wrong_token_and_another_dataset_show_the_service_message(servers):
     assert results[4] is None
     results, _ = drive(page(base, "u8", service), [{"do": "waitMessage"}])
     assert results[0] == f"Render service {service}: it serves dataset 'u16x3', not 'u8'"
+
+
+def service_info(service):
+    """The service's `GET /info`, with the token."""
+    request = urllib.request.Request(f"{service}/info", headers={"authorization": f"Bearer {TOKEN}"})
+    with urllib.request.urlopen(request, timeout=30) as r:
+        return json.loads(r.read())
+
+
+def test_info_names_the_gpu_and_a_busy_service_is_asked_again_after_retry_after(servers):
+    """Through a proxy that answers the first POST /vdi 503 with `Retry-After: 2` and the
+    second 429 without one, the page sends the same request again 2 s, then 1 s later, draws
+    the third answer's VDI and counts its bytes; its report names the service's GPU adapter as
+    /info does."""
+    base, service = servers
+    info = service_info(service)
+    assert set(info["adapter"]) == {"name", "backend"}, info["adapter"]
+    assert info["adapter"]["backend"] in ("vulkan", "metal", "dx12", "gl"), info["adapter"]
+    assert info["adapter"]["name"] != ""
+    with ServiceProxy(service, failures=[(503, "2"), (429, None)]) as proxy:
+        results, console = drive(page(base, "u16x3", proxy.url), [{"do": "converge"}, {"do": "message"}])
+        posts = proxy.posts()
+    state, message = results
+    assert state["error"] is None and state["converged"], state
+    remote = state["remote"]
+    assert remote["service_adapter"] == info["adapter"]
+    assert (remote["requests_sent"], remote["requests_retried"], remote["vdis_received"],
+            remote["last_error"]) == (1, 2, 1, None), remote
+    assert message is None
+    assert [p.status for p in posts] == [503, 429, 200], posts
+    assert posts[1].at_s - posts[0].at_s >= 2.0, posts
+    assert 1.0 <= posts[2].at_s - posts[1].at_s < 2.0, posts
+    assert remote["vdi_bytes_received"] == posts[2].body_bytes > 0, (remote, posts)
+    assert errors(console, ["status of 503", "status of 429"]) == []
+
+
+def test_a_request_refused_more_than_three_times_shows_the_last_refusal(servers):
+    """`Retry-After: 0` four times: three retries, then the fourth answer is the page's error."""
+    base, service = servers
+    with ServiceProxy(service, failures=[(503, "0")] * 4) as proxy:
+        results, console = drive(page(base, "u16x3", proxy.url), [{"do": "waitMessage"}, {"do": "state"}])
+        posts = proxy.posts()
+    message, state = results
+    expected = INJECTED_ERROR.format(status=503)
+    assert message == f"Render service {proxy.url}: {expected}"
+    remote = state["remote"]
+    assert (remote["requests_sent"], remote["requests_retried"], remote["vdis_received"],
+            remote["vdi_bytes_received"], remote["last_error"]) == (1, 3, 0, 0, expected), remote
+    assert [p.status for p in posts] == [503] * 4, posts
+    assert errors(console, ["status of 503"]) == []
+
+
+def test_a_camera_only_set_scene_moves_the_camera_without_rebuilding_the_controls(servers):
+    """setScene with only another camera keeps the channel controls (built once, when the page
+    opened) and the link follows the camera; a style change rebuilds them."""
+    base, service = servers
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    scene, opened = scene_of(results[1]), results[0]
+    assert opened["controls_built"] == 1, opened
+    closer = json.loads(json.dumps(scene))
+    cam = closer["camera"]
+    cam["eye"] = [t + 0.75 * (e - t) for e, t in zip(cam["eye"], cam["target"])]
+    recoloured = json.loads(json.dumps(closer))
+    recoloured["channels"][0]["color"] = [1.0, 0.25, 0.0]
+    results, console = drive(
+        page(base, "u16x3", service),
+        [
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "setScene", "scene": closer},
+            {"do": "waitState", "when": "s.remote.requests_sent >= 2"},
+            {"do": "converge"},
+            {"do": "hash", "not": results[1]},
+            {"do": "setScene", "scene": recoloured},
+            {"do": "waitState", "when": "s.remote.requests_sent >= 3"},
+            {"do": "converge"},
+        ],
+    )
+    moved, fragment, restyled = results[4], results[5], results[8]
+    assert moved["error"] is None and moved["converged"], moved
+    assert moved["controls_built"] == 1, moved
+    assert scene_of(fragment) == closer
+    assert moved["remote"]["vdi_camera"] == closer["camera"]
+    assert restyled["converged"] and restyled["controls_built"] == 2, restyled
+    assert restyled["remote"]["scene_current"] and restyled["remote"]["drawn_request"] == 3, restyled
+    assert errors(console) == []

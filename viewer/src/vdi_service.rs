@@ -1,7 +1,8 @@
 //! The documents of the VDI render service (`viewer serve`), as the service and its clients
 //! (the page's remote mode, `crate::web`) both read and write them: the request for a VDI of a
 //! view ([`VdiRequest`], `schemas/json/vdi-request.schema.json`), the description of the
-//! dataset served ([`ServiceInfo`]) and the bounds of a request ([`Limits`]).
+//! dataset served ([`ServiceInfo`]), the GPU adapter rendering it ([`Adapter`]) and the bounds
+//! of a request ([`Limits`]).
 
 use residency_schemas::vdi::MAX_SUPERSEGMENTS;
 use schemars::JsonSchema;
@@ -59,6 +60,29 @@ pub struct ServiceInfo {
     pub scene: Scene,
     /// The bounds every request is held to.
     pub limits: Limits,
+    /// The GPU adapter the service renders on.
+    pub adapter: Adapter,
+}
+
+/// The GPU adapter a service renders on, as wgpu reports it.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Adapter {
+    /// The adapter's name (`wgpu::AdapterInfo::name`), such as `llvmpipe (LLVM 19.1.7, 256
+    /// bits)` for Mesa's lavapipe.
+    pub name: String,
+    /// The wgpu backend it is driven by (`wgpu::Backend::to_str`): `vulkan`, `metal`, `dx12`,
+    /// `gl`, `webgpu` or `noop`.
+    pub backend: String,
+}
+
+impl From<&wgpu::AdapterInfo> for Adapter {
+    fn from(info: &wgpu::AdapterInfo) -> Self {
+        Self {
+            name: info.name.clone(),
+            backend: info.backend.to_str().to_owned(),
+        }
+    }
 }
 
 /// The bounds every request is held to.
@@ -72,4 +96,60 @@ pub struct Limits {
     /// Most `POST /vdi` requests per second, all clients together (a burst of as many is
     /// allowed).
     pub max_requests_per_second: f64,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::defaults::default_scene;
+    use crate::source::{ChannelDisplay, LevelInfo, SampleType, VolumeInfo};
+
+    #[test]
+    fn the_info_names_the_adapter_and_round_trips() {
+        let volume = VolumeInfo {
+            name: "vol".into(),
+            sample_type: SampleType::U8,
+            channels: vec!["a".into()],
+            display: vec![ChannelDisplay::default()],
+            voxel_size: [1.0; 3],
+            brick_shape: [8, 8, 8],
+            levels: vec![LevelInfo {
+                shape: [16, 16, 16],
+                factor: [1, 1, 1],
+            }],
+            minmax: None,
+        };
+        let adapter = Adapter::from(&wgpu::AdapterInfo {
+            name: "llvmpipe (LLVM 19.1.7, 256 bits)".into(),
+            driver: "llvmpipe".into(),
+            ..wgpu::AdapterInfo::new(wgpu::DeviceType::Cpu, wgpu::Backend::Vulkan)
+        });
+        assert_eq!(
+            adapter,
+            Adapter {
+                name: "llvmpipe (LLVM 19.1.7, 256 bits)".into(),
+                backend: "vulkan".into(),
+            }
+        );
+        let info = ServiceInfo {
+            dataset: "vol".into(),
+            extent: [16.0; 3],
+            channels: vec!["a".into()],
+            levels: 1,
+            scene: default_scene(&volume),
+            limits: Limits {
+                max_pixels: 100,
+                max_supersegments: 30,
+                max_requests_per_second: 20.0,
+            },
+            adapter,
+        };
+        let json = serde_json::to_value(&info).unwrap();
+        assert_eq!(
+            json["adapter"],
+            serde_json::json!({"name": "llvmpipe (LLVM 19.1.7, 256 bits)", "backend": "vulkan"})
+        );
+        let back: ServiceInfo = serde_json::from_value(json).unwrap();
+        assert_eq!(back, info);
+    }
 }

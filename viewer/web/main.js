@@ -11,8 +11,9 @@
 // switch then starts on: the page streams no bricks but asks the service for volumetric depth
 // images (VDIs) of its view (POST URL/vdi) and ray casts the newest one for its own camera
 // (viewer/src/web/remote.rs decides when to ask; only the latest request matters: a newer one
-// aborts the fetch in flight). `?target_fps=N` is the frame rate its frame-rate controller holds
-// while the camera moves (default 60).
+// aborts the fetch in flight; an answer 429 or 503 is asked again after its Retry-After, at
+// most 3 times). `?target_fps=N` is the frame rate its frame-rate controller holds while the
+// camera moves (default 60).
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
@@ -132,7 +133,27 @@ function abortInFlight() {
   inFlight = null;
 }
 
-/** Sends the request the viewer wants now, if any, superseding the one in flight. */
+/** The wait (ms) a 429 or 503 answer asks for: its `Retry-After` in seconds (or as an HTTP
+ * date), else 1 s; at most 60 s. */
+function retryAfterMs(response) {
+  const value = (response.headers.get("retry-after") ?? "").trim();
+  let ms = 1000;
+  if (/^\d+$/.test(value)) ms = parseInt(value, 10) * 1000;
+  else if (value && !Number.isNaN(Date.parse(value))) ms = Math.max(0, Date.parse(value) - Date.now());
+  return Math.min(ms, 60000);
+}
+
+/** Resolves after `ms`, or at once when `signal` aborts (a newer request superseded it). */
+function sleep(ms, signal) {
+  return new Promise((resolve) => {
+    const timer = setTimeout(resolve, ms);
+    signal.addEventListener("abort", () => { clearTimeout(timer); resolve(); }, { once: true });
+  });
+}
+
+/** Sends the request the viewer wants now, if any, superseding the one in flight. An answer
+ * 429 or 503 is retried after its Retry-After while the viewer allows (remote_retry: the
+ * request is still the latest, and retried fewer than MAX_RETRIES times). */
 function remoteTick() {
   const body = viewer.remote_request();
   if (body == null) return;
@@ -140,16 +161,24 @@ function remoteTick() {
   const sequence = JSON.parse(body).request;
   const mine = { sequence, abort: new AbortController() };
   inFlight = mine;
-  fetch(`${service.url}/vdi`, { method: "POST", headers: serviceHeaders(true), body, signal: mine.abort.signal })
-    .then(async (r) => {
-      if (r.ok) {
-        const bytes = new Uint8Array(await r.arrayBuffer());
-        if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes);
-      } else {
-        const message = await serviceError(r);
-        if (!mine.abort.signal.aborted) viewer.remote_failed(sequence, r.status, message);
-      }
-    })
+  const send = () => fetch(`${service.url}/vdi`, { method: "POST", headers: serviceHeaders(true), body, signal: mine.abort.signal });
+  const answered = async (r) => {
+    if (r.ok) {
+      const bytes = new Uint8Array(await r.arrayBuffer());
+      if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes);
+      return;
+    }
+    const message = await serviceError(r);
+    if (mine.abort.signal.aborted) return;
+    if ((r.status === 429 || r.status === 503) && viewer.remote_retry(sequence)) {
+      await sleep(retryAfterMs(r), mine.abort.signal);
+      if (!mine.abort.signal.aborted) await answered(await send());
+      return;
+    }
+    viewer.remote_failed(sequence, r.status, message);
+  };
+  send()
+    .then(answered)
     .catch((e) => {
       if (!mine.abort.signal.aborted) viewer.remote_failed(sequence, 0, `cannot reach the render service: ${e.message}`);
     })
@@ -169,10 +198,11 @@ function draw() {
 
 function state() {
   if (!viewer) {
-    return { frame: 0, converged: false, bricks_fetched: 0, bytes_fetched: 0, error: failure };
+    return { frame: 0, converged: false, bricks_fetched: 0, bytes_fetched: 0, error: failure, controls_built: 0 };
   }
   const s = JSON.parse(viewer.state_json());
   if (failure && !s.error) s.error = failure;
+  s.controls_built = controlsBuilt;
   return s;
 }
 
@@ -189,7 +219,8 @@ function showStats() {
   if (r) {
     stats.textContent +=
       `remote: ${r.mode}${r.converged ? " (converged)" : ""}\n` +
-      `VDIs received ${r.vdis_received} · requests ${r.requests_sent} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
+      (r.service_adapter ? `service GPU ${r.service_adapter.name} (${r.service_adapter.backend})\n` : "") +
+      `VDIs received ${r.vdis_received} (${(r.vdi_bytes_received / (1 << 20)).toFixed(1)} MiB) · requests ${r.requests_sent} · retried ${r.requests_retried} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
       `D_I ${r.d_i.toFixed(2)}` + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
       (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n";
   }
@@ -250,7 +281,17 @@ async function fetchHistogram(where, info, c) {
 
 const histograms = new Map();
 
+/** Times the channel controls were built (state().controls_built). */
+let controlsBuilt = 0;
+
+/** A scene's JSON without its camera: what the controls show. */
+function styleOf(json) {
+  const { camera: _, ...style } = JSON.parse(json);
+  return JSON.stringify(style);
+}
+
 function buildControls(info) {
+  controlsBuilt += 1;
   const panel = document.getElementById("channels");
   panel.textContent = "";
   const scene = JSON.parse(viewer.scene_json());
@@ -455,11 +496,14 @@ window.residency = {
   /** Replaces the scene (the same JSON as scene files). */
   setScene(scene) {
     if (!viewer) throw new Error(failure ?? "the viewer is not open yet");
+    const before = styleOf(viewer.scene_json());
     viewer.set_scene_json(JSON.stringify(scene));
-    buildControls(JSON.parse(viewer.info_json()));
+    // Only the camera changed: the controls still show the scene's style.
+    if (styleOf(viewer.scene_json()) !== before) buildControls(JSON.parse(viewer.info_json()));
   },
-  /** {frame, converged, bricks_fetched, bytes_fetched, error, ..., remote: {mode,
-   * requests_sent, requests_aborted, answers_dropped, vdis_received, last_error, d_i,
+  /** {frame, converged, bricks_fetched, bytes_fetched, error, controls_built, ..., remote:
+   * {mode, service_adapter: {name, backend}, requests_sent, requests_retried,
+   * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, last_error, d_i,
    * vdi_camera, converged, ...} with a render service, else null}. */
   state,
   /** The current frame as a PNG data URL (8-bit sRGB, like `viewer render`'s PNG). On the GPU

@@ -47,7 +47,7 @@ pub struct Args {
     #[arg(long, value_name = "N", default_value_t = 30)]
     pub max_supersegments: u32,
     /// Most VDI requests per second, all clients together (a burst of as many is allowed);
-    /// more are answered 429.
+    /// more are answered 429 with a `Retry-After`.
     #[arg(long, value_name = "R", default_value_t = 20.0)]
     pub max_requests_per_second: f64,
     /// How long each requested view may take to converge.

@@ -34,6 +34,14 @@ impl Bucket {
             false
         }
     }
+
+    /// Whole seconds until the next token, at least 1: the `Retry-After` of a request
+    /// refused by [`Bucket::take`].
+    pub(crate) fn retry_after_s(&self) -> u64 {
+        // Finite and at most 1 / rate for a positive rate; the cast saturates.
+        let seconds = ((1.0 - self.tokens) / self.rate).ceil() as u64;
+        seconds.max(1)
+    }
 }
 
 #[cfg(test)]
@@ -59,6 +67,11 @@ mod tests {
         // Under one a second: one request, then one per 1/rate seconds.
         let mut slow = Bucket::new(0.5);
         assert!(slow.take(t0) && !slow.take(t0 + Duration::from_secs(1)));
+        // Half a token left: one more second.
+        assert_eq!(slow.retry_after_s(), 1);
         assert!(slow.take(t0 + Duration::from_secs(2)));
+        assert_eq!(slow.retry_after_s(), 2);
+        assert!(!bucket.take(later));
+        assert_eq!(bucket.retry_after_s(), 1);
     }
 }

@@ -21,6 +21,7 @@ use crate::defaults::volume_extent;
 use crate::error_chain;
 use crate::gpu::device::Gpu;
 use crate::source::{BrickSource, VolumeInfo};
+use crate::vdi_service::Adapter;
 
 /// The media type of an encoded VDI.
 const VDI_MEDIA_TYPE: &str = "application/x-residency-vdi";
@@ -52,6 +53,7 @@ impl AppState {
             levels: volume.levels.len(),
             scene: options.default_scene,
             limits: options.limits,
+            adapter: Adapter::from(&gpu.adapter_info),
         };
         let queue = Arc::new(Latest::new());
         let worker = Worker::new(gpu, source, options.render, options.budget);
@@ -102,14 +104,20 @@ fn error_answer(error: &ServiceError, request: Option<u64>) -> Response<Body> {
 
 /// `POST /vdi`: the VDI of the view asked for, or the JSON error.
 async fn vdi(State(state): State<Arc<AppState>>, body: Bytes) -> Response<Body> {
-    let within_rate = state
-        .rate
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-        .take(Instant::now());
-    if !within_rate {
+    let refused = {
+        let mut rate = state
+            .rate
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        (!rate.take(Instant::now())).then(|| rate.retry_after_s())
+    };
+    if let Some(seconds) = refused {
         let limit = state.info.limits.max_requests_per_second;
-        return error_answer(&ServiceError::RateLimited { limit }, None);
+        let mut answer = error_answer(&ServiceError::RateLimited { limit }, None);
+        answer
+            .headers_mut()
+            .insert(header::RETRY_AFTER, HeaderValue::from(seconds));
+        return answer;
     }
     let request: VdiRequest = match serde_json::from_slice(&body) {
         Ok(r) => r,
@@ -160,7 +168,8 @@ fn vdi_answer(generated: Generated, request: Option<u64>) -> Response<Body> {
     answer
 }
 
-/// `GET /info`: the dataset, its box, channels, levels, default scene and the limits.
+/// `GET /info`: the dataset, its box, channels, levels, default scene, the limits and the GPU
+/// adapter.
 async fn info(State(state): State<Arc<AppState>>) -> Json<ServiceInfo> {
     Json(state.info.clone())
 }
@@ -196,13 +205,18 @@ async fn require_token(
 }
 
 /// The service's router: its routes, the token check when `token` is set, and CORS from any
-/// origin (exposing the `x-residency-*` headers).
+/// origin (exposing the `x-residency-*` headers and `Retry-After`).
 pub(crate) fn router(state: Arc<AppState>, token: Option<String>) -> Router {
     let cors = CorsLayer::new()
         .allow_origin(Any)
         .allow_methods([Method::GET, Method::POST, Method::OPTIONS])
         .allow_headers(Any)
-        .expose_headers([REQUEST_HEADER, GENERATION_HEADER, header::CONTENT_LENGTH])
+        .expose_headers([
+            REQUEST_HEADER,
+            GENERATION_HEADER,
+            header::CONTENT_LENGTH,
+            header::RETRY_AFTER,
+        ])
         .max_age(Duration::from_hours(24));
     let router = Router::new()
         .route("/vdi", post(vdi))

@@ -12,7 +12,10 @@
 //!   away from it. A new request supersedes the one in flight (the page aborts its fetch).
 //! - [`Viewer::remote_answer`] files an answer: only the answer to the latest request is kept,
 //!   and never one older than the VDI drawn; [`Viewer::remote_failed`] files the service's
-//!   error, which the page shows.
+//!   error, which the page shows. A request answered 429 or 503 (the service busy or its GPU
+//!   unavailable for a while) is sent again after the answer's `Retry-After` while
+//!   [`Viewer::remote_retry`] allows, at most [`MAX_RETRIES`] times, and never once a newer
+//!   request has superseded it.
 //! - [`step`] draws: the newest VDI ray cast for the current camera, at the image-space
 //!   sampling `D_I` a [`FrameRateController`] picks while the camera moves, at full resolution
 //!   once it rests.
@@ -30,7 +33,7 @@ use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::VdiRenderer;
 use crate::scene::{Camera, Scene};
-use crate::vdi_service::{DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
+use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
 /// A camera this many degrees of orbit (or roll) away from the latest request's asks again.
 pub const ORBIT_DEGREES: f64 = 10.0;
@@ -52,6 +55,10 @@ const MIN_INTERVAL_MS: f64 = 100.0;
 /// The frame time the controller holds while the camera moves unless the page says otherwise
 /// (ms): 60 frames a second.
 pub const TARGET_FRAME_MS: f64 = 1000.0 / 60.0;
+
+/// How many times one request answered 429 or 503 is sent again before its failure is the
+/// remote mode's error.
+pub const MAX_RETRIES: u32 = 3;
 
 /// The smallest `D_I` the controller may choose.
 const MIN_SCALE: f64 = 0.25;
@@ -111,6 +118,8 @@ pub enum RemoteError {
 struct Flight {
     sequence: u32,
     scene: Scene,
+    /// Times it was sent again after a 429 or 503.
+    retries: u32,
 }
 
 /// An answer decoded, waiting for the next step to upload it.
@@ -148,8 +157,12 @@ pub struct RemoteReport {
     service: String,
     /// The switch and the service's state.
     mode: RemoteMode,
-    /// `POST /vdi` requests sent.
+    /// The GPU adapter the service renders on (its `/info`), once read.
+    service_adapter: Option<Adapter>,
+    /// `POST /vdi` requests sent (each counted once, however often it was retried).
     requests_sent: u64,
+    /// Requests sent again after an answer 429 or 503 ([`Viewer::remote_retry`]).
+    requests_retried: u64,
     /// Requests superseded by a newer one while in flight (the page aborted their fetch).
     requests_aborted: u64,
     /// Answers not drawn: not the latest request's, older than the VDI drawn, or superseded
@@ -157,6 +170,8 @@ pub struct RemoteReport {
     answers_dropped: u64,
     /// VDIs received and drawn.
     vdis_received: u64,
+    /// Bytes of the VDI answers received (their bodies, as encoded), drawn or dropped.
+    vdi_bytes_received: u64,
     /// Frames ray cast from VDIs.
     frames: u64,
     /// Of those, the frames cast at `D_I` below 1 (while the camera moved).
@@ -417,12 +432,13 @@ impl Viewer {
                         limit: info.limits.max_pixels,
                     })
                 } else {
-                    Ok(info.limits.max_supersegments)
+                    Ok((info.limits.max_supersegments, info.adapter))
                 }
             });
         match checked {
-            Ok(most) => {
+            Ok((most, adapter)) => {
                 remote.supersegments = DEFAULT_SUPERSEGMENTS.min(most).max(1);
+                remote.report.service_adapter = Some(adapter);
                 remote.ready = true;
                 remote.report.mode = RemoteMode::On;
                 Ok(())
@@ -488,6 +504,7 @@ impl Viewer {
         remote.in_flight = Some(Flight {
             sequence,
             scene: scene.clone(),
+            retries: 0,
         });
         remote.last_sent_ms = now;
         remote.report.requests_sent += 1;
@@ -504,6 +521,7 @@ impl Viewer {
         let Some(remote) = inner.remote.as_mut() else {
             return;
         };
+        remote.report.vdi_bytes_received += bytes.len() as u64;
         let Some(flight) = remote.settle(sequence) else {
             return;
         };
@@ -540,6 +558,25 @@ impl Viewer {
                 });
             }
             Err(e) => remote.fail(&e),
+        }
+    }
+
+    /// Whether to send request `sequence` again, answered 429 or 503: only while it is the
+    /// request in flight and has been sent again fewer than [`MAX_RETRIES`] times. A retry is
+    /// counted (`requests_retried`); the page waits the answer's `Retry-After` first, and
+    /// files the failure with [`Viewer::remote_failed`] when this says no.
+    pub fn remote_retry(&self, sequence: u32) -> bool {
+        let mut inner = self.inner.borrow_mut();
+        let Some(remote) = inner.remote.as_mut() else {
+            return false;
+        };
+        match remote.in_flight.as_mut() {
+            Some(flight) if flight.sequence == sequence && flight.retries < MAX_RETRIES => {
+                flight.retries += 1;
+                remote.report.requests_retried += 1;
+                true
+            }
+            _ => false,
         }
     }
 
