@@ -64,7 +64,29 @@ def s3_error_body(status: int, path: str, request_id: str) -> bytes:
             f"<RequestId>{request_id}</RequestId></Error>").encode()
 
 
-class FaultProxy:
+class BackgroundServer:
+    """An HTTP server (`self._server`, made by the subclass) served on a background thread:
+    started and stopped, or used as a context manager."""
+
+    def start(self):
+        """Starts serving on a background thread."""
+        self._thread = threading.Thread(target=self._server.serve_forever, daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self):
+        """Stops serving and closes the listening socket."""
+        self._server.shutdown()
+        self._server.server_close()
+
+    def __enter__(self):
+        return self.start()
+
+    def __exit__(self, *_):
+        self.stop()
+
+
+class FaultProxy(BackgroundServer):
     """The proxy, listening on `127.0.0.1:port` (0: a free port) in front of `target`
     (`http://host:port`) from `start()` (or `with`) until `stop()`.
 
@@ -111,23 +133,6 @@ class FaultProxy:
         self.port = self._server.server_address[1]
         self.url = f"http://127.0.0.1:{self.port}"
         self._thread = None
-
-    def start(self) -> "FaultProxy":
-        """Starts serving on a background thread."""
-        self._thread = threading.Thread(target=self._server.serve_forever, daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self):
-        """Stops serving and closes the listening socket."""
-        self._server.shutdown()
-        self._server.server_close()
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *_):
-        self.stop()
 
     def set_mode(self, mode: str, fail_kind: str = "503"):
         """Switches to `mode` (see `MODES`) for the requests that arrive from now on;

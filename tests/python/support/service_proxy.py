@@ -19,6 +19,8 @@ import urllib.parse
 from dataclasses import dataclass
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
+from support.fault_proxy import BackgroundServer
+
 HOP_BY_HOP = {"connection", "keep-alive", "transfer-encoding", "te", "trailer", "upgrade",
               "proxy-authorization", "proxy-authenticate", "content-length"}
 """Headers not passed on (the proxy sets its own `Content-Length`)."""
@@ -37,7 +39,7 @@ class Post:
     body_bytes: int
 
 
-class ServiceProxy:
+class ServiceProxy(BackgroundServer):
     """The proxy, on `127.0.0.1` (a free port) in front of `target` (`http://host:port`), from
     `start()` (or `with`) until `stop()`. `failures`: `(status, retry_after)` answers of the
     first `POST /vdi` requests, in order (`retry_after` the `Retry-After` header's text, or
@@ -56,23 +58,6 @@ class ServiceProxy:
         self._server.daemon_threads = True
         self.url = f"http://127.0.0.1:{self._server.server_address[1]}"
         self._thread = None
-
-    def start(self) -> "ServiceProxy":
-        """Starts serving on a background thread."""
-        self._thread = threading.Thread(target=self._server.serve_forever, daemon=True)
-        self._thread.start()
-        return self
-
-    def stop(self):
-        """Stops serving and closes the listening socket."""
-        self._server.shutdown()
-        self._server.server_close()
-
-    def __enter__(self):
-        return self.start()
-
-    def __exit__(self, *_):
-        self.stop()
 
     def posts(self) -> list:
         """The `POST /vdi` requests received so far ([`Post`]), in order of arrival."""
