@@ -150,7 +150,7 @@ impl DatasetStore {
             Keys::Object(_) => {
                 let key = checked_key(&raw)?;
                 let key = StoreKey::new(key).map_err(|_| KeyError::Refused("not a store key"))?;
-                // zarrs' error holds the object store's failure among its causes.
+                // zarrs' error holds the object store's failure among its causes (`StoreFailure::in_chain`).
                 self.zarr
                     .get(&key)
                     .map(|found| found.map(|bytes| bytes.to_vec()))
@@ -244,7 +244,6 @@ fn failed(e: object_store::Error) -> KeyError {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store_keys::failure_of;
 
     #[test]
     fn ranges_for_the_object_store() {
@@ -285,7 +284,12 @@ mod tests {
             })
         };
         let transport = |kind| generic(Box::new(HttpError::new(kind, std::io::Error::other("x"))));
-        let unreachable = |e: &KeyError| failure_of(e).map(|f| f.unreachable);
+        let unreachable = |e: &KeyError| match e {
+            KeyError::Unreadable(source) => {
+                StoreFailure::in_chain(source.as_ref()).map(|f| f.unreachable)
+            }
+            _ => None,
+        };
         for kind in [
             HttpErrorKind::Connect,
             HttpErrorKind::Request,

@@ -26,17 +26,6 @@ pub enum KeyError {
 
 pub use residency_store::failure::StoreFailure;
 
-/// The object-store failure a key error stands for, if it is one (kept in
-/// [`KeyError::Unreadable`], directly or among the causes of a zarrs error): not the
-/// server's fault, so answered 502 (the store answered an error) or 503 (it could not be
-/// reached or did not answer in time), naming the key.
-pub fn failure_of(e: &KeyError) -> Option<&StoreFailure> {
-    match e {
-        KeyError::Unreadable(source) => StoreFailure::in_chain(source.as_ref()),
-        _ => None,
-    }
-}
-
 /// Decodes a raw (still percent-encoded) key and refuses any spelling that could leave the
 /// dataset: `..` and `.` segments, empty segments, backslashes, absolute paths, NUL bytes.
 ///

@@ -31,6 +31,14 @@ pub fn filled<T: Clone>(v: &mut Vec<T>, len: usize, value: T) {
     v.resize(len, value);
 }
 
+/// Makes `v` hold `len` values whose contents the caller is about to overwrite: unchanged
+/// when it already holds that many, else [`filled`] with defaults.
+pub fn sized<T: Clone + Default>(v: &mut Vec<T>, len: usize) {
+    if v.len() != len {
+        filled(v, len, T::default());
+    }
+}
+
 /// Advises the kernel to back the whole 2 MiB pages inside `memory` with huge pages; a
 /// refusal (no transparent huge pages) changes nothing but speed.
 fn advise_huge_pages<T>(memory: &mut [std::mem::MaybeUninit<T>]) {

@@ -276,9 +276,7 @@ fn read_level0<T: Sample>(
                         Err(_) => return (own, recycle_rx),
                     }
                 };
-                if slab.len() != channels * nz as usize * plane {
-                    crate::memory::filled(&mut slab, channels * nz as usize * plane, T::default());
-                }
+                crate::memory::sized(&mut slab, channels * nz as usize * plane);
                 let mut rest: &mut [T] = &mut slab;
                 let mut parts = Vec::new();
                 for s in sources.iter_mut() {
@@ -516,6 +514,12 @@ fn mean_slab<T: Sample>(
     let w = acc.window;
     let row = w.nx as usize;
     let f = level.factor;
+    // Every voxel of a row covers `f[2]` columns but the level's last one.
+    let inner = if w.x0 + w.nx >= level.shape[2] {
+        row - 1
+    } else {
+        row
+    };
     values.par_chunks_mut(row).enumerate().for_each(|(i, out)| {
         let (y, z) = (i as u64 % w.ny, i as u64 / w.ny % nz);
         let c = i as u64 / w.ny / nz;
@@ -528,9 +532,6 @@ fn mean_slab<T: Sample>(
             return;
         }
         let zy = covered(acc.z0 + z, f[0], full[0]) * covered(w.y0 + y, f[1], full[1]);
-        // Every voxel of the row covers `f[2]` columns but the level's last one.
-        let last = level.shape[2] - 1;
-        let inner = if w.x0 + w.nx > last { row - 1 } else { row };
         T::means(&mut out[..inner], &sum[..inner], zy * f[2] as u32);
         for x in inner..row {
             let n = zy * covered(w.x0 + x as u64, f[2], full[2]);
@@ -602,9 +603,7 @@ pub(crate) fn flush_if_full<T: Sample>(
     // Means of the slab: rounded once, from exact sums.
     let slab_len = nz as usize * plane;
     let mut values = std::mem::take(&mut levels[l].values);
-    if values.len() != channels * slab_len {
-        crate::memory::filled(&mut values, channels * slab_len, T::default());
-    }
+    crate::memory::sized(&mut values, channels * slab_len);
     mean_slab(
         &levels[l].acc,
         &levels[l].plan,

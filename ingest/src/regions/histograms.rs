@@ -43,10 +43,13 @@ impl Default for StatsScratch {
     /// write each entry, and a page first read as the shared zero page faults again, with a
     /// TLB flush on every core, when it is written.
     fn default() -> Self {
-        let mut exact = Vec::new();
+        let (mut exact, mut keys) = (Vec::new(), Vec::new());
         crate::memory::filled(&mut exact, 1 << 16, 0);
-        let mut keys: Box<[u32; FINE_KEYS]> = Box::new([1; FINE_KEYS]);
-        keys.fill(0);
+        crate::memory::filled(&mut keys, FINE_KEYS, 0);
+        let keys = keys
+            .into_boxed_slice()
+            .try_into()
+            .expect("FINE_KEYS counts");
         Self { keys, exact }
     }
 }
