@@ -296,6 +296,13 @@ def summarize(mode, run, segments):
         "frame_ms_median": round(1000 * statistics.median([b - a for a, b in zip(draws, draws[1:])]), 1) if len(draws) > 1 else None,
         "link_bytes": link_bytes, "page_bytes": page_bytes, "page_fetches": page_fetches,
         "page_fetches_failed": {link: out["end"]["failed"].get(o, 0) - out["start"]["failed"].get(o, 0) for link, o in origins.items()},
+        # What the page aborted: of the bodies cut short, the bytes their Content-Length promised
+        # and the page never read, and how many had no Content-Length; the requests aborted
+        # before their answer's headers; and the largest whole body, which bounds those answers.
+        "page_bytes_unread": {link: out["end"]["unread"].get(o, 0) - out["start"]["unread"].get(o, 0) for link, o in origins.items()},
+        "page_fetches_unbounded": {link: out["end"]["unbounded"].get(o, 0) - out["start"]["unbounded"].get(o, 0) for link, o in origins.items()},
+        "page_fetches_unanswered": {link: out["end"]["unanswered"].get(o, 0) - out["start"]["unanswered"].get(o, 0) for link, o in origins.items()},
+        "page_largest_body": {link: out["end"]["largest"].get(o, 0) for link, o in origins.items()},
         "bricks_fetched": end["bricks_fetched"] - start["bricks_fetched"],
         "bytes_fetched": end["bytes_fetched"] - start["bytes_fetched"],
         "bricks_before": start["bricks_fetched"],

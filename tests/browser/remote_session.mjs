@@ -35,23 +35,53 @@ const spec = JSON.parse(process.argv[2]);
 const deadline = Date.now() + (spec.timeout_s ?? 300) * 1000;
 const { browser, page, consoleMessages } = await launch(spec.viewport ?? {});
 
-// Counts the body bytes of every fetch() by origin (the page's bricks and VDIs, both fetched
-// with fetch()), and timestamps every frame drawn into the canvas (putImageData on the page's CPU
-// path; getCurrentTexture of its WebGPU canvas context, once a frame, on the GPU path).
+// Counts the body bytes of every fetch() by origin as they arrive (the page's bricks and VDIs,
+// both fetched with fetch()), the largest whole body, and what the page aborted (a superseded
+// request): for a body cut short, the bytes its Content-Length promised but the page never read;
+// the requests aborted before their answer's headers. Those may have crossed the link before the
+// abort reached the other end. Also timestamps every frame drawn into the canvas (putImageData on the page's
+// CPU path; getCurrentTexture of its WebGPU canvas context, once a frame, on the GPU path).
 await page.addInitScript(() => {
-  const rs = { draws: [], bytes: {}, fetches: {}, failed: {} };
+  const rs = { draws: [], bytes: {}, fetches: {}, failed: {}, unread: {}, unbounded: {}, unanswered: {}, largest: {} };
   window.__session = rs;
   const fetch = window.fetch.bind(window);
+  const add = (table, key, n) => { table[key] = (table[key] ?? 0) + n; };
   window.fetch = async (input, init) => {
     const url = new URL(typeof input === "string" ? input : input.url ?? String(input), location.href);
     const key = url.origin;
-    const response = await fetch(input, init);
-    response.clone().arrayBuffer().then(
-      (b) => {
-        rs.bytes[key] = (rs.bytes[key] ?? 0) + b.byteLength;
-        rs.fetches[key] = (rs.fetches[key] ?? 0) + 1;
+    let response;
+    try {
+      response = await fetch(input, init);
+    } catch (e) {
+      // Aborted before its answer's headers were read: the answer may still have crossed the
+      // link, whole, before the abort reached the other end.
+      add(rs.unanswered, key, 1);
+      throw e;
+    }
+    const promised = Number(response.headers.get("content-length") ?? NaN);
+    const body = response.clone().body;
+    let read = 0;
+    (async () => {
+      if (body) {
+        const reader = body.getReader();
+        for (;;) {
+          const { done, value } = await reader.read();
+          if (done) break;
+          read += value.byteLength;
+          add(rs.bytes, key, value.byteLength);
+        }
+      }
+    })().then(
+      () => {
+        add(rs.fetches, key, 1);
+        rs.largest[key] = Math.max(rs.largest[key] ?? 0, read);
       },
-      () => { rs.failed[key] = (rs.failed[key] ?? 0) + 1; },
+      () => {
+        add(rs.failed, key, 1);
+        // Without a Content-Length nothing bounds what crossed: counted apart, the test fails.
+        if (Number.isFinite(promised)) add(rs.unread, key, promised - read);
+        else add(rs.unbounded, key, 1);
+      },
     );
     return response;
   };
@@ -80,6 +110,10 @@ const counters = () => page.evaluate(() => ({
   bytes: { ...window.__session.bytes },
   fetches: { ...window.__session.fetches },
   failed: { ...window.__session.failed },
+  unread: { ...window.__session.unread },
+  unbounded: { ...window.__session.unbounded },
+  unanswered: { ...window.__session.unanswered },
+  largest: { ...window.__session.largest },
 }));
 
 let out;
