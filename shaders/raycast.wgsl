@@ -4,6 +4,37 @@
 
 // ---- the ray ----
 
+// MODE_MIP: the texel of `out_color` that holds pixel `pixel`'s maximum of channel c (lane
+// c % 4), after the image (image_texels in viewer/src/gpu/contract.rs).
+fn maximum_texel(pixel: u32, c: u32) -> u32 {
+    return P.width * P.height + pixel * ((P.channel_count + 3u) / 4u) + c / 4u;
+}
+
+// MODE_MIP: raises each channel's maximum in `have` to its value (NaN is no value); returns
+// whether every channel drawn has reached the value from which its intensity stays 1.
+fn take_maxima(
+    have: u32,
+    values: ptr<function, array<f32, MAX_CHANNELS>>,
+    maxima: ptr<function, array<f32, MAX_CHANNELS>>,
+) -> bool {
+    var left = have;
+    loop {
+        if left == 0u {
+            break;
+        }
+        let c = take_channel(&left);
+        let v = (*values)[c];
+        if v == v && v > (*maxima)[c] {
+            (*maxima)[c] = v;
+        }
+    }
+    var saturated = true;
+    for (var c = 0u; c < P.channel_count; c++) {
+        saturated = saturated && (*maxima)[c] >= S.channels[c].saturation;
+    }
+    return saturated;
+}
+
 @compute @workgroup_size(8, 8, 1)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if gid.x >= P.width || gid.y >= P.height {
@@ -35,6 +66,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     var vdi = vdi_fresh();
     if VDI && st.status != RAY_FRESH {
         vdi = vdi_load(pixel);
+    }
+    // MODE_MIP: each channel's largest value so far, kept between passes.
+    var maxima: array<f32, MAX_CHANNELS>;
+    if MODE == MODE_MIP {
+        for (var c = 0u; c < P.channel_count; c++) {
+            maxima[c] = NO_MAXIMUM;
+            if !fresh {
+                maxima[c] = out_color[maximum_texel(pixel, c)][c % 4u];
+            }
+        }
     }
     var samples = 0u;
     var skipped = 0u;
@@ -178,7 +219,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         && all((ray.cell >> node_shift(held.depth)) == held_cell) {
                         v = held;
                     } else {
-                        v = visit_octree(ray, last_depth, desired_step, dir, skipping);
+                        v = visit_octree(ray, last_depth, desired_step, dir, skipping, &maxima);
                         last_depth = v.depth;
                         held = v;
                         held_step = desired_step;
@@ -245,13 +286,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     move_by = step;
                 }
             }
-            let m = mixture(s.have, &values, step);
-            if VDI {
-                // A step may end past the volume's face: the supersegment ends there.
-                let t1 = min(ray.t + move_by, t_exit);
-                vdi_step(&vdi, pixel, m, steps, ray.t, t1, color, trans, t_plane);
+            if MODE == MODE_MIP {
+                if take_maxima(s.have, &values, &maxima) {
+                    trans = 0.0; // every channel saturated: nothing can change (ends the ray)
+                }
+            } else {
+                let m = mixture(s.have, &values, step);
+                if VDI {
+                    // A step may end past the volume's face: the supersegment ends there.
+                    let t1 = min(ray.t + move_by, t_exit);
+                    vdi_step(&vdi, pixel, m, steps, ray.t, t1, color, trans, t_plane);
+                }
+                composite(&color, &trans, m, steps);
             }
-            composite(&color, &trans, m, steps);
             advance(&ray, dir, move_by);
             if VDI && vdi_over(vdi) {
                 break;
@@ -286,8 +333,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         if RESIDENT_ONLY && needs_full {
             atomicAdd(&requests.counters.rays_need_full, 1u);
         }
+    } else if MODE == MODE_MIP {
+        out_color[pixel] = mip_pixel(&maxima, P.background);
     } else if !VDI {
         out_color[pixel] = vec4<f32>(color + trans * P.background, 1.0 - trans);
+    }
+    if MODE == MODE_MIP && suspended {
+        for (var c = 0u; c < P.channel_count; c++) {
+            out_color[maximum_texel(pixel, c)][c % 4u] = maxima[c];
+        }
     }
     atomicAdd(&requests.counters.samples, samples);
     atomicAdd(&requests.counters.empty_nodes_skipped, skipped);

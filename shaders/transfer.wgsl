@@ -20,7 +20,11 @@ struct ChannelEntry {
     min_level: u32, // level bounds of the LOD choice
     max_level: u32,
     points_offset: u32, // (value, opacity) pairs in `tables`
+    opacity_top: f32, // the highest opacity of the points: MIP's scale
+    saturation: f32, // MIP: from this value on the intensity no longer changes (±f32 max)
     pad0: u32,
+    pad1: u32,
+    pad2: u32,
 }
 
 struct SceneUniforms {
@@ -106,6 +110,35 @@ fn mixture(have: u32, values: ptr<function, array<f32, MAX_CHANNELS>>, step: f32
         m.alpha += a;
     }
     return m;
+}
+
+// ---- maximum intensity projection ----
+
+// A channel's maximum before the ray has met a value of it.
+const NO_MAXIMUM: f32 = -3.4028234e38; // -f32::MAX (Tint refuses a literal past it)
+
+// Channel c's intensity for its largest value m along the ray: its transfer function scaled so
+// that its highest point is 1; 0 where the ray met no value, or the function is 0 everywhere.
+fn mip_intensity(c: u32, m: f32) -> f32 {
+    let top = S.channels[c].opacity_top;
+    if m == NO_MAXIMUM || top <= 0.0 {
+        return 0.0;
+    }
+    return tf_opacity(c, m) / top;
+}
+
+// The pixel of a ray whose channels' maxima are `maxima`: Σ w_c·colour_c over the background
+// weighted by 1 − a, a = min(1, Σ w_c) (crate::scene's module doc).
+fn mip_pixel(maxima: ptr<function, array<f32, MAX_CHANNELS>>, background: vec3<f32>) -> vec4<f32> {
+    var color = vec3<f32>(0.0);
+    var sum = 0.0;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let w = mip_intensity(c, (*maxima)[c]);
+        color += w * S.channels[c].color;
+        sum += w;
+    }
+    let a = min(sum, 1.0);
+    return vec4<f32>(color + (1.0 - a) * background, a);
 }
 
 // Front-to-back emission–absorption of `steps` steps of mixture `m` (its opacity clamped to

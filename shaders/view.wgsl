@@ -41,6 +41,11 @@ struct Params {
     segment_capacity: u32, // records the ray segment area holds
     brick: vec3<u32>, // brick edge in voxels
     supersegments: u32, // most per pixel of a volumetric depth image (raycast/vdi.wgsl)
+    clip_lo: vec3<f32>, // the box kept (the volume's when the scene clips none), leaf units
+    clip_plane_count: u32,
+    clip_hi: vec3<f32>,
+    pad0: u32,
+    clip_planes: array<vec4<f32>, CLIP_PLANE_SLOTS>, // (n, d): kept where n·p >= d, leaf units
 }
 
 // One record of a pixel's ray segment list (segments.wgsl writes them, raycast.wgsl walks
@@ -91,9 +96,26 @@ fn box_span(r: PixelRay, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
     return vec2<f32>(max(tmin.x, max(tmin.y, tmin.z)), min(tmax.x, min(tmax.y, tmax.z)));
 }
 
-// Where ray r is inside the volume: (t_enter, t_exit), starting no nearer than the eye.
+// Where ray r is inside the part of the volume the scene keeps (its clip box, within the
+// volume, and the kept side of every clip plane): (t_enter, t_exit), starting no nearer than
+// the eye; empty when t_exit <= t_enter. crate::scene::Clip::clip_span is the f64 rule.
 fn volume_span(r: PixelRay) -> vec2<f32> {
-    let span = box_span(r, vec3<f32>(0.0), P.volume_leaf);
-    return vec2<f32>(max(span.x, -r.t_plane), span.y);
+    let span = box_span(r, P.clip_lo, P.clip_hi);
+    var t0 = max(span.x, -r.t_plane);
+    var t1 = span.y;
+    let at0 = -r.origin; // the ray at t = 0, leaf units from the volume's corner
+    for (var i = 0u; i < P.clip_plane_count; i++) {
+        let plane = P.clip_planes[i];
+        let s0 = dot(plane.xyz, at0) - plane.w;
+        let dn = dot(plane.xyz, r.dir_leaf);
+        if dn > 0.0 {
+            t0 = max(t0, -s0 / dn);
+        } else if dn < 0.0 {
+            t1 = min(t1, -s0 / dn);
+        } else if s0 < 0.0 {
+            t1 = t0; // parallel, on the cut side
+        }
+    }
+    return vec2<f32>(t0, t1);
 }
 

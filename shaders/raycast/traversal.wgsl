@@ -46,8 +46,16 @@ struct Visit {
 
 // The residency octree (Algorithm 1, multi-channel): from just above the depth of the last
 // node visited, down to the deepest node whose edge is at least the step, stopping where every
-// channel is empty, or constant, under its TF.
-fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, skipping: bool) -> Visit {
+// channel is empty, or constant, under its TF. In MODE_MIP a channel is also empty in a node
+// whose largest value is at most the ray's maximum so far (`maxima`): it cannot raise it.
+fn visit_octree(
+    ray: Ray,
+    last_depth: u32,
+    desired_step: f32,
+    dir: vec3<f32>,
+    skipping: bool,
+    maxima: ptr<function, array<f32, MAX_CHANNELS>>,
+) -> Visit {
     let depth = P.leaf_depth;
     var max_depth = depth;
     var edge = P.leaf_edge;
@@ -70,6 +78,18 @@ fn visit_octree(ray: Ray, last_depth: u32, desired_step: f32, dir: vec3<f32>, sk
             let word = nodes[P.class_offset + v.node];
             v.empty = word & all;
             homogeneous = (word >> CLASS_CONSTANT_SHIFT) & all;
+            if MODE == MODE_MIP {
+                var left = all & ~v.empty;
+                loop {
+                    if left == 0u {
+                        break;
+                    }
+                    let c = take_channel(&left);
+                    if bitcast<f32>(node_word(v.node, c, 2u)) <= (*maxima)[c] {
+                        v.empty |= 1u << c;
+                    }
+                }
+            }
         }
         if skipping && v.empty == all {
             v.action = ACTION_SKIP;

@@ -167,6 +167,15 @@ try {
         await page.selectOption(step.selector, step.value);
         results.push(null);
         break;
+      case "slide":
+        // Moves a range input (a slider) to a value, as dragging it does: input, then change.
+        await page.$eval(step.selector, (el, value) => {
+          el.value = value;
+          el.dispatchEvent(new Event("input", { bubbles: true }));
+          el.dispatchEvent(new Event("change", { bubbles: true }));
+        }, String(step.value));
+        results.push(null);
+        break;
       case "goto":
         await page.goto(step.url);
         results.push(null);

@@ -282,6 +282,67 @@ def test_the_filter_menu_renders_tricubic_as_the_reference_does(served, stores, 
     assert errors(console) == []
 
 
+def test_the_mode_menu_renders_mip_as_the_reference_does(served, stores, tmp_path):
+    """Choosing *maximum intensity projection* in the page's Mode menu builds a new renderer
+    whose converged image equals `viewer reference` of the scene the page then carries
+    (`"mode": "mip"`), and differs from the volume rendering."""
+    results, console = drive(
+        view_url(served, "u16x3"),
+        [
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "dvr.png")},
+            {"do": "select", "selector": "#mode", "value": "mip"},
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "snapshot", "path": str(tmp_path / "mip.png")},
+        ],
+    )
+    state, fragment = results[3], results[4]
+    assert state["error"] is None and state["converged"], state
+    assert state["renderer_builds"] == 2, state
+    scene = scene_of(fragment)
+    assert scene["mode"] == "mip"
+    # As a PNG: channels add, and where they sum past 1 the linear EXR keeps what the page's
+    # 8 bits clamp.
+    ref = reference(stores["u16x3"], scene, tmp_path / "ref.png")
+    psnr, ssim = compare(tmp_path / "mip.png", ref)
+    assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
+    assert np.abs(read_png(tmp_path / "dvr.png") - read_png(tmp_path / "mip.png")).max() > 8
+    assert errors(console) == []
+
+
+def test_the_clip_sliders_cut_the_volume_without_a_new_renderer(served, stores, tmp_path):
+    """Moving the x slider's high end to half the extent, and the front cut in, clips the
+    scene (`"clip"` in the link: the box, `near`): the same renderer draws it (no brick fetched
+    that the whole view had not), and the converged image equals `viewer reference` of that
+    scene, and differs from the whole volume's."""
+    info_extent = [40 * 0.5, 40 * 0.5, 24 * 2.0]  # ingest sample's voxel size: 2, 0.5, 0.5 µm
+    results, console = drive(
+        view_url(served, "u8"),
+        [
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "whole.png")},
+            {"do": "slide", "selector": "#clip-x-max", "value": 0.5},
+            {"do": "slide", "selector": "#clip-near", "value": 0.3},
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "snapshot", "path": str(tmp_path / "clipped.png")},
+        ],
+    )
+    whole, state, fragment = results[0], results[4], results[5]
+    assert state["error"] is None and state["converged"], state
+    assert state["renderer_builds"] == 1, state
+    assert state["bricks_fetched"] == whole["bricks_fetched"], (whole, state)
+    scene = scene_of(fragment)
+    assert scene["clip"]["box"] == {"min": [0.0, 0.0, 0.0], "max": [info_extent[0] / 2, info_extent[1], info_extent[2]]}
+    assert scene["clip"]["near"] > 0 and "planes" not in scene["clip"], scene["clip"]
+    ref = reference(stores["u8"], scene, tmp_path / "ref.exr")
+    psnr, ssim = compare(tmp_path / "clipped.png", ref)
+    assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
+    assert np.abs(read_png(tmp_path / "whole.png") - read_png(tmp_path / "clipped.png")).max() > 8
+    assert errors(console) == []
+
+
 def test_missing_dataset_and_no_webgpu_show_their_messages(served):
     (msg,), _ = drive(f"{served}/nope/view", [{"do": "waitMessage"}])
     assert "Cannot open dataset 'nope'" in msg and "no such dataset on the server" in msg

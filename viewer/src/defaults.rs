@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use crate::gpu::renderer::MAX_CHANNELS;
-use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, box_diagonal};
+use crate::scene::{Camera, ChannelStyle, ClipError, OpacityPoint, Scene, box_diagonal};
 use crate::source::{SampleType, VolumeInfo};
 
 /// Default vertical field of view, degrees.
@@ -50,6 +50,15 @@ pub enum SceneError {
         /// What serde said.
         #[source]
         source: serde_json::Error,
+    },
+    /// A scene whose clipping cannot be drawn.
+    #[error("{document}: clipping that cannot be drawn")]
+    Clip {
+        /// The document.
+        document: String,
+        /// What is wrong with it.
+        #[source]
+        source: ClipError,
     },
     /// A channel the volume does not have.
     #[error("{what}: channel {channel} does not exist ({volume} has {channels} channels)")]
@@ -307,6 +316,8 @@ pub fn default_scene(info: &VolumeInfo) -> Scene {
         channels: default_channels(info),
         background: [0.0; 3],
         filter: crate::scene::Filter::Trilinear,
+        mode: crate::scene::RenderMode::Dvr,
+        clip: crate::scene::Clip::default(),
     }
 }
 
@@ -333,12 +344,18 @@ pub fn check_channel(info: &VolumeInfo, channel: usize, what: &str) -> Result<()
 /// error.
 ///
 /// # Errors
-/// [`SceneError::Parse`], naming `source`, with serde's message.
+/// [`SceneError::Parse`], naming `source`, with serde's message; [`SceneError::Clip`] for
+/// clipping that cannot be drawn.
 pub fn parse_scene(json: &[u8], source: &str) -> Result<Scene, SceneError> {
-    serde_json::from_slice(json).map_err(|e| SceneError::Parse {
+    let scene: Scene = serde_json::from_slice(json).map_err(|e| SceneError::Parse {
         document: source.to_string(),
         source: e,
-    })
+    })?;
+    scene.clip.check().map_err(|e| SceneError::Clip {
+        document: source.to_string(),
+        source: e,
+    })?;
+    Ok(scene)
 }
 
 /// Reads a JSON scene file.

@@ -1,6 +1,7 @@
 //! The reference ray caster: the scene's ground truth, on the CPU in `f64`, at level 0, with
-//! the scene's filter (trilinear or tricubic) and a fine fixed step, following the conventions of [`crate::scene`]
-//! exactly (world space, projection, opacity correction and compositing).
+//! the scene's filter (trilinear or tricubic) and a fine fixed step, following the conventions
+//! of [`crate::scene`] exactly (world space, projection, opacity correction and compositing, or
+//! maximum intensity projection).
 //!
 //! Each ray is clipped to the volume box `[0, extent)` and cut into segments of the step `Δ`
 //! from the entry point, the last one shorter; each segment is sampled at its midpoint and
@@ -13,7 +14,7 @@ use std::sync::{Arc, RwLock};
 use rayon::prelude::*;
 
 use crate::image::RgbImage;
-use crate::scene::{ChannelStyle, Filter, Scene, bspline_weights, corrected_opacity};
+use crate::scene::{ChannelStyle, Filter, RenderMode, Scene, bspline_weights, corrected_opacity};
 use crate::source::{BrickKey, BrickSource, BrickVoxels, SourceError, VolumeInfo};
 
 /// Why the reference cannot render a scene: options, a camera or a volume that define no
@@ -367,21 +368,19 @@ pub fn render(
                 .camera
                 .ray_direction(px, py, options.width, options.height);
             let mut lasts: Vec<Option<([u64; 3], Arc<BrickVoxels>)>> = vec![None; volumes.len()];
-            let (colour, t) = march(
+            let pixel = march(
                 scene.camera.eye,
                 dir,
                 extent,
                 (step, reference_step),
                 options.min_transmittance,
-                scene.filter,
+                scene,
                 &visible,
                 &volumes,
                 spacing_xyz,
                 &mut lasts,
             )?;
-            Ok(std::array::from_fn(|i| {
-                (colour[i] + t * scene.background[i]) as f32
-            }))
+            Ok(pixel.map(|c| c as f32))
         })
         .collect::<Result<Vec<[f32; 3]>, ReferenceError>>()?;
     Ok(RgbImage {
@@ -398,7 +397,93 @@ fn extent_xyz(info: &VolumeInfo) -> [f64; 3] {
     [s[2] as f64 * v[2], s[1] as f64 * v[1], s[0] as f64 * v[0]]
 }
 
-/// Marches one ray; returns the accumulated colour and the final transmittance.
+/// What a ray has made of its samples so far, by the scene's mode ([`crate::scene`]).
+enum Accumulated {
+    /// Emission–absorption: the colour and the transmittance.
+    Dvr([f64; 3], f64),
+    /// Maximum intensity projection: each visible channel's largest value (`None`: no value
+    /// yet).
+    Mip(Vec<Option<f64>>),
+}
+
+impl Accumulated {
+    /// Nothing yet, for `channels` visible channels in `mode`.
+    fn new(mode: RenderMode, channels: usize) -> Self {
+        match mode {
+            RenderMode::Dvr => Self::Dvr([0.0; 3], 1.0),
+            RenderMode::Mip => Self::Mip(vec![None; channels]),
+        }
+    }
+
+    /// Whether nothing further along the ray can change the pixel: the transmittance is at
+    /// most `min_transmittance` (or 0), or every channel's maximum has reached its
+    /// [`ChannelStyle::saturation_value`].
+    fn done(&self, styles: &[&ChannelStyle], min_transmittance: f64) -> bool {
+        match self {
+            Self::Dvr(_, t) => *t <= min_transmittance || *t == 0.0,
+            Self::Mip(maxima) => styles
+                .iter()
+                .zip(maxima)
+                .all(|(s, m)| m.unwrap_or(f64::NEG_INFINITY) >= s.saturation_value()),
+        }
+    }
+
+    /// Takes one segment of length `length` whose samples are `values` (one per visible
+    /// channel, NaN for none).
+    fn take(&mut self, styles: &[&ChannelStyle], values: &[f64], length: f64, reference: f64) {
+        match self {
+            Self::Dvr(colour, t) => {
+                let mut sample_colour = [0.0; 3];
+                let mut alpha_sum = 0.0;
+                for (style, &v) in styles.iter().zip(values) {
+                    let alpha = corrected_opacity(style.opacity_at(v), length, reference);
+                    alpha_sum += alpha;
+                    for (s, c) in sample_colour.iter_mut().zip(style.color) {
+                        *s += alpha * c;
+                    }
+                }
+                let alpha = alpha_sum.min(1.0);
+                for (c, s) in colour.iter_mut().zip(sample_colour) {
+                    *c += *t * s;
+                }
+                *t *= 1.0 - alpha;
+            }
+            Self::Mip(maxima) => {
+                for (m, &v) in maxima.iter_mut().zip(values) {
+                    if !v.is_nan() {
+                        *m = Some(m.map_or(v, |m| m.max(v)));
+                    }
+                }
+            }
+        }
+    }
+
+    /// The pixel over `background`.
+    fn pixel(&self, styles: &[&ChannelStyle], background: [f64; 3]) -> [f64; 3] {
+        match self {
+            Self::Dvr(colour, t) => std::array::from_fn(|i| colour[i] + t * background[i]),
+            Self::Mip(maxima) => {
+                let mut colour = [0.0; 3];
+                let mut sum = 0.0;
+                for (style, m) in styles.iter().zip(maxima) {
+                    let top = style.opacity_top();
+                    let w = match m {
+                        Some(m) if top > 0.0 => style.opacity_at(*m) / top,
+                        _ => 0.0,
+                    };
+                    sum += w;
+                    for (o, c) in colour.iter_mut().zip(style.color) {
+                        *o += w * c;
+                    }
+                }
+                let a = sum.min(1.0);
+                std::array::from_fn(|i| colour[i] + (1.0 - a) * background[i])
+            }
+        }
+    }
+}
+
+/// Marches one ray; returns its pixel.
 #[allow(clippy::too_many_arguments)]
 fn march(
     eye: [f64; 3],
@@ -406,16 +491,17 @@ fn march(
     extent: [f64; 3],
     (step, reference_step): (f64, f64),
     min_transmittance: f64,
-    filter: Filter,
+    scene: &Scene,
     styles: &[&ChannelStyle],
     volumes: &[Level0],
     spacing_xyz: [f64; 3],
     lasts: &mut [Option<([u64; 3], Arc<BrickVoxels>)>],
-) -> Result<([f64; 3], f64), ReferenceError> {
-    let mut colour = [0.0; 3];
-    let mut t = 1.0;
-    let Some((t0, t1)) = clip_to_box(eye, dir, extent) else {
-        return Ok((colour, t));
+) -> Result<[f64; 3], ReferenceError> {
+    let mut ray = Accumulated::new(scene.mode, styles.len());
+    let Some((t0, t1)) = clip_to_box(eye, dir, extent)
+        .and_then(|span| scene.clip.clip_span(&scene.camera, dir, span))
+    else {
+        return Ok(ray.pixel(styles, scene.background));
     };
     let segments = ((t1 - t0) / step).ceil() as u64;
     let too_long = || ReferenceError::RayTooLong {
@@ -426,11 +512,12 @@ fn march(
     if segments > MAX_STEPS_PER_RAY && min_transmittance <= 0.0 {
         return Err(too_long());
     }
+    let mut values = Vec::with_capacity(styles.len());
     for i in 0..segments {
         if i == MAX_STEPS_PER_RAY {
             return Err(too_long());
         }
-        if t <= min_transmittance || t == 0.0 {
+        if ray.done(styles, min_transmittance) {
             break;
         }
         let a = t0 + i as f64 * step;
@@ -446,23 +533,13 @@ fn march(
             p[1] / spacing_xyz[1] - 0.5,
             p[0] / spacing_xyz[0] - 0.5,
         ];
-        let mut sample_colour = [0.0; 3];
-        let mut alpha_sum = 0.0;
-        for ((style, volume), last) in styles.iter().zip(volumes).zip(lasts.iter_mut()) {
-            let v = volume.filtered(filter, u, last)?;
-            let alpha = corrected_opacity(style.opacity_at(v), b - a, reference_step);
-            alpha_sum += alpha;
-            for (s, c) in sample_colour.iter_mut().zip(style.color) {
-                *s += alpha * c;
-            }
+        values.clear();
+        for (volume, last) in volumes.iter().zip(lasts.iter_mut()) {
+            values.push(volume.filtered(scene.filter, u, last)?);
         }
-        let alpha = alpha_sum.min(1.0);
-        for (c, s) in colour.iter_mut().zip(sample_colour) {
-            *c += t * s;
-        }
-        t *= 1.0 - alpha;
+        ray.take(styles, &values, b - a, reference_step);
     }
-    Ok((colour, t))
+    Ok(ray.pixel(styles, scene.background))
 }
 
 #[cfg(test)]
@@ -551,6 +628,8 @@ mod tests {
             }],
             background: [0.0, 0.0, 1.0],
             filter: Filter::Trilinear,
+            mode: RenderMode::Dvr,
+            clip: crate::scene::Clip::default(),
         }
     }
 

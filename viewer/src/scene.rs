@@ -15,14 +15,28 @@
 //! `α = min(1, Σ α_c)`. The ray accumulates `C += T·colour`, `T *= 1 − α`, starting from
 //! `T = 1`, and the final pixel is `C + T·background`.
 //!
+//! **Maximum intensity projection** (`mode: mip`). Each visible channel `c` keeps the
+//! largest value `m_c` of its samples along the ray (NaN samples are ignored; `m_c = −∞` when
+//! the ray meets none). Its opacity transfer function, scaled so that its highest control
+//! point is 1, maps that value to an intensity `w_c = a_c(m_c) / max a_c` (a ramp is a
+//! contrast window: 0 below its low end, 1 above its high end); a channel whose control points
+//! are all 0 shows nothing. Channels add, as in napari: the pixel is `Σ w_c·colour_c +
+//! (1 − a)·background` with `a = min(1, Σ w_c)`. The step does not enter: no opacity
+//! correction, no early termination, except that a ray stops once every channel's maximum has
+//! reached the value above which its intensity stays 1. Skipping is exact: a region whose
+//! largest value in a channel is at most the ray's maximum so far cannot change it, and one
+//! where the channel's transfer function is 0 for every value up to the region's largest
+//! (not merely inside its range) cannot change the pixel ([`ChannelStyle::hides`]).
+//!
 //! **Projection** (pinhole, [`Camera::ray_direction`]): `forward = normalize(target − eye)`,
 //! `right = normalize(forward × up)`, `up' = right × forward`. Pixel `(px, py)` of a `W × H`
 //! image (row 0 at the top) looks along `normalize(forward + nx·tan(fov/2)·(W/H)·right +
 //! ny·tan(fov/2)·up')` with `nx = 2(px + ½)/W − 1` and `ny = 1 − 2(py + ½)/H`.
 //!
 //! **Scene files** are these types as JSON (`schemas/json/scene.schema.json`); `up` defaults
-//! to `−y` (so that, looking toward `+z`, `x` runs right and `y` down as in a slice viewer), `fov_y_degrees` to 30, `visible` to true, `background` to black and `filter` to
-//! trilinear.
+//! to `−y` (so that, looking toward `+z`, `x` runs right and `y` down as in a slice viewer),
+//! `fov_y_degrees` to 30, `visible` to true, `background` to black, `filter` to trilinear and
+//! `mode` to `dvr`.
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
@@ -170,6 +184,49 @@ impl ChannelStyle {
         pts[pts.len() - 1].opacity
     }
 
+    /// The highest opacity of the control points: what maximum intensity projection scales
+    /// the transfer function by (0 when every point is 0, or there are none).
+    pub fn opacity_top(&self) -> f64 {
+        self.opacity.iter().map(|p| p.opacity).fold(0.0, f64::max)
+    }
+
+    /// The value from which maximum intensity projection's intensity no longer changes as the
+    /// ray's maximum grows: the first control point of the run of points at the top opacity
+    /// that ends the list (the intensity stays 1 from there); `−∞` when every point is 0 (the
+    /// intensity is always 0); `+∞` when the transfer function ends below its top. A ray whose
+    /// maximum has reached it in every channel cannot change any more.
+    pub fn saturation_value(&self) -> f64 {
+        let top = self.opacity_top();
+        if top <= 0.0 {
+            return f64::NEG_INFINITY;
+        }
+        let run = self
+            .opacity
+            .iter()
+            .rev()
+            .take_while(|p| p.opacity == top)
+            .count();
+        match run {
+            0 => f64::INFINITY,
+            n => self.opacity[self.opacity.len() - n].value,
+        }
+    }
+
+    /// Whether a region of values in `[lo, hi]` of this channel shows nothing under `mode`,
+    /// so that it is neither sampled nor fetched: in [`RenderMode::Dvr`], the transfer function
+    /// is transparent over `[lo, hi]` ([`ChannelStyle::transparent_over`]); in
+    /// [`RenderMode::Mip`], over every value up to `hi`, since a value in the region may become
+    /// the ray's maximum and the intensity is that of the maximum. An invisible channel, and a
+    /// region of NaN only, show nothing in either.
+    pub fn hides(&self, mode: RenderMode, lo: f64, hi: f64) -> bool {
+        match mode {
+            RenderMode::Dvr => self.transparent_over(lo, hi),
+            RenderMode::Mip => {
+                lo.is_nan() || hi.is_nan() || self.transparent_over(f64::NEG_INFINITY, hi)
+            }
+        }
+    }
+
     /// Whether the transfer function is fully transparent for every value in `[lo, hi]`.
     pub fn transparent_over(&self, lo: f64, hi: f64) -> bool {
         // An invisible channel, or a region of NaN only, shows nothing.
@@ -239,6 +296,50 @@ impl Named for Filter {
     const NOUN: &'static str = "filter";
 }
 
+/// What a ray makes of the samples it meets: the rule that every method, the web viewer
+/// and the f64 reference follow (the module doc has both in full).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Hash,
+    Serialize,
+    Deserialize,
+    JsonSchema,
+    strum::EnumCount,
+    strum::EnumString,
+    strum::IntoStaticStr,
+    strum::VariantArray,
+    strum::VariantNames,
+)]
+#[serde(rename_all = "kebab-case")]
+#[strum(
+    serialize_all = "kebab-case",
+    parse_err_ty = UnknownMode,
+    parse_err_fn = UnknownMode::new
+)]
+pub enum RenderMode {
+    /// Emission–absorption volume rendering: the channels' colours composited front to back
+    /// with the opacity of their transfer functions.
+    #[default]
+    Dvr,
+    /// Maximum intensity projection: per channel the largest value along the ray, shown
+    /// through its transfer function scaled to 1, the channels added.
+    Mip,
+}
+
+crate::names::strum_names!(RenderMode, all);
+
+impl Named for RenderMode {
+    const NOUN: &'static str = "mode";
+}
+
+/// A mode name that is not one of [`RenderMode::ALL`]'s.
+pub type UnknownMode = UnknownName<RenderMode>;
+
 /// A filter name that is not one of [`Filter::ALL`]'s.
 pub type UnknownFilter = UnknownName<Filter>;
 
@@ -252,6 +353,199 @@ pub fn bspline_weights(a: f64) -> [f64; 4] {
         (-3.0 * a3 + 3.0 * a2 + 3.0 * a + 1.0) / 6.0,
         a3 / 6.0,
     ]
+}
+
+/// The most clipping planes a scene has (besides `near`).
+pub const MAX_CLIP_PLANES: usize = 6;
+
+/// An axis-aligned box in world space: the points `p` with `min ≤ p ≤ max` on every axis.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ClipBox {
+    /// Low corner, world `x, y, z`.
+    pub min: [f64; 3],
+    /// High corner, world `x, y, z`.
+    pub max: [f64; 3],
+}
+
+/// A plane in world space keeping the half-space its normal points into: the points `p` with
+/// `(p − point) · normal ≥ 0`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct ClipPlane {
+    /// A point on the plane, world `x, y, z`.
+    pub point: [f64; 3],
+    /// Its normal (any length but 0), pointing into what is kept.
+    pub normal: [f64; 3],
+}
+
+impl ClipPlane {
+    /// Where the ray `eye + t·dir` is on the kept side, as a bound on `t`: `(lo, hi)` with
+    /// `lo = −∞` or `hi = +∞` where the plane does not bound that end; `None` for a ray
+    /// parallel to the plane on the cut side.
+    fn bound(&self, eye: [f64; 3], dir: [f64; 3]) -> Option<(f64, f64)> {
+        let s0: f64 = (0..3)
+            .map(|k| (eye[k] - self.point[k]) * self.normal[k])
+            .sum();
+        let dn: f64 = (0..3).map(|k| dir[k] * self.normal[k]).sum();
+        if dn == 0.0 {
+            return (s0 >= 0.0).then_some((f64::NEG_INFINITY, f64::INFINITY));
+        }
+        let t = -s0 / dn;
+        Some(if dn > 0.0 {
+            (t, f64::INFINITY)
+        } else {
+            (f64::NEG_INFINITY, t)
+        })
+    }
+}
+
+/// What part of the volume is drawn: the points inside the box, on the kept side of every
+/// plane, and at least `near` from the eye along the view direction (a plane that follows the
+/// camera). Clipping cuts each ray's span through the volume, so what lies outside is neither
+/// sampled nor fetched, in every mode and method.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct Clip {
+    /// The box kept (world space).
+    #[serde(default, rename = "box", skip_serializing_if = "Option::is_none")]
+    pub region: Option<ClipBox>,
+    /// Planes, each keeping the side its normal points into; at most [`MAX_CLIP_PLANES`].
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[schemars(length(max = 6))]
+    pub planes: Vec<ClipPlane>,
+    /// Distance from the eye along the view direction before which nothing is drawn (world
+    /// units).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(range(min = 0))]
+    pub near: Option<f64>,
+}
+
+/// Why a scene's clipping cannot be drawn.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum ClipError {
+    /// A box whose corners are not finite, or whose low corner is above its high one.
+    #[error("clip box: min {min:?} must be finite and at most max {max:?} on every axis")]
+    Box {
+        /// The low corner given.
+        min: [f64; 3],
+        /// The high corner given.
+        max: [f64; 3],
+    },
+    /// A plane whose point or normal is not finite, or whose normal is 0.
+    #[error(
+        "clip plane {index}: point {point:?} and normal {normal:?} must be finite, the normal not 0"
+    )]
+    Plane {
+        /// Its position in the list.
+        index: usize,
+        /// Its point.
+        point: [f64; 3],
+        /// Its normal.
+        normal: [f64; 3],
+    },
+    /// More planes than [`MAX_CLIP_PLANES`].
+    #[error("clip: {planes} planes, at most {MAX_CLIP_PLANES}")]
+    TooManyPlanes {
+        /// How many were given.
+        planes: usize,
+    },
+    /// A near distance that is negative or not finite.
+    #[error("clip near {near}: must be finite and at least 0")]
+    Near {
+        /// The distance given.
+        near: f64,
+    },
+}
+
+impl Clip {
+    /// Whether nothing is clipped.
+    pub fn is_empty(&self) -> bool {
+        self.region.is_none() && self.planes.is_empty() && self.near.is_none()
+    }
+
+    /// Checks that the clipping can be drawn.
+    ///
+    /// # Errors
+    /// The first [`ClipError`]: the box, the planes' count, each plane, then `near`.
+    pub fn check(&self) -> Result<(), ClipError> {
+        if let Some(b) = self.region {
+            let ok = (0..3)
+                .all(|k| b.min[k].is_finite() && b.max[k].is_finite() && b.min[k] <= b.max[k]);
+            if !ok {
+                return Err(ClipError::Box {
+                    min: b.min,
+                    max: b.max,
+                });
+            }
+        }
+        if self.planes.len() > MAX_CLIP_PLANES {
+            return Err(ClipError::TooManyPlanes {
+                planes: self.planes.len(),
+            });
+        }
+        for (index, p) in self.planes.iter().enumerate() {
+            let finite = p.point.iter().chain(&p.normal).all(|v| v.is_finite());
+            if !finite || p.normal == [0.0; 3] {
+                return Err(ClipError::Plane {
+                    index,
+                    point: p.point,
+                    normal: p.normal,
+                });
+            }
+        }
+        if let Some(near) = self.near
+            && !(near.is_finite() && near >= 0.0)
+        {
+            return Err(ClipError::Near { near });
+        }
+        Ok(())
+    }
+
+    /// Every plane that bounds what is kept, for `camera`: the planes, then `near`'s (its
+    /// normal the view direction).
+    pub fn planes_for(&self, camera: &Camera) -> Vec<ClipPlane> {
+        let mut planes = self.planes.clone();
+        if let Some(near) = self.near {
+            let (forward, _, _) = camera.basis();
+            planes.push(ClipPlane {
+                point: std::array::from_fn(|k| camera.eye[k] + near * forward[k]),
+                normal: forward,
+            });
+        }
+        planes
+    }
+
+    /// The part `[t0, t1]` of the span `span` of the ray `camera.eye + t·dir` that is kept
+    /// (`None` when nothing is): the f64 rule the GPU follows in `volume_span`.
+    pub fn clip_span(
+        &self,
+        camera: &Camera,
+        dir: [f64; 3],
+        span: (f64, f64),
+    ) -> Option<(f64, f64)> {
+        let eye = camera.eye;
+        let (mut t0, mut t1) = span;
+        if let Some(b) = self.region {
+            for k in 0..3 {
+                if dir[k] == 0.0 {
+                    if eye[k] < b.min[k] || eye[k] > b.max[k] {
+                        return None;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((b.min[k] - eye[k]) / dir[k], (b.max[k] - eye[k]) / dir[k]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+        }
+        for plane in self.planes_for(camera) {
+            let (lo, hi) = plane.bound(eye, dir)?;
+            t0 = t0.max(lo);
+            t1 = t1.min(hi);
+        }
+        (t1 > t0).then_some((t0, t1))
+    }
 }
 
 /// A whole scene: camera, channel styles and background.
@@ -270,6 +564,24 @@ pub struct Scene {
     /// The reconstruction filter of every sample.
     #[serde(default)]
     pub filter: Filter,
+    /// What each ray makes of its samples.
+    #[serde(default)]
+    pub mode: RenderMode,
+    /// What part of the volume is drawn (all of it by default).
+    #[serde(default, skip_serializing_if = "Clip::is_empty")]
+    pub clip: Clip,
+}
+
+impl Scene {
+    /// Whether `other` draws alike but for the camera: the same channel styles, background,
+    /// filter, mode and clipping.
+    pub fn same_style(&self, other: &Scene) -> bool {
+        self.channels == other.channels
+            && self.background == other.background
+            && self.filter == other.filter
+            && self.mode == other.mode
+            && self.clip == other.clip
+    }
 }
 
 /// The example of the scene schema (read back by the tests and the fuzzing seeds).
@@ -298,7 +610,11 @@ fn scene_example() -> serde_json::Value {
                 ]
             }
         ],
-        "background": [0.0, 0.0, 0.0]
+        "background": [0.0, 0.0, 0.0],
+        "clip": {
+            "box": {"min": [0.0, 0.0, 0.0], "max": [40.0, 48.0, 40.0]},
+            "planes": [{"point": [20.0, 24.0, 20.0], "normal": [1.0, 0.0, 1.0]}]
+        }
     })
 }
 
@@ -453,6 +769,212 @@ mod tests {
             assert_eq!(serde_json::to_value(f).unwrap(), f.name());
             assert_eq!(f.name().parse::<Filter>(), Ok(f));
         }
+    }
+
+    fn style(points: &[(f64, f64)]) -> ChannelStyle {
+        ChannelStyle {
+            channel: 0,
+            visible: true,
+            color: [1.0; 3],
+            opacity: points
+                .iter()
+                .map(|&(value, opacity)| OpacityPoint { value, opacity })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn each_mode_has_one_name_for_strum_and_serde() {
+        assert_eq!(RenderMode::ALL.map(RenderMode::name), ["dvr", "mip"]);
+        for m in RenderMode::ALL {
+            assert_eq!(serde_json::to_value(m).unwrap(), m.name());
+            assert_eq!(m.name().parse::<RenderMode>(), Ok(m));
+        }
+        assert_eq!(
+            "iso".parse::<RenderMode>().unwrap_err().to_string(),
+            "unknown mode 'iso' (dvr or mip)"
+        );
+        let s: Scene = serde_json::from_str(
+            r#"{"camera": {"eye": [0,0,5], "target": [0,0,0]}, "channels": [], "mode": "mip"}"#,
+        )
+        .unwrap();
+        assert_eq!(s.mode, RenderMode::Mip);
+    }
+
+    #[test]
+    fn mip_scales_the_transfer_function_and_saturates_at_its_last_top_run() {
+        let ramp = style(&[(100.0, 0.0), (200.0, 0.08)]);
+        assert_eq!(ramp.opacity_top(), 0.08);
+        assert_eq!(ramp.saturation_value(), 200.0);
+        // A peak that falls again never saturates; a plateau saturates where its top run
+        // starts; a function of zeros is always 0, so it never holds a ray back.
+        let peak = style(&[(0.0, 0.0), (50.0, 0.5), (90.0, 0.1)]);
+        assert_eq!(
+            (peak.opacity_top(), peak.saturation_value()),
+            (0.5, f64::INFINITY)
+        );
+        let plateau = style(&[
+            (0.0, 0.0),
+            (10.0, 0.4),
+            (20.0, 0.4),
+            (30.0, 0.2),
+            (40.0, 0.4),
+        ]);
+        assert_eq!(plateau.saturation_value(), 40.0);
+        let run = style(&[(0.0, 0.0), (10.0, 0.4), (20.0, 0.4)]);
+        assert_eq!(run.saturation_value(), 10.0);
+        let zeros = style(&[(0.0, 0.0), (10.0, 0.0)]);
+        assert_eq!(
+            (zeros.opacity_top(), zeros.saturation_value()),
+            (0.0, f64::NEG_INFINITY)
+        );
+        assert_eq!(style(&[]).saturation_value(), f64::NEG_INFINITY);
+    }
+
+    #[test]
+    fn mip_hides_a_region_only_below_where_the_function_first_rises() {
+        let ramp = style(&[(100.0, 0.0), (200.0, 0.08)]);
+        // DVR: transparent inside [lo, hi]. MIP: transparent for every value up to hi.
+        for (lo, hi, dvr, mip) in [
+            (0.0, 100.0, true, true),
+            (0.0, 150.0, false, false),
+            (150.0, 180.0, false, false),
+            (f64::NAN, f64::NAN, true, true),
+        ] {
+            assert_eq!(ramp.hides(RenderMode::Dvr, lo, hi), dvr, "{lo} {hi}");
+            assert_eq!(ramp.hides(RenderMode::Mip, lo, hi), mip, "{lo} {hi}");
+        }
+        // A band: [300, 400] is transparent, yet its values may become the ray's maximum, and
+        // the maximum's intensity is 0 only up to 100.
+        let band = style(&[(100.0, 0.0), (150.0, 0.5), (200.0, 0.0)]);
+        assert!(band.hides(RenderMode::Dvr, 300.0, 400.0));
+        assert!(!band.hides(RenderMode::Mip, 300.0, 400.0));
+        assert!(band.hides(RenderMode::Mip, 20.0, 90.0));
+        // Opaque from the start: nothing is hidden.
+        let floor = style(&[(100.0, 0.2), (200.0, 0.5)]);
+        assert!(!floor.hides(RenderMode::Mip, 0.0, 1.0));
+        let hidden = ChannelStyle {
+            visible: false,
+            ..ramp
+        };
+        assert!(hidden.hides(RenderMode::Mip, 0.0, 1000.0));
+    }
+
+    #[test]
+    fn clipping_cuts_the_span_by_the_box_the_planes_and_near() {
+        let camera = Camera {
+            eye: [-10.0, 5.0, 5.0],
+            target: [5.0, 5.0, 5.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_degrees: 30.0,
+        };
+        let dir = [1.0, 0.0, 0.0];
+        let span = (10.0, 20.0); // the volume [0, 10) along x
+        let mut clip = Clip::default();
+        assert!(clip.is_empty());
+        assert_eq!(clip.clip_span(&camera, dir, span), Some(span));
+        clip.region = Some(ClipBox {
+            min: [2.0, 0.0, 0.0],
+            max: [6.0, 10.0, 10.0],
+        });
+        assert_eq!(clip.clip_span(&camera, dir, span), Some((12.0, 16.0)));
+        // A plane keeping x ≥ 3 (normal +x), then one keeping x ≤ 5.
+        clip.planes.push(ClipPlane {
+            point: [3.0, 0.0, 0.0],
+            normal: [2.0, 0.0, 0.0],
+        });
+        clip.planes.push(ClipPlane {
+            point: [5.0, 0.0, 0.0],
+            normal: [-1.0, 0.0, 0.0],
+        });
+        assert_eq!(clip.clip_span(&camera, dir, span), Some((13.0, 15.0)));
+        // Near: nothing closer than 14 to the eye along the view direction.
+        clip.near = Some(14.0);
+        assert_eq!(clip.clip_span(&camera, dir, span), Some((14.0, 15.0)));
+        assert_eq!(clip.planes_for(&camera).len(), 3);
+        clip.near = Some(16.0);
+        assert_eq!(clip.clip_span(&camera, dir, span), None);
+        // A ray parallel to a plane: kept on its side, cut on the other.
+        let side = ClipPlane {
+            point: [0.0, 6.0, 0.0],
+            normal: [0.0, 1.0, 0.0],
+        };
+        let parallel = Clip {
+            planes: vec![side],
+            ..Clip::default()
+        };
+        assert_eq!(parallel.clip_span(&camera, dir, span), None);
+        let other = Clip {
+            planes: vec![ClipPlane {
+                normal: [0.0, -1.0, 0.0],
+                ..side
+            }],
+            ..Clip::default()
+        };
+        assert_eq!(other.clip_span(&camera, dir, span), Some(span));
+    }
+
+    #[test]
+    fn clipping_that_cannot_be_drawn_is_named() {
+        let plane = ClipPlane {
+            point: [0.0; 3],
+            normal: [0.0, 0.0, 1.0],
+        };
+        let cases = [
+            (
+                Clip {
+                    region: Some(ClipBox {
+                        min: [0.0, 5.0, 0.0],
+                        max: [1.0, 4.0, 1.0],
+                    }),
+                    ..Clip::default()
+                },
+                "clip box: min [0.0, 5.0, 0.0] must be finite and at most max [1.0, 4.0, 1.0] \
+                 on every axis",
+            ),
+            (
+                Clip {
+                    planes: vec![plane; 7],
+                    ..Clip::default()
+                },
+                "clip: 7 planes, at most 6",
+            ),
+            (
+                Clip {
+                    planes: vec![
+                        plane,
+                        ClipPlane {
+                            normal: [0.0; 3],
+                            ..plane
+                        },
+                    ],
+                    ..Clip::default()
+                },
+                "clip plane 1: point [0.0, 0.0, 0.0] and normal [0.0, 0.0, 0.0] must be \
+                 finite, the normal not 0",
+            ),
+            (
+                Clip {
+                    near: Some(-1.0),
+                    ..Clip::default()
+                },
+                "clip near -1: must be finite and at least 0",
+            ),
+        ];
+        for (clip, message) in cases {
+            assert_eq!(clip.check().unwrap_err().to_string(), message);
+        }
+        let json = r#"{"camera": {"eye": [0,0,5], "target": [0,0,0]}, "channels": [],
+            "clip": {"box": {"min": [0,0,0], "max": [1,1,1]}, "near": 2}}"#;
+        let s: Scene = serde_json::from_str(json).unwrap();
+        assert_eq!(s.clip.near, Some(2.0));
+        assert!(s.clip.check().is_ok());
+        // An unclipped scene is written without the field.
+        let plain = Scene {
+            clip: Clip::default(),
+            ..s
+        };
+        assert!(serde_json::to_value(&plain).unwrap().get("clip").is_none());
     }
 
     #[test]

@@ -419,7 +419,50 @@ function listen() {
   const showFilter = () => { filter.value = JSON.parse(viewer.scene_json()).filter ?? "trilinear"; };
   showFilter();
   filter.addEventListener("change", (e) => viewer.set_filter(e.target.value));
-  const reset = () => { viewer.reset(); buildControls(JSON.parse(viewer.info_json())); showFilter(); };
+  // The render mode (scene "mode"): a new renderer, the cache refilled.
+  const mode = document.getElementById("mode");
+  const showMode = () => { mode.value = JSON.parse(viewer.scene_json()).mode ?? "dvr"; };
+  showMode();
+  mode.addEventListener("change", (e) => viewer.set_mode(e.target.value));
+  // Clipping (scene "clip"): a box, as fractions of the volume's extent per axis, and a cut
+  // facing the camera at `near` from the eye, from the volume's nearest possible point (0) to
+  // its farthest (1) at the camera's distance. The scene's own planes are kept.
+  const extent = JSON.parse(viewer.info_json()).extent;
+  const axes = ["x", "y", "z"];
+  const slider = (name) => document.getElementById(`clip-${name}`);
+  const radius = 0.5 * Math.hypot(...extent);
+  const eyeDistance = (camera) => Math.hypot(...camera.eye.map((e, a) => e - camera.target[a]));
+  const applyClip = () => {
+    const scene = JSON.parse(viewer.scene_json());
+    const clip = {};
+    const lo = axes.map((a, i) => Math.min(+slider(`${a}-min`).value, +slider(`${a}-max`).value) * extent[i]);
+    const hi = axes.map((a, i) => Math.max(+slider(`${a}-min`).value, +slider(`${a}-max`).value) * extent[i]);
+    if (lo.some((v) => v > 0) || hi.some((v, i) => v < extent[i])) clip.box = { min: lo, max: hi };
+    if (scene.clip?.planes) clip.planes = scene.clip.planes;
+    const front = +slider("near").value;
+    if (front > 0) clip.near = Math.max(0, eyeDistance(scene.camera) - radius) + front * 2 * radius;
+    viewer.set_clip(JSON.stringify(clip));
+  };
+  const showClip = () => {
+    const scene = JSON.parse(viewer.scene_json());
+    const box = scene.clip?.box;
+    axes.forEach((a, i) => {
+      slider(`${a}-min`).value = box ? box.min[i] / extent[i] : 0;
+      slider(`${a}-max`).value = box ? box.max[i] / extent[i] : 1;
+    });
+    const near = scene.clip?.near;
+    slider("near").value = near == null ? 0 : (near - Math.max(0, eyeDistance(scene.camera) - radius)) / (2 * radius);
+  };
+  showClip();
+  for (const a of axes) for (const end of ["min", "max"]) slider(`${a}-${end}`).addEventListener("input", applyClip);
+  slider("near").addEventListener("input", applyClip);
+  const reset = () => {
+    viewer.reset();
+    buildControls(JSON.parse(viewer.info_json()));
+    showFilter();
+    showMode();
+    showClip();
+  };
   // The remote switch: only with a render service (?render=URL).
   const remote = document.getElementById("remote");
   remote.disabled = !service;

@@ -1,13 +1,14 @@
 //! Scene files (`viewer/src/scene.rs`, read by `viewer::cli::scene_args::read_scene`) on any
-//! bytes, then what the renderer asks of a scene: the camera frame and some rays, and every
-//! channel's opacity at a few values and over a few ranges. A scene must serialise and parse
-//! back to itself.
+//! bytes, then what the renderer asks of a scene: the camera frame and some rays, every
+//! channel's opacity at a few values and over a few ranges (and what each mode hides there,
+//! MIP's scale and saturation), and the clipped span of those rays. A scene must serialise and
+//! parse back to itself.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
 use residency_fuzz::scratch;
 use residency_viewer::defaults::read_scene;
-use residency_viewer::scene::{Scene, box_diagonal, corrected_opacity};
+use residency_viewer::scene::{RenderMode, Scene, box_diagonal, corrected_opacity};
 
 fuzz_target!(|data: &[u8]| {
     let path = scratch::file("scene.json", data);
@@ -17,7 +18,10 @@ fuzz_target!(|data: &[u8]| {
     let cam = &scene.camera;
     let _ = cam.basis();
     for (px, py, w, h) in [(0, 0, 1, 1), (3, 1, 4, 2), (0, 9, 1, 10)] {
-        let _ = cam.ray_direction(px, py, w, h);
+        let dir = cam.ray_direction(px, py, w, h);
+        if let Some((t0, t1)) = scene.clip.clip_span(cam, dir, (0.0, 1e6)) {
+            assert!(t0 < t1 && t0 >= 0.0 && t1 <= 1e6, "{t0} {t1}");
+        }
     }
     let probes = [
         f64::NEG_INFINITY,
@@ -37,7 +41,11 @@ fuzz_target!(|data: &[u8]| {
         }
         for w in probes.windows(2) {
             let _ = ch.transparent_over(w[0], w[1]);
+            for mode in RenderMode::ALL {
+                let _ = ch.hides(mode, w[0], w[1]);
+            }
         }
+        let _ = (ch.opacity_top(), ch.saturation_value());
     }
     let _ = box_diagonal(cam.eye);
     let json = serde_json::to_vec(&scene).expect("a scene serialises");

@@ -124,7 +124,7 @@ pub fn naive_fetch(info: &VolumeInfo, scene: &Scene, options: &RenderOptions) ->
     NaiveFetch { level, bricks }
 }
 
-/// Whether `key` is transparent under `scene`'s transfer function for its channel: the
+/// Whether `key` shows nothing under `scene`'s transfer function for its channel, in its mode: the
 /// renderer's rule for a brick it never fetches ([`crate::gpu::renderer::is_clear`]), judged
 /// by the brick's conservative range, so a brick counted here is certainly empty. A channel
 /// without a style shows nothing.
@@ -133,7 +133,7 @@ pub fn transparent(info: &VolumeInfo, scene: &Scene, key: &BrickKey) -> bool {
         .channels
         .iter()
         .find(|c| c.channel == key.channel as usize)
-        .is_none_or(|c| crate::gpu::renderer::is_clear(info, c, key, scene.filter))
+        .is_none_or(|c| crate::gpu::renderer::is_clear(info, c, scene.mode, key, scene.filter))
 }
 
 /// Whether `key` holds the fill value (0) everywhere by its range, so that the store has no

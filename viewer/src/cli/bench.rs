@@ -97,7 +97,7 @@ pub struct RunArgs {
     /// Experiments, comma-separated: table1, sweep, skipped, scaling.
     #[arg(
         long,
-        value_parser = experiment_parser(),
+        value_parser = super::names_parser::<Experiment>(),
         value_delimiter = ',',
         default_value = "table1,skipped"
     )]
@@ -192,13 +192,6 @@ pub struct ReportArgs {
     /// The command line named in the report as how the numbers were made.
     #[arg(long, default_value = "viewer bench")]
     pub command: String,
-}
-
-/// Parses one `--experiment` value: one of the library's [`Experiment`] names.
-fn experiment_parser() -> impl clap::builder::TypedValueParser<Value = Experiment> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(<Experiment as strum::VariantNames>::VARIANTS)
-        .map(|s| s.parse::<Experiment>().expect("one of the possible values"))
 }
 
 fn parse_method(s: &str) -> Result<MethodConfig> {

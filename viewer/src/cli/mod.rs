@@ -9,3 +9,16 @@ pub mod scene_args;
 pub mod serve;
 pub mod vdi;
 pub mod view;
+
+/// Parses a flag whose values are the variant names of one of the library's named enums
+/// (`--method`, `--filter`, `--mode`, `--experiment`): clap lists them in the help and in the
+/// error for any other value.
+pub fn names_parser<E>() -> impl clap::builder::TypedValueParser<Value = E>
+where
+    E: strum::VariantNames + std::str::FromStr + Clone + Send + Sync + 'static,
+    E::Err: std::fmt::Debug,
+{
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(E::VARIANTS)
+        .map(|s| s.parse::<E>().expect("one of the possible values"))
+}

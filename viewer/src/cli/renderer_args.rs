@@ -11,13 +11,6 @@ use residency_viewer::gpu::streaming::Budget;
 use residency_viewer::scene::Scene;
 use residency_viewer::source::BrickSource;
 
-/// Parses `--method`: one of the library's [`Method`] names.
-pub fn method_parser() -> impl clap::builder::TypedValueParser<Value = Method> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(<Method as strum::VariantNames>::VARIANTS)
-        .map(|s| s.parse::<Method>().expect("one of the possible values"))
-}
-
 /// How long a view may take to converge (flattened into `viewer render`, `viewer vdi` and
 /// `viewer serve`).
 #[derive(clap::Args, Debug)]
@@ -83,7 +76,7 @@ pub struct RendererArgs {
     /// another paper's renderer: `sparseleap` (occupancy geometry rasterised into per-pixel
     /// ray segment lists) or `rasterize` (a cut of bricks by projected bounding sphere,
     /// rasterised into ray segment lists, with macrocell skipping).
-    #[arg(long, default_value = Method::Residency.name(), value_parser = method_parser())]
+    #[arg(long, default_value = Method::Residency.name(), value_parser = super::names_parser::<Method>())]
     pub method: Method,
     /// Brick fetch worker threads.
     #[arg(long, default_value_t = 8)]

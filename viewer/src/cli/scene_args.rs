@@ -13,7 +13,7 @@ use residency_viewer::defaults::{
     CameraSpec, NumbersError, check_channel, default_channels, default_scene, numbers, read_scene,
     volume_extent,
 };
-use residency_viewer::scene::{Filter, OpacityPoint, Scene};
+use residency_viewer::scene::{ClipBox, ClipPlane, Filter, OpacityPoint, RenderMode, Scene};
 use residency_viewer::source::{BrickSource, HttpSource, LocalSource, VolumeInfo, read_token_file};
 
 /// Where the volume comes from: a brick server and dataset name, or a local store.
@@ -211,6 +211,39 @@ impl FromStr for Rgb {
     }
 }
 
+/// `--clip-box`: the box kept, `X0,Y0,Z0,X1,Y1,Z1` in world units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxSpec(pub ClipBox);
+
+impl FromStr for BoxSpec {
+    type Err = NumbersError;
+
+    fn from_str(s: &str) -> Result<Self, NumbersError> {
+        let v = numbers::<6>(s, "clip box")?;
+        Ok(Self(ClipBox {
+            min: [v[0], v[1], v[2]],
+            max: [v[3], v[4], v[5]],
+        }))
+    }
+}
+
+/// `--clip-plane`: a plane through a point keeping the side its normal points into,
+/// `PX,PY,PZ,NX,NY,NZ` in world units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PlaneSpec(pub ClipPlane);
+
+impl FromStr for PlaneSpec {
+    type Err = NumbersError;
+
+    fn from_str(s: &str) -> Result<Self, NumbersError> {
+        let v = numbers::<6>(s, "clip plane")?;
+        Ok(Self(ClipPlane {
+            point: [v[0], v[1], v[2]],
+            normal: [v[3], v[4], v[5]],
+        }))
+    }
+}
+
 /// What to draw: a JSON scene file (`schemas/json/scene.schema.json`) and/or flags. Flags
 /// override the file; without either, the camera orbits the volume and every channel gets
 /// its store colour and a ramp over its display window.
@@ -242,15 +275,27 @@ pub struct SceneArgs {
     /// Reconstruction filter of every sample: `trilinear`, or `tricubic` (the cubic B-spline
     /// over 4³ voxels; 8 trilinear fetches per sample) [default: the scene file's, else
     /// trilinear].
-    #[arg(long, value_name = "FILTER", value_parser = filter_parser())]
+    #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<Filter>())]
     pub filter: Option<Filter>,
-}
-
-/// Parses `--filter`: one of the library's [`Filter`] names.
-pub fn filter_parser() -> impl clap::builder::TypedValueParser<Value = Filter> {
-    use clap::builder::TypedValueParser;
-    clap::builder::PossibleValuesParser::new(<Filter as strum::VariantNames>::VARIANTS)
-        .map(|s| s.parse::<Filter>().expect("one of the possible values"))
+    /// What each ray makes of its samples: `dvr` (emission–absorption, the default) or `mip`
+    /// (maximum intensity projection: per channel the largest value along the ray, through
+    /// its transfer function scaled to 1, channels added) [default: the scene file's, else
+    /// dvr].
+    #[arg(long, value_name = "MODE", value_parser = super::names_parser::<RenderMode>())]
+    pub mode: Option<RenderMode>,
+    /// Draw only what lies inside this box: `X0,Y0,Z0,X1,Y1,Z1`, world units (replaces the
+    /// scene file's box).
+    #[arg(long, value_name = "BOX", allow_hyphen_values = true)]
+    pub clip_box: Option<BoxSpec>,
+    /// Draw only what lies on the side of a plane its normal points into:
+    /// `PX,PY,PZ,NX,NY,NZ`, a point and the normal, world units (repeatable, at most 6; added
+    /// to the scene file's planes).
+    #[arg(long, value_name = "PLANE", allow_hyphen_values = true)]
+    pub clip_plane: Vec<PlaneSpec>,
+    /// Draw nothing nearer the eye than this distance along the view direction (world units):
+    /// a clip plane that follows the camera.
+    #[arg(long, value_name = "DISTANCE")]
+    pub clip_near: Option<f64>,
 }
 
 impl SceneArgs {
@@ -312,7 +357,7 @@ impl SceneArgs {
     }
 
     /// Refuses the flags that would change what a VDI baked in (colours, transfer functions,
-    /// background, filter).
+    /// background, filter, mode, clipping).
     fn refuse_for_vdi(&self) -> Result<()> {
         let baked = [
             (!self.tf.is_empty(), "--tf"),
@@ -320,11 +365,15 @@ impl SceneArgs {
             (self.channels.is_some(), "--channels"),
             (self.background.is_some(), "--background"),
             (self.filter.is_some(), "--filter"),
+            (self.mode.is_some(), "--mode"),
+            (self.clip_box.is_some(), "--clip-box"),
+            (!self.clip_plane.is_empty(), "--clip-plane"),
+            (self.clip_near.is_some(), "--clip-near"),
         ];
         if let Some((_, flag)) = baked.iter().find(|(given, _)| *given) {
             bail!(
-                "{flag} does not apply to a VDI: its colours, transfer functions, background \
-                 and filter were fixed when it was generated (`viewer vdi`)"
+                "{flag} does not apply to a VDI: its colours, transfer functions, background, \
+                 filter, mode and clipping were fixed when it was generated (`viewer vdi`)"
             );
         }
         Ok(())
@@ -377,6 +426,20 @@ impl SceneArgs {
         if let Some(filter) = self.filter {
             scene.filter = filter;
         }
+        if let Some(mode) = self.mode {
+            scene.mode = mode;
+        }
+        if let Some(BoxSpec(b)) = self.clip_box {
+            scene.clip.region = Some(b);
+        }
+        scene
+            .clip
+            .planes
+            .extend(self.clip_plane.iter().map(|p| p.0));
+        if let Some(near) = self.clip_near {
+            scene.clip.near = Some(near);
+        }
+        scene.clip.check()?;
         scene.channels.sort_by_key(|s| s.channel);
         Ok(scene)
     }

@@ -15,7 +15,7 @@ use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
 use super::method::Method;
 use super::page_table::{APRON_SHIFT, ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
-use crate::scene::Filter;
+use crate::scene::{Filter, MAX_CLIP_PLANES, RenderMode};
 
 // The capacities the prelude gives the shader (see `wgsl_prelude`).
 pub use super::limits::{MAX_CHANNELS, MAX_LEVELS};
@@ -249,8 +249,24 @@ gpu_struct! {
         /// Most supersegments per pixel of a volumetric depth image (the VDI pipeline; 0
         /// otherwise): see [`VDI_STATE_SLOTS`].
         pub supersegments: u32,
+        /// What each ray keeps of the volume (`crate::scene::Clip`), leaf units from the
+        /// volume's corner: the low corner of the box kept, the volume's own where the scene
+        /// clips none (`volume_span` in `shaders/view.wgsl`).
+        pub clip_lo: [f32; 3],
+        /// Planes of `clip_planes` in use.
+        pub clip_plane_count: u32,
+        /// The high corner of the box kept.
+        pub clip_hi: [f32; 3],
+        /// Unused (alignment).
+        pub pad0: u32,
+        /// Clip planes `(n, d)`, leaf units from the volume's corner, `n` of unit length:
+        /// what is kept has `n · p ≥ d` (the scene's planes, then `near`'s).
+        pub clip_planes: [[f32; 4]; CLIP_PLANE_SLOTS],
     }
 }
+
+/// Slots for clip planes in [`Params`]: the scene's ([`MAX_CLIP_PLANES`]) and `near`'s.
+pub const CLIP_PLANE_SLOTS: usize = MAX_CLIP_PLANES + 1;
 
 /// Slots of a pixel's VDI state after its `supersegments` slots in the VDI target
 /// (`shaders/raycast/vdi.wgsl`): the ray's VDI state between passes, then, once it is done,
@@ -289,8 +305,18 @@ gpu_struct! {
         pub max_level: u32,
         /// Word offset of the control points `(value, opacity)` in the table buffer.
         pub points_offset: u32,
+        /// The highest opacity of the control points: maximum intensity projection's scale
+        /// ([`crate::scene::ChannelStyle::opacity_top`]).
+        pub opacity_top: f32,
+        /// The value from which maximum intensity projection's intensity no longer changes
+        /// ([`crate::scene::ChannelStyle::saturation_value`], clamped to `±f32::MAX`).
+        pub saturation: f32,
         /// Unused (alignment).
         pub pad0: u32,
+        /// Unused (alignment).
+        pub pad1: u32,
+        /// Unused (alignment).
+        pub pad2: u32,
     }
 }
 
@@ -485,6 +511,9 @@ pub fn wgsl_prelude() -> String {
         u("RECORD_WORDS", RECORD_WORDS),
         u("FILTER_TRILINEAR", Filter::Trilinear as u32),
         u("FILTER_TRICUBIC", Filter::Tricubic as u32),
+        u("MODE_DVR", RenderMode::Dvr as u32),
+        u("MODE_MIP", RenderMode::Mip as u32),
+        u("CLIP_PLANE_SLOTS", CLIP_PLANE_SLOTS as u32),
         u("ATLAS_UINT", AtlasKind::Uint as u32),
         u("ATLAS_SINT", AtlasKind::Sint as u32),
         u("ATLAS_FLOAT", AtlasKind::Float as u32),
@@ -503,6 +532,17 @@ pub fn wgsl_prelude() -> String {
 pub const FILTER_MANUAL: u32 = 0;
 /// The limit probe's pipeline constant `FILTER`: one hardware-filtered sample.
 pub const FILTER_HARDWARE: u32 = 1;
+
+/// Texels (`vec4<f32>`) of the ray caster's image buffer for `pixels` pixels: the image, then
+/// in [`RenderMode::Mip`] each pixel's running maxima of the `channels` channels drawn, four
+/// to a texel (`shaders/raycast.wgsl`'s `maximum_texel`: pixel `p`'s channel `c` is lane
+/// `c % 4` of texel `pixels + p·K + c / 4`, `K = ⌈channels / 4⌉`), kept between passes.
+pub fn image_texels(pixels: u64, mode: RenderMode, channels: usize) -> u64 {
+    match mode {
+        RenderMode::Dvr => pixels,
+        RenderMode::Mip => pixels * (1 + channels.div_ceil(4) as u64),
+    }
+}
 
 /// [`Params::flags`] bit: skip empty and homogeneous nodes.
 pub const FLAG_SKIPPING: u32 = 1;

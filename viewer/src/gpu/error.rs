@@ -161,6 +161,18 @@ pub enum GpuError {
     /// Waiting for the GPU failed.
     #[error("waiting for the GPU")]
     Poll(#[source] wgpu::PollError),
+    /// A scene whose clipping cannot be drawn.
+    #[error(transparent)]
+    Clip(#[from] crate::scene::ClipError),
+    /// A volumetric depth image asked of a scene in a mode other than emission–absorption:
+    /// supersegments are composited colour and opacity.
+    #[error(
+        "a volumetric depth image is generated in the dvr mode only (the scene's mode is {mode})"
+    )]
+    VdiMode {
+        /// The scene's mode.
+        mode: &'static str,
+    },
     /// A supersegment count a volumetric depth image cannot have.
     #[error("--supersegments {supersegments}: a VDI has 1 to {max} supersegments per pixel")]
     Supersegments {

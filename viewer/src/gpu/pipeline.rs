@@ -9,7 +9,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use super::brick_cache::AtlasKind;
 use super::contract::{binding, raycast_source};
 use super::method::Method;
-use crate::scene::Filter;
+use crate::scene::{Filter, RenderMode};
 
 /// A compute-stage layout entry of binding `binding`.
 pub(super) fn compute_layout(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
@@ -99,13 +99,24 @@ pub(crate) struct Bindings<'a> {
     pub rays: &'a wgpu::Buffer,
 }
 
-/// `raycast.wgsl` compiled for one atlas format, one method and one filter, as the full pass
-/// and as the resident-only pass, and on first use as the pass that writes volumetric depth
-/// images.
+/// What a ray-casting pipeline is compiled for (its pipeline constants, so that the driver
+/// compiles only the code it runs): one per combination a device has drawn.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PipelineKey {
+    /// The atlas's sample format.
+    pub kind: AtlasKind,
+    /// The traversal method.
+    pub method: Method,
+    /// The reconstruction filter.
+    pub filter: Filter,
+    /// What a ray makes of its samples.
+    pub mode: RenderMode,
+}
+
+/// `raycast.wgsl` compiled for one [`PipelineKey`], as the full pass and as the resident-only
+/// pass, and on first use as the pass that writes volumetric depth images.
 pub struct RaycastPipeline {
-    kind: AtlasKind,
-    method: Method,
-    filter: Filter,
+    key: PipelineKey,
     layout: wgpu::BindGroupLayout,
     module: wgpu::ShaderModule,
     pipeline_layout: wgpu::PipelineLayout,
@@ -137,9 +148,9 @@ impl Pass {
 }
 
 impl RaycastPipeline {
-    /// Compiles the shader for atlas `kind`, `method` and `filter` (pipeline constants, so
-    /// that the driver compiles only the code this pipeline runs).
-    pub fn new(device: &wgpu::Device, kind: AtlasKind, method: Method, filter: Filter) -> Self {
+    /// Compiles the shader for `key` (pipeline constants, so that the driver compiles only the
+    /// code this pipeline runs).
+    pub fn new(device: &wgpu::Device, key: PipelineKey) -> Self {
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("raycast.wgsl"),
             source: wgpu::ShaderSource::Wgsl(raycast_source().into()),
@@ -171,28 +182,10 @@ impl RaycastPipeline {
             immediate_size: 0,
         });
         Self {
-            kind,
-            method,
-            filter,
+            key,
             layout,
-            pipeline: compile(
-                device,
-                &module,
-                &pipeline_layout,
-                kind,
-                method,
-                filter,
-                Pass::Full,
-            ),
-            resident_only: compile(
-                device,
-                &module,
-                &pipeline_layout,
-                kind,
-                method,
-                filter,
-                Pass::ResidentOnly,
-            ),
+            pipeline: compile(device, &module, &pipeline_layout, key, Pass::Full),
+            resident_only: compile(device, &module, &pipeline_layout, key, Pass::ResidentOnly),
             module,
             pipeline_layout,
             vdi: OnceLock::new(),
@@ -207,9 +200,7 @@ impl RaycastPipeline {
                 device,
                 &self.module,
                 &self.pipeline_layout,
-                self.kind,
-                self.method,
-                self.filter,
+                self.key,
                 Pass::Vdi,
             )
         })
@@ -257,9 +248,7 @@ fn compile(
     device: &wgpu::Device,
     module: &wgpu::ShaderModule,
     layout: &wgpu::PipelineLayout,
-    kind: AtlasKind,
-    method: Method,
-    filter: Filter,
+    key: PipelineKey,
     pass: Pass,
 ) -> wgpu::ComputePipeline {
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -269,9 +258,10 @@ fn compile(
         entry_point: Some("main"),
         compilation_options: wgpu::PipelineCompilationOptions {
             constants: &[
-                ("SAMPLE_KIND", f64::from(kind as u32)),
-                ("METHOD", f64::from(method as u32)),
-                ("FILTER", f64::from(filter as u32)),
+                ("SAMPLE_KIND", f64::from(key.kind as u32)),
+                ("METHOD", f64::from(key.method as u32)),
+                ("FILTER", f64::from(key.filter as u32)),
+                ("MODE", f64::from(key.mode as u32)),
                 (
                     "RESIDENT_ONLY",
                     f64::from(u8::from(pass == Pass::ResidentOnly)),
@@ -284,33 +274,27 @@ fn compile(
     })
 }
 
-/// The pipelines a device has built, one per (atlas format, method, filter).
+/// The pipelines a device has built, one per [`PipelineKey`].
 #[derive(Default)]
 pub struct PipelineCache {
     built: Mutex<Vec<Arc<RaycastPipeline>>>,
 }
 
 impl PipelineCache {
-    /// The pipeline of `kind`, `method` and `filter` on `device`: the one built before, else a
-    /// new one.
+    /// The pipeline of `key` on `device`: the one built before, else a new one.
     pub(crate) fn get_or_build(
         &self,
         device: &wgpu::Device,
-        kind: AtlasKind,
-        method: Method,
-        filter: Filter,
+        key: PipelineKey,
     ) -> Arc<RaycastPipeline> {
         let mut built = self
             .built
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some(p) = built
-            .iter()
-            .find(|p| p.kind == kind && p.method == method && p.filter == filter)
-        {
+        if let Some(p) = built.iter().find(|p| p.key == key) {
             return Arc::clone(p);
         }
-        let p = Arc::new(RaycastPipeline::new(device, kind, method, filter));
+        let p = Arc::new(RaycastPipeline::new(device, key));
         built.push(Arc::clone(&p));
         p
     }

@@ -13,19 +13,22 @@ use super::brick_cut::{CutView, brick_cut};
 use super::buffers::{
     check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
 };
-use super::contract::{FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState};
+use super::contract::{
+    CLIP_PLANE_SLOTS, FLAG_SKIPPING, FLAG_SUBSTITUTION, FrameCounters, Params, RayState,
+    image_texels,
+};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::occupancy::occupancy_geometry;
 use super::page_table::PageTables;
-use super::pipeline::{Bindings, RaycastPipeline};
+use super::pipeline::{Bindings, PipelineKey, RaycastPipeline};
 use super::residency::ResidencyState;
 use super::segments::SegmentStage;
 use super::tables::{SceneTables, channel_level_bounds};
 use super::timer::PassTimer;
 use super::vdi::{VdiCompactor, VdiGeneration, VdiTarget};
 use crate::octree::ResidencyOctree;
-use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
+use crate::scene::{Camera, ChannelStyle, OpacityPoint, RenderMode, Scene};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
 // The names code outside `gpu` has long found here; each lives in its own module.
@@ -120,10 +123,19 @@ struct FrameBuffers {
 
 impl FrameBuffers {
     /// Buffers for `width × height` pixels, `max_requests` requests and a cache of
-    /// `cache_slots` slots.
-    fn new(gpu: &Gpu, options: &RenderOptions, cache_slots: u32) -> Result<Self, GpuError> {
+    /// `cache_slots` slots, for `mode` with `channels` channels drawn: in
+    /// [`RenderMode::Mip`] the image buffer holds after the image each pixel's running
+    /// maxima ([`image_texels`]).
+    fn new(
+        gpu: &Gpu,
+        options: &RenderOptions,
+        cache_slots: u32,
+        mode: RenderMode,
+        channels: usize,
+    ) -> Result<Self, GpuError> {
         let pixels = u64::from(options.width) * u64::from(options.height);
-        check_binding(gpu, "the image", pixels * 16, "render a smaller image")?;
+        let image_bytes = image_texels(pixels, mode, channels) * 16;
+        check_binding(gpu, "the image", image_bytes, "render a smaller image")?;
         check_binding(
             gpu,
             "the ray states",
@@ -133,7 +145,7 @@ impl FrameBuffers {
         let params = uniform_buffer(gpu, "raycast params", size_of::<Params>() as u64);
         let request_bytes = COUNTER_BYTES + 8 * u64::from(options.max_requests);
         let requests = storage_buffer(gpu, "requests", request_bytes, wgpu::BufferUsages::COPY_SRC);
-        let image = storage_buffer(gpu, "image", pixels * 16, wgpu::BufferUsages::COPY_SRC);
+        let image = storage_buffer(gpu, "image", image_bytes, wgpu::BufferUsages::COPY_SRC);
         let rays = storage_buffer(
             gpu,
             "ray states",
@@ -200,9 +212,9 @@ impl Renderer {
     /// channels are rendered (and ever fetched).
     ///
     /// # Errors
-    /// A [`GpuError`] naming what does not fit: an empty image, too many visible channels or
-    /// levels, a volume the octree refuses, a buffer or the cache over the device's limits,
-    /// or a GPU error while setting up.
+    /// A [`GpuError`] naming what does not fit: an empty image, clipping that cannot be
+    /// drawn, too many visible channels or levels, a volume the octree refuses, a buffer or
+    /// the cache over the device's limits, or a GPU error while setting up.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn new(
         gpu: &Gpu,
@@ -241,6 +253,7 @@ impl Renderer {
                 height: options.height,
             });
         }
+        scene.clip.check()?;
         let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
         if visible.len() > MAX_CHANNELS {
             return Err(GpuError::TooManyVisible {
@@ -249,14 +262,23 @@ impl Renderer {
         }
         let channels: Vec<usize> = visible.iter().map(|c| c.channel).collect();
         let mut residency = ResidencyState::new(gpu, info, &channels, scene.filter, &options)?;
-        residency.restyle(&visible);
+        residency.restyle(&visible, scene.mode);
         let tables = SceneTables::new(gpu, &residency, &options, &visible)?;
-        let buffers = FrameBuffers::new(gpu, &options, residency.cache().capacity())?;
+        let buffers = FrameBuffers::new(
+            gpu,
+            &options,
+            residency.cache().capacity(),
+            scene.mode,
+            visible.len(),
+        )?;
         let pipeline = gpu.pipelines.get_or_build(
             &gpu.device,
-            residency.cache().kind(),
-            options.method,
-            scene.filter,
+            PipelineKey {
+                kind: residency.cache().kind(),
+                method: options.method,
+                filter: scene.filter,
+                mode: scene.mode,
+            },
         );
         let atlas = residency.cache().views();
         let bind_group = pipeline.bind_group(
@@ -354,11 +376,15 @@ impl Renderer {
     /// tables, cache: every resident brick) and the pipeline stay. A channel hidden since
     /// construction is drawn fully transparent, so its bricks are clear (never fetched) and
     /// showing it again finds its resident bricks. Returns `false`, changing nothing, when the
-    /// scene shows a channel this renderer does not have or its transfer functions do not fit
-    /// the table: such a scene needs a new renderer.
+    /// scene shows a channel this renderer does not have, has another filter or mode, or its
+    /// transfer functions do not fit the table (or its clipping cannot be drawn): such a
+    /// scene needs a new renderer.
     pub fn restyle(&mut self, gpu: &Gpu, scene: &Scene) -> bool {
         let drawn = self.residency.octree().channels();
-        if scene.filter != self.scene.filter {
+        if scene.filter != self.scene.filter
+            || scene.mode != self.scene.mode
+            || scene.clip.check().is_err()
+        {
             return false;
         }
         if scene
@@ -394,7 +420,7 @@ impl Renderer {
         {
             return false;
         }
-        self.residency.restyle(&styles);
+        self.residency.restyle(&styles, scene.mode);
         self.scene = scene.clone();
         true
     }
@@ -504,7 +530,7 @@ impl Renderer {
             slots_y_log2: slots[1].trailing_zeros(),
             fine,
             brick: g.brick.map(|b| b as u32),
-            ..Params::default()
+            ..clip_params(&self.scene, leaf_world, g.volume_voxels, g.leaf_shift)
         }
     }
 
@@ -614,7 +640,8 @@ impl Renderer {
     ///
     /// # Errors
     /// As [`Renderer::render`], and a [`GpuError`] naming the VDI when it is over the
-    /// device's storage-buffer limit or `supersegments` is not in `1..=MAX_SUPERSEGMENTS`.
+    /// device's storage-buffer limit, `supersegments` is not in `1..=MAX_SUPERSEGMENTS` or the
+    /// scene is not in the `dvr` mode.
     #[cfg(not(target_arch = "wasm32"))]
     pub fn generate_vdi(
         &mut self,
@@ -633,6 +660,11 @@ impl Renderer {
         gpu: &Gpu,
         supersegments: u32,
     ) -> Result<(VdiGeneration, FrameOutput), GpuError> {
+        if self.scene.mode != RenderMode::Dvr {
+            return Err(GpuError::VdiMode {
+                mode: self.scene.mode.name(),
+            });
+        }
         let max = residency_schemas::vdi::MAX_SUPERSEGMENTS;
         if !(1..=max).contains(&supersegments) {
             return Err(GpuError::Supersegments { supersegments, max });
@@ -923,5 +955,46 @@ fn view_distance(eye: [f64; 3], forward: [f64; 3], voxels: [u64; 3], spacing: [f
         depth - diagonal
     } else {
         0.0
+    }
+}
+
+/// The clip fields of [`Params`] for `scene` (the rest default): its box within the volume and
+/// its planes (and `near`'s, from its camera), in leaf units of `leaf_world` world units per
+/// leaf, for a volume of `voxels` level-0 voxels in leaves of `2^leaf_shift` voxels per axis.
+fn clip_params(
+    scene: &Scene,
+    leaf_world: [f64; 3],
+    voxels: [u64; 3],
+    leaf_shift: [i32; 3],
+) -> Params {
+    let volume: [f64; 3] =
+        std::array::from_fn(|a| voxels[a] as f64 / (leaf_shift[a] as f64).exp2());
+    let (lo, hi) = match scene.clip.region {
+        Some(b) => (
+            std::array::from_fn(|a| (b.min[a] / leaf_world[a]).clamp(0.0, volume[a])),
+            std::array::from_fn(|a| (b.max[a] / leaf_world[a]).clamp(0.0, volume[a])),
+        ),
+        None => ([0.0; 3], volume),
+    };
+    let mut planes = [[0.0f32; 4]; CLIP_PLANE_SLOTS];
+    let world = scene.clip.planes_for(&scene.camera);
+    for (slot, p) in planes.iter_mut().zip(&world) {
+        // n · p_world = Σ n_a · leaf_a · p_leaf_a: the normal in leaf units, then unit length.
+        let n: [f64; 3] = std::array::from_fn(|a| p.normal[a] * leaf_world[a]);
+        let len = crate::scene::box_diagonal(n.map(f64::abs));
+        let d: f64 = (0..3).map(|a| p.normal[a] * p.point[a]).sum();
+        *slot = [
+            (n[0] / len) as f32,
+            (n[1] / len) as f32,
+            (n[2] / len) as f32,
+            (d / len) as f32,
+        ];
+    }
+    Params {
+        clip_lo: lo.map(|x: f64| x as f32),
+        clip_hi: hi.map(|x: f64| x as f32),
+        clip_plane_count: world.len().min(CLIP_PLANE_SLOTS) as u32,
+        clip_planes: planes,
+        ..Params::default()
     }
 }

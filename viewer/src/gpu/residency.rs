@@ -19,7 +19,7 @@ use super::page_table::{
     ENTRY_CLEAR, ENTRY_EMPTY, ENTRY_MISSING, PageTables, entry_slot, slot_entry,
 };
 use crate::octree::{OctreeGeometry, ResidencyOctree, f32_down, f32_up};
-use crate::scene::{ChannelStyle, Filter};
+use crate::scene::{ChannelStyle, Filter, RenderMode};
 use crate::source::{BrickKey, BrickVoxels, VolumeInfo};
 
 /// Outcome of inserting one brick.
@@ -64,6 +64,8 @@ pub(crate) struct ResidencyState {
     brick_ranges: Vec<(f32, f32)>,
     /// Per channel slot of the octree, its style (`None`: not drawn, so empty).
     styles: Vec<Option<ChannelStyle>>,
+    /// The mode the styles are drawn in (what "empty" means: [`ChannelStyle::hides`]).
+    mode: RenderMode,
     /// What the next flush, or the next occupancy geometry, must redo.
     pending: Pending,
 }
@@ -169,16 +171,16 @@ pub struct RangeClass {
     pub constant: bool,
 }
 
-/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style`, by the
-/// exact rule of [`ChannelStyle::transparent_over`]; the clear bricks ([`is_clear`]) follow it
-/// too.
-pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> RangeClass {
+/// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style` in
+/// `mode`, by the exact rule of [`ChannelStyle::hides`]; the clear bricks ([`is_clear`])
+/// follow it too.
+pub fn range_class(style: Option<&ChannelStyle>, mode: RenderMode, lo: f32, hi: f32) -> RangeClass {
     let empty = match style {
         None => true,
         // No data (an empty range, or NaN only) shows nothing.
         Some(s) => {
             lo.partial_cmp(&hi).is_none_or(std::cmp::Ordering::is_gt)
-                || s.transparent_over(f64::from(lo), f64::from(hi))
+                || s.hides(mode, f64::from(lo), f64::from(hi))
         }
     };
     RangeClass {
@@ -187,11 +189,15 @@ pub fn range_class(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> RangeClass
     }
 }
 
-/// The class words of every node of `octree` under `styles` (`node_class` of each), as a
-/// renderer of our method uploads them.
-pub fn node_classes(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>]) -> Vec<u32> {
+/// The class words of every node of `octree` under `styles` in `mode` (`node_class` of
+/// each), as a renderer of our method uploads them.
+pub fn node_classes(
+    octree: &ResidencyOctree,
+    styles: &[Option<ChannelStyle>],
+    mode: RenderMode,
+) -> Vec<u32> {
     (0..octree.geometry().node_count())
-        .map(|n| node_class(octree, styles, n))
+        .map(|n| node_class(octree, styles, mode, n))
         .collect()
 }
 
@@ -200,12 +206,13 @@ pub fn node_classes(octree: &ResidencyOctree, styles: &[Option<ChannelStyle>]) -
 pub(crate) fn node_class(
     octree: &ResidencyOctree,
     styles: &[Option<ChannelStyle>],
+    mode: RenderMode,
     node: usize,
 ) -> u32 {
     let mut word = 0;
     for (c, style) in styles.iter().enumerate() {
         let (lo, hi) = octree.range(node, c);
-        let class = range_class(style.as_ref(), f32_down(lo), f32_up(hi));
+        let class = range_class(style.as_ref(), mode, f32_down(lo), f32_up(hi));
         word |= u32::from(class.empty) << c
             | u32::from(class.constant) << (CLASS_CONSTANT_SHIFT as usize + c);
     }
@@ -299,6 +306,7 @@ impl ResidencyState {
             segments,
             brick_ranges,
             styles,
+            mode: RenderMode::Dvr,
             pending: Pending {
                 classes: true,
                 aprons: false,
@@ -366,7 +374,8 @@ impl ResidencyState {
     /// missing brick that [`is_clear`] under its channel's style is never fetched, and a
     /// sample whose footprint reaches it is clear. Only the residency method with empty-space
     /// skipping marks bricks clear.
-    pub fn restyle(&mut self, styles: &[&ChannelStyle]) {
+    pub fn restyle(&mut self, styles: &[&ChannelStyle], mode: RenderMode) {
+        self.mode = mode;
         self.styles = self
             .octree
             .channels()
@@ -395,7 +404,7 @@ impl ResidencyState {
             }
             let clear = self
                 .style_of(&key)
-                .is_some_and(|style| is_clear(&self.info, style, &key, self.filter));
+                .is_some_and(|style| is_clear(&self.info, style, self.mode, &key, self.filter));
             let wanted = if clear { ENTRY_CLEAR } else { ENTRY_MISSING };
             if entry != wanted {
                 self.pages.set(id, wanted);
@@ -600,7 +609,7 @@ impl ResidencyState {
             };
             if let Some(range) = range {
                 for n in range.clone() {
-                    self.classes[n] = node_class(&self.octree, &self.styles, n);
+                    self.classes[n] = node_class(&self.octree, &self.styles, self.mode, n);
                 }
                 let offset = (u64::from(self.class_offset) + range.start as u64) * 4;
                 gpu.queue.write_buffer(
@@ -614,7 +623,7 @@ impl ResidencyState {
                 .map(|id| {
                     let style = self.pages.key(id).and_then(|k| self.style_of(&k));
                     let (lo, hi) = self.brick_ranges[id as usize];
-                    u32::from(range_class(style, lo, hi).empty)
+                    u32::from(range_class(style, self.mode, lo, hi).empty)
                 })
                 .collect();
             gpu.queue.write_buffer(
@@ -633,12 +642,18 @@ pub(crate) fn clear_range(info: &VolumeInfo, key: &BrickKey, filter: Filter) -> 
     info.widened_brick_range(key, 2 * filter.reach())
 }
 
-/// Whether brick `key` is clear under `style` and `filter`: its `clear_range`, rounded
-/// outward to `f32` as the shader sees values, holds data and is transparent under the
-/// transfer function. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
+/// Whether brick `key` is clear under `style`, `mode` and `filter`: its `clear_range`, rounded
+/// outward to `f32` as the shader sees values, holds data and shows nothing in the mode
+/// ([`ChannelStyle::hides`]). The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
 /// TF".
-pub fn is_clear(info: &VolumeInfo, style: &ChannelStyle, key: &BrickKey, filter: Filter) -> bool {
+pub fn is_clear(
+    info: &VolumeInfo,
+    style: &ChannelStyle,
+    mode: RenderMode,
+    key: &BrickKey,
+    filter: Filter,
+) -> bool {
     let (lo, hi) = clear_range(info, key, filter);
     let (lo, hi) = (f32_down(lo), f32_up(hi));
-    lo <= hi && range_class(Some(style), lo, hi).empty
+    lo <= hi && range_class(Some(style), mode, lo, hi).empty
 }

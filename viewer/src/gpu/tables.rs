@@ -87,6 +87,8 @@ pub fn build(
             min_level: ch.min_level,
             max_level: ch.max_level,
             points_offset,
+            opacity_top: s.opacity_top() as f32,
+            saturation: (s.saturation_value() as f32).clamp(-f32::MAX, f32::MAX),
             ..ChannelEntry::default()
         };
     }

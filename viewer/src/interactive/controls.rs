@@ -8,7 +8,7 @@
 //! window to the new one, so a multi-point transfer function keeps its shape.
 
 use crate::defaults::{DEFAULT_COLOURS, default_channels, default_opacity};
-use crate::scene::{ChannelStyle, Filter, OpacityPoint, Scene};
+use crate::scene::{ChannelStyle, OpacityPoint, Scene};
 use crate::source::VolumeInfo;
 
 /// The colours `c` cycles through: the default channel colours, then white (linear RGB).
@@ -106,10 +106,11 @@ pub fn next_colour(current: [f64; 3]) -> [f64; 3] {
     }
 }
 
-/// The filter after `current` in [`Filter::ALL`] (trilinear, tricubic, then trilinear again).
-pub fn next_filter(current: Filter) -> Filter {
-    let i = Filter::ALL.iter().position(|&f| f == current).unwrap_or(0);
-    Filter::ALL[(i + 1) % Filter::ALL.len()]
+/// The variant after `current` in the order of its enum (the filter, the mode), the first
+/// after the last.
+pub fn next_variant<E: strum::VariantArray + PartialEq + Copy>(current: E) -> E {
+    let i = E::VARIANTS.iter().position(|&v| v == current).unwrap_or(0);
+    E::VARIANTS[(i + 1) % E::VARIANTS.len()]
 }
 
 /// Width of channel `channel`'s default ramp: the unit of the window/level steps.
@@ -164,7 +165,7 @@ pub fn visible_count(scene: &Scene) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::Camera;
+    use crate::scene::{Camera, Filter, RenderMode};
     use crate::source::{ChannelDisplay, LevelInfo, SampleType};
 
     fn ramp(lo: f64, hi: f64) -> Vec<OpacityPoint> {
@@ -249,8 +250,10 @@ mod tests {
 
     #[test]
     fn filters_alternate() {
-        assert_eq!(next_filter(Filter::Trilinear), Filter::Tricubic);
-        assert_eq!(next_filter(Filter::Tricubic), Filter::Trilinear);
+        assert_eq!(next_variant(Filter::Trilinear), Filter::Tricubic);
+        assert_eq!(next_variant(Filter::Tricubic), Filter::Trilinear);
+        assert_eq!(next_variant(RenderMode::Dvr), RenderMode::Mip);
+        assert_eq!(next_variant(RenderMode::Mip), RenderMode::Dvr);
     }
 
     #[test]
@@ -278,6 +281,8 @@ mod tests {
             channels: vec![],
             background: [0.0; 3],
             filter: Filter::Trilinear,
+            mode: RenderMode::Dvr,
+            clip: crate::scene::Clip::default(),
         };
         assert!(style_mut(&mut scene, &info, 2).is_none());
         let s = style_mut(&mut scene, &info, 1).unwrap();

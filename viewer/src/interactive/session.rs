@@ -140,10 +140,7 @@ impl Session {
     /// ([`Renderer::restyle`]); the renderer is rebuilt at the next step only when the set of
     /// visible channels changed.
     pub fn set_scene(&mut self, scene: Scene) {
-        if scene.channels != self.scene.channels
-            || scene.background != self.scene.background
-            || scene.filter != self.scene.filter
-        {
+        if !scene.same_style(&self.scene) {
             // Nothing visible shows the background without a renderer.
             let restyled = scene.channels.iter().any(|c| c.visible)
                 && self

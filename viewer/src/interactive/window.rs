@@ -416,9 +416,14 @@ impl App {
                 "q" | "Q" => event_loop.exit(),
                 "h" | "H" => self.overlay = !self.overlay,
                 "f" | "F" => {
-                    let filter = controls::next_filter(self.session.scene().filter);
+                    let filter = controls::next_variant(self.session.scene().filter);
                     self.update_scene(|_, scene| scene.filter = filter);
                     self.say(format!("{} filter", filter.name()));
+                }
+                "m" | "M" => {
+                    let mode = controls::next_variant(self.session.scene().mode);
+                    self.update_scene(|_, scene| scene.mode = mode);
+                    self.say(format!("{} mode", mode.name()));
                 }
                 "r" | "R" => {
                     let home = self.home.clone();

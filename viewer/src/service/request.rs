@@ -2,7 +2,7 @@
 //! before it reaches the GPU ([`check`]).
 
 use crate::defaults::{SceneError, check_channel};
-use crate::scene::{Camera, Scene};
+use crate::scene::{Camera, RenderMode, Scene};
 use crate::source::VolumeInfo;
 pub use crate::vdi_service::{DEFAULT_SUPERSEGMENTS, Limits, ServiceInfo, VdiRequest};
 
@@ -86,6 +86,12 @@ pub enum RequestError {
     /// A scene that shows nothing.
     #[error("scene: no channel is visible")]
     NothingVisible,
+    /// A scene in a mode a VDI cannot hold.
+    #[error("scene: mode {mode}: a VDI holds composited colour and opacity (mode dvr only)")]
+    Mode {
+        /// The scene's mode.
+        mode: &'static str,
+    },
 }
 
 impl RequestError {
@@ -102,7 +108,7 @@ impl RequestError {
 /// (from `default_scene` when it gives none).
 ///
 /// # Errors
-/// The first [`RequestError`] found: image size, N_S, camera, then channels.
+/// The first [`RequestError`] found: image size, N_S, camera, channels, then mode.
 pub fn check(
     request: VdiRequest,
     info: &VolumeInfo,
@@ -153,6 +159,11 @@ pub fn check(
     }
     if !scene.channels.iter().any(|s| s.visible) {
         return Err(RequestError::NothingVisible);
+    }
+    if scene.mode != RenderMode::Dvr {
+        return Err(RequestError::Mode {
+            mode: scene.mode.name(),
+        });
     }
     Ok(CheckedRequest {
         scene,
@@ -302,6 +313,16 @@ mod tests {
             serde_json::to_string(&scene).unwrap()
         );
         assert_eq!(checked(&json).unwrap_err(), "scene: no channel is visible");
+        let mut scene = default_scene(&info());
+        scene.mode = RenderMode::Mip;
+        let json = format!(
+            r#"{{"scene": {}, "width": 4, "height": 4}}"#,
+            serde_json::to_string(&scene).unwrap()
+        );
+        assert_eq!(
+            checked(&json).unwrap_err(),
+            "scene: mode mip: a VDI holds composited colour and opacity (mode dvr only)"
+        );
         let mut camera = default_scene(&info()).camera;
         camera.eye[0] = f64::NAN;
         assert_eq!(

@@ -27,14 +27,14 @@ use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
 use self::fetch::BrowserFetch;
-use crate::defaults::{check_channel, default_scene, parse_scene};
+use crate::defaults::{check_channel, default_scene, parse_scene, volume_extent};
 use crate::error_chain;
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{FrameStats, StreamState};
 use crate::interactive::{camera_control, controls};
-use crate::scene::{Filter, Scene};
+use crate::scene::{Clip, Filter, RenderMode, Scene};
 use crate::source::{BrickKey, BrickVoxels, SourceError, VolumeInfo, server};
 
 /// Bricks per `/bricks` request from the page: small batches refine the image sooner.
@@ -253,6 +253,7 @@ impl Viewer {
             "levels": info.levels.iter().map(|l| l.shape).collect::<Vec<_>>(),
             "brick_shape": info.brick_shape,
             "region_metadata": info.minmax.is_some(),
+            "extent": volume_extent(info),
             "adapter": inner.gpu.adapter_info.name,
             "timestamps": inner.gpu.timestamps,
         })
@@ -322,6 +323,36 @@ impl Viewer {
         self.inner
             .borrow_mut()
             .edit(|scene, _, _| scene.filter = filter);
+        Ok(())
+    }
+
+    /// Sets what each ray makes of its samples by name (`dvr` or `mip`): a new renderer at the
+    /// next step (the mode is compiled into its pipeline). The remote mode's VDIs are `dvr`
+    /// only: in another mode the page draws from bricks.
+    ///
+    /// # Errors
+    /// The [`UnknownMode`](crate::scene::UnknownMode) message, scene unchanged.
+    pub fn set_mode(&self, name: &str) -> Result<(), JsValue> {
+        let mode: RenderMode = name.parse().map_err(|e| js_error(&e))?;
+        self.inner
+            .borrow_mut()
+            .edit(|scene, _, _| scene.mode = mode);
+        Ok(())
+    }
+
+    /// Sets what part of the volume is drawn: scene-file JSON of the scene's `clip`
+    /// (`{"box": {"min": [...], "max": [...]}, "planes": [...], "near": D}`, any part left out).
+    /// The residency state stays: bricks outside are no longer fetched, those inside are kept.
+    ///
+    /// # Errors
+    /// serde's message for JSON that is no clip, or the [`ClipError`](crate::scene::ClipError)
+    /// message; scene unchanged.
+    pub fn set_clip(&self, json: &str) -> Result<(), JsValue> {
+        let clip: Clip = serde_json::from_str(json).map_err(|e| js_error(&e))?;
+        clip.check().map_err(|e| js_error(&e))?;
+        self.inner
+            .borrow_mut()
+            .edit(|scene, _, _| scene.clip = clip);
         Ok(())
     }
 
@@ -497,14 +528,11 @@ impl Inner {
         self.set_scene(scene);
     }
 
-    /// Wants `scene`. Only a change of style (channels, background) goes through the renderer
-    /// at the next step; the camera is set on every frame anyway.
+    /// Wants `scene`. Only a change of style (channels, background, filter, mode, clipping)
+    /// goes through the renderer at the next step; the camera is set on every frame anyway.
     fn set_scene(&mut self, scene: Scene) {
         if scene != self.scene {
-            if scene.channels != self.scene.channels
-                || scene.background != self.scene.background
-                || scene.filter != self.scene.filter
-            {
+            if !scene.same_style(&self.scene) {
                 self.scene_changed = true;
             }
             self.scene = scene;
@@ -556,13 +584,10 @@ async fn renderer_for(
             i.options.clone(),
         )
     };
-    if let Some(mut r) = current {
-        let same_style = r.scene().channels == scene.channels
-            && r.scene().background == scene.background
-            && r.scene().filter == scene.filter;
-        if same_style || r.restyle(&gpu, &scene) {
-            return Ok(r);
-        }
+    if let Some(mut r) = current
+        && (r.scene().same_style(&scene) || r.restyle(&gpu, &scene))
+    {
+        return Ok(r);
     }
     let renderer = Renderer::create(&gpu, &info, &scene, options).await?;
     let mut i = inner.borrow_mut();

@@ -32,7 +32,7 @@ use crate::error_chain;
 use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::VdiRenderer;
-use crate::scene::{Camera, Scene};
+use crate::scene::{Camera, RenderMode, Scene};
 use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
 /// A camera this many degrees of orbit (or roll) away from the latest request's asks again.
@@ -225,11 +225,6 @@ fn now_ms() -> f64 {
         .map_or(0.0, |p| p.now())
 }
 
-/// Whether `a` and `b` draw alike but for the camera.
-fn same_style(a: &Scene, b: &Scene) -> bool {
-    a.channels == b.channels && a.background == b.background && a.filter == b.filter
-}
-
 /// The angle between `a` and `b` in degrees (0 for a zero vector).
 fn degrees_between(a: [f64; 3], b: [f64; 3]) -> f64 {
     let dot: f64 = (0..3).map(|i| a[i] * b[i]).sum();
@@ -306,7 +301,7 @@ impl Remote {
         let Some(latest) = latest else {
             return true;
         };
-        if !same_style(latest, scene) {
+        if !latest.same_style(scene) {
             return true;
         }
         if latest.camera == scene.camera {
@@ -363,7 +358,7 @@ impl Remote {
             scene_current: self
                 .drawn
                 .as_ref()
-                .is_some_and(|d| same_style(&d.scene, scene)),
+                .is_some_and(|d| d.scene.same_style(scene)),
             converged: self.converged(scene),
             ..self.report.clone()
         }
@@ -371,11 +366,15 @@ impl Remote {
 }
 
 impl Inner {
-    /// The remote mode, when a service is given and the switch is on.
+    /// The remote mode, when a service is given, the switch is on and the scene is in the
+    /// `dvr` mode.
     pub(super) fn remote_on(&self) -> bool {
-        self.remote
-            .as_ref()
-            .is_some_and(|r| r.report.mode != RemoteMode::Off)
+        // VDIs hold composited colour: a scene in another mode is drawn here, from bricks.
+        self.scene.mode == RenderMode::Dvr
+            && self
+                .remote
+                .as_ref()
+                .is_some_and(|r| r.report.mode != RemoteMode::Off)
     }
 
     /// The remote mode's report for `state()`.

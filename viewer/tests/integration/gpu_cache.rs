@@ -7,7 +7,7 @@ use residency_viewer::gpu::page_table::PageTables;
 use residency_viewer::gpu::residency::{RangeClass, range_class};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::octree::OctreeGeometry;
-use residency_viewer::scene::{ChannelStyle, OpacityPoint};
+use residency_viewer::scene::{ChannelStyle, OpacityPoint, RenderMode};
 use residency_viewer::source::{BrickKey, BrickSource, BrickVoxels, SampleType};
 
 #[test]
@@ -173,10 +173,10 @@ fn range_classes_follow_the_exact_transparency_rule() {
         ((f32::NAN, f32::NAN), class(true, false), "NaN only"),
     ];
     for ((lo, hi), want, why) in cases {
-        assert_eq!(range_class(s, lo, hi), want, "{why}");
+        assert_eq!(range_class(s, RenderMode::Dvr, lo, hi), want, "{why}");
     }
     assert_eq!(
-        range_class(None, 50.0, 60.0),
+        range_class(None, RenderMode::Dvr, 50.0, 60.0),
         class(true, false),
         "a channel not drawn"
     );
@@ -185,7 +185,7 @@ fn range_classes_follow_the_exact_transparency_rule() {
         ..style.clone()
     };
     assert_eq!(
-        range_class(Some(&hidden), 50.0, 60.0),
+        range_class(Some(&hidden), RenderMode::Dvr, 50.0, 60.0),
         class(true, false),
         "a hidden channel"
     );
@@ -218,6 +218,8 @@ fn renderer_rejects_bad_setups_with_errors() {
         channels,
         background: [0.0; 3],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let err = |s: &Scene, o: RenderOptions| {
         residency_viewer::error_chain(&Renderer::new(&gpu, src.info(), s, o).err().unwrap())

@@ -52,6 +52,8 @@ fn probe_images_match_the_reference_and_count_their_samples() {
         ],
         background: [0.0, 0.0, 0.1],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let (w, h) = (48, 40);
     let reference = reference(&src, &scene, w as usize, h as usize);
@@ -100,6 +102,8 @@ fn a_volume_over_the_texture_limit_is_refused() {
         channels: vec![ramp(0, [1.0, 1.0, 1.0], 0.0, 40000.0, 0.2)],
         background: [0.0; 3],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let mut small = new_gpu();
     small.limits.max_texture_dimension_3d = 16;

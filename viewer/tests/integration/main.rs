@@ -23,6 +23,7 @@ mod reference_cli;
 mod render_baselines;
 mod render_cli;
 mod render_filters;
+mod render_modes;
 mod render_precision;
 mod render_reference;
 mod render_segments;

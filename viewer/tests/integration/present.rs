@@ -326,6 +326,8 @@ fn scene() -> Scene {
         }],
         background: [0.05, 0.0, 0.1],
         filter: Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 

@@ -129,6 +129,8 @@ fn local_and_http_sources_give_the_same_reference() {
             .collect(),
         background: [0.1, 0.1, 0.1],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let mut options = ReferenceOptions::new(24, 16);
     options.step_fraction = 0.5;

@@ -51,6 +51,8 @@ fn scene(channels: usize) -> Scene {
             .collect(),
         background: [0.02, 0.02, 0.05],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 
@@ -232,6 +234,8 @@ fn bricks_used_counts_the_working_set() {
         channels: vec![ramp(0, [1.0, 1.0, 1.0], 30.0, 240.0, 0.05)],
         background: [0.0; 3],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     for method in METHODS {
         let (p, _) = render(&src, &s, options(method), 30);

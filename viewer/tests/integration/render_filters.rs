@@ -10,7 +10,7 @@ use residency_viewer::gpu::renderer::{Method, RenderOptions, is_clear};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::metrics;
 use residency_viewer::octree::{ResidencyOctree, node_index};
-use residency_viewer::scene::{Camera, ChannelStyle, Filter, Scene};
+use residency_viewer::scene::{Camera, ChannelStyle, Filter, RenderMode, Scene};
 use residency_viewer::source::{BrickKey, BrickSource, SampleType};
 
 /// A ball of radius 6 and a rod one voxel thin along z, both 30000 in 0 (one per channel,
@@ -44,6 +44,8 @@ fn scene(camera: Camera, channels: Vec<ChannelStyle>, filter: Filter) -> Scene {
         channels,
         background: [0.05, 0.05, 0.1],
         filter,
+        mode: RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 
@@ -127,12 +129,30 @@ fn culling_ranges_widen_by_the_filters_reach() {
         channel: 0,
         brick: [1, 1, 0],
     };
-    assert!(is_clear(info, &style, &key, Filter::Trilinear));
-    assert!(!is_clear(info, &style, &key, Filter::Tricubic));
+    assert!(is_clear(
+        info,
+        &style,
+        RenderMode::Dvr,
+        &key,
+        Filter::Trilinear
+    ));
+    assert!(!is_clear(
+        info,
+        &style,
+        RenderMode::Dvr,
+        &key,
+        Filter::Tricubic
+    ));
     // Brick x = 3 (voxels 24..32): far away, clear for both.
     let far = BrickKey {
         brick: [1, 1, 3],
         ..key
     };
-    assert!(is_clear(info, &style, &far, Filter::Tricubic));
+    assert!(is_clear(
+        info,
+        &style,
+        RenderMode::Dvr,
+        &far,
+        Filter::Tricubic
+    ));
 }

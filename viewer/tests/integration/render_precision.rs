@@ -99,6 +99,8 @@ fn far_from_the_origin_matches_the_reference() {
         channels: vec![ramp(0, [1.0, 0.7, 0.2], 40.0, 190.0, 0.6)],
         background: [0.0, 0.0, 0.2],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let options = RenderOptions {
         width: 32,

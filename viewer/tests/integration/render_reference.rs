@@ -43,6 +43,8 @@ fn scene(camera: Camera, channels: Vec<ChannelStyle>) -> Scene {
         channels,
         background: [0.05, 0.05, 0.1],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 

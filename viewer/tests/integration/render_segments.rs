@@ -14,7 +14,7 @@ use residency_viewer::gpu::renderer::{Method, RenderOptions};
 use residency_viewer::gpu::residency::node_classes;
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::octree::{ResidencyOctree, node_index};
-use residency_viewer::scene::{ChannelStyle, Filter, Scene};
+use residency_viewer::scene::{ChannelStyle, Filter, RenderMode, Scene};
 use residency_viewer::source::{BrickKey, BrickSource, SampleType};
 
 /// 32³ voxels, bricks 16³, min/max cells of 4: data (1000) in the octant x ≥ 16, y < 16,
@@ -66,7 +66,7 @@ fn occupancy_geometry_is_exact_and_nests_where_the_class_changes() {
     // Leaves of 8³ (depth 2): the octant is one depth-1 node of 8 leaves, 7 with data.
     let mut tree = ResidencyOctree::new(info, &[0], 2).unwrap();
     // The classes depend on the ranges and styles only, not on what is resident.
-    let classes = node_classes(&tree, &styles);
+    let classes = node_classes(&tree, &styles, RenderMode::Dvr);
     let geometry = occupancy_geometry(&tree, &classes);
     // Nothing resident: the leaves with data are unknown.
     assert_eq!(geometry.leaves, [57, 0, 7]);
@@ -146,7 +146,11 @@ fn cut_view(eye: [f64; 3], target: [f64; 3], fov: f64) -> CutView {
 fn brick_cut_refines_by_projected_size_and_culls_empty_and_hidden_bricks() {
     let src = big_octant();
     let tree = ResidencyOctree::new(src.info(), &[0], 3).unwrap();
-    let classes = node_classes(&tree, &[Some(ramp(0, [1.0; 3], 50.0, 200.0, 0.3))]);
+    let classes = node_classes(
+        &tree,
+        &[Some(ramp(0, [1.0; 3], 50.0, 200.0, 0.3))],
+        RenderMode::Dvr,
+    );
     let levels = |cut: &residency_viewer::gpu::brick_cut::BrickCut| {
         let mut n = [0usize; 4];
         for b in &cut.boxes {
@@ -212,6 +216,8 @@ fn scene_of(style: ChannelStyle) -> Scene {
         channels: vec![style],
         background: [0.02, 0.02, 0.05],
         filter: Filter::Trilinear,
+        mode: RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 

@@ -56,6 +56,8 @@ fn half_scene() -> Scene {
         channels: vec![ramp(0, [0.9, 0.9, 0.2], 50.0, 200.0, 0.2)],
         background: [0.0, 0.0, 0.0],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 
@@ -109,6 +111,8 @@ fn aprons_stand_in_for_clear_bricks_until_a_restyle_shows_them() {
         channels: vec![ramp(0, [0.9, 0.9, 0.2], lo, 200.0, 0.2)],
         background: [0.0, 0.0, 0.0],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let (hidden, shown) = (scene(50.0), scene(0.0));
     let mut renderer = Renderer::new(gpu, src.info(), &hidden, full_res(48, 48)).unwrap();
@@ -225,6 +229,8 @@ fn small_cache_evicts_and_converges_for_a_new_view() {
         channels: vec![ramp(0, [0.2, 0.9, 0.9], 60.0, 180.0, 0.3)],
         background: [0.0, 0.0, 0.0],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     // Views from inside, looking at opposite corners (opaque enough to stop early).
     let a = view([12.0, 12.0, 12.0], [0.0, 0.0, 0.0]);
@@ -417,6 +423,8 @@ fn per_channel_level_bounds_pick_the_levels_fetched() {
         ],
         background: [0.0; 3],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let options = RenderOptions {
         width: 32,
@@ -570,6 +578,8 @@ fn bricks_behind_opaque_matter_are_not_fetched() {
         channels: vec![ramp(0, [0.9, 0.7, 0.3], 100.0, 200.0, 1.0)],
         background: [0.0, 0.0, 0.0],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let (p, img) = render(&src, &scene, finest_wanted(32, 32), 20);
     assert!(p.converged, "{}", p.stop_reason);
@@ -631,6 +641,8 @@ fn structures_averaged_away_at_the_coarsest_level_still_render() {
         channels: vec![ramp(0, [0.9, 0.9, 0.9], 100.0, 255.0, 0.8)],
         background: [0.0, 0.0, 0.0],
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     };
     let (p, img) = render(&src, &scene, finest_wanted(32, 32), 20);
     assert!(p.converged, "{}", p.stop_reason);

@@ -111,8 +111,8 @@ fn bad_vdi_input_fails_with_a_clear_error() {
     let err = fails(&["render", "--vdi", &vdi, "--tf", "0:1:2:0.5", "--out", &png]);
     assert!(
         err.contains(
-            "error: --tf does not apply to a VDI: its colours, transfer functions, background \
-             and filter were fixed when it was generated (`viewer vdi`)"
+            "error: --tf does not apply to a VDI: its colours, transfer functions, background, \
+             filter, mode and clipping were fixed when it was generated (`viewer vdi`)"
         ),
         "{err}"
     );

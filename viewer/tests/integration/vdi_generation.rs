@@ -58,6 +58,8 @@ fn scene(channels: usize) -> Scene {
             .collect(),
         background: [0.05, 0.05, 0.1],
         filter: Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 

@@ -114,8 +114,8 @@ fn view_vdi_refuses_what_does_not_apply_to_a_vdi() {
     let err = fails(&["view", "--vdi", &vdi, "--tf", "0:1:2:0.5"]);
     assert!(
         err.contains(
-            "error: --tf does not apply to a VDI: its colours, transfer functions, background \
-             and filter were fixed when it was generated (`viewer vdi`)"
+            "error: --tf does not apply to a VDI: its colours, transfer functions, background, \
+             filter, mode and clipping were fixed when it was generated (`viewer vdi`)"
         ),
         "{err}"
     );

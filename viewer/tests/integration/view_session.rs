@@ -11,7 +11,7 @@ use residency_viewer::gpu::renderer::RenderOptions;
 use residency_viewer::gpu::streaming::{Budget, render_progressive};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::interactive::camera_control::orbit;
-use residency_viewer::interactive::controls::next_filter;
+use residency_viewer::interactive::controls::next_variant;
 use residency_viewer::interactive::session::{Session, Step};
 use residency_viewer::scene::{Camera, ChannelStyle, Filter, OpacityPoint, Scene};
 use residency_viewer::source::SampleType;
@@ -64,6 +64,8 @@ fn scene() -> Scene {
         channels: vec![style(0, [0.0, 1.0, 1.0]), style(1, [1.0, 0.0, 1.0])],
         background: [0.0, 0.0, 0.1],
         filter: Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
 
@@ -160,7 +162,7 @@ fn session_converges_and_keeps_its_bricks_through_camera_and_style_changes() {
     let trilinear = s.image().2.to_vec();
     let press_f = |s: &mut Session| {
         let mut scene = s.scene().clone();
-        scene.filter = next_filter(scene.filter);
+        scene.filter = next_variant(scene.filter);
         s.set_scene(scene);
         settle(s);
         s.scene().filter

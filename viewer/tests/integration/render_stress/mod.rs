@@ -259,5 +259,7 @@ fn scene(camera: Camera, channels: Vec<ChannelStyle>, background: [f64; 3]) -> S
         channels,
         background,
         filter: residency_viewer::scene::Filter::Trilinear,
+        mode: residency_viewer::scene::RenderMode::Dvr,
+        clip: residency_viewer::scene::Clip::default(),
     }
 }
