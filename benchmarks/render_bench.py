@@ -143,6 +143,12 @@ def plan(short: bool):
         # reach 163), as a microscopist sets it: the default ramp starts at the median (108),
         # so the background noise would be faint fog and no brick would be transparent.
         (f"cycif {cy[0]}×{cy[1]}×{cy[2]}", "cycif", cy, chunk, None, 16, None, "table1,skipped,sweep", sweep_methods + window(16)),
+        # Maximum intensity projection beside DVR on the same stores and windows: what its
+        # skipping (by the ray's running maximum, and regions transparent up to their largest
+        # value) saves against the baselines, and bytes against the naive loader.
+        (f"sparse {s[0]}³ MIP", "sparse", s, chunk, 1, None, None, "table1,skipped", bone(1) + ["--mode", "mip"]),
+        (f"dense {s[0]}³ MIP", "dense", s, chunk, 1, None, None, "table1,skipped", ["--mode", "mip"]),
+        (f"cycif {cy[0]}×{cy[1]}×{cy[2]} MIP", "cycif", cy, chunk, None, 16, None, "table1,skipped", window(16) + ["--mode", "mip"]),
         (f"sparse {small[0]}³", "sparse", small, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {big[0]}³", "sparse", big, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {s[0]}³ ×8 (2 shown)", "sparse", s, chunk, 8, None, [0, 1], "scaling", ["--vary-tf"] + bone(8)),

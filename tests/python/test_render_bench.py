@@ -1,7 +1,8 @@
 """The renderer benchmark's short mode (CI's): `benchmarks/render_bench.py --short` runs every
 experiment of `viewer bench` on tiny datasets into a temporary folder; its outputs exist, every
 results file validates against schemas/json/render-bench.schema.json, every method produced
-finite times and an image compared with the reference, and each sweep has a Pareto front.
+finite times and an image compared with the reference, each sweep has a Pareto front, and the
+maximum intensity projection runs have their rows beside DVR's.
 Nothing here is about speed."""
 
 import json
@@ -50,6 +51,7 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
     methods = set()
     sweeps = 0
     probes = 0
+    modes = {}
     for f in files:
         r = json.loads(f.read_text())
         validator.validate(r)
@@ -74,7 +76,13 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
             brick = d["brick_shape"][0] * d["brick_shape"][1] * d["brick_shape"][2] * SAMPLE_BYTES[d["sample_type"]]
             assert 1 <= s["ours_bricks_read"] <= s["ours_bricks_fetched"], (f.name, s)
             assert s["bytes_ceiling"] == s["naive_bytes"] / (s["ours_bricks_read"] * brick), (f.name, s)
-        if any(run["experiment"] == "table1" for run in r["runs"]):
+        modes[r["settings"]["mode"]] = modes.get(r["settings"]["mode"], 0) + 1
+        if r["settings"]["mode"] != "dvr" and any(run["experiment"] == "table1" for run in r["runs"]):
+            # The limit probe marches emission–absorption: it says so, and has no rows.
+            assert r["probe_error"] == (
+                f"the limit probe marches emission–absorption only (the scene's mode is {r['settings']['mode']})"
+            ) and r["probe"] == [], f.name
+        elif any(run["experiment"] == "table1" for run in r["runs"]):
             # The limit probe ran beside Table 1, by hand and (lavapipe filters R32Float) by
             # the texture unit, and its image matches the reference as the renderer's does.
             assert r["probe_error"] is None, r["probe_error"]
@@ -113,7 +121,12 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
     # CyCIF-like store renders all 16 of its channels, as the paper's CyCIF Small row does.
     datasets = [json.loads(f.read_text())["dataset"] for f in files]
     assert {"sparse", "mixing", "dense", "cycif"} <= {d["kind"] for d in datasets}
-    assert [d["visible_channels"] for d in datasets if d["kind"] == "cycif"] == [16]
+    assert [d["visible_channels"] for d in datasets if d["kind"] == "cycif"] == [16, 16]
+    # Maximum intensity projection has its Table 1 and skipped-work rows beside DVR's, for the
+    # sparse, dense and CyCIF stores.
+    assert modes.get("mip") == 3 and modes.get("dvr", 0) >= 5, modes
+    for label in ("sparse 32³ MIP", "dense 32³ MIP", "cycif 8×64×64 MIP"):
+        assert report.count(f"| {label} |") >= 2, label
     assert probes >= 1 and "### Ours against the limit probe" in report
     assert "| Ours / manual |" in (out / "summary.md").read_text()
     # The report marks a non-empty Pareto front for every sweep.

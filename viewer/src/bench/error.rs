@@ -33,6 +33,12 @@ pub enum BenchError {
         #[source]
         source: Box<ReferenceError>,
     },
+    /// The limit probe marches emission–absorption only: it has no ceiling for another mode.
+    #[error("the limit probe marches emission–absorption only (the scene's mode is {mode})")]
+    ProbeMode {
+        /// The scene's mode.
+        mode: &'static str,
+    },
     /// No frame was timed (a bug: the plan asks for at least one).
     #[error("no frame timed")]
     NoFrameTimed,

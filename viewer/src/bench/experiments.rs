@@ -17,6 +17,7 @@ use crate::gpu::probe::LimitProbe;
 use crate::gpu::renderer::{Method, RenderOptions};
 use crate::metrics;
 use crate::octree::OctreeGeometry;
+use crate::scene::RenderMode;
 
 impl Bench {
     /// Table 1: every configured method over the orbit.
@@ -349,7 +350,14 @@ impl Bench {
             match e {
                 Experiment::Table1 => {
                     runs.extend(self.table1()?);
-                    match self.probe() {
+                    let probed = if self.scene.mode == RenderMode::Dvr {
+                        self.probe()
+                    } else {
+                        Err(BenchError::ProbeMode {
+                            mode: self.scene.mode.name(),
+                        })
+                    };
+                    match probed {
                         Ok(p) => probe = p,
                         Err(e) => {
                             let e = crate::error_chain(&e);
@@ -393,6 +401,7 @@ impl Bench {
                 first_azimuth: self.plan.first_azimuth,
                 reference_step: self.plan.reference_step,
                 reference_s: self.reference_s,
+                mode: self.scene.mode,
             },
             experiments: self.plan.experiments.clone(),
             runs,

@@ -10,7 +10,7 @@ use crate::gpu::device::Gpu;
 use crate::gpu::probe::ProbeFilter;
 use crate::gpu::renderer::Method;
 use crate::gpu::stop_reason::StopReason;
-use crate::scene::Scene;
+use crate::scene::{RenderMode, Scene};
 use crate::source::{SampleType, VolumeInfo};
 use residency_schemas::SampleKind;
 
@@ -145,6 +145,8 @@ pub struct Settings {
     /// Seconds spent computing the reference images.
     #[schemars(range(min = 0))]
     pub reference_s: f64,
+    /// What each ray made of its samples (the scene's mode) in every run.
+    pub mode: RenderMode,
 }
 
 /// The renderer options of one run.
