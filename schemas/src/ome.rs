@@ -550,6 +550,9 @@ pub struct PyramidLayout {
     pub level_paths: Vec<String>,
     /// Voxel size of each level, `z, y, x`, in the axes' units.
     pub level_scales: Vec<[f64; 3]>,
+    /// The `x` axis's unit (`micrometer`, ...), when the metadata names one: the unit of
+    /// every scale, since writers give the spatial axes one unit.
+    pub unit: Option<String>,
 }
 
 impl PyramidLayout {
@@ -606,6 +609,7 @@ impl PyramidLayout {
             channel_axis,
             level_paths,
             level_scales,
+            unit: multiscale.axes[n - 1].unit.clone(),
         })
     }
 
@@ -630,7 +634,7 @@ mod tests {
     const GROUP_V2: &str = r#"{
         "multiscales": [{"version": "0.4", "axes": [
             {"name": "c", "type": "channel"}, {"name": "z", "type": "space"},
-            {"name": "y", "type": "space"}, {"name": "x", "type": "space"}],
+            {"name": "y", "type": "space"}, {"name": "x", "type": "space", "unit": "micrometer"}],
           "datasets": [
             {"path": "0", "coordinateTransformations": [{"type": "scale", "scale": [1, 2.0, 0.5, 0.5]}]},
             {"path": "1", "coordinateTransformations": [{"type": "scale", "scale": [1, 2.0, 1.0, 1.0]},
@@ -648,6 +652,7 @@ mod tests {
         assert_eq!(p.channel_axis, Some(0));
         assert_eq!(p.level_paths, ["0", "1"]);
         assert_eq!(p.level_scales, [[2.0, 0.5, 0.5], [2.0, 1.0, 1.0]]);
+        assert_eq!(p.unit.as_deref(), Some("micrometer"));
         assert_eq!(p.chunk_indices(1, [2, 3, 4]), [1, 2, 3, 4]);
         let omero = a.omero.unwrap();
         assert_eq!(omero.channels[0].label.as_deref(), Some("dapi"));

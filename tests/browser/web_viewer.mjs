@@ -167,6 +167,9 @@ try {
         await page.selectOption(step.selector, step.value);
         results.push(null);
         break;
+      case "orientation":
+        results.push(await until(() => page.evaluate(() => window.residency?.orientation() ?? null)));
+        break;
       case "slide":
         // Moves a range input (a slider) to a value, as dragging it does: input, then change.
         await page.$eval(step.selector, (el, value) => {

@@ -343,6 +343,50 @@ def test_the_clip_sliders_cut_the_volume_without_a_new_renderer(served, stores, 
     assert errors(console) == []
 
 
+def expected_orientation(camera, height):
+    """The scale bar and the axes the page should show for `camera` (its own rule, written
+    again here from crate::scene's camera frame)."""
+    eye, target = np.array(camera["eye"]), np.array(camera["target"])
+    up = np.array(camera.get("up", [0.0, -1.0, 0.0]))
+    forward = (target - eye) / np.linalg.norm(target - eye)
+    right = np.cross(forward, up)
+    right /= np.linalg.norm(right)
+    up2 = np.cross(right, forward)
+    per_pixel = 2 * np.linalg.norm(target - eye) * np.tan(np.radians(camera.get("fov_y_degrees", 30)) / 2) / height
+    axes = {n: [float(right[i]), float(-up2[i])] for i, n in enumerate("xyz")}
+    return per_pixel, axes
+
+
+def test_the_orientation_shows_a_scale_bar_in_micrometres_and_axes_that_turn(served):
+    """Over the view: a scale bar of a round length in the store's unit (the sample's
+    micrometres), about 100 pixels long, and x, y, z axes drawn along the camera's projection of
+    each; an orbit turns the axes and keeps the bar's rule."""
+    results, console = drive(
+        view_url(served, "u8"),
+        [
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "orientation"},
+            {"do": "drag", "dx": 50, "dy": 0},
+            {"do": "converge"},
+            {"do": "hash", "not": None},
+            {"do": "orientation"},
+        ],
+    )
+    for fragment, shown in ((results[1], results[2]), (results[5], results[6])):
+        per_pixel, axes = expected_orientation(scene_of(fragment)["camera"], SIZE)
+        scale = shown["scale"]
+        assert scale["unit"] == "µm", scale
+        mantissa = scale["length"] / 10 ** np.floor(np.log10(scale["length"]))
+        assert round(mantissa, 9) in (1.0, 2.0, 5.0), scale
+        assert scale["pixels"] == pytest.approx(scale["length"] / per_pixel, rel=1e-9), scale
+        assert 100 / 1.6 <= scale["pixels"] <= 100 * 1.6, scale
+        for name in "xyz":
+            assert shown["axes"][name] == pytest.approx(axes[name], abs=1e-9), (name, shown["axes"])
+    assert results[2]["axes"]["x"] != pytest.approx(results[6]["axes"]["x"], abs=1e-3)
+    assert errors(console) == []
+
+
 def test_missing_dataset_and_no_webgpu_show_their_messages(served):
     (msg,), _ = drive(f"{served}/nope/view", [{"do": "waitMessage"}])
     assert "Cannot open dataset 'nope'" in msg and "no such dataset on the server" in msg

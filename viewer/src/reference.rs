@@ -563,6 +563,7 @@ mod tests {
                     channels: vec!["c0".into()],
                     display: vec![crate::source::ChannelDisplay::default()],
                     voxel_size: [1.0; 3],
+                    unit: None,
                     brick_shape: brick,
                     levels: vec![LevelInfo {
                         shape,

@@ -112,6 +112,7 @@ mod tests {
             channels: vec!["a".into()],
             display: vec![ChannelDisplay::default()],
             voxel_size: [1.0; 3],
+            unit: None,
             brick_shape: [8, 8, 8],
             levels: vec![LevelInfo {
                 shape: [16, 16, 16],

@@ -520,6 +520,85 @@ async function answerWaiting() {
   }
 }
 
+// ---- orientation: a scale bar in the store's unit and axes that turn with the camera ----
+
+// OME-Zarr's unit names (the UDUNITS-2 spatial units it lists) as symbols.
+const UNIT_SYMBOLS = {
+  angstrom: "Å", nanometer: "nm", micrometer: "µm", micron: "µm", millimeter: "mm",
+  centimeter: "cm", meter: "m", kilometer: "km", inch: "in", foot: "ft",
+};
+let orientation = null;
+let orientationKey = null;
+
+const sub3 = (a, b) => a.map((v, i) => v - b[i]);
+const dot3 = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+const cross3 = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+const unit3 = (a) => { const n = Math.hypot(...a); return a.map((v) => v / n); };
+
+// The scale bar and the axes for `camera` on a view `height` CSS pixels high: the bar a round
+// length (1, 2 or 5 times a power of ten, nearest 100 pixels at the target's distance) and its
+// pixels; each world axis as the screen direction (right, down) of its unit vector, from the
+// camera frame of crate::scene (forward, right = forward × up, up' = right × forward).
+function orientationOf(camera, height, unit) {
+  const forward = unit3(sub3(camera.target, camera.eye));
+  const right = unit3(cross3(forward, camera.up ?? [0, -1, 0]));
+  const up = cross3(right, forward);
+  const distance = Math.hypot(...sub3(camera.target, camera.eye));
+  const fov = ((camera.fov_y_degrees ?? 30) * Math.PI) / 180;
+  const perPixel = (2 * distance * Math.tan(fov / 2)) / height;
+  const want = 100 * perPixel;
+  const power = 10 ** Math.floor(Math.log10(want));
+  const length = [1, 2, 5, 10].map((m) => m * power)
+    .reduce((best, l) => (Math.abs(Math.log(l / want)) < Math.abs(Math.log(best / want)) ? l : best));
+  const axes = {};
+  for (const [name, v] of [["x", [1, 0, 0]], ["y", [0, 1, 0]], ["z", [0, 0, 1]]]) {
+    axes[name] = [dot3(v, right), -dot3(v, up)];
+  }
+  return { scale: { length: Number(length.toPrecision(1)), unit: UNIT_SYMBOLS[unit] ?? unit ?? "units", pixels: length / perPixel }, axes };
+}
+
+// Draws the orientation over the view when the camera or the view's size changed.
+function drawOrientation() {
+  const overlay = document.getElementById("orientation");
+  const rect = canvas.getBoundingClientRect();
+  const camera = JSON.parse(viewer.scene_json()).camera;
+  const key = JSON.stringify([camera, rect.width, rect.height]);
+  if (key === orientationKey || rect.height === 0) return;
+  orientationKey = key;
+  orientation = orientationOf(camera, rect.height, JSON.parse(viewer.info_json()).unit);
+  const dpr = window.devicePixelRatio || 1;
+  overlay.style.width = `${rect.width}px`;
+  overlay.style.height = `${rect.height}px`;
+  overlay.width = Math.round(rect.width * dpr);
+  overlay.height = Math.round(rect.height * dpr);
+  const g = overlay.getContext("2d");
+  g.setTransform(dpr, 0, 0, dpr, 0, 0);
+  g.clearRect(0, 0, rect.width, rect.height);
+  g.font = "12px system-ui, sans-serif";
+  g.lineWidth = 2;
+  g.shadowColor = "black";
+  g.shadowBlur = 2;
+  // The scale bar, bottom left.
+  const { length, unit, pixels } = orientation.scale;
+  const y = rect.height - 14;
+  g.strokeStyle = g.fillStyle = "white";
+  g.beginPath();
+  g.moveTo(12, y - 4); g.lineTo(12, y); g.lineTo(12 + pixels, y); g.lineTo(12 + pixels, y - 4);
+  g.stroke();
+  g.fillText(`${length} ${unit}`, 12, y - 7);
+  // The axes, bottom right: x red, y green, z blue.
+  const origin = [rect.width - 40, rect.height - 40];
+  for (const [name, colour] of [["x", "#f55"], ["y", "#5f5"], ["z", "#59f"]]) {
+    const [dx, dy] = orientation.axes[name];
+    g.strokeStyle = g.fillStyle = colour;
+    g.beginPath();
+    g.moveTo(...origin);
+    g.lineTo(origin[0] + 24 * dx, origin[1] + 24 * dy);
+    g.stroke();
+    g.fillText(name, origin[0] + 31 * dx - 3, origin[1] + 31 * dy + 4);
+  }
+}
+
 async function loop() {
   try {
     if (service) remoteTick();
@@ -527,6 +606,7 @@ async function loop() {
       draw();
       keepSceneInUrl();
     }
+    drawOrientation();
   } catch (e) {
     failure = String(e);
   }
@@ -549,6 +629,9 @@ window.residency = {
    * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, last_error, d_i,
    * vdi_camera, converged, ...} with a render service, else null}. */
   state,
+  /** What the orientation overlay shows: {scale: {length, unit, pixels}, axes: {x, y, z: the
+   * screen direction [right, down] of each world axis}}; null before the first frame. */
+  orientation: () => orientation,
   /** The current frame as a PNG data URL (8-bit sRGB, like `viewer render`'s PNG). On the GPU
    * path it is read back for this call (state().image_readbacks counts it). */
   async snapshot() {

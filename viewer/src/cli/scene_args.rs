@@ -488,6 +488,7 @@ mod tests {
             ],
             // z, y, x: a box of x 40, y 20, z 30 world units.
             voxel_size: [3.0, 1.0, 0.5],
+            unit: None,
             brick_shape: [8, 8, 8],
             levels: vec![LevelInfo {
                 shape: [10, 20, 80],

@@ -135,6 +135,7 @@ impl SyntheticSource {
             channels: (0..channels).map(|c| format!("c{c}")).collect(),
             display: vec![ChannelDisplay::default(); channels],
             voxel_size,
+            unit: None,
             brick_shape: brick,
             levels,
             minmax: Some(minmax),

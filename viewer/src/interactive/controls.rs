@@ -264,6 +264,7 @@ mod tests {
             channels: vec!["a".into(), "b".into()],
             display: vec![ChannelDisplay::default(), ChannelDisplay::default()],
             voxel_size: [1.0; 3],
+            unit: None,
             brick_shape: [8; 3],
             levels: vec![LevelInfo {
                 shape: [8, 8, 8],

@@ -223,6 +223,7 @@ mod tests {
             channels: vec!["a".into(), "b".into()],
             display: vec![ChannelDisplay::default(); 2],
             voxel_size: [1.0; 3],
+            unit: None,
             brick_shape: [8, 8, 8],
             levels: vec![LevelInfo {
                 shape: [16, 16, 16],

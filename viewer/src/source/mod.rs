@@ -562,6 +562,9 @@ pub struct VolumeInfo {
     pub display: Vec<ChannelDisplay>,
     /// Level-0 voxel spacing in physical units, `z, y, x`.
     pub voxel_size: [f64; 3],
+    /// The physical unit of `voxel_size` (the store's `x` axis unit: `micrometer`, ...), when
+    /// the store names one.
+    pub unit: Option<String>,
     /// Brick shape shared by all levels and channels, `z, y, x`.
     pub brick_shape: [u64; 3],
     /// Levels, finest first.

@@ -177,6 +177,7 @@ pub fn volume_info(
         channels: labels,
         display,
         voxel_size: layout.level_scales[0],
+        unit: layout.unit.clone(),
         brick_shape: first.brick_shape(),
         levels,
         minmax: None,

@@ -411,6 +411,7 @@ mod tests {
             channels: vec!["a".into(), "b".into()],
             display: vec![crate::source::ChannelDisplay::default(); 2],
             voxel_size: [1.0; 3],
+            unit: None,
             brick_shape: [1, 1, 2],
             levels: vec![LevelInfo {
                 shape: [1, 1, 4],

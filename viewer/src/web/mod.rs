@@ -254,6 +254,7 @@ impl Viewer {
             "brick_shape": info.brick_shape,
             "region_metadata": info.minmax.is_some(),
             "extent": volume_extent(info),
+            "unit": info.unit,
             "adapter": inner.gpu.adapter_info.name,
             "timestamps": inner.gpu.timestamps,
         })

@@ -38,6 +38,7 @@ impl Wide {
                 channels: vec!["c0".into()],
                 display: vec![ChannelDisplay::default()],
                 voxel_size: [1.0; 3],
+                unit: None,
                 brick_shape: BRICK,
                 levels: vec![
                     LevelInfo {

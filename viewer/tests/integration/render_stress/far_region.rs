@@ -58,6 +58,7 @@ impl FarRoi {
             channels: vec!["c0".into()],
             display: vec![ChannelDisplay::default()],
             voxel_size: [1.0; 3],
+            unit: None,
             brick_shape: [16; 3],
             levels: vec![LevelInfo {
                 shape: [32, 32, extent],
