@@ -4,10 +4,130 @@
 
 // ---- the ray ----
 
-// MODE_MIP: the texel of `out_color` that holds pixel `pixel`'s maximum of channel c (lane
-// c % 4), after the image (image_texels in viewer/src/gpu/contract.rs).
-fn maximum_texel(pixel: u32, c: u32) -> u32 {
-    return P.width * P.height + pixel * ((P.channel_count + 3u) / 4u) + c / 4u;
+// MODE_MIP, MODE_ISO: the texels of `out_color` after the image that keep one pixel's state
+// between passes (state_texels in viewer/src/gpu/contract.rs): per channel a value (MIP: its
+// maximum; ISO: its last sample), then (ISO) one texel of IsoState.
+fn state_texels() -> u32 {
+    return (P.channel_count + 3u) / 4u + select(0u, 1u, MODE == MODE_ISO);
+}
+
+// The texel holding pixel `pixel`'s value of channel c (lane c % 4).
+fn channel_texel(pixel: u32, c: u32) -> u32 {
+    return P.width * P.height + pixel * state_texels() + c / 4u;
+}
+
+// MODE_ISO: the texel holding pixel `pixel`'s IsoState.
+fn iso_texel(pixel: u32) -> u32 {
+    return P.width * P.height + pixel * state_texels() + state_texels() - 1u;
+}
+
+// MODE_ISO: where a ray's last samples were taken (or its last skip ended), and bits per
+// channel: its side of the iso value is known, it is at or above it, and its last value is a
+// sample's (not only a skipped region's side).
+struct IsoState {
+    at: f32,
+    known: u32,
+    above: u32,
+    valued: u32,
+}
+
+const NO_CHANNEL: u32 = 0xffffffffu;
+
+// MODE_ISO: takes the samples `values` of the channels `have` at ray distance `t` against the
+// last ones (`last`, `iso`). Returns the channel whose surface the ray crossed first since
+// then, at `*hit` (linear interpolation between the two samples; where a skip ended when the
+// last value is only a side; at `t` for a ray's first sample at or above the iso value), or
+// NO_CHANNEL.
+fn iso_take(
+    have: u32,
+    values: ptr<function, array<f32, MAX_CHANNELS>>,
+    last: ptr<function, array<f32, MAX_CHANNELS>>,
+    iso: ptr<function, IsoState>,
+    t: f32,
+    hit: ptr<function, f32>,
+) -> u32 {
+    var found = NO_CHANNEL;
+    var left = have;
+    loop {
+        if left == 0u {
+            break;
+        }
+        let c = take_channel(&left);
+        let v = (*values)[c];
+        if v != v {
+            continue;
+        }
+        let level = S.channels[c].iso;
+        let bit = 1u << c;
+        let above = v >= level;
+        var crossed = false;
+        var at = t;
+        if ((*iso).known & bit) == 0u {
+            crossed = above;
+        } else if above != (((*iso).above & bit) != 0u) {
+            crossed = true;
+            at = (*iso).at;
+            if ((*iso).valued & bit) != 0u {
+                let u = (*last)[c];
+                at = (*iso).at + (level - u) / (v - u) * (t - (*iso).at);
+            }
+        }
+        if crossed && (found == NO_CHANNEL || at < *hit) {
+            found = c;
+            *hit = at;
+        }
+        (*last)[c] = v;
+        (*iso).known |= bit;
+        (*iso).valued |= bit;
+        (*iso).above = select((*iso).above & ~bit, (*iso).above | bit, above);
+    }
+    (*iso).at = t;
+    return found;
+}
+
+// MODE_ISO: after a skip of node `node` (whose range excludes every channel's iso value), each
+// channel with data there is known on the node's side, its last value no sample's.
+fn iso_skipped(iso: ptr<function, IsoState>, node: u32, t: f32) {
+    for (var c = 0u; c < P.channel_count; c++) {
+        let lo = bitcast<f32>(node_word(node, c, 1u));
+        let hi = bitcast<f32>(node_word(node, c, 2u));
+        if lo <= hi {
+            let bit = 1u << c;
+            (*iso).known |= bit;
+            (*iso).valued &= ~bit;
+            (*iso).above = select((*iso).above & ~bit, (*iso).above | bit, lo > S.channels[c].iso);
+        }
+    }
+    (*iso).at = t;
+}
+
+// MODE_ISO: the colour of channel c's surface at ray distance `t`: its colour times
+// 0.25 + 0.75·|n·l| (crate::scene's module doc), the gradient n by central differences half a
+// level-0 voxel either side along each axis at level l, l the ray's world direction.
+fn iso_shade(c: u32, l: u32, ray: Ray, dir: vec3<f32>, t: f32, world_dir: vec3<f32>) -> vec3<f32> {
+    var at = ray;
+    advance(&at, dir, t - ray.t);
+    let half = vec3<f32>(0.5) / exp2(vec3<f32>(P.unit_shift));
+    let voxel = vec3<f32>(1.0) / (P.world_to_leaf * exp2(vec3<f32>(P.fine + P.unit_shift)));
+    var g = vec3<f32>(0.0);
+    for (var a = 0u; a < 3u; a++) {
+        var e = vec3<f32>(0.0);
+        e[a] = half[a];
+        var plus = at;
+        advance(&plus, e, 1.0);
+        var minus = at;
+        advance(&minus, -e, 1.0);
+        let sp = sample_filtered(c, l, plus.cell, plus.local, false, t);
+        let sm = sample_filtered(c, l, minus.cell, minus.local, false, t);
+        if sp.ok && sm.ok && !sp.clear && !sm.clear {
+            g[a] = (sp.value - sm.value) / voxel[a];
+        }
+    }
+    var lit = 1.0;
+    if dot(g, g) > 0.0 {
+        lit = abs(dot(normalize(g), world_dir));
+    }
+    return S.channels[c].color * (0.25 + 0.75 * lit);
 }
 
 // MODE_MIP: raises each channel's maximum in `have` to its value (NaN is no value); returns
@@ -67,15 +187,21 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if VDI && st.status != RAY_FRESH {
         vdi = vdi_load(pixel);
     }
-    // MODE_MIP: each channel's largest value so far, kept between passes.
+    // MODE_MIP: each channel's largest value so far; MODE_ISO: its last value, and the
+    // IsoState. Kept between passes.
     var maxima: array<f32, MAX_CHANNELS>;
-    if MODE == MODE_MIP {
+    var iso = IsoState(0.0, 0u, 0u, 0u);
+    if MODE == MODE_MIP || MODE == MODE_ISO {
         for (var c = 0u; c < P.channel_count; c++) {
             maxima[c] = NO_MAXIMUM;
             if !fresh {
-                maxima[c] = out_color[maximum_texel(pixel, c)][c % 4u];
+                maxima[c] = out_color[channel_texel(pixel, c)][c % 4u];
             }
         }
+    }
+    if MODE == MODE_ISO && !fresh {
+        let kept = bitcast<vec4<u32>>(out_color[iso_texel(pixel)]);
+        iso = IsoState(bitcast<f32>(kept.x), kept.y, kept.z, kept.w);
     }
     var samples = 0u;
     var skipped = 0u;
@@ -111,7 +237,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             ray.cell = (ray.cell << fine_shift()) + vec3<i32>(whole);
             ray.local = scaled - whole;
         }
-        let skipping = (P.flags & FLAG_SKIPPING) != 0u;
+        // Iso-surfaces skip by the sides of a node's ranges, which only our octree keeps: the
+        // baselines march every brick there.
+        let skipping = (P.flags & FLAG_SKIPPING) != 0u && (MODE != MODE_ISO || METHOD == METHOD_RESIDENCY);
         let substitute = (P.flags & FLAG_SUBSTITUTION) != 0u;
         var budget = P.steps_per_pass;
         // Page-table baseline: the brick each channel's last sample was in, and whether it
@@ -219,7 +347,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         && all((ray.cell >> node_shift(held.depth)) == held_cell) {
                         v = held;
                     } else {
-                        v = visit_octree(ray, last_depth, desired_step, dir, skipping, &maxima);
+                        v = visit_octree(ray, last_depth, desired_step, dir, skipping, &maxima, iso);
                         last_depth = v.depth;
                         held = v;
                         held_step = desired_step;
@@ -238,6 +366,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if v.action == ACTION_SKIP {
                     skipped++;
                     advance(&ray, dir, v.skip + nudge);
+                    if MODE == MODE_ISO {
+                        iso_skipped(&iso, v.node, ray.t);
+                    }
                     continue;
                 }
                 break;
@@ -290,6 +421,23 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 if take_maxima(s.have, &values, &maxima) {
                     trans = 0.0; // every channel saturated: nothing can change (ends the ray)
                 }
+            } else if MODE == MODE_ISO {
+                if v.action == ACTION_REQUEST {
+                    // Nothing sampled over the unmapped node: its values are not known.
+                    iso.valued = 0u;
+                    iso.at = ray.t + move_by;
+                } else {
+                    var hit = 0.0;
+                    let c = iso_take(s.have, &values, &maxima, &iso, ray.t, &hit);
+                    if c != NO_CHANNEL {
+                        var l = level_of(chosen, c);
+                        if l == NO_LEVEL {
+                            l = 0u;
+                        }
+                        color = iso_shade(c, l, ray, dir, hit, pray.world_dir);
+                        trans = 0.0; // an opaque surface ends the ray
+                    }
+                }
             } else {
                 let m = mixture(s.have, &values, step);
                 if VDI {
@@ -335,12 +483,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         }
     } else if MODE == MODE_MIP {
         out_color[pixel] = mip_pixel(&maxima, P.background);
+    } else if MODE == MODE_ISO {
+        out_color[pixel] = select(vec4<f32>(P.background, 0.0), vec4<f32>(color, 1.0), trans == 0.0);
     } else if !VDI {
         out_color[pixel] = vec4<f32>(color + trans * P.background, 1.0 - trans);
     }
-    if MODE == MODE_MIP && suspended {
+    if (MODE == MODE_MIP || MODE == MODE_ISO) && suspended {
         for (var c = 0u; c < P.channel_count; c++) {
-            out_color[maximum_texel(pixel, c)][c % 4u] = maxima[c];
+            out_color[channel_texel(pixel, c)][c % 4u] = maxima[c];
+        }
+        if MODE == MODE_ISO {
+            out_color[iso_texel(pixel)] = bitcast<vec4<f32>>(vec4<u32>(bitcast<u32>(iso.at), iso.known, iso.above, iso.valued));
         }
     }
     atomicAdd(&requests.counters.samples, samples);

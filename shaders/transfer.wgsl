@@ -22,7 +22,7 @@ struct ChannelEntry {
     points_offset: u32, // (value, opacity) pairs in `tables`
     opacity_top: f32, // the highest opacity of the points: MIP's scale
     saturation: f32, // MIP: from this value on the intensity no longer changes (±f32 max)
-    pad0: u32,
+    iso: f32, // MODE_ISO: the surface's value (f32 max: none)
     pad1: u32,
     pad2: u32,
 }

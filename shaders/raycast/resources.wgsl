@@ -38,9 +38,10 @@ override FILTER: u32 = 0u;
 // pass of the smaller loop: on a CPU Vulkan driver every branch of the loop body runs on
 // every iteration, taken or not, so what a converged frame never needs still costs it.
 override RESIDENT_ONLY: bool = false;
-// What a ray makes of its samples: MODE_DVR (emission–absorption) or MODE_MIP (maximum
+// What a ray makes of its samples: MODE_DVR (emission–absorption), MODE_MIP (maximum
 // intensity projection: each channel's largest value, kept between passes after the image in
-// `out_color`, see maximum_texel).
+// `out_color`, see channel_texel) or MODE_ISO (iso-surfaces: the nearest crossing of a
+// channel's iso value, shaded).
 override MODE: u32 = 0u;
 const NO_LEVEL: u32 = 0xffffffffu;
 

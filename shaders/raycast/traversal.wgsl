@@ -47,7 +47,10 @@ struct Visit {
 // The residency octree (Algorithm 1, multi-channel): from just above the depth of the last
 // node visited, down to the deepest node whose edge is at least the step, stopping where every
 // channel is empty, or constant, under its TF. In MODE_MIP a channel is also empty in a node
-// whose largest value is at most the ray's maximum so far (`maxima`): it cannot raise it.
+// whose largest value is at most the ray's maximum so far (`maxima`): it cannot raise it. In
+// MODE_ISO a node is skipped only when every channel's range excludes its iso value and lies
+// on the side of it the ray knows the channel on (below it, before the ray knows), and is
+// otherwise sampled in every channel (`iso`: what the ray knows).
 fn visit_octree(
     ray: Ray,
     last_depth: u32,
@@ -55,6 +58,7 @@ fn visit_octree(
     dir: vec3<f32>,
     skipping: bool,
     maxima: ptr<function, array<f32, MAX_CHANNELS>>,
+    iso: IsoState,
 ) -> Visit {
     let depth = P.leaf_depth;
     var max_depth = depth;
@@ -78,6 +82,14 @@ fn visit_octree(
             let word = nodes[P.class_offset + v.node];
             v.empty = word & all;
             homogeneous = (word >> CLASS_CONSTANT_SHIFT) & all;
+            if MODE == MODE_ISO {
+                homogeneous = 0u;
+                if v.empty == all && !iso_sides_agree(v.node, iso) {
+                    v.empty = 0u;
+                } else if v.empty != all {
+                    v.empty = 0u;
+                }
+            }
             if MODE == MODE_MIP {
                 var left = all & ~v.empty;
                 loop {
@@ -131,6 +143,24 @@ fn visit_octree(
         v.skip = node_exit(ray, d, dir);
     }
     return v;
+}
+
+// MODE_ISO: whether every channel with data in `node` lies on the side of its iso value that
+// `iso` knows it on (below, where the ray knows nothing yet), so that skipping the node loses
+// no crossing.
+fn iso_sides_agree(node: u32, iso: IsoState) -> bool {
+    var agree = true;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let lo = bitcast<f32>(node_word(node, c, 1u));
+        let hi = bitcast<f32>(node_word(node, c, 2u));
+        let bit = 1u << c;
+        let above = lo > S.channels[c].iso;
+        let known_above = (iso.above & bit) != 0u;
+        if lo <= hi && above != (((iso.known & bit) != 0u) && known_above) {
+            agree = false;
+        }
+    }
+    return agree;
 }
 
 // The page-table baseline (MRMCPT): per channel, whether the brick of its chosen level at the

@@ -404,6 +404,16 @@ enum Accumulated {
     /// Maximum intensity projection: each visible channel's largest value (`None`: no value
     /// yet).
     Mip(Vec<Option<f64>>),
+    /// Iso-surfaces: where the last samples were taken and each visible channel's value there
+    /// (`None`: no value yet), then the shaded colour of the surface met.
+    Iso {
+        /// Ray parameter of the last samples.
+        at: f64,
+        /// Each channel's last value.
+        last: Vec<Option<f64>>,
+        /// The colour of the surface met, which ends the ray.
+        hit: Option<[f64; 3]>,
+    },
 }
 
 impl Accumulated {
@@ -412,6 +422,11 @@ impl Accumulated {
         match mode {
             RenderMode::Dvr => Self::Dvr([0.0; 3], 1.0),
             RenderMode::Mip => Self::Mip(vec![None; channels]),
+            RenderMode::Iso => Self::Iso {
+                at: 0.0,
+                last: vec![None; channels],
+                hit: None,
+            },
         }
     }
 
@@ -425,12 +440,21 @@ impl Accumulated {
                 .iter()
                 .zip(maxima)
                 .all(|(s, m)| m.unwrap_or(f64::NEG_INFINITY) >= s.saturation_value()),
+            Self::Iso { hit, .. } => hit.is_some(),
         }
     }
 
-    /// Takes one segment of length `length` whose samples are `values` (one per visible
-    /// channel, NaN for none).
-    fn take(&mut self, styles: &[&ChannelStyle], values: &[f64], length: f64, reference: f64) {
+    /// Takes one segment of length `length` whose samples, at ray parameter `at`, are `values`
+    /// (one per visible channel, NaN for none). For iso-surfaces, returns the surface crossed
+    /// first since the last samples: its channel's index among `styles` and the ray parameter
+    /// of the crossing.
+    fn take(
+        &mut self,
+        styles: &[&ChannelStyle],
+        values: &[f64],
+        (at, length): (f64, f64),
+        reference: f64,
+    ) -> Option<(usize, f64)> {
         match self {
             Self::Dvr(colour, t) => {
                 let mut sample_colour = [0.0; 3];
@@ -455,6 +479,42 @@ impl Accumulated {
                     }
                 }
             }
+            Self::Iso {
+                at: before, last, ..
+            } => {
+                let mut first: Option<(usize, f64)> = None;
+                for (k, (style, &v)) in styles.iter().zip(values).enumerate() {
+                    let Some(iso) = style.iso_value() else {
+                        continue;
+                    };
+                    if v.is_nan() {
+                        continue;
+                    }
+                    let crossed = match last[k] {
+                        None => (v >= iso).then_some(at),
+                        Some(u) if (u >= iso) != (v >= iso) => {
+                            Some(*before + (iso - u) / (v - u) * (at - *before))
+                        }
+                        Some(_) => None,
+                    };
+                    if let Some(t) = crossed
+                        && first.is_none_or(|(_, f)| t < f)
+                    {
+                        first = Some((k, t));
+                    }
+                    last[k] = Some(v);
+                }
+                *before = at;
+                return first;
+            }
+        }
+        None
+    }
+
+    /// Ends the ray on a surface of colour `colour` (iso-surfaces).
+    fn hit(&mut self, colour: [f64; 3]) {
+        if let Self::Iso { hit, .. } = self {
+            *hit = Some(colour);
         }
     }
 
@@ -462,6 +522,7 @@ impl Accumulated {
     fn pixel(&self, styles: &[&ChannelStyle], background: [f64; 3]) -> [f64; 3] {
         match self {
             Self::Dvr(colour, t) => std::array::from_fn(|i| colour[i] + t * background[i]),
+            Self::Iso { hit, .. } => hit.unwrap_or(background),
             Self::Mip(maxima) => {
                 let mut colour = [0.0; 3];
                 let mut sum = 0.0;
@@ -513,6 +574,35 @@ fn march(
         return Err(too_long());
     }
     let mut values = Vec::with_capacity(styles.len());
+    // Each segment's samples at its ray parameter `at`, and (iso-surfaces) the surface they
+    // cross, shaded.
+    let mut take = |ray: &mut Accumulated, at: f64, length: f64, values: &mut Vec<f64>| {
+        let p: [f64; 3] = std::array::from_fn(|k| eye[k] + at * dir[k]);
+        // Continuous voxel coordinates, z, y, x, voxel centres at integers.
+        let u = [
+            p[2] / spacing_xyz[2] - 0.5,
+            p[1] / spacing_xyz[1] - 0.5,
+            p[0] / spacing_xyz[0] - 0.5,
+        ];
+        values.clear();
+        for (volume, last) in volumes.iter().zip(lasts.iter_mut()) {
+            values.push(volume.filtered(scene.filter, u, last)?);
+        }
+        if let Some((k, t)) = ray.take(styles, values, (at, length), reference_step) {
+            let p: [f64; 3] = std::array::from_fn(|a| eye[a] + t * dir[a]);
+            let normal = gradient(&volumes[k], scene.filter, p, spacing_xyz, &mut lasts[k])?;
+            let lit = normal.map_or(1.0, |n| {
+                (n[0] * dir[0] + n[1] * dir[1] + n[2] * dir[2]).abs()
+            });
+            ray.hit(styles[k].color.map(|c| c * (0.25 + 0.75 * lit)));
+        }
+        Ok::<(), ReferenceError>(())
+    };
+    // Iso-surfaces: a ray starting at or above a channel's iso value (at a cut, or where an
+    // object crosses the volume's face) meets its surface where it enters: a sample there.
+    if matches!(ray, Accumulated::Iso { .. }) {
+        take(&mut ray, t0, 0.0, &mut values)?;
+    }
     for i in 0..segments {
         if i == MAX_STEPS_PER_RAY {
             return Err(too_long());
@@ -525,21 +615,42 @@ fn march(
         if b <= a {
             break;
         }
-        let mid = 0.5 * (a + b);
-        let p: [f64; 3] = std::array::from_fn(|k| eye[k] + mid * dir[k]);
-        // Continuous voxel coordinates, z, y, x, voxel centres at integers.
-        let u = [
-            p[2] / spacing_xyz[2] - 0.5,
-            p[1] / spacing_xyz[1] - 0.5,
-            p[0] / spacing_xyz[0] - 0.5,
-        ];
-        values.clear();
-        for (volume, last) in volumes.iter().zip(lasts.iter_mut()) {
-            values.push(volume.filtered(scene.filter, u, last)?);
-        }
-        ray.take(styles, &values, b - a, reference_step);
+        take(&mut ray, 0.5 * (a + b), b - a, &mut values)?;
     }
     Ok(ray.pixel(styles, scene.background))
+}
+
+/// The unit gradient of `volume`'s filtered field at world point `p` (world `x, y, z`), by
+/// central differences half a level-0 voxel either side along each axis (`None` where it is
+/// 0).
+fn gradient(
+    volume: &Level0,
+    filter: Filter,
+    p: [f64; 3],
+    spacing_xyz: [f64; 3],
+    last: &mut Option<([u64; 3], Arc<BrickVoxels>)>,
+) -> Result<Option<[f64; 3]>, ReferenceError> {
+    let mut g = [0.0; 3];
+    for (a, ga) in g.iter_mut().enumerate() {
+        let mut at = |sign: f64| {
+            let q: [f64; 3] = std::array::from_fn(|k| {
+                if k == a {
+                    p[k] + sign * 0.5 * spacing_xyz[k]
+                } else {
+                    p[k]
+                }
+            });
+            let u = [
+                q[2] / spacing_xyz[2] - 0.5,
+                q[1] / spacing_xyz[1] - 0.5,
+                q[0] / spacing_xyz[0] - 0.5,
+            ];
+            volume.filtered(filter, u, last)
+        };
+        *ga = (at(1.0)? - at(-1.0)?) / spacing_xyz[a];
+    }
+    let n = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+    Ok((n > 0.0 && n.is_finite()).then(|| g.map(|x| x / n)))
 }
 
 #[cfg(test)]

@@ -277,10 +277,11 @@ pub struct SceneArgs {
     /// trilinear].
     #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<Filter>())]
     pub filter: Option<Filter>,
-    /// What each ray makes of its samples: `dvr` (emission–absorption, the default) or `mip`
+    /// What each ray makes of its samples: `dvr` (emission–absorption, the default), `mip`
     /// (maximum intensity projection: per channel the largest value along the ray, through
-    /// its transfer function scaled to 1, channels added) [default: the scene file's, else
-    /// dvr].
+    /// its transfer function scaled to 1, channels added) or `iso` (per channel the surface
+    /// where its value crosses the middle of its ramp, the nearest drawn shaded; methods
+    /// residency, page-table and octree) [default: the scene file's, else dvr].
     #[arg(long, value_name = "MODE", value_parser = super::names_parser::<RenderMode>())]
     pub mode: Option<RenderMode>,
     /// Draw only what lies inside this box: `X0,Y0,Z0,X1,Y1,Z1`, world units (replaces the

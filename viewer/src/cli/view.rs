@@ -33,7 +33,7 @@ Keys:
   {  }                          move the selected ramp's high end down/up
                                 (by 5% of the channel's default ramp width)
   f                             switch the filter: trilinear, tricubic (rebuilds the renderer)
-  m                             switch the mode: dvr, mip (rebuilds the renderer)
+  m                             switch the mode: dvr, mip, iso (rebuilds the renderer)
   r                             reset the camera
   h                             hide/show the statistics panel
   q, Esc                        quit

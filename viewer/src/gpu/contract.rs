@@ -311,8 +311,9 @@ gpu_struct! {
         /// The value from which maximum intensity projection's intensity no longer changes
         /// ([`crate::scene::ChannelStyle::saturation_value`], clamped to `±f32::MAX`).
         pub saturation: f32,
-        /// Unused (alignment).
-        pub pad0: u32,
+        /// The iso-surface's value ([`crate::scene::ChannelStyle::iso_value`]; `f32::MAX`
+        /// for none, a value no sample reaches).
+        pub iso: f32,
         /// Unused (alignment).
         pub pad1: u32,
         /// Unused (alignment).
@@ -513,6 +514,7 @@ pub fn wgsl_prelude() -> String {
         u("FILTER_TRICUBIC", Filter::Tricubic as u32),
         u("MODE_DVR", RenderMode::Dvr as u32),
         u("MODE_MIP", RenderMode::Mip as u32),
+        u("MODE_ISO", RenderMode::Iso as u32),
         u("CLIP_PLANE_SLOTS", CLIP_PLANE_SLOTS as u32),
         u("ATLAS_UINT", AtlasKind::Uint as u32),
         u("ATLAS_SINT", AtlasKind::Sint as u32),
@@ -534,13 +536,24 @@ pub const FILTER_MANUAL: u32 = 0;
 pub const FILTER_HARDWARE: u32 = 1;
 
 /// Texels (`vec4<f32>`) of the ray caster's image buffer for `pixels` pixels: the image, then
-/// in [`RenderMode::Mip`] each pixel's running maxima of the `channels` channels drawn, four
-/// to a texel (`shaders/raycast.wgsl`'s `maximum_texel`: pixel `p`'s channel `c` is lane
-/// `c % 4` of texel `pixels + p·K + c / 4`, `K = ⌈channels / 4⌉`), kept between passes.
+/// each pixel's per-channel state kept between passes (`shaders/raycast.wgsl`'s
+/// `channel_texel`): in [`RenderMode::Mip`] its running maxima, in [`RenderMode::Iso`] its
+/// channels' last values and then one texel of where they were taken and their sides. Pixel
+/// `p`'s channel `c` is lane `c % 4` of texel `pixels + p·K + c / 4`, `K` the texels per pixel
+/// ([`state_texels`]).
 pub fn image_texels(pixels: u64, mode: RenderMode, channels: usize) -> u64 {
+    pixels * (1 + state_texels(mode, channels))
+}
+
+/// Texels of one pixel's state between passes in `mode` with `channels` channels drawn: none
+/// for [`RenderMode::Dvr`] (the ray state holds it), `⌈channels / 4⌉` for
+/// [`RenderMode::Mip`], one more for [`RenderMode::Iso`].
+pub fn state_texels(mode: RenderMode, channels: usize) -> u64 {
+    let values = channels.div_ceil(4) as u64;
     match mode {
-        RenderMode::Dvr => pixels,
-        RenderMode::Mip => pixels * (1 + channels.div_ceil(4) as u64),
+        RenderMode::Dvr => 0,
+        RenderMode::Mip => values,
+        RenderMode::Iso => values + 1,
     }
 }
 

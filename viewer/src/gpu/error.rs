@@ -161,6 +161,17 @@ pub enum GpuError {
     /// Waiting for the GPU failed.
     #[error("waiting for the GPU")]
     Poll(#[source] wgpu::PollError),
+    /// A mode a method cannot draw: iso-surfaces need the crossings of consecutive samples,
+    /// which ray segment lists do not keep across their segments.
+    #[error(
+        "--method {method} does not draw the {mode} mode (use residency, page-table or octree)"
+    )]
+    ModeMethod {
+        /// The method.
+        method: &'static str,
+        /// The mode.
+        mode: &'static str,
+    },
     /// A scene whose clipping cannot be drawn.
     #[error(transparent)]
     Clip(#[from] crate::scene::ClipError),

@@ -254,6 +254,14 @@ impl Renderer {
             });
         }
         scene.clip.check()?;
+        if scene.mode == RenderMode::Iso
+            && matches!(options.method, Method::SparseLeap | Method::Rasterize)
+        {
+            return Err(GpuError::ModeMethod {
+                method: options.method.name(),
+                mode: scene.mode.name(),
+            });
+        }
         let visible: Vec<&ChannelStyle> = scene.channels.iter().filter(|c| c.visible).collect();
         if visible.len() > MAX_CHANNELS {
             return Err(GpuError::TooManyVisible {

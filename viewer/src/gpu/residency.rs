@@ -644,7 +644,8 @@ pub(crate) fn clear_range(info: &VolumeInfo, key: &BrickKey, filter: Filter) -> 
 
 /// Whether brick `key` is clear under `style`, `mode` and `filter`: its `clear_range`, rounded
 /// outward to `f32` as the shader sees values, holds data and shows nothing in the mode
-/// ([`ChannelStyle::hides`]). The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
+/// ([`ChannelStyle::hides`]). No brick is clear for iso-surfaces, whose crossings need every
+/// sample's value. The rule behind [`ENTRY_CLEAR`], and the benchmark's "empty under the
 /// TF".
 pub fn is_clear(
     info: &VolumeInfo,
@@ -653,6 +654,10 @@ pub fn is_clear(
     key: &BrickKey,
     filter: Filter,
 ) -> bool {
+    // An iso-surface's crossings need each sample's value, even one far from the iso value.
+    if mode == RenderMode::Iso {
+        return false;
+    }
     let (lo, hi) = clear_range(info, key, filter);
     let (lo, hi) = (f32_down(lo), f32_up(hi));
     lo <= hi && range_class(Some(style), mode, lo, hi).empty

@@ -89,6 +89,9 @@ pub fn build(
             points_offset,
             opacity_top: s.opacity_top() as f32,
             saturation: (s.saturation_value() as f32).clamp(-f32::MAX, f32::MAX),
+            iso: s
+                .iso_value()
+                .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX)),
             ..ChannelEntry::default()
         };
     }

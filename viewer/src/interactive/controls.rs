@@ -253,7 +253,8 @@ mod tests {
         assert_eq!(next_variant(Filter::Trilinear), Filter::Tricubic);
         assert_eq!(next_variant(Filter::Tricubic), Filter::Trilinear);
         assert_eq!(next_variant(RenderMode::Dvr), RenderMode::Mip);
-        assert_eq!(next_variant(RenderMode::Mip), RenderMode::Dvr);
+        assert_eq!(next_variant(RenderMode::Mip), RenderMode::Iso);
+        assert_eq!(next_variant(RenderMode::Iso), RenderMode::Dvr);
     }
 
     #[test]
