@@ -253,32 +253,36 @@ def test_hiding_a_channel_or_moving_a_window_fetches_no_brick(served, tmp_path):
     assert errors(console) == []
 
 
+def choose_in_menu(served, name, menu, value, tmp_path):
+    """Opens dataset `name`, converges, picks `value` in the page's `menu` and converges
+    again; returns (the state after, the scene of the link, the image before, the image
+    after, the console messages)."""
+    results, console = drive(
+        view_url(served, name),
+        [
+            {"do": "converge"},
+            {"do": "snapshot", "path": str(tmp_path / "before.png")},
+            {"do": "select", "selector": menu, "value": value},
+            {"do": "converge"},
+            {"do": "hash"},
+            {"do": "snapshot", "path": str(tmp_path / "after.png")},
+        ],
+    )
+    return results[3], scene_of(results[4]), tmp_path / "before.png", tmp_path / "after.png", console
+
+
 def test_the_filter_menu_renders_tricubic_as_the_reference_does(served, stores, tmp_path):
     """Choosing *tricubic* in the page's Filter menu builds a new renderer whose converged
     image equals `viewer reference` of the scene the page then carries (`"filter":
     "tricubic"`), and differs from the trilinear image."""
-    results, console = drive(
-        view_url(served, "u8"),
-        [
-            {"do": "converge"},
-            {"do": "snapshot", "path": str(tmp_path / "trilinear.png")},
-            {"do": "select", "selector": "#filter", "value": "tricubic"},
-            {"do": "converge"},
-            {"do": "hash"},
-            {"do": "snapshot", "path": str(tmp_path / "tricubic.png")},
-        ],
-    )
-    state, fragment = results[3], results[4]
+    state, scene, lin_png, cub_png, console = choose_in_menu(served, "u8", "#filter", "tricubic", tmp_path)
     assert state["error"] is None and state["converged"], state
     assert state["renderer_builds"] == 2, state
-    scene = scene_of(fragment)
     assert scene["filter"] == "tricubic"
     ref = reference(stores["u8"], scene, tmp_path / "ref.exr")
-    psnr, ssim = compare(tmp_path / "tricubic.png", ref)
+    psnr, ssim = compare(cub_png, ref)
     assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
-    lin = read_png(tmp_path / "trilinear.png")
-    cub = read_png(tmp_path / "tricubic.png")
-    assert np.abs(lin - cub).max() > 8
+    assert np.abs(read_png(lin_png) - read_png(cub_png)).max() > 8
     assert errors(console) == []
 
 
@@ -286,28 +290,16 @@ def test_the_mode_menu_renders_mip_as_the_reference_does(served, stores, tmp_pat
     """Choosing *maximum intensity projection* in the page's Mode menu builds a new renderer
     whose converged image equals `viewer reference` of the scene the page then carries
     (`"mode": "mip"`), and differs from the volume rendering."""
-    results, console = drive(
-        view_url(served, "u16x3"),
-        [
-            {"do": "converge"},
-            {"do": "snapshot", "path": str(tmp_path / "dvr.png")},
-            {"do": "select", "selector": "#mode", "value": "mip"},
-            {"do": "converge"},
-            {"do": "hash"},
-            {"do": "snapshot", "path": str(tmp_path / "mip.png")},
-        ],
-    )
-    state, fragment = results[3], results[4]
+    state, scene, dvr_png, mip_png, console = choose_in_menu(served, "u16x3", "#mode", "mip", tmp_path)
     assert state["error"] is None and state["converged"], state
     assert state["renderer_builds"] == 2, state
-    scene = scene_of(fragment)
     assert scene["mode"] == "mip"
     # As a PNG: channels add, and where they sum past 1 the linear EXR keeps what the page's
     # 8 bits clamp.
     ref = reference(stores["u16x3"], scene, tmp_path / "ref.png")
-    psnr, ssim = compare(tmp_path / "mip.png", ref)
+    psnr, ssim = compare(mip_png, ref)
     assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
-    assert np.abs(read_png(tmp_path / "dvr.png") - read_png(tmp_path / "mip.png")).max() > 8
+    assert np.abs(read_png(dvr_png) - read_png(mip_png)).max() > 8
     assert errors(console) == []
 
 
@@ -315,21 +307,9 @@ def test_the_mode_menu_draws_iso_surfaces_as_the_native_renderer_does(served, st
     """Choosing *iso-surfaces* builds a new renderer whose converged image (`"mode": "iso"` in
     the link) equals `viewer render`'s of the same scene at the same size, and differs from the
     volume rendering."""
-    results, console = drive(
-        view_url(served, "u16x3"),
-        [
-            {"do": "converge"},
-            {"do": "snapshot", "path": str(tmp_path / "dvr.png")},
-            {"do": "select", "selector": "#mode", "value": "iso"},
-            {"do": "converge"},
-            {"do": "hash"},
-            {"do": "snapshot", "path": str(tmp_path / "iso.png")},
-        ],
-    )
-    state, fragment = results[3], results[4]
+    state, scene, dvr_png, iso_png, console = choose_in_menu(served, "u16x3", "#mode", "iso", tmp_path)
     assert state["error"] is None and state["converged"], state
     assert state["renderer_builds"] == 2, state
-    scene = scene_of(fragment)
     assert scene["mode"] == "iso"
     path = tmp_path / "scene.json"
     path.write_text(json.dumps(scene))
@@ -339,10 +319,10 @@ def test_the_mode_menu_draws_iso_surfaces_as_the_native_renderer_does(served, st
         capture_output=True, text=True, env={"XDG_RUNTIME_DIR": "/tmp", "PATH": "/usr/bin:/bin"},
     )
     assert p.returncode == 0, p.stderr
-    psnr, ssim = compare(tmp_path / "iso.png", tmp_path / "native.png")
+    psnr, ssim = compare(iso_png, tmp_path / "native.png")
     # Measured identical (PSNR infinite, reported as null) on SwiftShader against lavapipe.
     assert (psnr is None or psnr >= 40.0) and ssim >= 0.99, (psnr, ssim)
-    assert np.abs(read_png(tmp_path / "dvr.png") - read_png(tmp_path / "iso.png")).max() > 8
+    assert np.abs(read_png(dvr_png) - read_png(iso_png)).max() > 8
     assert errors(console) == []
 
 

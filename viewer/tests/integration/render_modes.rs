@@ -106,26 +106,6 @@ fn mip_matches_its_reference_for_every_method_and_filter() {
     }
 }
 
-/// A bright front slab (x < 8: 200 to 240) before dimmer matter (at most 180), u8, 32³ in
-/// bricks of 8³; a camera on the −x side, every ray entering through the slab.
-fn bright_front() -> Arc<SyntheticSource> {
-    Arc::new(SyntheticSource::new(
-        SampleType::U8,
-        [32, 32, 32],
-        [1.0; 3],
-        [8; 3],
-        4,
-        1,
-        |_, [x, y, z]| {
-            if x < 8 {
-                220.0 + 20.0 * ((y + z) as f64 * 0.4).sin()
-            } else {
-                120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
-            }
-        },
-    ))
-}
-
 fn front_scene(mode: RenderMode, opacity: f64) -> Scene {
     scene(
         camera([-40.0, 16.0, 16.0], [16.0, 16.0, 16.0]),
@@ -151,15 +131,7 @@ fn mip_never_fetches_bricks_that_cannot_raise_the_rays_maximum() {
         let label = format!("front-{}", mode.name());
         let m = check(&label, &p, &img, &reference(&src, &scene, 32, 32));
         assert!(m.psnr_db >= 45.0, "{label}: PSNR {}", m.psnr_db);
-        let mut x: Vec<u64> = p
-            .request_log
-            .iter()
-            .filter(|k| k.level == 0)
-            .map(|k| k.brick[2])
-            .collect();
-        x.sort_unstable();
-        x.dedup();
-        x
+        level0_bricks_along_x(&p)
     };
     assert_eq!(fetched_x(RenderMode::Dvr), [0, 1, 2, 3]);
     assert_eq!(fetched_x(RenderMode::Mip), [0, 1, 2]);
@@ -440,13 +412,5 @@ fn iso_never_fetches_bricks_behind_the_surface() {
     assert!(p.converged, "{}", p.stop_reason);
     let m = check("iso-front", &p, &img, &reference(&src, &scene, 32, 32));
     assert!(m.psnr_db >= 45.0, "iso-front: PSNR {}", m.psnr_db);
-    let mut x: Vec<u64> = p
-        .request_log
-        .iter()
-        .filter(|k| k.level == 0)
-        .map(|k| k.brick[2])
-        .collect();
-    x.sort_unstable();
-    x.dedup();
-    assert_eq!(x, [0]);
+    assert_eq!(level0_bricks_along_x(&p), [0]);
 }

@@ -558,21 +558,7 @@ fn without_substitution_a_failed_brick_leaves_a_hole() {
 /// rays cross all four bricks along x. The converged image matches the reference.
 #[test]
 fn bricks_behind_opaque_matter_are_not_fetched() {
-    let src = Arc::new(SyntheticSource::new(
-        SampleType::U8,
-        [32, 32, 32],
-        [1.0; 3],
-        [8; 3],
-        4,
-        1,
-        |_, [x, y, z]| {
-            if x < 8 {
-                220.0 + 20.0 * ((y + z) as f64 * 0.4).sin()
-            } else {
-                120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
-            }
-        },
-    ));
+    let src = bright_front();
     let scene = Scene {
         camera: camera([-40.0, 16.0, 16.0], [16.0, 16.0, 16.0]),
         channels: vec![ramp(0, [0.9, 0.7, 0.3], 100.0, 200.0, 1.0)],

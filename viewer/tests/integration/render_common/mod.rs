@@ -13,7 +13,7 @@ use residency_viewer::image::RgbImage;
 use residency_viewer::metrics::{self, Metrics};
 use residency_viewer::reference::{self, ReferenceOptions};
 use residency_viewer::scene::{Camera, ChannelStyle, OpacityPoint, Scene};
-use residency_viewer::source::BrickSource;
+use residency_viewer::source::{BrickSource, SampleType};
 
 /// The GPU (lavapipe on CI), opened once per test binary and shared by the tests.
 pub fn gpu() -> &'static Gpu {
@@ -144,4 +144,39 @@ pub fn check(label: &str, p: &Progressive, gpu: &RgbImage, reference: &RgbImage)
         p.frames.last()
     );
     m
+}
+
+/// A bright front slab (x < 8: 200 to 240) before dimmer matter (at most 180), u8, 32³ in
+/// bricks of 8³ (min/max cells of 4³): seen from the −x side, every ray enters through the
+/// slab. Opaque under a steep ramp (nothing behind it is needed), the brightest along every
+/// ray for MIP, the first surface for iso-surfaces.
+pub fn bright_front() -> Arc<SyntheticSource> {
+    Arc::new(SyntheticSource::new(
+        SampleType::U8,
+        [32, 32, 32],
+        [1.0; 3],
+        [8; 3],
+        4,
+        1,
+        |_, [x, y, z]| {
+            if x < 8 {
+                220.0 + 20.0 * ((y + z) as f64 * 0.4).sin()
+            } else {
+                120.0 + 60.0 * (x as f64 * 0.5).sin() * (y as f64 * 0.3 + z as f64 * 0.2).cos()
+            }
+        },
+    ))
+}
+
+/// The distinct x indices of the level-0 bricks `p` requested, ascending.
+pub fn level0_bricks_along_x(p: &Progressive) -> Vec<u64> {
+    let mut x: Vec<u64> = p
+        .request_log
+        .iter()
+        .filter(|k| k.level == 0)
+        .map(|k| k.brick[2])
+        .collect();
+    x.sort_unstable();
+    x.dedup();
+    x
 }
