@@ -47,6 +47,7 @@ pub(crate) mod apron;
 pub mod brick_cache;
 pub mod brick_cut;
 pub(crate) mod buffers;
+mod clipping;
 pub mod contract;
 pub mod device;
 pub mod error;
