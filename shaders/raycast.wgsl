@@ -85,17 +85,14 @@ fn iso_take(
     return found;
 }
 
-// MODE_ISO: after a skip of node `node` (whose range excludes every channel's iso value), each
-// channel with data there is known on the node's side, its last value no sample's.
+// MODE_ISO: after a skip of node `node`, each channel with data there is known on the node's
+// side, its last value no sample's. The sides agreed (iso_sides_agree): a known side stays, and
+// an unknown one is below, which its clear `above` bit already says.
 fn iso_skipped(iso: ptr<function, IsoState>, node: u32, t: f32) {
     for (var c = 0u; c < P.channel_count; c++) {
-        let lo = bitcast<f32>(node_word(node, c, 1u));
-        let hi = bitcast<f32>(node_word(node, c, 2u));
-        if lo <= hi {
-            let bit = 1u << c;
-            (*iso).known |= bit;
-            (*iso).valued &= ~bit;
-            (*iso).above = select((*iso).above & ~bit, (*iso).above | bit, lo > S.channels[c].iso);
+        if bitcast<f32>(node_word(node, c, 1u)) <= bitcast<f32>(node_word(node, c, 2u)) {
+            (*iso).known |= 1u << c;
+            (*iso).valued &= ~(1u << c);
         }
     }
     (*iso).at = t;
@@ -189,19 +186,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     // MODE_MIP: each channel's largest value so far; MODE_ISO: its last value, and the
     // IsoState. Kept between passes.
-    var maxima: array<f32, MAX_CHANNELS>;
+    var kept: array<f32, MAX_CHANNELS>;
     var iso = IsoState(0.0, 0u, 0u, 0u);
     if MODE == MODE_MIP || MODE == MODE_ISO {
         for (var c = 0u; c < P.channel_count; c++) {
-            maxima[c] = NO_MAXIMUM;
+            kept[c] = NO_MAXIMUM;
             if !fresh {
-                maxima[c] = out_color[channel_texel(pixel, c)][c % 4u];
+                kept[c] = out_color[channel_texel(pixel, c)][c % 4u];
             }
         }
     }
     if MODE == MODE_ISO && !fresh {
-        let kept = bitcast<vec4<u32>>(out_color[iso_texel(pixel)]);
-        iso = IsoState(bitcast<f32>(kept.x), kept.y, kept.z, kept.w);
+        let words = bitcast<vec4<u32>>(out_color[iso_texel(pixel)]);
+        iso = IsoState(bitcast<f32>(words.x), words.y, words.z, words.w);
     }
     var samples = 0u;
     var skipped = 0u;
@@ -347,7 +344,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         && all((ray.cell >> node_shift(held.depth)) == held_cell) {
                         v = held;
                     } else {
-                        v = visit_octree(ray, last_depth, desired_step, dir, skipping, &maxima, iso);
+                        v = visit_octree(ray, last_depth, desired_step, dir, skipping, &kept, iso);
                         last_depth = v.depth;
                         held = v;
                         held_step = desired_step;
@@ -418,7 +415,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 }
             }
             if MODE == MODE_MIP {
-                if take_maxima(s.have, &values, &maxima) {
+                if take_maxima(s.have, &values, &kept) {
                     trans = 0.0; // every channel saturated: nothing can change (ends the ray)
                 }
             } else if MODE == MODE_ISO {
@@ -428,7 +425,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     iso.at = ray.t + move_by;
                 } else {
                     var hit = 0.0;
-                    let c = iso_take(s.have, &values, &maxima, &iso, ray.t, &hit);
+                    let c = iso_take(s.have, &values, &kept, &iso, ray.t, &hit);
                     if c != NO_CHANNEL {
                         var l = level_of(chosen, c);
                         if l == NO_LEVEL {
@@ -482,7 +479,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             atomicAdd(&requests.counters.rays_need_full, 1u);
         }
     } else if MODE == MODE_MIP {
-        out_color[pixel] = mip_pixel(&maxima, P.background);
+        out_color[pixel] = mip_pixel(&kept, P.background);
     } else if MODE == MODE_ISO {
         out_color[pixel] = select(vec4<f32>(P.background, 0.0), vec4<f32>(color, 1.0), trans == 0.0);
     } else if !VDI {
@@ -490,7 +487,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     if (MODE == MODE_MIP || MODE == MODE_ISO) && suspended {
         for (var c = 0u; c < P.channel_count; c++) {
-            out_color[channel_texel(pixel, c)][c % 4u] = maxima[c];
+            out_color[channel_texel(pixel, c)][c % 4u] = kept[c];
         }
         if MODE == MODE_ISO {
             out_color[iso_texel(pixel)] = bitcast<vec4<f32>>(vec4<u32>(bitcast<u32>(iso.at), iso.known, iso.above, iso.valued));

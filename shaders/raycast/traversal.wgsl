@@ -84,9 +84,7 @@ fn visit_octree(
             homogeneous = (word >> CLASS_CONSTANT_SHIFT) & all;
             if MODE == MODE_ISO {
                 homogeneous = 0u;
-                if v.empty == all && !iso_sides_agree(v.node, iso) {
-                    v.empty = 0u;
-                } else if v.empty != all {
+                if v.empty != all || !iso_sides_agree(v.node, iso) {
                     v.empty = 0u;
                 }
             }

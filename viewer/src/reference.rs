@@ -14,7 +14,9 @@ use std::sync::{Arc, RwLock};
 use rayon::prelude::*;
 
 use crate::image::RgbImage;
-use crate::scene::{ChannelStyle, Filter, RenderMode, Scene, bspline_weights, corrected_opacity};
+use crate::scene::{
+    ChannelStyle, ClipPlane, Filter, RenderMode, Scene, bspline_weights, corrected_opacity,
+};
 use crate::source::{BrickKey, BrickSource, BrickVoxels, SourceError, VolumeInfo};
 
 /// Why the reference cannot render a scene: options, a camera or a volume that define no
@@ -360,6 +362,12 @@ pub fn render(
             fov_y_degrees: cam.fov_y_degrees,
         });
     }
+    let rule = RayRule {
+        scene,
+        styles: &visible,
+        start: Accumulated::new(scene.mode, &visible),
+        planes: scene.clip.planes_for(&scene.camera),
+    };
     let pixels = (0..options.width * options.height)
         .into_par_iter()
         .map(|p| {
@@ -369,13 +377,11 @@ pub fn render(
                 .ray_direction(px, py, options.width, options.height);
             let mut lasts: Vec<Option<([u64; 3], Arc<BrickVoxels>)>> = vec![None; volumes.len()];
             let pixel = march(
-                scene.camera.eye,
                 dir,
                 extent,
                 (step, reference_step),
                 options.min_transmittance,
-                scene,
-                &visible,
+                &rule,
                 &volumes,
                 spacing_xyz,
                 &mut lasts,
@@ -398,15 +404,25 @@ fn extent_xyz(info: &VolumeInfo) -> [f64; 3] {
 }
 
 /// What a ray has made of its samples so far, by the scene's mode ([`crate::scene`]).
+#[derive(Clone)]
 enum Accumulated {
     /// Emission–absorption: the colour and the transmittance.
     Dvr([f64; 3], f64),
     /// Maximum intensity projection: each visible channel's largest value (`None`: no value
-    /// yet).
-    Mip(Vec<Option<f64>>),
-    /// Iso-surfaces: where the last samples were taken and each visible channel's value there
-    /// (`None`: no value yet), then the shaded colour of the surface met.
+    /// yet), and the value from which its intensity no longer changes
+    /// ([`ChannelStyle::saturation_value`]).
+    Mip {
+        /// Each channel's largest value.
+        maxima: Vec<Option<f64>>,
+        /// Each channel's saturation value.
+        saturation: Vec<f64>,
+    },
+    /// Iso-surfaces: each visible channel's iso value ([`ChannelStyle::iso_value`]), where the
+    /// last samples were taken and each channel's value there (`None`: no value yet), then
+    /// the shaded colour of the surface met.
     Iso {
+        /// Each channel's iso value.
+        levels: Vec<Option<f64>>,
         /// Ray parameter of the last samples.
         at: f64,
         /// Each channel's last value.
@@ -417,12 +433,18 @@ enum Accumulated {
 }
 
 impl Accumulated {
-    /// Nothing yet, for `channels` visible channels in `mode`.
-    fn new(mode: RenderMode, channels: usize) -> Self {
+    /// Nothing yet, for the visible channels' `styles` in `mode` (once per render: each ray
+    /// starts from a clone).
+    fn new(mode: RenderMode, styles: &[&ChannelStyle]) -> Self {
+        let channels = styles.len();
         match mode {
             RenderMode::Dvr => Self::Dvr([0.0; 3], 1.0),
-            RenderMode::Mip => Self::Mip(vec![None; channels]),
+            RenderMode::Mip => Self::Mip {
+                maxima: vec![None; channels],
+                saturation: styles.iter().map(|s| s.saturation_value()).collect(),
+            },
             RenderMode::Iso => Self::Iso {
+                levels: styles.iter().map(|s| s.iso_value()).collect(),
                 at: 0.0,
                 last: vec![None; channels],
                 hit: None,
@@ -433,13 +455,13 @@ impl Accumulated {
     /// Whether nothing further along the ray can change the pixel: the transmittance is at
     /// most `min_transmittance` (or 0), or every channel's maximum has reached its
     /// [`ChannelStyle::saturation_value`].
-    fn done(&self, styles: &[&ChannelStyle], min_transmittance: f64) -> bool {
+    fn done(&self, min_transmittance: f64) -> bool {
         match self {
             Self::Dvr(_, t) => *t <= min_transmittance || *t == 0.0,
-            Self::Mip(maxima) => styles
+            Self::Mip { maxima, saturation } => saturation
                 .iter()
                 .zip(maxima)
-                .all(|(s, m)| m.unwrap_or(f64::NEG_INFINITY) >= s.saturation_value()),
+                .all(|(&s, m)| m.unwrap_or(f64::NEG_INFINITY) >= s),
             Self::Iso { hit, .. } => hit.is_some(),
         }
     }
@@ -472,7 +494,7 @@ impl Accumulated {
                 }
                 *t *= 1.0 - alpha;
             }
-            Self::Mip(maxima) => {
+            Self::Mip { maxima, .. } => {
                 for (m, &v) in maxima.iter_mut().zip(values) {
                     if !v.is_nan() {
                         *m = Some(m.map_or(v, |m| m.max(v)));
@@ -480,11 +502,14 @@ impl Accumulated {
                 }
             }
             Self::Iso {
-                at: before, last, ..
+                levels,
+                at: before,
+                last,
+                ..
             } => {
                 let mut first: Option<(usize, f64)> = None;
-                for (k, (style, &v)) in styles.iter().zip(values).enumerate() {
-                    let Some(iso) = style.iso_value() else {
+                for (k, (&level, &v)) in levels.iter().zip(values).enumerate() {
+                    let Some(iso) = level else {
                         continue;
                     };
                     if v.is_nan() {
@@ -523,7 +548,7 @@ impl Accumulated {
         match self {
             Self::Dvr(colour, t) => std::array::from_fn(|i| colour[i] + t * background[i]),
             Self::Iso { hit, .. } => hit.unwrap_or(background),
-            Self::Mip(maxima) => {
+            Self::Mip { maxima, .. } => {
                 let mut colour = [0.0; 3];
                 let mut sum = 0.0;
                 for (style, m) in styles.iter().zip(maxima) {
@@ -544,23 +569,37 @@ impl Accumulated {
     }
 }
 
+/// What every ray of one render shares: the scene, its visible channels' styles, a ray's state
+/// before its first sample, and the clip planes for the scene's camera.
+struct RayRule<'a> {
+    scene: &'a Scene,
+    styles: &'a [&'a ChannelStyle],
+    start: Accumulated,
+    planes: Vec<ClipPlane>,
+}
+
 /// Marches one ray; returns its pixel.
 #[allow(clippy::too_many_arguments)]
 fn march(
-    eye: [f64; 3],
     dir: [f64; 3],
     extent: [f64; 3],
     (step, reference_step): (f64, f64),
     min_transmittance: f64,
-    scene: &Scene,
-    styles: &[&ChannelStyle],
+    rule: &RayRule<'_>,
     volumes: &[Level0],
     spacing_xyz: [f64; 3],
     lasts: &mut [Option<([u64; 3], Arc<BrickVoxels>)>],
 ) -> Result<[f64; 3], ReferenceError> {
-    let mut ray = Accumulated::new(scene.mode, styles.len());
-    let Some((t0, t1)) = clip_to_box(eye, dir, extent)
-        .and_then(|span| scene.clip.clip_span(&scene.camera, dir, span))
+    let RayRule {
+        scene,
+        styles,
+        start,
+        planes,
+    } = rule;
+    let eye = scene.camera.eye;
+    let mut ray = start.clone();
+    let Some((t0, t1)) =
+        clip_to_box(eye, dir, extent).and_then(|span| scene.clip.clip_span(planes, eye, dir, span))
     else {
         return Ok(ray.pixel(styles, scene.background));
     };
@@ -577,13 +616,7 @@ fn march(
     // Each segment's samples at its ray parameter `at`, and (iso-surfaces) the surface they
     // cross, shaded.
     let mut take = |ray: &mut Accumulated, at: f64, length: f64, values: &mut Vec<f64>| {
-        let p: [f64; 3] = std::array::from_fn(|k| eye[k] + at * dir[k]);
-        // Continuous voxel coordinates, z, y, x, voxel centres at integers.
-        let u = [
-            p[2] / spacing_xyz[2] - 0.5,
-            p[1] / spacing_xyz[1] - 0.5,
-            p[0] / spacing_xyz[0] - 0.5,
-        ];
+        let u = voxel_coordinates(std::array::from_fn(|k| eye[k] + at * dir[k]), spacing_xyz);
         values.clear();
         for (volume, last) in volumes.iter().zip(lasts.iter_mut()) {
             values.push(volume.filtered(scene.filter, u, last)?);
@@ -607,7 +640,7 @@ fn march(
         if i == MAX_STEPS_PER_RAY {
             return Err(too_long());
         }
-        if ray.done(styles, min_transmittance) {
+        if ray.done(min_transmittance) {
             break;
         }
         let a = t0 + i as f64 * step;
@@ -618,6 +651,16 @@ fn march(
         take(&mut ray, 0.5 * (a + b), b - a, &mut values)?;
     }
     Ok(ray.pixel(styles, scene.background))
+}
+
+/// Continuous level-0 voxel coordinates (`z, y, x`, voxel centres at integers) of the world
+/// point `p` (`x, y, z`).
+fn voxel_coordinates(p: [f64; 3], spacing_xyz: [f64; 3]) -> [f64; 3] {
+    [
+        p[2] / spacing_xyz[2] - 0.5,
+        p[1] / spacing_xyz[1] - 0.5,
+        p[0] / spacing_xyz[0] - 0.5,
+    ]
 }
 
 /// The unit gradient of `volume`'s filtered field at world point `p` (world `x, y, z`), by
@@ -640,12 +683,7 @@ fn gradient(
                     p[k]
                 }
             });
-            let u = [
-                q[2] / spacing_xyz[2] - 0.5,
-                q[1] / spacing_xyz[1] - 0.5,
-                q[0] / spacing_xyz[0] - 0.5,
-            ];
-            volume.filtered(filter, u, last)
+            volume.filtered(filter, voxel_coordinates(q, spacing_xyz), last)
         };
         *ga = (at(1.0)? - at(-1.0)?) / spacing_xyz[a];
     }

@@ -149,6 +149,11 @@ pub struct OpacityPoint {
 }
 
 impl OpacityPoint {
+    /// The highest opacity of `points` (0 when every point is 0, or there are none).
+    pub fn top(points: &[Self]) -> f64 {
+        points.iter().map(|p| p.opacity).fold(0.0, f64::max)
+    }
+
     /// A two-point ramp: opacity 0 at `lo` rising to `opacity` at `hi`.
     pub fn ramp(lo: f64, hi: f64, opacity: f64) -> Vec<Self> {
         vec![
@@ -204,7 +209,7 @@ impl ChannelStyle {
     /// The highest opacity of the control points: what maximum intensity projection scales
     /// the transfer function by (0 when every point is 0, or there are none).
     pub fn opacity_top(&self) -> f64 {
-        self.opacity.iter().map(|p| p.opacity).fold(0.0, f64::max)
+        OpacityPoint::top(&self.opacity)
     }
 
     /// The value from which maximum intensity projection's intensity no longer changes as the

@@ -242,6 +242,7 @@ function keepSceneInUrl() {
     lastScene = json;
     history.replaceState(null, "", location.pathname + location.search + "#scene=" + encodeURIComponent(json));
   }
+  return json;
 }
 
 /** Draws channel `c`'s histogram (log counts) with its window [lo, hi] shaded. */
@@ -557,14 +558,15 @@ function orientationOf(camera, height, unit) {
   return { scale: { length: Number(length.toPrecision(1)), unit: UNIT_SYMBOLS[unit] ?? unit ?? "units", pixels: length / perPixel }, axes };
 }
 
-// Draws the orientation over the view when the camera or the view's size changed.
-function drawOrientation() {
+// Draws the orientation over the view of the scene `sceneJson` (a frame just drawn) when the
+// scene or the view's size changed.
+function drawOrientation(sceneJson) {
   const overlay = document.getElementById("orientation");
   const rect = canvas.getBoundingClientRect();
-  const camera = JSON.parse(viewer.scene_json()).camera;
-  const key = JSON.stringify([camera, rect.width, rect.height]);
+  const key = `${rect.width}x${rect.height} ${sceneJson}`;
   if (key === orientationKey || rect.height === 0) return;
   orientationKey = key;
+  const camera = JSON.parse(sceneJson).camera;
   orientation = orientationOf(camera, rect.height, JSON.parse(viewer.info_json()).unit);
   const dpr = window.devicePixelRatio || 1;
   overlay.style.width = `${rect.width}px`;
@@ -604,9 +606,8 @@ async function loop() {
     if (service) remoteTick();
     if (await viewer.step()) {
       draw();
-      keepSceneInUrl();
+      drawOrientation(keepSceneInUrl());
     }
-    drawOrientation();
   } catch (e) {
     failure = String(e);
   }

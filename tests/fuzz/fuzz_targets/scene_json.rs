@@ -17,9 +17,10 @@ fuzz_target!(|data: &[u8]| {
     };
     let cam = &scene.camera;
     let _ = cam.basis();
+    let planes = scene.clip.planes_for(cam);
     for (px, py, w, h) in [(0, 0, 1, 1), (3, 1, 4, 2), (0, 9, 1, 10)] {
         let dir = cam.ray_direction(px, py, w, h);
-        if let Some((t0, t1)) = scene.clip.clip_span(cam, dir, (0.0, 1e6)) {
+        if let Some((t0, t1)) = scene.clip.clip_span(&planes, cam.eye, dir, (0.0, 1e6)) {
             assert!(t0 < t1 && t0 >= 0.0 && t1 <= 1e6, "{t0} {t1}");
         }
     }

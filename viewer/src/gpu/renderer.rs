@@ -124,8 +124,8 @@ struct FrameBuffers {
 impl FrameBuffers {
     /// Buffers for `width × height` pixels, `max_requests` requests and a cache of
     /// `cache_slots` slots, for `mode` with `channels` channels drawn: in
-    /// [`RenderMode::Mip`] the image buffer holds after the image each pixel's running
-    /// maxima ([`image_texels`]).
+    /// [`RenderMode::Mip`] and [`RenderMode::Iso`] the image buffer holds after the image each
+    /// pixel's state between passes ([`image_texels`]).
     fn new(
         gpu: &Gpu,
         options: &RenderOptions,

@@ -125,7 +125,7 @@ pub fn reference_width(info: &VolumeInfo, channel: usize) -> f64 {
 /// Scales the opacity ramp `points` so that its highest point is `opacity` (every point set
 /// to `opacity` where the ramp is zero everywhere).
 pub fn set_top_opacity(points: &mut [OpacityPoint], opacity: f64) {
-    let top = points.iter().map(|p| p.opacity).fold(0.0, f64::max);
+    let top = OpacityPoint::top(points);
     for p in points {
         p.opacity = if top > 0.0 {
             p.opacity / top * opacity

@@ -168,15 +168,16 @@ impl Clip {
         planes
     }
 
-    /// The part `[t0, t1]` of the span `span` of the ray `camera.eye + t·dir` that is kept
-    /// (`None` when nothing is): the f64 rule the GPU follows in `volume_span`.
+    /// The part `[t0, t1]` of the span `span` of the ray `eye + t·dir` that is kept (`None`
+    /// when nothing is), `planes` being [`Clip::planes_for`] the camera at `eye` (worked out
+    /// once per view): the f64 rule the GPU follows in `volume_span`.
     pub fn clip_span(
         &self,
-        camera: &Camera,
+        planes: &[ClipPlane],
+        eye: [f64; 3],
         dir: [f64; 3],
         span: (f64, f64),
     ) -> Option<(f64, f64)> {
-        let eye = camera.eye;
         let (mut t0, mut t1) = span;
         if let Some(b) = self.region {
             for k in 0..3 {
@@ -191,7 +192,7 @@ impl Clip {
                 t1 = t1.min(ta.max(tb));
             }
         }
-        for plane in self.planes_for(camera) {
+        for plane in planes {
             let (lo, hi) = plane.bound(eye, dir)?;
             t0 = t0.max(lo);
             t1 = t1.min(hi);
@@ -217,12 +218,18 @@ mod tests {
         let span = (10.0, 20.0); // the volume [0, 10) along x
         let mut clip = Clip::default();
         assert!(clip.is_empty());
-        assert_eq!(clip.clip_span(&camera, dir, span), Some(span));
+        assert_eq!(
+            clip.clip_span(&clip.planes_for(&camera), camera.eye, dir, span),
+            Some(span)
+        );
         clip.region = Some(ClipBox {
             min: [2.0, 0.0, 0.0],
             max: [6.0, 10.0, 10.0],
         });
-        assert_eq!(clip.clip_span(&camera, dir, span), Some((12.0, 16.0)));
+        assert_eq!(
+            clip.clip_span(&clip.planes_for(&camera), camera.eye, dir, span),
+            Some((12.0, 16.0))
+        );
         // A plane keeping x ≥ 3 (normal +x), then one keeping x ≤ 5.
         clip.planes.push(ClipPlane {
             point: [3.0, 0.0, 0.0],
@@ -232,13 +239,22 @@ mod tests {
             point: [5.0, 0.0, 0.0],
             normal: [-1.0, 0.0, 0.0],
         });
-        assert_eq!(clip.clip_span(&camera, dir, span), Some((13.0, 15.0)));
+        assert_eq!(
+            clip.clip_span(&clip.planes_for(&camera), camera.eye, dir, span),
+            Some((13.0, 15.0))
+        );
         // Near: nothing closer than 14 to the eye along the view direction.
         clip.near = Some(14.0);
-        assert_eq!(clip.clip_span(&camera, dir, span), Some((14.0, 15.0)));
+        assert_eq!(
+            clip.clip_span(&clip.planes_for(&camera), camera.eye, dir, span),
+            Some((14.0, 15.0))
+        );
         assert_eq!(clip.planes_for(&camera).len(), 3);
         clip.near = Some(16.0);
-        assert_eq!(clip.clip_span(&camera, dir, span), None);
+        assert_eq!(
+            clip.clip_span(&clip.planes_for(&camera), camera.eye, dir, span),
+            None
+        );
         // A ray parallel to a plane: kept on its side, cut on the other.
         let side = ClipPlane {
             point: [0.0, 6.0, 0.0],
@@ -248,7 +264,10 @@ mod tests {
             planes: vec![side],
             ..Clip::default()
         };
-        assert_eq!(parallel.clip_span(&camera, dir, span), None);
+        assert_eq!(
+            parallel.clip_span(&parallel.planes, camera.eye, dir, span),
+            None
+        );
         let other = Clip {
             planes: vec![ClipPlane {
                 normal: [0.0, -1.0, 0.0],
@@ -256,7 +275,10 @@ mod tests {
             }],
             ..Clip::default()
         };
-        assert_eq!(other.clip_span(&camera, dir, span), Some(span));
+        assert_eq!(
+            other.clip_span(&other.planes, camera.eye, dir, span),
+            Some(span)
+        );
     }
 
     #[test]

@@ -327,7 +327,7 @@ impl Viewer {
         Ok(())
     }
 
-    /// Sets what each ray makes of its samples by name (`dvr` or `mip`): a new renderer at the
+    /// Sets what each ray makes of its samples by name (`dvr`, `mip` or `iso`): a new renderer at the
     /// next step (the mode is compiled into its pipeline). The remote mode's VDIs are `dvr`
     /// only: in another mode the page draws from bricks.
     ///
