@@ -3,7 +3,9 @@
 // the background already) on a surface or texture, scaled to it by nearest neighbour, with the
 // 8-bit sRGB encoding of the CPU path (`interactive::overlay::SrgbTable`: the same table) and
 // the statistics panel over its top-left corner (text in its colour, the rest of the panel
-// darkened to a quarter, as `Canvas::panel` does on the CPU).
+// darkened to a quarter, as `Canvas::panel` does on the CPU) and the orientation strip along
+// its bottom edge (marks in their colour, the image showing through elsewhere, as
+// `Canvas::orientation` draws on the CPU).
 
 struct PresentParams {
     // The image's size in pixels.
@@ -20,12 +22,19 @@ struct PresentParams {
     encode: u32,
     // Entries of the sRGB table.
     table_entries: u32,
+    // The orientation strip's size in pixels (0 × 0: none), its bottom-left corner at the
+    // target's.
+    footer_width: u32,
+    footer_height: u32,
+    pad0: u32,
+    pad1: u32,
 }
 
 @group(0) @binding(0) var<uniform> params: PresentParams;
 @group(0) @binding(1) var<storage, read> image: array<vec4<f32>>;
 @group(0) @binding(2) var<storage, read> srgb_table: array<u32>;
 @group(0) @binding(3) var panel: texture_2d<u32>;
+@group(0) @binding(4) var footer: texture_2d<u32>;
 
 @vertex
 fn vs_main(@builtin(vertex_index) i: u32) -> @builtin(position) vec4<f32> {
@@ -69,6 +78,13 @@ fn fs_main(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
             rgb = t.rgb;
         } else {
             rgb = rgb >> vec3<u32>(2u);
+        }
+    }
+    let footer_top = params.target_height - min(params.footer_height, params.target_height);
+    if p.x < params.footer_width && p.y >= footer_top && params.footer_height != 0u {
+        let t = textureLoad(footer, vec2<u32>(p.x, p.y - footer_top), 0);
+        if t.a != 0u {
+            rgb = t.rgb;
         }
     }
     let codes = vec3<f32>(rgb);

@@ -57,6 +57,7 @@ use serde::{Deserialize, Serialize};
 use crate::names::{Named, UnknownName};
 
 mod clip;
+pub mod orientation;
 
 pub use clip::{Clip, ClipBox, ClipError, ClipPlane, MAX_CLIP_PLANES};
 

@@ -523,40 +523,8 @@ async function answerWaiting() {
 
 // ---- orientation: a scale bar in the store's unit and axes that turn with the camera ----
 
-// OME-Zarr's unit names (the UDUNITS-2 spatial units it lists) as symbols.
-const UNIT_SYMBOLS = {
-  angstrom: "Å", nanometer: "nm", micrometer: "µm", micron: "µm", millimeter: "mm",
-  centimeter: "cm", meter: "m", kilometer: "km", inch: "in", foot: "ft",
-};
 let orientation = null;
 let orientationKey = null;
-
-const sub3 = (a, b) => a.map((v, i) => v - b[i]);
-const dot3 = (a, b) => a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-const cross3 = (a, b) => [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
-const unit3 = (a) => { const n = Math.hypot(...a); return a.map((v) => v / n); };
-
-// The scale bar and the axes for `camera` on a view `height` CSS pixels high: the bar a round
-// length (1, 2 or 5 times a power of ten, nearest 100 pixels at the target's distance) and its
-// pixels; each world axis as the screen direction (right, down) of its unit vector, from the
-// camera frame of crate::scene (forward, right = forward × up, up' = right × forward).
-function orientationOf(camera, height, unit) {
-  const forward = unit3(sub3(camera.target, camera.eye));
-  const right = unit3(cross3(forward, camera.up ?? [0, -1, 0]));
-  const up = cross3(right, forward);
-  const distance = Math.hypot(...sub3(camera.target, camera.eye));
-  const fov = ((camera.fov_y_degrees ?? 30) * Math.PI) / 180;
-  const perPixel = (2 * distance * Math.tan(fov / 2)) / height;
-  const want = 100 * perPixel;
-  const power = 10 ** Math.floor(Math.log10(want));
-  const length = [1, 2, 5, 10].map((m) => m * power)
-    .reduce((best, l) => (Math.abs(Math.log(l / want)) < Math.abs(Math.log(best / want)) ? l : best));
-  const axes = {};
-  for (const [name, v] of [["x", [1, 0, 0]], ["y", [0, 1, 0]], ["z", [0, 0, 1]]]) {
-    axes[name] = [dot3(v, right), -dot3(v, up)];
-  }
-  return { scale: { length: Number(length.toPrecision(1)), unit: UNIT_SYMBOLS[unit] ?? unit ?? "units", pixels: length / perPixel }, axes };
-}
 
 // Draws the orientation over the view of the scene `sceneJson` (a frame just drawn) when the
 // scene or the view's size changed.
@@ -566,8 +534,9 @@ function drawOrientation(sceneJson) {
   const key = `${rect.width}x${rect.height} ${sceneJson}`;
   if (key === orientationKey || rect.height === 0) return;
   orientationKey = key;
-  const camera = JSON.parse(sceneJson).camera;
-  orientation = orientationOf(camera, rect.height, JSON.parse(viewer.info_json()).unit);
+  // Worked out in the WebAssembly module, by the rule `viewer view` draws by.
+  orientation = JSON.parse(viewer.orientation_json(rect.height));
+  if (!orientation) return;
   const dpr = window.devicePixelRatio || 1;
   overlay.style.width = `${rect.width}px`;
   overlay.style.height = `${rect.height}px`;

@@ -35,10 +35,12 @@ Keys:
   f                             switch the filter: trilinear, tricubic (rebuilds the renderer)
   m                             switch the mode: dvr, mip, iso (rebuilds the renderer)
   r                             reset the camera
-  h                             hide/show the statistics panel
+  h                             hide/show the statistics panel and the orientation
   q, Esc                        quit
 The panel and the window title show the frame number, samples, bricks requested, fetched
-and substituted, bytes fetched and the GPU time of the last frame. A change of channel
+and substituted, bytes fetched and the GPU time of the last frame. Along the bottom: a
+scale bar of a round length in the store's unit, and the x (red), y (green) and z (blue)
+axes as the camera sees them. A change of channel
 styles or window size restarts streaming (the renderer is rebuilt); camera changes reuse
 the bricks already resident.
 With --vdi: orbit, pan, zoom, r, h, q and Esc as above (the VDI's colours are fixed); the

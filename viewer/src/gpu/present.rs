@@ -8,7 +8,9 @@
 //! same bytes. On a `*Srgb` target the hardware encodes (the pass writes the linear light of
 //! the table's code); on a `*Unorm` target the pass writes the code. An optional statistics
 //! panel (text colours as 8-bit sRGB, uploaded only when it changes) covers the top-left
-//! corner: text in its colour, the rest darkened to a quarter, as the CPU panel is drawn.
+//! corner: text in its colour, the rest darkened to a quarter, as the CPU panel is drawn. An
+//! optional orientation strip (a scale bar and axes, uploaded when the camera or the window
+//! changes) covers the bottom edge: marks in their colour, the image showing through elsewhere.
 //!
 //! Nothing here reads back: the target is a surface texture, or a texture a test copies out.
 //! Target-agnostic (a canvas surface in the browser works the same).
@@ -48,6 +50,14 @@ gpu_struct! {
         pub encode: u32,
         /// Entries of the sRGB table ([`SRGB_TABLE_ENTRIES`]).
         pub table_entries: u32,
+        /// The orientation strip's width in pixels (0: none), from the target's left edge.
+        pub footer_width: u32,
+        /// The orientation strip's height in pixels, up from the target's bottom edge.
+        pub footer_height: u32,
+        /// Padding to 16 bytes.
+        pub pad0: u32,
+        /// Padding to 16 bytes.
+        pub pad1: u32,
     }
 }
 
@@ -86,9 +96,11 @@ pub enum PresentError {
         /// The image's height.
         height: u32,
     },
-    /// Panel pixels that do not fill the panel.
-    #[error("the panel has {bytes} bytes for {width}×{height} RGBA pixels")]
-    Panel {
+    /// Overlay pixels (the panel's or the orientation strip's) that do not fill it.
+    #[error("the {what} has {bytes} bytes for {width}×{height} RGBA pixels")]
+    Overlay {
+        /// `panel` or `orientation strip`.
+        what: &'static str,
         /// Bytes given.
         bytes: usize,
         /// Width.
@@ -104,6 +116,70 @@ mod binding {
     pub const IMAGE: u32 = 1;
     pub const TABLE: u32 = 2;
     pub const PANEL: u32 = 3;
+    pub const FOOTER: u32 = 4;
+}
+
+/// An overlay texture (`Rgba8Uint`), at least 1 × 1, and the size of what it holds (0 × 0:
+/// nothing).
+struct Layer {
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+    size: (u32, u32),
+}
+
+impl Layer {
+    /// An empty layer.
+    fn empty(gpu: &Gpu, label: &'static str) -> Self {
+        let (texture, view) = overlay_texture(gpu, label, 1, 1, &[0; 4]);
+        Self {
+            texture,
+            view,
+            size: (0, 0),
+        }
+    }
+
+    /// Holds `rgba` (`width × height` pixels) from now on: written into the texture it has
+    /// when that is the same size, else into a new one. Returns whether the texture is new
+    /// (bind groups holding the old one are stale).
+    ///
+    /// # Errors
+    /// [`PresentError::Overlay`] when `rgba` does not hold `width × height` pixels.
+    fn set(
+        &mut self,
+        gpu: &Gpu,
+        what: &'static str,
+        (width, height): (u32, u32),
+        rgba: &[u8],
+    ) -> Result<bool, PresentError> {
+        if rgba.len() != width as usize * height as usize * 4 {
+            return Err(PresentError::Overlay {
+                what,
+                bytes: rgba.len(),
+                width,
+                height,
+            });
+        }
+        if width == 0 || height == 0 {
+            return Ok(self.clear(gpu, what));
+        }
+        if (self.texture.width(), self.texture.height()) == (width, height) {
+            write_rgba(gpu, &self.texture, rgba);
+            self.size = (width, height);
+            return Ok(false);
+        }
+        (self.texture, self.view) = overlay_texture(gpu, what, width, height, rgba);
+        self.size = (width, height);
+        Ok(true)
+    }
+
+    /// Holds nothing from now on. Returns whether the texture is new.
+    fn clear(&mut self, gpu: &Gpu, what: &'static str) -> bool {
+        if self.size == (0, 0) {
+            return false;
+        }
+        *self = Self::empty(gpu, what);
+        true
+    }
 }
 
 /// The present pass for one target format.
@@ -113,11 +189,12 @@ pub struct Presenter {
     layout: wgpu::BindGroupLayout,
     params: wgpu::Buffer,
     table: wgpu::Buffer,
-    /// The panel texture (`Rgba8Uint`, alpha 0 where the panel is only darkened), at least
-    /// 1 × 1, and the panel's size (0 × 0: none).
-    panel: (wgpu::TextureView, (u32, u32)),
+    /// The panel (alpha 0 where the panel is only darkened).
+    panel: Layer,
+    /// The orientation strip (alpha 0 where the image shows through).
+    footer: Layer,
     /// The bind group of the last image presented (its buffer and bytes read), made again only
-    /// when the image buffer, its size or the panel changes.
+    /// when the image buffer, its size or an overlay's texture changes.
     bound: std::sync::Mutex<Option<(wgpu::Buffer, u64, wgpu::BindGroup)>>,
 }
 
@@ -125,7 +202,8 @@ impl std::fmt::Debug for Presenter {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Presenter")
             .field("format", &self.format)
-            .field("panel", &self.panel.1)
+            .field("panel", &self.panel.size)
+            .field("footer", &self.footer.size)
             .finish_non_exhaustive()
     }
 }
@@ -169,6 +247,16 @@ impl Presenter {
             },
             count: None,
         };
+        let texture = |b: u32| wgpu::BindGroupLayoutEntry {
+            binding: b,
+            visibility: fragment,
+            ty: wgpu::BindingType::Texture {
+                sample_type: wgpu::TextureSampleType::Uint,
+                view_dimension: wgpu::TextureViewDimension::D2,
+                multisampled: false,
+            },
+            count: None,
+        };
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("present"),
             entries: &[
@@ -184,16 +272,8 @@ impl Presenter {
                 },
                 storage(binding::IMAGE),
                 storage(binding::TABLE),
-                wgpu::BindGroupLayoutEntry {
-                    binding: binding::PANEL,
-                    visibility: fragment,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Uint,
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
+                texture(binding::PANEL),
+                texture(binding::FOOTER),
             ],
         });
         let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -242,7 +322,8 @@ impl Presenter {
             layout,
             params,
             table,
-            panel: (panel_texture(gpu, 1, 1, &[0; 4]), (0, 0)),
+            panel: Layer::empty(gpu, "panel"),
+            footer: Layer::empty(gpu, "orientation strip"),
             bound: std::sync::Mutex::new(None),
         })
     }
@@ -257,7 +338,7 @@ impl Presenter {
     /// `a` = 0 where the image shows through darkened to a quarter. Uploaded now, once.
     ///
     /// # Errors
-    /// [`PresentError::Panel`] when `rgba` does not hold `width × height` pixels.
+    /// [`PresentError::Overlay`] when `rgba` does not hold `width × height` pixels.
     pub fn set_panel(
         &mut self,
         gpu: &Gpu,
@@ -265,31 +346,49 @@ impl Presenter {
         height: u32,
         rgba: &[u8],
     ) -> Result<(), PresentError> {
-        if rgba.len() != width as usize * height as usize * 4 {
-            return Err(PresentError::Panel {
-                bytes: rgba.len(),
-                width,
-                height,
-            });
+        if self.panel.set(gpu, "panel", (width, height), rgba)? {
+            self.unbind();
         }
-        if width == 0 || height == 0 {
-            self.clear_panel(gpu);
-            return Ok(());
-        }
-        self.panel = (panel_texture(gpu, width, height, rgba), (width, height));
-        self.unbind();
         Ok(())
     }
 
     /// Removes the panel.
     pub fn clear_panel(&mut self, gpu: &Gpu) {
-        if self.panel.1 != (0, 0) {
-            self.panel = (panel_texture(gpu, 1, 1, &[0; 4]), (0, 0));
+        if self.panel.clear(gpu, "panel") {
             self.unbind();
         }
     }
 
-    /// Forgets the bind group (the panel it binds is gone).
+    /// Sets the orientation strip along the bottom edge, from the left: `width × height`
+    /// pixels of `[r, g, b, a]`, row-major from the top, `r, g, b` an 8-bit sRGB colour where
+    /// `a` is not 0, and `a` = 0 where the image shows through. Uploaded now, once.
+    ///
+    /// # Errors
+    /// [`PresentError::Overlay`] when `rgba` does not hold `width × height` pixels.
+    pub fn set_footer(
+        &mut self,
+        gpu: &Gpu,
+        width: u32,
+        height: u32,
+        rgba: &[u8],
+    ) -> Result<(), PresentError> {
+        if self
+            .footer
+            .set(gpu, "orientation strip", (width, height), rgba)?
+        {
+            self.unbind();
+        }
+        Ok(())
+    }
+
+    /// Removes the orientation strip.
+    pub fn clear_footer(&mut self, gpu: &Gpu) {
+        if self.footer.clear(gpu, "orientation strip") {
+            self.unbind();
+        }
+    }
+
+    /// Forgets the bind group (an overlay texture it binds is gone).
     fn unbind(&mut self) {
         *self
             .bound
@@ -349,7 +448,8 @@ impl Presenter {
                 height: ih,
             });
         }
-        let (pw, ph) = self.panel.1;
+        let (pw, ph) = self.panel.size;
+        let (fw, fh) = self.footer.size;
         let params = PresentParams {
             image_width: iw,
             image_height: ih,
@@ -359,6 +459,10 @@ impl Presenter {
             panel_height: ph,
             encode: u32::from(!self.format.is_srgb()),
             table_entries: SRGB_TABLE_ENTRIES as u32,
+            footer_width: fw,
+            footer_height: fh,
+            pad0: 0,
+            pad1: 0,
         };
         gpu.queue
             .write_buffer(&self.params, 0, bytemuck::bytes_of(&params));
@@ -391,7 +495,11 @@ impl Presenter {
                         },
                         wgpu::BindGroupEntry {
                             binding: binding::PANEL,
-                            resource: wgpu::BindingResource::TextureView(&self.panel.0),
+                            resource: wgpu::BindingResource::TextureView(&self.panel.view),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: binding::FOOTER,
+                            resource: wgpu::BindingResource::TextureView(&self.footer.view),
                         },
                     ],
                 });
@@ -424,15 +532,20 @@ impl Presenter {
 }
 
 /// An `Rgba8Uint` texture of `width × height` holding `rgba`, and its view.
-fn panel_texture(gpu: &Gpu, width: u32, height: u32, rgba: &[u8]) -> wgpu::TextureView {
-    let size = wgpu::Extent3d {
-        width,
-        height,
-        depth_or_array_layers: 1,
-    };
+fn overlay_texture(
+    gpu: &Gpu,
+    label: &'static str,
+    width: u32,
+    height: u32,
+    rgba: &[u8],
+) -> (wgpu::Texture, wgpu::TextureView) {
     let texture = gpu.device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("present panel"),
-        size,
+        label: Some(label),
+        size: wgpu::Extent3d {
+            width,
+            height,
+            depth_or_array_layers: 1,
+        },
         mip_level_count: 1,
         sample_count: 1,
         dimension: wgpu::TextureDimension::D2,
@@ -440,15 +553,21 @@ fn panel_texture(gpu: &Gpu, width: u32, height: u32, rgba: &[u8]) -> wgpu::Textu
         usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
         view_formats: &[],
     });
+    write_rgba(gpu, &texture, rgba);
+    let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+    (texture, view)
+}
+
+/// Writes `rgba` over the whole of `texture` (`Rgba8Uint`).
+fn write_rgba(gpu: &Gpu, texture: &wgpu::Texture, rgba: &[u8]) {
     gpu.queue.write_texture(
         texture.as_image_copy(),
         rgba,
         wgpu::TexelCopyBufferLayout {
             offset: 0,
-            bytes_per_row: Some(width * 4),
-            rows_per_image: Some(height),
+            bytes_per_row: Some(texture.width() * 4),
+            rows_per_image: Some(texture.height()),
         },
-        size,
+        texture.size(),
     );
-    texture.create_view(&wgpu::TextureViewDescriptor::default())
 }

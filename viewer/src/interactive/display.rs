@@ -3,18 +3,19 @@
 //! image buffer, no readback), or, where no surface can be made, by a CPU blit (`softbuffer`:
 //! the frame read back, converted to sRGB and copied, which works on any X11 server).
 //!
-//! Both draw the statistics panel the same way: the GPU path uploads it as a small texture
-//! only when its text changes.
+//! Both draw the statistics panel and the orientation strip the same way: the GPU path
+//! uploads each as a small texture only when it changes.
 
 use std::num::NonZeroU32;
 use std::sync::Arc;
 
 use winit::window::Window;
 
-use super::overlay::{Canvas, SrgbTable, panel_rgba};
+use super::overlay::{Canvas, SrgbTable, orientation_rgba, panel_rgba};
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
 use crate::gpu::present::{PresentError, Presenter, surface_format};
+use crate::scene::orientation::Orientation;
 
 /// Which way frames reach the window.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, strum::EnumString, strum::Display)]
@@ -63,6 +64,18 @@ fn buffer_error(what: &'static str) -> impl FnOnce(softbuffer::SoftBufferError) 
 /// The statistics panel: text lines with their `0x00RRGGBB` colours, and the glyph scale.
 pub type Panel = (Vec<(String, u32)>, usize);
 
+/// The orientation strip: the scale bar and axes, and the glyph scale.
+pub type Footer = (Orientation, usize);
+
+/// The overlays over a frame: the statistics panel and the orientation strip, each optional.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Overlays {
+    /// The statistics panel, top left.
+    pub panel: Option<Panel>,
+    /// The orientation strip, along the bottom edge.
+    pub footer: Option<Footer>,
+}
+
 /// What one frame shows: the image on the GPU (GPU path) or its pixels (CPU path).
 pub enum Frame<'a> {
     /// Linear RGBA `vec4<f32>` per pixel in a storage buffer, and its size.
@@ -79,6 +92,8 @@ pub struct GpuDisplay {
     presenter: Presenter,
     /// The panel uploaded, to upload again only when it changes.
     panel: Option<Panel>,
+    /// The orientation strip uploaded and the window width it was drawn for.
+    footer: Option<(Footer, u32)>,
 }
 
 /// The CPU path's state.
@@ -140,7 +155,8 @@ impl Display {
         matches!(self, Self::Gpu(_))
     }
 
-    /// Shows `frame` scaled to the window, with `panel` over its top-left corner. Returns
+    /// Shows `frame` scaled to the window, with the overlays' panel over its top-left corner
+    /// and orientation strip along its bottom edge. Returns
     /// whether the frame was shown (a GPU surface that is outdated, lost, occluded or timed
     /// out is set up again and the frame skipped).
     ///
@@ -151,11 +167,11 @@ impl Display {
         &mut self,
         gpu: &Gpu,
         frame: Frame<'_>,
-        panel: Option<Panel>,
+        overlays: Overlays,
     ) -> Result<bool, DisplayError> {
         match (self, frame) {
-            (Self::Gpu(d), Frame::Gpu(image, size)) => d.show(gpu, image, size, panel),
-            (Self::Cpu(d), Frame::Cpu(pixels, size)) => d.show(pixels, size, panel),
+            (Self::Gpu(d), Frame::Gpu(image, size)) => d.show(gpu, image, size, overlays),
+            (Self::Cpu(d), Frame::Cpu(pixels, size)) => d.show(pixels, size, overlays),
             (Self::Gpu(_), Frame::Cpu(..)) | (Self::Cpu(_), Frame::Gpu(..)) => Err(
                 DisplayError::NoSurface("a frame for the other way of presenting".into()),
             ),
@@ -201,6 +217,7 @@ impl GpuDisplay {
             config,
             presenter,
             panel: None,
+            footer: None,
         })
     }
 
@@ -217,7 +234,7 @@ impl GpuDisplay {
         gpu: &Gpu,
         image: &wgpu::Buffer,
         image_size: (u32, u32),
-        panel: Option<Panel>,
+        Overlays { panel, footer }: Overlays,
     ) -> Result<bool, DisplayError> {
         let size = self.window.inner_size();
         if size.width == 0 || size.height == 0 {
@@ -235,6 +252,17 @@ impl GpuDisplay {
                 None => self.presenter.clear_panel(gpu),
             }
             self.panel = panel;
+        }
+        let footer = footer.map(|f| (f, size.width));
+        if footer != self.footer {
+            match &footer {
+                Some(((orientation, scale), width)) => {
+                    let (w, h, rgba) = orientation_rgba(orientation, *width as usize, *scale);
+                    self.presenter.set_footer(gpu, w, h, &rgba)?;
+                }
+                None => self.presenter.clear_footer(gpu),
+            }
+            self.footer = footer;
         }
         let (texture, suboptimal) = match self.surface.get_current_texture() {
             wgpu::CurrentSurfaceTexture::Success(t) => (t, false),
@@ -283,7 +311,7 @@ impl CpuDisplay {
         &mut self,
         pixels: &[[f32; 4]],
         (iw, ih): (u32, u32),
-        panel: Option<Panel>,
+        Overlays { panel, footer }: Overlays,
     ) -> Result<bool, DisplayError> {
         let size = self.window.inner_size();
         let (Some(w), Some(h)) = (NonZeroU32::new(size.width), NonZeroU32::new(size.height)) else {
@@ -304,6 +332,9 @@ impl CpuDisplay {
         canvas.blit(pixels, iw as usize, ih as usize, &self.srgb);
         if let Some((lines, scale)) = panel {
             canvas.panel(&lines, scale);
+        }
+        if let Some((orientation, scale)) = footer {
+            canvas.orientation(&orientation, scale);
         }
         buffer
             .present()

@@ -17,12 +17,13 @@ use winit::keyboard::{Key, ModifiersState, NamedKey};
 use winit::window::{Window, WindowId};
 
 use super::camera_control::{orbit, pan, zoom};
-use super::display::{Display, Frame, PresentPath};
+use super::display::{Display, Frame, Overlays, PresentPath};
 use super::window::{ViewError, open_window, panel_scale, render_size, wheel_steps};
 use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
 use crate::gpu::vdi_render::VdiRenderer;
 use crate::scene::Camera;
+use crate::scene::orientation::Orientation;
 
 /// How long after the last input the view counts as at rest (and renders at full resolution).
 pub const REST: Duration = Duration::from_millis(150);
@@ -207,7 +208,15 @@ impl App {
             Some(renderer) => renderer.resize(&self.gpu, size.0, size.1)?,
             None => self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?),
         }
-        let panel = self.overlay.then(|| (self.panel_lines(), panel_scale(win)));
+        let glyphs = panel_scale(win);
+        let overlays = Overlays {
+            panel: self.overlay.then(|| (self.panel_lines(), glyphs)),
+            footer: self
+                .overlay
+                .then(|| Orientation::of(&self.camera, f64::from(win.height), None))
+                .flatten()
+                .map(|o| (o, glyphs)),
+        };
         let (Some(window), Some(display), Some(renderer)) =
             (&self.window, &mut self.display, &self.renderer)
         else {
@@ -224,7 +233,7 @@ impl App {
                 });
             let (image, rays) = renderer.encode(gpu, &mut encoder, &self.camera, skipping, scale);
             gpu.queue.submit([encoder.finish()]);
-            let shown = display.show(gpu, Frame::Gpu(image, size), panel)?;
+            let shown = display.show(gpu, Frame::Gpu(image, size), overlays)?;
             // The frame's time to the GPU's end: what the controller holds.
             gpu.device
                 .poll(wgpu::PollType::wait_indefinitely())
@@ -232,7 +241,7 @@ impl App {
             (shown, rays)
         } else {
             let frame = renderer.render_preview(gpu, &self.camera, skipping, scale)?;
-            let shown = display.show(gpu, Frame::Cpu(&frame.pixels, size), panel)?;
+            let shown = display.show(gpu, Frame::Cpu(&frame.pixels, size), overlays)?;
             (shown, frame.rays)
         };
         if !shown {

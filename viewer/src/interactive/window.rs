@@ -17,12 +17,13 @@ use winit::window::{Window, WindowId};
 
 use super::camera_control::{orbit, pan, zoom};
 use super::controls::{self, End, KEY_STEP};
-use super::display::{Display, DisplayError, Frame, PresentPath};
+use super::display::{Display, DisplayError, Frame, Overlays, PresentPath};
 use super::overlay::text_colour;
 use super::session::{Session, Step};
 use crate::defaults::volume_extent;
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
+use crate::scene::orientation::Orientation;
 use crate::scene::{Camera, Scene};
 
 /// Why the window stopped with an error: no X11 display, a window or frame buffer that cannot
@@ -360,7 +361,19 @@ impl App {
             return Ok(());
         };
         let size = window.inner_size();
-        let panel = lines.map(|lines| (lines, panel_scale(size)));
+        let scale = panel_scale(size);
+        let footer = self
+            .overlay
+            .then(|| {
+                let unit = self.session.info().unit.as_deref();
+                Orientation::of(&self.session.scene().camera, f64::from(size.height), unit)
+            })
+            .flatten()
+            .map(|o| (o, scale));
+        let overlays = Overlays {
+            panel: lines.map(|lines| (lines, scale)),
+            footer,
+        };
         let frame = if display.on_gpu() {
             match self.session.gpu_image() {
                 Some((buffer, size)) => Frame::Gpu(buffer, size),
@@ -370,7 +383,7 @@ impl App {
             let (iw, ih, pixels) = self.session.image();
             Frame::Cpu(pixels, (iw, ih))
         };
-        if !display.show(self.session.gpu(), frame, panel)? {
+        if !display.show(self.session.gpu(), frame, overlays)? {
             window.request_redraw();
             return Ok(());
         }

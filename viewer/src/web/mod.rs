@@ -34,6 +34,7 @@ use crate::gpu::device::Gpu;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{FrameStats, StreamState};
 use crate::interactive::{camera_control, controls};
+use crate::scene::orientation::Orientation;
 use crate::scene::{Clip, Filter, RenderMode, Scene};
 use crate::source::{BrickKey, BrickVoxels, SourceError, VolumeInfo, server};
 
@@ -236,6 +237,17 @@ impl Viewer {
     /// The image height in pixels.
     pub fn height(&self) -> u32 {
         self.inner.borrow().options.height
+    }
+
+    /// The orientation of the scene's camera on a view `height` CSS pixels high, JSON
+    /// ([`Orientation`]: `{scale: {length, unit, pixels}, axes: {x, y, z}}`, each axis the
+    /// screen direction `[right, down]` of its unit vector), or `null` for a camera at its
+    /// target or a view with no height: what the page's overlay draws, worked out by the rule
+    /// `viewer view` draws by.
+    pub fn orientation_json(&self, height: f64) -> String {
+        let inner = self.inner.borrow();
+        let o = Orientation::of(&inner.scene.camera, height, inner.info.unit.as_deref());
+        serde_json::to_string(&o).expect("orientations serialize")
     }
 
     /// The dataset as the page's controls need it, JSON: name, sample type, channel names

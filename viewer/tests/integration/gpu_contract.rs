@@ -227,7 +227,7 @@ fn the_present_pass_uniforms_match_their_wgsl_twin() {
         disagreements::<PresentParams>(&module),
         Vec::<String>::new()
     );
-    assert_eq!(size_of::<PresentParams>(), 32);
+    assert_eq!(size_of::<PresentParams>(), 48);
     // Checked the other way too: a twin of another layout disagrees.
     let wrong = source.replace("    encode: u32,\n", "    encode: vec2<u32>,\n");
     assert_ne!(

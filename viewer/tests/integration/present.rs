@@ -13,8 +13,11 @@ use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::present::{PresentError, Presenter, srgb_table, surface_format};
 use residency_viewer::gpu::renderer::{RenderOptions, Renderer};
 use residency_viewer::gpu::synthetic::SyntheticSource;
-use residency_viewer::interactive::overlay::{Canvas, SrgbTable, panel_rgba, panel_size};
+use residency_viewer::interactive::overlay::{
+    Canvas, ORIENTATION_HEIGHT, SrgbTable, orientation_rgba, panel_rgba, panel_size,
+};
 use residency_viewer::interactive::session::{Session, Step};
+use residency_viewer::scene::orientation::Orientation;
 use residency_viewer::scene::{Camera, ChannelStyle, Filter, OpacityPoint, Scene};
 use residency_viewer::source::{BrickSource, SampleType};
 
@@ -154,6 +157,7 @@ fn cpu(
     (iw, ih): (usize, usize),
     (tw, th): (usize, usize),
     panel: Option<&[(String, u32)]>,
+    orientation: Option<&Orientation>,
 ) -> Vec<u32> {
     let mut out = vec![0u32; tw * th];
     let mut canvas = Canvas {
@@ -164,6 +168,9 @@ fn cpu(
     canvas.blit(pixels, iw, ih, &SrgbTable::default());
     if let Some(lines) = panel {
         canvas.panel(lines, 1);
+    }
+    if let Some(o) = orientation {
+        canvas.orientation(o, 1);
     }
     out
 }
@@ -207,21 +214,49 @@ fn the_present_pass_shows_the_bytes_of_the_cpu_path() {
         let mut presenter = Presenter::new(gpu, format).unwrap();
         // Scaled up, unevenly, and 1:1.
         for (tw, th) in [(75u32, 31u32), (7, 5)] {
-            let want = cpu(&image, (7, 5), (tw as usize, th as usize), None);
+            let want = cpu(&image, (7, 5), (tw as usize, th as usize), None, None);
             let got = present(gpu, &presenter, &image, (7, 5), (tw, th));
             assert_same(&got, &want, tw as usize, &format!("{format:?} {tw}x{th}"));
         }
         // With the panel: text in its colour, the rest darkened to a quarter.
         let (w, h, rgba) = panel_rgba(&lines, 1);
         presenter.set_panel(gpu, w, h, &rgba).unwrap();
-        let want = cpu(&image, (7, 5), (75, 31), Some(&lines));
+        let want = cpu(&image, (7, 5), (75, 31), Some(&lines), None);
         let got = present(gpu, &presenter, &image, (7, 5), (75, 31));
         assert_same(&got, &want, 75, &format!("{format:?} with the panel"));
         assert!(got.contains(&0x0012_3456) && got.contains(&0x00ff_ffff));
+        // With the orientation strip too: the scale bar and axes along the bottom edge, the
+        // image showing through around them; set twice at one size (the texture rewritten).
+        let camera = Camera {
+            eye: [3.0, -4.0, -20.0],
+            target: [0.0; 3],
+            up: [0.0, -1.0, 0.0],
+            fov_y_degrees: 30.0,
+        };
+        let (tw, th) = (160usize, 120usize);
+        for eye_x in [9.0, 3.0] {
+            let camera = Camera {
+                eye: [eye_x, -4.0, -20.0],
+                ..camera.clone()
+            };
+            let o = Orientation::of(&camera, th as f64, Some("micrometer")).unwrap();
+            let (w, h, rgba) = orientation_rgba(&o, tw, 1);
+            assert_eq!((w, h), (tw as u32, ORIENTATION_HEIGHT as u32));
+            presenter.set_footer(gpu, w, h, &rgba).unwrap();
+            let want = cpu(&image, (7, 5), (tw, th), Some(&lines), Some(&o));
+            let got = present(gpu, &presenter, &image, (7, 5), (tw as u32, th as u32));
+            assert_same(&got, &want, tw, &format!("{format:?} with the orientation"));
+            // The axes' colours and the white scale bar are there, under the panel's rows.
+            let strip = &got[(th - ORIENTATION_HEIGHT) * tw..];
+            for colour in [0x00ff_5555, 0x0055_ff55, 0x0055_99ff, 0x00ff_ffff, 0] {
+                assert!(strip.contains(&colour), "{colour:06x} not drawn");
+            }
+        }
+        presenter.clear_footer(gpu);
         presenter.clear_panel(gpu);
-        let want = cpu(&image, (7, 5), (75, 31), None);
+        let want = cpu(&image, (7, 5), (75, 31), None, None);
         let got = present(gpu, &presenter, &image, (7, 5), (75, 31));
-        assert_same(&got, &want, 75, &format!("{format:?} without the panel"));
+        assert_same(&got, &want, 75, &format!("{format:?} without the overlays"));
     }
 }
 
@@ -245,7 +280,8 @@ fn the_present_pass_refuses_what_it_cannot_draw() {
     let mut presenter = Presenter::new(gpu, wgpu::TextureFormat::Rgba8Unorm).unwrap();
     assert_eq!(
         presenter.set_panel(gpu, 2, 2, &[0; 15]).unwrap_err(),
-        PresentError::Panel {
+        PresentError::Overlay {
+            what: "panel",
             bytes: 15,
             width: 2,
             height: 2

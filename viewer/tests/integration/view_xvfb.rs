@@ -270,6 +270,24 @@ struct Shot {
     hues: [usize; 3],
     /// White pixels in the panel (its text).
     text: usize,
+    /// Pixels of the `x` (red), `y` (green) and `z` (blue) axes' exact colours in the
+    /// orientation strip's right half.
+    axes: [usize; 3],
+    /// White pixels in the orientation strip's left half (the scale bar and its label).
+    bar: usize,
+}
+
+/// Rows at the window's bottom of the orientation strip (the scale bar and the axes).
+const ORIENTATION_ROWS: usize = residency_viewer::interactive::overlay::ORIENTATION_HEIGHT;
+
+/// The axes' colours, as the viewer draws them (`x`, `y`, `z`).
+const AXIS_COLOURS: [[u8; 3]; 3] = [[0xff, 0x55, 0x55], [0x55, 0xff, 0x55], [0x55, 0x99, 0xff]];
+
+/// Where the `x` axis (red) is drawn: its pixels' indices in a screenshot.
+fn x_axis(pixels: &[[u8; 3]]) -> Vec<usize> {
+    (0..pixels.len())
+        .filter(|&i| pixels[i] == AXIS_COLOURS[0])
+        .collect()
 }
 
 /// Rows of the window the statistics panel may cover.
@@ -291,6 +309,8 @@ fn analyse(pixels: &[[u8; 3]]) -> Shot {
         coloured: 0,
         hues: [0; 3],
         text: 0,
+        axes: [0; 3],
+        bar: 0,
     };
     for (i, p) in pixels.iter().enumerate() {
         let (x, y) = (i % sw, i / sw);
@@ -299,6 +319,15 @@ fn analyse(pixels: &[[u8; 3]]) -> Shot {
             continue;
         }
         shot.lit += lit(p) as usize;
+        if y >= wh - ORIENTATION_ROWS {
+            if x >= ww / 2 {
+                for (n, colour) in shot.axes.iter_mut().zip(AXIS_COLOURS) {
+                    *n += (*p == colour) as usize;
+                }
+            } else {
+                shot.bar += (*p == [0xff; 3]) as usize;
+            }
+        }
         if y < PANEL_ROWS {
             shot.text += p.iter().all(|&v| v >= 240) as usize;
         } else if coloured(p) {
@@ -367,7 +396,7 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
 
     let line = settle("at start-up");
     assert!(line.ends_with("converged"), "{line:?}");
-    let (first, _) = shoot("start");
+    let (first, first_pixels) = shoot("start");
     let titles = x.titles();
 
     // Hide membranes (key 2), then zoom in four wheel steps (half the distance).
@@ -402,6 +431,10 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
         "too few rendered pixels: {first:?}"
     );
     assert!(first.text >= 300, "no statistics panel: {first:?}");
+    // The orientation: a scale bar (2 rows over at least 60 pixels, with its label) and the
+    // three axes (the z axis is foreshortened, the camera looking along it).
+    assert!(first.bar >= 2 * 60 + 40, "no scale bar: {first:?}");
+    assert!(first.axes.iter().all(|&n| n >= 8), "no axes: {first:?}");
     for (i, name) in ["cyan", "magenta", "yellow"].iter().enumerate() {
         assert!(first.hues[i] >= 20, "no {name} channel: {first:?}");
     }
@@ -417,6 +450,13 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
         .count();
     assert!(changed >= area / 50, "orbiting changed {changed} pixels");
     assert!(orbited.coloured >= area / 100, "{orbited:?}");
+    // ... and the axes turned with the camera.
+    assert_ne!(
+        x_axis(&orbited_pixels),
+        x_axis(&first_pixels),
+        "the axes did not turn"
+    );
+    assert!(orbited.axes.iter().all(|&n| n >= 8), "{orbited:?}");
     // Zoomed in, the volume covers more of the window.
     assert!(
         zoomed.coloured * 4 > orbited.coloured * 5,
