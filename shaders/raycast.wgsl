@@ -85,16 +85,24 @@ fn iso_take(
     return found;
 }
 
-// MODE_ISO: after a skip of node `node`, each channel with data there is known on the node's
-// side, its last value no sample's. The sides agreed (iso_sides_agree): a known side stays, and
-// an unknown one is below, which its clear `above` bit already says.
-fn iso_skipped(iso: ptr<function, IsoState>, node: u32, t: f32) {
+// MODE_ISO: the channels with data in node `node` (their ranges not empty).
+fn node_data_channels(node: u32) -> u32 {
+    var data = 0u;
     for (var c = 0u; c < P.channel_count; c++) {
         if bitcast<f32>(node_word(node, c, 1u)) <= bitcast<f32>(node_word(node, c, 2u)) {
-            (*iso).known |= 1u << c;
-            (*iso).valued &= ~(1u << c);
+            data |= 1u << c;
         }
     }
+    return data;
+}
+
+// MODE_ISO: after a skip that ended at ray distance `t`, each channel of `data` (those with
+// data where the ray skipped) is known on the skipped region's side, its last value no
+// sample's. The sides agreed (iso_sides_agree, iso_side_agrees): a known side stays, and an
+// unknown one is below, which its clear `above` bit already says.
+fn iso_skipped(iso: ptr<function, IsoState>, data: u32, t: f32) {
+    (*iso).known |= data;
+    (*iso).valued &= ~data;
     (*iso).at = t;
 }
 
@@ -234,9 +242,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             ray.cell = (ray.cell << fine_shift()) + vec3<i32>(whole);
             ray.local = scaled - whole;
         }
-        // Iso-surfaces skip by the sides of a node's ranges, which only our octree keeps: the
-        // baselines march every brick there.
-        let skipping = (P.flags & FLAG_SKIPPING) != 0u && (MODE != MODE_ISO || METHOD == METHOD_RESIDENCY);
+        let skipping = (P.flags & FLAG_SKIPPING) != 0u;
         let substitute = (P.flags & FLAG_SUBSTITUTION) != 0u;
         var budget = P.steps_per_pass;
         // Page-table baseline: the brick each channel's last sample was in, and whether it
@@ -351,9 +357,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                         held_cell = ray.cell >> node_shift(v.depth);
                     }
                 } else if METHOD == METHOD_PAGE_TABLE {
-                    v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping);
+                    v = visit_page_table(ray, chosen, &pt_brick, &pt_empty, dir, skipping, iso);
                 } else if METHOD == METHOD_OCTREE {
-                    v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane);
+                    v = visit_brick_octree(ray, &chosen, dir, skipping, ray.t + t_plane, iso);
                 }
                 if RESIDENT_ONLY && needs_full {
                     suspended = true;
@@ -364,7 +370,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     skipped++;
                     advance(&ray, dir, v.skip + nudge);
                     if MODE == MODE_ISO {
-                        iso_skipped(&iso, v.node, ray.t);
+                        var data = v.empty;
+                        if METHOD == METHOD_RESIDENCY {
+                            data = node_data_channels(v.node);
+                        }
+                        iso_skipped(&iso, data, ray.t);
                     }
                     continue;
                 }

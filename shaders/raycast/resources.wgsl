@@ -124,9 +124,25 @@ fn page_offset(c: u32, l: u32) -> u32 {
 }
 
 // Whether brick pid is empty under its channel's transfer function (the baselines' class,
-// written by the CPU with the style; ours has one class word per node instead).
+// written by the CPU with the style; ours has one class word per node instead). MODE_DVR and
+// MODE_MIP only.
 fn brick_empty(pid: u32) -> bool {
     return nodes[P.class_offset + pid] != 0u;
+}
+
+// MODE_ISO: where brick pid's range lies against its channel's iso value (the baselines'
+// class in this mode: ISO_CROSSES, ISO_BELOW, ISO_ABOVE or ISO_NOTHING).
+fn brick_iso_side(pid: u32) -> u32 {
+    return nodes[P.class_offset + pid];
+}
+
+// MODE_ISO: whether a brick of channel c on `side` of its iso value may be skipped by a ray
+// that knows what `iso` says: it holds nothing drawn, or lies below the value where the ray
+// is not known above it, or above it where the ray is (iso_sides_agree for a node).
+fn iso_side_agrees(side: u32, c: u32, iso: IsoState) -> bool {
+    let known_above = (iso.known & iso.above & (1u << c)) != 0u;
+    return side == ISO_NOTHING || (side == ISO_BELOW && !known_above)
+        || (side == ISO_ABOVE && known_above);
 }
 
 // ---- octree ----

@@ -40,7 +40,9 @@ struct Visit {
     action: u32,
     node: u32, // the node reached (residency method)
     depth: u32, // its depth
-    empty: u32, // bits: the channels empty under their TF here
+    // bits: the channels empty under their TF here (MODE_ISO, a baseline's ACTION_SKIP: the
+    // channels with data in the bricks skipped, whose sides the ray now knows)
+    empty: u32,
     skip: f32, // world distance to the exit of the node or brick (ACTION_SKIP, ACTION_REQUEST)
 }
 
@@ -164,6 +166,7 @@ fn iso_sides_agree(node: u32, iso: IsoState) -> bool {
 // The page-table baseline (MRMCPT): per channel, whether the brick of its chosen level at the
 // sample is empty under its TF, judged once per brick the ray enters, as a page-table
 // renderer would (`seen`: the brick of each channel's last sample; `seen_empty`: its bits).
+// MODE_ISO: visit_page_table_iso.
 fn visit_page_table(
     ray: Ray,
     chosen: ChannelLevels,
@@ -171,7 +174,11 @@ fn visit_page_table(
     seen_empty: ptr<function, u32>,
     dir: vec3<f32>,
     skipping: bool,
+    iso: IsoState,
 ) -> Visit {
+    if MODE == MODE_ISO {
+        return visit_page_table_iso(ray, chosen, dir, skipping, iso);
+    }
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
     var all_empty = true;
     for (var c = 0u; c < P.channel_count; c++) {
@@ -197,61 +204,155 @@ fn visit_page_table(
     return v;
 }
 
+// MODE_ISO, the page-table baseline: the ray skips to the nearest exit of the bricks of its
+// channels' chosen levels when every one lies on the side of its iso value that the ray knows
+// its channel on (iso_side_agrees), else samples every channel. Judged at every step (the
+// ray's sides change as it samples). On a skip, `empty` holds the channels with data there.
+fn visit_page_table_iso(
+    ray: Ray,
+    chosen: ChannelLevels,
+    dir: vec3<f32>,
+    skipping: bool,
+    iso: IsoState,
+) -> Visit {
+    var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
+    if !skipping {
+        return v;
+    }
+    var data = 0u;
+    for (var c = 0u; c < P.channel_count; c++) {
+        let l = level_of(chosen, c);
+        let pos = level_pos(l, ray.cell, ray.local);
+        let b = point_brick(l, pos);
+        let side = brick_iso_side(brick_id(c, l, b));
+        if !iso_side_agrees(side, c, iso) {
+            return Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
+        }
+        if side != ISO_NOTHING {
+            data |= 1u << c;
+        }
+        v.skip = min(v.skip, brick_exit(l, b, pos, dir));
+    }
+    v.action = ACTION_SKIP;
+    v.empty = data;
+    return v;
+}
+
+// One channel's descent of the octree-of-bricks baseline: the brick it stopped at where it
+// skips (`exit`: world distance to its exit; `data`: MODE_ISO, the brick has data), else the
+// finest resident level (`resident`, or NO_LEVEL) and the first missing brick plus one
+// (`missing`, or 0).
+struct BrickDescent {
+    skip: bool,
+    exit: f32,
+    data: bool,
+    resident: u32,
+    missing: u32,
+}
+
+// The octree-of-bricks baseline's descent for channel c down to level l: from the coarsest
+// level, a brick that can be skipped (with `skipping`: empty under the TF, or in MODE_ISO on
+// the side of the iso value the ray knows) ends it; every ancestor must be resident, the first
+// missing one is requested, and the finest resident one is sampled.
+fn descend_brick_octree(
+    ray: Ray,
+    c: u32,
+    l: u32,
+    dir: vec3<f32>,
+    skipping: bool,
+    iso: IsoState,
+    t: f32,
+) -> BrickDescent {
+    var d = BrickDescent(false, 3.0e38, false, NO_LEVEL, 0u);
+    var k = min(S.channels[c].max_level, P.level_count - 1u);
+    loop {
+        let pos = level_pos(k, ray.cell, ray.local);
+        let b = point_brick(k, pos);
+        let pid = brick_id(c, k, b);
+        if skipping {
+            if MODE == MODE_ISO {
+                let side = brick_iso_side(pid);
+                d.skip = iso_side_agrees(side, c, iso);
+                d.data = side != ISO_NOTHING;
+            } else {
+                d.skip = brick_empty(pid);
+            }
+            if d.skip {
+                d.exit = brick_exit(k, b, pos, dir);
+                break;
+            }
+        }
+        let entry = page_table[pid];
+        if entry == 0u {
+            if RESIDENT_ONLY {
+                needs_full = true;
+            } else {
+                request(pid, t);
+            }
+            d.missing = pid + 1u;
+            break;
+        }
+        if entry != ENTRY_EMPTY {
+            _ = slot_origin(entry);
+        }
+        d.resident = k;
+        if k <= l {
+            break;
+        }
+        k--;
+    }
+    return d;
+}
+
 // The octree-of-bricks baseline (GigaVoxels style): per channel, descend from the coarsest
-// level; every ancestor must be resident, the first missing one is requested, and the finest
-// resident one is sampled (`chosen` becomes that level, or NO_LEVEL).
+// level (descend_brick_octree); `chosen` becomes each sampled channel's finest resident level,
+// or NO_LEVEL. MODE_ISO skips only where every channel can be skipped (each channel's values
+// must be followed at every sample); a channel that could, where another cannot, is descended
+// again to be sampled.
 fn visit_brick_octree(
     ray: Ray,
     chosen: ptr<function, ChannelLevels>,
     dir: vec3<f32>,
     skipping: bool,
     t: f32,
+    iso: IsoState,
 ) -> Visit {
     var v = Visit(ACTION_SAMPLE, 0u, 0u, 0u, 3.0e38);
     var all_empty = true;
+    var data = 0u;
     for (var c = 0u; c < P.channel_count; c++) {
         let l = level_of(*chosen, c);
-        var k = min(S.channels[c].max_level, P.level_count - 1u);
-        var resident = NO_LEVEL;
-        var missing = 0u;
-        loop {
-            let pos = level_pos(k, ray.cell, ray.local);
-            let b = point_brick(k, pos);
-            let pid = brick_id(c, k, b);
-            if skipping && brick_empty(pid) {
-                v.empty |= 1u << c;
-                v.skip = min(v.skip, brick_exit(k, b, pos, dir));
-                break;
-            }
-            let entry = page_table[pid];
-            if entry == 0u {
-                if RESIDENT_ONLY {
-                    needs_full = true;
-                } else {
-                    request(pid, t);
-                }
-                missing = pid + 1u;
-                break;
-            }
-            if entry != ENTRY_EMPTY {
-                _ = slot_origin(entry);
-            }
-            resident = k;
-            if k <= l {
-                break;
-            }
-            k--;
+        // MODE_ISO: once a channel is sampled, every channel is.
+        let skip_test = skipping && (MODE != MODE_ISO || all_empty);
+        let d = descend_brick_octree(ray, c, l, dir, skip_test, iso, t);
+        if d.skip {
+            v.empty |= 1u << c;
+            v.skip = min(v.skip, d.exit);
+            data |= select(0u, 1u << c, d.data);
+            continue;
         }
-        if (v.empty & (1u << c)) == 0u {
-            all_empty = false;
-            *chosen = with_level(*chosen, c, resident);
-            if !RESIDENT_ONLY && missing != 0u && resident != NO_LEVEL {
-                note_substituted(missing - 1u);
+        if MODE == MODE_ISO && all_empty && c > 0u {
+            // The channels before c could be skipped, c cannot: descend them to be sampled.
+            for (var e = 0u; e < c; e++) {
+                let again = descend_brick_octree(ray, e, level_of(*chosen, e), dir, false, iso, t);
+                *chosen = with_level(*chosen, e, again.resident);
+                if !RESIDENT_ONLY && again.missing != 0u && again.resident != NO_LEVEL {
+                    note_substituted(again.missing - 1u);
+                }
             }
+            v.empty = 0u;
+        }
+        all_empty = false;
+        *chosen = with_level(*chosen, c, d.resident);
+        if !RESIDENT_ONLY && d.missing != 0u && d.resident != NO_LEVEL {
+            note_substituted(d.missing - 1u);
         }
     }
     if all_empty {
         v.action = ACTION_SKIP;
+        if MODE == MODE_ISO {
+            v.empty = data;
+        }
     }
     return v;
 }

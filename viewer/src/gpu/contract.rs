@@ -15,6 +15,7 @@ use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
 use super::method::Method;
 use super::page_table::{APRON_SHIFT, ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
+use super::residency::IsoSide;
 use crate::scene::{Filter, MAX_CLIP_PLANES, RenderMode};
 
 // The capacities the prelude gives the shader (see `wgsl_prelude`).
@@ -515,6 +516,10 @@ pub fn wgsl_prelude() -> String {
         u("MODE_DVR", RenderMode::Dvr as u32),
         u("MODE_MIP", RenderMode::Mip as u32),
         u("MODE_ISO", RenderMode::Iso as u32),
+        u("ISO_CROSSES", IsoSide::Crosses as u32),
+        u("ISO_BELOW", IsoSide::Below as u32),
+        u("ISO_ABOVE", IsoSide::Above as u32),
+        u("ISO_NOTHING", IsoSide::Nothing as u32),
         u("CLIP_PLANE_SLOTS", CLIP_PLANE_SLOTS as u32),
         u("ATLAS_UINT", AtlasKind::Uint as u32),
         u("ATLAS_SINT", AtlasKind::Sint as u32),

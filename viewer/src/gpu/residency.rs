@@ -171,6 +171,46 @@ pub struct RangeClass {
     pub constant: bool,
 }
 
+/// Where a brick's value range lies against its channel's iso value: the page-table and
+/// octree-of-bricks baselines' class word of a brick in [`RenderMode::Iso`] (`ISO_*` in the
+/// shaders). A ray skips a brick below the value while it is not known above it, and one above
+/// it while it is; a brick holding the value is sampled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum IsoSide {
+    /// The range holds the iso value: a surface may be inside.
+    Crosses = 0,
+    /// Every value is below the iso value.
+    Below = 1,
+    /// Every value is above the iso value.
+    Above = 2,
+    /// No data, or the channel is not drawn: nothing to follow.
+    Nothing = 3,
+}
+
+impl IsoSide {
+    /// The side of a value range `[lo, hi]` (`f32`, as the shader sees it) against `style`'s
+    /// iso value (`f32`, as the shader's channel table holds it; none is above every value).
+    pub fn of(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> Self {
+        let Some(style) = style.filter(|s| s.visible) else {
+            return Self::Nothing;
+        };
+        if lo.partial_cmp(&hi).is_none_or(std::cmp::Ordering::is_gt) {
+            return Self::Nothing;
+        }
+        let iso = style
+            .iso_value()
+            .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX));
+        if hi < iso {
+            Self::Below
+        } else if lo > iso {
+            Self::Above
+        } else {
+            Self::Crosses
+        }
+    }
+}
+
 /// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style` in
 /// `mode`, by the exact rule of [`ChannelStyle::hides`]; the clear bricks ([`is_clear`])
 /// follow it too.
@@ -623,7 +663,10 @@ impl ResidencyState {
                 .map(|id| {
                     let style = self.pages.key(id).and_then(|k| self.style_of(&k));
                     let (lo, hi) = self.brick_ranges[id as usize];
-                    u32::from(range_class(style, self.mode, lo, hi).empty)
+                    match self.mode {
+                        RenderMode::Iso => IsoSide::of(style, lo, hi) as u32,
+                        _ => u32::from(range_class(style, self.mode, lo, hi).empty),
+                    }
                 })
                 .collect();
             gpu.queue.write_buffer(
@@ -661,4 +704,60 @@ pub fn is_clear(
     let (lo, hi) = clear_range(info, key, filter);
     let (lo, hi) = (f32_down(lo), f32_up(hi));
     lo <= hi && range_class(Some(style), mode, lo, hi).empty
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::OpacityPoint;
+
+    #[test]
+    fn iso_sides_place_a_range_against_the_iso_value() {
+        // A ramp from 100 (transparent) to 300 (opacity 0.4): the iso value is its middle, 200.
+        let style = ChannelStyle {
+            channel: 0,
+            visible: true,
+            color: [1.0; 3],
+            opacity: vec![
+                OpacityPoint {
+                    value: 100.0,
+                    opacity: 0.0,
+                },
+                OpacityPoint {
+                    value: 300.0,
+                    opacity: 0.4,
+                },
+            ],
+        };
+        let side = |lo, hi| IsoSide::of(Some(&style), lo, hi);
+        assert_eq!(side(0.0, 199.0), IsoSide::Below);
+        assert_eq!(side(201.0, 250.0), IsoSide::Above);
+        assert_eq!(side(150.0, 200.0), IsoSide::Crosses);
+        assert_eq!(side(200.0, 200.0), IsoSide::Crosses);
+        // No data, NaN, no style or a hidden channel: nothing to follow.
+        assert_eq!(side(5.0, 4.0), IsoSide::Nothing);
+        assert_eq!(side(f32::NAN, 4.0), IsoSide::Nothing);
+        assert_eq!(IsoSide::of(None, 0.0, 1.0), IsoSide::Nothing);
+        let hidden = ChannelStyle {
+            visible: false,
+            ..style.clone()
+        };
+        assert_eq!(IsoSide::of(Some(&hidden), 0.0, 1.0), IsoSide::Nothing);
+        // A transparent channel has no iso value: every range lies below it.
+        let clear = ChannelStyle {
+            opacity: vec![],
+            ..style
+        };
+        assert_eq!(IsoSide::of(Some(&clear), 0.0, 3.0e38), IsoSide::Below);
+        assert_eq!(
+            [
+                IsoSide::Crosses,
+                IsoSide::Below,
+                IsoSide::Above,
+                IsoSide::Nothing
+            ]
+            .map(|s| s as u32),
+            [0, 1, 2, 3]
+        );
+    }
 }

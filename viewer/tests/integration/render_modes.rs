@@ -4,8 +4,9 @@
 //! bricks behind a bright front that emission–absorption fetches are never fetched. Clipping
 //! (`Scene::clip`: a box, planes, `near`): every method in every mode matches the reference,
 //! and no brick outside what is kept is fetched. Iso-surfaces (`iso`): our method and the
-//! page-table and octree baselines match the reference's surfaces, skipping changes nothing,
-//! the segment-list methods decline the mode, and no brick behind the surfaces is fetched.
+//! page-table and octree baselines match the reference's surfaces, skipping (by node ranges
+//! in ours, by brick sides in the baselines) changes nothing and spares fetches in each, the
+//! segment-list methods decline the mode, and no brick behind the surfaces is fetched.
 
 use std::sync::Arc;
 
@@ -413,4 +414,55 @@ fn iso_never_fetches_bricks_behind_the_surface() {
     let m = check("iso-front", &p, &img, &reference(&src, &scene, 32, 32));
     assert!(m.psnr_db >= 45.0, "iso-front: PSNR {}", m.psnr_db);
     assert_eq!(level0_bricks_along_x(&p), [0]);
+}
+
+/// Seen from the +x side, rays cross the dim matter (at most 180, below the iso value 200)
+/// before the bright slab's surface: every method that draws iso-surfaces (ours, the page table
+/// and the octree of bricks, each with its own classes: node ranges, or brick sides) skips the
+/// matter below the surface, changing no pixel, taking fewer samples, and never fetching the
+/// level-0 bricks of x ≥ 24 (whose haloed ranges lie below the value; those of 16 ≤ x < 24
+/// hold the footprints of the samples just below x = 16, in the bricks whose halo reaches the
+/// slab), which every method fetches without skipping.
+#[test]
+fn iso_skipping_is_exact_and_spares_fetches_for_every_method() {
+    let src = bright_front();
+    let scene = Scene {
+        camera: camera([72.0, 14.0, 17.0], [16.0, 16.0, 16.0]),
+        channels: vec![ramp(0, [0.9, 0.7, 0.3], 190.0, 210.0, 0.02)],
+        ..front_scene(RenderMode::Iso, 0.02)
+    };
+    let want = reference(&src, &scene, 32, 32);
+    for method in [Method::Residency, Method::PageTable, Method::Octree] {
+        let run = |skipping: bool| {
+            let options = RenderOptions {
+                method,
+                empty_space_skipping: skipping,
+                ..finest_wanted(32, 32)
+            };
+            let (p, img) = render(&src, &scene, options, 40);
+            let label = format!("iso-back-{}-{skipping}", method.name());
+            assert!(p.converged, "{label}: {}", p.stop_reason);
+            let m = check(&label, &p, &img, &want);
+            assert!(m.psnr_db >= 45.0, "{label}: PSNR {}", m.psnr_db);
+            (p, img)
+        };
+        let (with, skipped) = run(true);
+        let (without, marched) = run(false);
+        let name = method.name();
+        let same = metrics::compare(&skipped, &marched).unwrap().psnr_db;
+        assert!(same >= 50.0, "{name}: {same} dB");
+        let (w, wo) = (
+            &with.frames.last().unwrap().shader,
+            &without.frames.last().unwrap().shader,
+        );
+        assert!(w.empty_nodes_skipped > 0, "{name}: {w:?}");
+        assert!(
+            w.samples < wo.samples,
+            "{name}: {} samples with skipping, {} without",
+            w.samples,
+            wo.samples
+        );
+        assert_eq!(level0_bricks_along_x(&with), [0, 1, 2], "{name}");
+        assert_eq!(level0_bricks_along_x(&without), [0, 1, 2, 3], "{name}");
+    }
 }
