@@ -20,12 +20,16 @@ Experiments (see `viewer bench run --help` and docs/benchmarks/render-bench.md):
   leaf size again on stores of smaller and larger bricks;
 - skipped: bytes fetched against a naive frustum loader (sparse, mixing, dense, cycif, and
   sparse at half the brick size);
-- scaling: sparse at three sizes, and 1, 2, 4, 8, 16 channels.
+- scaling: sparse at three sizes, and 1, 2, 4, 8, 16 channels;
+- modes: table1 and skipped again in maximum intensity projection and iso-surfaces (sparse,
+  dense, cycif), iso without the segment-list renderers (they decline the mode).
 
 `--short` runs tiny sizes, one view, one timed frame, 32x32 images (CI's mode, a few minutes
 on two cores; it asserts nothing about speed). Outputs go to docs/benchmarks/ (full) or
 benchmarks/data/short-report/ (short) unless --out-dir says otherwise; `--docs` also
-points docs/benchmarks.md at the report, between its render-bench markers.
+points docs/benchmarks.md at the report, between its render-bench markers. `--modes` runs only
+the render modes' comparison (Table 1 and skipped work in DVR, MIP and iso on the sparse, dense
+and CyCIF stores) into docs/benchmarks/modes/.
 """
 
 import argparse
@@ -107,9 +111,11 @@ class Data:
         return store
 
 
-def plan(short: bool):
+def plan(short: bool, modes: bool = False):
     """Datasets and experiments: (label, kind, size, chunk, repeat, sample channels, visible
-    channels or None for all, experiments, extra flags)."""
+    channels or None for all, experiments, extra flags). With `modes`, only the render modes'
+    comparison: Table 1 and skipped work in DVR, MIP and iso on the sparse, dense and CyCIF
+    stores."""
     if short:
         s, big, cy, chunk = (32, 32, 32), (48, 48, 48), (8, 64, 64), 16
     else:
@@ -127,6 +133,8 @@ def plan(short: bool):
 
     def window(n):
         return [a for c in range(n) for a in ("--tf", f"{c}:200:3000:0.6")]
+
+    iso = ["--mode", "iso", "--methods", "page-table,octree,residency,no-skipping"]
 
     p = [
         (f"sparse {s[0]}³", "sparse", s, chunk, 1, None, None, "table1,skipped,sweep,scaling", bone(1)),
@@ -149,6 +157,12 @@ def plan(short: bool):
         (f"sparse {s[0]}³ MIP", "sparse", s, chunk, 1, None, None, "table1,skipped", bone(1) + ["--mode", "mip"]),
         (f"dense {s[0]}³ MIP", "dense", s, chunk, 1, None, None, "table1,skipped", ["--mode", "mip"]),
         (f"cycif {cy[0]}×{cy[1]}×{cy[2]} MIP", "cycif", cy, chunk, None, 16, None, "table1,skipped", window(16) + ["--mode", "mip"]),
+        # Iso-surfaces (each channel's surface at its ramp's middle) on the same stores: what
+        # skipping by the sides of the iso values saves, for the methods that draw the mode (the
+        # segment-list renderers decline it).
+        (f"sparse {s[0]}³ iso", "sparse", s, chunk, 1, None, None, "table1,skipped", bone(1) + iso),
+        (f"dense {s[0]}³ iso", "dense", s, chunk, 1, None, None, "table1,skipped", iso),
+        (f"cycif {cy[0]}×{cy[1]}×{cy[2]} iso", "cycif", cy, chunk, None, 16, None, "table1,skipped", window(16) + iso),
         (f"sparse {small[0]}³", "sparse", small, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {big[0]}³", "sparse", big, chunk, 1, None, None, "scaling", bone(1)),
         (f"sparse {s[0]}³ ×8 (2 shown)", "sparse", s, chunk, 8, None, [0, 1], "scaling", ["--vary-tf"] + bone(8)),
@@ -158,6 +172,11 @@ def plan(short: bool):
         (f"sparse {s[0]}³ bricks {chunk // 2}", "sparse", s, chunk // 2, 1, None, None, "sweep,skipped", sweep_leaf + bone(1)),
         (f"sparse {s[0]}³ bricks {chunk * 2}", "sparse", s, chunk * 2, 1, None, None, "sweep", sweep_leaf + bone(1)),
     ]
+    if modes:
+        dvr = (f"sparse {s[0]}³", f"dense {s[0]}³", f"cycif {cy[0]}×{cy[1]}×{cy[2]}")
+        p = [(label, kind, size, chunk, repeat, channels, visible, "table1,skipped", extra)
+             for (label, kind, size, chunk, repeat, channels, visible, _, extra) in p
+             if label in dvr or label.endswith((" MIP", " iso"))]
     if short:
         # Keep CI's run small: one leaf-vs-brick store is enough to exercise the code.
         p = [x for x in p if not x[0].endswith(f"bricks {chunk * 2}")]
@@ -168,6 +187,8 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--short", action="store_true", help="tiny sizes, 1 view, 1 timed frame, 32x32 images")
     ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
+    ap.add_argument("--modes", action="store_true",
+                    help="only the render modes' comparison: Table 1 and skipped work in DVR, MIP and iso on the sparse, dense and CyCIF stores [report in docs/benchmarks/modes]")
     ap.add_argument("--out-dir", type=pathlib.Path, help="report folder [docs/benchmarks, or benchmarks/data/short-report with --short]")
     ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data", help="scratch folder for datasets")
     ap.add_argument("--views", type=int, help="views of the orbit [4; 1 with --short]")
@@ -177,7 +198,10 @@ def main():
     for exe in ("ingest", "viewer"):
         if not (BIN / exe).exists():
             raise SystemExit(f"{BIN / exe} not built: run cargo build --release")
-    out = args.out_dir or (ROOT / "benchmarks" / "data" / "short-report" if args.short else ROOT / "docs" / "benchmarks")
+    if args.modes and args.docs:
+        raise SystemExit("--docs points docs/benchmarks.md at the full run, not at --modes")
+    default_out = ROOT / "docs" / "benchmarks" / ("modes" if args.modes else "")
+    out = args.out_dir or (ROOT / "benchmarks" / "data" / "short-report" if args.short else default_out)
     raw = out / "raw"
     raw.mkdir(parents=True, exist_ok=True)
     for old in [*raw.glob("*.json"), *out.glob("*.png")]:  # a stale file would be mistaken for this run's
@@ -191,7 +215,8 @@ def main():
     data = Data(args.data_dir, has_kind)
     started = time.time()
     results = []
-    for i, (label, kind, shape, chunk, repeat, channels, visible, experiments, extra) in enumerate(plan(args.short)):
+    rows = plan(args.short, args.modes)
+    for i, (label, kind, shape, chunk, repeat, channels, visible, experiments, extra) in enumerate(rows):
         store = data.store(kind, shape, chunk, repeat, channels)
         k = data.kind(kind)
         if k != kind:
@@ -202,11 +227,11 @@ def main():
                "--out", result, "--quiet", *extra]
         if visible is not None:
             cmd += ["--channels", ",".join(map(str, visible))]
-        print(f"[{i + 1}/{len(plan(args.short))}] {label}: {experiments}", flush=True)
+        print(f"[{i + 1}/{len(rows)}] {label}: {experiments}", flush=True)
         run(cmd)
         results.append(result)
-    mode = "--short" if args.short else ""
-    command = f"benchmarks/render_bench.py {mode}".strip()
+    flags = " ".join(f for f, on in (("--short", args.short), ("--modes", args.modes)) if on)
+    command = f"benchmarks/render_bench.py {flags}".strip()
     run([BIN / "viewer", "bench", "report", *results, "--out-dir", out, "--command", command])
     summary = (out / "summary.md").read_text()
     stamp = datetime.date.today().isoformat()

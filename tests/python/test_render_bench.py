@@ -2,7 +2,7 @@
 experiment of `viewer bench` on tiny datasets into a temporary folder; its outputs exist, every
 results file validates against schemas/json/render-bench.schema.json, every method produced
 finite times and an image compared with the reference, each sweep has a Pareto front, and the
-maximum intensity projection runs have their rows beside DVR's.
+maximum intensity projection and iso-surface runs have their rows beside DVR's.
 Nothing here is about speed."""
 
 import json
@@ -121,11 +121,22 @@ def test_short_mode_runs_every_experiment_and_validates(tmp_path):
     # CyCIF-like store renders all 16 of its channels, as the paper's CyCIF Small row does.
     datasets = [json.loads(f.read_text())["dataset"] for f in files]
     assert {"sparse", "mixing", "dense", "cycif"} <= {d["kind"] for d in datasets}
-    assert [d["visible_channels"] for d in datasets if d["kind"] == "cycif"] == [16, 16]
+    assert [d["visible_channels"] for d in datasets if d["kind"] == "cycif"] == [16, 16, 16]
     # Maximum intensity projection has its Table 1 and skipped-work rows beside DVR's, for the
     # sparse, dense and CyCIF stores.
     assert modes.get("mip") == 3 and modes.get("dvr", 0) >= 5, modes
     for label in ("sparse 32³ MIP", "dense 32³ MIP", "cycif 8×64×64 MIP"):
+        assert report.count(f"| {label} |") >= 2, label
+    # So have iso-surfaces, run by the methods that draw them (the segment-list renderers
+    # decline the mode), each with its skipping: ours and both baselines beside no skipping.
+    assert modes.get("iso") == 3, modes
+    for f in files:
+        r = json.loads(f.read_text())
+        if r["settings"]["mode"] == "iso":
+            table1 = sorted(run["label"] for run in r["runs"] if run["experiment"] == "table1")
+            assert table1 == ["octree", "page-table", "residency", "residency (no skipping)"], (f.name, table1)
+            assert r["skipped"], f.name
+    for label in ("sparse 32³ iso", "dense 32³ iso", "cycif 8×64×64 iso"):
         assert report.count(f"| {label} |") >= 2, label
     assert probes >= 1 and "### Ours against the limit probe" in report
     assert "| Ours / manual |" in (out / "summary.md").read_text()
