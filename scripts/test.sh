@@ -35,6 +35,7 @@ RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
 cargo build --release --workspace --bins
 # The web viewer (WebAssembly + WebGPU) into target/release/web, where brickserver finds it.
 bash scripts/build-web.sh
+bash scripts/build-wheel.sh
 cargo test --release --workspace
 # A short run (10 s) of every fuzz target: the corpora and seeds must still run clean.
 bash scripts/fuzz.sh 10

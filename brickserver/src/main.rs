@@ -56,7 +56,7 @@ enum Command {
         #[arg(long)]
         token_file: Option<PathBuf>,
         /// The web viewer's built files (scripts/build-web.sh) [default: the folder `web`
-        /// beside this binary].
+        /// beside this binary, else `../share/residency/web` from it, as the wheel installs].
         #[arg(long, value_name = "DIR")]
         viewer_dir: Option<PathBuf>,
         /// The URL clients reach the server at (a reverse proxy's, path prefix included);
@@ -129,10 +129,21 @@ fn raise_file_limit() {
 }
 
 /// The web viewer's default folder: `web` beside the running executable (where
-/// `scripts/build-web.sh` writes, e.g. `target/release/web`).
+/// `scripts/build-web.sh` writes, e.g. `target/release/web`), else `share/residency/web` under
+/// the executable's prefix (where the Python wheel installs it: `ENV/bin/brickserver`,
+/// `ENV/share/residency/web`), else the first (the page then says it was not built).
 fn default_viewer_dir() -> Option<PathBuf> {
     let exe = std::env::current_exe().ok()?;
-    Some(exe.parent()?.join("web"))
+    let bin = exe.parent()?;
+    let beside = bin.join("web");
+    let shared = bin
+        .parent()
+        .map(|prefix| prefix.join("share/residency/web"));
+    let built = |dir: &PathBuf| dir.join("index.html").is_file();
+    Some(match shared {
+        Some(shared) if !built(&beside) && built(&shared) => shared,
+        _ => beside,
+    })
 }
 
 async fn run(

@@ -15,8 +15,7 @@ use super::apron::APRON_VOXELS;
 use super::brick_cache::AtlasKind;
 use super::method::Method;
 use super::page_table::{APRON_SHIFT, ENTRY_APRON, ENTRY_CLEAR, ENTRY_EMPTY};
-use super::residency::IsoSide;
-use crate::scene::{Filter, MAX_CLIP_PLANES, RenderMode};
+use crate::scene::{ChannelStyle, Filter, MAX_CLIP_PLANES, RenderMode};
 
 // The capacities the prelude gives the shader (see `wgsl_prelude`).
 pub use super::limits::{MAX_CHANNELS, MAX_LEVELS};
@@ -533,6 +532,46 @@ pub fn wgsl_prelude() -> String {
         u("FILTER_HARDWARE", FILTER_HARDWARE),
     ]
     .concat()
+}
+
+/// Where a brick's value range lies against its channel's iso value: the page-table and
+/// octree-of-bricks baselines' class word of a brick in [`RenderMode::Iso`] (`ISO_*` in the
+/// shaders). A ray skips a brick below the value while it is not known above it, and one above
+/// it while it is; a brick holding the value is sampled.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum IsoSide {
+    /// The range holds the iso value: a surface may be inside.
+    Crosses = 0,
+    /// Every value is below the iso value.
+    Below = 1,
+    /// Every value is above the iso value.
+    Above = 2,
+    /// No data, or the channel is not drawn: nothing to follow.
+    Nothing = 3,
+}
+
+impl IsoSide {
+    /// The side of a value range `[lo, hi]` (`f32`, as the shader sees it) against `style`'s
+    /// iso value (`f32`, as the shader's channel table holds it; none is above every value).
+    pub fn of(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> Self {
+        let Some(style) = style.filter(|s| s.visible) else {
+            return Self::Nothing;
+        };
+        if lo.partial_cmp(&hi).is_none_or(std::cmp::Ordering::is_gt) {
+            return Self::Nothing;
+        }
+        let iso = style
+            .iso_value()
+            .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX));
+        if hi < iso {
+            Self::Below
+        } else if lo > iso {
+            Self::Above
+        } else {
+            Self::Crosses
+        }
+    }
 }
 
 /// The limit probe's pipeline constant `FILTER`: 8 texel loads and manual weights.

@@ -10,7 +10,7 @@
 use super::apron::{self, Aprons, EntryKind, LowFaces, Part, PartSource};
 use super::brick_cache::BrickCache;
 use super::buffers::{check_binding, storage_buffer};
-use super::contract::{CLASS_CONSTANT_SHIFT, RECORD_WORDS, SEGMENT_HEADS};
+use super::contract::{CLASS_CONSTANT_SHIFT, IsoSide, RECORD_WORDS, SEGMENT_HEADS};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::method::Method;
@@ -169,46 +169,6 @@ pub struct RangeClass {
     pub empty: bool,
     /// The range is one value: integrated in closed form.
     pub constant: bool,
-}
-
-/// Where a brick's value range lies against its channel's iso value: the page-table and
-/// octree-of-bricks baselines' class word of a brick in [`RenderMode::Iso`] (`ISO_*` in the
-/// shaders). A ray skips a brick below the value while it is not known above it, and one above
-/// it while it is; a brick holding the value is sampled.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum IsoSide {
-    /// The range holds the iso value: a surface may be inside.
-    Crosses = 0,
-    /// Every value is below the iso value.
-    Below = 1,
-    /// Every value is above the iso value.
-    Above = 2,
-    /// No data, or the channel is not drawn: nothing to follow.
-    Nothing = 3,
-}
-
-impl IsoSide {
-    /// The side of a value range `[lo, hi]` (`f32`, as the shader sees it) against `style`'s
-    /// iso value (`f32`, as the shader's channel table holds it; none is above every value).
-    pub fn of(style: Option<&ChannelStyle>, lo: f32, hi: f32) -> Self {
-        let Some(style) = style.filter(|s| s.visible) else {
-            return Self::Nothing;
-        };
-        if lo.partial_cmp(&hi).is_none_or(std::cmp::Ordering::is_gt) {
-            return Self::Nothing;
-        }
-        let iso = style
-            .iso_value()
-            .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX));
-        if hi < iso {
-            Self::Below
-        } else if lo > iso {
-            Self::Above
-        } else {
-            Self::Crosses
-        }
-    }
 }
 
 /// The class of a value range `[lo, hi]` (`f32`, as the shader sees it) under `style` in

@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Builds the `residency` wheel (python/pyproject.toml, by maturin) into target/wheels: the three
+# programs installed on the PATH, the web viewer under ENV/share/residency/web (where
+# `brickserver` looks), and the Python package `residency` (python/residency, over the extension
+# module python/src/lib.rs). Needs scripts/setup.sh's environment (maturin is in .venv).
+#
+#   bash scripts/build-wheel.sh        # -> target/wheels/residency-VERSION-cp310-abi3-PLATFORM.whl
+#
+# The programs are stripped of debug information (the release profile keeps line tables for
+# backtraces; a user's install need not carry them). The platform tag is the manylinux one of
+# the newest glibc symbol version any of the four binaries needs, so pip refuses the wheel on
+# an older system instead of failing at run time. Idempotent: everything is rebuilt from the
+# current tree, and the wheel replaces an earlier one of the same name.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+cargo build --release --workspace --bins
+bash scripts/build-web.sh >/dev/null
+cargo build --release -p residency-python
+
+stage=python/wheel-data
+rm -rf "$stage"
+mkdir -p "$stage/scripts" "$stage/data/share/residency"
+for program in ingest brickserver viewer; do
+  strip --strip-debug -o "$stage/scripts/$program" "target/release/$program"
+done
+cp -r target/release/web "$stage/data/share/residency/web"
+
+# The newest GLIBC_x.y any binary needs (the extension module included).
+glibc=$(for f in "$stage"/scripts/* target/release/lib_native.so; do objdump -T "$f"; done \
+  | grep -o 'GLIBC_[0-9]*\.[0-9]*' | sort -t. -k2 -n -u | tail -1 | sed 's/GLIBC_//')
+tag="manylinux_${glibc/./_}"
+echo "== the programs need glibc $glibc or newer: platform tag $tag"
+
+rm -f target/wheels/residency-*.whl
+.venv/bin/maturin build --release --quiet -m python/Cargo.toml --out target/wheels \
+  --compatibility "$tag" --strip
+wheel=$(ls target/wheels/residency-*.whl)
+echo "== $wheel ($(du -h "$wheel" | cut -f1))"

@@ -1,0 +1,192 @@
+"""The `residency` wheel (scripts/build-wheel.sh, python/pyproject.toml) installed by pip into a
+fresh virtual environment whose PATH holds no Rust toolchain, and the tour run from there:
+`ingest sample`, `ingest convert`, `brickserver serve` read by zarr-python, `viewer render` on
+lavapipe, and the page the wheel's server serves opened in Chromium. What the wheel's programs
+write is byte for byte what the workspace's build writes; the Python API (`residency`) answers
+as the command line does, errors included.
+
+Needs target/wheels/residency-*.whl (scripts/build-wheel.sh; scripts/test.sh builds it)."""
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+import zipfile
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import requests
+import zarr
+
+from support.browser import require_browser, run_pausing
+from support.paths import BIN, ROOT
+
+WHEELS = ROOT / "target" / "wheels"
+DRIVER = ROOT / "tests" / "browser" / "web_viewer.mjs"
+# The README's bound on the wheel's size (it says "under 50 MB").
+MAX_WHEEL_BYTES = 50 * 1024 * 1024
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """The wheel pip-installed (offline, no dependencies to fetch) into a new virtual
+    environment of the interpreter the tests run on; its environment for subprocesses: PATH is
+    the environment's bin and the system's folders only, no Cargo or rustup variables."""
+    wheels = sorted(WHEELS.glob("residency-*.whl"))
+    assert len(wheels) == 1, f"{WHEELS} holds {wheels}: run scripts/build-wheel.sh"
+    root = tmp_path_factory.mktemp("wheel") / "env"
+    base = getattr(sys, "_base_executable", sys.executable)
+    subprocess.run([base, "-m", "venv", root], check=True)
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("CARGO", "RUSTUP", "RUST"))}
+    env.pop("VIRTUAL_ENV", None)
+    env["PATH"] = f"{root / 'bin'}:/usr/local/bin:/usr/bin:/bin"
+    env.setdefault("XDG_RUNTIME_DIR", "/tmp")
+    start = time.monotonic()
+    p = subprocess.run([root / "bin" / "pip", "install", "--no-index", "--no-deps", "-q", wheels[0]],
+                       env=env, capture_output=True, text=True)
+    install_s = time.monotonic() - start
+    assert p.returncode == 0, p.stderr
+    print(f"\n{wheels[0].name}: {wheels[0].stat().st_size / 2**20:.1f} MiB, installed in {install_s:.1f} s")
+    return SimpleNamespace(root=root, bin=root / "bin", env=env, wheel=wheels[0])
+
+
+def run(installed, *args, check=True):
+    """Runs a program of the environment (`args[0]` in its bin) with its environment."""
+    p = subprocess.run([installed.bin / args[0], *map(str, args[1:])], env=installed.env,
+                       capture_output=True, text=True)
+    if check:
+        assert p.returncode == 0, f"{args}: {p.stderr}"
+    return p
+
+
+def run_workspace(*args):
+    """Runs a program of the workspace's build (target/release)."""
+    p = subprocess.run([BIN / args[0], *map(str, args[1:])], capture_output=True, text=True)
+    assert p.returncode == 0, f"{args}: {p.stderr}"
+    return p
+
+
+def files(folder):
+    """Every file under `folder` by its relative path, with its bytes."""
+    return {str(f.relative_to(folder)): f.read_bytes() for f in sorted(folder.rglob("*")) if f.is_file()}
+
+
+def test_the_wheel_holds_the_programs_the_page_and_the_package(installed):
+    names = zipfile.ZipFile(installed.wheel).namelist()
+    version = tomllib.loads((ROOT / "Cargo.toml").read_text())["workspace"]["package"]["version"]
+    data = f"residency-{version}.data"
+    for name in ("ingest", "brickserver", "viewer"):
+        assert f"{data}/scripts/{name}" in names, names
+    assert f"{data}/data/share/residency/web/index.html" in names
+    assert {"residency/__init__.py", "residency/_native.pyi", "residency/py.typed"} <= set(names)
+    assert installed.wheel.stat().st_size < MAX_WHEEL_BYTES, installed.wheel.stat().st_size
+    # The platform the README names: CPython 3.10 or newer (abi3), and its glibc.
+    glibc = re.search(r"with glibc (\d+)\.(\d+) or newer", (ROOT / "README.md").read_text())
+    assert glibc, "the README names no glibc"
+    assert installed.wheel.name.endswith(f"-cp310-abi3-manylinux_{glibc[1]}_{glibc[2]}_x86_64.whl"), installed.wheel.name
+    # No Rust toolchain where the environment's programs run.
+    for tool in ("cargo", "rustc", "rustup"):
+        assert shutil.which(tool, path=installed.env["PATH"]) is None, tool
+    # The programs are on the PATH, the page under the environment's share folder.
+    for name in ("ingest", "brickserver", "viewer"):
+        assert shutil.which(name, path=installed.env["PATH"]) == str(installed.bin / name)
+    assert (installed.root / "share" / "residency" / "web" / "index.html").is_file()
+    p = run(installed, "python", "-c", "import residency; print(residency.__version__)")
+    assert p.stdout == f"{version}\n"
+
+
+def test_the_tour_runs_from_the_wheel_and_writes_what_the_build_writes(installed, tmp_path):
+    wheel, build = tmp_path / "wheel", tmp_path / "build"
+    # ingest sample: the same TIFF stacks.
+    run(installed, "ingest", "sample", "-o", wheel / "sample", "--size", "16,48,48")
+    run_workspace("ingest", "sample", "-o", build / "sample", "--size", "16,48,48")
+    assert files(wheel / "sample") == files(build / "sample")
+    tiffs = [f"{n}.ome.tif" for n in ("nuclei", "membranes", "filaments")]
+    # ingest convert: the same store, byte for byte.
+    run(installed, "ingest", "convert", *(wheel / "sample" / t for t in tiffs), "-o", wheel / "tour.ome.zarr", "--chunk", "16")
+    run_workspace("ingest", "convert", *(build / "sample" / t for t in tiffs), "-o", build / "tour.ome.zarr", "--chunk", "16")
+    assert files(wheel / "tour.ome.zarr") == files(build / "tour.ome.zarr")
+    # viewer render on lavapipe: the same PNG.
+    flags = ["--width", "64", "--height", "48", "--camera", "30,20,1.6"]
+    run(installed, "viewer", "render", "--store", wheel / "tour.ome.zarr", *flags, "--out", wheel / "tour.png")
+    run_workspace("viewer", "render", "--store", build / "tour.ome.zarr", *flags, "--out", build / "tour.png")
+    assert (wheel / "tour.png").read_bytes() == (build / "tour.png").read_bytes()
+    # brickserver serve: zarr-python reads every level over HTTP as from the folder, and the
+    # page's files come from the environment's share folder.
+    server, base = start(installed, wheel / "tour.ome.zarr")
+    try:
+        remote = zarr.open_group(f"{base}/tour/", mode="r")
+        local = zarr.open_group(str(wheel / "tour.ome.zarr"), mode="r")
+        levels = [d["path"] for d in local.attrs["ome"]["multiscales"][0]["datasets"]]
+        assert len(levels) >= 2, levels
+        for level in levels:
+            np.testing.assert_array_equal(remote[level][...], local[level][...])
+        web = installed.root / "share" / "residency" / "web"
+        page = requests.get(f"{base}/tour/view", timeout=10)
+        assert page.status_code == 200, page.text[:200]
+        assert page.text == (web / "index.html").read_text().replace("%VIEWER_BASE%", "../viewer/")
+        wasm = requests.get(f"{base}/viewer/residency_viewer_bg.wasm", timeout=10)
+        assert wasm.status_code == 200 and wasm.content == (web / "residency_viewer_bg.wasm").read_bytes()
+    finally:
+        stop(server)
+
+
+def start(installed, *stores):
+    """`brickserver serve STORES --bind 127.0.0.1:0` from the environment; (process, base URL)."""
+    proc = subprocess.Popen([installed.bin / "brickserver", "serve", *map(str, stores), "--bind", "127.0.0.1:0"],
+                            env=installed.env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if line.startswith("listening on "):
+            return proc, line.split("listening on ")[1].strip()
+    raise AssertionError(f"the wheel's brickserver did not start:\n{proc.stderr.read()}")
+
+
+def stop(proc):
+    """Stops a server `start` started, and checks it is gone."""
+    proc.terminate()
+    assert proc.wait(timeout=10) == 0
+
+
+@pytest.mark.browser
+def test_the_page_the_wheels_server_serves_converges_in_chromium(installed, tmp_path):
+    require_browser()
+    run(installed, "ingest", "sample", "-o", tmp_path / "sample", "--size", "16,48,48")
+    run(installed, "ingest", "convert", tmp_path / "sample" / "nuclei.ome.tif", "-o", tmp_path / "page.ome.zarr", "--quiet")
+    server, base = start(installed, tmp_path / "page.ome.zarr")
+    try:
+        spec = {"url": f"{base}/page/view?width=96&height=96", "steps": [{"do": "converge"}]}
+        last, code, err = run_pausing(DRIVER, spec, None, 600)
+        assert code == 0, f"browser driver failed:\n{last}\n{err}"
+        out = json.loads(last)
+        [state] = out["results"]
+        assert state["error"] is None and state["converged"] and state["bricks_fetched"] > 0, state
+        assert [m for m in out["console"] if m.startswith(("error", "pageerror"))] == []
+    finally:
+        stop(server)
+
+
+def test_inspect_from_python_prints_what_ingest_inspect_prints(installed, tmp_path):
+    run(installed, "ingest", "sample", "-o", tmp_path / "sample", "--size", "16,32,32")
+    store = tmp_path / "x.ome.zarr"
+    run(installed, "ingest", "convert", tmp_path / "sample" / "membranes.ome.tif", "-o", store, "--quiet")
+    cli = run(installed, "ingest", "inspect", store).stdout
+    assert "region metadata" in cli, cli
+    api = run(installed, "python", "-c", f"import residency, sys; sys.stdout.write(residency.inspect({str(store)!r}))")
+    assert api.stdout == cli
+    # A failure: the exception's message is the command line's, after its `error: `.
+    missing = tmp_path / "missing.ome.zarr"
+    cli = run(installed, "ingest", "inspect", missing, check=False)
+    assert cli.returncode != 0 and cli.stderr.startswith("error: "), cli.stderr
+    api = run(installed, "python", "-c", f"""
+import residency
+try:
+    residency.inspect({str(missing)!r})
+except residency.ResidencyError as e:
+    print(type(e).__name__, e)
+""")
+    assert api.stdout == f"ResidencyError {cli.stderr.removeprefix('error: ')}", (api.stdout, cli.stderr)
