@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Builds the `residency` wheel (python/pyproject.toml, by maturin) into target/wheels: the three
+# Builds the `residency` wheel (python/pyproject.toml, by maturin) into target/wheels (numpy's
+# wheel, its one dependency, into target/wheels/deps): the three
 # programs installed on the PATH, the web viewer under ENV/share/residency/web (where
 # `brickserver` looks), and the Python package `residency` (python/residency, over the extension
 # module python/src/lib.rs). Needs scripts/setup.sh's environment (maturin is in .venv).
@@ -37,3 +38,8 @@ rm -f target/wheels/residency-*.whl
   --compatibility "$tag" --strip
 wheel=$(ls target/wheels/residency-*.whl)
 echo "== $wheel ($(du -h "$wheel" | cut -f1))"
+
+# The wheel's one dependency, numpy, at the test environment's version, beside it: the wheel's
+# test installs both into a fresh environment without the package index.
+numpy=$(.venv/bin/python -c 'import numpy; print(numpy.__version__)')
+.venv/bin/pip download -q --only-binary :all: --no-deps -d target/wheels/deps "numpy==$numpy"

@@ -1,5 +1,10 @@
 """Type stubs of the extension module ``residency._native`` (python/src/lib.rs)."""
 
+from typing import Any, TypedDict
+
+import numpy as np
+import numpy.typing as npt
+
 __version__: str
 
 class ResidencyError(Exception):
@@ -12,3 +17,52 @@ def inspect(store: str, *, s3_endpoint: str | None = None) -> str:
 
     Raises :class:`ResidencyError` where the store cannot be read, with ``ingest inspect``'s
     message."""
+
+class Regions(TypedDict):
+    """One channel's region metadata at one level (:func:`regions`)."""
+
+    cell_shape: tuple[int, int, int]
+    """Edge of a min/max cell in voxels of the level, ``z, y, x``."""
+    halo: int
+    """Voxels added on every side of a cell for its ``min`` and ``max``."""
+    brick_shape: tuple[int, int, int]
+    """Brick shape, ``z, y, x``."""
+    min: npt.NDArray[np.float64]
+    """Each cell's minimum over its voxels and halo, ``[gz, gy, gx]`` (NaN: all NaN)."""
+    max: npt.NDArray[np.float64]
+    """Each cell's maximum over its voxels and halo, ``[gz, gy, gx]``."""
+    exact_min: npt.NDArray[np.float64] | None
+    """Each cell's minimum over its own voxels (``None`` in stores of layout 0.1)."""
+    exact_max: npt.NDArray[np.float64] | None
+    """Each cell's maximum over its own voxels (``None`` in stores of layout 0.1)."""
+    histograms: npt.NDArray[np.uint32]
+    """Each brick's histogram, ``[bz, by, bx, bins]``."""
+    histogram_edges: npt.NDArray[np.float64]
+    """The channel's bin edges (at most ``bins + 1``), shared by every brick and level."""
+
+def regions(store: str, level: int = 0, channel: int = 0, *, s3_endpoint: str | None = None) -> Regions:
+    """Channel ``channel``'s region metadata at level ``level`` (0: the finest) of ``store``,
+    read whole from its ``residency`` arrays.
+
+    Raises :class:`ResidencyError` where the store cannot be read, has no region metadata, or
+    has no such level or channel."""
+
+def render(
+    volume: str,
+    scene: dict[str, Any] | str | None = None,
+    width: int = 256,
+    height: int = 256,
+    *,
+    dataset: str | None = None,
+    s3_endpoint: str | None = None,
+) -> npt.NDArray[np.uint8]:
+    """``volume`` rendered as ``viewer render`` renders it with the same scene and size: a
+    ``uint8`` array ``[height, width, 3]`` of the 8-bit sRGB pixels its PNG holds.
+
+    ``volume`` is a store (a folder or ``s3://BUCKET/PREFIX``) or a ``brickserver`` URL with
+    ``dataset`` the dataset's name; ``scene`` a scene (``schemas/json/scene.schema.json``) as a
+    dict or JSON text, ``None`` for the volume's default scene. Rendered on the GPU (Mesa's
+    lavapipe where there is none) until no brick is outstanding, or 64 frames.
+
+    Raises :class:`ResidencyError` with ``viewer render``'s message where the volume cannot be
+    opened, the scene is not one of it, or the GPU fails."""

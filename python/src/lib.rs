@@ -2,10 +2,15 @@
 //! `residency` package (`python/residency/__init__.py`). Errors are `residency.ResidencyError`
 //! with the message the command line prints for the same failure.
 
+mod region_arrays;
+mod rendering;
+
+use numpy::{PyArray1, PyArrayMethods};
 use pyo3::create_exception;
 use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
-use residency_store::location::{ObjectStoreOptions, StoreLocation};
+use pyo3::types::PyDict;
+use residency_store::location::{LocationError, ObjectStoreOptions, StoreLocation};
 
 create_exception!(
     _native,
@@ -29,14 +34,121 @@ fn residency_error(e: &(dyn std::error::Error + 'static)) -> PyErr {
 #[pyfunction]
 #[pyo3(signature = (store, *, s3_endpoint = None))]
 fn inspect(py: Python<'_>, store: &str, s3_endpoint: Option<String>) -> PyResult<String> {
-    let location: StoreLocation = store
-        .parse()
-        .map_err(|e: residency_store::location::LocationError| residency_error(&e))?;
+    let (location, options) = open(store, s3_endpoint)?;
     py.detach(|| {
-        let options = ObjectStoreOptions::for_location(&location, s3_endpoint)
-            .map_err(|e| residency_error(&e))?;
         residency_ingest::inspect::inspect(&location, &options).map_err(|e| residency_error(&e))
     })
+}
+
+/// The store at `store` (a folder or `s3://BUCKET/PREFIX`) and how to reach it.
+fn open(store: &str, s3_endpoint: Option<String>) -> PyResult<(StoreLocation, ObjectStoreOptions)> {
+    let location: StoreLocation = store
+        .parse()
+        .map_err(|e: LocationError| residency_error(&e))?;
+    let options = ObjectStoreOptions::for_location(&location, s3_endpoint)
+        .map_err(|e| residency_error(&e))?;
+    Ok((location, options))
+}
+
+/// Channel `channel`'s region metadata at level `level` (0: the finest) of `store`, read
+/// whole: a dict of `cell_shape`, `halo` and `brick_shape` (`z, y, x` tuples and voxels), `min`
+/// and `max` (the finest min/max grid with its halo, `float64` arrays `[gz, gy, gx]`, NaN for
+/// cells of NaN only), `exact_min` and `exact_max` (the same cells without the halo; `None`
+/// in stores of layout 0.1), `histograms` (`uint32` `[bz, by, bx, bins]`, one per brick) and
+/// `histogram_edges` (`float64`, the channel's bin edges, shared by every brick and level).
+///
+/// # Errors
+/// `ResidencyError` where the store cannot be read, has no region metadata, or has no such
+/// level or channel.
+#[pyfunction]
+#[pyo3(signature = (store, level = 0, channel = 0, *, s3_endpoint = None))]
+fn regions<'py>(
+    py: Python<'py>,
+    store: &str,
+    level: usize,
+    channel: usize,
+    s3_endpoint: Option<String>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let (location, options) = open(store, s3_endpoint)?;
+    let r = py
+        .detach(|| region_arrays::read(&location, &options, level, channel))
+        .map_err(|e| residency_error(&e))?;
+    let grid = r.grid_shape.map(|n| n as usize);
+    let bricks = r.brick_grid.map(|n| n as usize);
+    let cells = |values: Vec<f64>| PyArray1::from_vec(py, values).reshape(grid);
+    let out = PyDict::new(py);
+    let zyx = |v: [u64; 3]| (v[0], v[1], v[2]);
+    out.set_item("cell_shape", zyx(r.cell_shape))?;
+    out.set_item("halo", r.halo)?;
+    out.set_item("brick_shape", zyx(r.brick_shape))?;
+    out.set_item("min", cells(r.min)?)?;
+    out.set_item("max", cells(r.max)?)?;
+    if let Some((lo, hi)) = r.exact {
+        out.set_item("exact_min", cells(lo)?)?;
+        out.set_item("exact_max", cells(hi)?)?;
+    } else {
+        out.set_item("exact_min", py.None())?;
+        out.set_item("exact_max", py.None())?;
+    }
+    let histograms =
+        PyArray1::from_vec(py, r.histograms).reshape([bricks[0], bricks[1], bricks[2], r.bins])?;
+    out.set_item("histograms", histograms)?;
+    out.set_item("histogram_edges", PyArray1::from_vec(py, r.edges))?;
+    Ok(out)
+}
+
+/// `volume` rendered as `viewer render` renders it with the same scene and size: a `uint8`
+/// array `[height, width, 3]` of the 8-bit sRGB pixels its PNG holds. `volume` is a store (a
+/// folder or `s3://BUCKET/PREFIX`, with `s3_endpoint` as in [`inspect`]) or a `brickserver`
+/// URL with `dataset` the dataset's name; `scene` a scene (`schemas/json/scene.schema.json`)
+/// as a dict or JSON text, `None` for the volume's default scene. Rendered on the GPU (Mesa's
+/// lavapipe where there is none) until no brick is outstanding, or 64 frames.
+///
+/// # Errors
+/// `ResidencyError` with `viewer render`'s message where the volume cannot be opened, the
+/// scene is not one of it, or the GPU fails; also for a URL without `dataset`.
+#[pyfunction]
+#[pyo3(signature = (volume, scene = None, width = 256, height = 256, *, dataset = None, s3_endpoint = None))]
+fn render<'py>(
+    py: Python<'py>,
+    volume: &str,
+    scene: Option<Bound<'py, PyAny>>,
+    width: u32,
+    height: u32,
+    dataset: Option<String>,
+    s3_endpoint: Option<String>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let served = volume.starts_with("http://") || volume.starts_with("https://");
+    let source = match (served, dataset) {
+        (true, Some(dataset)) => rendering::Volume::Served {
+            url: volume.to_string(),
+            dataset,
+        },
+        (true, None) => {
+            return Err(ResidencyError::new_err(format!(
+                "{volume}: a server's URL needs dataset=NAME"
+            )));
+        }
+        (false, Some(_)) => {
+            return Err(ResidencyError::new_err(format!(
+                "{volume}: dataset= names a dataset of a server; a store is one volume"
+            )));
+        }
+        (false, None) => {
+            let (location, options) = open(volume, s3_endpoint)?;
+            rendering::Volume::Store(location, options)
+        }
+    };
+    let scene: Option<String> = match scene {
+        None => None,
+        Some(s) if s.is_instance_of::<pyo3::types::PyString>() => Some(s.extract()?),
+        Some(s) => Some(py.import("json")?.call_method1("dumps", (s,))?.extract()?),
+    };
+    let pixels = py
+        .detach(|| rendering::render(&source, scene.as_deref(), width, height))
+        .map_err(|e| residency_error(&e))?;
+    let image = PyArray1::from_vec(py, pixels).reshape([height as usize, width as usize, 3])?;
+    Ok(image.into_any())
 }
 
 /// The module: the functions above, `ResidencyError` and `__version__`.
@@ -45,5 +157,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("ResidencyError", m.py().get_type::<ResidencyError>())?;
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
+    m.add_function(wrap_pyfunction!(regions, m)?)?;
+    m.add_function(wrap_pyfunction!(render, m)?)?;
     Ok(())
 }

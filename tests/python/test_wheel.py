@@ -34,9 +34,10 @@ MAX_WHEEL_BYTES = 50 * 1024 * 1024
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory):
-    """The wheel pip-installed (offline, no dependencies to fetch) into a new virtual
-    environment of the interpreter the tests run on; its environment for subprocesses: PATH is
-    the environment's bin and the system's folders only, no Cargo or rustup variables."""
+    """The wheel pip-installed into a new virtual environment of the interpreter the tests run
+    on, offline (its one dependency, numpy, from target/wheels/deps); its environment for
+    subprocesses: PATH is the environment's bin and the system's folders only, no Cargo or
+    rustup variables."""
     wheels = sorted(WHEELS.glob("residency-*.whl"))
     assert len(wheels) == 1, f"{WHEELS} holds {wheels}: run scripts/build-wheel.sh"
     root = tmp_path_factory.mktemp("wheel") / "env"
@@ -47,7 +48,7 @@ def installed(tmp_path_factory):
     env["PATH"] = f"{root / 'bin'}:/usr/local/bin:/usr/bin:/bin"
     env.setdefault("XDG_RUNTIME_DIR", "/tmp")
     start = time.monotonic()
-    p = subprocess.run([root / "bin" / "pip", "install", "--no-index", "--no-deps", "-q", wheels[0]],
+    p = subprocess.run([root / "bin" / "pip", "install", "--no-index", "--find-links", WHEELS / "deps", "-q", wheels[0]],
                        env=env, capture_output=True, text=True)
     install_s = time.monotonic() - start
     assert p.returncode == 0, p.stderr
@@ -190,3 +191,118 @@ except residency.ResidencyError as e:
     print(type(e).__name__, e)
 """)
     assert api.stdout == f"ResidencyError {cli.stderr.removeprefix('error: ')}", (api.stdout, cli.stderr)
+
+
+REGIONS_SCRIPT = """
+import json, sys
+import numpy as np
+import residency
+r = residency.regions(sys.argv[1], int(sys.argv[2]), int(sys.argv[3]))
+np.savez(sys.argv[4], **{k: v for k, v in r.items() if isinstance(v, np.ndarray)})
+print(json.dumps({k: (str(v.dtype), v.shape) if isinstance(v, np.ndarray) else v for k, v in r.items()}))
+"""
+
+
+def test_regions_from_python_are_the_stores_region_arrays(installed, tmp_path):
+    """`residency.regions` gives what zarr-python reads from the arrays the store's `residency`
+    attributes name: the finest min/max grid with its halo and exact, and the brick histograms
+    with the channel's bin edges."""
+    run(installed, "ingest", "sample", "-o", tmp_path / "sample", "--size", "16,48,48")
+    store = tmp_path / "r.ome.zarr"
+    run(installed, "ingest", "convert", *(tmp_path / "sample" / f"{n}.ome.tif" for n in ("nuclei", "filaments")),
+        "-o", store, "--chunk", "16", "--quiet")
+    group = zarr.open_group(str(store), mode="r")
+    meta = group.attrs["residency"]
+    assert len(meta["levels"]) >= 2 and len(meta["channels"]) == 2
+    for level, channel in [(0, 0), (0, 1), (1, 1)]:
+        out = tmp_path / f"r{level}{channel}.npz"
+        p = run(installed, "python", "-c", REGIONS_SCRIPT, store, level, channel, out)
+        shown = json.loads(p.stdout)
+        got = np.load(out)
+        at = meta["levels"][level]
+        grid = group[at["minmax"][0]["path"]][channel]
+        exact = group[at["range"][0]["path"]][channel]
+        histograms = group[at["histogram"]][channel]
+        assert shown["cell_shape"] == at["minmax"][0]["cell_shape"] and shown["halo"] == meta["halo"]
+        assert shown["brick_shape"] == meta["brick_shape"]
+        assert shown["min"] == ["float64", list(grid.shape[1:])], shown
+        assert shown["histograms"] == ["uint32", list(histograms.shape)], shown
+        np.testing.assert_array_equal(got["min"], grid[0].astype(np.float64))
+        np.testing.assert_array_equal(got["max"], grid[1].astype(np.float64))
+        np.testing.assert_array_equal(got["exact_min"], exact[0].astype(np.float64))
+        np.testing.assert_array_equal(got["exact_max"], exact[1].astype(np.float64))
+        np.testing.assert_array_equal(got["histograms"], histograms)
+        edges = [np.inf if e is None else e for e in meta["channels"][channel]["histogram_edges"]]
+        np.testing.assert_array_equal(got["histogram_edges"], np.array(edges, np.float64))
+        assert got["max"].max() > 0 and histograms.sum() > 0
+    # What it cannot answer, it says.
+    for args, message in [
+        ((store, 9, 0), f"{store}: no level 9 (the store has {len(meta['levels'])})"),
+        ((store, 0, 2), f"{store}: no channel 2 (the store has 2)"),
+    ]:
+        p = run(installed, "python", "-c", f"""
+import residency
+try:
+    residency.regions(*{tuple(map(str, args[:1])) + args[1:]!r})
+except residency.ResidencyError as e:
+    print(e)
+""")
+        assert p.stdout == f"{message}\n", p.stdout
+
+
+RENDER_SCRIPT = """
+import json, sys
+import numpy as np
+import residency
+volume, out, scene = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
+kwargs = {"dataset": sys.argv[4]} if len(sys.argv) > 4 else {}
+np.save(out, residency.render(volume, scene, 64, 48, **kwargs))
+"""
+
+
+def test_render_from_python_gives_the_pixels_viewer_render_writes(installed, tmp_path):
+    """`residency.render` of a store and of the same store served by the wheel's `brickserver`,
+    with the default scene and with a scene file's dict, gives the pixels of `viewer render`'s
+    PNG for the same volume, scene and size."""
+    from support.browser import read_png
+
+    run(installed, "ingest", "sample", "-o", tmp_path / "sample", "--size", "16,48,48")
+    store = tmp_path / "v.ome.zarr"
+    run(installed, "ingest", "convert", *(tmp_path / "sample" / f"{n}.ome.tif" for n in ("nuclei", "membranes")),
+        "-o", store, "--chunk", "16", "--quiet")
+    scene = {
+        "camera": {"eye": [60.0, -20.0, -30.0], "target": [12.0, 12.0, 16.0]},
+        "channels": [{"channel": 0, "visible": True, "color": [1.0, 0.5, 0.2],
+                      "opacity": [{"value": 100.0, "opacity": 0.0}, {"value": 3000.0, "opacity": 0.5}]}],
+        "mode": "mip",
+    }
+    (tmp_path / "scene.json").write_text(json.dumps(scene))
+    server, base = start(installed, store)
+    try:
+        for label, scene_arg, cli_scene in [("default", None, []), ("scene", scene, ["--scene", tmp_path / "scene.json"])]:
+            png = tmp_path / f"{label}.png"
+            run(installed, "viewer", "render", "--store", store, *cli_scene, "--width", "64", "--height", "48", "--out", png)
+            want = read_png(png)[:, :, :3]
+            assert want.max() > 0, label
+            for where, extra in [("store", [store]), ("server", [base, "v"])]:
+                out = tmp_path / f"{label}-{where}.npy"
+                volume, *dataset = extra
+                run(installed, "python", "-c", RENDER_SCRIPT, volume, out, json.dumps(scene_arg), *dataset)
+                got = np.load(out)
+                assert got.dtype == np.uint8 and got.shape == (48, 64, 3), (label, where, got.dtype, got.shape)
+                np.testing.assert_array_equal(got, want, err_msg=f"{label} from the {where}")
+    finally:
+        stop(server)
+    # What it cannot draw, it says as `viewer render` does.
+    bad = {**scene, "channels": [{"channel": 5, "visible": True, "color": [1, 1, 1], "opacity": []}]}
+    (tmp_path / "bad.json").write_text(json.dumps(bad))
+    cli = run(installed, "viewer", "render", "--store", store, "--scene", tmp_path / "bad.json", "--out", tmp_path / "x.png", check=False)
+    assert cli.returncode != 0, cli.stderr
+    p = run(installed, "python", "-c", f"""
+import residency
+try:
+    residency.render({str(store)!r}, {bad!r})
+except residency.ResidencyError as e:
+    print(e)
+""")
+    assert "channel 5" in p.stdout and cli.stderr == f"error: {p.stdout}", (p.stdout, cli.stderr)

@@ -119,6 +119,15 @@ mod binding {
     pub const FOOTER: u32 = 4;
 }
 
+/// The present pass's overlays.
+#[derive(Clone, Copy)]
+enum Overlay {
+    /// The statistics panel, top left.
+    Panel,
+    /// The orientation strip, along the bottom edge.
+    Footer,
+}
+
 /// An overlay texture (`Rgba8Uint`), at least 1 × 1, and the size of what it holds (0 × 0:
 /// nothing).
 struct Layer {
@@ -346,17 +355,12 @@ impl Presenter {
         height: u32,
         rgba: &[u8],
     ) -> Result<(), PresentError> {
-        if self.panel.set(gpu, "panel", (width, height), rgba)? {
-            self.unbind();
-        }
-        Ok(())
+        self.set_overlay(gpu, Overlay::Panel, (width, height), rgba)
     }
 
     /// Removes the panel.
     pub fn clear_panel(&mut self, gpu: &Gpu) {
-        if self.panel.clear(gpu, "panel") {
-            self.unbind();
-        }
+        self.clear_overlay(gpu, Overlay::Panel);
     }
 
     /// Sets the orientation strip along the bottom edge, from the left: `width × height`
@@ -372,18 +376,41 @@ impl Presenter {
         height: u32,
         rgba: &[u8],
     ) -> Result<(), PresentError> {
-        if self
-            .footer
-            .set(gpu, "orientation strip", (width, height), rgba)?
-        {
+        self.set_overlay(gpu, Overlay::Footer, (width, height), rgba)
+    }
+
+    /// Removes the orientation strip.
+    pub fn clear_footer(&mut self, gpu: &Gpu) {
+        self.clear_overlay(gpu, Overlay::Footer);
+    }
+
+    /// An overlay's layer and its name in errors.
+    fn layer(&mut self, which: Overlay) -> (&mut Layer, &'static str) {
+        match which {
+            Overlay::Panel => (&mut self.panel, "panel"),
+            Overlay::Footer => (&mut self.footer, "orientation strip"),
+        }
+    }
+
+    /// [`Layer::set`] of an overlay; a new texture unbinds the old.
+    fn set_overlay(
+        &mut self,
+        gpu: &Gpu,
+        which: Overlay,
+        size: (u32, u32),
+        rgba: &[u8],
+    ) -> Result<(), PresentError> {
+        let (layer, what) = self.layer(which);
+        if layer.set(gpu, what, size, rgba)? {
             self.unbind();
         }
         Ok(())
     }
 
-    /// Removes the orientation strip.
-    pub fn clear_footer(&mut self, gpu: &Gpu) {
-        if self.footer.clear(gpu, "orientation strip") {
+    /// [`Layer::clear`] of an overlay; a new texture unbinds the old.
+    fn clear_overlay(&mut self, gpu: &Gpu, which: Overlay) {
+        let (layer, what) = self.layer(which);
+        if layer.clear(gpu, what) {
             self.unbind();
         }
     }

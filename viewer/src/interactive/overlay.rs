@@ -221,24 +221,8 @@ pub fn panel_size(lines: &[(String, u32)], scale: usize) -> (usize, usize) {
 /// ([`crate::gpu::present::Presenter::set_panel`]): `(width, height, RGBA bytes)`, the text
 /// pixels in their colour with alpha 255, the shaded rest all 0.
 pub fn panel_rgba(lines: &[(String, u32)], scale: usize) -> (u32, u32, Vec<u8>) {
-    /// A value no text colour (`0x00RRGGBB`) has.
-    const SHADED: u32 = 0xff00_0000;
     let (w, h) = panel_size(lines, scale);
-    let mut pixels = vec![SHADED; w * h];
-    Canvas {
-        pixels: &mut pixels,
-        width: w,
-        height: h,
-    }
-    .panel_text(lines, scale);
-    let rgba = pixels
-        .iter()
-        .flat_map(|&p| match p {
-            SHADED => [0; 4],
-            p => [(p >> 16) as u8, (p >> 8) as u8, p as u8, 255],
-        })
-        .collect();
-    (w as u32, h as u32, rgba)
+    overlay_rgba(w, h, |canvas| canvas.panel_text(lines, scale))
 }
 
 /// The orientation strip [`Canvas::orientation`] draws across a window `width` pixels wide,
@@ -246,20 +230,29 @@ pub fn panel_rgba(lines: &[(String, u32)], scale: usize) -> (u32, u32, Vec<u8>) 
 /// `(width, height, RGBA bytes)`, the marks in their colour with alpha 255, the rest all 0
 /// (the image shows through).
 pub fn orientation_rgba(o: &Orientation, width: usize, scale: usize) -> (u32, u32, Vec<u8>) {
-    /// A value no mark's colour (`0x00RRGGBB`) has.
-    const CLEAR: u32 = 0xff00_0000;
     let height = ORIENTATION_HEIGHT * scale.max(1);
-    let mut pixels = vec![CLEAR; width * height];
-    Canvas {
+    overlay_rgba(width, height, |canvas| canvas.orientation(o, scale))
+}
+
+/// What `draw` draws on a `width × height` canvas as an overlay texture: `(width, height,
+/// RGBA bytes)`, each pixel drawn in its colour with alpha 255, every other all 0.
+fn overlay_rgba(
+    width: usize,
+    height: usize,
+    draw: impl FnOnce(&mut Canvas),
+) -> (u32, u32, Vec<u8>) {
+    /// A value no colour drawn (`0x00RRGGBB`) has.
+    const UNDRAWN: u32 = 0xff00_0000;
+    let mut pixels = vec![UNDRAWN; width * height];
+    draw(&mut Canvas {
         pixels: &mut pixels,
         width,
         height,
-    }
-    .orientation(o, scale);
+    });
     let rgba = pixels
         .iter()
         .flat_map(|&p| match p {
-            CLEAR => [0; 4],
+            UNDRAWN => [0; 4],
             p => [(p >> 16) as u8, (p >> 8) as u8, p as u8, 255],
         })
         .collect();
