@@ -66,3 +66,19 @@ def render(
 
     Raises :class:`ResidencyError` with ``viewer render``'s message where the volume cannot be
     opened, the scene is not one of it, or the GPU fails."""
+
+class Server:
+    """``brickserver serve STORES`` in this process (``residency.Server`` wraps it)."""
+
+    def __init__(
+        self,
+        stores: list[str],
+        bind: str = "127.0.0.1:0",
+        viewer_dir: str | None = None,
+        s3_endpoint: str | None = None,
+    ) -> None: ...
+    @property
+    def url(self) -> str:
+        """The base URL, ``http://HOST:PORT``."""
+    def close(self) -> None:
+        """Stops serving: open requests finish and the server's threads end."""

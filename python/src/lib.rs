@@ -4,6 +4,7 @@
 
 mod region_arrays;
 mod rendering;
+mod server;
 
 use numpy::{PyArray1, PyArrayMethods};
 use pyo3::create_exception;
@@ -151,6 +152,55 @@ fn render<'py>(
     Ok(image.into_any())
 }
 
+/// `brickserver serve STORES` in this process until closed (`residency.Server` wraps it):
+/// `url` is where it listens, as `brickserver` prints it.
+#[pyclass(module = "residency._native")]
+struct Server {
+    running: server::Running,
+}
+
+#[pymethods]
+impl Server {
+    /// Starts serving `stores` (folders or `s3://BUCKET/PREFIX`) on `bind` (`HOST:PORT`, port
+    /// 0 for a free one), the web viewer from `viewer_dir`; returns once it listens.
+    ///
+    /// # Errors
+    /// `ResidencyError` with `brickserver serve`'s message.
+    #[new]
+    #[pyo3(signature = (stores, bind = "127.0.0.1:0", viewer_dir = None, s3_endpoint = None))]
+    fn new(
+        py: Python<'_>,
+        stores: Vec<String>,
+        bind: &str,
+        viewer_dir: Option<std::path::PathBuf>,
+        s3_endpoint: Option<String>,
+    ) -> PyResult<Self> {
+        let locations = stores
+            .iter()
+            .map(|s| s.parse::<StoreLocation>())
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| residency_error(&e))?;
+        let bind: std::net::SocketAddr = bind
+            .parse()
+            .map_err(|e| ResidencyError::new_err(format!("--bind {bind}: {e}")))?;
+        let running = py
+            .detach(|| server::Running::start(&locations, bind, viewer_dir, s3_endpoint))
+            .map_err(|e| residency_error(&e))?;
+        Ok(Self { running })
+    }
+
+    /// The base URL, `http://HOST:PORT`.
+    #[getter]
+    fn url(&self) -> String {
+        format!("http://{}", self.running.address)
+    }
+
+    /// Stops serving: open requests finish (for at most 10 s) and the server's threads end.
+    fn close(&mut self, py: Python<'_>) {
+        py.detach(|| self.running.stop());
+    }
+}
+
 /// The module: the functions above, `ResidencyError` and `__version__`.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -159,5 +209,6 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
     m.add_function(wrap_pyfunction!(regions, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;
+    m.add_class::<Server>()?;
     Ok(())
 }

@@ -306,3 +306,66 @@ except residency.ResidencyError as e:
     print(e)
 """)
     assert "channel 5" in p.stdout and cli.stderr == f"error: {p.stdout}", (p.stdout, cli.stderr)
+
+
+SERVER_SCRIPT = """
+import os, socket, sys, time
+import residency
+
+def threads():
+    return len(os.listdir("/proc/self/task"))
+
+before = threads()
+with residency.Server(sys.argv[1]) as server:
+    print(server.url, flush=True)
+    sys.stdin.readline()  # the test reads from it meanwhile
+host, port = server.url.removeprefix("http://").rsplit(":", 1)
+try:
+    socket.create_connection((host, int(port)), timeout=2).close()
+    print("still listening")
+except ConnectionRefusedError:
+    print("closed")
+deadline = time.monotonic() + 10
+while threads() != before and time.monotonic() < deadline:
+    time.sleep(0.05)
+print("threads", before, threads())
+try:
+    residency.Server(sys.argv[1] + ".missing")
+except residency.ResidencyError as e:
+    print("error", e)
+"""
+
+
+def test_server_from_python_serves_until_closed_and_leaves_nothing_behind(installed, tmp_path):
+    """`residency.Server` serves a store in the Python process: zarr-python reads it over HTTP
+    as from the folder and the page's files come from the wheel's share folder; once the `with`
+    block ends, the port refuses connections and the server's threads are gone; a store that
+    cannot be served is `brickserver serve`'s error."""
+    run(installed, "ingest", "sample", "-o", tmp_path / "sample", "--size", "16,48,48")
+    store = tmp_path / "cells.ome.zarr"
+    run(installed, "ingest", "convert", tmp_path / "sample" / "nuclei.ome.tif", "-o", store, "--chunk", "16", "--quiet")
+    proc = subprocess.Popen([installed.bin / "python", "-c", SERVER_SCRIPT, store], env=installed.env,
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        url = proc.stdout.readline().strip()
+        assert url.startswith("http://127.0.0.1:"), (url, proc.stderr.read() if proc.poll() is not None else "")
+        remote = zarr.open_group(f"{url}/cells/", mode="r")
+        local = zarr.open_group(str(store), mode="r")
+        for level in ("0", "1"):
+            np.testing.assert_array_equal(remote[level][...], local[level][...])
+        web = installed.root / "share" / "residency" / "web"
+        page = requests.get(f"{url}/cells/view", timeout=10)
+        assert page.status_code == 200
+        assert page.text == (web / "index.html").read_text().replace("%VIEWER_BASE%", "../viewer/")
+        out, err = proc.communicate("done\n", timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, err
+    lines = out.splitlines()
+    assert lines[0] == "closed", out
+    _, before, after = lines[1].split()
+    assert before == after, out
+    cli = run(installed, "brickserver", "serve", f"{store}.missing", "--bind", "127.0.0.1:0", check=False)
+    assert cli.returncode != 0
+    assert lines[2] == f"error {cli.stderr.removeprefix('error: ').strip()}", (lines[2], cli.stderr)
