@@ -4,6 +4,8 @@ The wheel installs the three programs on the PATH (``ingest``, ``brickserver``, 
 and the web viewer where ``brickserver`` finds it. This package calls the Rust libraries
 directly (no subprocess):
 
+- :func:`convert` -- ``ingest convert``: inputs to an OME-Zarr store with region metadata,
+  with a progress callback;
 - :func:`inspect` -- the report ``ingest inspect`` prints for a store;
 - :func:`regions` -- one channel's region metadata at one level as NumPy arrays: the min/max
   grid (with its halo, and exact) and the per-brick histograms with their bin edges;
@@ -18,9 +20,9 @@ import os
 import sys
 
 from . import _native
-from ._native import ResidencyError, __version__, inspect, regions, render
+from ._native import ResidencyError, __version__, convert, inspect, regions, render
 
-__all__ = ["ResidencyError", "Server", "__version__", "inspect", "regions", "render"]
+__all__ = ["ResidencyError", "Server", "__version__", "convert", "inspect", "regions", "render"]
 
 
 def _shipped_viewer():

@@ -4,6 +4,7 @@ import os
 
 from ._native import ResidencyError as ResidencyError
 from ._native import __version__ as __version__
+from ._native import convert as convert
 from ._native import inspect as inspect
 from ._native import regions as regions
 from ._native import render as render

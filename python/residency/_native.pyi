@@ -1,5 +1,7 @@
 """Type stubs of the extension module ``residency._native`` (python/src/lib.rs)."""
 
+import os
+from collections.abc import Callable, Sequence
 from typing import Any, TypedDict
 
 import numpy as np
@@ -9,6 +11,48 @@ __version__: str
 
 class ResidencyError(Exception):
     """A failure of a Residency call, with the message the command line prints for it."""
+
+class ConvertSummary(TypedDict):
+    """What :func:`convert` wrote."""
+
+    output: str
+    """The store written."""
+    input_bytes: int
+    """Bytes of input read."""
+    stored_bytes: int
+    """Bytes of the store."""
+    seconds: float
+    """Wall time of the conversion."""
+    report: str
+    """The text ``ingest convert`` prints."""
+
+def convert(
+    inputs: Sequence[str],
+    output: str | os.PathLike[str],
+    *,
+    chunk: int | tuple[int, int, int] | None = None,
+    shard: int | tuple[int, int, int] | None = None,
+    voxel_size: tuple[float, float, float] | None = None,
+    unit: str | None = None,
+    ome_zarr_version: str = "0.5",
+    levels: int | None = None,
+    channel_names: Sequence[str] | None = None,
+    overwrite: bool = False,
+    memory_limit: int | None = None,
+    dims: tuple[int, int, int] | None = None,
+    dtype: str | None = None,
+    endian: str = "little",
+    header_bytes: int = 0,
+    progress: Callable[[int, int], object] | None = None,
+) -> ConvertSummary:
+    """``ingest convert INPUTS -o OUTPUT`` in this process: the inputs (TIFF, OME-TIFF, ImageJ
+    files, folders or globs of slices, raw files; each one or more channels, in order) into the
+    OME-Zarr store ``output`` (a folder) with region metadata. The options are ``ingest
+    convert``'s flags (``chunk`` is ``--chunk``: an edge or ``(z, y, x)``; ``dims`` is raw
+    input's ``(x, y, z)``). ``progress(done, total)`` is called as the input is read (bytes).
+
+    Raises :class:`ResidencyError` with ``ingest convert``'s message; an exception ``progress``
+    raised is raised once the conversion has finished."""
 
 def inspect(store: str, *, s3_endpoint: str | None = None) -> str:
     """The report ``ingest inspect STORE`` prints: the store's version, multiscales, levels,

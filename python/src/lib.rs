@@ -2,6 +2,7 @@
 //! `residency` package (`python/residency/__init__.py`). Errors are `residency.ResidencyError`
 //! with the message the command line prints for the same failure.
 
+mod conversion;
 mod region_arrays;
 mod rendering;
 mod server;
@@ -152,6 +153,114 @@ fn render<'py>(
     Ok(image.into_any())
 }
 
+/// An edge given as one number (a cube) or `(z, y, x)`, as `--chunk 64` or `--chunk 16,64,64`.
+fn edge(value: &Bound<'_, PyAny>) -> PyResult<[u64; 3]> {
+    if let Ok(n) = value.extract::<u64>() {
+        return Ok([n; 3]);
+    }
+    value.extract::<[u64; 3]>()
+}
+
+/// `ingest convert INPUTS -o OUTPUT` in this process: the inputs (TIFF, OME-TIFF, ImageJ
+/// files, folders or globs of slices, raw files; each becomes one or more channels, in order)
+/// converted into the OME-Zarr store `output` (a folder) with region metadata. The options
+/// are `ingest convert`'s flags: `chunk` and `shard` (an edge or `(z, y, x)`), `voxel_size`
+/// (`(z, y, x)`), `unit`, `ome_zarr_version` (`"0.5"` or `"0.4"`), `levels`,
+/// `channel_names`, `overwrite`, `memory_limit` (bytes), and for raw inputs `dims` (`(x, y,
+/// z)`), `dtype`, `endian`, `header_bytes`. `progress(done, total)` is called as the input is
+/// read (bytes). Returns a dict: `output`, `input_bytes`, `stored_bytes`, `seconds` and
+/// `report` (the text `ingest convert` prints).
+///
+/// # Errors
+/// `ResidencyError` with `ingest convert`'s message; an exception `progress` raised, once the
+/// conversion has finished.
+#[pyfunction]
+#[pyo3(signature = (
+    inputs, output, *, chunk = None, shard = None, voxel_size = None, unit = None,
+    ome_zarr_version = "0.5", levels = None, channel_names = None, overwrite = false,
+    memory_limit = None, dims = None, dtype = None, endian = "little", header_bytes = 0,
+    progress = None
+))]
+#[allow(clippy::too_many_arguments)]
+fn convert<'py>(
+    py: Python<'py>,
+    inputs: Vec<String>,
+    output: std::path::PathBuf,
+    chunk: Option<Bound<'py, PyAny>>,
+    shard: Option<Bound<'py, PyAny>>,
+    voxel_size: Option<[f64; 3]>,
+    unit: Option<String>,
+    ome_zarr_version: &str,
+    levels: Option<usize>,
+    channel_names: Option<Vec<String>>,
+    overwrite: bool,
+    memory_limit: Option<u64>,
+    dims: Option<[u64; 3]>,
+    dtype: Option<String>,
+    endian: &str,
+    header_bytes: u64,
+    progress: Option<Py<PyAny>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use residency_ingest::store::OmeZarrVersion;
+    let bad = |message: String| ResidencyError::new_err(message);
+    if levels == Some(0) {
+        return Err(bad("levels must be at least 1".into()));
+    }
+    let mut options = residency_ingest::ConvertOptions::new(inputs, output);
+    options.raw = residency_ingest::source::RawOptions {
+        dims,
+        format: dtype
+            .as_deref()
+            .map(str::parse::<residency_schemas::SampleType>)
+            .transpose()
+            .map_err(|e| residency_error(&e))?,
+        big_endian: match endian {
+            "little" => false,
+            "big" => true,
+            other => return Err(bad(format!("endian {other:?}: little or big"))),
+        },
+        header_bytes,
+    };
+    options.voxel_size = voxel_size;
+    options.unit = unit;
+    if let Some(chunk) = &chunk {
+        options.brick = edge(chunk)?;
+    }
+    options.shard = shard.as_ref().map(edge).transpose()?;
+    options.version = match ome_zarr_version {
+        "0.5" => OmeZarrVersion::V05,
+        "0.4" => OmeZarrVersion::V04,
+        other => {
+            return Err(bad(format!(
+                "ome_zarr_version {other:?}: \"0.5\" or \"0.4\""
+            )));
+        }
+    };
+    options.levels = levels;
+    options.overwrite = overwrite;
+    options.channel_names = channel_names.unwrap_or_default();
+    options.memory_limit = memory_limit;
+    let failed = std::sync::Arc::new(std::sync::Mutex::new(None));
+    options.on_progress = progress.map(|p| conversion::python_progress(p, failed.clone()));
+    let summary = py
+        .detach(|| residency_ingest::convert(&options))
+        .map_err(|e| residency_error(&e))?;
+    if let Some(e) = failed
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .take()
+    {
+        return Err(e);
+    }
+    let out = PyDict::new(py);
+    out.set_item("output", summary.output.to_string_lossy().into_owned())?;
+    out.set_item("input_bytes", summary.input_bytes)?;
+    out.set_item("stored_bytes", summary.stored_bytes)?;
+    out.set_item("seconds", summary.seconds)?;
+    out.set_item("report", summary.report())?;
+    Ok(out)
+}
+
 /// `brickserver serve STORES` in this process until closed (`residency.Server` wraps it):
 /// `url` is where it listens, as `brickserver` prints it.
 #[pyclass(module = "residency._native")]
@@ -206,6 +315,7 @@ impl Server {
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("ResidencyError", m.py().get_type::<ResidencyError>())?;
+    m.add_function(wrap_pyfunction!(convert, m)?)?;
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
     m.add_function(wrap_pyfunction!(regions, m)?)?;
     m.add_function(wrap_pyfunction!(render, m)?)?;

@@ -369,3 +369,45 @@ def test_server_from_python_serves_until_closed_and_leaves_nothing_behind(instal
     cli = run(installed, "brickserver", "serve", f"{store}.missing", "--bind", "127.0.0.1:0", check=False)
     assert cli.returncode != 0
     assert lines[2] == f"error {cli.stderr.removeprefix('error: ').strip()}", (lines[2], cli.stderr)
+
+
+CONVERT_SCRIPT = """
+import json, sys
+import residency
+calls = []
+summary = residency.convert(sys.argv[2:], sys.argv[1], chunk=(8, 16, 16), channel_names=["a", "b"],
+                            progress=lambda done, total: calls.append((done, total)))
+print(json.dumps({"summary": summary, "calls": calls}))
+"""
+
+
+def test_convert_from_python_writes_what_ingest_convert_writes(installed, tmp_path):
+    """`residency.convert` with `ingest convert`'s options writes the same store, byte for byte,
+    tells its progress callback the input read up to the whole, and fails with the command
+    line's message."""
+    run(installed, "ingest", "sample", "-o", tmp_path / "sample", "--size", "16,48,48")
+    tiffs = [tmp_path / "sample" / f"{n}.ome.tif" for n in ("nuclei", "filaments")]
+    api, cli = tmp_path / "api" / "c.ome.zarr", tmp_path / "cli" / "c.ome.zarr"
+    cli.parent.mkdir()
+    p = run(installed, "python", "-c", CONVERT_SCRIPT, api, *tiffs)
+    run(installed, "ingest", "convert", *tiffs, "-o", cli, "--chunk", "8,16,16", "--channel-names", "a,b", "--quiet")
+    assert files(api) == files(cli)
+    out = json.loads(p.stdout)
+    summary, calls = out["summary"], out["calls"]
+    assert summary["output"] == str(api) and summary["report"].startswith(f"wrote {api} (uint16)\n"), summary
+    assert summary["input_bytes"] == 2 * 16 * 48 * 48 * 2
+    assert calls and all(total == summary["input_bytes"] for _, total in calls), calls
+    assert [done for done, _ in calls] == sorted(done for done, _ in calls) and calls[-1][0] == calls[-1][1], calls
+    # A failure: the exception's message is the command line's, after its `error: `.
+    missing = tmp_path / "missing.tif"
+    cli_err = run(installed, "ingest", "convert", missing, "-o", tmp_path / "x.ome.zarr", "--quiet", check=False)
+    assert cli_err.returncode != 0
+    p = run(installed, "python", "-c", f"""
+import residency
+try:
+    residency.convert([{str(missing)!r}], {str(tmp_path / 'x.ome.zarr')!r})
+except residency.ResidencyError as e:
+    print(e)
+""")
+    assert p.stdout == cli_err.stderr.removeprefix("error: "), (p.stdout, cli_err.stderr)
+    assert not (tmp_path / "x.ome.zarr").exists()

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use crate::progress::ProgressCallback;
 use crate::source::RawOptions;
 use crate::store::OmeZarrVersion;
 
@@ -34,6 +35,9 @@ pub struct ConvertOptions {
     pub channel_names: Vec<String>,
     /// Peak memory to stay within, in bytes (default: [`default_memory_limit`]).
     pub memory_limit: Option<u64>,
+    /// Told the input bytes read so far and the pass's total as the conversion goes on (a
+    /// conversion within a memory limit may read in several passes), beside the bar.
+    pub on_progress: Option<ProgressCallback>,
 }
 
 /// The memory a conversion keeps within unless told otherwise: half of this machine's
@@ -59,6 +63,7 @@ impl ConvertOptions {
             progress: false,
             channel_names: Vec::new(),
             memory_limit: None,
+            on_progress: None,
         }
     }
 }

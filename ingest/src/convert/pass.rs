@@ -249,7 +249,7 @@ fn read_level0<T: Sample>(
     levels: &mut [Level<T>],
     handed_over: &mut HandedOver<T>,
     stats: &[Mutex<ChannelAccumulator>],
-    bar: &indicatif::ProgressBar,
+    bar: &crate::progress::Progress,
     spare: &mut Vec<Vec<T>>,
 ) -> Result<(), ConvertError> {
     let channels = plan.labels.len();
@@ -345,7 +345,12 @@ pub(crate) fn run_pass<T: Sample>(
     let [_, ny, nx] = plan.shape;
     let input_bytes =
         (planes.end - planes.start) * ny * nx * channels as u64 * T::FORMAT.bytes() as u64;
-    let bar = crate::progress::bytes_bar(input_bytes, "", options.progress);
+    let bar = crate::progress::Progress::new(
+        input_bytes,
+        "",
+        options.progress,
+        options.on_progress.clone(),
+    );
     let local = columns.local_levels;
     let split = !columns.is_whole([ny, nx]);
     // Every local level is complete at the end of a group: one slab of the first level made
