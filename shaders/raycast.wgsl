@@ -89,7 +89,7 @@ fn iso_take(
 fn node_data_channels(node: u32) -> u32 {
     var data = 0u;
     for (var c = 0u; c < P.channel_count; c++) {
-        if bitcast<f32>(node_word(node, c, 1u)) <= bitcast<f32>(node_word(node, c, 2u)) {
+        if node_iso_side(node, c) != ISO_NOTHING {
             data |= 1u << c;
         }
     }

@@ -20,7 +20,6 @@ impl std::fmt::Debug for ProgressCallback {
 pub struct Progress {
     bar: ProgressBar,
     callback: Option<ProgressCallback>,
-    total: u64,
 }
 
 impl Progress {
@@ -29,7 +28,6 @@ impl Progress {
         Self {
             bar: bytes_bar(total, label, visible),
             callback,
-            total,
         }
     }
 
@@ -37,7 +35,7 @@ impl Progress {
     pub fn inc(&self, bytes: u64) {
         self.bar.inc(bytes);
         if let Some(c) = &self.callback {
-            (c.0)(self.bar.position(), self.total);
+            (c.0)(self.bar.position(), self.bar.length().unwrap_or(0));
         }
     }
 
@@ -49,11 +47,13 @@ impl Progress {
 
 /// A bar over `total` bytes, labelled `label` (`""` for none), drawn on stderr when `visible`.
 pub fn bytes_bar(total: u64, label: &str, visible: bool) -> ProgressBar {
-    let bar = if visible {
-        ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr())
+    // A hidden bar still counts, over its length (what `Progress` tells its callback).
+    let target = if visible {
+        ProgressDrawTarget::stderr()
     } else {
-        ProgressBar::hidden()
+        ProgressDrawTarget::hidden()
     };
+    let bar = ProgressBar::with_draw_target(Some(total), target);
     bar.set_style(
         ProgressStyle::with_template(
             "{prefix}{spinner} [{elapsed_precise}] [{wide_bar}] {bytes}/{total_bytes} {binary_bytes_per_sec} ETA {eta}",

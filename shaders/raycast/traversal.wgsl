@@ -151,16 +151,21 @@ fn visit_octree(
 fn iso_sides_agree(node: u32, iso: IsoState) -> bool {
     var agree = true;
     for (var c = 0u; c < P.channel_count; c++) {
-        let lo = bitcast<f32>(node_word(node, c, 1u));
-        let hi = bitcast<f32>(node_word(node, c, 2u));
-        let bit = 1u << c;
-        let above = lo > S.channels[c].iso;
-        let known_above = (iso.above & bit) != 0u;
-        if lo <= hi && above != (((iso.known & bit) != 0u) && known_above) {
-            agree = false;
-        }
+        agree = agree && iso_side_agrees(node_iso_side(node, c), c, iso);
     }
     return agree;
+}
+
+// MODE_ISO: where channel c's range in node `node` lies against its iso value, for skipping
+// a node every channel's class already says holds no surface: ISO_NOTHING (no data),
+// ISO_ABOVE, else ISO_BELOW.
+fn node_iso_side(node: u32, c: u32) -> u32 {
+    let lo = bitcast<f32>(node_word(node, c, 1u));
+    let hi = bitcast<f32>(node_word(node, c, 2u));
+    if !(lo <= hi) {
+        return ISO_NOTHING;
+    }
+    return select(ISO_BELOW, ISO_ABOVE, lo > S.channels[c].iso);
 }
 
 // The page-table baseline (MRMCPT): per channel, whether the brick of its chosen level at the

@@ -534,6 +534,14 @@ pub fn wgsl_prelude() -> String {
     .concat()
 }
 
+/// `style`'s iso value as the shader's channel table holds it ([`ChannelEntry::iso`]): `f32`,
+/// clamped to `±f32::MAX`; `f32::MAX` for none (a value no sample reaches).
+pub fn gpu_iso_value(style: &ChannelStyle) -> f32 {
+    style
+        .iso_value()
+        .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX))
+}
+
 /// Where a brick's value range lies against its channel's iso value: the page-table and
 /// octree-of-bricks baselines' class word of a brick in [`RenderMode::Iso`] (`ISO_*` in the
 /// shaders). A ray skips a brick below the value while it is not known above it, and one above
@@ -561,9 +569,7 @@ impl IsoSide {
         if lo.partial_cmp(&hi).is_none_or(std::cmp::Ordering::is_gt) {
             return Self::Nothing;
         }
-        let iso = style
-            .iso_value()
-            .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX));
+        let iso = gpu_iso_value(style);
         if hi < iso {
             Self::Below
         } else if lo > iso {

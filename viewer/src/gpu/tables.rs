@@ -12,7 +12,9 @@
 //! channel's range against a prefix table of the transfer function's bins.
 
 use super::buffers::{check_binding, storage_buffer, uniform_buffer};
-use super::contract::{ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms};
+use super::contract::{
+    ChannelEntry, LevelEntry, MAX_CHANNELS, MAX_LEVELS, SceneUniforms, gpu_iso_value,
+};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::options::RenderOptions;
@@ -89,9 +91,7 @@ pub fn build(
             points_offset,
             opacity_top: s.opacity_top() as f32,
             saturation: (s.saturation_value() as f32).clamp(-f32::MAX, f32::MAX),
-            iso: s
-                .iso_value()
-                .map_or(f32::MAX, |v| (v as f32).clamp(-f32::MAX, f32::MAX)),
+            iso: gpu_iso_value(s),
             ..ChannelEntry::default()
         };
     }

@@ -15,6 +15,7 @@ use super::overlay::{Canvas, SrgbTable, orientation_rgba, panel_rgba};
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
 use crate::gpu::present::{PresentError, Presenter, surface_format};
+use crate::scene::Camera;
 use crate::scene::orientation::Orientation;
 
 /// Which way frames reach the window.
@@ -74,6 +75,29 @@ pub struct Overlays {
     pub panel: Option<Panel>,
     /// The orientation strip, along the bottom edge.
     pub footer: Option<Footer>,
+}
+
+impl Overlays {
+    /// The overlays of a window `height` pixels high at glyph `scale`: the statistics `lines`
+    /// and the orientation of a view from `camera` of a store in `unit`, both hidden where
+    /// `lines` is `None` (the window's `h`).
+    pub fn shown(
+        lines: Option<Vec<(String, u32)>>,
+        scale: usize,
+        camera: &Camera,
+        unit: Option<&str>,
+        height: u32,
+    ) -> Self {
+        let footer = lines
+            .is_some()
+            .then(|| Orientation::of(camera, f64::from(height), unit))
+            .flatten()
+            .map(|o| (o, scale));
+        Self {
+            panel: lines.map(|lines| (lines, scale)),
+            footer,
+        }
+    }
 }
 
 /// What one frame shows: the image on the GPU (GPU path) or its pixels (CPU path).

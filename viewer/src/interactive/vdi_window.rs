@@ -23,7 +23,6 @@ use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
 use crate::gpu::vdi_render::VdiRenderer;
 use crate::scene::Camera;
-use crate::scene::orientation::Orientation;
 
 /// How long after the last input the view counts as at rest (and renders at full resolution).
 pub const REST: Duration = Duration::from_millis(150);
@@ -208,15 +207,13 @@ impl App {
             Some(renderer) => renderer.resize(&self.gpu, size.0, size.1)?,
             None => self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?),
         }
-        let glyphs = panel_scale(win);
-        let overlays = Overlays {
-            panel: self.overlay.then(|| (self.panel_lines(), glyphs)),
-            footer: self
-                .overlay
-                .then(|| Orientation::of(&self.camera, f64::from(win.height), None))
-                .flatten()
-                .map(|o| (o, glyphs)),
-        };
+        let overlays = Overlays::shown(
+            self.overlay.then(|| self.panel_lines()),
+            panel_scale(win),
+            &self.camera,
+            None,
+            win.height,
+        );
         let (Some(window), Some(display), Some(renderer)) =
             (&self.window, &mut self.display, &self.renderer)
         else {

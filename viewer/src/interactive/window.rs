@@ -23,7 +23,6 @@ use super::session::{Session, Step};
 use crate::defaults::volume_extent;
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
-use crate::scene::orientation::Orientation;
 use crate::scene::{Camera, Scene};
 
 /// Why the window stopped with an error: no X11 display, a window or frame buffer that cannot
@@ -361,19 +360,13 @@ impl App {
             return Ok(());
         };
         let size = window.inner_size();
-        let scale = panel_scale(size);
-        let footer = self
-            .overlay
-            .then(|| {
-                let unit = self.session.info().unit.as_deref();
-                Orientation::of(&self.session.scene().camera, f64::from(size.height), unit)
-            })
-            .flatten()
-            .map(|o| (o, scale));
-        let overlays = Overlays {
-            panel: lines.map(|lines| (lines, scale)),
-            footer,
-        };
+        let overlays = Overlays::shown(
+            lines,
+            panel_scale(size),
+            &self.session.scene().camera,
+            self.session.info().unit.as_deref(),
+            size.height,
+        );
         let frame = if display.on_gpu() {
             match self.session.gpu_image() {
                 Some((buffer, size)) => Frame::Gpu(buffer, size),
