@@ -9,7 +9,8 @@
 #
 # The programs are stripped of debug information (the release profile keeps line tables for
 # backtraces; a user's install need not carry them). The platform tag is the manylinux one of
-# the newest glibc symbol version any of the four binaries needs, so pip refuses the wheel on
+# the newest glibc symbol version any of the three programs needs (maturin checks
+# the extension module against it), so pip refuses the wheel on
 # an older system instead of failing at run time. Idempotent: everything is rebuilt from the
 # current tree, and the wheel replaces an earlier one of the same name.
 set -euo pipefail
@@ -17,7 +18,6 @@ cd "$(dirname "$0")/.."
 
 cargo build --release --workspace --bins
 bash scripts/build-web.sh >/dev/null
-cargo build --release -p residency-python
 
 stage=python/wheel-data
 rm -rf "$stage"
@@ -27,8 +27,11 @@ for program in ingest brickserver viewer; do
 done
 cp -r target/release/web "$stage/data/share/residency/web"
 
-# The newest GLIBC_x.y any binary needs (the extension module included).
-glibc=$(for f in "$stage"/scripts/* target/release/lib_native.so; do objdump -T "$f"; done \
+# The newest GLIBC_x.y any program needs. maturin checks the extension module against the same
+# tag (its auditwheel check fails the build if the module needs a newer symbol). The module is
+# built by maturin alone: a separate `cargo build` of it would set pyo3's build environment
+# differently, and each would rebuild pyo3 after the other.
+glibc=$(for f in "$stage"/scripts/*; do objdump -T "$f"; done \
   | grep -o 'GLIBC_[0-9]*\.[0-9]*' | sort -t. -k2 -n -u | tail -1 | sed 's/GLIBC_//')
 tag="manylinux_${glibc/./_}"
 echo "== the programs need glibc $glibc or newer: platform tag $tag"
