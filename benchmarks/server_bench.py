@@ -49,7 +49,7 @@ import numpy as np
 from docs_page import point_page_at, write_result
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-BIN = ROOT / "target" / "release"
+BIN = pathlib.Path(os.environ.get("RESIDENCY_BIN", ROOT / "target" / "release"))
 GRID = (20, 25, 40)  # 20,000 chunks, z, y, x
 OHA = shutil.which("oha") or str(pathlib.Path.home() / ".cargo" / "bin" / "oha")
 WRK_SCRIPT = pathlib.Path(__file__).resolve().parent / "wrk_random_keys.lua"

@@ -39,6 +39,6 @@ pub mod viewer_page;
 
 pub use datasets::{Dataset, Datasets};
 pub use http1::App;
-pub use listener::{ConnectionLimits, serve};
+pub use listener::{ConnectionLimits, serve, serve_on_threads, shared_port_listeners};
 pub use listing::PublicUrl;
 pub use routes::{AppState, ServerOptions, openapi_document, router};

@@ -1,15 +1,18 @@
 //! Accepting connections: each served by the crate's `http1` module (HTTP/1.1 with a
 //! header-read timeout, so a slow or idle client cannot hold a connection forever), a
 //! connection limit (connections past it get a `503` and are closed), and graceful shutdown
-//! (in-flight requests finish).
+//! (in-flight requests finish); on the caller's runtime, or on one single-threaded runtime per
+//! core, each with a listener of its own on the shared port.
 
 use std::future::Future;
+use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
+use socket2::{Domain, Protocol, Socket, Type};
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
-use tokio::sync::{Semaphore, watch};
+use tokio::sync::{Semaphore, oneshot, watch};
 
 use crate::http1::{App, connection};
 use crate::metrics::Metrics;
@@ -36,7 +39,8 @@ const TOO_MANY: &[u8] = b"HTTP/1.1 503 Service Unavailable\r\nRetry-After: 1\r\n
 
 /// Serves `app` on `listener` until `shutdown` resolves, then lets open requests finish
 /// (for at most 10 s). Failures of single connections (an `accept` that fails, a client that
-/// breaks off) are logged, and serving goes on.
+/// breaks off) are logged, and serving goes on. Everything runs on the caller's runtime; see
+/// [`serve_on_threads`] for one single-threaded runtime per core.
 pub async fn serve(
     listener: TcpListener,
     app: App,
@@ -46,19 +50,116 @@ pub async fn serve(
 ) {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
     let (stopping, stop) = watch::channel(false);
-    tokio::pin!(shutdown);
+    tokio::select! {
+        () = accept(listener, &app, limits, &metrics, &permits, &stop) => {},
+        () = shutdown => {},
+    }
+    // Connections close once their request in progress is answered; idle ones at once.
+    let _ = stopping.send(true);
+    drain(&permits, limits).await;
+}
+
+/// Serves `app` on every listener of `listeners` (sockets bound to one address, such as
+/// [`shared_port_listeners`] makes), each on a thread of its own that runs a single-threaded
+/// runtime with `blocking_threads` threads for blocking reads, until `shutdown` resolves; then
+/// lets open requests finish (for at most 10 s) and returns once every thread has ended. A
+/// connection is served from start to end on the thread that accepted it, as in nginx's worker
+/// processes: no task moves between cores, and no wake-up crosses threads. The connection limit
+/// is one for all threads.
+///
+/// # Errors
+/// A thread, its runtime or its listener's registration that cannot be made (at start).
+pub async fn serve_on_threads(
+    listeners: Vec<std::net::TcpListener>,
+    app: App,
+    limits: ConnectionLimits,
+    metrics: Arc<Metrics>,
+    blocking_threads: usize,
+    shutdown: impl Future<Output = ()>,
+) -> std::io::Result<()> {
+    let permits = Arc::new(Semaphore::new(limits.max_connections));
+    let (stopping, stop) = watch::channel(false);
+    let mut ended = Vec::with_capacity(listeners.len());
+    for (i, listener) in listeners.into_iter().enumerate() {
+        listener.set_nonblocking(true)?;
+        let runtime = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .max_blocking_threads(blocking_threads.max(1))
+            .build()?;
+        let (app, metrics, permits, stop) =
+            (app.clone(), metrics.clone(), permits.clone(), stop.clone());
+        let (end, ended_rx) = oneshot::channel::<()>();
+        std::thread::Builder::new()
+            .name(format!("brickserver-{i}"))
+            .spawn(move || {
+                runtime.block_on(async move {
+                    let listener = match TcpListener::from_std(listener) {
+                        Ok(listener) => listener,
+                        Err(e) => return tracing::error!("listener {i}: {e}"),
+                    };
+                    let mut stopped = stop.clone();
+                    tokio::select! {
+                        () = accept(listener, &app, limits, &metrics, &permits, &stop) => {},
+                        _ = stopped.wait_for(|stopped| *stopped) => {},
+                    }
+                    drain(&permits, limits).await;
+                });
+                let _ = end.send(());
+            })?;
+        ended.push(ended_rx);
+    }
+    shutdown.await;
+    let _ = stopping.send(true);
+    for end in ended {
+        let _ = end.await;
+    }
+    Ok(())
+}
+
+/// `count` listening sockets on `addr`, all on the same port (`SO_REUSEPORT`: the kernel spreads
+/// new connections over them), for [`serve_on_threads`]. Port 0 picks one free port for all.
+///
+/// # Errors
+/// The address cannot be bound (in use, not this machine's, not permitted).
+pub fn shared_port_listeners(
+    addr: SocketAddr,
+    count: usize,
+) -> std::io::Result<Vec<std::net::TcpListener>> {
+    let mut listeners: Vec<std::net::TcpListener> = Vec::with_capacity(count.max(1));
+    for _ in 0..count.max(1) {
+        // The first socket resolves port 0; the others join it on the port it got.
+        let at = listeners
+            .first()
+            .map_or(Ok(addr), std::net::TcpListener::local_addr)?;
+        let socket = Socket::new(Domain::for_address(at), Type::STREAM, Some(Protocol::TCP))?;
+        socket.set_reuse_address(true)?;
+        socket.set_reuse_port(true)?;
+        socket.bind(&at.into())?;
+        socket.listen(1024)?;
+        listeners.push(socket.into());
+    }
+    Ok(listeners)
+}
+
+/// Accepts connections on `listener` and serves each on a task of its own, until the runtime
+/// stops polling it (never returns by itself).
+async fn accept(
+    listener: TcpListener,
+    app: &App,
+    limits: ConnectionLimits,
+    metrics: &Arc<Metrics>,
+    permits: &Arc<Semaphore>,
+    stop: &watch::Receiver<bool>,
+) {
     loop {
-        let (mut stream, peer) = tokio::select! {
-            accepted = listener.accept() => match accepted {
-                Ok(conn) => conn,
-                Err(e) => {
-                    // Out of file descriptors and the like: wait a little, keep serving.
-                    tracing::warn!("accept failed: {e}");
-                    tokio::time::sleep(Duration::from_millis(20)).await;
-                    continue;
-                }
-            },
-            () = &mut shutdown => break,
+        let (mut stream, peer) = match listener.accept().await {
+            Ok(conn) => conn,
+            Err(e) => {
+                // Out of file descriptors and the like: wait a little, keep serving.
+                tracing::warn!("accept failed: {e}");
+                tokio::time::sleep(Duration::from_millis(20)).await;
+                continue;
+            }
         };
         let Ok(permit) = permits.clone().try_acquire_owned() else {
             metrics.connections_refused.inc();
@@ -81,9 +182,10 @@ pub async fn serve(
             drop(permit);
         });
     }
-    drop(listener);
-    // Connections close once their request in progress is answered; idle ones at once.
-    let _ = stopping.send(true);
+}
+
+/// Waits until every connection has closed (each holds a permit), or 10 s.
+async fn drain(permits: &Semaphore, limits: ConnectionLimits) {
     let all = u32::try_from(limits.max_connections).unwrap_or(u32::MAX);
     tokio::select! {
         _ = permits.acquire_many(all) => {},

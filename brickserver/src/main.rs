@@ -11,7 +11,8 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use residency_brickserver::bricks::BatchLimits;
 use residency_brickserver::{
-    App, AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, serve,
+    App, AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, serve_on_threads,
+    shared_port_listeners,
 };
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 
@@ -84,6 +85,11 @@ enum Command {
         /// is answered from the failure before a request tries again.
         #[arg(long, default_value_t = 5.0)]
         load_retry: f64,
+        /// Threads that serve connections, each with a listener of its own on the port and a
+        /// single-threaded runtime (a connection stays on the thread that accepted it)
+        /// [default: one per core].
+        #[arg(long, value_name = "N")]
+        threads: Option<usize>,
     },
 }
 
@@ -151,11 +157,11 @@ async fn run(
     bind: SocketAddr,
     options: ServerOptions,
     limits: ConnectionLimits,
+    threads: usize,
 ) -> Result<()> {
-    let listener = tokio::net::TcpListener::bind(bind)
-        .await
-        .with_context(|| format!("cannot listen on {bind}"))?;
-    let addr = listener.local_addr()?;
+    let listeners =
+        shared_port_listeners(bind, threads).with_context(|| format!("cannot listen on {bind}"))?;
+    let addr = listeners[0].local_addr()?;
     let shutdown = shutdown_signal()?;
     for d in &datasets.0 {
         println!("serving {} at http://{addr}/{}/", d.location, d.name);
@@ -175,11 +181,14 @@ async fn run(
     }
     let metrics = state.metrics.clone();
     let app = App::new(state, &options).await;
-    serve(listener, app, limits, metrics, shutdown).await;
-    Ok(())
+    // The blocking threads shared out among the serving threads' runtimes.
+    let blocking = BLOCKING_THREADS.div_ceil(threads);
+    serve_on_threads(listeners, app, limits, metrics, blocking, shutdown)
+        .await
+        .context("cannot start the serving threads")
 }
 
-/// Most threads of the runtime's blocking pool.
+/// Most threads of the runtimes' blocking pools, all together.
 const BLOCKING_THREADS: usize = 64;
 
 fn main() -> ExitCode {
@@ -204,6 +213,7 @@ fn main() -> ExitCode {
             max_batch_bricks,
             max_batch_bytes,
             load_retry,
+            threads,
         } => (|| {
             // Each object-store dataset's client is made here, once, and its requests run on
             // the server's runtime (see `DatasetStore`), so the options carry no runtime.
@@ -211,8 +221,8 @@ fn main() -> ExitCode {
                 endpoint: s3_endpoint,
                 runtime: None,
             };
-            // One runtime for everything the server does, object-store requests included.
-            // Blocking threads read files the page cache does not hold and run zarrs' reads:
+            // The runtime that starts the server and runs object-store requests; connections
+            // are served on threads of their own (`serve_on_threads`). Blocking threads read files the page cache does not hold and run zarrs' reads:
             // disk- and network-bound, so a few dozen keep a disk or a store busy, where
             // tokio's default of 512 would each hold a stack and an allocator heap.
             let runtime = tokio::runtime::Builder::new_multi_thread()
@@ -225,9 +235,14 @@ fn main() -> ExitCode {
             if !(request_timeout > 0.0 && request_timeout.is_finite()) {
                 anyhow::bail!("--request-timeout must be a positive number of seconds");
             }
-            if max_connections == 0 || max_batch_bricks == 0 {
-                anyhow::bail!("--max-connections and --max-batch-bricks must be at least 1");
+            if max_connections == 0 || max_batch_bricks == 0 || threads == Some(0) {
+                anyhow::bail!(
+                    "--max-connections, --max-batch-bricks and --threads must be at least 1"
+                );
             }
+            let threads = threads.unwrap_or_else(|| {
+                std::thread::available_parallelism().map_or(1, std::num::NonZeroUsize::get)
+            });
             let timeout = Duration::from_secs_f64(request_timeout);
             let options = ServerOptions {
                 token: token_file.as_deref().map(read_token).transpose()?,
@@ -246,7 +261,7 @@ fn main() -> ExitCode {
                 header_timeout: timeout,
             };
             raise_file_limit();
-            runtime.block_on(run(datasets, bind, options, limits))
+            runtime.block_on(run(datasets, bind, options, limits, threads))
         })(),
     };
     match result {

@@ -6,6 +6,7 @@ bounded cache, unreadable and corrupt chunks)."""
 
 import shutil
 import socket
+import subprocess
 import time
 
 import jsonschema
@@ -17,7 +18,7 @@ import zarr
 from openapi_spec_validator import validate as validate_openapi
 
 from support.binaries import run_ingest, start_server, stop_server
-from support.paths import schema
+from support.paths import BIN, schema
 from support.stores import root_attributes
 from support.wire import metric, unframe, widen
 
@@ -363,9 +364,11 @@ def test_slow_and_idle_clients_are_disconnected(stores):
         stop_server(proc)
 
 
-def test_connection_limit_refuses_with_503_then_recovers(stores):
+@pytest.mark.parametrize("threads", [[], ["--threads", "3"]], ids=["threads-per-core", "threads-3"])
+def test_connection_limit_refuses_with_503_then_recovers(stores, threads):
+    # The limit counts the connections of every serving thread (each has a listener of its own).
     _, paths = stores
-    proc, base = start_server(paths["u16"], "--max-connections", "2")
+    proc, base = start_server(paths["u16"], "--max-connections", "2", *threads)
     host, port = base.removeprefix("http://").split(":")
     try:
         held = [socket.create_connection((host, int(port))) for _ in range(2)]
@@ -384,6 +387,16 @@ def test_connection_limit_refuses_with_503_then_recovers(stores):
             assert metric(s.get(f"{base}/metrics").text, "brickserver_connections_refused_total") == 1
     finally:
         stop_server(proc)
+
+
+@pytest.mark.parametrize("flag", ["--threads", "--max-connections", "--max-batch-bricks"])
+def test_counts_below_one_are_refused_with_the_flags_named(stores, flag):
+    _, paths = stores
+    p = subprocess.run([str(BIN / "brickserver"), "serve", str(paths["u16"]), flag, "0", "--bind", "127.0.0.1:0"],
+                       capture_output=True, text=True, timeout=30)
+    assert p.returncode == 1
+    assert p.stderr.strip().splitlines()[-1] == (
+        "error: --max-connections, --max-batch-bricks and --threads must be at least 1")
 
 
 def test_cache_hits_are_counted_and_the_cache_stays_within_budget(stores):

@@ -1,7 +1,7 @@
 //! Connections as clients make them, over TCP to `serve` in process: chunk keys of a folder
 //! store answered directly (with `sendfile`) give the router's answer field for field and byte
 //! for byte; keep-alive, pipelining, HTTP/1.0, refused heads, the header timeout, metrics and
-//! graceful shutdown.
+//! graceful shutdown; and the binary's way of serving, one thread per listener on one port.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
@@ -9,7 +9,10 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use residency_brickserver::{App, AppState, ConnectionLimits, Datasets, ServerOptions, serve};
+use residency_brickserver::{
+    App, AppState, ConnectionLimits, Datasets, ServerOptions, serve, serve_on_threads,
+    shared_port_listeners,
+};
 use residency_store::location::ObjectStoreOptions;
 use tokio::sync::oneshot;
 
@@ -50,8 +53,19 @@ impl Drop for Served {
     }
 }
 
-/// Serves `stores` (NAME, path) on a loopback port with `limits`.
+/// Serves `stores` (NAME, path) on a loopback port with `limits`, on one runtime (`serve`).
 fn start(stores: &[(&str, &Path)], options: ServerOptions, limits: ConnectionLimits) -> Served {
+    start_with(stores, options, limits, None)
+}
+
+/// Serves `stores` as [`start`] does, or with `threads: Some(n)` as the binary does: `n`
+/// threads with a runtime and a listener each on one port (`serve_on_threads`).
+fn start_with(
+    stores: &[(&str, &Path)],
+    options: ServerOptions,
+    limits: ConnectionLimits,
+    threads: Option<usize>,
+) -> Served {
     let runtime = Arc::new(
         tokio::runtime::Builder::new_multi_thread()
             .worker_threads(2)
@@ -63,24 +77,36 @@ fn start(stores: &[(&str, &Path)], options: ServerOptions, limits: ConnectionLim
         .iter()
         .map(|(n, p)| format!("{n}={}", p.display()))
         .collect();
-    let (app, router, listener) = runtime.block_on(async {
+    let (app, router) = runtime.block_on(async {
         let datasets = Datasets::from_args(&[], &named, &ObjectStoreOptions::default())
             .await
             .unwrap();
         let state = Arc::new(AppState::new(datasets, &options).unwrap());
         let router = residency_brickserver::router(state.clone(), &options);
         let app = App::new(state, &options).await;
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        (app, router, listener)
+        (app, router)
     });
-    let addr = listener.local_addr().unwrap().to_string();
+    let loopback = "127.0.0.1:0".parse().unwrap();
+    let listeners = shared_port_listeners(loopback, threads.unwrap_or(1)).unwrap();
+    let addr = listeners[0].local_addr().unwrap().to_string();
     let (stop, stopped) = oneshot::channel::<()>();
     let rt = runtime.clone();
     let metrics = Arc::new(residency_brickserver::metrics::Metrics::default());
-    let thread = std::thread::spawn(move || {
-        rt.block_on(serve(listener, app, limits, metrics, async {
-            let _ = stopped.await;
-        }));
+    let stopped = async {
+        let _ = stopped.await;
+    };
+    let thread = std::thread::spawn(move || match threads {
+        Some(_) => rt
+            .block_on(serve_on_threads(
+                listeners, app, limits, metrics, 4, stopped,
+            ))
+            .unwrap(),
+        None => rt.block_on(async {
+            let [listener] = <[_; 1]>::try_from(listeners).unwrap();
+            listener.set_nonblocking(true).unwrap();
+            let listener = tokio::net::TcpListener::from_std(listener).unwrap();
+            serve(listener, app, limits, metrics, stopped).await;
+        }),
     });
     Served {
         addr,
@@ -247,10 +273,43 @@ fn chunks_sent_directly_are_the_routers_answers_field_for_field() {
         assert_eq!(direct.body, routed.body, "{method} {fields:?}");
         assert!(direct.field("date").is_some());
     }
-    // What each answered, exactly.
+    // What each answered, exactly: the fields of a 200, and of a 304 only what RFC 9110 asks it
+    // to repeat (no `Accept-Ranges`), with the CORS fields; no `Vary` (no answer depends on
+    // the request's origin).
+    let names =
+        |reply: &Reply| -> Vec<String> { reply.fields.iter().map(|(n, _)| n.clone()).collect() };
     let whole = exchange(&served, "GET", "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n");
     assert_eq!((whole.status, whole.body.as_slice()), (200, CHUNK));
     assert_eq!(whole.field("access-control-allow-origin"), Some("*"));
+    assert_eq!(
+        names(&whole),
+        [
+            "etag",
+            "cache-control",
+            "accept-ranges",
+            "content-type",
+            "content-length",
+            "date",
+            "access-control-expose-headers",
+            "access-control-allow-origin",
+        ]
+    );
+    let revalidated = exchange(
+        &served,
+        "GET",
+        &format!("GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nIf-None-Match: {etag}\r\n\r\n"),
+    );
+    assert_eq!(revalidated.status, 304);
+    assert_eq!(
+        names(&revalidated),
+        [
+            "etag",
+            "cache-control",
+            "date",
+            "access-control-expose-headers",
+            "access-control-allow-origin",
+        ]
+    );
     let part = exchange(
         &served,
         "GET",
@@ -465,4 +524,47 @@ fn answers_of_both_paths_are_counted_in_the_metrics() {
     // The chunk's bytes and the 404's message.
     let bytes = CHUNK.len() + "no key '0/c/9/9/9/9' in 'cells'\n".len();
     assert_eq!(count("brickserver_response_bytes_total"), bytes.to_string());
+}
+
+#[test]
+fn threads_on_one_port_serve_every_connection_share_the_limit_and_stop() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = v3_store(dir.path(), "cells");
+    let limits = ConnectionLimits {
+        max_connections: 24,
+        ..ConnectionLimits::default()
+    };
+    let mut served = start_with(
+        &[("cells", &store)],
+        ServerOptions::default(),
+        limits,
+        Some(3),
+    );
+    // 24 connections kept open at once, spread by the kernel over the three listeners: each is
+    // answered, twice (kept alive), with the chunk's bytes; one through the router.
+    let mut open: Vec<_> = (0..24).map(|_| connect(&served)).collect();
+    for (i, (stream, reader)) in open.iter_mut().enumerate() {
+        let path = if i == 0 {
+            "/cells/0/c/0/0/0/0?x=1"
+        } else {
+            "/cells/0/c/0/0/0/0"
+        };
+        for _ in 0..2 {
+            stream
+                .write_all(format!("GET {path} HTTP/1.1\r\n\r\n").as_bytes())
+                .unwrap();
+            let reply = read_reply(reader, "GET");
+            assert_eq!((reply.status, reply.body.as_slice()), (200, CHUNK), "{i}");
+        }
+    }
+    // The limit counts the connections of every thread: the 25th is refused.
+    let refused = exchange(&served, "GET", "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n");
+    assert_eq!(refused.status, 503);
+    assert_eq!(refused.body, b"too many connections, retry\r\n");
+    // Shutting down closes the idle connections of every thread and returns.
+    let took = served.stop();
+    assert!(took < Duration::from_secs(5), "{took:?}");
+    for (_, reader) in &mut open {
+        assert!(closed(reader));
+    }
 }
