@@ -22,7 +22,7 @@ use residency_schemas::wire::{
 };
 use residency_schemas::{MinMaxGrid, RegionMetadata};
 use residency_store::pyramid::{Pyramid, PyramidError, read_key};
-use zarrs::array::{Array, ArrayBytes, ArraySubset};
+use residency_store::region_array::{ArrayPart, RegionArrayError, read_region_array};
 use zarrs::storage::ReadableListableStorageTraits;
 
 use crate::dataset_store::DatasetStore;
@@ -186,7 +186,7 @@ pub(crate) enum RegionsError {
         path: String,
         /// What zarrs said.
         #[source]
-        source: Box<dyn std::error::Error + Send + Sync>,
+        source: Box<RegionArrayError>,
     },
     /// A region array holds another number of values than its description implies.
     #[error("{kind} array '{path}' holds {found} {unit}, expected {expected}")]
@@ -204,28 +204,19 @@ pub(crate) enum RegionsError {
     },
 }
 
-/// Reads a whole array as little-endian bytes and as `f64` values.
+/// Reads a whole region array as little-endian bytes and as `f64` values, naming it in the
+/// error.
 fn read_array(
     store: &Arc<dyn ReadableListableStorageTraits>,
     path: &str,
     data_type: SampleType,
 ) -> Result<(Vec<u8>, Vec<f64>), RegionsError> {
-    let failed = |e: Box<dyn std::error::Error + Send + Sync>| RegionsError::ReadArray {
-        path: path.to_string(),
-        source: e,
-    };
-    let array = Array::open(store.clone(), &format!("/{path}")).map_err(|e| failed(e.into()))?;
-    let bytes: ArrayBytes<'static> = array
-        .retrieve_array_subset(&ArraySubset::new_with_shape(array.shape().to_vec()))
-        .map_err(|e| failed(e.into()))?;
-    let raw = bytes
-        .into_fixed()
-        .map_err(|e| failed(e.into()))?
-        .into_owned();
-    let values = data_type
-        .decode_le_to_f64(&raw)
-        .map_err(|e| failed(e.into()))?;
-    Ok((raw, values))
+    read_region_array(store, path, ArrayPart::Whole, data_type).map_err(|source| {
+        RegionsError::ReadArray {
+            path: path.to_string(),
+            source: Box::new(source),
+        }
+    })
 }
 
 /// Splits a grid array `[c, 2, gz, gy, gx]` into per-channel `[min, max]` pairs.

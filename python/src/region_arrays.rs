@@ -8,7 +8,7 @@ use std::sync::Arc;
 use residency_schemas::{MinMaxGrid, SampleType};
 use residency_store::location::{LocationError, ObjectStoreOptions, StoreLocation};
 use residency_store::pyramid::{Pyramid, PyramidError};
-use zarrs::array::{Array, ArrayBytes, ArraySubset};
+use residency_store::region_array::{ArrayPart, read_region_array};
 use zarrs::storage::ReadableListableStorageTraits;
 
 /// Why region metadata cannot be read. Messages name the store.
@@ -185,19 +185,8 @@ impl ChannelReader<'_> {
             path: path.to_string(),
             reason,
         };
-        let array = Array::open(self.store.clone(), &format!("/{path}"))
-            .map_err(|e| failed(e.to_string()))?;
-        let shape = array.shape().to_vec();
-        let c = self.channel as u64;
-        let ranges: Vec<std::ops::Range<u64>> = std::iter::once(c..c + 1)
-            .chain(shape.iter().skip(1).map(|&s| 0..s))
-            .collect();
-        let bytes: ArrayBytes<'static> = array
-            .retrieve_array_subset(&ArraySubset::new_with_ranges(&ranges))
-            .map_err(|e| failed(e.to_string()))?;
-        let raw = bytes.into_fixed().map_err(|e| failed(e.to_string()))?;
-        let values = sample_type
-            .decode_le_to_f64(&raw)
+        let part = ArrayPart::Channel(self.channel as u64);
+        let (_, values) = read_region_array(&self.store, path, part, sample_type)
             .map_err(|e| failed(e.to_string()))?;
         if values.len() != expected {
             return Err(failed(format!(

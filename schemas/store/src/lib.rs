@@ -10,7 +10,8 @@
 //!   through whatever layers carry it;
 //! - [`pyramid`]: the pyramid reader, bricks and metadata through zarrs' codecs over any
 //!   zarrs storage;
-//! - [`ranged`]: an object store read by zarrs with one ranged `GET` per read (no `HEAD`).
+//! - [`ranged`]: an object store read by zarrs with one ranged `GET` per read (no `HEAD`);
+//! - [`region_array`]: a region-metadata array read whole or by channel, as `f64` values.
 
 #[cfg(feature = "mimalloc")]
 pub mod allocator;
@@ -19,3 +20,4 @@ pub mod failure;
 pub mod location;
 pub mod pyramid;
 pub mod ranged;
+pub mod region_array;
