@@ -208,6 +208,7 @@ fn closed(reader: &mut BufReader<TcpStream>) -> bool {
 fn served_store(dir: &Path) -> Served {
     let store = v3_store(dir, "cells");
     common::write(&store, "0/c/1/0/0/0", vec![7u8; 100_000]);
+    common::write(&store, "0/c/2/0/0/0", Vec::new());
     start(
         &[("cells", &store)],
         ServerOptions::default(),
@@ -320,6 +321,21 @@ fn chunks_sent_directly_are_the_routers_answers_field_for_field() {
     // A larger chunk, sent in more than one piece of the socket's buffer.
     let big = exchange(&served, "GET", "GET /cells/0/c/1/0/0/0 HTTP/1.1\r\n\r\n");
     assert_eq!(big.body, vec![7u8; 100_000]);
+    // An empty chunk: its head alone (nothing follows it to carry it out), then the next
+    // answer on the same connection.
+    let (mut stream, mut reader) = connect(&served);
+    stream
+        .write_all(
+            b"GET /cells/0/c/2/0/0/0 HTTP/1.1\r\n\r\nGET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n",
+        )
+        .unwrap();
+    let empty = read_reply(&mut reader, "GET");
+    assert_eq!(
+        (empty.status, empty.field("content-length")),
+        (200, Some("0"))
+    );
+    assert!(empty.body.is_empty());
+    assert_eq!(read_reply(&mut reader, "GET").body, CHUNK);
 }
 
 #[test]
