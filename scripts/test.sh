@@ -5,7 +5,15 @@
 # neuroglancer and Viv in headless Chromium).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup.sh
+# Each long step's wall time, and the run's so far: a run that nears CI's limit says which step
+# grew (CI keeps the output of a run that fails).
+timed() {
+  local label=$1 start=$SECONDS
+  shift
+  "$@"
+  echo "== $label: $((SECONDS - start)) s (run so far: $SECONDS s)"
+}
+timed setup bash scripts/setup.sh
 # The disk this run has, and what the build folders take, printed at the start and before the
 # external-client tests: a full disk fails every test after it, and this says how close it was.
 disk() {
@@ -30,14 +38,14 @@ python3 scripts/check_structure.py
 cargo fmt --all --check
 # The fuzz targets are a cargo project of their own (outside the workspace).
 cargo fmt --manifest-path tests/fuzz/Cargo.toml --check
-cargo clippy --workspace --all-targets -- -D warnings
-RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
-cargo build --release --workspace --bins
+timed clippy cargo clippy --workspace --all-targets -- -D warnings
+timed doc env RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps
+timed "release build" cargo build --release --workspace --bins
 # The web viewer (WebAssembly + WebGPU) into target/release/web, where brickserver finds it.
-bash scripts/build-web.sh
-bash scripts/build-wheel.sh
-cargo test --release --workspace
+timed "web build" bash scripts/build-web.sh
+timed wheel bash scripts/build-wheel.sh
+timed "cargo test" cargo test --release --workspace
 # A short run (10 s) of every fuzz target: the corpora and seeds must still run clean.
-bash scripts/fuzz.sh 10
+timed fuzz bash scripts/fuzz.sh 10
 disk "before the external-client tests"
-RESIDENCY_BIN="$PWD/target/release" .venv/bin/python -m pytest -q tests/python
+timed pytest env RESIDENCY_BIN="$PWD/target/release" .venv/bin/python -m pytest -q tests/python
