@@ -50,13 +50,13 @@ pub async fn serve(
 ) {
     let permits = Arc::new(Semaphore::new(limits.max_connections));
     let (stopping, stop) = watch::channel(false);
-    tokio::select! {
-        () = accept(listener, &app, limits, &metrics, &permits, &stop) => {},
-        () = shutdown => {},
-    }
-    // Connections close once their request in progress is answered; idle ones at once.
-    let _ = stopping.send(true);
-    drain(&permits, limits).await;
+    tokio::join!(
+        serve_listener(listener, app, limits, metrics, permits, stop),
+        async {
+            shutdown.await;
+            let _ = stopping.send(true);
+        },
+    );
 }
 
 /// Serves `app` on every listener of `listeners` (sockets bound to one address, such as
@@ -68,7 +68,8 @@ pub async fn serve(
 /// is one for all threads.
 ///
 /// # Errors
-/// A thread, its runtime or its listener's registration that cannot be made (at start).
+/// A thread, its runtime or its listener's registration with the runtime that cannot be made
+/// (at start).
 pub async fn serve_on_threads(
     listeners: Vec<std::net::TcpListener>,
     app: App,
@@ -86,24 +87,24 @@ pub async fn serve_on_threads(
             .enable_all()
             .max_blocking_threads(blocking_threads.max(1))
             .build()?;
-        let (app, metrics, permits, stop) =
-            (app.clone(), metrics.clone(), permits.clone(), stop.clone());
+        // Registered with the thread's runtime here, so that a failure is this call's error.
+        let listener = {
+            let _entered = runtime.enter();
+            TcpListener::from_std(listener)?
+        };
+        let serving = serve_listener(
+            listener,
+            app.clone(),
+            limits,
+            metrics.clone(),
+            permits.clone(),
+            stop.clone(),
+        );
         let (end, ended_rx) = oneshot::channel::<()>();
         std::thread::Builder::new()
             .name(format!("brickserver-{i}"))
             .spawn(move || {
-                runtime.block_on(async move {
-                    let listener = match TcpListener::from_std(listener) {
-                        Ok(listener) => listener,
-                        Err(e) => return tracing::error!("listener {i}: {e}"),
-                    };
-                    let mut stopped = stop.clone();
-                    tokio::select! {
-                        () = accept(listener, &app, limits, &metrics, &permits, &stop) => {},
-                        _ = stopped.wait_for(|stopped| *stopped) => {},
-                    }
-                    drain(&permits, limits).await;
-                });
+                runtime.block_on(serving);
                 let _ = end.send(());
             })?;
         ended.push(ended_rx);
@@ -139,6 +140,25 @@ pub fn shared_port_listeners(
         listeners.push(socket.into());
     }
     Ok(listeners)
+}
+
+/// Serves the connections `listener` accepts until `stop` turns true (the connections close
+/// once their request in progress is answered; idle ones at once), then waits until every
+/// connection holding one of `permits` has closed, or 10 s.
+async fn serve_listener(
+    listener: TcpListener,
+    app: App,
+    limits: ConnectionLimits,
+    metrics: Arc<Metrics>,
+    permits: Arc<Semaphore>,
+    stop: watch::Receiver<bool>,
+) {
+    let mut stopped = stop.clone();
+    tokio::select! {
+        () = accept(listener, &app, limits, &metrics, &permits, &stop) => {},
+        _ = stopped.wait_for(|stopped| *stopped) => {},
+    }
+    drain(&permits, limits).await;
 }
 
 /// Accepts connections on `listener` and serves each on a task of its own, until the runtime

@@ -181,14 +181,14 @@ async fn run(
     }
     let metrics = state.metrics.clone();
     let app = App::new(state, &options).await;
-    // The blocking threads shared out among the serving threads' runtimes.
+    // BLOCKING_THREADS shared out among the serving threads' runtimes.
     let blocking = BLOCKING_THREADS.div_ceil(threads);
     serve_on_threads(listeners, app, limits, metrics, blocking, shutdown)
         .await
         .context("cannot start the serving threads")
 }
 
-/// Most threads of the runtimes' blocking pools, all together.
+/// Most blocking threads of the starting runtime, and of the serving threads' runtimes together.
 const BLOCKING_THREADS: usize = 64;
 
 fn main() -> ExitCode {
@@ -221,9 +221,11 @@ fn main() -> ExitCode {
                 endpoint: s3_endpoint,
                 runtime: None,
             };
-            // The runtime that starts the server and runs object-store requests; connections
-            // are served on threads of their own (`serve_on_threads`). Blocking threads read files the page cache does not hold and run zarrs' reads:
-            // disk- and network-bound, so a few dozen keep a disk or a store busy, where
+            // The runtime that starts the server (opening the datasets on its blocking threads)
+            // and runs object-store requests; connections are served on threads of their own
+            // (`serve_on_threads`), whose runtimes' blocking threads read files the page cache
+            // does not hold and run zarrs' reads. Both pools are capped at BLOCKING_THREADS:
+            // disk- and network-bound work, so a few dozen keep a disk or a store busy, where
             // tokio's default of 512 would each hold a stack and an allocator heap.
             let runtime = tokio::runtime::Builder::new_multi_thread()
                 .enable_all()
