@@ -38,7 +38,7 @@ fn shown(display: &str, args: &[&str], present: &str) -> (String, Vec<[u8; 3]>) 
         .unwrap_or_else(|e| panic!("{present}: no summary line: {e}"));
     assert!(line.starts_with("view: "), "{line:?}");
     let x = X::open(display);
-    let below = still_window(&x);
+    let pixels = x.still_screenshot();
     x.point(160, 200);
     x.type_char('q');
     let status = child.0.wait().unwrap();
@@ -47,37 +47,11 @@ fn shown(display: &str, args: &[&str], present: &str) -> (String, Vec<[u8; 3]>) 
         status.success(),
         "{present}: viewer failed: {status}\n{stderr}"
     );
+    let (w, h) = (WINDOW.0 as usize, WINDOW.1 as usize);
+    let below: Vec<[u8; 3]> = (PANEL_ROWS..h)
+        .flat_map(|y| pixels[y * SCREEN.0 as usize..][..w].to_vec())
+        .collect();
     (stderr, below)
-}
-
-/// How long the window must hold still before [`still_window`] takes it.
-const STILL: Duration = Duration::from_secs(1);
-
-/// The window's pixels below the panel, once they have not changed for [`STILL`] (at most
-/// 6 s after the call). A presented frame reaches the X server some time after `viewer view`
-/// reports the view settled (Mesa's X11 presentation queues it on a thread of its own), and
-/// until then the window may show what was on the screen before it.
-fn still_window(x: &X) -> Vec<[u8; 3]> {
-    const EVERY: Duration = Duration::from_millis(250);
-    let below_panel = || {
-        let pixels = x.screenshot();
-        let (w, h) = (WINDOW.0 as usize, WINDOW.1 as usize);
-        (PANEL_ROWS..h)
-            .flat_map(|y| pixels[y * SCREEN.0 as usize..][..w].to_vec())
-            .collect::<Vec<_>>()
-    };
-    let start = std::time::Instant::now();
-    let mut last = below_panel();
-    let mut since = std::time::Instant::now();
-    while since.elapsed() < STILL && start.elapsed() < Duration::from_secs(6) {
-        std::thread::sleep(EVERY);
-        let now = below_panel();
-        if now != last {
-            last = now;
-            since = std::time::Instant::now();
-        }
-    }
-    last
 }
 
 /// Asserts both ways of presenting show the same, lit pixels.

@@ -115,6 +115,27 @@ impl X {
         Self { conn, root }
     }
 
+    /// [`X::screenshot`] once the screen has not changed for 1 s (at most 6 s after the
+    /// call). A presented frame reaches the X server some time after `viewer view` reports
+    /// the view settled (Mesa's X11 presentation queues it on a thread of its own): under
+    /// load the screen may still show the frame before, or what was there before the window.
+    pub(crate) fn still_screenshot(&self) -> Vec<[u8; 3]> {
+        const STILL: Duration = Duration::from_secs(1);
+        const EVERY: Duration = Duration::from_millis(250);
+        let start = Instant::now();
+        let mut last = self.screenshot();
+        let mut since = Instant::now();
+        while since.elapsed() < STILL && start.elapsed() < Duration::from_secs(6) {
+            std::thread::sleep(EVERY);
+            let now = self.screenshot();
+            if now != last {
+                last = now;
+                since = Instant::now();
+            }
+        }
+        last
+    }
+
     /// The root window's pixels as RGB, row-major.
     pub(crate) fn screenshot(&self) -> Vec<[u8; 3]> {
         let setup = self.conn.setup();
@@ -360,10 +381,10 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
         .args(["--height", &WINDOW.1.to_string()])
         // A small image keeps lavapipe quick; it is scaled up to the window.
         .args(["--render-scale", "0.5"])
-        .args(["--exit-after-frames", "40", "--exit-delay-ms", "8000"]);
+        .args(["--exit-after-frames", "40", "--exit-delay-ms", "12000"]);
     let (mut viewer, rx, err_thread) = spawn_with_lines(&mut cmd);
     // A summary line comes each time the view settles (converged here); the window then
-    // waits 8 s for input before quitting.
+    // waits 12 s for input before quitting.
     let settle = |what: &str| -> String {
         let line = rx
             .recv_timeout(Duration::from_mins(4))
@@ -377,10 +398,10 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
     let x = X::open(&display);
     let shoot = |name: &str| {
         let at = Instant::now();
-        let pixels = x.screenshot();
+        let pixels = x.still_screenshot();
         let took = at.elapsed();
         assert!(
-            took < Duration::from_secs(4),
+            took < Duration::from_secs(7),
             "the screenshot took {took:?}"
         );
         let png = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("view_xvfb_{name}.png"));
@@ -413,7 +434,7 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
     x.click(4);
     settle("after zooming");
     let (zoomed, _) = shoot("zoomed");
-    // Quit with q, well before the 8 s the settled window would wait.
+    // Quit with q, well before the 12 s the settled window would wait.
     let quit = Instant::now();
     x.type_char('q');
     let status = viewer.0.wait().unwrap();
