@@ -8,30 +8,21 @@
 //! be read or decoded is `error`, with a message naming it, and the rest of the batch is still
 //! answered. A batch is capped in brick count and in decoded size.
 
+use std::sync::Arc;
+
 use axum::body::Bytes;
+use futures::StreamExt;
 use rayon::prelude::*;
 use residency_schemas::SampleType;
 use residency_schemas::wire::{BrickBatchHeader, BrickEncoding, BrickEntry, BrickStatus};
-use residency_store::pyramid::{Pyramid, PyramidError};
+use residency_store::pyramid::{AsyncBricks, Pyramid, PyramidError};
 use zarrs::storage::ReadableListableStorageTraits;
 
-use crate::dataset_store::{DatasetStore, Keys};
+use crate::dataset_store::DatasetStore;
 
-/// Threads that read the bricks of batches from object stores: such reads wait on the network,
-/// not the CPU, so a batch's bricks are fetched this many at a time rather than one per core.
+/// Bricks of one batch read at once from an object store: such reads wait on the network,
+/// not the CPU, so they are futures, this many in flight, rather than one per core.
 const REMOTE_READS: usize = 32;
-
-/// The thread pool of [`REMOTE_READS`] threads, made on first use.
-fn remote_reads() -> &'static rayon::ThreadPool {
-    static POOL: std::sync::OnceLock<rayon::ThreadPool> = std::sync::OnceLock::new();
-    POOL.get_or_init(|| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(REMOTE_READS)
-            .thread_name(|i| format!("remote-bricks-{i}"))
-            .build()
-            .expect("a thread pool")
-    })
-}
 
 /// Caps on one batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -219,8 +210,8 @@ pub(crate) struct ImageArrays {
     pub data_type: SampleType,
     /// Brick shape `z, y, x`.
     pub brick_shape: [u64; 3],
-    /// Whether the store is an object store (its reads wait on the network).
-    remote: bool,
+    /// An object store's level arrays read by futures, and the runtime they run on.
+    remote: Option<(AsyncBricks, tokio::runtime::Handle)>,
 }
 
 impl ImageArrays {
@@ -230,11 +221,15 @@ impl ImageArrays {
     /// When the store cannot be opened or its pyramid is unusable (see [`Pyramid::open`]).
     pub fn open(dataset: &DatasetStore) -> Result<Self, PyramidError> {
         let pyramid = Pyramid::open(dataset.zarr(), dataset.shown())?;
+        let remote = dataset.async_store.as_ref().map(|store| {
+            let bricks = pyramid.async_bricks(store.storage.clone());
+            (bricks, store.runtime.clone())
+        });
         Ok(Self {
             data_type: pyramid.sample_type,
             brick_shape: pyramid.brick_shape,
             pyramid,
-            remote: matches!(dataset.keys, Keys::Object(_)),
+            remote,
         })
     }
 
@@ -252,23 +247,64 @@ impl ImageArrays {
         self.pyramid.check(at)
     }
 
-    /// Reads one brick: `None` when empty, else its stored or decoded bytes.
+    /// Reads one brick from a folder: `None` when empty, else its stored or decoded bytes.
     ///
     /// # Errors
     /// [`PyramidError`] naming the brick and its key when it cannot be read or decoded.
-    pub fn read(
+    fn read(&self, at: &BrickAt, encoding: BrickEncoding) -> Result<Option<Vec<u8>>, PyramidError> {
+        match encoding {
+            BrickEncoding::Stored => self.pyramid.read_brick_encoded(at),
+            BrickEncoding::Raw => not_fill(self.pyramid.read_brick_bytes(at)?),
+        }
+    }
+
+    /// [`ImageArrays::read`] by futures from an object store (from a folder: that read).
+    ///
+    /// # Errors
+    /// [`PyramidError`] naming the brick and its key when it cannot be read or decoded.
+    async fn read_async(
         &self,
         at: &BrickAt,
         encoding: BrickEncoding,
     ) -> Result<Option<Vec<u8>>, PyramidError> {
+        let Some((bricks, _)) = &self.remote else {
+            return self.read(at, encoding);
+        };
         match encoding {
-            BrickEncoding::Stored => self.pyramid.read_brick_encoded(at),
-            BrickEncoding::Raw => {
-                let raw = self.pyramid.read_brick_bytes(at)?;
-                Ok((!raw.iter().all(|&b| b == 0)).then_some(raw))
-            }
+            BrickEncoding::Stored => self.pyramid.read_brick_encoded_async(bricks, at).await,
+            BrickEncoding::Raw => not_fill(self.pyramid.read_brick_bytes_async(bricks, at).await?),
         }
     }
+}
+
+/// Decoded bytes, or `None` when they are all the fill value (zero).
+#[expect(
+    clippy::unnecessary_wraps,
+    reason = "the Ok of both arms of ImageArrays::read"
+)]
+fn not_fill(raw: Vec<u8>) -> Result<Option<Vec<u8>>, PyramidError> {
+    Ok((!raw.iter().all(|&b| b == 0)).then_some(raw))
+}
+
+/// Where a batch's bricks are kept between requests (the server's memory cache).
+/// A brick is kept as its bytes, an empty brick as no bytes.
+pub(crate) trait BrickCache: Send + Sync + 'static {
+    /// A kept brick, or `None` when it is not kept.
+    fn get(&self, at: &BrickAt) -> Option<Bytes>;
+    /// Keeps a brick just read.
+    fn keep(&self, at: &BrickAt, bytes: Bytes);
+}
+
+/// A brick's bytes as a batch answers them: `None` for an empty brick.
+fn present(bytes: Bytes) -> Option<Bytes> {
+    (!bytes.is_empty()).then_some(bytes)
+}
+
+/// Keeps a brick just read (`None`: empty) in `cache`, and gives it back as a batch answers it.
+fn keep(cache: &impl BrickCache, at: &BrickAt, read: Option<Vec<u8>>) -> Option<Bytes> {
+    let bytes = read.map(Bytes::from).unwrap_or_default();
+    cache.keep(at, bytes.clone());
+    present(bytes)
 }
 
 /// Why one brick of a batch could not be read; its message goes into the brick's entry.
@@ -282,30 +318,64 @@ pub(crate) enum BrickReadError {
     Store(#[from] PyramidError),
 }
 
-/// Reads a whole batch (in parallel: one brick per core from a folder, [`REMOTE_READS`] at a
-/// time from an object store) into its header and payload, given a brick reader (which may
-/// consult a cache). A brick that cannot be read gets an error entry with the reason; the
-/// rest of the batch is still answered.
-pub(crate) fn read_batch(
+/// One brick of a batch: its bytes (`None`: empty), or why it could not be read.
+pub(crate) type BrickRead = Result<Option<Bytes>, BrickReadError>;
+
+/// Reads a batch's bricks, each from `cache` when kept there, else from the store and then
+/// kept: from a folder in parallel on the blocking pool, one brick per core; from an object
+/// store as futures on the store's runtime, [`REMOTE_READS`] in flight (no thread waits on
+/// the network). A brick that cannot be read is its error; the rest are still read.
+pub(crate) async fn read_bricks<C: BrickCache>(
+    arrays: Arc<ImageArrays>,
+    bricks: Arc<[BrickAt]>,
+    encoding: BrickEncoding,
+    cache: Arc<C>,
+) -> Vec<BrickRead> {
+    let Some(runtime) = arrays.remote.as_ref().map(|(_, runtime)| runtime.clone()) else {
+        let read_all = move || {
+            bricks
+                .par_iter()
+                .map(|at| -> BrickRead {
+                    arrays.check(at)?;
+                    if let Some(kept) = cache.get(at) {
+                        return Ok(present(kept));
+                    }
+                    Ok(keep(&*cache, at, arrays.read(at, encoding)?))
+                })
+                .collect()
+        };
+        return tokio::task::spawn_blocking(read_all)
+            .await
+            .expect("reading a batch panicked");
+    };
+    let read_all = async move {
+        let (arrays, cache) = (&arrays, &cache);
+        futures::stream::iter(bricks.iter().copied())
+            .map(|at| async move {
+                arrays.check(&at)?;
+                if let Some(kept) = cache.get(&at) {
+                    return Ok(present(kept));
+                }
+                Ok(keep(&**cache, &at, arrays.read_async(&at, encoding).await?))
+            })
+            .buffered(REMOTE_READS)
+            .collect::<Vec<BrickRead>>()
+            .await
+    };
+    runtime
+        .spawn(read_all)
+        .await
+        .expect("reading a batch panicked")
+}
+
+/// A batch's document: its header and payload, from the bricks read ([`read_bricks`], in the
+/// batch's order).
+pub(crate) fn batch_document(
     arrays: &ImageArrays,
     bricks: &[BrickAt],
     encoding: BrickEncoding,
-    read: impl Fn(&BrickAt) -> Result<Option<Bytes>, BrickReadError> + Sync,
+    results: Vec<BrickRead>,
 ) -> (BrickBatchHeader, Vec<u8>) {
-    let read_all = || -> Vec<Result<Option<Bytes>, BrickReadError>> {
-        bricks
-            .par_iter()
-            .map(|at| {
-                arrays.check(at)?;
-                read(at)
-            })
-            .collect()
-    };
-    let results = if arrays.remote {
-        remote_reads().install(read_all)
-    } else {
-        read_all()
-    };
     let mut payload = Vec::new();
     let entries = bricks
         .iter()

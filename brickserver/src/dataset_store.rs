@@ -12,9 +12,10 @@ use residency_store::location::object_store::{
     self, GetOptions, GetRange, ObjectStore, ObjectStoreExt,
 };
 use residency_store::location::{
-    BlockOn, LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation, object_storage,
+    BlockOn, LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation, async_object_storage,
 };
-use zarrs::storage::{ReadableListableStorageTraits, StoreKey};
+use zarrs::storage::storage_adapter::async_to_sync::AsyncToSyncStorageAdapter;
+use zarrs::storage::{AsyncReadableStorageTraits, ReadableListableStorageTraits, StoreKey};
 
 use crate::store_keys::{KeyError, RootDir, StoreFailure, checked_key, resolve};
 
@@ -61,14 +62,28 @@ pub(crate) enum Keys {
     Object(ObjectKeys),
 }
 
+/// An object-store dataset's storage for reads by futures: zarrs' async storage over the
+/// dataset's one client, and the runtime its requests run on (the server's multi-threaded
+/// one, which makes the object-store requests).
+#[derive(Clone)]
+pub(crate) struct AsyncStore {
+    /// The store's keys as zarrs' async storage.
+    pub storage: Arc<dyn AsyncReadableStorageTraits>,
+    /// The runtime that runs the reads.
+    pub runtime: tokio::runtime::Handle,
+}
+
 /// A served dataset's store: its keys for verbatim answers, and the same store as zarrs storage
 /// for the region index, batched bricks and the listing. An object store is reached through one
-/// client, which both use: zarrs' synchronous reads run its requests on the server's runtime
-/// from blocking tasks.
+/// client, which all use: batched bricks are read by futures on the server's runtime
+/// ([`AsyncStore`]); the metadata read once when a dataset's parts are loaded, by zarrs'
+/// synchronous reads, which run their requests on that runtime from blocking tasks.
 pub struct DatasetStore {
     /// The keys.
     pub(crate) keys: Keys,
     zarr: Arc<dyn ReadableListableStorageTraits>,
+    /// Object stores only: the store read by futures.
+    pub(crate) async_store: Option<AsyncStore>,
     shown: String,
 }
 
@@ -99,13 +114,13 @@ impl DatasetStore {
         object_store: Option<&ObjectStoreAt>,
     ) -> Result<Self, OpenError> {
         let shown = location.to_string();
-        let (keys, zarr) = if let Some(path) = location.folder() {
+        let (keys, zarr, async_store) = if let Some(path) = location.folder() {
             let root = RootDir::open(path).map_err(|source| OpenError::Folder {
                 location: shown.clone(),
                 source,
             })?;
             let zarr = location.open_readable(&ObjectStoreOptions::default())?;
-            (Keys::Folder(root), zarr)
+            (Keys::Folder(root), zarr, None)
         } else {
             let (store, prefix) = object_store.cloned().ok_or_else(|| OpenError::NoClient {
                 location: shown.clone(),
@@ -114,10 +129,20 @@ impl DatasetStore {
                 tokio::runtime::Handle::try_current().map_err(|_| OpenError::NoRuntime {
                     location: shown.clone(),
                 })?;
-            let zarr = object_storage(store.clone(), &prefix, BlockOn::new(runtime));
-            (Keys::Object(ObjectKeys { store, prefix }), zarr)
+            let storage = async_object_storage(store.clone(), &prefix);
+            let zarr: Arc<dyn ReadableListableStorageTraits> = Arc::new(
+                AsyncToSyncStorageAdapter::new(storage.clone(), BlockOn::new(runtime.clone())),
+            );
+            let async_store = AsyncStore { storage, runtime };
+            let keys = Keys::Object(ObjectKeys { store, prefix });
+            (keys, zarr, Some(async_store))
         };
-        Ok(Self { keys, zarr, shown })
+        Ok(Self {
+            keys,
+            zarr,
+            async_store,
+            shown,
+        })
     }
 
     /// The store as zarrs storage (synchronous: call it from blocking code).

@@ -13,7 +13,9 @@ use schemars::JsonSchema;
 use super::api_error::{api_error, load_failed, no_dataset};
 use super::params::DatasetPath;
 use super::state::{AppState, blocking, loaded};
-use crate::bricks::{BatchError, ImageArrays, parse_batch, read_batch};
+use crate::bricks::{
+    BatchError, BrickAt, BrickCache, ImageArrays, batch_document, parse_batch, read_bricks,
+};
 use crate::cache::{CacheKey, Cached};
 use crate::openapi::{answer, api_errors, binary, responses, with_content};
 
@@ -102,27 +104,15 @@ pub(super) async fn bricks(
     if let Err(e) = state.batch.check_bytes(list.len(), arrays.brick_bytes()) {
         return batch_error(&e);
     }
-    let st = state.clone();
-    let raw = encoding == BrickEncoding::Raw;
+    let bricks: Arc<[BrickAt]> = list.into();
+    let cache = Arc::new(BatchCache {
+        state: state.clone(),
+        dataset: index,
+        raw: encoding == BrickEncoding::Raw,
+    });
+    let results = read_bricks(arrays.clone(), bricks.clone(), encoding, cache).await;
     let body = blocking(move || {
-        let (header, payload) = read_batch(&arrays, &list, encoding, |at| {
-            let key = CacheKey::Brick {
-                dataset: index,
-                at: (at.level, at.channel, at.brick),
-                raw,
-            };
-            if let Some(hit) = st.cache.get(&key) {
-                return Ok((!hit.bytes.is_empty()).then_some(hit.bytes));
-            }
-            let read = arrays.read(at, encoding)?;
-            let bytes = read.map(Bytes::from).unwrap_or_default();
-            let cached = Cached {
-                bytes: bytes.clone(),
-                etag: None,
-            };
-            st.cache.insert(key, cached);
-            Ok((!bytes.is_empty()).then_some(bytes))
-        });
+        let (header, payload) = batch_document(&arrays, &bricks, encoding, results);
         for e in header.bricks.iter().filter_map(|b| b.error.as_deref()) {
             tracing::error!(dataset = %name, "{e}");
         }
@@ -130,4 +120,32 @@ pub(super) async fn bricks(
     })
     .await;
     ([(header::CONTENT_TYPE, BRICKS_MEDIA_TYPE)], body).into_response()
+}
+
+/// A batch's bricks in the server's memory cache: those of one dataset, stored or raw.
+struct BatchCache {
+    state: Arc<AppState>,
+    dataset: usize,
+    raw: bool,
+}
+
+impl BatchCache {
+    fn key(&self, at: &BrickAt) -> CacheKey {
+        CacheKey::Brick {
+            dataset: self.dataset,
+            at: (at.level, at.channel, at.brick),
+            raw: self.raw,
+        }
+    }
+}
+
+impl BrickCache for BatchCache {
+    fn get(&self, at: &BrickAt) -> Option<Bytes> {
+        self.state.cache.get(&self.key(at)).map(|hit| hit.bytes)
+    }
+
+    fn keep(&self, at: &BrickAt, bytes: Bytes) {
+        let cached = Cached { bytes, etag: None };
+        self.state.cache.insert(self.key(at), cached);
+    }
 }

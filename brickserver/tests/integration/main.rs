@@ -9,5 +9,6 @@ mod binary;
 mod connections;
 mod listing;
 mod loads;
+mod object_store;
 mod openapi;
 mod viewer;

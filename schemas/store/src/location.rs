@@ -321,8 +321,22 @@ pub fn object_storage(
     prefix: &ObjectPath,
     block_on: BlockOn,
 ) -> Arc<dyn ReadableListableStorageTraits> {
-    let store = RangedObjectStore::new(Arc::new(PrefixStore::new(store, prefix.clone())));
-    Arc::new(AsyncToSyncStorageAdapter::new(Arc::new(store), block_on))
+    Arc::new(AsyncToSyncStorageAdapter::new(
+        async_object_storage(store, prefix),
+        block_on,
+    ))
+}
+
+/// The keys under `prefix` in `store` as async zarrs storage (one ranged `GET` per read, see
+/// [`RangedObjectStore`]): for callers that read the pyramid by futures on their own runtime.
+pub fn async_object_storage(
+    store: Arc<dyn ObjectStore>,
+    prefix: &ObjectPath,
+) -> Arc<RangedObjectStore> {
+    Arc::new(RangedObjectStore::new(Arc::new(PrefixStore::new(
+        store,
+        prefix.clone(),
+    ))))
 }
 
 impl StoreLocation {

@@ -6,10 +6,10 @@
 use std::sync::Arc;
 
 use zarrs::array::{
-    Array, ArrayBytes, ArrayShardedReadableExt, ArrayShardedReadableExtCache, CodecOptions,
-    ElementOwned,
+    Array, ArrayBytes, ArrayShardedReadableExt, ArrayShardedReadableExtCache,
+    AsyncArrayShardedReadableExt, AsyncArrayShardedReadableExtCache, CodecOptions, ElementOwned,
 };
-use zarrs::storage::{ReadableStorageTraits, StoreKey};
+use zarrs::storage::{AsyncReadableStorageTraits, ReadableStorageTraits, StoreKey};
 
 use residency_schemas::SampleType;
 use residency_schemas::ome::{ImageAttributes, OmeError, PyramidLayout, ZarrFormat};
@@ -118,6 +118,23 @@ pub struct PyramidLevel<S: ?Sized> {
     shards: ArrayShardedReadableExtCache,
 }
 
+/// A pyramid's level arrays over async storage (an object store read by futures), for
+/// [`Pyramid::read_brick_bytes_async`] and [`Pyramid::read_brick_encoded_async`]: the same
+/// bricks as the synchronous reads, with no thread held while a request is on the network.
+/// Made by [`Pyramid::async_bricks`].
+pub struct AsyncBricks {
+    /// Per level, finest first: the array over the async storage and zarrs' cache of its
+    /// shard indices.
+    levels: Vec<(
+        Array<dyn AsyncReadableStorageTraits>,
+        AsyncArrayShardedReadableExtCache,
+    )>,
+}
+
+/// Shard indices a level's cache holds before it is emptied (a shard index of a 64³-brick
+/// shard of 8³ bricks is 8 KiB).
+const SHARD_INDICES_KEPT: usize = 4096;
+
 /// An OME-Zarr image's pyramid, opened for brick reads.
 pub struct Pyramid<S: ?Sized> {
     /// The store, for reading other arrays of the image (such as the region metadata's).
@@ -170,6 +187,114 @@ pub fn read_key<S: ReadableStorageTraits + ?Sized>(
         .get(&key)
         .map(|b| b.map(|b| b.to_vec()))
         .map_err(|e| storage(e.into()))
+}
+
+impl<S: ?Sized> Pyramid<S> {
+    /// The array chunk (or inner chunk) indices of a brick.
+    fn indices(&self, at: &BrickIndex) -> Vec<u64> {
+        self.layout.chunk_indices(u64::from(at.channel), at.brick)
+    }
+
+    /// The key or inner chunk a brick lives in, for messages.
+    fn located(&self, at: &BrickIndex) -> String {
+        let level = &self.levels[at.level as usize];
+        let key = if level.shards.array_is_sharded() {
+            format!("an inner chunk of array '{}'", level.path)
+        } else {
+            format!("key '{}'", level.array.chunk_key(&self.indices(at)))
+        };
+        format!(
+            "level {} channel {} brick {:?} ({key})",
+            at.level, at.channel, at.brick
+        )
+    }
+
+    fn brick_error(
+        &self,
+        at: &BrickIndex,
+        e: impl std::error::Error + Send + Sync + 'static,
+    ) -> PyramidError {
+        PyramidError::Storage {
+            what: self.located(at),
+            source: e.into(),
+        }
+    }
+
+    /// The level arrays over `store`, the same keys as this pyramid's store read through
+    /// async storage (for an object store: futures on the caller's runtime).
+    pub fn async_bricks(&self, store: Arc<dyn AsyncReadableStorageTraits>) -> AsyncBricks {
+        AsyncBricks {
+            levels: self
+                .levels
+                .iter()
+                .map(|level| {
+                    let array = level.array.with_storage(store.clone());
+                    let shards = AsyncArrayShardedReadableExtCache::new(&array);
+                    (array, shards)
+                })
+                .collect(),
+        }
+    }
+
+    /// Level `at.level` of `bricks`, its shard-index cache kept bounded.
+    async fn async_level<'a>(
+        bricks: &'a AsyncBricks,
+        at: &BrickIndex,
+    ) -> &'a (
+        Array<dyn AsyncReadableStorageTraits>,
+        AsyncArrayShardedReadableExtCache,
+    ) {
+        let level = &bricks.levels[at.level as usize];
+        if level.1.len().await > SHARD_INDICES_KEPT {
+            level.1.clear().await;
+        }
+        level
+    }
+
+    /// [`Pyramid::read_brick_bytes`] through `bricks` (made by [`Pyramid::async_bricks`]).
+    ///
+    /// # Errors
+    /// [`PyramidError::Storage`] naming the brick when it cannot be read or decoded.
+    pub async fn read_brick_bytes_async(
+        &self,
+        bricks: &AsyncBricks,
+        at: &BrickIndex,
+    ) -> Result<Vec<u8>, PyramidError> {
+        let (array, shards) = Self::async_level(bricks, at).await;
+        let bytes: ArrayBytes<'static> = array
+            .async_retrieve_subchunk_opt(shards, &self.indices(at), &CodecOptions::default())
+            .await
+            .map_err(|e| self.brick_error(at, e))?;
+        Ok(bytes
+            .into_fixed()
+            .map_err(|e| self.brick_error(at, e))?
+            .into_owned())
+    }
+
+    /// [`Pyramid::read_brick_encoded`] through `bricks` (made by [`Pyramid::async_bricks`]).
+    ///
+    /// # Errors
+    /// [`PyramidError::Storage`] naming the brick when the store cannot be read.
+    pub async fn read_brick_encoded_async(
+        &self,
+        bricks: &AsyncBricks,
+        at: &BrickIndex,
+    ) -> Result<Option<Vec<u8>>, PyramidError> {
+        let (array, shards) = Self::async_level(bricks, at).await;
+        let indices = self.indices(at);
+        if shards.array_is_sharded() {
+            array
+                .async_retrieve_encoded_subchunk(shards, &indices)
+                .await
+                .map_err(|e| self.brick_error(at, e))
+        } else {
+            array
+                .async_retrieve_encoded_chunk(&indices)
+                .await
+                .map(|bytes| bytes.map(|b| b.to_vec()))
+                .map_err(|e| self.brick_error(at, e))
+        }
+    }
 }
 
 impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
@@ -304,39 +429,9 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
         self.sample_type.block_bytes(self.brick_shape)
     }
 
-    /// The array chunk (or inner chunk) indices of a brick.
-    fn indices(&self, at: &BrickIndex) -> Vec<u64> {
-        self.layout.chunk_indices(u64::from(at.channel), at.brick)
-    }
-
-    /// The key or inner chunk a brick lives in, for messages.
-    fn located(&self, at: &BrickIndex) -> String {
-        let level = &self.levels[at.level as usize];
-        let key = if level.shards.array_is_sharded() {
-            format!("an inner chunk of array '{}'", level.path)
-        } else {
-            format!("key '{}'", level.array.chunk_key(&self.indices(at)))
-        };
-        format!(
-            "level {} channel {} brick {:?} ({key})",
-            at.level, at.channel, at.brick
-        )
-    }
-
-    fn brick_error(
-        &self,
-        at: &BrickIndex,
-        e: impl std::error::Error + Send + Sync + 'static,
-    ) -> PyramidError {
-        PyramidError::Storage {
-            what: self.located(at),
-            source: e.into(),
-        }
-    }
-
     /// Keeps zarrs' shard-index cache of a level bounded.
     fn trim_shard_cache(level: &PyramidLevel<S>) {
-        if level.shards.len() > 4096 {
+        if level.shards.len() > SHARD_INDICES_KEPT {
             level.shards.clear();
         }
     }
