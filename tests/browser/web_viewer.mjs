@@ -29,6 +29,7 @@
 //   {"do": "goto", "url": U}           open another URL in the same page
 //   {"do": "message"}                  the on-page message (null when hidden)
 //   {"do": "waitMessage"}              wait until the on-page message shows, then return it
+//   {"do": "sleep", "ms": MS}          wait MS milliseconds (what the page does meanwhile)
 //   {"do": "pause"}                    print {"paused": STEP_INDEX} and wait for a line on stdin
 //                                      (the test does something to the server meanwhile)
 // It prints {"results": [one per step], "console": ["type: text", ...]} as JSON.
@@ -194,6 +195,10 @@ try {
           const m = document.getElementById("message");
           return m.hidden ? null : m.textContent;
         })));
+        break;
+      case "sleep":
+        await new Promise((resolve) => setTimeout(resolve, step.ms));
+        results.push(null);
         break;
       case "pause":
         console.log(JSON.stringify({ paused: results.length }));

@@ -288,6 +288,43 @@ def test_a_request_refused_more_than_three_times_shows_the_last_refusal(servers)
     assert errors(console, ["status of 503"]) == []
 
 
+def test_a_request_waiting_to_be_retried_is_superseded_by_a_newer_view(servers):
+    """The first POST /vdi is answered 503 with `Retry-After: 4`; while the page waits to send
+    it again, the camera moves: the newer request is sent at once, the old one is not sent
+    again (not in the 4 s nor after them), and the page draws the newer view's VDI."""
+    base, service = servers
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    scene = scene_of(results[1])
+    closer = json.loads(json.dumps(scene))
+    cam = closer["camera"]
+    cam["eye"] = [t + 0.75 * (e - t) for e, t in zip(cam["eye"], cam["target"])]
+    with ServiceProxy(service, failures=[(503, "4")]) as proxy:
+        results, console = drive(
+            page(base, "u16x3", proxy.url),
+            [
+                {"do": "waitState", "when": "s.remote && s.remote.requests_retried >= 1"},
+                {"do": "setScene", "scene": closer},
+                {"do": "waitState", "when": "s.remote.requests_sent >= 2"},
+                {"do": "converge"},
+                {"do": "sleep", "ms": 5000},
+                {"do": "state"},
+            ],
+        )
+        posts = proxy.posts()
+    waiting, state, later = results[0], results[3], results[5]
+    assert waiting["remote"]["vdis_received"] == 0, waiting
+    assert state["error"] is None and state["converged"], state
+    remote = state["remote"]
+    assert (remote["requests_sent"], remote["requests_retried"], remote["requests_aborted"],
+            remote["vdis_received"], remote["drawn_request"], remote["last_error"]) == \
+        (2, 1, 1, 1, 2, None), remote
+    assert remote["vdi_camera"] == closer["camera"]
+    assert later["remote"] == remote, later
+    assert [p.status for p in posts] == [503, 200], posts
+    assert posts[1].at_s - posts[0].at_s < 4.0, posts
+    assert errors(console, ["status of 503"]) == []
+
+
 def test_a_camera_only_set_scene_moves_the_camera_without_rebuilding_the_controls(servers):
     """setScene with only another camera keeps the channel controls (built once, when the page
     opened) and the link follows the camera; a style change rebuilds them."""
