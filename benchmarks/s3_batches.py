@@ -1,0 +1,110 @@
+"""Batched bricks read from S3: `brickserver` binaries side by side on one store in s3s-fs on
+loopback (the object-store tests' S3 server), for an A/B of two builds.
+
+    .venv/bin/python benchmarks/s3_batches.py [--bin NAME=PATH ...] [--rounds 3]
+
+Builds `ingest sample --kind dense` (256³ float32, 64 bricks of 64³ at level 0) into a bucket,
+then per round and per binary: starts `brickserver serve s3://bucket/dense.ome.zarr
+--cache-bytes 0` (every brick from the store), and asks 24 batches of 16 random level-0
+bricks, stored and raw, from 1 and from 4 clients at once. Prints per binary the median batch
+latency and the bricks per second of each round, and the server's thread count after the
+load. Without `--bin`, the release build's brickserver alone. s3s-fs comes from
+scripts/test.sh.
+"""
+
+import argparse
+import concurrent.futures
+import random
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import urllib.request
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "python"))
+from support.s3 import env, free_port, start_s3  # noqa: E402
+
+BRICKS = [f"0,0,{z},{y},{x}" for z in range(4) for y in range(4) for x in range(4)]
+
+
+def serve(exe, endpoint):
+    """Starts brickserver `exe` on the bucket's store; returns (process, base URL)."""
+    port = free_port()
+    p = subprocess.Popen([exe, "serve", "s3://bucket/dense.ome.zarr", "--s3-endpoint", endpoint,
+                          "--cache-bytes", "0", "--bind", f"127.0.0.1:{port}"],
+                         env=env(), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    base = f"http://127.0.0.1:{port}"
+    for _ in range(300):
+        try:
+            urllib.request.urlopen(base + "/healthz", timeout=1).read()
+            return p, base
+        except OSError:
+            time.sleep(0.1)
+    raise SystemExit(f"{exe} did not answer /healthz within 30 s")
+
+
+def batch(base, encoding, rng):
+    """Seconds for one batch of 16 random bricks."""
+    pick = rng.sample(BRICKS, 16)
+    t = time.perf_counter()
+    urllib.request.urlopen(f"{base}/dense/bricks?b={';'.join(pick)}&encoding={encoding}",
+                           timeout=120).read()
+    return time.perf_counter() - t
+
+
+def threads(pid):
+    """The process's thread count."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("Threads:"):
+            return int(line.split()[1])
+    return 0
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--bin", action="append", default=[], help="NAME=PATH of a brickserver")
+    ap.add_argument("--rounds", type=int, default=3)
+    args = ap.parse_args()
+    bins = [b.split("=", 1) for b in args.bin] or [["release", str(ROOT / "target/release/brickserver")]]
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        ingest = ROOT / "target" / "release" / "ingest"
+        subprocess.run([ingest, "sample", "--kind", "dense", "-o", tmp / "in", "--quiet"], check=True)
+        (tmp / "root" / "bucket").mkdir(parents=True)
+        subprocess.run([ingest, "convert", tmp / "in" / "dense.ome.tif", "-o",
+                        tmp / "root" / "bucket" / "dense.ome.zarr", "--quiet"], check=True)
+        s3, endpoint = start_s3(tmp / "root")
+        results = {}
+        try:
+            for rnd in range(args.rounds):
+                for name, exe in bins:
+                    p, base = serve(exe, endpoint)
+                    rng = random.Random(rnd)
+                    batch(base, "stored", rng)  # loads the image arrays
+                    for encoding in ["stored", "raw"]:
+                        for clients in [1, 4]:
+                            t0 = time.perf_counter()
+                            with concurrent.futures.ThreadPoolExecutor(clients) as pool:
+                                lat = list(pool.map(lambda _: batch(base, encoding, rng), range(24)))
+                            rate = 24 * 16 / (time.perf_counter() - t0)
+                            results.setdefault((name, encoding, clients), []).append(
+                                (statistics.median(lat), rate))
+                    results.setdefault((name, "threads"), []).append(threads(p.pid))
+                    p.terminate()
+                    p.wait()
+        finally:
+            s3.terminate()
+    for key, values in results.items():
+        if key[1] == "threads":
+            print(f"{key[0]}: threads after the load {values}")
+        else:
+            name, encoding, clients = key
+            print(f"{name}: {encoding}, {clients} client(s): median batch "
+                  f"{[round(a * 1e3, 1) for a, _ in values]} ms, bricks/s {[round(b) for _, b in values]}")
+
+
+if __name__ == "__main__":
+    main()
