@@ -76,7 +76,7 @@ pub(crate) struct AsyncStore {
 /// A served dataset's store: its keys for verbatim answers, and the same store as zarrs storage
 /// for the region index, batched bricks and the listing. An object store is reached through one
 /// client, which all use: batched bricks are read by futures on the server's runtime
-/// ([`AsyncStore`]); the metadata read once when a dataset's parts are loaded, by zarrs'
+/// (`AsyncStore`); the metadata read once when a dataset's parts are loaded, by zarrs'
 /// synchronous reads, which run their requests on that runtime from blocking tasks.
 pub struct DatasetStore {
     /// The keys.
