@@ -23,7 +23,8 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 /// is what it holds (see `residency_store::allocator`); set before `main`.
 #[used]
 #[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
-static RETURN_FREED_MEMORY: extern "C" fn() = residency_store::allocator::return_freed_memory;
+static RETURN_FREED_MEMORY: extern "C" fn() =
+    residency_store::allocator::return_freed_memory_for_serving;
 
 #[derive(Parser)]
 #[command(

@@ -23,11 +23,13 @@ use strum::VariantArray;
 #[global_allocator]
 static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
-/// mimalloc gives freed memory back and commits arenas page by page, so that the peak RSS
-/// stays within `--memory-limit` (see `residency_store::allocator`); set before `main`.
+/// mimalloc gives freed memory back a second after its last use (the next slab's buffers
+/// reuse it before then) and commits arenas page by page, so that the peak RSS stays within
+/// `--memory-limit` (see `residency_store::allocator`); set before `main`.
 #[used]
 #[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
-static RETURN_FREED_MEMORY: extern "C" fn() = residency_store::allocator::return_freed_memory;
+static RETURN_FREED_MEMORY: extern "C" fn() =
+    residency_store::allocator::return_freed_memory_for_converting;
 
 #[derive(Parser)]
 #[command(

@@ -1,19 +1,27 @@
 //! How the programs that read and write stores (`ingest`, `brickserver`) set up mimalloc, their
-//! allocator: memory that is freed and not reused goes back to the kernel within 10 ms (mimalloc
-//! v3 waits a second), and arenas are committed page by page, not up front. So the resident set
-//! is what the program holds: `ingest --memory-limit` bounds the peak RSS
-//! (`tests/python/test_memory_limit.py`; a 64 × 3000² tiled zlib BigTIFF at 256M peaked at
-//! 178 MiB with mimalloc's defaults, 128–132 MiB with these), and `brickserver` under load stays
-//! near nginx's size (`benchmarks/server_bench.py`; 61 MB peak with the defaults, 22 MB with
-//! these, on 2 cores at 16 and 256 connections).
+//! allocator: arenas are committed page by page, not up front, and memory that is freed and
+//! not reused goes back to the kernel after a delay that suits the program.
 //!
-//! Each binary runs [`return_freed_memory`] before `main`, from `.init_array`, so that it
-//! comes before mimalloc reserves its first arena:
+//! - `brickserver` ([`return_freed_memory_for_serving`]): within 10 ms (mimalloc v3 waits a
+//!   second), so its resident set is what it holds: under load it stays near nginx's size
+//!   (`benchmarks/server_bench.py`; 61 MB peak with mimalloc's defaults, 22 MB with these, on
+//!   2 cores at 16 and 256 connections).
+//! - `ingest` ([`return_freed_memory_for_converting`]): after a second. A conversion frees and
+//!   needs again the same large buffers once per slab (zarrs' encoded chunks and shards, a few
+//!   hundred milliseconds apart at 1024² planes); returned after 10 ms, each came back as fresh
+//!   pages that the kernel zeroed again. On a 2 GiB TIFF that was 60,000 minor faults against
+//!   25,000 and `clear_page_erms` 15 % of the samples against 1–3 % (`perf record`, 2-core
+//!   VM); `--memory-limit` still bounds the peak RSS (`tests/python/test_memory_limit.py`:
+//!   the same 0.61–0.68× of the limit, partitions 0.49× against 0.42×).
+//!
+//! Each binary runs its function before `main`, from `.init_array`, so that it comes before
+//! mimalloc reserves its first arena:
 //!
 //! ```ignore
 //! #[used]
 //! #[cfg_attr(target_os = "linux", unsafe(link_section = ".init_array"))]
-//! static RETURN_FREED_MEMORY: extern "C" fn() = residency_store::allocator::return_freed_memory;
+//! static RETURN_FREED_MEMORY: extern "C" fn() =
+//!     residency_store::allocator::return_freed_memory_for_serving;
 //! ```
 
 use std::ffi::{c_int, c_long};
@@ -26,21 +34,35 @@ use libmimalloc_sys as _;
 const ARENA_EAGER_COMMIT: c_int = 4;
 /// mimalloc's number for `mi_option_purge_delay`.
 const PURGE_DELAY: c_int = 15;
-/// Milliseconds before freed memory goes back to the kernel (0 costs measurably more system
-/// time in `ingest`: 4.9 s against 1.9 s on the BigTIFF above).
-const PURGE_DELAY_MS: c_long = 10;
+/// Milliseconds before a server's freed memory goes back to the kernel (0 costs measurably
+/// more system time in `ingest`: 4.9 s against 1.9 s on a 64 × 3000² tiled zlib BigTIFF).
+const SERVING_PURGE_DELAY_MS: c_long = 10;
+/// Milliseconds before a conversion's freed memory goes back to the kernel.
+const CONVERTING_PURGE_DELAY_MS: c_long = 1000;
 
 unsafe extern "C" {
     fn mi_option_set(option: c_int, value: c_long);
 }
 
-/// Sets mimalloc's options as this module says, unless mimalloc's own environment variables
-/// (`MIMALLOC_ARENA_EAGER_COMMIT`, `MIMALLOC_PURGE_DELAY`) set them. Meant to run before
-/// `main` (see the module's documentation).
-pub extern "C" fn return_freed_memory() {
+/// Sets mimalloc's options for a server (see the module's documentation). Meant to run
+/// before `main`.
+pub extern "C" fn return_freed_memory_for_serving() {
+    set_options(SERVING_PURGE_DELAY_MS);
+}
+
+/// Sets mimalloc's options for a conversion (see the module's documentation). Meant to run
+/// before `main`.
+pub extern "C" fn return_freed_memory_for_converting() {
+    set_options(CONVERTING_PURGE_DELAY_MS);
+}
+
+/// Commits arenas page by page and returns freed memory after `purge_delay_ms`, unless
+/// mimalloc's own environment variables (`MIMALLOC_ARENA_EAGER_COMMIT`,
+/// `MIMALLOC_PURGE_DELAY`) set them.
+fn set_options(purge_delay_ms: c_long) {
     for (option, name, value) in [
         (ARENA_EAGER_COMMIT, "MIMALLOC_ARENA_EAGER_COMMIT", 0),
-        (PURGE_DELAY, "MIMALLOC_PURGE_DELAY", PURGE_DELAY_MS),
+        (PURGE_DELAY, "MIMALLOC_PURGE_DELAY", purge_delay_ms),
     ] {
         if std::env::var_os(name).is_none() {
             // SAFETY: `mi_option_set` only stores the value of an option that takes an
