@@ -9,9 +9,9 @@
 //! - `ingest` ([`return_freed_memory_for_converting`]): after a second. A conversion frees and
 //!   needs again the same large buffers once per slab (zarrs' encoded chunks and shards, a few
 //!   hundred milliseconds apart at 1024² planes); returned after 10 ms, each came back as fresh
-//!   pages that the kernel zeroed again. On a 2 GiB TIFF that was 60,000 minor faults against
-//!   25,000 and `clear_page_erms` 15 % of the samples against 1–3 % (`perf record`, 2-core
-//!   VM); `--memory-limit` still bounds the peak RSS (`tests/python/test_memory_limit.py`:
+//!   pages that the kernel faulted in and zeroed again: a 2 GiB TIFF took 60,000–71,000 minor
+//!   faults, and takes 24,000–29,000 (`/usr/bin/time`, 2-core VM, 2026-11-28), for 10 MB more
+//!   peak RSS. `--memory-limit` still bounds the peak RSS (`tests/python/test_memory_limit.py`:
 //!   the same 0.61–0.68× of the limit, partitions 0.49× against 0.42×).
 //!
 //! Each binary runs its function before `main`, from `.init_array`, so that it comes before
