@@ -211,7 +211,7 @@ pub(crate) struct ImageArrays {
     /// Brick shape `z, y, x`.
     pub brick_shape: [u64; 3],
     /// An object store's level arrays read by futures, and the runtime they run on.
-    remote: Option<(AsyncBricks, tokio::runtime::Handle)>,
+    remote: Option<(Arc<AsyncBricks>, tokio::runtime::Handle)>,
 }
 
 impl ImageArrays {
@@ -223,7 +223,7 @@ impl ImageArrays {
         let pyramid = Pyramid::open(dataset.zarr(), dataset.shown())?;
         let remote = dataset.async_store.as_ref().map(|store| {
             let bricks = pyramid.async_bricks(store.storage.clone());
-            (bricks, store.runtime.clone())
+            (Arc::new(bricks), store.runtime.clone())
         });
         Ok(Self {
             data_type: pyramid.sample_type,
@@ -258,18 +258,17 @@ impl ImageArrays {
         }
     }
 
-    /// [`ImageArrays::read`] by futures from an object store (from a folder: that read).
+    /// [`ImageArrays::read`] by futures from an object store, through `bricks` (the arrays'
+    /// [`AsyncBricks`]).
     ///
     /// # Errors
     /// [`PyramidError`] naming the brick and its key when it cannot be read or decoded.
     async fn read_async(
         &self,
+        bricks: &AsyncBricks,
         at: &BrickAt,
         encoding: BrickEncoding,
     ) -> Result<Option<Vec<u8>>, PyramidError> {
-        let Some((bricks, _)) = &self.remote else {
-            return self.read(at, encoding);
-        };
         match encoding {
             BrickEncoding::Stored => self.pyramid.read_brick_encoded_async(bricks, at).await,
             BrickEncoding::Raw => not_fill(self.pyramid.read_brick_bytes_async(bricks, at).await?),
@@ -323,15 +322,16 @@ pub(crate) type BrickRead = Result<Option<Bytes>, BrickReadError>;
 
 /// Reads a batch's bricks, each from `cache` when kept there, else from the store and then
 /// kept: from a folder in parallel on the blocking pool, one brick per core; from an object
-/// store as futures on the store's runtime, [`REMOTE_READS`] in flight (no thread waits on
-/// the network). A brick that cannot be read is its error; the rest are still read.
+/// store as one task per brick on the store's runtime (the one its client runs on),
+/// [`REMOTE_READS`] in flight: no thread waits on the network, and the runtime's workers
+/// decode side by side. A brick that cannot be read is its error; the rest are still read.
 pub(crate) async fn read_bricks<C: BrickCache>(
     arrays: Arc<ImageArrays>,
     bricks: Arc<[BrickAt]>,
     encoding: BrickEncoding,
     cache: Arc<C>,
 ) -> Vec<BrickRead> {
-    let Some(runtime) = arrays.remote.as_ref().map(|(_, runtime)| runtime.clone()) else {
+    let Some((remote, runtime)) = arrays.remote.clone() else {
         let read_all = move || {
             bricks
                 .par_iter()
@@ -348,24 +348,24 @@ pub(crate) async fn read_bricks<C: BrickCache>(
             .await
             .expect("reading a batch panicked");
     };
-    let read_all = async move {
-        let (arrays, cache) = (&arrays, &cache);
-        futures::stream::iter(bricks.iter().copied())
-            .map(|at| async move {
-                arrays.check(&at)?;
-                if let Some(kept) = cache.get(&at) {
-                    return Ok(present(kept));
-                }
-                Ok(keep(&**cache, &at, arrays.read_async(&at, encoding).await?))
-            })
-            .buffered(REMOTE_READS)
-            .collect::<Vec<BrickRead>>()
-            .await
-    };
-    runtime
-        .spawn(read_all)
+    // One task per brick, so that the runtime's workers decode bricks side by side (zarrs
+    // decodes inside the future that reads).
+    let tasks = bricks.iter().copied().map(|at| {
+        let (arrays, remote, cache) = (arrays.clone(), remote.clone(), cache.clone());
+        runtime.spawn(async move {
+            arrays.check(&at)?;
+            if let Some(kept) = cache.get(&at) {
+                return Ok(present(kept));
+            }
+            let read = arrays.read_async(&remote, &at, encoding).await?;
+            Ok(keep(&*cache, &at, read))
+        })
+    });
+    futures::stream::iter(tasks)
+        .buffered(REMOTE_READS)
+        .map(|task| task.expect("reading a brick panicked"))
+        .collect()
         .await
-        .expect("reading a batch panicked")
 }
 
 /// A batch's document: its header and payload, from the bricks read ([`read_bricks`], in the

@@ -13,8 +13,8 @@ use residency_store::location::object_store::{
 };
 use residency_store::location::{
     BlockOn, LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation, async_object_storage,
+    synchronous,
 };
-use zarrs::storage::storage_adapter::async_to_sync::AsyncToSyncStorageAdapter;
 use zarrs::storage::{AsyncReadableStorageTraits, ReadableListableStorageTraits, StoreKey};
 
 use crate::store_keys::{KeyError, RootDir, StoreFailure, checked_key, resolve};
@@ -63,8 +63,8 @@ pub(crate) enum Keys {
 }
 
 /// An object-store dataset's storage for reads by futures: zarrs' async storage over the
-/// dataset's one client, and the runtime its requests run on (the server's multi-threaded
-/// one, which makes the object-store requests).
+/// dataset's one client, and the runtime its requests run on (the one [`DatasetStore::open`]
+/// ran on: in the binary, the multi-threaded runtime that makes the object-store requests).
 #[derive(Clone)]
 pub(crate) struct AsyncStore {
     /// The store's keys as zarrs' async storage.
@@ -75,9 +75,10 @@ pub(crate) struct AsyncStore {
 
 /// A served dataset's store: its keys for verbatim answers, and the same store as zarrs storage
 /// for the region index, batched bricks and the listing. An object store is reached through one
-/// client, which all use: batched bricks are read by futures on the server's runtime
-/// (`AsyncStore`); the metadata read once when a dataset's parts are loaded, by zarrs'
-/// synchronous reads, which run their requests on that runtime from blocking tasks.
+/// client, which all use: batched bricks are read by futures on the runtime the store was
+/// opened on (`AsyncStore`); what a dataset's loads read (the pyramid's metadata, the region
+/// index's arrays: on first use, and again after a failed load) and the small documents, by
+/// zarrs' synchronous API from blocking tasks, their requests run on that runtime.
 pub struct DatasetStore {
     /// The keys.
     pub(crate) keys: Keys,
@@ -130,9 +131,7 @@ impl DatasetStore {
                     location: shown.clone(),
                 })?;
             let storage = async_object_storage(store.clone(), &prefix);
-            let zarr: Arc<dyn ReadableListableStorageTraits> = Arc::new(
-                AsyncToSyncStorageAdapter::new(storage.clone(), BlockOn::new(runtime.clone())),
-            );
+            let zarr = synchronous(storage.clone(), BlockOn::new(runtime.clone()));
             let async_store = AsyncStore { storage, runtime };
             let keys = Keys::Object(ObjectKeys { store, prefix });
             (keys, zarr, Some(async_store))

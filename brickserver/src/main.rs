@@ -223,7 +223,8 @@ fn main() -> ExitCode {
                 runtime: None,
             };
             // The runtime that starts the server (opening the datasets on its blocking threads)
-            // and runs object-store requests; connections are served on threads of their own
+            // and runs object-store requests (batched bricks read from an object store are
+            // its tasks, decoded on its workers); connections are served on threads of their own
             // (`serve_on_threads`), whose runtimes' blocking threads read files the page cache
             // does not hold and run zarrs' reads. Both pools are capped at BLOCKING_THREADS:
             // disk- and network-bound work, so a few dozen keep a disk or a store busy, where

@@ -23,8 +23,8 @@ use crate::source::PlaneRegion;
 /// Bytes a pass holds whatever its shape: the program and its libraries (about 13 MiB
 /// resident), thread stacks, the reader thread, zarrs' and the decoders' buffers (a strip or
 /// tile) and what the allocator has not yet handed back (`ingest` makes mimalloc purge freed
-/// memory within 10 ms). Measured by `tests/python/test_memory_limit.py`, whose passes peak
-/// at about 0.6× their limit.
+/// memory a second after it was last used). Measured by `tests/python/test_memory_limit.py`,
+/// whose passes peak at about 0.6× their limit.
 pub const FIXED_BYTES: u64 = 64 << 20;
 
 /// How a pass cuts its level-0 planes into columns.

@@ -12,7 +12,8 @@
 //!   pages that the kernel faulted in and zeroed again: a 2 GiB TIFF took 60,000–71,000 minor
 //!   faults, and takes 24,000–29,000 (`/usr/bin/time`, 2-core VM, 2026-11-28), for 10 MB more
 //!   peak RSS. `--memory-limit` still bounds the peak RSS (`tests/python/test_memory_limit.py`:
-//!   the same 0.61–0.68× of the limit, partitions 0.49× against 0.42×).
+//!   the same 0.61–0.68× of the limit, partitions 0.49× against 0.42×). A delay of 0 cost
+//!   far more: 4.9 s of system time against 1.9 s on a 64 × 3000² tiled zlib BigTIFF.
 //!
 //! Each binary runs its function before `main`, from `.init_array`, so that it comes before
 //! mimalloc reserves its first arena:
@@ -34,10 +35,10 @@ use libmimalloc_sys as _;
 const ARENA_EAGER_COMMIT: c_int = 4;
 /// mimalloc's number for `mi_option_purge_delay`.
 const PURGE_DELAY: c_int = 15;
-/// Milliseconds before a server's freed memory goes back to the kernel (0 costs measurably
-/// more system time in `ingest`: 4.9 s against 1.9 s on a 64 × 3000² tiled zlib BigTIFF).
+/// Milliseconds before a server's freed memory goes back to the kernel.
 const SERVING_PURGE_DELAY_MS: c_long = 10;
-/// Milliseconds before a conversion's freed memory goes back to the kernel.
+/// Milliseconds before a conversion's freed memory goes back to the kernel: mimalloc v3's own
+/// default, set here because v2 (which `libmimalloc-sys` builds today) waits 10 ms.
 const CONVERTING_PURGE_DELAY_MS: c_long = 1000;
 
 unsafe extern "C" {

@@ -321,10 +321,16 @@ pub fn object_storage(
     prefix: &ObjectPath,
     block_on: BlockOn,
 ) -> Arc<dyn ReadableListableStorageTraits> {
-    Arc::new(AsyncToSyncStorageAdapter::new(
-        async_object_storage(store, prefix),
-        block_on,
-    ))
+    synchronous(async_object_storage(store, prefix), block_on)
+}
+
+/// `storage` read synchronously, its requests run by `block_on`: for callers that also read
+/// the same storage by futures ([`async_object_storage`]).
+pub fn synchronous(
+    storage: Arc<RangedObjectStore>,
+    block_on: BlockOn,
+) -> Arc<dyn ReadableListableStorageTraits> {
+    Arc::new(AsyncToSyncStorageAdapter::new(storage, block_on))
 }
 
 /// The keys under `prefix` in `store` as async zarrs storage (one ranged `GET` per read, see

@@ -9,6 +9,7 @@ use zarrs::array::{
     Array, ArrayBytes, ArrayShardedReadableExt, ArrayShardedReadableExtCache,
     AsyncArrayShardedReadableExt, AsyncArrayShardedReadableExtCache, CodecOptions, ElementOwned,
 };
+use zarrs::storage::byte_range::ByteRange;
 use zarrs::storage::{AsyncReadableStorageTraits, ReadableStorageTraits, StoreKey};
 
 use residency_schemas::SampleType;
@@ -129,6 +130,16 @@ pub struct AsyncBricks {
         Array<dyn AsyncReadableStorageTraits>,
         AsyncArrayShardedReadableExtCache,
     )>,
+}
+
+/// Whether the byte range zarrs gives for an inner chunk is the sharding codec's mark of one
+/// that is not stored (offset and length both `u64::MAX`). zarrs 0.23's
+/// `retrieve_encoded_subchunk` does not check for the mark: it asks the store for the bytes
+/// from offset `u64::MAX` (a capacity-overflow panic from a folder, a refused range from an
+/// object store). The range it reports for the mark starts at `u64::MAX` (its end wraps; a
+/// build with overflow checks panics inside zarrs instead).
+fn not_stored(range: Option<&ByteRange>) -> bool {
+    matches!(range, None | Some(ByteRange::FromStart(u64::MAX, _)))
 }
 
 /// Shard indices a level's cache holds before it is emptied (a shard index of a 64³-brick
@@ -283,6 +294,13 @@ impl<S: ?Sized> Pyramid<S> {
         let (array, shards) = Self::async_level(bricks, at).await;
         let indices = self.indices(at);
         if shards.array_is_sharded() {
+            let range = array
+                .async_subchunk_byte_range(shards, &indices)
+                .await
+                .map_err(|e| self.brick_error(at, e))?;
+            if not_stored(range.as_ref()) {
+                return Ok(None);
+            }
             array
                 .async_retrieve_encoded_subchunk(shards, &indices)
                 .await
@@ -477,6 +495,13 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
         Self::trim_shard_cache(level);
         let indices = self.indices(at);
         if level.shards.array_is_sharded() {
+            let range = level
+                .array
+                .subchunk_byte_range(&level.shards, &indices)
+                .map_err(|e| self.brick_error(at, e))?;
+            if not_stored(range.as_ref()) {
+                return Ok(None);
+            }
             level
                 .array
                 .retrieve_encoded_subchunk(&level.shards, &indices)

@@ -17,8 +17,8 @@ const WINDOW: (u32, u32) = (320, 240);
 const PANEL_ROWS: usize = 100;
 
 /// Runs `viewer view ARGS --present PATH` on `display` until its view settles and the window
-/// holds still, takes a screenshot, quits it with `q`, and returns its stderr (logged at info) and the window's
-/// pixels below the panel.
+/// holds still, takes a screenshot, quits it with `q`, and returns its stderr (logged at info)
+/// and the window's pixels below the panel.
 fn shown(display: &str, args: &[&str], present: &str) -> (String, Vec<[u8; 3]>) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_viewer"));
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
