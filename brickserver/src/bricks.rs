@@ -221,7 +221,7 @@ impl ImageArrays {
     /// When the store cannot be opened or its pyramid is unusable (see [`Pyramid::open`]).
     pub fn open(dataset: &DatasetStore) -> Result<Self, PyramidError> {
         let pyramid = Pyramid::open(dataset.zarr(), dataset.shown())?;
-        let remote = dataset.async_store.as_ref().map(|store| {
+        let remote = dataset.async_store().map(|store| {
             let bricks = pyramid.async_bricks(store.storage.clone());
             (Arc::new(bricks), store.runtime.clone())
         });
@@ -254,7 +254,7 @@ impl ImageArrays {
     fn read(&self, at: &BrickAt, encoding: BrickEncoding) -> Result<Option<Vec<u8>>, PyramidError> {
         match encoding {
             BrickEncoding::Stored => self.pyramid.read_brick_encoded(at),
-            BrickEncoding::Raw => not_fill(self.pyramid.read_brick_bytes(at)?),
+            BrickEncoding::Raw => Ok(not_fill(self.pyramid.read_brick_bytes(at)?)),
         }
     }
 
@@ -271,18 +271,16 @@ impl ImageArrays {
     ) -> Result<Option<Vec<u8>>, PyramidError> {
         match encoding {
             BrickEncoding::Stored => self.pyramid.read_brick_encoded_async(bricks, at).await,
-            BrickEncoding::Raw => not_fill(self.pyramid.read_brick_bytes_async(bricks, at).await?),
+            BrickEncoding::Raw => Ok(not_fill(
+                self.pyramid.read_brick_bytes_async(bricks, at).await?,
+            )),
         }
     }
 }
 
 /// Decoded bytes, or `None` when they are all the fill value (zero).
-#[expect(
-    clippy::unnecessary_wraps,
-    reason = "the Ok of both arms of ImageArrays::read"
-)]
-fn not_fill(raw: Vec<u8>) -> Result<Option<Vec<u8>>, PyramidError> {
-    Ok((!raw.iter().all(|&b| b == 0)).then_some(raw))
+fn not_fill(raw: Vec<u8>) -> Option<Vec<u8>> {
+    (!raw.iter().all(|&b| b == 0)).then_some(raw)
 }
 
 /// Where a batch's bricks are kept between requests (the server's memory cache).
@@ -297,6 +295,15 @@ pub(crate) trait BrickCache: Send + Sync + 'static {
 /// A brick's bytes as a batch answers them: `None` for an empty brick.
 fn present(bytes: Bytes) -> Option<Bytes> {
     (!bytes.is_empty()).then_some(bytes)
+}
+
+/// A brick's answer without reading the store: its error when the dataset has no such brick,
+/// or the brick kept in `cache`; `None` when it must be read.
+fn known(arrays: &ImageArrays, cache: &impl BrickCache, at: &BrickAt) -> Option<BrickRead> {
+    if let Err(e) = arrays.check(at) {
+        return Some(Err(e.into()));
+    }
+    cache.get(at).map(|kept| Ok(present(kept)))
 }
 
 /// Keeps a brick just read (`None`: empty) in `cache`, and gives it back as a batch answers it.
@@ -335,12 +342,9 @@ pub(crate) async fn read_bricks<C: BrickCache>(
         let read_all = move || {
             bricks
                 .par_iter()
-                .map(|at| -> BrickRead {
-                    arrays.check(at)?;
-                    if let Some(kept) = cache.get(at) {
-                        return Ok(present(kept));
-                    }
-                    Ok(keep(&*cache, at, arrays.read(at, encoding)?))
+                .map(|at| {
+                    known(&arrays, &*cache, at)
+                        .unwrap_or_else(|| Ok(keep(&*cache, at, arrays.read(at, encoding)?)))
                 })
                 .collect()
         };
@@ -353,9 +357,8 @@ pub(crate) async fn read_bricks<C: BrickCache>(
     let tasks = bricks.iter().copied().map(|at| {
         let (arrays, remote, cache) = (arrays.clone(), remote.clone(), cache.clone());
         runtime.spawn(async move {
-            arrays.check(&at)?;
-            if let Some(kept) = cache.get(&at) {
-                return Ok(present(kept));
+            if let Some(answer) = known(&arrays, &*cache, &at) {
+                return answer;
             }
             let read = arrays.read_async(&remote, &at, encoding).await?;
             Ok(keep(&*cache, &at, read))

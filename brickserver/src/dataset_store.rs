@@ -52,6 +52,8 @@ pub enum OpenError {
 pub(crate) struct ObjectKeys {
     store: Arc<dyn ObjectStore>,
     prefix: ObjectPath,
+    /// The same keys read by futures, for batched bricks.
+    reads: AsyncStore,
 }
 
 /// Where a dataset's keys are read from.
@@ -83,8 +85,6 @@ pub struct DatasetStore {
     /// The keys.
     pub(crate) keys: Keys,
     zarr: Arc<dyn ReadableListableStorageTraits>,
-    /// Object stores only: the store read by futures.
-    pub(crate) async_store: Option<AsyncStore>,
     shown: String,
 }
 
@@ -115,13 +115,13 @@ impl DatasetStore {
         object_store: Option<&ObjectStoreAt>,
     ) -> Result<Self, OpenError> {
         let shown = location.to_string();
-        let (keys, zarr, async_store) = if let Some(path) = location.folder() {
+        let (keys, zarr) = if let Some(path) = location.folder() {
             let root = RootDir::open(path).map_err(|source| OpenError::Folder {
                 location: shown.clone(),
                 source,
             })?;
             let zarr = location.open_readable(&ObjectStoreOptions::default())?;
-            (Keys::Folder(root), zarr, None)
+            (Keys::Folder(root), zarr)
         } else {
             let (store, prefix) = object_store.cloned().ok_or_else(|| OpenError::NoClient {
                 location: shown.clone(),
@@ -132,16 +132,23 @@ impl DatasetStore {
                 })?;
             let storage = async_object_storage(store.clone(), &prefix);
             let zarr = synchronous(storage.clone(), BlockOn::new(runtime.clone()));
-            let async_store = AsyncStore { storage, runtime };
-            let keys = Keys::Object(ObjectKeys { store, prefix });
-            (keys, zarr, Some(async_store))
+            let reads = AsyncStore { storage, runtime };
+            let keys = Keys::Object(ObjectKeys {
+                store,
+                prefix,
+                reads,
+            });
+            (keys, zarr)
         };
-        Ok(Self {
-            keys,
-            zarr,
-            async_store,
-            shown,
-        })
+        Ok(Self { keys, zarr, shown })
+    }
+
+    /// An object store's keys read by futures; `None` for a folder.
+    pub(crate) fn async_store(&self) -> Option<&AsyncStore> {
+        match &self.keys {
+            Keys::Object(keys) => Some(&keys.reads),
+            Keys::Folder(_) => None,
+        }
     }
 
     /// The store as zarrs storage (synchronous: call it from blocking code).

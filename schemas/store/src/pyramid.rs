@@ -124,12 +124,15 @@ pub struct PyramidLevel<S: ?Sized> {
 /// bricks as the synchronous reads, with no thread held while a request is on the network.
 /// Made by [`Pyramid::async_bricks`].
 pub struct AsyncBricks {
-    /// Per level, finest first: the array over the async storage and zarrs' cache of its
-    /// shard indices.
-    levels: Vec<(
-        Array<dyn AsyncReadableStorageTraits>,
-        AsyncArrayShardedReadableExtCache,
-    )>,
+    /// Levels, finest first.
+    levels: Vec<AsyncLevel>,
+}
+
+/// One level of [`AsyncBricks`]: the array over the async storage, and zarrs' cache of its
+/// shard indices.
+struct AsyncLevel {
+    array: Array<dyn AsyncReadableStorageTraits>,
+    shards: AsyncArrayShardedReadableExtCache,
 }
 
 /// Whether the byte range zarrs gives for an inner chunk is the sharding codec's mark of one
@@ -241,25 +244,31 @@ impl<S: ?Sized> Pyramid<S> {
                 .map(|level| {
                     let array = level.array.with_storage(store.clone());
                     let shards = AsyncArrayShardedReadableExtCache::new(&array);
-                    (array, shards)
+                    AsyncLevel { array, shards }
                 })
                 .collect(),
         }
     }
 
     /// Level `at.level` of `bricks`, its shard-index cache kept bounded.
-    async fn async_level<'a>(
-        bricks: &'a AsyncBricks,
-        at: &BrickIndex,
-    ) -> &'a (
-        Array<dyn AsyncReadableStorageTraits>,
-        AsyncArrayShardedReadableExtCache,
-    ) {
+    async fn async_level<'a>(bricks: &'a AsyncBricks, at: &BrickIndex) -> &'a AsyncLevel {
         let level = &bricks.levels[at.level as usize];
-        if level.1.len().await > SHARD_INDICES_KEPT {
-            level.1.clear().await;
+        if level.shards.len().await > SHARD_INDICES_KEPT {
+            level.shards.clear().await;
         }
         level
+    }
+
+    /// A decoded brick's samples as little-endian bytes.
+    fn fixed_bytes(
+        &self,
+        at: &BrickIndex,
+        bytes: ArrayBytes<'static>,
+    ) -> Result<Vec<u8>, PyramidError> {
+        Ok(bytes
+            .into_fixed()
+            .map_err(|e| self.brick_error(at, e))?
+            .into_owned())
     }
 
     /// [`Pyramid::read_brick_bytes`] through `bricks` (made by [`Pyramid::async_bricks`]).
@@ -271,15 +280,12 @@ impl<S: ?Sized> Pyramid<S> {
         bricks: &AsyncBricks,
         at: &BrickIndex,
     ) -> Result<Vec<u8>, PyramidError> {
-        let (array, shards) = Self::async_level(bricks, at).await;
-        let bytes: ArrayBytes<'static> = array
+        let AsyncLevel { array, shards } = Self::async_level(bricks, at).await;
+        let bytes = array
             .async_retrieve_subchunk_opt(shards, &self.indices(at), &CodecOptions::default())
             .await
             .map_err(|e| self.brick_error(at, e))?;
-        Ok(bytes
-            .into_fixed()
-            .map_err(|e| self.brick_error(at, e))?
-            .into_owned())
+        self.fixed_bytes(at, bytes)
     }
 
     /// [`Pyramid::read_brick_encoded`] through `bricks` (made by [`Pyramid::async_bricks`]).
@@ -291,7 +297,7 @@ impl<S: ?Sized> Pyramid<S> {
         bricks: &AsyncBricks,
         at: &BrickIndex,
     ) -> Result<Option<Vec<u8>>, PyramidError> {
-        let (array, shards) = Self::async_level(bricks, at).await;
+        let AsyncLevel { array, shards } = Self::async_level(bricks, at).await;
         let indices = self.indices(at);
         if shards.array_is_sharded() {
             let range = array
@@ -475,14 +481,11 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
     pub fn read_brick_bytes(&self, at: &BrickIndex) -> Result<Vec<u8>, PyramidError> {
         let level = &self.levels[at.level as usize];
         Self::trim_shard_cache(level);
-        let bytes: ArrayBytes<'static> = level
+        let bytes = level
             .array
             .retrieve_subchunk_opt(&level.shards, &self.indices(at), &CodecOptions::default())
             .map_err(|e| self.brick_error(at, e))?;
-        Ok(bytes
-            .into_fixed()
-            .map_err(|e| self.brick_error(at, e))?
-            .into_owned())
+        self.fixed_bytes(at, bytes)
     }
 
     /// A brick's bytes exactly as stored (the chunk file, or the inner chunk's bytes inside its
