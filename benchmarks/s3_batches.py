@@ -12,20 +12,20 @@ load. Without `--bin`, the release build's brickserver alone. s3s-fs comes from
 scripts/test.sh.
 """
 
-import argparse
 import concurrent.futures
 import random
 import statistics
 import subprocess
 import sys
-import tempfile
 import time
 import urllib.request
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "python"))
-from support.s3 import env, free_port, start_s3  # noqa: E402
+sys.path.insert(0, str(ROOT / "benchmarks"))
+import s3_ab  # noqa: E402
+from support.s3 import env, free_port  # noqa: E402
 
 BRICKS = [f"0,0,{z},{y},{x}" for z in range(4) for y in range(4) for x in range(4)]
 
@@ -64,39 +64,24 @@ def threads(pid):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--bin", action="append", default=[], help="NAME=PATH of a brickserver")
-    ap.add_argument("--rounds", type=int, default=3)
-    args = ap.parse_args()
-    bins = [b.split("=", 1) for b in args.bin] or [["release", str(ROOT / "target/release/brickserver")]]
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
-        ingest = ROOT / "target" / "release" / "ingest"
-        subprocess.run([ingest, "sample", "--kind", "dense", "-o", tmp / "in", "--quiet"], check=True)
-        (tmp / "root" / "bucket").mkdir(parents=True)
-        subprocess.run([ingest, "convert", tmp / "in" / "dense.ome.tif", "-o",
-                        tmp / "root" / "bucket" / "dense.ome.zarr", "--quiet"], check=True)
-        s3, endpoint = start_s3(tmp / "root")
-        results = {}
-        try:
-            for rnd in range(args.rounds):
-                for name, exe in bins:
-                    p, base = serve(exe, endpoint)
-                    rng = random.Random(rnd)
-                    batch(base, "stored", rng)  # loads the image arrays
-                    for encoding in ["stored", "raw"]:
-                        for clients in [1, 4]:
-                            t0 = time.perf_counter()
-                            with concurrent.futures.ThreadPoolExecutor(clients) as pool:
-                                lat = list(pool.map(lambda _: batch(base, encoding, rng), range(24)))
-                            rate = 24 * 16 / (time.perf_counter() - t0)
-                            results.setdefault((name, encoding, clients), []).append(
-                                (statistics.median(lat), rate))
-                    results.setdefault((name, "threads"), []).append(threads(p.pid))
-                    p.terminate()
-                    p.wait()
-        finally:
-            s3.terminate()
+    args = s3_ab.parser(__doc__, "brickserver").parse_args()
+    results = {}
+    with s3_ab.dense_store_in_s3() as (_, endpoint):
+        for rnd, name, exe in s3_ab.rounds(args, "brickserver"):
+            p, base = serve(exe, endpoint)
+            rng = random.Random(rnd)
+            batch(base, "stored", rng)  # loads the image arrays
+            for encoding in ["stored", "raw"]:
+                for clients in [1, 4]:
+                    t0 = time.perf_counter()
+                    with concurrent.futures.ThreadPoolExecutor(clients) as pool:
+                        lat = list(pool.map(lambda _: batch(base, encoding, rng), range(24)))
+                    rate = 24 * 16 / (time.perf_counter() - t0)
+                    results.setdefault((name, encoding, clients), []).append(
+                        (statistics.median(lat), rate))
+            results.setdefault((name, "threads"), []).append(threads(p.pid))
+            p.terminate()
+            p.wait()
     for key, values in results.items():
         if key[1] == "threads":
             print(f"{key[0]}: threads after the load {values}")

@@ -15,14 +15,10 @@ use futures::StreamExt;
 use rayon::prelude::*;
 use residency_schemas::SampleType;
 use residency_schemas::wire::{BrickBatchHeader, BrickEncoding, BrickEntry, BrickStatus};
-use residency_store::pyramid::{AsyncBricks, Pyramid, PyramidError};
+use residency_store::pyramid::{AsyncBricks, Pyramid, PyramidError, REMOTE_READS};
 use zarrs::storage::ReadableListableStorageTraits;
 
 use crate::dataset_store::DatasetStore;
-
-/// Bricks of one batch read at once from an object store: such reads wait on the network,
-/// not the CPU, so they are futures, this many in flight, rather than one per core.
-const REMOTE_READS: usize = 32;
 
 /// Caps on one batch.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

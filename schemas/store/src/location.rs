@@ -17,7 +17,10 @@
 //! runtime ([`BlockOn`]). The synchronous functions ([`StoreLocation::exists`],
 //! [`StoreLocation::open_readable`], publishing and downloading) run theirs on the runtime the
 //! caller gives in [`ObjectStoreOptions::runtime`] (synchronous programs start one with
-//! [`ObjectStoreOptions::for_location`]); this crate keeps no runtime of its own.
+//! [`ObjectStoreOptions::for_location`]); this crate keeps no runtime of its own. A synchronous
+//! reader of many bricks (the viewer) opens the store with
+//! [`StoreLocation::open_readable_and_async`] and reads bricks many at once by futures on that
+//! runtime ([`BlockOn::run_all`]).
 
 use std::fmt;
 use std::path::{Path, PathBuf};
@@ -29,10 +32,10 @@ use futures::{StreamExt, TryStreamExt};
 use crate::aws_profile::{Profile, ProfileError};
 use crate::ranged::RangedObjectStore;
 use zarrs::filesystem::{FilesystemStore, FilesystemStoreCreateError};
-use zarrs::storage::ReadableListableStorageTraits;
 use zarrs::storage::storage_adapter::async_to_sync::{
     AsyncToSyncBlockOn, AsyncToSyncStorageAdapter,
 };
+use zarrs::storage::{AsyncReadableStorageTraits, ReadableListableStorageTraits};
 use zarrs_object_store::object_store::ClientConfigKey;
 use zarrs_object_store::object_store::aws::{AmazonS3, AmazonS3Builder, AmazonS3ConfigKey};
 use zarrs_object_store::object_store::path::Path as ObjectPath;
@@ -226,15 +229,19 @@ pub struct ObjectStoreOptions {
     pub endpoint: Option<String>,
     /// Runs object-store requests for the synchronous functions ([`StoreLocation::exists`],
     /// [`StoreLocation::upload_folder`], [`StoreLocation::download_prefix`],
-    /// [`StoreLocation::open_readable`]); without one they refuse object-store locations
+    /// [`StoreLocation::open_readable`], [`StoreLocation::open_readable_and_async`], whose async
+    /// storage's reads run on it by [`BlockOn::run_all`]); without one they refuse object-store locations
     /// ([`LocationError::NoRuntime`]). Folders need none, and asynchronous callers use
     /// [`StoreLocation::exists_in`] and [`object_storage`] on their own runtime instead.
     pub runtime: Option<BlockOn>,
 }
 
-/// Worker threads of the runtime [`ObjectStoreOptions::for_location`] starts: object-store
-/// requests wait on the network, so two keep many in flight.
-const REQUEST_THREADS: usize = 2;
+/// Worker threads of the runtime [`ObjectStoreOptions::for_location`] starts: one per core, at
+/// least two. Requests wait on the network, so a few workers keep many in flight; readers that
+/// decode what they read on these workers ([`BlockOn::run_all`]) decode on every core.
+fn request_threads() -> usize {
+    std::thread::available_parallelism().map_or(2, |n| n.get().max(2))
+}
 
 impl ObjectStoreOptions {
     /// Options for a synchronous program that reaches `location`: `endpoint`, and for an
@@ -249,12 +256,14 @@ impl ObjectStoreOptions {
     ) -> Result<Self, LocationError> {
         let runtime = match location {
             StoreLocation::Folder(_) => None,
-            StoreLocation::S3 { .. } => Some(BlockOn::start(REQUEST_THREADS).map_err(
-                |source| LocationError::Runtime {
-                    location: location.to_string(),
-                    source,
-                },
-            )?),
+            StoreLocation::S3 { .. } => {
+                Some(BlockOn::start(request_threads()).map_err(|source| {
+                    LocationError::Runtime {
+                        location: location.to_string(),
+                        source,
+                    }
+                })?)
+            }
         };
         Ok(Self { endpoint, runtime })
     }
@@ -305,12 +314,48 @@ impl BlockOn {
             _started: Some(Arc::new(runtime)),
         })
     }
+
+    /// Runs `tasks` on the runtime, one runtime task each and at most `in_flight` at once, from
+    /// synchronous code (as [`BlockOn`]), and gives their outputs in the order of `tasks`. The
+    /// runtime's workers run them side by side: what a task does after its request (decoding)
+    /// does not wait for the others.
+    ///
+    /// # Panics
+    /// With a task's own panic, when one panics.
+    pub fn run_all<F>(&self, tasks: impl IntoIterator<Item = F>, in_flight: usize) -> Vec<F::Output>
+    where
+        F: Future + Send + 'static,
+        F::Output: Send + 'static,
+    {
+        // Lazily spawned: no more than `in_flight` tasks exist at once.
+        let spawned = futures::stream::iter(tasks).map(|task| self.handle.spawn(task));
+        self.handle.block_on(
+            spawned
+                .buffered(in_flight.max(1))
+                .map(|done| match done {
+                    Ok(output) => output,
+                    Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
+                    Err(e) => panic!("an object-store task was cancelled: {e}"),
+                })
+                .collect(),
+        )
+    }
 }
 
 impl AsyncToSyncBlockOn for BlockOn {
     fn block_on<F: Future>(&self, future: F) -> F::Output {
         self.handle.block_on(future)
     }
+}
+
+/// An object store's keys as zarrs' async storage, and the runtime its requests run on (see
+/// [`StoreLocation::open_readable_and_async`]).
+#[derive(Clone)]
+pub struct AsyncReadable {
+    /// The keys, one ranged `GET` per read ([`RangedObjectStore`]).
+    pub storage: Arc<dyn AsyncReadableStorageTraits>,
+    /// The runtime that runs the requests (from [`ObjectStoreOptions::runtime`]).
+    pub runtime: BlockOn,
 }
 
 /// The keys under `prefix` in `store` as synchronous zarrs storage, its requests made by that
@@ -652,12 +697,34 @@ impl StoreLocation {
         &self,
         options: &ObjectStoreOptions,
     ) -> Result<Arc<dyn ReadableListableStorageTraits>, LocationError> {
+        Ok(self.open_readable_and_async(options)?.0)
+    }
+
+    /// [`StoreLocation::open_readable`], and for an object store the same keys through the same
+    /// client as async storage, with the runtime that runs its requests: for a synchronous
+    /// reader that reads its metadata through the first and many bricks at once by futures
+    /// through the second ([`BlockOn::run_all`]). A folder has no async storage (`None`).
+    ///
+    /// # Errors
+    /// As [`StoreLocation::open_readable`].
+    pub fn open_readable_and_async(
+        &self,
+        options: &ObjectStoreOptions,
+    ) -> Result<
+        (
+            Arc<dyn ReadableListableStorageTraits>,
+            Option<AsyncReadable>,
+        ),
+        LocationError,
+    > {
         Ok(match self {
-            Self::Folder(path) => Arc::new(folder_store(path)?),
+            Self::Folder(path) => (Arc::new(folder_store(path)?), None),
             Self::S3 { .. } => {
-                let block_on = options.runtime_for(self)?.clone();
+                let runtime = options.runtime_for(self)?.clone();
                 let (s3, prefix) = self.s3_client(options)?;
-                object_storage(Arc::new(s3), &ObjectPath::from(prefix), block_on)
+                let storage = async_object_storage(Arc::new(s3), &ObjectPath::from(prefix));
+                let sync = synchronous(storage.clone(), runtime.clone());
+                (sync, Some(AsyncReadable { storage, runtime }))
             }
         })
     }
@@ -774,6 +841,31 @@ fn folder_store(path: &Path) -> Result<FilesystemStore, LocationError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn run_all_keeps_the_order_and_at_most_in_flight_tasks_at_once() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let runtime = BlockOn::start(2).unwrap();
+        let (now, most) = (Arc::new(AtomicUsize::new(0)), Arc::new(AtomicUsize::new(0)));
+        let tasks = (0..20u64).map(|i| {
+            let (now, most) = (now.clone(), most.clone());
+            async move {
+                most.fetch_max(now.fetch_add(1, Ordering::SeqCst) + 1, Ordering::SeqCst);
+                // Later tasks finish first: the order of the outputs is the order of the tasks.
+                tokio::time::sleep(std::time::Duration::from_millis(40 - 2 * i)).await;
+                now.fetch_sub(1, Ordering::SeqCst);
+                i * 10
+            }
+        });
+        let out = runtime.run_all(tasks, 5);
+        assert_eq!(out, (0..20).map(|i| i * 10).collect::<Vec<_>>());
+        assert_eq!(most.load(Ordering::SeqCst), 5);
+        let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            runtime.run_all([async { panic!("brick 7 is cursed") }], 1)
+        }));
+        let message = panicked.unwrap_err();
+        assert_eq!(message.downcast_ref::<&str>(), Some(&"brick 7 is cursed"));
+    }
 
     #[test]
     fn locations_parse_and_print() {

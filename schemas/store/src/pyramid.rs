@@ -149,6 +149,11 @@ fn not_stored(range: Option<&ByteRange>) -> bool {
 /// shard of 8³ bricks is 8 KiB).
 const SHARD_INDICES_KEPT: usize = 4096;
 
+/// Bricks of one batch read at once from an object store (brickserver's batches, the viewer's
+/// fetches): such reads wait on the network, not the CPU, so they are futures, this many in
+/// flight, rather than one per core.
+pub const REMOTE_READS: usize = 32;
+
 /// An OME-Zarr image's pyramid, opened for brick reads.
 pub struct Pyramid<S: ?Sized> {
     /// The store, for reading other arrays of the image (such as the region metadata's).
@@ -269,6 +274,22 @@ impl<S: ?Sized> Pyramid<S> {
             .into_fixed()
             .map_err(|e| self.brick_error(at, e))?
             .into_owned())
+    }
+
+    /// [`Pyramid::read_brick`] through `bricks` (made by [`Pyramid::async_bricks`]).
+    ///
+    /// # Errors
+    /// [`PyramidError::Storage`] naming the brick when it cannot be read or decoded as `T`.
+    pub async fn read_brick_async<T: ElementOwned + Send + Sync>(
+        &self,
+        bricks: &AsyncBricks,
+        at: &BrickIndex,
+    ) -> Result<Vec<T>, PyramidError> {
+        let AsyncLevel { array, shards } = Self::async_level(bricks, at).await;
+        array
+            .async_retrieve_subchunk_opt(shards, &self.indices(at), &CodecOptions::default())
+            .await
+            .map_err(|e| self.brick_error(at, e))
     }
 
     /// [`Pyramid::read_brick_bytes`] through `bricks` (made by [`Pyramid::async_bricks`]).

@@ -124,11 +124,12 @@ class FaultProxy(BackgroundServer):
         self._lock = threading.Lock()
         self._counts = dict.fromkeys(COUNTERS, 0)
         self._in_flight = 0
+        self._paths = []
         self._max_in_flight = 0
         self._mode = "faults"
         self._fail_kind = "503"
         self.set_mode(mode, fail_kind)
-        self._server = ThreadingHTTPServer(("127.0.0.1", port), _handler_for(self))
+        self._server = _Server(("127.0.0.1", port), _handler_for(self))
         self._server.daemon_threads = True
         self.port = self._server.server_address[1]
         self.url = f"http://127.0.0.1:{self.port}"
@@ -156,6 +157,11 @@ class FaultProxy(BackgroundServer):
         counts["mode"] = mode
         return counts
 
+    def paths(self) -> list:
+        """The path (with its query) of every request received but the proxy's own, in order."""
+        with self._lock:
+            return list(self._paths)
+
     def _enter(self):
         with self._lock:
             self._in_flight += 1
@@ -174,6 +180,7 @@ class FaultProxy(BackgroundServer):
         `reset_body` or `stall`, drawn (in `faults` mode) from the seeded generator."""
         with self._lock:
             self._counts["requests"] += 1
+            self._paths.append(path)
             if self.fail_after is not None and self._counts["requests"] > self.fail_after:
                 self._mode, self.fail_after = "fail", None
             if self._mode == "healthy":
@@ -192,6 +199,12 @@ class FaultProxy(BackgroundServer):
         if u < self.stall_rate:
             return "stall"
         return "forward"
+
+
+class _Server(ThreadingHTTPServer):
+    """A threading HTTP server whose listen queue holds a client's burst of connections
+    (socketserver's default of 5 drops some, which the client tries again a second later)."""
+    request_queue_size = 128
 
 
 def _reset(sock: socket.socket):

@@ -2,10 +2,11 @@
 //! on Zarr v2) with zarrs, from a local folder or an S3-compatible object store.
 
 use std::path::Path;
+use std::sync::Arc;
 
 use rayon::prelude::*;
-use residency_store::location::{ObjectStoreOptions, StoreLocation};
-use residency_store::pyramid::{BrickIndex, Pyramid, PyramidError};
+use residency_store::location::{AsyncReadable, BlockOn, ObjectStoreOptions, StoreLocation};
+use residency_store::pyramid::{AsyncBricks, BrickIndex, Pyramid, PyramidError, REMOTE_READS};
 use zarrs::array::{Array, ArrayError, CodecOptions, ElementOwned};
 use zarrs::storage::ReadableListableStorageTraits;
 
@@ -22,7 +23,17 @@ type Storage = dyn ReadableListableStorageTraits;
 pub struct LocalSource {
     location: StoreLocation,
     info: VolumeInfo,
-    pyramid: Pyramid<Storage>,
+    /// The location as messages name it.
+    shown: Arc<str>,
+    pyramid: Arc<Pyramid<Storage>>,
+    /// An object store's bricks read by futures; `None` for a folder.
+    remote: Option<RemoteBricks>,
+}
+
+/// An object store's level arrays over its async storage, and the runtime their requests run on.
+struct RemoteBricks {
+    bricks: Arc<AsyncBricks>,
+    runtime: BlockOn,
 }
 
 impl std::fmt::Debug for LocalSource {
@@ -62,13 +73,17 @@ impl LocalSource {
         {
             return Err(SourceError::NoSuchStore { store: shown });
         }
-        let store = location
-            .open_readable(options)
+        let (store, remote) = location
+            .open_readable_and_async(options)
             .map_err(|source| SourceError::CannotOpen {
                 store: shown.clone(),
                 source: Box::new(source),
             })?;
         let pyramid = Pyramid::open(store, &shown)?;
+        let remote = remote.map(|AsyncReadable { storage, runtime }| RemoteBricks {
+            bricks: Arc::new(pyramid.async_bricks(storage)),
+            runtime,
+        });
         let descriptions: Vec<_> = pyramid
             .levels
             .iter()
@@ -89,7 +104,9 @@ impl LocalSource {
         Ok(Self {
             location: location.clone(),
             info,
-            pyramid,
+            shown: shown.into(),
+            pyramid: Arc::new(pyramid),
+            remote,
         })
     }
 
@@ -98,7 +115,8 @@ impl LocalSource {
         &self.location
     }
 
-    fn fetch_one(&self, key: &BrickKey) -> Result<BrickVoxels, SourceError> {
+    /// The brick a key names, after checking it, and its level's fill value.
+    fn brick_at(&self, key: &BrickKey) -> Result<(BrickIndex, f64), SourceError> {
         self.info.check_key(key)?;
         let at = BrickIndex {
             level: key.level,
@@ -108,37 +126,62 @@ impl LocalSource {
         let fill = self.pyramid.levels[key.level as usize]
             .description
             .fill_value;
-        fn decode<T: ElementOwned + Copy + Into<f64>>(
-            pyramid: &Pyramid<Storage>,
-            at: &BrickIndex,
-            fill: f64,
-            wrap: fn(Vec<T>) -> BrickVoxels,
-        ) -> Result<BrickVoxels, PyramidError> {
-            let v: Vec<T> = pyramid.read_brick(at)?;
-            let is_fill = |x: &T| {
-                let x: f64 = (*x).into();
-                x == fill || (x.is_nan() && fill.is_nan())
-            };
-            Ok(if v.iter().all(is_fill) {
-                BrickVoxels::Empty
-            } else {
-                wrap(v)
-            })
-        }
+        Ok((at, fill))
+    }
+
+    /// Reads one brick synchronously (from a folder).
+    fn fetch_one(&self, key: &BrickKey) -> Result<BrickVoxels, SourceError> {
+        let (at, fill) = self.brick_at(key)?;
         let p = &self.pyramid;
         match self.info.sample_type {
-            SampleType::U8 => decode::<u8>(p, &at, fill, BrickVoxels::U8),
-            SampleType::U16 => decode::<u16>(p, &at, fill, BrickVoxels::U16),
-            SampleType::I16 => decode::<i16>(p, &at, fill, BrickVoxels::I16),
-            SampleType::U32 => decode::<u32>(p, &at, fill, BrickVoxels::U32),
-            SampleType::I32 => decode::<i32>(p, &at, fill, BrickVoxels::I32),
-            SampleType::F32 => decode::<f32>(p, &at, fill, BrickVoxels::F32),
+            SampleType::U8 => p.read_brick(&at).map(BrickVoxels::U8),
+            SampleType::U16 => p.read_brick(&at).map(BrickVoxels::U16),
+            SampleType::I16 => p.read_brick(&at).map(BrickVoxels::I16),
+            SampleType::U32 => p.read_brick(&at).map(BrickVoxels::U32),
+            SampleType::I32 => p.read_brick(&at).map(BrickVoxels::I32),
+            SampleType::F32 => p.read_brick(&at).map(BrickVoxels::F32),
         }
-        .map_err(|source| SourceError::ReadBrick {
-            store: self.location.to_string(),
-            key: *key,
-            source: Box::new(source),
-        })
+        .map(|voxels| voxels.empty_if_all(fill))
+        .map_err(|source| read_error(&self.shown, *key, source))
+    }
+
+    /// Reads `keys` from an object store by futures: one runtime task per brick, at most
+    /// [`REMOTE_READS`] in flight, each decoding what it read.
+    fn fetch_remote(
+        &self,
+        remote: &RemoteBricks,
+        keys: &[BrickKey],
+    ) -> Vec<Result<BrickVoxels, SourceError>> {
+        let tasks = keys.iter().map(|&key| {
+            let brick = self.brick_at(&key);
+            let (pyramid, bricks) = (self.pyramid.clone(), remote.bricks.clone());
+            let (sample_type, shown) = (self.info.sample_type, self.shown.clone());
+            async move {
+                let (at, fill) = brick?;
+                let p = &*pyramid;
+                let b = &*bricks;
+                match sample_type {
+                    SampleType::U8 => p.read_brick_async(b, &at).await.map(BrickVoxels::U8),
+                    SampleType::U16 => p.read_brick_async(b, &at).await.map(BrickVoxels::U16),
+                    SampleType::I16 => p.read_brick_async(b, &at).await.map(BrickVoxels::I16),
+                    SampleType::U32 => p.read_brick_async(b, &at).await.map(BrickVoxels::U32),
+                    SampleType::I32 => p.read_brick_async(b, &at).await.map(BrickVoxels::I32),
+                    SampleType::F32 => p.read_brick_async(b, &at).await.map(BrickVoxels::F32),
+                }
+                .map(|voxels| voxels.empty_if_all(fill))
+                .map_err(|source| read_error(&shown, key, source))
+            }
+        });
+        remote.runtime.run_all(tasks, REMOTE_READS)
+    }
+}
+
+/// The error of a brick that could not be read from the store shown as `store`.
+fn read_error(store: &str, key: BrickKey, source: PyramidError) -> SourceError {
+    SourceError::ReadBrick {
+        store: store.to_string(),
+        key,
+        source: Box::new(source),
     }
 }
 
@@ -228,7 +271,12 @@ impl BrickSource for LocalSource {
         &self.info
     }
 
+    /// From a folder, one brick per core; from an object store, many at once by futures
+    /// ([`REMOTE_READS`]), since those reads wait on the network.
     fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>> {
-        keys.par_iter().map(|k| self.fetch_one(k)).collect()
+        match &self.remote {
+            Some(remote) => self.fetch_remote(remote, keys),
+            None => keys.par_iter().map(|k| self.fetch_one(k)).collect(),
+        }
     }
 }

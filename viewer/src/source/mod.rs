@@ -640,6 +640,45 @@ impl BrickVoxels {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+
+    /// A brick's samples of type `t` from their little-endian bytes.
+    pub fn from_le_bytes(t: SampleType, bytes: &[u8]) -> Self {
+        fn le<const N: usize, T>(bytes: &[u8], f: fn([u8; N]) -> T) -> Vec<T> {
+            bytes
+                .chunks_exact(N)
+                .map(|b| f(b.try_into().expect("N bytes")))
+                .collect()
+        }
+        match t {
+            SampleType::U8 => Self::U8(bytes.to_vec()),
+            SampleType::U16 => Self::U16(le(bytes, u16::from_le_bytes)),
+            SampleType::I16 => Self::I16(le(bytes, i16::from_le_bytes)),
+            SampleType::U32 => Self::U32(le(bytes, u32::from_le_bytes)),
+            SampleType::I32 => Self::I32(le(bytes, i32::from_le_bytes)),
+            SampleType::F32 => Self::F32(le(bytes, f32::from_le_bytes)),
+        }
+    }
+
+    /// The brick as it is kept: [`BrickVoxels::Empty`] when every sample is `fill` (NaN
+    /// matching NaN), else the samples.
+    pub fn empty_if_all(self, fill: f64) -> Self {
+        fn all<T: Copy + Into<f64>>(v: &[T], fill: f64) -> bool {
+            v.iter().all(|&x| {
+                let x: f64 = x.into();
+                x == fill || (x.is_nan() && fill.is_nan())
+            })
+        }
+        let only_fill = match &self {
+            Self::Empty => true,
+            Self::U8(v) => all(v, fill),
+            Self::U16(v) => all(v, fill),
+            Self::I16(v) => all(v, fill),
+            Self::U32(v) => all(v, fill),
+            Self::I32(v) => all(v, fill),
+            Self::F32(v) => all(v, fill),
+        };
+        if only_fill { Self::Empty } else { self }
+    }
 }
 
 impl VolumeInfo {
@@ -807,4 +846,61 @@ pub trait BrickSource: Send + Sync {
     /// Fetches the given bricks, one result per key, in order. A brick that cannot be read
     /// gives an error naming it; the others are still returned.
     fn fetch(&self, keys: &[BrickKey]) -> Vec<Result<BrickVoxels, SourceError>>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn little_endian_samples_become_typed_voxels() {
+        let bytes = [0x01, 0x02, 0xff, 0xff];
+        assert_eq!(
+            BrickVoxels::from_le_bytes(SampleType::U8, &bytes),
+            BrickVoxels::U8(vec![1, 2, 255, 255])
+        );
+        assert_eq!(
+            BrickVoxels::from_le_bytes(SampleType::U16, &bytes),
+            BrickVoxels::U16(vec![0x0201, 0xffff])
+        );
+        assert_eq!(
+            BrickVoxels::from_le_bytes(SampleType::I16, &bytes),
+            BrickVoxels::I16(vec![0x0201, -1])
+        );
+        assert_eq!(
+            BrickVoxels::from_le_bytes(SampleType::I32, &bytes),
+            BrickVoxels::I32(vec![-65023])
+        );
+        assert_eq!(
+            BrickVoxels::from_le_bytes(SampleType::F32, &1.5f32.to_le_bytes()),
+            BrickVoxels::F32(vec![1.5])
+        );
+    }
+
+    #[test]
+    fn a_brick_of_fill_is_kept_empty() {
+        let nan = f64::NAN;
+        assert_eq!(
+            BrickVoxels::U16(vec![7, 7]).empty_if_all(7.0),
+            BrickVoxels::Empty
+        );
+        assert_eq!(
+            BrickVoxels::U16(vec![7, 8]).empty_if_all(7.0),
+            BrickVoxels::U16(vec![7, 8])
+        );
+        assert_eq!(
+            BrickVoxels::F32(vec![f32::NAN, f32::NAN]).empty_if_all(nan),
+            BrickVoxels::Empty
+        );
+        let kept = BrickVoxels::F32(vec![f32::NAN, 0.0]).empty_if_all(nan);
+        assert!(matches!(&kept, BrickVoxels::F32(v) if v[0].is_nan() && v[1] == 0.0));
+        assert_eq!(
+            BrickVoxels::F32(vec![-0.0]).empty_if_all(0.0),
+            BrickVoxels::Empty
+        );
+        assert_eq!(
+            BrickVoxels::I32(vec![]).empty_if_all(3.0),
+            BrickVoxels::Empty
+        );
+    }
 }

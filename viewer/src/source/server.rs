@@ -21,7 +21,7 @@ use residency_schemas::wire::{
 use residency_schemas::zarr::ArrayDescription;
 
 use super::ome;
-use super::{BrickKey, BrickVoxels, MinMaxGrid, SampleType, SourceError, VolumeInfo};
+use super::{BrickKey, BrickVoxels, MinMaxGrid, SourceError, VolumeInfo};
 
 /// Most bricks asked for in one `/bricks` request; larger fetches are split.
 pub const MAX_BATCH: usize = 256;
@@ -371,29 +371,11 @@ pub fn parse_batch(
                             expected,
                             payload: payload.len(),
                         })?;
-                    Ok(decode_le(info.sample_type, bytes))
+                    Ok(BrickVoxels::from_le_bytes(info.sample_type, bytes))
                 }
             }
         })
         .collect())
-}
-
-/// Little-endian samples as typed voxels.
-fn decode_le(t: SampleType, bytes: &[u8]) -> BrickVoxels {
-    fn le<const N: usize, T>(bytes: &[u8], f: fn([u8; N]) -> T) -> Vec<T> {
-        bytes
-            .chunks_exact(N)
-            .map(|b| f(b.try_into().expect("N bytes")))
-            .collect()
-    }
-    match t {
-        SampleType::U8 => BrickVoxels::U8(bytes.to_vec()),
-        SampleType::U16 => BrickVoxels::U16(le(bytes, u16::from_le_bytes)),
-        SampleType::I16 => BrickVoxels::I16(le(bytes, i16::from_le_bytes)),
-        SampleType::U32 => BrickVoxels::U32(le(bytes, u32::from_le_bytes)),
-        SampleType::I32 => BrickVoxels::I32(le(bytes, i32::from_le_bytes)),
-        SampleType::F32 => BrickVoxels::F32(le(bytes, f32::from_le_bytes)),
-    }
 }
 
 #[cfg(test)]
@@ -401,7 +383,7 @@ mod tests {
     use residency_schemas::wire::{BrickEntry, MinMaxGridBlock, MinMaxLevelBlock, encode_framed};
 
     use super::*;
-    use crate::source::LevelInfo;
+    use crate::source::{LevelInfo, SampleType};
 
     /// The volume of `http://h/v`, for the document parsers.
     fn info() -> VolumeInfo {
