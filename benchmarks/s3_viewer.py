@@ -7,9 +7,9 @@ latency of a distant object store), for an A/B of two builds.
 Builds `ingest sample --kind dense` (256³ float32, 64 bricks of 64³ at level 0) into a bucket,
 then per round and per binary renders it at 256 × 256 from `s3://bucket/dense.ome.zarr`
 through the proxy (support/fault_proxy.py with every request stalled `--latency-ms`), with the
-default fetch workers, the builds' order alternating round by round. Prints per binary the wall
-time of each round, the requests the proxy saw, and the most it held at once, and says when
-two builds' images differ. Without `--bin`, the release build's viewer alone. s3s-fs
+default fetch workers, the builds' order alternating round by round, and each build also from
+the store's folder (the floor). Prints per binary the wall time of each round, the requests
+the proxy saw, and the most it held at once, and says when two builds' images differ. Without `--bin`, the release build's viewer alone. s3s-fs
 comes from scripts/test.sh.
 """
 
@@ -28,11 +28,10 @@ import s3_ab  # noqa: E402
 from support.s3 import env  # noqa: E402
 
 
-def render(exe, endpoint, out):
-    """Seconds for one converged render of the bucket's store through `endpoint`."""
+def render(exe, store, out):
+    """Seconds for one converged render of `store` (the flags that name it)."""
     t = time.perf_counter()
-    done = subprocess.run([exe, "render", "--store", "s3://bucket/dense.ome.zarr",
-                           "--s3-endpoint", endpoint, "--width", "256", "--height", "256",
+    done = subprocess.run([exe, "render", "--store", *store, "--width", "256", "--height", "256",
                            "--out", out], env=env(XDG_RUNTIME_DIR="/tmp"), capture_output=True,
                           text=True)
     if done.returncode:
@@ -49,10 +48,14 @@ def main():
         first = None
         for rnd, name, exe in s3_ab.rounds(args, "viewer"):
             with FaultProxy(endpoint, stall_rate=1.0, stall_s=args.latency_ms / 1e3) as proxy:
-                seconds = render(exe, proxy.url, tmp / f"{name}.png")
+                seconds = render(exe, ["s3://bucket/dense.ome.zarr", "--s3-endpoint", proxy.url],
+                                 tmp / f"{name}.png")
                 stats = proxy.stats()
             results.setdefault(name, []).append(
                 (seconds, stats["requests"], stats["max_in_flight"]))
+            # The floor: the same render from the store's folder.
+            seconds = render(exe, [tmp / "root" / "bucket" / "dense.ome.zarr"], tmp / "folder.png")
+            results.setdefault(f"{name} from the folder", []).append((seconds, 0, 0))
             # Each round's images are compared with the round's first build's.
             if first is None or first[0] != rnd:
                 first = (rnd, name)
@@ -61,8 +64,8 @@ def main():
     print(f"latency {args.latency_ms:g} ms per request, {args.rounds} rounds")
     for name, runs in results.items():
         print(f"{name}: median {statistics.median(r[0] for r in runs):.2f} s, rounds "
-              f"{[round(r[0], 2) for r in runs]} s, requests {[r[1] for r in runs]}, "
-              f"most in flight {[r[2] for r in runs]}")
+              f"{[round(r[0], 2) for r in runs]} s" + ("" if name.endswith(" folder") else
+              f", requests {[r[1] for r in runs]}, most in flight {[r[2] for r in runs]}"))
 
 
 if __name__ == "__main__":

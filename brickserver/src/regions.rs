@@ -11,6 +11,7 @@
 //! box aligned to cells (bricks) or ending at the level's edge, and found in time that grows
 //! with the box's surface, not its volume.
 
+use std::collections::HashMap;
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -21,6 +22,7 @@ use residency_schemas::wire::{
     MINMAX_MAGIC, MinMaxGridBlock, MinMaxHierarchyHeader, MinMaxLevelBlock, encode_framed,
 };
 use residency_schemas::{MinMaxGrid, RegionMetadata};
+use residency_store::at_once;
 use residency_store::pyramid::{Pyramid, PyramidError, read_key};
 use residency_store::region_array::{ArrayPart, RegionArrayError, read_region_array};
 use zarrs::storage::ReadableListableStorageTraits;
@@ -288,6 +290,26 @@ impl RegionIndex {
         let data_type = pyramid.sample_type;
         let channels = meta.channels.len();
         let bins = meta.histogram_bins;
+        // Every region array the index needs, read side by side (over an object store each
+        // read waits on the network), then taken below in the order the checks need them.
+        let wanted: Vec<(&str, SampleType)> = meta
+            .levels
+            .iter()
+            .flat_map(|level| {
+                let grids = level.minmax.iter().chain(&level.range);
+                grids
+                    .map(|g| (g.path.as_str(), data_type))
+                    .chain([(level.histogram.as_str(), SampleType::U32)])
+            })
+            .collect();
+        let read = at_once::read_all(&wanted, |&(path, t)| read_array(&store, path, t));
+        let mut read_ahead: HashMap<&str, _> = wanted.iter().map(|&(p, _)| p).zip(read).collect();
+        // A path listed twice was read once: the second use reads it again.
+        let mut take_array = |path: &str, t| {
+            read_ahead
+                .remove(path)
+                .unwrap_or_else(|| read_array(&store, path, t))
+        };
         let mut levels = Vec::new();
         let mut blocks: Vec<Vec<MinMaxLevelBlock>> = vec![Vec::new(); channels];
         let mut payloads: Vec<Vec<u8>> = vec![Vec::new(); channels];
@@ -296,7 +318,7 @@ impl RegionIndex {
             let mut level_blocks: Vec<Vec<MinMaxGridBlock>> = vec![Vec::new(); channels];
             let mut haloed = Vec::new();
             for grid in &level.minmax {
-                let (raw, values) = read_array(&store, &grid.path, data_type)?;
+                let (raw, values) = take_array(&grid.path, data_type)?;
                 let cells = cells_of(grid.grid_shape);
                 let per_channel = raw.len() / channels.max(1);
                 if values.len() != channels * 2 * cells {
@@ -340,7 +362,7 @@ impl RegionIndex {
                 grids
                     .iter()
                     .map(|g| {
-                        let (_, values) = read_array(&store, &g.path, data_type)?;
+                        let (_, values) = take_array(&g.path, data_type)?;
                         Ok(pairs(&values, channels, cells_of(g.grid_shape)))
                     })
                     .collect::<Result<_, RegionsError>>()?
@@ -350,7 +372,7 @@ impl RegionIndex {
             let range_values = (0..channels)
                 .map(|c| range_grids.iter().map(|g| g[c].clone()).collect())
                 .collect();
-            let (_, counts) = read_array(&store, &level.histogram, SampleType::U32)?;
+            let (_, counts) = take_array(&level.histogram, SampleType::U32)?;
             let brick_grid: [u64; 3] =
                 std::array::from_fn(|a| level.shape[a].div_ceil(meta.brick_shape[a]));
             let per_channel = cells_of(brick_grid) * bins;

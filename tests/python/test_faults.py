@@ -314,6 +314,30 @@ def test_a_batch_of_bricks_is_fetched_from_the_store_concurrently(s3):
         proxy.stop()
 
 
+def test_the_region_index_is_read_from_the_store_side_by_side(s3):
+    """Every request to the store held 0.3 s: brickserver's one-time load of the region index
+    reads its 21 arrays 16 at a time (not one after another), each key once, and answers a
+    region query with the local copy's bytes."""
+    proxy = FaultProxy(s3["endpoint"], stall_rate=1.0, stall_s=0.3, seed=1).start()
+    faulty, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
+                                env=env())
+    local, local_base = start_server(s3["local"])
+    try:
+        remote = requests.get(f"{base}/{NAME}/{REGIONS}", timeout=60)
+        local_answer = requests.get(f"{local_base}/{NAME}/{REGIONS}", timeout=60)
+        assert (remote.status_code, remote.content) == (200, local_answer.content)
+        stats, paths = proxy.stats(), proxy.paths()
+        arrays = [p for p in paths if p.startswith("/bucket/sample.ome.zarr/residency/")
+                  and p.endswith("/zarr.json")]
+        region = [p for p in paths if p.startswith("/bucket/sample.ome.zarr/residency/")]
+        assert (len(arrays), len(region), len(set(region))) == (21, 45, 45), paths
+        assert stats["max_in_flight"] == 16, stats
+    finally:
+        stop_server(faulty)
+        stop_server(local)
+        proxy.stop()
+
+
 def test_the_viewer_fetches_a_batch_of_bricks_from_the_store_concurrently(s3, tmp_path):
     """Every request to the store held 0.3 s, one fetch worker, and one core for rayon: the
     viewer has its first batch of level-0 bricks in flight at once (it reads an object store's
@@ -329,6 +353,8 @@ def test_the_viewer_fetches_a_batch_of_bricks_from_the_store_concurrently(s3, tm
     assert remote.returncode == 0, remote.stderr
     bricks = [p for p in paths if p.startswith("/bucket/sample.ome.zarr/0/c/")]
     assert len(bricks) == len(set(bricks)) == 24, paths
+    # Every key is read once: a level's zarr.json too (its array is made from the document read).
+    assert len(paths) == len(set(paths)), paths
     # The renderer asks for bricks as its frames find them missing, so how many wait at once
     # depends on timing (8 or 9 here); read one per core, at most one would.
     assert stats["max_in_flight"] >= 8, stats

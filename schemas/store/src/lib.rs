@@ -5,6 +5,7 @@
 //! touches storage:
 //! - [`location`]: a store's location (a local folder, or a prefix in an S3-compatible bucket)
 //!   opened as one zarrs storage, and publishing, listing and downloading object-store stores;
+//! - [`at_once`]: blocking reads side by side, for one-time loads over an object store;
 //! - [`aws_profile`]: the AWS shared configuration profiles that `object_store` does not read;
 //! - [`failure`]: an object store that failed a request, told apart from one not reached,
 //!   through whatever layers carry it;
@@ -15,6 +16,7 @@
 
 #[cfg(feature = "mimalloc")]
 pub mod allocator;
+pub mod at_once;
 pub mod aws_profile;
 pub mod failure;
 pub mod location;

@@ -9,12 +9,34 @@ use zarrs::array::{
     Array, ArrayBytes, ArrayShardedReadableExt, ArrayShardedReadableExtCache,
     AsyncArrayShardedReadableExt, AsyncArrayShardedReadableExtCache, CodecOptions, ElementOwned,
 };
+use zarrs::metadata::ArrayMetadata;
+use zarrs::metadata::v3::ArrayMetadataV3;
 use zarrs::storage::byte_range::ByteRange;
 use zarrs::storage::{AsyncReadableStorageTraits, ReadableStorageTraits, StoreKey};
 
 use residency_schemas::SampleType;
 use residency_schemas::ome::{ImageAttributes, OmeError, PyramidLayout, ZarrFormat};
 use residency_schemas::zarr::{ArrayDescription, ArrayMetadataError};
+
+/// A level's array: for Zarr v3 made from its `zarr.json`, which the caller has read already
+/// (over an object store, one request less per level); for v2 opened by zarrs, which reads the
+/// array's `.zarray` and `.zattrs`.
+fn level_array<S: ReadableStorageTraits + ?Sized + 'static>(
+    store: Arc<S>,
+    format: ZarrFormat,
+    path: &str,
+    document: &[u8],
+) -> Result<Array<S>, Box<dyn std::error::Error + Send + Sync>> {
+    let node = format!("/{path}");
+    let array = match format {
+        ZarrFormat::V3 => {
+            let metadata: ArrayMetadataV3 = serde_json::from_slice(document)?;
+            Array::new_with_metadata(store, &node, ArrayMetadata::V3(metadata))
+        }
+        ZarrFormat::V2 => Array::open(store, &node),
+    };
+    array.map_err(|e| CannotOpenArray(e).into())
+}
 
 /// A problem opening a pyramid or reading one of its bricks. Every message names the store
 /// (and the level or brick) it is about.
@@ -409,10 +431,10 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
                     description.chunk[c]
                 )));
             }
-            let array = Array::open(store.clone(), &format!("/{path}")).map_err(|e| {
+            let array = level_array(store.clone(), format, path, &document).map_err(|e| {
                 PyramidError::Storage {
                     what: shown(&key),
-                    source: CannotOpenArray(e).into(),
+                    source: e,
                 }
             })?;
             let brick = description.brick_shape();

@@ -5,6 +5,7 @@ use std::path::Path;
 use std::sync::Arc;
 
 use rayon::prelude::*;
+use residency_store::at_once;
 use residency_store::location::{AsyncReadable, BlockOn, ObjectStoreOptions, StoreLocation};
 use residency_store::pyramid::{AsyncBricks, BrickIndex, Pyramid, PyramidError, REMOTE_READS};
 use zarrs::array::{Array, ArrayError, CodecOptions, ElementOwned};
@@ -185,59 +186,30 @@ fn read_error(store: &str, key: BrickKey, source: PyramidError) -> SourceError {
     }
 }
 
-/// Reads every min/max grid of the region metadata into `minmax[channel][level][k]`.
+/// Reads every min/max grid of the region metadata into `minmax[channel][level][k]`, side by
+/// side (over an object store each read waits on the network; [`at_once::read_all`]).
 fn read_minmax(
     pyramid: &Pyramid<Storage>,
     info: &VolumeInfo,
     shown: &str,
 ) -> Result<Vec<Vec<Vec<MinMaxGrid>>>, SourceError> {
-    let store = &pyramid.store;
     let regions = pyramid
         .attributes
         .regions
         .as_ref()
         .expect("called with region metadata");
     let channels = info.channels.len();
+    let grids: Vec<_> = regions.levels.iter().flat_map(|l| &l.minmax).collect();
+    let mut read = at_once::read_all(&grids, |grid| read_minmax_grid(pyramid, grid, info, shown))
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?
+        .into_iter();
     let mut out = vec![Vec::with_capacity(regions.levels.len()); channels];
     for level in &regions.levels {
         let mut per_channel = vec![Vec::with_capacity(level.minmax.len()); channels];
-        for grid in &level.minmax {
-            let source = format!("{shown}/{}", grid.path);
-            let array = match Array::open(store.clone(), &format!("/{}", grid.path)) {
-                Ok(array) => array,
-                Err(e) => {
-                    return Err(SourceError::OpenMinMax {
-                        array: source,
-                        source: Box::new(e),
-                    });
-                }
-            };
-            let [gz, gy, gx] = grid.grid_shape;
-            let expected = [channels as u64, 2, gz, gy, gx];
-            if array.shape() != expected {
-                return Err(SourceError::MinMaxShape {
-                    array: source,
-                    shape: array.shape().to_vec(),
-                    expected,
-                });
-            }
-            let values = match read_all_f64(&array, info.sample_type) {
-                Ok(values) => values,
-                Err(e) => {
-                    return Err(SourceError::ReadMinMax {
-                        array: source,
-                        source: Box::new(e),
-                    });
-                }
-            };
-            let per = 2 * (gz * gy * gx) as usize;
-            for (c, chunk) in values.chunks_exact(per).enumerate() {
-                per_channel[c].push(ome::minmax_grid(
-                    grid.cell_shape,
-                    grid.grid_shape,
-                    chunk,
-                    &source,
-                )?);
+        for grid_per_channel in read.by_ref().take(level.minmax.len()) {
+            for (c, grid) in grid_per_channel.into_iter().enumerate() {
+                per_channel[c].push(grid);
             }
         }
         for (c, grids) in per_channel.into_iter().enumerate() {
@@ -245,6 +217,49 @@ fn read_minmax(
         }
     }
     Ok(out)
+}
+
+/// One min/max grid of the region metadata, one per channel.
+fn read_minmax_grid(
+    pyramid: &Pyramid<Storage>,
+    grid: &residency_schemas::MinMaxGrid,
+    info: &VolumeInfo,
+    shown: &str,
+) -> Result<Vec<MinMaxGrid>, SourceError> {
+    let channels = info.channels.len();
+    let source = format!("{shown}/{}", grid.path);
+    let array = match Array::open(pyramid.store.clone(), &format!("/{}", grid.path)) {
+        Ok(array) => array,
+        Err(e) => {
+            return Err(SourceError::OpenMinMax {
+                array: source,
+                source: Box::new(e),
+            });
+        }
+    };
+    let [gz, gy, gx] = grid.grid_shape;
+    let expected = [channels as u64, 2, gz, gy, gx];
+    if array.shape() != expected {
+        return Err(SourceError::MinMaxShape {
+            array: source,
+            shape: array.shape().to_vec(),
+            expected,
+        });
+    }
+    let values = match read_all_f64(&array, info.sample_type) {
+        Ok(values) => values,
+        Err(e) => {
+            return Err(SourceError::ReadMinMax {
+                array: source,
+                source: Box::new(e),
+            });
+        }
+    };
+    let per = 2 * (gz * gy * gx) as usize;
+    values
+        .chunks_exact(per)
+        .map(|chunk| ome::minmax_grid(grid.cell_shape, grid.grid_shape, chunk, &source))
+        .collect()
 }
 
 /// The whole array as `f64`.
