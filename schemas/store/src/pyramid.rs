@@ -14,6 +14,7 @@ use zarrs::metadata::v3::ArrayMetadataV3;
 use zarrs::storage::byte_range::ByteRange;
 use zarrs::storage::{AsyncReadableStorageTraits, ReadableStorageTraits, StoreKey};
 
+use crate::at_once;
 use residency_schemas::SampleType;
 use residency_schemas::ome::{ImageAttributes, OmeError, PyramidLayout, ZarrFormat};
 use residency_schemas::zarr::{ArrayDescription, ArrayMetadataError};
@@ -392,12 +393,17 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
         };
         let n = layout.axis_names.len();
         let mut levels: Vec<PyramidLevel<S>> = Vec::new();
-        for path in &layout.level_paths {
-            let key = format!("{path}/{}", format.array_key());
-            let document = read_key(&*store, &key, &shown(&key))?.ok_or_else(|| {
-                PyramidError::MissingLevel {
-                    document: shown(&key),
-                }
+        let level_key = |path: &str| format!("{path}/{}", format.array_key());
+        // The levels' documents side by side (over an object store each waits on the network),
+        // checked in order.
+        let documents = at_once::read_all(&layout.level_paths, |path| {
+            let key = level_key(path);
+            read_key(&*store, &key, &shown(&key))
+        });
+        for (path, document) in layout.level_paths.iter().zip(documents) {
+            let key = level_key(path);
+            let document = document?.ok_or_else(|| PyramidError::MissingLevel {
+                document: shown(&key),
             })?;
             let description = ArrayDescription::parse(format, &document, &shown(&key))?;
             if description.shape.len() != n {
