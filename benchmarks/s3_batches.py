@@ -69,19 +69,21 @@ def main():
     with s3_ab.dense_store_in_s3() as (_, endpoint):
         for rnd, name, exe in s3_ab.rounds(args, "brickserver"):
             p, base = serve(exe, endpoint)
-            rng = random.Random(rnd)
-            batch(base, "stored", rng)  # loads the image arrays
-            for encoding in ["stored", "raw"]:
-                for clients in [1, 4]:
-                    t0 = time.perf_counter()
-                    with concurrent.futures.ThreadPoolExecutor(clients) as pool:
-                        lat = list(pool.map(lambda _: batch(base, encoding, rng), range(24)))
-                    rate = 24 * 16 / (time.perf_counter() - t0)
-                    results.setdefault((name, encoding, clients), []).append(
-                        (statistics.median(lat), rate))
-            results.setdefault((name, "threads"), []).append(threads(p.pid))
-            p.terminate()
-            p.wait()
+            try:
+                rng = random.Random(rnd)
+                batch(base, "stored", rng)  # loads the image arrays
+                for encoding in ["stored", "raw"]:
+                    for clients in [1, 4]:
+                        t0 = time.perf_counter()
+                        with concurrent.futures.ThreadPoolExecutor(clients) as pool:
+                            lat = list(pool.map(lambda _: batch(base, encoding, rng), range(24)))
+                        rate = 24 * 16 / (time.perf_counter() - t0)
+                        results.setdefault((name, encoding, clients), []).append(
+                            (statistics.median(lat), rate))
+                results.setdefault((name, "threads"), []).append(threads(p.pid))
+            finally:
+                p.terminate()
+                p.wait()
     for key, values in results.items():
         if key[1] == "threads":
             print(f"{key[0]}: threads after the load {values}")

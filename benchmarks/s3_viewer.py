@@ -9,7 +9,8 @@ then per round and per binary renders it at 256 × 256 from `s3://bucket/dense.o
 through the proxy (support/fault_proxy.py with every request stalled `--latency-ms`), with the
 default fetch workers, the builds' order alternating round by round, and each build also from
 the store's folder (the floor). Prints per binary the wall time of each round, the requests
-the proxy saw, and the most it held at once, and says when two builds' images differ. Without `--bin`, the release build's viewer alone. s3s-fs
+the proxy saw, and the most it held at once, and says when two builds' images differ, or a
+build's image from S3 and from the folder. Without `--bin`, the release build's viewer alone. s3s-fs
 comes from scripts/test.sh.
 """
 
@@ -53,9 +54,11 @@ def main():
                 stats = proxy.stats()
             results.setdefault(name, []).append(
                 (seconds, stats["requests"], stats["max_in_flight"]))
-            # The floor: the same render from the store's folder.
+            # The floor: the same render from the store's folder, the same image.
             seconds = render(exe, [tmp / "root" / "bucket" / "dense.ome.zarr"], tmp / "folder.png")
             results.setdefault(f"{name} from the folder", []).append((seconds, 0, 0))
+            if not filecmp.cmp(tmp / "folder.png", tmp / f"{name}.png", shallow=False):
+                print(f"round {rnd}: {name}'s image from S3 differs from the folder's")
             # Each round's images are compared with the round's first build's.
             if first is None or first[0] != rnd:
                 first = (rnd, name)

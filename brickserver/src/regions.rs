@@ -11,7 +11,7 @@
 //! box aligned to cells (bricks) or ending at the level's edge, and found in time that grows
 //! with the box's surface, not its volume.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use axum::body::Bytes;
@@ -291,7 +291,9 @@ impl RegionIndex {
         let channels = meta.channels.len();
         let bins = meta.histogram_bins;
         // Every region array the index needs, read side by side (over an object store each
-        // read waits on the network), then taken below in the order the checks need them.
+        // read waits on the network) in the order the loop below takes them, up to the first
+        // that fails; the loop meets that failure where a loop reading them in turn would.
+        let mut seen = HashSet::new();
         let wanted: Vec<(&str, SampleType)> = meta
             .levels
             .iter()
@@ -301,13 +303,18 @@ impl RegionIndex {
                     .map(|g| (g.path.as_str(), data_type))
                     .chain([(level.histogram.as_str(), SampleType::U32)])
             })
+            .filter(|wanted| seen.insert(*wanted))
             .collect();
-        let read = at_once::read_all(&wanted, |&(path, t)| read_array(&store, path, t));
-        let mut read_ahead: HashMap<&str, _> = wanted.iter().map(|&(p, _)| p).zip(read).collect();
-        // A path listed twice was read once: the second use reads it again.
+        let read = at_once::try_read_all(&wanted, |&(path, t)| read_array(&store, path, t));
+        let mut read_ahead: HashMap<(String, SampleType), _> = wanted
+            .iter()
+            .map(|&(path, t)| (path.to_string(), t))
+            .zip(read)
+            .collect();
+        // What was not read ahead (an array taken a second time, or past a failure) is read now.
         let mut take_array = |path: &str, t| {
             read_ahead
-                .remove(path)
+                .remove(&(path.to_string(), t))
                 .unwrap_or_else(|| read_array(&store, path, t))
         };
         let mut levels = Vec::new();

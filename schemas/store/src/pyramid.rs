@@ -6,8 +6,9 @@
 use std::sync::Arc;
 
 use zarrs::array::{
-    Array, ArrayBytes, ArrayShardedReadableExt, ArrayShardedReadableExtCache,
-    AsyncArrayShardedReadableExt, AsyncArrayShardedReadableExtCache, CodecOptions, ElementOwned,
+    AdditionalFieldUnsupportedError, Array, ArrayBytes, ArrayCreateError, ArrayShardedReadableExt,
+    ArrayShardedReadableExtCache, AsyncArrayShardedReadableExt, AsyncArrayShardedReadableExtCache,
+    CodecOptions, ElementOwned,
 };
 use zarrs::metadata::ArrayMetadata;
 use zarrs::metadata::v3::ArrayMetadataV3;
@@ -20,8 +21,9 @@ use residency_schemas::ome::{ImageAttributes, OmeError, PyramidLayout, ZarrForma
 use residency_schemas::zarr::{ArrayDescription, ArrayMetadataError};
 
 /// A level's array: for Zarr v3 made from its `zarr.json`, which the caller has read already
-/// (over an object store, one request less per level); for v2 opened by zarrs, which reads the
-/// array's `.zarray` and `.zattrs`.
+/// (over an object store, one request less per level), with the check `Array::open` makes (no
+/// additional field that must be understood); for v2 opened by zarrs, which reads the array's
+/// `.zarray` and `.zattrs`.
 fn level_array<S: ReadableStorageTraits + ?Sized + 'static>(
     store: Arc<S>,
     format: ZarrFormat,
@@ -32,6 +34,17 @@ fn level_array<S: ReadableStorageTraits + ?Sized + 'static>(
     let array = match format {
         ZarrFormat::V3 => {
             let metadata: ArrayMetadataV3 = serde_json::from_slice(document)?;
+            let unsupported = metadata
+                .additional_fields
+                .iter()
+                .find(|(_, field)| field.must_understand());
+            if let Some((name, field)) = unsupported {
+                let e =
+                    AdditionalFieldUnsupportedError::new(name.clone(), field.as_value().clone());
+                return Err(
+                    CannotOpenArray(ArrayCreateError::AdditionalFieldUnsupportedError(e)).into(),
+                );
+            }
             Array::new_with_metadata(store, &node, ArrayMetadata::V3(metadata))
         }
         ZarrFormat::V2 => Array::open(store, &node),
@@ -84,7 +97,7 @@ pub enum PyramidError {
 /// zarrs cannot open a level's array (the cause of a [`PyramidError::Storage`]).
 #[derive(Debug, thiserror::Error)]
 #[error("cannot open the array: {0}")]
-pub struct CannotOpenArray(#[source] pub zarrs::array::ArrayCreateError);
+pub struct CannotOpenArray(#[source] pub ArrayCreateError);
 
 /// A requested brick the pyramid does not have.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -395,8 +408,8 @@ impl<S: ReadableStorageTraits + ?Sized + 'static> Pyramid<S> {
         let mut levels: Vec<PyramidLevel<S>> = Vec::new();
         let level_key = |path: &str| format!("{path}/{}", format.array_key());
         // The levels' documents side by side (over an object store each waits on the network),
-        // checked in order.
-        let documents = at_once::read_all(&layout.level_paths, |path| {
+        // checked in order (up to the first that could not be read).
+        let documents = at_once::try_read_all(&layout.level_paths, |path| {
             let key = level_key(path);
             read_key(&*store, &key, &shown(&key))
         });

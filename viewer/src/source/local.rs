@@ -187,7 +187,7 @@ fn read_error(store: &str, key: BrickKey, source: PyramidError) -> SourceError {
 }
 
 /// Reads every min/max grid of the region metadata into `minmax[channel][level][k]`, side by
-/// side (over an object store each read waits on the network; [`at_once::read_all`]).
+/// side (over an object store each read waits on the network; [`at_once::try_read_all`]).
 fn read_minmax(
     pyramid: &Pyramid<Storage>,
     info: &VolumeInfo,
@@ -200,10 +200,11 @@ fn read_minmax(
         .expect("called with region metadata");
     let channels = info.channels.len();
     let grids: Vec<_> = regions.levels.iter().flat_map(|l| &l.minmax).collect();
-    let mut read = at_once::read_all(&grids, |grid| read_minmax_grid(pyramid, grid, info, shown))
-        .into_iter()
-        .collect::<Result<Vec<_>, _>>()?
-        .into_iter();
+    let mut read =
+        at_once::try_read_all(&grids, |grid| read_minmax_grid(pyramid, grid, info, shown))
+            .into_iter()
+            .collect::<Result<Vec<_>, _>>()?
+            .into_iter();
     let mut out = vec![Vec::with_capacity(regions.levels.len()); channels];
     for level in &regions.levels {
         let mut per_channel = vec![Vec::with_capacity(level.minmax.len()); channels];

@@ -322,6 +322,27 @@ fn bad_stores_and_bricks_give_errors_naming_them() {
         got.next().unwrap().unwrap(),
         expected_brick(&voxels(ramp), good.brick)
     );
+
+    // A level whose zarr.json holds a field a reader must understand is refused, as zarrs'
+    // Array::open refuses it; one marked `"must_understand": false` is not.
+    let extra = make_store(dir.path(), "extra", Layout::V3);
+    let level = extra.join("1/zarr.json");
+    let plain: serde_json::Value = serde_json::from_slice(&std::fs::read(&level).unwrap()).unwrap();
+    let with = |field: serde_json::Value| {
+        let mut doc = plain.clone();
+        doc["foo"] = field;
+        std::fs::write(&level, serde_json::to_vec(&doc).unwrap()).unwrap();
+        LocalSource::open(&extra).map(|_| ())
+    };
+    let e = with(serde_json::json!("bar")).unwrap_err();
+    assert_eq!(
+        residency_viewer::error_chain(&e),
+        format!(
+            "{}: cannot open the array: unsupported additional field foo with value \"bar\"",
+            level.display()
+        )
+    );
+    with(serde_json::json!({"must_understand": false, "x": 1})).unwrap();
 }
 
 /// Every sample type `ingest` writes reads back exactly, typed, with its min/max grids.
