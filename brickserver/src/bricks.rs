@@ -219,7 +219,7 @@ impl ImageArrays {
         let pyramid = Pyramid::open(dataset.zarr(), dataset.shown())?;
         let remote = dataset.async_store().map(|store| {
             let bricks = pyramid.async_bricks(store.storage.clone());
-            (Arc::new(bricks), store.runtime.clone())
+            (Arc::new(bricks), store.runtime.handle().clone())
         });
         Ok(Self {
             data_type: pyramid.sample_type,

@@ -12,10 +12,10 @@ use residency_store::location::object_store::{
     self, GetOptions, GetRange, ObjectStore, ObjectStoreExt,
 };
 use residency_store::location::{
-    BlockOn, LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation, async_object_storage,
-    synchronous,
+    AsyncReadable, BlockOn, LocationError, ObjectStoreAt, ObjectStoreOptions, StoreLocation,
+    object_storage,
 };
-use zarrs::storage::{AsyncReadableStorageTraits, ReadableListableStorageTraits, StoreKey};
+use zarrs::storage::{ReadableListableStorageTraits, StoreKey};
 
 use crate::store_keys::{KeyError, RootDir, StoreFailure, checked_key, resolve};
 
@@ -52,8 +52,10 @@ pub enum OpenError {
 pub(crate) struct ObjectKeys {
     store: Arc<dyn ObjectStore>,
     prefix: ObjectPath,
-    /// The same keys read by futures, for batched bricks.
-    reads: AsyncStore,
+    /// The same keys read by futures, for batched bricks, and the runtime they run on (the one
+    /// [`DatasetStore::open`] ran on: in the binary, the multi-threaded runtime that makes the
+    /// object-store requests).
+    reads: AsyncReadable,
 }
 
 /// Where a dataset's keys are read from.
@@ -64,21 +66,10 @@ pub(crate) enum Keys {
     Object(ObjectKeys),
 }
 
-/// An object-store dataset's storage for reads by futures: zarrs' async storage over the
-/// dataset's one client, and the runtime its requests run on (the one [`DatasetStore::open`]
-/// ran on: in the binary, the multi-threaded runtime that makes the object-store requests).
-#[derive(Clone)]
-pub(crate) struct AsyncStore {
-    /// The store's keys as zarrs' async storage.
-    pub storage: Arc<dyn AsyncReadableStorageTraits>,
-    /// The runtime that runs the reads.
-    pub runtime: tokio::runtime::Handle,
-}
-
 /// A served dataset's store: its keys for verbatim answers, and the same store as zarrs storage
 /// for the region index, batched bricks and the listing. An object store is reached through one
 /// client, which all use: batched bricks are read by futures on the runtime the store was
-/// opened on (`AsyncStore`); what a dataset's loads read (the pyramid's metadata, the region
+/// opened on; what a dataset's loads read (the pyramid's metadata, the region
 /// index's arrays: on first use, and again after a failed load) and the small documents, by
 /// zarrs' synchronous API from blocking tasks, their requests run on that runtime.
 pub struct DatasetStore {
@@ -130,9 +121,7 @@ impl DatasetStore {
                 tokio::runtime::Handle::try_current().map_err(|_| OpenError::NoRuntime {
                     location: shown.clone(),
                 })?;
-            let storage = async_object_storage(store.clone(), &prefix);
-            let zarr = synchronous(storage.clone(), BlockOn::new(runtime.clone()));
-            let reads = AsyncStore { storage, runtime };
+            let (zarr, reads) = object_storage(store.clone(), &prefix, BlockOn::new(runtime));
             let keys = Keys::Object(ObjectKeys {
                 store,
                 prefix,
@@ -144,7 +133,7 @@ impl DatasetStore {
     }
 
     /// An object store's keys read by futures; `None` for a folder.
-    pub(crate) fn async_store(&self) -> Option<&AsyncStore> {
+    pub(crate) fn async_store(&self) -> Option<&AsyncReadable> {
         match &self.keys {
             Keys::Object(keys) => Some(&keys.reads),
             Keys::Folder(_) => None,

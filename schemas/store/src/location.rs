@@ -13,8 +13,8 @@
 //!
 //! Asynchronous programs (brickserver) make one client per store with
 //! [`StoreLocation::object_store`], ask it with [`StoreLocation::exists_in`], and read the
-//! pyramid through the same client with [`object_storage`], whose requests run on their own
-//! runtime ([`BlockOn`]). The synchronous functions ([`StoreLocation::exists`],
+//! pyramid through the same client with [`object_storage`], synchronously (its requests run on
+//! their runtime, [`BlockOn`]) and by futures. The synchronous functions ([`StoreLocation::exists`],
 //! [`StoreLocation::open_readable`], publishing and downloading) run theirs on the runtime the
 //! caller gives in [`ObjectStoreOptions::runtime`] (synchronous programs start one with
 //! [`ObjectStoreOptions::for_location`]); this crate keeps no runtime of its own. A synchronous
@@ -315,6 +315,11 @@ impl BlockOn {
         })
     }
 
+    /// The runtime's handle, for async callers that spawn on it.
+    pub fn handle(&self) -> &tokio::runtime::Handle {
+        &self.handle
+    }
+
     /// Runs `tasks` on the runtime, one runtime task each and at most `in_flight` at once, from
     /// synchronous code (as [`BlockOn`]), and gives their outputs in the order of `tasks`. The
     /// runtime's workers run them side by side: what a task does after its request (decoding)
@@ -358,36 +363,25 @@ pub struct AsyncReadable {
     pub runtime: BlockOn,
 }
 
-/// The keys under `prefix` in `store` as synchronous zarrs storage, its requests made by that
-/// same client and run by `block_on`: for callers that also make their own requests to
-/// `store` (see [`StoreLocation::object_store`]) and read the pyramid through zarrs.
+/// The keys under `prefix` in `store`, read through that one client two ways: by zarrs'
+/// synchronous API, its requests run by `runtime` (a reader's one-time loads: metadata, region
+/// arrays), and by futures (bricks, many at once); one ranged `GET` per read either way
+/// ([`RangedObjectStore`]). For callers that also make their own requests to `store` (see
+/// [`StoreLocation::object_store`]), and for [`StoreLocation::open_readable_and_async`].
 pub fn object_storage(
     store: Arc<dyn ObjectStore>,
     prefix: &ObjectPath,
-    block_on: BlockOn,
-) -> Arc<dyn ReadableListableStorageTraits> {
-    synchronous(async_object_storage(store, prefix), block_on)
-}
-
-/// `storage` read synchronously, its requests run by `block_on`: for callers that also read
-/// the same storage by futures ([`async_object_storage`]).
-pub fn synchronous(
-    storage: Arc<RangedObjectStore>,
-    block_on: BlockOn,
-) -> Arc<dyn ReadableListableStorageTraits> {
-    Arc::new(AsyncToSyncStorageAdapter::new(storage, block_on))
-}
-
-/// The keys under `prefix` in `store` as async zarrs storage (one ranged `GET` per read, see
-/// [`RangedObjectStore`]): for callers that read the pyramid by futures on their own runtime.
-pub fn async_object_storage(
-    store: Arc<dyn ObjectStore>,
-    prefix: &ObjectPath,
-) -> Arc<RangedObjectStore> {
-    Arc::new(RangedObjectStore::new(Arc::new(PrefixStore::new(
+    runtime: BlockOn,
+) -> (Arc<dyn ReadableListableStorageTraits>, AsyncReadable) {
+    let storage = Arc::new(RangedObjectStore::new(Arc::new(PrefixStore::new(
         store,
         prefix.clone(),
-    ))))
+    ))));
+    let sync = Arc::new(AsyncToSyncStorageAdapter::new(
+        storage.clone(),
+        runtime.clone(),
+    ));
+    (sync, AsyncReadable { storage, runtime })
 }
 
 impl StoreLocation {
@@ -722,9 +716,9 @@ impl StoreLocation {
             Self::S3 { .. } => {
                 let runtime = options.runtime_for(self)?.clone();
                 let (s3, prefix) = self.s3_client(options)?;
-                let storage = async_object_storage(Arc::new(s3), &ObjectPath::from(prefix));
-                let sync = synchronous(storage.clone(), runtime.clone());
-                (sync, Some(AsyncReadable { storage, runtime }))
+                let (sync, reads) =
+                    object_storage(Arc::new(s3), &ObjectPath::from(prefix), runtime);
+                (sync, Some(reads))
             }
         })
     }
