@@ -38,6 +38,7 @@ import subprocess
 import sys
 
 from docs_page import point_page_at, write_result
+from file_system import describe
 from ingest_limits import limits
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -134,7 +135,7 @@ def table(results):
     return "\n".join(lines)
 
 
-def flame(size_mib, work):
+def flame(size_mib, work, report):
     """Records one `ingest` run of `size_mib` and draws its flame graph; returns the SVG's
     name under docs/benchmarks, or why there is none."""
     collapse, draw = shutil.which("inferno-collapse-perf"), shutil.which("inferno-flamegraph")
@@ -150,7 +151,7 @@ def flame(size_mib, work):
                    check=True, capture_output=True)
     script = subprocess.run(["perf", "script", "-i", data], check=True, capture_output=True).stdout
     folded = subprocess.run([collapse], input=script, check=True, capture_output=True).stdout
-    name = f"ingest-flame-{size_mib}.svg"
+    name = f"{report}-flame-{size_mib}.svg"
     svg = subprocess.run([draw, "--title", f"ingest convert, {size_mib} MiB u16 OME-TIFF, {os.cpu_count()} cores",
                           "--minwidth", "0.5"], input=folded, check=True, capture_output=True).stdout
     (ROOT / "docs" / "benchmarks" / name).write_bytes(svg)
@@ -178,26 +179,30 @@ def main():
     ap.add_argument("--rounds", type=int, default=3, help="runs of every tool per size, alternating")
     ap.add_argument("--flame", action="store_true", help="draw a flame graph of one ingest run per size")
     ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
+    ap.add_argument("--report", default="ingest",
+                    help="name of the report: docs/benchmarks/REPORT.md, its flame graphs REPORT-flame-SIZE.svg and, with "
+                         "--docs, the REPORT-bench markers in docs/benchmarks.md")
     args = ap.parse_args()
     if not INGEST.exists():
         sys.exit(f"{INGEST} not built: run cargo build --release")
     work = pathlib.Path(args.work)
     results = {int(s): bench(int(s), work, args.rounds) for s in args.sizes.split(",")}
-    flames = {size: flame(size, work) for size in results} if args.flame else {}
+    flames = {size: flame(size, work, args.report) for size in results} if args.flame else {}
     cpu = re.sub(r"\s+", " ", next((l.split(":", 1)[1] for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")).strip()
     header = (
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu}), "
         f"{os.sysconf('SC_PAGE_SIZE') * os.sysconf('SC_PHYS_PAGES') / 2**30:.0f} GiB RAM, {platform.system()} {platform.release()}, "
-        f"by `benchmarks/ingest_bench.py --sizes {args.sizes} --rounds {args.rounds}`. Ratios above 1 mean the peer is "
-        f"slower or larger."
+        f"inputs and outputs on {describe(work)}, "
+        f"by `benchmarks/ingest_bench.py --sizes {args.sizes} --rounds {args.rounds} --work {work} --report {args.report}`. "
+        f"Ratios above 1 mean the peer is slower or larger."
     )
     text = header + "\n" + table(results)
     for size, (name, why) in flames.items():
         text += f"\n\nFlame graph of one `ingest` run at {size} MiB: " + (f"[{name}]({name})." if name else why)
     print(text)
-    result = write_result("ingest.md", text + "\n")
+    result = write_result(f"{args.report}.md", text + "\n")
     if args.docs:
-        point_page_at("ingest-bench", result, text)
+        point_page_at(f"{args.report}-bench", result, text)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@ use residency_store::pyramid::{Pyramid, PyramidError};
 use zarrs::array::{ArrayError, ArraySubset};
 use zarrs::storage::{ReadableStorageTraits, StoreKey};
 
-use crate::convert::sink::{ChunkWriteError, SlabSink};
+use crate::convert::sink::{ChunkWriteError, SlabSink, planes_of};
 use crate::region_writer::{
     LevelRegionWriter, RegionWriteError, channel_summaries, region_document,
 };
@@ -234,7 +234,8 @@ fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
                 histograms: &histograms,
                 stats: (i == 0).then_some(stats.as_slice()),
             };
-            let (w, e) = sink.process(&slab, z0, nz, &mut cells)?;
+            let planes = planes_of(&slab, (ny * nx) as usize);
+            let (w, e) = sink.process(&planes, z0, nz, &mut cells)?;
             written += w;
             empty += e;
             z0 += nz;

@@ -149,6 +149,12 @@ enum Command {
         /// columns of whole chunks, reading only the strips, tiles or rows each column spans.
         #[arg(long, value_name = "BYTES", value_parser = parse_bytes)]
         memory_limit: Option<u64>,
+        /// Copy every input plane into memory. By default whole planes stored uncompressed
+        /// (in the output's sample type and this machine's byte order) are mapped from their
+        /// files and read where they lie; use this for inputs that may change while the
+        /// conversion runs, since a mapped file cut short meanwhile ends it with SIGBUS.
+        #[arg(long)]
+        no_mmap: bool,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
@@ -337,6 +343,7 @@ fn run(cli: Cli) -> Result<()> {
             overwrite,
             partition,
             memory_limit,
+            no_mmap,
             threads,
             quiet,
         } => {
@@ -380,6 +387,7 @@ fn run(cli: Cli) -> Result<()> {
             options.progress = !quiet;
             options.channel_names = channel_names;
             options.memory_limit = memory_limit;
+            options.map_inputs = !no_mmap;
             if let Some(partition) = partition {
                 let mut summary = convert_partition(&options, partition)?;
                 if staging.is_some() {

@@ -373,6 +373,89 @@ def test_killed_run_leaves_no_complete_looking_store_and_rerun_is_identical(tmp_
             assert a[k] == b[k], k
 
 
+def mapped_line(stdout: str) -> str:
+    """The report's line about input read in place ('' when none was)."""
+    return next((l.strip() for l in stdout.splitlines() if "read in place" in l), "")
+
+
+def write_inputs(kind: str, d: pathlib.Path) -> list:
+    """The input files of one kind of stack (two channels of 10 × 64 × 81 where it has
+    channels), as tifffile and NumPy write them."""
+    a, b = (sparse_volume((10, 64, 81), np.uint16) for _ in range(2))
+    if kind == "tiff-strips":
+        tifffile.imwrite(d / "s.tif", a, rowsperstrip=4, photometric="minisblack")
+    elif kind == "bigtiff-float":
+        tifffile.imwrite(d / "s.tif", a.astype(np.float32) / 7, bigtiff=True, photometric="minisblack")
+    elif kind in ("ome-czyx", "ome-zcyx"):
+        czyx = np.stack([a, b])
+        data = czyx if kind == "ome-czyx" else czyx.transpose(1, 0, 2, 3)
+        tifffile.imwrite(d / "s.ome.tif", data, ome=True, photometric="minisblack",
+                         metadata={"axes": kind[-4:].upper()})
+    elif kind == "imagej-zcyx":
+        tifffile.imwrite(d / "s.tif", np.stack([a, b], axis=1), imagej=True, metadata={"axes": "ZCYX"})
+    elif kind == "two-files":
+        tifffile.imwrite(d / "a.tif", a)
+        tifffile.imwrite(d / "b.tif", b)
+    elif kind == "slices":
+        (d / "slices").mkdir()
+        for z in range(a.shape[0]):
+            tifffile.imwrite(d / "slices" / f"z{z}.tif", a[z])
+        return [d / "slices"]
+    elif kind == "raw":
+        a.astype("<u2").tofile(d / "s_81x64x10_uint16.raw")
+    elif kind == "big-endian":
+        tifffile.imwrite(d / "s.tif", a, byteorder=">", photometric="minisblack")
+    elif kind == "deflate":
+        tifffile.imwrite(d / "s.tif", a, compression="zlib", photometric="minisblack")
+    elif kind == "tiled":
+        tifffile.imwrite(d / "s.tif", a, tile=(16, 16), photometric="minisblack")
+    elif kind == "promoted":
+        tifffile.imwrite(d / "a.tif", a.astype(np.uint8))
+        tifffile.imwrite(d / "b.tif", b)
+    return sorted(p for p in d.iterdir() if p.is_file())
+
+
+# Kind of input: (MB of it read in place, MB in all); 0 read in place: every plane is copied.
+CHANNEL_MB = 10 * 64 * 81 * 2 / 1e6
+MAPPED = {
+    "tiff-strips": (CHANNEL_MB, CHANNEL_MB),
+    "bigtiff-float": (2 * CHANNEL_MB, 2 * CHANNEL_MB),
+    "ome-czyx": (2 * CHANNEL_MB, 2 * CHANNEL_MB),
+    "ome-zcyx": (2 * CHANNEL_MB, 2 * CHANNEL_MB),
+    "imagej-zcyx": (2 * CHANNEL_MB, 2 * CHANNEL_MB),
+    "two-files": (2 * CHANNEL_MB, 2 * CHANNEL_MB),
+    "slices": (CHANNEL_MB, CHANNEL_MB),
+    "raw": (CHANNEL_MB, CHANNEL_MB),
+    "big-endian": (0, CHANNEL_MB),
+    "deflate": (0, CHANNEL_MB),
+    "tiled": (0, CHANNEL_MB),
+    "promoted": (0, 2 * CHANNEL_MB),
+}
+
+
+@pytest.mark.parametrize("kind", MAPPED)
+def test_planes_read_in_place_give_the_store_copied_planes_give(tmp_path, kind):
+    """Planes stored uncompressed in the store's type and this machine's byte order are mapped
+    from their files (the report says how many bytes); the store is byte for byte the one
+    `--no-mmap`, which copies every plane, writes."""
+    src = tmp_path / "in"
+    src.mkdir()
+    inputs = write_inputs(kind, src)
+    trees, lines = [], []
+    for flags in ([], ["--no-mmap"]):
+        out = tmp_path / ("copied" if flags else "mapped") / "s.ome.zarr"
+        done = run_ingest("convert", *inputs, "-o", out, "--chunk", "8", *flags)
+        trees.append(tree_bytes(out))
+        lines.append(mapped_line(done.stdout))
+    mapped, total = MAPPED[kind]
+    expected = f"read in place from the input files (memory-mapped): {mapped:.1f} of {total:.1f} MB"
+    expected = expected if mapped else ""
+    assert lines == [expected, ""]
+    assert trees[0].keys() == trees[1].keys()
+    for k in trees[0]:
+        assert trees[0][k] == trees[1][k], k
+
+
 @pytest.mark.parametrize("layout", [["--chunk", "8"], ["--chunk", "8", "--shard", "16"], ["--chunk", "8", "--ome-zarr-version", "0.4"]])
 def test_stores_are_byte_identical_across_runs_and_thread_counts(tmp_path, layout):
     """Every store, sharded or not, has the same bytes from run to run and whatever --threads:

@@ -35,6 +35,11 @@ pub struct ConvertOptions {
     pub channel_names: Vec<String>,
     /// Peak memory to stay within, in bytes (default: [`default_memory_limit`]).
     pub memory_limit: Option<u64>,
+    /// Map whole input planes that their files store as they are read (uncompressed, in the
+    /// output's sample type and the machine's byte order) instead of copying them into
+    /// memory: the page cache's own memory is read in place. Only for inputs that do not
+    /// change during the conversion (a mapped file truncated meanwhile ends the process).
+    pub map_inputs: bool,
     /// Told the input bytes read so far and the pass's total as the conversion goes on (a
     /// conversion within a memory limit may read in several passes), beside the bar.
     pub on_progress: Option<ProgressCallback>,
@@ -63,6 +68,7 @@ impl ConvertOptions {
             progress: false,
             channel_names: Vec::new(),
             memory_limit: None,
+            map_inputs: true,
             on_progress: None,
         }
     }

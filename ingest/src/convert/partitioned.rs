@@ -15,7 +15,7 @@ use super::pass::{
 };
 use super::plan::{plan_pass, plan_store};
 use super::pyramid_sums::Accumulator;
-use super::summary::{ConvertSummary, columns_report};
+use super::summary::{ConvertSummary, columns_report, mapped_report};
 use crate::columns::ColumnPlan;
 use crate::partition::handoff::{
     HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, RECORDS_FOLDER,
@@ -51,6 +51,9 @@ pub struct PartitionSummary {
     pub columns: Option<ColumnPlan>,
     /// Plane extent `y, x`.
     pub plane: [u64; 2],
+    /// Bytes of its level-0 voxels read in place from the input files (see
+    /// [`ConvertOptions::map_inputs`](super::ConvertOptions::map_inputs)).
+    pub mapped_bytes: u64,
 }
 
 impl PartitionSummary {
@@ -68,7 +71,8 @@ impl PartitionSummary {
             self.bricks_empty,
             self.seconds,
             mb / self.seconds.max(1e-9)
-        ) + &columns_report(self.columns.as_ref(), self.plane)
+        ) + &mapped_report(self.mapped_bytes, self.input_bytes)
+            + &columns_report(self.columns.as_ref(), self.plane)
     }
 }
 
@@ -118,7 +122,7 @@ fn partition_typed<T: Sample>(
         )
     });
     let stats = new_stats(channels);
-    run_pass(
+    let mapped_bytes = run_pass(
         options,
         &mut inputs.sources,
         &plan,
@@ -169,6 +173,7 @@ fn partition_typed<T: Sample>(
         seconds: started.elapsed().as_secs_f64(),
         columns: (!columns.is_whole([ny, nx])).then_some(columns),
         plane: [ny, nx],
+        mapped_bytes,
     })
 }
 

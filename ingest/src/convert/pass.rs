@@ -14,7 +14,7 @@ use zarrs::array::Array;
 use super::error::ConvertError;
 use super::options::ConvertOptions;
 use super::pyramid_sums::{Accumulator, SlabRows, Sums, Values, accumulate, covered};
-use super::sink::SlabSink;
+use super::sink::{SlabSink, planes_of};
 use super::summary::{ConvertSummary, LevelSummary};
 use crate::columns::{ColumnPlan, at_level};
 use crate::ome::{image_attributes, multiscale, omero};
@@ -26,7 +26,7 @@ use crate::region_writer::{
 };
 use crate::regions::{CELL, CellGrid, ChannelAccumulator, HALO, LevelHistograms, cells_reached};
 use crate::sample_format::Sample;
-use crate::source::{PlaneRegion, SourceError, VolumeSource};
+use crate::source::{MappedPlane, PlaneRegion, SourceError, VolumeSource};
 use crate::store::{ArrayLayout, Store, StoreWriter, directory_bytes};
 
 /// Per-level state during the pass.
@@ -57,10 +57,11 @@ pub(crate) struct Level<T: Sample> {
 }
 
 impl<T: Sample> Level<T> {
-    /// Writes one slab of this level's values and records its region metadata.
+    /// Writes one slab of this level's values (`planes[c · nz + z]`) and records its region
+    /// metadata.
     pub(crate) fn write_slab(
         &mut self,
-        values: &[T],
+        planes: &[&[T]],
         z0: u64,
         nz: u64,
         stats: Option<&[Mutex<ChannelAccumulator>]>,
@@ -78,7 +79,7 @@ impl<T: Sample> Level<T> {
             stats,
         };
         let (written, empty) = sink
-            .process(values, z0, nz, &mut self.cells)
+            .process(planes, z0, nz, &mut self.cells)
             .map_err(|source| ConvertError::WriteLevel0 {
                 path: self.output.clone(),
                 source,
@@ -237,29 +238,81 @@ pub(crate) fn open_levels<T: Sample>(
     Ok(levels)
 }
 
+/// A level-0 slab as the reader hands it over: decoded into memory, or lent plane by plane by
+/// the inputs' files (see [`VolumeSource::map_plane`]).
+enum Level0Slab<T> {
+    /// `[c][nz][y][x]` in one buffer.
+    Decoded(Vec<T>),
+    /// Plane `c · nz + z` of the slab at index `c · nz + z`.
+    Mapped(Vec<MappedPlane>),
+}
+
+impl<T: Sample> Level0Slab<T> {
+    /// The slab's planes of `plane` voxels, as its consumers take them.
+    fn planes(&self, plane: usize) -> Vec<&[T]> {
+        match self {
+            Self::Decoded(values) => planes_of(values, plane),
+            Self::Mapped(mapped) => mapped.iter().map(MappedPlane::samples).collect(),
+        }
+    }
+}
+
+/// The planes `z0..z0 + nz` of every channel of `sources`, in the slab's order, mapped from
+/// their files; None once a source has a plane that must be read instead (that source is then
+/// marked in `mappable` and not asked again).
+fn map_slab<T: Sample>(
+    sources: &mut [Box<dyn VolumeSource>],
+    mappable: &mut [bool],
+    z0: u64,
+    nz: u64,
+) -> Result<Option<Vec<MappedPlane>>, SourceError> {
+    let mut planes = Vec::new();
+    for (source, mappable) in sources.iter_mut().zip(mappable) {
+        if !*mappable {
+            return Ok(None);
+        }
+        for c in 0..source.info().channels {
+            for z in z0..z0 + nz {
+                let Some(plane) = source.map_plane(c, z, T::FORMAT)? else {
+                    *mappable = false;
+                    return Ok(None);
+                };
+                planes.push(plane);
+            }
+        }
+    }
+    Ok(Some(planes))
+}
+
 /// Reads `region` of level-0 planes `planes` of the inputs slab by slab (a reader thread
-/// decodes slab k+1 while slab k is written) and sends each up the pyramid. The two slabs
-/// come from `spare` and go back to it, so the columns of a pass reuse the same memory.
+/// decodes or maps slab k+1 while slab k is written) and sends each up the pyramid. Whole
+/// planes stored as they are read are mapped from their files when `map_inputs` allows;
+/// the others are decoded into two slabs that come from `spare` and go back to it, so the
+/// columns of a pass reuse the same memory. Returns the bytes of input planes mapped.
 #[allow(clippy::too_many_arguments)]
 fn read_level0<T: Sample>(
     sources: &mut [Box<dyn VolumeSource>],
     plan: &PartitionPlan,
     planes: std::ops::Range<u64>,
     region: PlaneRegion,
+    map_inputs: bool,
     levels: &mut [Level<T>],
     handed_over: &mut HandedOver<T>,
     stats: &[Mutex<ChannelAccumulator>],
     bar: &crate::progress::Progress,
     spare: &mut Vec<Vec<T>>,
-) -> Result<(), ConvertError> {
+) -> Result<u64, ConvertError> {
     let channels = plan.labels.len();
     let plane = region.area() as usize;
     let oz = plan.outer[0];
+    let [_, ny, nx] = plan.shape;
+    let mut mappable = vec![map_inputs && region.is_whole([ny, nx]); sources.len()];
     std::thread::scope(|scope| {
-        // Reader thread: decodes slab k+1 while slab k is processed.
-        let (tx, rx) = sync_channel::<Result<(u64, u64, Vec<T>), SourceError>>(0);
+        // Reader thread: decodes or maps slab k+1 while slab k is processed.
+        type Message<T> = Result<(u64, u64, Level0Slab<T>), SourceError>;
+        let (tx, rx) = sync_channel::<Message<T>>(0);
         // Processed slabs go back to the reader, so their memory is reused, not re-faulted.
-        let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Vec<T>>();
+        let (recycle_tx, recycle_rx) = std::sync::mpsc::channel::<Level0Slab<T>>();
         let mut own = std::mem::take(spare);
         let reader = scope.spawn(move || {
             let mut z0 = planes.start;
@@ -267,15 +320,32 @@ fn read_level0<T: Sample>(
             while z0 < planes.end {
                 let nz = oz.min(planes.end - z0);
                 // At most two slabs exist: the one being processed and the one being read.
-                let mut slab = if allocated < 2 {
+                // A decoded slab that comes back is kept for the next decoded one; a mapped
+                // one is unmapped.
+                if allocated < 2 {
                     allocated += 1;
-                    own.pop().unwrap_or_default()
                 } else {
                     match recycle_rx.recv() {
-                        Ok(slab) => slab,
+                        Ok(Level0Slab::Decoded(slab)) => own.push(slab),
+                        Ok(Level0Slab::Mapped(_)) => {}
                         Err(_) => return (own, recycle_rx),
                     }
-                };
+                }
+                match map_slab::<T>(sources, &mut mappable, z0, nz) {
+                    Ok(Some(mapped)) => {
+                        if tx.send(Ok((z0, nz, Level0Slab::Mapped(mapped)))).is_err() {
+                            return (own, recycle_rx);
+                        }
+                        z0 += nz;
+                        continue;
+                    }
+                    Ok(None) => {}
+                    Err(e) => {
+                        let _ = tx.send(Err(e));
+                        return (own, recycle_rx);
+                    }
+                }
+                let mut slab = own.pop().unwrap_or_default();
                 crate::memory::sized(&mut slab, channels * nz as usize * plane);
                 let mut rest: &mut [T] = &mut slab;
                 let mut parts = Vec::new();
@@ -301,7 +371,8 @@ fn read_level0<T: Sample>(
                         Ok(())
                     });
                 let failed = result.is_err();
-                if tx.send(result.map(|()| (z0, nz, slab))).is_err() || failed {
+                let message = result.map(|()| (z0, nz, Level0Slab::Decoded(slab)));
+                if tx.send(message).is_err() || failed {
                     return (own, recycle_rx);
                 }
                 z0 += nz;
@@ -309,20 +380,31 @@ fn read_level0<T: Sample>(
             (own, recycle_rx)
         });
 
-        let result = (|| -> Result<(), ConvertError> {
+        let result = (|| -> Result<u64, ConvertError> {
+            let mut mapped = 0;
             for message in &rx {
                 let (z0, nz, slab) = message?;
-                process_level0(levels, handed_over, stats, &slab, z0, nz)?;
-                bar.inc(slab.len() as u64 * T::FORMAT.bytes() as u64);
+                let planes = slab.planes(plane);
+                process_level0(levels, handed_over, stats, &planes, z0, nz)?;
+                let bytes = (channels * nz as usize * plane * T::FORMAT.bytes()) as u64;
+                bar.inc(bytes);
+                if matches!(slab, Level0Slab::Mapped(_)) {
+                    mapped += bytes;
+                }
+                drop(planes);
                 let _ = recycle_tx.send(slab);
             }
-            Ok(())
+            Ok(mapped)
         })();
         // Unblock the reader whether it waits to send a slab or to get one back.
         drop(rx);
         drop(recycle_tx);
         let (own, recycled) = reader.join().map_err(|_| ConvertError::ReaderPanicked)?;
-        spare.extend(own.into_iter().chain(recycled.try_iter()));
+        let decoded = recycled.try_iter().filter_map(|slab| match slab {
+            Level0Slab::Decoded(values) => Some(values),
+            Level0Slab::Mapped(_) => None,
+        });
+        spare.extend(own.into_iter().chain(decoded));
         result
     })
 }
@@ -330,6 +412,7 @@ fn read_level0<T: Sample>(
 /// Runs level-0 planes `planes` of the inputs through the levels of `levels` (and into the
 /// hand-over accumulator after them, in a partition), in the columns of `columns`: whole
 /// planes in one pass, or each group of planes column by column (see [`crate::columns`]).
+/// Returns the bytes of input planes mapped from their files rather than copied.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_pass<T: Sample>(
     options: &ConvertOptions,
@@ -340,7 +423,7 @@ pub(crate) fn run_pass<T: Sample>(
     levels: &mut [Level<T>],
     handed_over: &mut HandedOver<T>,
     stats: &[Mutex<ChannelAccumulator>],
-) -> Result<(), ConvertError> {
+) -> Result<u64, ConvertError> {
     let channels = plan.labels.len();
     let [_, ny, nx] = plan.shape;
     let input_bytes =
@@ -360,6 +443,7 @@ pub(crate) fn run_pass<T: Sample>(
     });
     // The level-0 slabs, kept from column to column.
     let mut spare = Vec::new();
+    let mut mapped = 0;
     let mut start = planes.start;
     while start < planes.end {
         let group = start..(start + group_depth.max(1)).min(planes.end);
@@ -391,11 +475,12 @@ pub(crate) fn run_pass<T: Sample>(
             } else {
                 &mut *handed_over
             };
-            read_level0(
+            mapped += read_level0(
                 sources,
                 plan,
                 group.clone(),
                 region,
+                options.map_inputs,
                 &mut levels[..local],
                 into,
                 stats,
@@ -424,7 +509,7 @@ pub(crate) fn run_pass<T: Sample>(
         start = group.end;
     }
     bar.finish_and_clear();
-    Ok(())
+    Ok(mapped)
 }
 
 pub(crate) fn new_stats(channels: usize) -> Vec<Mutex<ChannelAccumulator>> {
@@ -503,6 +588,7 @@ pub(crate) fn finish_store<T: Sample>(
         metadata_bytes,
         seconds: started.elapsed().as_secs_f64(),
         columns: None,
+        mapped_bytes: 0,
     })
 }
 
@@ -572,17 +658,17 @@ fn propagate<T: Sample>(
     Ok(())
 }
 
-/// Writes a level-0 slab and propagates it up the pyramid.
+/// Writes a level-0 slab (`planes[c · nz + z]`) and propagates it up the pyramid.
 fn process_level0<T: Sample>(
     levels: &mut [Level<T>],
     handed_over: &mut HandedOver<T>,
     stats: &[Mutex<ChannelAccumulator>],
-    slab: &[T],
+    planes: &[&[T]],
     z0: u64,
     nz: u64,
 ) -> Result<(), ConvertError> {
-    levels[0].write_slab(slab, z0, nz, Some(stats))?;
-    propagate(levels, handed_over, 0, z0, nz, &Values(slab))
+    levels[0].write_slab(planes, z0, nz, Some(stats))?;
+    propagate(levels, handed_over, 0, z0, nz, &Values(planes))
 }
 
 /// Flushes level `l`'s accumulator when the level below has delivered everything it covers
@@ -616,14 +702,15 @@ pub(crate) fn flush_if_full<T: Sample>(
         nz,
         &mut values,
     );
-    levels[l].write_slab(&values, z0, nz, None)?;
+    levels[l].write_slab(&planes_of(&values, plane), z0, nz, None)?;
     levels[l].values = values;
     let acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());
     let sums = Sums::<T> {
         sum: &acc.sum,
         count: &acc.count,
-        nz_plane: nz as usize * plane,
-        oz_plane: acc.depth as usize * plane,
+        nz: nz as usize,
+        oz: acc.depth as usize,
+        plane,
     };
     let done = propagate(levels, handed_over, l, z0, nz, &sums);
     let mut acc = acc;

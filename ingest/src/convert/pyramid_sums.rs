@@ -69,17 +69,33 @@ pub(crate) fn covered(i: u64, f: u64, n0: u64) -> u32 {
 
 /// A slab of one level, as the next level's accumulator reads it: rows of `x` values.
 pub(crate) trait SlabRows<T: Sample>: Sync {
-    /// Adds the source row starting at `base` (length `sx`) into `sum`/`count`, summing
-    /// `step_x` (1 or 2) neighbours per destination voxel.
-    fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]);
+    /// Adds the row starting at `offset` (length `sx`) of the slab's plane `plane` (`c · nz +
+    /// z`) into `sum`/`count`, summing `step_x` (1 or 2) neighbours per destination voxel.
+    fn add_row(
+        &self,
+        plane: usize,
+        offset: usize,
+        sx: usize,
+        step_x: u64,
+        sum: &mut [T::Sum],
+        count: &mut [u32],
+    );
 }
 
-/// Level-0 voxel values, `[c][nz][y][x]`.
-pub(crate) struct Values<'a, T>(pub(crate) &'a [T]);
+/// Level-0 voxel values, plane by plane (`[c][nz]`, each `[y][x]`).
+pub(crate) struct Values<'a, T>(pub(crate) &'a [&'a [T]]);
 
 impl<T: Sample> SlabRows<T> for Values<'_, T> {
-    fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
-        let row = &self.0[base..base + sx];
+    fn add_row(
+        &self,
+        plane: usize,
+        offset: usize,
+        sx: usize,
+        step_x: u64,
+        sum: &mut [T::Sum],
+        count: &mut [u32],
+    ) {
+        let row = &self.0[plane][offset..offset + sx];
         if step_x == 1 {
             for (s, &v) in sum.iter_mut().zip(row) {
                 *s += v.to_sum();
@@ -113,18 +129,27 @@ impl<T: Sample> SlabRows<T> for Values<'_, T> {
     }
 }
 
-/// Exact sums and counts of a level ≥ 1 accumulator, laid out `[c][oz][y][x]` while the
-/// slab holds `nz ≤ oz` planes.
+/// Exact sums and counts of a level ≥ 1 accumulator, laid out `[c][oz][y][x]` (planes of
+/// `plane` voxels) while the slab holds `nz ≤ oz` planes.
 pub(crate) struct Sums<'a, T: Sample> {
     pub(crate) sum: &'a [T::Sum],
     pub(crate) count: &'a [u32],
-    pub(crate) nz_plane: usize,
-    pub(crate) oz_plane: usize,
+    pub(crate) nz: usize,
+    pub(crate) oz: usize,
+    pub(crate) plane: usize,
 }
 
 impl<T: Sample> SlabRows<T> for Sums<'_, T> {
-    fn add_row(&self, base: usize, sx: usize, step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
-        let j = base / self.nz_plane * self.oz_plane + base % self.nz_plane;
+    fn add_row(
+        &self,
+        plane: usize,
+        offset: usize,
+        sx: usize,
+        step_x: u64,
+        sum: &mut [T::Sum],
+        count: &mut [u32],
+    ) {
+        let j = (plane / self.nz * self.oz + plane % self.nz) * self.plane + offset;
         let src_sum = &self.sum[j..j + sx];
         let src_count = if T::HAS_NAN {
             &self.count[j..j + sx]
@@ -175,7 +200,6 @@ pub(crate) fn accumulate<T: Sample>(
     let dst = next.window;
     let oz = next.depth;
     let a0 = next.z0;
-    let src_plane = window.area() as usize;
     let [src_y1, _] = window.end();
     // The first column of the destination this window sums into.
     let offset = (window.x0 / step[2] - dst.x0) as usize;
@@ -204,9 +228,10 @@ pub(crate) fn accumulate<T: Sample>(
                 if syy < window.y0 || syy >= src_y1 {
                     continue;
                 }
-                let base = (c as u64 * nz + (szz - src_z0)) as usize * src_plane
-                    + ((syy - window.y0) * window.nx) as usize;
-                src.add_row(base, window.nx as usize, step[2], &mut sum[offset..], count);
+                let plane = (c as u64 * nz + (szz - src_z0)) as usize;
+                let at = ((syy - window.y0) * window.nx) as usize;
+                let (sx, step_x) = (window.nx as usize, step[2]);
+                src.add_row(plane, at, sx, step_x, &mut sum[offset..], count);
             }
         }
     };

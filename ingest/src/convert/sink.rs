@@ -49,14 +49,23 @@ pub(crate) struct SlabSink<'a> {
     pub stats: Option<&'a [Mutex<ChannelAccumulator>]>,
 }
 
+/// The planes of a slab held in one buffer `[c][nz][y][x]`, `plane` voxels each, as the
+/// slab's consumers take them (see [`SlabSink::process`]).
+pub(crate) fn planes_of<T>(slab: &[T], plane: usize) -> Vec<&[T]> {
+    if plane == 0 {
+        return Vec::new();
+    }
+    slab.chunks_exact(plane).collect()
+}
+
 impl SlabSink<'_> {
-    /// Writes (when an array is given) the chunks of a slab `[c][nz][y][x]` of the window
-    /// starting at `z0`,
-    /// records brick histograms and statistics, and folds the slab into the min/max `cells`.
+    /// Writes (when an array is given) the chunks of a slab of the window starting at `z0`,
+    /// given plane by plane (`planes[c · nz + z]`, each `[y][x]`), records brick histograms
+    /// and statistics, and folds the slab into the min/max `cells`.
     /// Returns (bricks written, bricks empty).
     pub fn process<T: Sample>(
         &self,
-        slab: &[T],
+        planes: &[&[T]],
         z0: u64,
         nz: u64,
         cells: &mut CellGrid<T>,
@@ -89,14 +98,13 @@ impl SlabSink<'_> {
                 if (nz, vy, vx) != (oz, oy, ox) {
                     chunk.fill(T::default());
                 }
-                let plane = w.area() as usize;
                 for dz in 0..nz {
+                    let plane = planes[(c as u64 * nz + dz) as usize];
                     for dy in 0..vy {
-                        let src = (c as u64 * nz + dz) as usize * plane
-                            + ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
+                        let src = ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
                         let dst = ((dz * oy + dy) * ox) as usize;
                         chunk[dst..dst + vx as usize]
-                            .copy_from_slice(&slab[src..src + vx as usize]);
+                            .copy_from_slice(&plane[src..src + vx as usize]);
                     }
                 }
                 let result =
@@ -105,7 +113,7 @@ impl SlabSink<'_> {
                 result
             })
             .collect::<Result<Vec<_>, _>>()?;
-        cells.add_slab(slab, z0, nz, w);
+        cells.add_slab(planes, z0, nz, w);
         Ok(counts
             .into_iter()
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))

@@ -38,6 +38,21 @@ pub struct ConvertSummary {
     pub seconds: f64,
     /// The columns the planes were cut into, when they were (see [`crate::columns`]).
     pub columns: Option<ColumnPlan>,
+    /// Bytes of level-0 voxels read in place from the input files, not copied (see
+    /// [`ConvertOptions::map_inputs`](super::ConvertOptions::map_inputs)).
+    pub mapped_bytes: u64,
+}
+
+/// The report line of the input read in place, or nothing when none was.
+pub(crate) fn mapped_report(mapped: u64, input: u64) -> String {
+    if mapped == 0 {
+        return String::new();
+    }
+    format!(
+        "  read in place from the input files (memory-mapped): {:.1} of {:.1} MB\n",
+        mapped as f64 / 1e6,
+        input as f64 / 1e6
+    )
 }
 
 /// The report line of a pass made in columns, or nothing for whole planes.
@@ -82,6 +97,7 @@ impl ConvertSummary {
             mb / self.seconds.max(1e-9)
         );
         let plane = [self.levels[0].shape[2], self.levels[0].shape[3]];
-        s + &columns_report(self.columns.as_ref(), plane)
+        s + &mapped_report(self.mapped_bytes, self.input_bytes)
+            + &columns_report(self.columns.as_ref(), plane)
     }
 }

@@ -246,16 +246,15 @@ impl<T: Sample> CellGrid<T> {
         ((c as u64 * self.grid[0] + z) * gy * gx + y * gx + x) as usize
     }
 
-    /// Folds one slab of voxels (`[c][nz][y][x]` over `window` of each plane, starting at
-    /// depth `z0` of the level) into the cells. Slabs and windows may arrive in any
+    /// Folds one slab of voxels (`planes[c · nz + z]`, each `[y][x]` over `window` of its
+    /// plane, starting at depth `z0` of the level) into the cells. Slabs and windows may arrive in any
     /// order: a cell at a window's edge takes its halo from the next window's voxels when
     /// they come.
-    pub fn add_slab(&mut self, slab: &[T], z0: u64, nz: u64, window: PlaneRegion) {
+    pub fn add_slab(&mut self, planes: &[&[T]], z0: u64, nz: u64, window: PlaneRegion) {
         use rayon::prelude::*;
         if nz == 0 {
             return;
         }
-        let plane = window.area() as usize;
         // The level's cells per row (a block holds the cells its column reaches).
         let gy = (window.y0 + window.ny)
             .div_ceil(CELL)
@@ -270,8 +269,8 @@ impl<T: Sample> CellGrid<T> {
             .collect::<Vec<_>>()
             .into_par_iter()
             .map(|(c, dz)| {
-                let start = (c as u64 * nz + dz) as usize * plane;
-                let cells = slice_cells(&slab[start..start + plane], window, [gy, gx]);
+                let plane = planes[(c as u64 * nz + dz) as usize];
+                let cells = slice_cells(plane, window, [gy, gx]);
                 (c, z0 + dz, cells)
             })
             .collect();
@@ -434,6 +433,7 @@ pub const CHUNK_ROWS: u64 = 8;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::convert::sink::planes_of;
     use crate::regions::histograms::LevelHistograms;
 
     /// A partition's rows of cells see what the whole grid sees there, and merge back into it.
@@ -447,7 +447,7 @@ mod tests {
             .collect();
         let plane = PlaneRegion::whole([30, 37]);
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
-        whole.add_slab(&values, 0, 12, plane);
+        whole.add_slab(&planes_of(&values, 30 * 37), 0, 12, plane);
         let mut cut = CellGrid::<u16>::for_shape(1, shape);
         for (y0, ny, x0, nx) in [
             (13, 17, 20, 17),
@@ -467,7 +467,7 @@ mod tests {
                     })
                 })
                 .collect();
-            cut.add_slab(&slab, 0, 12, region);
+            cut.add_slab(&planes_of(&slab, region.area() as usize), 0, 12, region);
         }
         assert_eq!(cut.haloed, whole.haloed);
         assert_eq!(cut.exact, whole.exact);
@@ -481,13 +481,13 @@ mod tests {
         let values: Vec<u16> = (0..40 * 64).map(|i| (i * 13 % 977) as u16).collect();
         let plane = PlaneRegion::whole([8, 8]);
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
-        whole.add_slab(&values, 0, 40, plane);
+        whole.add_slab(&planes_of(&values, 64), 0, 40, plane);
         let mut window = CellGrid::<u16>::window(1, [1, 1], 0..0, 5);
         let mut rows = CellGrid::<u16>::window(1, [1, 1], 0..0, 5);
         for z0 in (0..40).step_by(6) {
             let nz = 6.min(40 - z0);
             window.add_slab(
-                &values[(z0 * 64) as usize..((z0 + nz) * 64) as usize],
+                &planes_of(&values[(z0 * 64) as usize..((z0 + nz) * 64) as usize], 64),
                 z0,
                 nz,
                 plane,
@@ -537,13 +537,18 @@ mod tests {
         let shape = [40, 8, 8];
         let values: Vec<u16> = (0..40 * 64).map(|i| (i * 7 % 1000) as u16).collect();
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
-        whole.add_slab(&values, 0, 40, PlaneRegion::whole([shape[1], shape[2]]));
+        whole.add_slab(
+            &planes_of(&values, 64),
+            0,
+            40,
+            PlaneRegion::whole([shape[1], shape[2]]),
+        );
         let mut merged = CellGrid::<u16>::for_shape(1, shape);
         for planes in [0..16, 16..24, 24..40] {
             let mut part = CellGrid::<u16>::for_rows(1, shape, planes.clone());
             let slab = &values[(planes.start * 64) as usize..(planes.end * 64) as usize];
             part.add_slab(
-                slab,
+                &planes_of(slab, 64),
                 planes.start,
                 planes.end - planes.start,
                 PlaneRegion::whole([shape[1], shape[2]]),
@@ -573,7 +578,7 @@ mod tests {
         // 1 × 1 × 20 volume: value = x.
         let slab: Vec<u16> = (0..20).collect();
         let mut g = CellGrid::<u16>::for_shape(1, [1, 1, 20]);
-        g.add_slab(&slab, 0, 1, PlaneRegion::whole([1, 20]));
+        g.add_slab(&planes_of(&slab, 20), 0, 1, PlaneRegion::whole([1, 20]));
         assert_eq!(g.grid, [1, 1, 3]);
         assert_eq!(g.haloed.min, [0, 7, 15]);
         assert_eq!(g.haloed.max, [8, 16, 19]);

@@ -3,11 +3,12 @@
 //! Every input kind (TIFF, OME-TIFF, ImageJ hyperstack, a folder of slices, raw) implements
 //! [`VolumeSource`], so the converter streams planes without knowing where they come from.
 //!
-//! The modules below this one: [`error`](SourceError) and [`volume`](VolumeSource), which
-//! every input kind uses, then the kinds: `tiff` (with `tiff_claims` and `tiff_metadata`),
+//! The modules below this one: [`error`](SourceError), [`volume`](VolumeSource) and
+//! [`mapped`](MappedPlane), which the input kinds use, then the kinds: `tiff` (with `tiff_claims` and `tiff_metadata`),
 //! `slices` and `raw`. This module only opens an input as the kind it is ([`open_input`]).
 
 mod error;
+mod mapped;
 mod raw;
 mod slices;
 mod tiff;
@@ -18,6 +19,7 @@ mod volume;
 use std::path::Path;
 
 pub use self::error::{PlaneClaim, SourceError, TiffDirectoryError};
+pub use self::mapped::MappedPlane;
 pub use self::raw::{RawOptions, RawSource, parse_raw_name};
 pub use self::slices::SliceFolderSource;
 pub use self::tiff::TiffSource;

@@ -4,6 +4,7 @@ use std::fs::File;
 use std::path::Path;
 
 use super::error::SourceError;
+use super::mapped::MappedPlane;
 use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
 use crate::sample_format::{PlaneOut, SampleType};
 
@@ -172,11 +173,33 @@ impl VolumeSource for RawSource {
         out.fill_from_bytes(&self.buffer, self.info.format, self.big_endian, 1, 0);
         Ok(())
     }
+
+    fn map_plane(
+        &mut self,
+        _channel: usize,
+        z: u64,
+        format: SampleType,
+    ) -> Result<Option<MappedPlane>, SourceError> {
+        if format != self.info.format || self.big_endian != cfg!(target_endian = "big") {
+            return Ok(None);
+        }
+        let [depth, y, x] = self.info.shape;
+        let bytes = y * x * format.bytes() as u64;
+        let end = self.header_bytes + depth * bytes;
+        MappedPlane::map(
+            &self.file,
+            &self.info.path,
+            (self.header_bytes + z * bytes, bytes),
+            end,
+            format.bytes(),
+        )
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sample_format::Sample;
 
     #[test]
     fn recognises_the_naming_convention() {
@@ -194,6 +217,55 @@ mod tests {
 
     /// Found by fuzzing (tests/fuzz, target raw_name): an empty file matched `--dims` with a
     /// zero axis (0 bytes), so the source was opened with 1.8e19 planes to read.
+    #[test]
+    fn planes_in_the_machines_byte_order_are_mapped_where_aligned() {
+        let dir = tempfile::tempdir().unwrap();
+        let values: Vec<u16> = (0..2 * 3 * 4).map(|v| v * 100).collect();
+        let bytes = |big: bool| -> Vec<u8> {
+            values
+                .iter()
+                .flat_map(|v| {
+                    if big {
+                        v.to_be_bytes()
+                    } else {
+                        v.to_le_bytes()
+                    }
+                })
+                .collect()
+        };
+        let open = |name: &str, header: usize, big: bool| {
+            let path = dir.path().join(name);
+            let mut file = vec![7u8; header];
+            file.extend(bytes(big));
+            std::fs::write(&path, file).unwrap();
+            let options = RawOptions {
+                dims: Some([4, 3, 2]),
+                format: Some(SampleType::U16),
+                big_endian: big,
+                header_bytes: header as u64,
+            };
+            RawSource::open(&path, &options).unwrap()
+        };
+        let little = cfg!(target_endian = "little");
+        let mut native = open("native.raw", 6, !little);
+        let plane = native.map_plane(0, 1, SampleType::U16).unwrap().unwrap();
+        assert_eq!(
+            plane.samples::<u16>(),
+            [
+                1200, 1300, 1400, 1500, 1600, 1700, 1800, 1900, 2000, 2100, 2200, 2300
+            ]
+        );
+        assert!(native.map_plane(0, 0, SampleType::I32).unwrap().is_none());
+        // Swapped bytes, or samples at odd offsets, are read instead.
+        let mut swapped = open("swapped.raw", 6, little);
+        assert!(swapped.map_plane(0, 1, SampleType::U16).unwrap().is_none());
+        let mut odd = open("odd.raw", 5, !little);
+        assert!(odd.map_plane(0, 1, SampleType::U16).unwrap().is_none());
+        let mut plane = vec![0u16; 12];
+        odd.read_plane(0, 1, u16::plane_out(&mut plane)).unwrap();
+        assert_eq!(plane[11], 2300);
+    }
+
     #[test]
     fn an_empty_axis_is_refused() {
         let dir = tempfile::tempdir().unwrap();

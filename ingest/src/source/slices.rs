@@ -1,11 +1,18 @@
 //! A z-stack stored as one single-page TIFF file per slice, in natural sort order.
 
+use std::fs::File;
+use std::io::BufReader;
 use std::path::{Path, PathBuf};
 
+use tiff::decoder::Decoder;
+
 use super::error::SourceError;
-use super::tiff::{DecodeUnit, DecodedRegion, check_page, open_decoder, page_format};
+use super::mapped::MappedPlane;
+use super::tiff::{
+    DecodeUnit, DecodedRegion, TiffFile, check_page, open_decoder, page_format, stored_as_decoded,
+};
 use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
-use crate::sample_format::PlaneOut;
+use crate::sample_format::{PlaneOut, SampleType};
 
 /// A folder or glob of single-slice TIFF files.
 pub struct SliceFolderSource {
@@ -92,6 +99,41 @@ impl SliceFolderSource {
     }
 }
 
+impl SliceFolderSource {
+    /// Opens slice `z`, once it is found to be of the first slice's size and sample format;
+    /// returns its decoder, what its claims are checked against, and that format.
+    fn open_slice(
+        &self,
+        z: u64,
+    ) -> Result<(Decoder<BufReader<File>>, TiffFile, SampleType), SourceError> {
+        let file = &self.files[z as usize];
+        let (mut decoder, tiff) = open_decoder(file)?;
+        let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
+        let [_, ey, ex] = self.info.shape;
+        if (h as u64, w as u64) != (ey, ex) {
+            return Err(SourceError::SliceSize {
+                path: file.clone(),
+                width: w,
+                height: h,
+                first: self.files[0].clone(),
+                expected: [ey, ex],
+            });
+        }
+        let (format, spp) = page_format(&mut decoder, file)?;
+        if (format, spp) != (self.info.format, self.samples_per_pixel) {
+            return Err(SourceError::SliceFormat {
+                path: file.clone(),
+                samples: spp,
+                format,
+                first: self.files[0].clone(),
+                expected_samples: self.samples_per_pixel,
+                expected_format: self.info.format,
+            });
+        }
+        Ok((decoder, tiff, format))
+    }
+}
+
 impl VolumeSource for SliceFolderSource {
     fn info(&self) -> &SourceInfo {
         &self.info
@@ -99,6 +141,30 @@ impl VolumeSource for SliceFolderSource {
 
     fn decoder_bytes(&self, _region: PlaneRegion) -> u64 {
         self.unit.bytes()
+    }
+
+    fn map_plane(
+        &mut self,
+        _channel: usize,
+        z: u64,
+        format: SampleType,
+    ) -> Result<Option<MappedPlane>, SourceError> {
+        if self.samples_per_pixel != 1 || format != self.info.format {
+            return Ok(None);
+        }
+        let (mut decoder, tiff, _) = self.open_slice(z)?;
+        let [_, ny, nx] = self.info.shape;
+        let Some(stored) = stored_as_decoded(&mut decoder, ny * nx * format.bytes() as u64) else {
+            return Ok(None);
+        };
+        let path = &self.files[z as usize];
+        MappedPlane::map(
+            decoder.inner().get_ref(),
+            path,
+            stored,
+            tiff.len,
+            format.bytes(),
+        )
     }
 
     fn read_region(
@@ -110,29 +176,9 @@ impl VolumeSource for SliceFolderSource {
     ) -> Result<(), SourceError> {
         let file = &self.files[z as usize];
         if !self.decoded.holds(z, region) {
-            let (mut decoder, tiff) = open_decoder(file)?;
-            let (w, h) = decoder.dimensions().map_err(SourceError::Tiff)?;
+            let (mut decoder, tiff, format) = self.open_slice(z)?;
             let [_, ey, ex] = self.info.shape;
-            if (h as u64, w as u64) != (ey, ex) {
-                return Err(SourceError::SliceSize {
-                    path: file.clone(),
-                    width: w,
-                    height: h,
-                    first: self.files[0].clone(),
-                    expected: [ey, ex],
-                });
-            }
-            let (format, spp) = page_format(&mut decoder, file)?;
-            if (format, spp) != (self.info.format, self.samples_per_pixel) {
-                return Err(SourceError::SliceFormat {
-                    path: file.clone(),
-                    samples: spp,
-                    format,
-                    first: self.files[0].clone(),
-                    expected_samples: self.samples_per_pixel,
-                    expected_format: self.info.format,
-                });
-            }
+            let spp = self.samples_per_pixel;
             self.decoded.decode(
                 z,
                 &mut decoder,

@@ -9,6 +9,7 @@ use tiff::decoder::{Decoder, Limits};
 use tiff::tags::Tag;
 
 use super::error::SourceError;
+use super::mapped::MappedPlane;
 use super::tiff_claims::PageClaims;
 use super::tiff_metadata::{StackLayout, normalise_unit, parse_imagej, parse_ome_xml};
 use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
@@ -525,6 +526,89 @@ impl TiffSource {
     }
 }
 
+impl TiffSource {
+    /// The page holding the plane at depth `z` of channel `channel`.
+    fn page_of(&self, channel: usize, z: u64) -> u64 {
+        (channel / self.samples_per_pixel) as u64 * self.layout.channel_stride
+            + z * self.layout.z_stride
+    }
+
+    /// Makes `page` the decoder's current page, once it is found to be of the first page's
+    /// size and sample format; returns that format.
+    fn seek_page(&mut self, page: u64) -> Result<SampleType, SourceError> {
+        let path = &self.info.path;
+        self.decoder
+            .seek_to_image(page as usize)
+            .map_err(|source| SourceError::Seek {
+                path: path.clone(),
+                page,
+                source,
+            })?;
+        let (w, h) = self.decoder.dimensions().map_err(SourceError::Tiff)?;
+        let [_, ey, ex] = self.info.shape;
+        if (h as u64, w as u64) != (ey, ex) {
+            return Err(SourceError::PageSize {
+                path: path.clone(),
+                page,
+                width: w,
+                height: h,
+                expected: [ey, ex],
+            });
+        }
+        let spp = self.samples_per_pixel;
+        let (format, samples) = page_format(&mut self.decoder, path)?;
+        if (format, samples) != (self.info.format, spp) {
+            return Err(SourceError::PageFormat {
+                path: path.clone(),
+                page,
+                samples,
+                format,
+                expected_samples: spp,
+                expected_format: self.info.format,
+            });
+        }
+        Ok(format)
+    }
+}
+
+/// Where the current page of `decoder` keeps its pixels, when they are one run of bytes as
+/// they would be decoded (`plane_bytes` of them): strips, uncompressed, without a predictor,
+/// in the machine's byte order, each strip starting where the one before ends.
+pub(super) fn stored_as_decoded(
+    decoder: &mut Decoder<BufReader<File>>,
+    plane_bytes: u64,
+) -> Option<(u64, u64)> {
+    let tag = |decoder: &mut Decoder<BufReader<File>>, tag| {
+        decoder
+            .find_tag_unsigned::<u16>(tag)
+            .ok()
+            .flatten()
+            .unwrap_or(1)
+    };
+    let native = (decoder.byte_order() == tiff::tags::ByteOrder::BigEndian) == NATIVE_BIG_ENDIAN;
+    if !native
+        || tag(decoder, Tag::Compression) != 1
+        || tag(decoder, Tag::Predictor) != 1
+        || decoder.get_chunk_type() != tiff::decoder::ChunkType::Strip
+    {
+        return None;
+    }
+    let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).ok()?;
+    let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).ok()?;
+    if offsets.len() != counts.len() {
+        return None;
+    }
+    let first = *offsets.first()?;
+    let mut end = first;
+    for (&offset, &count) in offsets.iter().zip(&counts) {
+        if offset != end {
+            return None;
+        }
+        end = offset.checked_add(count)?;
+    }
+    (end - first == plane_bytes).then_some((first, plane_bytes))
+}
+
 impl VolumeSource for TiffSource {
     fn info(&self) -> &SourceInfo {
         &self.info
@@ -532,6 +616,25 @@ impl VolumeSource for TiffSource {
 
     fn decoder_bytes(&self, _region: PlaneRegion) -> u64 {
         self.unit.bytes()
+    }
+
+    fn map_plane(
+        &mut self,
+        channel: usize,
+        z: u64,
+        format: SampleType,
+    ) -> Result<Option<MappedPlane>, SourceError> {
+        if self.samples_per_pixel != 1 || format != self.info.format {
+            return Ok(None);
+        }
+        self.seek_page(self.page_of(channel, z))?;
+        let [_, ny, nx] = self.info.shape;
+        let plane_bytes = ny * nx * format.bytes() as u64;
+        let Some(stored) = stored_as_decoded(&mut self.decoder, plane_bytes) else {
+            return Ok(None);
+        };
+        let file = self.decoder.inner().get_ref();
+        MappedPlane::map(file, &self.info.path, stored, self.file.len, format.bytes())
     }
 
     fn read_region(
@@ -542,38 +645,11 @@ impl VolumeSource for TiffSource {
         mut out: PlaneOut<'_>,
     ) -> Result<(), SourceError> {
         let spp = self.samples_per_pixel;
-        let page = (channel / spp) as u64 * self.layout.channel_stride + z * self.layout.z_stride;
+        let page = self.page_of(channel, z);
         let path = self.info.path.clone();
         if !self.decoded.holds(page, region) {
-            self.decoder
-                .seek_to_image(page as usize)
-                .map_err(|source| SourceError::Seek {
-                    path: path.clone(),
-                    page,
-                    source,
-                })?;
-            let (w, h) = self.decoder.dimensions().map_err(SourceError::Tiff)?;
+            let format = self.seek_page(page)?;
             let [_, ey, ex] = self.info.shape;
-            if (h as u64, w as u64) != (ey, ex) {
-                return Err(SourceError::PageSize {
-                    path,
-                    page,
-                    width: w,
-                    height: h,
-                    expected: [ey, ex],
-                });
-            }
-            let (format, samples) = page_format(&mut self.decoder, &path)?;
-            if (format, samples) != (self.info.format, spp) {
-                return Err(SourceError::PageFormat {
-                    path,
-                    page,
-                    samples,
-                    format,
-                    expected_samples: spp,
-                    expected_format: self.info.format,
-                });
-            }
             // The page's samples are the destination's: decoded straight into it.
             let direct = spp == 1 && out.format() == format;
             self.decoded.decode(
@@ -594,5 +670,66 @@ impl VolumeSource for TiffSource {
         self.decoded
             .fill(&mut out, self.info.format, spp, channel % spp);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use tiff::encoder::{Compression, DeflateLevel, TiffEncoder, colortype};
+
+    use super::*;
+    use crate::sample_format::Sample;
+
+    /// Writes 3 pages of 20 × 33 u16 (several strips each, value = 1000·z + y·33 + x).
+    fn write_stack(path: &Path, compression: Compression) {
+        let file = std::io::BufWriter::new(File::create(path).unwrap());
+        let mut encoder = TiffEncoder::new(file)
+            .unwrap()
+            .with_compression(compression);
+        for z in 0..3u16 {
+            let data: Vec<u16> = (0..20 * 33u16).map(|i| 1000 * z + i).collect();
+            let mut image = encoder.new_image::<colortype::Gray16>(33, 20).unwrap();
+            image.rows_per_strip(6).unwrap();
+            image.write_data(&data).unwrap();
+        }
+    }
+
+    fn read(source: &mut TiffSource, z: u64) -> Vec<u16> {
+        let mut plane = vec![0u16; 20 * 33];
+        source.read_plane(0, z, u16::plane_out(&mut plane)).unwrap();
+        plane
+    }
+
+    #[test]
+    fn uncompressed_pages_are_mapped_as_they_are_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("stack.tif");
+        write_stack(&path, Compression::Uncompressed);
+        let mut source = TiffSource::open(&path).unwrap();
+        for z in [2, 0, 1] {
+            let mapped = source.map_plane(0, z, SampleType::U16).unwrap().unwrap();
+            assert_eq!(mapped.samples::<u16>(), read(&mut source, z));
+            assert_eq!(mapped.samples::<u16>()[33], 1000 * z as u16 + 33);
+        }
+        // Another sample type than the file's is read and converted, never mapped.
+        assert!(source.map_plane(0, 0, SampleType::F32).unwrap().is_none());
+        // A page past the stack is the error reading it would give.
+        let error = source.map_plane(0, 3, SampleType::U16).err().unwrap();
+        assert!(
+            error
+                .to_string()
+                .starts_with(&format!("{}:", path.display())),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn compressed_pages_are_not_mapped() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("deflate.tif");
+        write_stack(&path, Compression::Deflate(DeflateLevel::Fast));
+        let mut source = TiffSource::open(&path).unwrap();
+        assert!(source.map_plane(0, 1, SampleType::U16).unwrap().is_none());
+        assert_eq!(read(&mut source, 1)[5], 1005);
     }
 }

@@ -4,6 +4,7 @@
 use std::path::PathBuf;
 
 use super::error::SourceError;
+use super::mapped::MappedPlane;
 use crate::sample_format::{PlaneOut, SampleType};
 
 /// What a source holds, known before any plane is read.
@@ -90,6 +91,25 @@ pub trait VolumeSource: Send {
     fn decoder_bytes(&self, region: PlaneRegion) -> u64 {
         let _ = region;
         0
+    }
+
+    /// The whole plane at depth `z` of channel `channel` mapped from the source's file, when
+    /// the file stores it as it would be read: its samples uncompressed, next to each other,
+    /// in `format` and the machine's byte order. None when it is stored otherwise
+    /// (compressed, tiled, with several samples per pixel, in another format or byte order),
+    /// or the source has no such file; the plane is then read with
+    /// [`VolumeSource::read_region`].
+    ///
+    /// # Errors
+    /// As [`VolumeSource::read_region`], and when the system refuses the mapping.
+    fn map_plane(
+        &mut self,
+        channel: usize,
+        z: u64,
+        format: SampleType,
+    ) -> Result<Option<MappedPlane>, SourceError> {
+        let _ = (channel, z, format);
+        Ok(None)
     }
 
     /// Reads the whole plane at depth `z` of channel `channel` into `out`.
