@@ -166,8 +166,8 @@ fn edge(value: &Bound<'_, PyAny>) -> PyResult<[u64; 3]> {
 /// converted into the OME-Zarr store `output` (a folder) with region metadata. The options
 /// are `ingest convert`'s flags: `chunk` and `shard` (an edge or `(z, y, x)`), `voxel_size`
 /// (`(z, y, x)`), `unit`, `ome_zarr_version` (`"0.5"` or `"0.4"`), `levels`,
-/// `channel_names`, `overwrite`, `memory_limit` (bytes), and for raw inputs `dims` (`(x, y,
-/// z)`), `dtype`, `endian`, `header_bytes`. `progress(done, total)` is called as the input is
+/// `channel_names`, `overwrite`, `memory_limit` (bytes), `map_inputs` (false: `--no-mmap`),
+/// and for raw inputs `dims` (`(x, y, z)`), `dtype`, `endian`, `header_bytes`. `progress(done, total)` is called as the input is
 /// read (bytes). Returns a dict: `output`, `input_bytes`, `stored_bytes`, `seconds` and
 /// `report` (the text `ingest convert` prints).
 ///
@@ -178,8 +178,8 @@ fn edge(value: &Bound<'_, PyAny>) -> PyResult<[u64; 3]> {
 #[pyo3(signature = (
     inputs, output, *, chunk = None, shard = None, voxel_size = None, unit = None,
     ome_zarr_version = "0.5", levels = None, channel_names = None, overwrite = false,
-    memory_limit = None, dims = None, dtype = None, endian = "little", header_bytes = 0,
-    progress = None
+    memory_limit = None, map_inputs = true, dims = None, dtype = None, endian = "little",
+    header_bytes = 0, progress = None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn convert<'py>(
@@ -195,6 +195,7 @@ fn convert<'py>(
     channel_names: Option<Vec<String>>,
     overwrite: bool,
     memory_limit: Option<u64>,
+    map_inputs: bool,
     dims: Option<[u64; 3]>,
     dtype: Option<String>,
     endian: &str,
@@ -240,6 +241,7 @@ fn convert<'py>(
     options.overwrite = overwrite;
     options.channel_names = channel_names.unwrap_or_default();
     options.memory_limit = memory_limit;
+    options.map_inputs = map_inputs;
     let failed = std::sync::Arc::new(std::sync::Mutex::new(None));
     options.on_progress = progress.map(|p| conversion::python_progress(p, failed.clone()));
     let summary = py

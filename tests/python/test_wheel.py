@@ -398,6 +398,18 @@ def test_convert_from_python_writes_what_ingest_convert_writes(installed, tmp_pa
     assert summary["input_bytes"] == 2 * 16 * 48 * 48 * 2
     assert calls and all(total == summary["input_bytes"] for _, total in calls), calls
     assert [done for done, _ in calls] == sorted(done for done, _ in calls) and calls[-1][0] == calls[-1][1], calls
+    # The sample's planes are read in place from the TIFF files unless `map_inputs=False`.
+    mapped = "  read in place from the input files (memory-mapped): 0.0 of 0.0 MB\n"
+    assert mapped in summary["report"], summary["report"]
+    copied = tmp_path / "copied" / "c.ome.zarr"
+    p = run(installed, "python", "-c", f"""
+import residency
+tiffs = {[str(t) for t in tiffs]!r}
+print(residency.convert(tiffs, {str(copied)!r}, chunk=(8, 16, 16), channel_names=["a", "b"],
+                        map_inputs=False)["report"])
+""")
+    assert "read in place" not in p.stdout, p.stdout
+    assert files(copied) == files(cli)
     # A failure: the exception's message is the command line's, after its `error: `.
     missing = tmp_path / "missing.tif"
     cli_err = run(installed, "ingest", "convert", missing, "-o", tmp_path / "x.ome.zarr", "--quiet", check=False)

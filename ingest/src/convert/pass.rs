@@ -386,10 +386,10 @@ fn read_level0<T: Sample>(
                 let (z0, nz, slab) = message?;
                 let planes = slab.planes(plane);
                 process_level0(levels, handed_over, stats, &planes, z0, nz)?;
-                let bytes = (channels * nz as usize * plane * T::FORMAT.bytes()) as u64;
-                bar.inc(bytes);
-                if matches!(slab, Level0Slab::Mapped(_)) {
-                    mapped += bytes;
+                bar.inc((channels * nz as usize * plane * T::FORMAT.bytes()) as u64);
+                if let Level0Slab::Mapped(planes) = &slab {
+                    let in_place = planes.iter().filter(|p| p.in_place());
+                    mapped += in_place.map(|p| p.byte_len() as u64).sum::<u64>();
                 }
                 drop(planes);
                 let _ = recycle_tx.send(slab);

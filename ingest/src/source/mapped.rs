@@ -16,19 +16,24 @@ use crate::sample_format::Sample;
 /// a conversion ends it with `SIGBUS` instead of an error, so a conversion of inputs that may
 /// change reads them instead (`ConvertOptions::map_inputs`).
 pub struct MappedPlane {
-    map: Mmap,
-    /// Where the plane starts in `map` (the mapping starts on a page boundary).
-    start: usize,
-    /// Bytes of the plane.
-    len: usize,
+    bytes: PlaneBytes,
+}
+
+/// Where a [`MappedPlane`]'s bytes are.
+enum PlaneBytes {
+    /// In the mapping, from `start` (the mapping starts on a page boundary).
+    InPlace { map: Mmap, start: usize, len: usize },
+    /// Copied out of the mapping into words, because in the file they do not start on a
+    /// multiple of their samples' size (a TIFF page after an odd-length description).
+    Copied { words: Vec<u64>, len: usize },
 }
 
 impl MappedPlane {
     /// Maps `len` bytes at `offset` of `file` (`path`, `file_len` bytes long), with its page
     /// table filled now ([`MmapOptions::populate`]): the mapping thread, not the converter's
-    /// workers, waits for the disk and takes the page faults. None when the bytes do not lie
-    /// inside the file or do not start on a multiple of `align`, the samples' alignment (a
-    /// plane that cannot be used in place is read instead).
+    /// workers, waits for the disk and takes the page faults. Bytes that do not start on a
+    /// multiple of `align`, the samples' size, are copied once out of the mapping (a slice of
+    /// samples must be aligned). None when the bytes do not lie inside the file.
     ///
     /// # Errors
     /// When the system refuses the mapping.
@@ -41,7 +46,7 @@ impl MappedPlane {
     ) -> Result<Option<Self>, SourceError> {
         let page = page_size();
         let inside = offset.checked_add(len).is_some_and(|end| end <= file_len);
-        if !inside || len == 0 || !offset.is_multiple_of(align as u64) {
+        if !inside || len == 0 {
             return Ok(None);
         }
         let base = offset / page * page;
@@ -65,7 +70,27 @@ impl MappedPlane {
             offset,
             source,
         })?;
-        Ok(Some(Self { map, start, len }))
+        let bytes = if offset.is_multiple_of(align as u64) {
+            PlaneBytes::InPlace { map, start, len }
+        } else {
+            let mut words = vec![0u64; len.div_ceil(8)];
+            bytemuck::cast_slice_mut::<u64, u8>(&mut words)[..len]
+                .copy_from_slice(&map[start..start + len]);
+            PlaneBytes::Copied { words, len }
+        };
+        Ok(Some(Self { bytes }))
+    }
+
+    /// Whether the plane is read where it lies in the page cache (not copied).
+    pub fn in_place(&self) -> bool {
+        matches!(self.bytes, PlaneBytes::InPlace { .. })
+    }
+
+    /// Bytes of the plane.
+    pub fn byte_len(&self) -> usize {
+        match &self.bytes {
+            PlaneBytes::InPlace { len, .. } | PlaneBytes::Copied { len, .. } => *len,
+        }
     }
 
     /// The plane's samples.
@@ -74,7 +99,11 @@ impl MappedPlane {
     /// When `T` is not the sample type the plane was mapped for (its alignment or size do not
     /// fit): a converter bug.
     pub fn samples<T: Sample>(&self) -> &[T] {
-        bytemuck::cast_slice(&self.map[self.start..self.start + self.len])
+        let bytes = match &self.bytes {
+            PlaneBytes::InPlace { map, start, len } => &map[*start..*start + *len],
+            PlaneBytes::Copied { words, len } => &bytemuck::cast_slice::<u64, u8>(words)[..*len],
+        };
+        bytemuck::cast_slice(bytes)
     }
 }
 
@@ -90,7 +119,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_plane_is_lent_where_it_lies_and_refused_outside_the_file_or_misaligned() {
+    fn a_plane_is_lent_where_it_lies_copied_when_misaligned_and_refused_outside_the_file() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("planes.raw");
         // 8198 bytes of header (more than a page), then 3 planes of 2 × 3 u16.
@@ -107,17 +136,23 @@ mod tests {
             plane.samples::<u16>(),
             &[6000, 7000, 8000, 9000, 10000, 11000]
         );
-        // A plane past the end of the file, or at an odd offset, is read instead.
+        assert!(plane.in_place());
+        // A plane past the end of the file is read instead.
         assert!(
             MappedPlane::map(&file, &path, (8222, 14), len, 2)
                 .unwrap()
                 .is_none()
         );
-        assert!(
-            MappedPlane::map(&file, &path, (8199, 12), len, 2)
-                .unwrap()
-                .is_none()
-        );
+        // Samples at an odd offset are copied once into aligned memory.
+        let odd = MappedPlane::map(&file, &path, (8209, 12), len, 2)
+            .unwrap()
+            .unwrap();
+        assert!(!odd.in_place());
+        let expected: Vec<u16> = bytes[8209..8221]
+            .chunks(2)
+            .map(|b| u16::from_ne_bytes([b[0], b[1]]))
+            .collect();
+        assert_eq!((odd.samples::<u16>(), odd.byte_len()), (&expected[..], 12));
         assert!(
             MappedPlane::map(&file, &path, (0, 0), len, 2)
                 .unwrap()

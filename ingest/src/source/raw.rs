@@ -256,14 +256,16 @@ mod tests {
             ]
         );
         assert!(native.map_plane(0, 0, SampleType::I32).unwrap().is_none());
-        // Swapped bytes, or samples at odd offsets, are read instead.
+        assert!(plane.in_place());
+        // Swapped bytes are read instead; samples at odd offsets are copied out of the file.
         let mut swapped = open("swapped.raw", 6, little);
         assert!(swapped.map_plane(0, 1, SampleType::U16).unwrap().is_none());
         let mut odd = open("odd.raw", 5, !little);
-        assert!(odd.map_plane(0, 1, SampleType::U16).unwrap().is_none());
+        let copied = odd.map_plane(0, 1, SampleType::U16).unwrap().unwrap();
+        assert!(!copied.in_place());
         let mut plane = vec![0u16; 12];
         odd.read_plane(0, 1, u16::plane_out(&mut plane)).unwrap();
-        assert_eq!(plane[11], 2300);
+        assert_eq!((copied.samples::<u16>(), plane[11]), (&plane[..], 2300));
     }
 
     #[test]
