@@ -234,7 +234,7 @@ fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
                 histograms: &histograms,
                 stats: (i == 0).then_some(stats.as_slice()),
             };
-            let planes = planes_of(&slab, (ny * nx) as usize);
+            let planes = planes_of(&slab, channels * nz as usize, (ny * nx) as usize);
             let (w, e) = sink.process(&planes, z0, nz, &mut cells)?;
             written += w;
             empty += e;

@@ -97,7 +97,7 @@ pub(crate) fn max_of<T: Sample>(a: T, b: T) -> T {
 /// [`round_mean`] of each of `sums` over `count`, converted by `to`: a power-of-two count
 /// (every interior voxel of a pyramid level) rounds with a shift, which gives the same value
 /// as the division.
-#[inline]
+#[multiversion::multiversion(targets("x86_64+avx2"))]
 fn round_means<T>(sums: &[i64], count: u32, out: &mut [T], to: impl Fn(i64) -> T) {
     const SAFE: u64 = 1 << 60;
     if !count.is_power_of_two() || sums.iter().any(|s| s.unsigned_abs() >= SAFE) {

@@ -248,10 +248,10 @@ enum Level0Slab<T> {
 }
 
 impl<T: Sample> Level0Slab<T> {
-    /// The slab's planes of `plane` voxels, as its consumers take them.
-    fn planes(&self, plane: usize) -> Vec<&[T]> {
+    /// The slab's `count` planes of `plane` voxels, as its consumers take them.
+    fn planes(&self, count: usize, plane: usize) -> Vec<&[T]> {
         match self {
-            Self::Decoded(values) => planes_of(values, plane),
+            Self::Decoded(values) => planes_of(values, count, plane),
             Self::Mapped(mapped) => mapped.iter().map(MappedPlane::samples).collect(),
         }
     }
@@ -384,7 +384,7 @@ fn read_level0<T: Sample>(
             let mut mapped = 0;
             for message in &rx {
                 let (z0, nz, slab) = message?;
-                let planes = slab.planes(plane);
+                let planes = slab.planes(channels * nz as usize, plane);
                 process_level0(levels, handed_over, stats, &planes, z0, nz)?;
                 bar.inc((channels * nz as usize * plane * T::FORMAT.bytes()) as u64);
                 if let Level0Slab::Mapped(planes) = &slab {
@@ -702,7 +702,8 @@ pub(crate) fn flush_if_full<T: Sample>(
         nz,
         &mut values,
     );
-    levels[l].write_slab(&planes_of(&values, plane), z0, nz, None)?;
+    let planes = planes_of(&values, channels * nz as usize, plane);
+    levels[l].write_slab(&planes, z0, nz, None)?;
     levels[l].values = values;
     let acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());
     let sums = Sums::<T> {

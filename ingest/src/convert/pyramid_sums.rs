@@ -95,35 +95,41 @@ impl<T: Sample> SlabRows<T> for Values<'_, T> {
         sum: &mut [T::Sum],
         count: &mut [u32],
     ) {
-        let row = &self.0[plane][offset..offset + sx];
-        if step_x == 1 {
-            for (s, &v) in sum.iter_mut().zip(row) {
-                *s += v.to_sum();
+        add_values(&self.0[plane][offset..offset + sx], step_x, sum, count);
+    }
+}
+
+/// Adds a row of level-0 values into `sum`/`count` (see [`SlabRows::add_row`]).
+#[multiversion::multiversion(targets("x86_64+avx2"))]
+fn add_values<T: Sample>(row: &[T], step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
+    let sx = row.len();
+    if step_x == 1 {
+        for (s, &v) in sum.iter_mut().zip(row) {
+            *s += v.to_sum();
+        }
+        if T::HAS_NAN {
+            for (n, &v) in count.iter_mut().zip(row) {
+                *n += v.counts() as u32;
             }
+        }
+    } else {
+        let pairs = row.chunks_exact(2);
+        let tail = pairs.remainder();
+        for (s, p) in sum.iter_mut().zip(pairs.clone()) {
+            let mut pair = p[0].to_sum();
+            pair += p[1].to_sum();
+            *s += pair;
+        }
+        if T::HAS_NAN {
+            for (n, p) in count.iter_mut().zip(pairs) {
+                *n += p[0].counts() as u32 + p[1].counts() as u32;
+            }
+        }
+        if let [v] = tail {
+            let last = sx / 2;
+            sum[last] += v.to_sum();
             if T::HAS_NAN {
-                for (n, &v) in count.iter_mut().zip(row) {
-                    *n += v.counts() as u32;
-                }
-            }
-        } else {
-            let pairs = row.chunks_exact(2);
-            let tail = pairs.remainder();
-            for (s, p) in sum.iter_mut().zip(pairs.clone()) {
-                let mut pair = p[0].to_sum();
-                pair += p[1].to_sum();
-                *s += pair;
-            }
-            if T::HAS_NAN {
-                for (n, p) in count.iter_mut().zip(pairs) {
-                    *n += p[0].counts() as u32 + p[1].counts() as u32;
-                }
-            }
-            if let [v] = tail {
-                let last = sx / 2;
-                sum[last] += v.to_sum();
-                if T::HAS_NAN {
-                    count[last] += v.counts() as u32;
-                }
+                count[last] += v.counts() as u32;
             }
         }
     }

@@ -49,13 +49,13 @@ pub(crate) struct SlabSink<'a> {
     pub stats: Option<&'a [Mutex<ChannelAccumulator>]>,
 }
 
-/// The planes of a slab held in one buffer `[c][nz][y][x]`, `plane` voxels each, as the
-/// slab's consumers take them (see [`SlabSink::process`]).
-pub(crate) fn planes_of<T>(slab: &[T], plane: usize) -> Vec<&[T]> {
-    if plane == 0 {
-        return Vec::new();
-    }
-    slab.chunks_exact(plane).collect()
+/// The `count` planes of a slab held in one buffer `[c][nz][y][x]`, `plane` voxels each (an
+/// empty window's planes are empty), as the slab's consumers take them (see
+/// [`SlabSink::process`]).
+pub(crate) fn planes_of<T>(slab: &[T], count: usize, plane: usize) -> Vec<&[T]> {
+    (0..count)
+        .map(|i| &slab[i * plane..(i + 1) * plane])
+        .collect()
 }
 
 impl SlabSink<'_> {

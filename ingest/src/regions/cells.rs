@@ -33,6 +33,22 @@ pub struct Ranges<T: Sample> {
     pub max: Vec<T>,
 }
 
+/// Folds a row of values into per-column minima and maxima.
+#[multiversion::multiversion(targets("x86_64+avx2"))]
+fn fold_row<T: Sample>(min: &mut [T], max: &mut [T], values: &[T]) {
+    for ((mn, mx), &v) in min.iter_mut().zip(max).zip(values) {
+        (*mn, *mx) = (min_of(*mn, v), max_of(*mx, v));
+    }
+}
+
+/// The smallest of `min` and the largest of `max` (the identities when empty).
+#[multiversion::multiversion(targets("x86_64+avx2"))]
+fn range_of<T: Sample>(min: &[T], max: &[T]) -> (T, T) {
+    let mn = min.iter().fold(T::HIGHEST, |a, &v| min_of(a, v));
+    let mx = max.iter().fold(T::LOWEST, |a, &v| max_of(a, v));
+    (mn, mx)
+}
+
 impl<T: Sample> Ranges<T> {
     fn new(n: usize) -> Self {
         Self {
@@ -54,19 +70,13 @@ impl<T: Sample> Ranges<T> {
     /// Folds a row of values into this row of ranges, element by element.
     #[inline]
     fn fold_row(&mut self, values: &[T]) {
-        for ((mn, mx), &v) in self.min.iter_mut().zip(&mut self.max).zip(values) {
-            (*mn, *mx) = (min_of(*mn, v), max_of(*mx, v));
-        }
+        fold_row(&mut self.min, &mut self.max, values);
     }
 
     /// The range of ranges `i` (the identity when empty).
     #[inline]
     fn range_of(&self, i: std::ops::Range<usize>) -> (T, T) {
-        let mn = self.min[i.clone()]
-            .iter()
-            .fold(T::HIGHEST, |a, &v| min_of(a, v));
-        let mx = self.max[i].iter().fold(T::LOWEST, |a, &v| max_of(a, v));
-        (mn, mx)
+        range_of(&self.min[i.clone()], &self.max[i])
     }
 
     /// Sets range `i`.
@@ -447,7 +457,7 @@ mod tests {
             .collect();
         let plane = PlaneRegion::whole([30, 37]);
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
-        whole.add_slab(&planes_of(&values, 30 * 37), 0, 12, plane);
+        whole.add_slab(&planes_of(&values, 12, 30 * 37), 0, 12, plane);
         let mut cut = CellGrid::<u16>::for_shape(1, shape);
         for (y0, ny, x0, nx) in [
             (13, 17, 20, 17),
@@ -467,7 +477,7 @@ mod tests {
                     })
                 })
                 .collect();
-            cut.add_slab(&planes_of(&slab, region.area() as usize), 0, 12, region);
+            cut.add_slab(&planes_of(&slab, 12, region.area() as usize), 0, 12, region);
         }
         assert_eq!(cut.haloed, whole.haloed);
         assert_eq!(cut.exact, whole.exact);
@@ -481,13 +491,17 @@ mod tests {
         let values: Vec<u16> = (0..40 * 64).map(|i| (i * 13 % 977) as u16).collect();
         let plane = PlaneRegion::whole([8, 8]);
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
-        whole.add_slab(&planes_of(&values, 64), 0, 40, plane);
+        whole.add_slab(&planes_of(&values, 40, 64), 0, 40, plane);
         let mut window = CellGrid::<u16>::window(1, [1, 1], 0..0, 5);
         let mut rows = CellGrid::<u16>::window(1, [1, 1], 0..0, 5);
         for z0 in (0..40).step_by(6) {
             let nz = 6.min(40 - z0);
             window.add_slab(
-                &planes_of(&values[(z0 * 64) as usize..((z0 + nz) * 64) as usize], 64),
+                &planes_of(
+                    &values[(z0 * 64) as usize..((z0 + nz) * 64) as usize],
+                    nz as usize,
+                    64,
+                ),
                 z0,
                 nz,
                 plane,
@@ -538,7 +552,7 @@ mod tests {
         let values: Vec<u16> = (0..40 * 64).map(|i| (i * 7 % 1000) as u16).collect();
         let mut whole = CellGrid::<u16>::for_shape(1, shape);
         whole.add_slab(
-            &planes_of(&values, 64),
+            &planes_of(&values, 40, 64),
             0,
             40,
             PlaneRegion::whole([shape[1], shape[2]]),
@@ -548,7 +562,7 @@ mod tests {
             let mut part = CellGrid::<u16>::for_rows(1, shape, planes.clone());
             let slab = &values[(planes.start * 64) as usize..(planes.end * 64) as usize];
             part.add_slab(
-                &planes_of(slab, 64),
+                &planes_of(slab, (planes.end - planes.start) as usize, 64),
                 planes.start,
                 planes.end - planes.start,
                 PlaneRegion::whole([shape[1], shape[2]]),
@@ -578,7 +592,7 @@ mod tests {
         // 1 × 1 × 20 volume: value = x.
         let slab: Vec<u16> = (0..20).collect();
         let mut g = CellGrid::<u16>::for_shape(1, [1, 1, 20]);
-        g.add_slab(&planes_of(&slab, 20), 0, 1, PlaneRegion::whole([1, 20]));
+        g.add_slab(&planes_of(&slab, 1, 20), 0, 1, PlaneRegion::whole([1, 20]));
         assert_eq!(g.grid, [1, 1, 3]);
         assert_eq!(g.haloed.min, [0, 7, 15]);
         assert_eq!(g.haloed.max, [8, 16, 19]);

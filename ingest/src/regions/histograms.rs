@@ -77,11 +77,12 @@ pub struct BrickStats {
 
 impl BrickStats {
     /// Statistics of the voxels in `rows` (any number of row slices).
+    #[multiversion::multiversion(targets("x86_64+avx2"))]
     pub fn of_rows<'a, T: Sample>(
         rows: impl Iterator<Item = &'a [T]>,
         scratch: &mut StatsScratch,
         keep_exact: bool,
-    ) -> Self {
+    ) -> BrickStats {
         let (mut mn, mut mx) = (T::HIGHEST, T::LOWEST);
         if T::HIGHEST.exact_index().is_some() {
             // Count exact values only; everything else follows from the counts.
@@ -109,9 +110,9 @@ impl BrickStats {
                 }
             }
             if total == 0 {
-                return Self {
+                return BrickStats {
                     all_fill: true,
-                    ..Self::default()
+                    ..BrickStats::default()
                 };
             }
             let (lo, hi) = (mn.exact_index().unwrap_or(0), mx.exact_index().unwrap_or(0));
@@ -126,7 +127,7 @@ impl BrickStats {
             let all_fill = exact[zero] as u64 == total;
             let exact_counts = keep_exact.then(|| (lo, exact[lo..=hi].to_vec()));
             exact[lo..=hi].fill(0);
-            Self {
+            BrickStats {
                 fine: FineHistogram::from_keys(&mut scratch.keys),
                 exact: exact_counts,
                 sum,
@@ -156,7 +157,7 @@ impl BrickStats {
                     }
                 }
             }
-            Self {
+            BrickStats {
                 fine: FineHistogram::from_keys(&mut scratch.keys),
                 exact: None,
                 sum: T::sum_to_f64(sum),
