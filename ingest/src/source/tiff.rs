@@ -147,11 +147,7 @@ pub(super) fn check_page(
     })?;
     claims.check(path, page, file.len, file.memory)?;
     let (columns, rows) = decoder.chunk_dimensions();
-    let predictor = decoder
-        .find_tag_unsigned::<u16>(Tag::Predictor)
-        .ok()
-        .flatten()
-        .unwrap_or(1);
+    let predictor = tag_or_one(decoder, Tag::Predictor);
     Ok(DecodeUnit {
         decoded: if claims.compression == 1 && predictor == 1 {
             // Read where it lies, straight into the destination.
@@ -301,14 +297,7 @@ fn decode_region(
     let (cw, ch) = (u64::from(cw), u64::from(ch));
     let across = plane[1].div_ceil(cw);
     let [y1, x1] = region.end();
-    let tag = |decoder: &mut Decoder<BufReader<File>>, tag| {
-        decoder
-            .find_tag_unsigned::<u16>(tag)
-            .ok()
-            .flatten()
-            .unwrap_or(1)
-    };
-    if tag(decoder, Tag::Compression) == 1 && tag(decoder, Tag::Predictor) == 1 {
+    if tag_or_one(decoder, Tag::Compression) == 1 && tag_or_one(decoder, Tag::Predictor) == 1 {
         // Uncompressed (ImageJ's and tifffile's one strip per page): read the region's row
         // segments where they lie, never the whole strip.
         let offsets = match decoder.get_chunk_type() {
@@ -368,6 +357,15 @@ fn decode_region(
         }
     }
     Ok(())
+}
+
+/// A tag of the current page that means 1 when absent (Compression, Predictor): its value.
+fn tag_or_one(decoder: &mut Decoder<BufReader<File>>, tag: Tag) -> u16 {
+    decoder
+        .find_tag_unsigned::<u16>(tag)
+        .ok()
+        .flatten()
+        .unwrap_or(1)
 }
 
 /// Whether decoded pages are big-endian (they are in native byte order).
@@ -578,17 +576,10 @@ pub(super) fn stored_as_decoded(
     decoder: &mut Decoder<BufReader<File>>,
     plane_bytes: u64,
 ) -> Option<(u64, u64)> {
-    let tag = |decoder: &mut Decoder<BufReader<File>>, tag| {
-        decoder
-            .find_tag_unsigned::<u16>(tag)
-            .ok()
-            .flatten()
-            .unwrap_or(1)
-    };
     let native = (decoder.byte_order() == tiff::tags::ByteOrder::BigEndian) == NATIVE_BIG_ENDIAN;
     if !native
-        || tag(decoder, Tag::Compression) != 1
-        || tag(decoder, Tag::Predictor) != 1
+        || tag_or_one(decoder, Tag::Compression) != 1
+        || tag_or_one(decoder, Tag::Predictor) != 1
         || decoder.get_chunk_type() != tiff::decoder::ChunkType::Strip
     {
         return None;
