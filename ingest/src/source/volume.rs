@@ -95,7 +95,7 @@ pub trait VolumeSource: Send {
 
     /// The whole plane at depth `z` of channel `channel` mapped from the source's file, when
     /// the file stores it as it would be read: its samples uncompressed, next to each other,
-    /// in `format` and the machine's byte order (see [`MappedPlane::map`] for samples that do
+    /// in `format` and the machine's byte order (see [`MappedPlane`] for samples that do
     /// not start on a multiple of their size). None when it is stored otherwise
     /// (compressed, tiled, with several samples per pixel, in another format or byte order),
     /// or the source has no such file; the plane is then read with
