@@ -19,6 +19,9 @@ class ConvertSummary(TypedDict):
     """The store written."""
     input_bytes: int
     """Bytes of input read."""
+    planes_in_place: int
+    """Level-0 planes (of all channels) read where they lie in the input files (memory-mapped),
+    not copied."""
     stored_bytes: int
     """Bytes of the store."""
     seconds: float
@@ -39,6 +42,7 @@ def convert(
     channel_names: Sequence[str] | None = None,
     overwrite: bool = False,
     memory_limit: int | None = None,
+    map_inputs: bool = True,
     dims: tuple[int, int, int] | None = None,
     dtype: str | None = None,
     endian: str = "little",
@@ -49,7 +53,8 @@ def convert(
     files, folders or globs of slices, raw files; each one or more channels, in order) into the
     OME-Zarr store ``output`` (a folder) with region metadata. The options are ``ingest
     convert``'s flags (``chunk`` is ``--chunk``: an edge or ``(z, y, x)``; ``dims`` is raw
-    input's ``(x, y, z)``). ``progress(done, total)`` is called as the input is read (bytes).
+    input's ``(x, y, z)``; ``map_inputs=False`` is ``--no-mmap``). ``progress(done, total)`` is
+    called as the input is read (bytes).
 
     Raises :class:`ResidencyError` with ``ingest convert``'s message; an exception ``progress``
     raised is raised once the conversion has finished."""

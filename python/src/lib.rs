@@ -168,8 +168,9 @@ fn edge(value: &Bound<'_, PyAny>) -> PyResult<[u64; 3]> {
 /// (`(z, y, x)`), `unit`, `ome_zarr_version` (`"0.5"` or `"0.4"`), `levels`,
 /// `channel_names`, `overwrite`, `memory_limit` (bytes), `map_inputs` (false: `--no-mmap`),
 /// and for raw inputs `dims` (`(x, y, z)`), `dtype`, `endian`, `header_bytes`. `progress(done, total)` is called as the input is
-/// read (bytes). Returns a dict: `output`, `input_bytes`, `stored_bytes`, `seconds` and
-/// `report` (the text `ingest convert` prints).
+/// read (bytes). Returns a dict: `output`, `input_bytes`, `planes_in_place` (level-0 planes read
+/// where they lie in the input files), `stored_bytes`, `seconds` and `report` (the text
+/// `ingest convert` prints).
 ///
 /// # Errors
 /// `ResidencyError` with `ingest convert`'s message; an exception `progress` raised, once the
@@ -257,6 +258,7 @@ fn convert<'py>(
     let out = PyDict::new(py);
     out.set_item("output", summary.output.to_string_lossy().into_owned())?;
     out.set_item("input_bytes", summary.input_bytes)?;
+    out.set_item("planes_in_place", summary.planes_in_place)?;
     out.set_item("stored_bytes", summary.stored_bytes)?;
     out.set_item("seconds", summary.seconds)?;
     out.set_item("report", summary.report())?;

@@ -21,6 +21,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import requests
+import tifffile
 import zarr
 
 from support.browser import require_browser, run_pausing
@@ -398,18 +399,28 @@ def test_convert_from_python_writes_what_ingest_convert_writes(installed, tmp_pa
     assert summary["input_bytes"] == 2 * 16 * 48 * 48 * 2
     assert calls and all(total == summary["input_bytes"] for _, total in calls), calls
     assert [done for done, _ in calls] == sorted(done for done, _ in calls) and calls[-1][0] == calls[-1][1], calls
-    # The sample's planes are read in place from the TIFF files unless `map_inputs=False`.
-    mapped = "  read in place from the input files (memory-mapped): 0.0 of 0.0 MB\n"
-    assert mapped in summary["report"], summary["report"]
-    copied = tmp_path / "copied" / "c.ome.zarr"
-    p = run(installed, "python", "-c", f"""
-import residency
-tiffs = {[str(t) for t in tiffs]!r}
-print(residency.convert(tiffs, {str(copied)!r}, chunk=(8, 16, 16), channel_names=["a", "b"],
-                        map_inputs=False)["report"])
+    # nuclei (uint16) and filaments (uint8) are promoted to uint16: every plane is decoded.
+    assert summary["planes_in_place"] == 0 and "read in place" not in summary["report"], summary
+    # nuclei alone is read in place from its file unless `map_inputs=False` (a page whose
+    # samples start at an odd offset is copied out of the file); the stores are the same.
+    nuclei = tiffs[0]
+    aligned = sum(page.dataoffsets[0] % 2 == 0 for page in tifffile.TiffFile(nuclei).pages)
+    assert aligned > 0
+    summaries = {}
+    for map_inputs in (True, False):
+        out = tmp_path / f"map-{map_inputs}" / "n.ome.zarr"
+        p = run(installed, "python", "-c", f"""
+import json, residency
+s = residency.convert([{str(nuclei)!r}], {str(out)!r}, map_inputs={map_inputs})
+print(json.dumps(s))
 """)
-    assert "read in place" not in p.stdout, p.stdout
-    assert files(copied) == files(cli)
+        summaries[map_inputs] = json.loads(p.stdout)
+    assert summaries[True]["planes_in_place"] == aligned, summaries[True]
+    line = f"  {aligned} of 16 planes read in place from the input files (memory-mapped)\n"
+    assert line in summaries[True]["report"], summaries[True]["report"]
+    assert summaries[False]["planes_in_place"] == 0, summaries[False]
+    assert "read in place" not in summaries[False]["report"], summaries[False]["report"]
+    assert files(tmp_path / "map-True" / "n.ome.zarr") == files(tmp_path / "map-False" / "n.ome.zarr")
     # A failure: the exception's message is the command line's, after its `error: `.
     missing = tmp_path / "missing.tif"
     cli_err = run(installed, "ingest", "convert", missing, "-o", tmp_path / "x.ome.zarr", "--quiet", check=False)

@@ -84,7 +84,7 @@ fn convert_typed<T: Sample>(
     };
     let mut levels = open_levels::<T>(&writer, &plan, plan.levels.len(), 0..depth, output)?;
     let stats = new_stats(plan.labels.len());
-    let mapped = run_pass(
+    let in_place = run_pass(
         options,
         &mut inputs.sources,
         &plan,
@@ -95,7 +95,7 @@ fn convert_typed<T: Sample>(
         &stats,
     )?;
     let mut summary = finish_store(writer, &plan, &mut levels, &into_stats(stats), started)?;
-    summary.mapped_bytes = mapped;
+    summary.planes_in_place = in_place;
     summary.columns = (!columns.is_whole([plan.shape[1], plan.shape[2]])).then_some(columns);
     Ok(summary)
 }

@@ -15,7 +15,7 @@ use super::pass::{
 };
 use super::plan::{plan_pass, plan_store};
 use super::pyramid_sums::Accumulator;
-use super::summary::{ConvertSummary, columns_report, mapped_report};
+use super::summary::{ConvertSummary, columns_report, in_place_report};
 use crate::columns::ColumnPlan;
 use crate::partition::handoff::{
     HANDOFF_FOLDER, Handoff, HandoffError, Handoffs, LevelPart, LevelSums, RECORDS_FOLDER,
@@ -51,9 +51,11 @@ pub struct PartitionSummary {
     pub columns: Option<ColumnPlan>,
     /// Plane extent `y, x`.
     pub plane: [u64; 2],
-    /// Bytes of its level-0 voxels read in place from the input files (see
+    /// Its level-0 planes, of all channels.
+    pub input_planes: u64,
+    /// Of those, the planes read in place from the input files (see
     /// [`ConvertOptions::map_inputs`](super::ConvertOptions::map_inputs)).
-    pub mapped_bytes: u64,
+    pub planes_in_place: u64,
 }
 
 impl PartitionSummary {
@@ -71,7 +73,7 @@ impl PartitionSummary {
             self.bricks_empty,
             self.seconds,
             mb / self.seconds.max(1e-9)
-        ) + &mapped_report(self.mapped_bytes, self.input_bytes)
+        ) + &in_place_report(self.planes_in_place, self.input_planes)
             + &columns_report(self.columns.as_ref(), self.plane)
     }
 }
@@ -122,7 +124,7 @@ fn partition_typed<T: Sample>(
         )
     });
     let stats = new_stats(channels);
-    let mapped_bytes = run_pass(
+    let planes_in_place = run_pass(
         options,
         &mut inputs.sources,
         &plan,
@@ -173,7 +175,8 @@ fn partition_typed<T: Sample>(
         seconds: started.elapsed().as_secs_f64(),
         columns: (!columns.is_whole([ny, nx])).then_some(columns),
         plane: [ny, nx],
-        mapped_bytes,
+        input_planes: (planes.end - planes.start) * channels as u64,
+        planes_in_place,
     })
 }
 

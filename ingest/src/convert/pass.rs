@@ -252,7 +252,11 @@ impl<T: Sample> Level0Slab<T> {
     fn planes(&self, count: usize, plane: usize) -> Vec<&[T]> {
         match self {
             Self::Decoded(values) => planes_of(values, count, plane),
-            Self::Mapped(mapped) => mapped.iter().map(MappedPlane::samples).collect(),
+            Self::Mapped(mapped) => {
+                let planes: Vec<&[T]> = mapped.iter().map(MappedPlane::samples).collect();
+                debug_assert!(planes.len() == count && planes.iter().all(|p| p.len() == plane));
+                planes
+            }
         }
     }
 }
@@ -266,11 +270,13 @@ fn map_slab<T: Sample>(
     z0: u64,
     nz: u64,
 ) -> Result<Option<Vec<MappedPlane>>, SourceError> {
+    // A slab is mapped whole or read whole: a source that must be read is not waited for
+    // after the others are mapped.
+    if !mappable.iter().all(|&m| m) {
+        return Ok(None);
+    }
     let mut planes = Vec::new();
     for (source, mappable) in sources.iter_mut().zip(mappable) {
-        if !*mappable {
-            return Ok(None);
-        }
         for c in 0..source.info().channels {
             for z in z0..z0 + nz {
                 let Some(plane) = source.map_plane(c, z, T::FORMAT)? else {
@@ -288,7 +294,7 @@ fn map_slab<T: Sample>(
 /// decodes or maps slab k+1 while slab k is written) and sends each up the pyramid. Whole
 /// planes stored as they are read are mapped from their files when `map_inputs` allows;
 /// the others are decoded into two slabs that come from `spare` and go back to it, so the
-/// columns of a pass reuse the same memory. Returns the bytes of input planes mapped.
+/// columns of a pass reuse the same memory. Returns the input planes read in place.
 #[allow(clippy::too_many_arguments)]
 fn read_level0<T: Sample>(
     sources: &mut [Box<dyn VolumeSource>],
@@ -388,8 +394,7 @@ fn read_level0<T: Sample>(
                 process_level0(levels, handed_over, stats, &planes, z0, nz)?;
                 bar.inc((channels * nz as usize * plane * T::FORMAT.bytes()) as u64);
                 if let Level0Slab::Mapped(planes) = &slab {
-                    let in_place = planes.iter().filter(|p| p.in_place());
-                    mapped += in_place.map(|p| p.byte_len() as u64).sum::<u64>();
+                    mapped += planes.iter().filter(|p| p.in_place()).count() as u64;
                 }
                 drop(planes);
                 let _ = recycle_tx.send(slab);
@@ -412,7 +417,7 @@ fn read_level0<T: Sample>(
 /// Runs level-0 planes `planes` of the inputs through the levels of `levels` (and into the
 /// hand-over accumulator after them, in a partition), in the columns of `columns`: whole
 /// planes in one pass, or each group of planes column by column (see [`crate::columns`]).
-/// Returns the bytes of input planes mapped from their files rather than copied.
+/// Returns the input planes read in place from their files (mapped, not copied).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn run_pass<T: Sample>(
     options: &ConvertOptions,
@@ -588,7 +593,7 @@ pub(crate) fn finish_store<T: Sample>(
         metadata_bytes,
         seconds: started.elapsed().as_secs_f64(),
         columns: None,
-        mapped_bytes: 0,
+        planes_in_place: 0,
     })
 }
 

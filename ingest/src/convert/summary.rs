@@ -38,21 +38,17 @@ pub struct ConvertSummary {
     pub seconds: f64,
     /// The columns the planes were cut into, when they were (see [`crate::columns`]).
     pub columns: Option<ColumnPlan>,
-    /// Bytes of level-0 voxels read in place from the input files, not copied (see
+    /// Level-0 planes (of all channels) read in place from the input files, not copied (see
     /// [`ConvertOptions::map_inputs`](super::ConvertOptions::map_inputs)).
-    pub mapped_bytes: u64,
+    pub planes_in_place: u64,
 }
 
-/// The report line of the input read in place, or nothing when none was.
-pub(crate) fn mapped_report(mapped: u64, input: u64) -> String {
-    if mapped == 0 {
+/// The report line of the planes read in place out of `planes`, or nothing when none was.
+pub(crate) fn in_place_report(in_place: u64, planes: u64) -> String {
+    if in_place == 0 {
         return String::new();
     }
-    format!(
-        "  read in place from the input files (memory-mapped): {:.1} of {:.1} MB\n",
-        mapped as f64 / 1e6,
-        input as f64 / 1e6
-    )
+    format!("  {in_place} of {planes} planes read in place from the input files (memory-mapped)\n")
 }
 
 /// The report line of a pass made in columns, or nothing for whole planes.
@@ -97,7 +93,8 @@ impl ConvertSummary {
             mb / self.seconds.max(1e-9)
         );
         let plane = [self.levels[0].shape[2], self.levels[0].shape[3]];
-        s + &mapped_report(self.mapped_bytes, self.input_bytes)
+        let [c, z, ..] = self.levels[0].shape;
+        s + &in_place_report(self.planes_in_place, c * z)
             + &columns_report(self.columns.as_ref(), plane)
     }
 }

@@ -467,17 +467,6 @@ pub enum SourceError {
         #[source]
         source: io::Error,
     },
-    /// A plane stored as it is read, which the system would not map into memory.
-    #[error("{}: cannot map the plane at byte {offset} into memory", path.display())]
-    Map {
-        /// The file.
-        path: PathBuf,
-        /// Where the plane starts in the file.
-        offset: u64,
-        /// What the system said.
-        #[source]
-        source: io::Error,
-    },
 }
 
 /// Why the decoder could not read a page's directory (its tags): its own words, except for a

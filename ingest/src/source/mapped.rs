@@ -7,14 +7,14 @@ use std::path::Path;
 
 use memmap2::{Mmap, MmapOptions};
 
-use super::error::SourceError;
 use crate::sample_format::Sample;
 
 /// One whole plane of an input, mapped from its file.
 ///
 /// Mapping assumes the file does not change while the plane is mapped: a file truncated under
-/// a conversion ends it with `SIGBUS` instead of an error, so a conversion of inputs that may
-/// change reads them instead (`ConvertOptions::map_inputs`).
+/// a conversion, or a disk that fails to read a mapped page, ends it with `SIGBUS` instead of
+/// an error, so a conversion of inputs that may change reads them instead
+/// (`ConvertOptions::map_inputs`).
 pub struct MappedPlane {
     bytes: PlaneBytes,
 }
@@ -33,43 +33,43 @@ impl MappedPlane {
     /// table filled now ([`MmapOptions::populate`]): the mapping thread, not the converter's
     /// workers, waits for the disk and takes the page faults. Bytes that do not start on a
     /// multiple of `align`, the samples' size, are copied once out of the mapping (a slice of
-    /// samples must be aligned). None when the bytes do not lie inside the file.
-    ///
-    /// # Errors
-    /// When the system refuses the mapping.
+    /// samples must be aligned). None when the bytes do not lie inside the file, or the system
+    /// refuses the mapping (a file system that cannot map, or too many mappings): the plane is
+    /// then read instead.
     pub(crate) fn map(
         file: &File,
         path: &Path,
         (offset, len): (u64, u64),
         file_len: u64,
         align: usize,
-    ) -> Result<Option<Self>, SourceError> {
+    ) -> Option<Self> {
         let page = page_size();
         let inside = offset.checked_add(len).is_some_and(|end| end <= file_len);
         if !inside || len == 0 {
-            return Ok(None);
+            return None;
         }
         let base = offset / page * page;
         let start = (offset - base) as usize;
         let (Ok(len), Ok(mapped)) = (usize::try_from(len), usize::try_from(len + offset - base))
         else {
-            return Ok(None);
+            return None;
         };
         // SAFETY: the mapping is read-only and lies inside the file (checked above). Its
         // contents change only if another process writes the file during the conversion,
         // which `MappedPlane`'s documentation rules out.
-        let map = unsafe {
+        let map = match unsafe {
             MmapOptions::new()
                 .offset(base)
                 .len(mapped)
                 .populate()
                 .map(file)
-        }
-        .map_err(|source| SourceError::Map {
-            path: path.to_path_buf(),
-            offset,
-            source,
-        })?;
+        } {
+            Ok(map) => map,
+            Err(error) => {
+                tracing::debug!("{}: not mapped at byte {offset}: {error}", path.display());
+                return None;
+            }
+        };
         let bytes = if offset.is_multiple_of(align as u64) {
             PlaneBytes::InPlace { map, start, len }
         } else {
@@ -78,7 +78,7 @@ impl MappedPlane {
                 .copy_from_slice(&map[start..start + len]);
             PlaneBytes::Copied { words, len }
         };
-        Ok(Some(Self { bytes }))
+        Some(Self { bytes })
     }
 
     /// Whether the plane is read where it lies in the page cache (not copied).
@@ -129,39 +129,25 @@ mod tests {
         let file = File::open(&path).unwrap();
         let len = bytes.len() as u64;
         // The second plane: 12 bytes at 8198 + 12, across no page boundary.
-        let plane = MappedPlane::map(&file, &path, (8210, 12), len, 2)
-            .unwrap()
-            .unwrap();
+        let plane = MappedPlane::map(&file, &path, (8210, 12), len, 2).unwrap();
         assert_eq!(
             plane.samples::<u16>(),
             &[6000, 7000, 8000, 9000, 10000, 11000]
         );
         assert!(plane.in_place());
         // A plane past the end of the file is read instead.
-        assert!(
-            MappedPlane::map(&file, &path, (8222, 14), len, 2)
-                .unwrap()
-                .is_none()
-        );
+        assert!(MappedPlane::map(&file, &path, (8222, 14), len, 2).is_none());
         // Samples at an odd offset are copied once into aligned memory.
-        let odd = MappedPlane::map(&file, &path, (8209, 12), len, 2)
-            .unwrap()
-            .unwrap();
+        let odd = MappedPlane::map(&file, &path, (8209, 12), len, 2).unwrap();
         assert!(!odd.in_place());
         let expected: Vec<u16> = bytes[8209..8221]
             .chunks(2)
             .map(|b| u16::from_ne_bytes([b[0], b[1]]))
             .collect();
         assert_eq!((odd.samples::<u16>(), odd.byte_len()), (&expected[..], 12));
-        assert!(
-            MappedPlane::map(&file, &path, (0, 0), len, 2)
-                .unwrap()
-                .is_none()
-        );
+        assert!(MappedPlane::map(&file, &path, (0, 0), len, 2).is_none());
         // The last plane ends where the file does.
-        let last = MappedPlane::map(&file, &path, (8222, 12), len, 2)
-            .unwrap()
-            .unwrap();
+        let last = MappedPlane::map(&file, &path, (8222, 12), len, 2).unwrap();
         assert_eq!(last.samples::<u16>()[5], 17000);
     }
 }

@@ -180,19 +180,20 @@ impl VolumeSource for RawSource {
         z: u64,
         format: SampleType,
     ) -> Result<Option<MappedPlane>, SourceError> {
-        if format != self.info.format || self.big_endian != cfg!(target_endian = "big") {
+        let swapped = self.big_endian != cfg!(target_endian = "big") && format.bytes() > 1;
+        if format != self.info.format || swapped {
             return Ok(None);
         }
         let [depth, y, x] = self.info.shape;
         let bytes = y * x * format.bytes() as u64;
         let end = self.header_bytes + depth * bytes;
-        MappedPlane::map(
+        Ok(MappedPlane::map(
             &self.file,
             &self.info.path,
             (self.header_bytes + z * bytes, bytes),
             end,
             format.bytes(),
-        )
+        ))
     }
 }
 

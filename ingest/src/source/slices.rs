@@ -154,17 +154,17 @@ impl VolumeSource for SliceFolderSource {
         }
         let (mut decoder, tiff, _) = self.open_slice(z)?;
         let [_, ny, nx] = self.info.shape;
-        let Some(stored) = stored_as_decoded(&mut decoder, ny * nx * format.bytes() as u64) else {
+        let Some(stored) = stored_as_decoded(&mut decoder, [ny, nx], format.bytes() as u64) else {
             return Ok(None);
         };
         let path = &self.files[z as usize];
-        MappedPlane::map(
+        Ok(MappedPlane::map(
             decoder.inner().get_ref(),
             path,
             stored,
             tiff.len,
             format.bytes(),
-        )
+        ))
     }
 
     fn read_region(

@@ -569,35 +569,46 @@ impl TiffSource {
     }
 }
 
-/// Where the current page of `decoder` keeps its pixels, when they are one run of bytes as
-/// they would be decoded (`plane_bytes` of them): strips, uncompressed, without a predictor,
-/// in the machine's byte order, each strip starting where the one before ends.
+/// Where the current page of `decoder` (planes of `[ny, nx]` samples of `sample` bytes each)
+/// keeps its pixels, when they are one run of bytes as they would be decoded: strips,
+/// uncompressed, without a predictor, black is zero (the decoder inverts white-is-zero pages),
+/// in the machine's byte order (or one-byte samples), each strip as long as its rows and
+/// starting where the one before ends. Returns the run's offset and length.
 pub(super) fn stored_as_decoded(
     decoder: &mut Decoder<BufReader<File>>,
-    plane_bytes: u64,
+    [ny, nx]: [u64; 2],
+    sample: u64,
 ) -> Option<(u64, u64)> {
-    let native = (decoder.byte_order() == tiff::tags::ByteOrder::BigEndian) == NATIVE_BIG_ENDIAN;
-    if !native
+    let big = decoder.byte_order() == tiff::tags::ByteOrder::BigEndian;
+    let black_is_zero = decoder
+        .find_tag_unsigned::<u16>(Tag::PhotometricInterpretation)
+        .ok()
+        .flatten()
+        == Some(1);
+    if (big != NATIVE_BIG_ENDIAN && sample > 1)
+        || !black_is_zero
         || tag_or_one(decoder, Tag::Compression) != 1
         || tag_or_one(decoder, Tag::Predictor) != 1
         || decoder.get_chunk_type() != tiff::decoder::ChunkType::Strip
     {
         return None;
     }
+    let rows_per_strip = u64::from(decoder.chunk_dimensions().1).max(1);
     let offsets = decoder.get_tag_u64_vec(Tag::StripOffsets).ok()?;
     let counts = decoder.get_tag_u64_vec(Tag::StripByteCounts).ok()?;
-    if offsets.len() != counts.len() {
+    if offsets.len() as u64 != ny.div_ceil(rows_per_strip) || counts.len() != offsets.len() {
         return None;
     }
     let first = *offsets.first()?;
     let mut end = first;
-    for (&offset, &count) in offsets.iter().zip(&counts) {
-        if offset != end {
+    for (i, (&offset, &count)) in offsets.iter().zip(&counts).enumerate() {
+        let rows = rows_per_strip.min(ny - i as u64 * rows_per_strip);
+        if offset != end || count != rows * nx * sample {
             return None;
         }
         end = offset.checked_add(count)?;
     }
-    (end - first == plane_bytes).then_some((first, plane_bytes))
+    Some((first, end - first))
 }
 
 impl VolumeSource for TiffSource {
@@ -620,12 +631,18 @@ impl VolumeSource for TiffSource {
         }
         self.seek_page(self.page_of(channel, z))?;
         let [_, ny, nx] = self.info.shape;
-        let plane_bytes = ny * nx * format.bytes() as u64;
-        let Some(stored) = stored_as_decoded(&mut self.decoder, plane_bytes) else {
+        let sample = format.bytes() as u64;
+        let Some(stored) = stored_as_decoded(&mut self.decoder, [ny, nx], sample) else {
             return Ok(None);
         };
         let file = self.decoder.inner().get_ref();
-        MappedPlane::map(file, &self.info.path, stored, self.file.len, format.bytes())
+        Ok(MappedPlane::map(
+            file,
+            &self.info.path,
+            stored,
+            self.file.len,
+            format.bytes(),
+        ))
     }
 
     fn read_region(
@@ -699,6 +716,7 @@ mod tests {
         let mut source = TiffSource::open(&path).unwrap();
         for z in [2, 0, 1] {
             let mapped = source.map_plane(0, z, SampleType::U16).unwrap().unwrap();
+            assert!(mapped.in_place());
             assert_eq!(mapped.samples::<u16>(), read(&mut source, z));
             assert_eq!(mapped.samples::<u16>()[33], 1000 * z as u16 + 33);
         }
