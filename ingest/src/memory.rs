@@ -3,14 +3,17 @@
 
 /// Physical memory of this machine in bytes, or `None` where the system does not say.
 pub fn physical_memory() -> Option<u64> {
-    // SAFETY: `sysconf` only reads system configuration values.
-    let (pages, page_size) = unsafe {
-        (
-            libc::sysconf(libc::_SC_PHYS_PAGES),
-            libc::sysconf(libc::_SC_PAGESIZE),
-        )
-    };
-    (pages > 0 && page_size > 0).then(|| (pages as u64).saturating_mul(page_size as u64))
+    // SAFETY: `sysconf` only reads a system configuration value.
+    let pages = unsafe { libc::sysconf(libc::_SC_PHYS_PAGES) };
+    let page_size = page_size()?;
+    (pages > 0).then(|| (pages as u64).saturating_mul(page_size))
+}
+
+/// The size of a memory page in bytes, or `None` where the system does not say.
+pub fn page_size() -> Option<u64> {
+    // SAFETY: `sysconf` only reads a system configuration value.
+    let size = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
+    u64::try_from(size).ok().filter(|&s| s > 0)
 }
 
 /// Buffers at least this large are asked to live in huge pages.

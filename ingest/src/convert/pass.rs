@@ -262,25 +262,23 @@ impl<T: Sample> Level0Slab<T> {
 }
 
 /// The planes `z0..z0 + nz` of every channel of `sources`, in the slab's order, mapped from
-/// their files; None once a source has a plane that must be read instead (that source is then
-/// marked in `mappable` and not asked again).
+/// their files while `mapping`; None once a plane must be read instead, which ends `mapping`
+/// for the pass: a slab is mapped whole or read whole.
 fn map_slab<T: Sample>(
     sources: &mut [Box<dyn VolumeSource>],
-    mappable: &mut [bool],
+    mapping: &mut bool,
     z0: u64,
     nz: u64,
 ) -> Result<Option<Vec<MappedPlane>>, SourceError> {
-    // A slab is mapped whole or read whole: a source that must be read is not waited for
-    // after the others are mapped.
-    if !mappable.iter().all(|&m| m) {
+    if !*mapping {
         return Ok(None);
     }
     let mut planes = Vec::new();
-    for (source, mappable) in sources.iter_mut().zip(mappable) {
+    for source in sources.iter_mut() {
         for c in 0..source.info().channels {
             for z in z0..z0 + nz {
                 let Some(plane) = source.map_plane(c, z, T::FORMAT)? else {
-                    *mappable = false;
+                    *mapping = false;
                     return Ok(None);
                 };
                 planes.push(plane);
@@ -288,6 +286,41 @@ fn map_slab<T: Sample>(
         }
     }
     Ok(Some(planes))
+}
+
+/// Decodes `region` of the planes `z0..z0 + nz` of every channel of `sources` into one slab
+/// `[c][nz][y][x]` of `channels` channels, in a buffer from `spare` when it holds one; each
+/// source on its own thread.
+fn decode_slab<T: Sample>(
+    sources: &mut [Box<dyn VolumeSource>],
+    spare: &mut Vec<Vec<T>>,
+    z0: u64,
+    nz: u64,
+    region: PlaneRegion,
+    channels: usize,
+) -> Result<Vec<T>, SourceError> {
+    let plane = region.area() as usize;
+    let mut slab = spare.pop().unwrap_or_default();
+    crate::memory::sized(&mut slab, channels * nz as usize * plane);
+    let mut rest: &mut [T] = &mut slab;
+    let mut parts = Vec::new();
+    for s in sources.iter_mut() {
+        let len = s.info().channels * nz as usize * plane;
+        let (part, tail) = rest.split_at_mut(len);
+        parts.push((s, part));
+        rest = tail;
+    }
+    parts.into_par_iter().try_for_each(|(s, part)| {
+        for c in 0..s.info().channels {
+            for dz in 0..nz {
+                let start = (c * nz as usize + dz as usize) * plane;
+                let out = T::plane_out(&mut part[start..start + plane]);
+                s.read_region(c, z0 + dz, region, out)?;
+            }
+        }
+        Ok(())
+    })?;
+    Ok(slab)
 }
 
 /// Reads `region` of level-0 planes `planes` of the inputs slab by slab (a reader thread
@@ -312,7 +345,7 @@ fn read_level0<T: Sample>(
     let plane = region.area() as usize;
     let oz = plan.outer[0];
     let [_, ny, nx] = plan.shape;
-    let mut mappable = vec![map_inputs && region.is_whole([ny, nx]); sources.len()];
+    let mut mapping = map_inputs && region.is_whole([ny, nx]);
     std::thread::scope(|scope| {
         // Reader thread: decodes or maps slab k+1 while slab k is processed.
         type Message<T> = Result<(u64, u64, Level0Slab<T>), SourceError>;
@@ -337,48 +370,14 @@ fn read_level0<T: Sample>(
                         Err(_) => return (own, recycle_rx),
                     }
                 }
-                match map_slab::<T>(sources, &mut mappable, z0, nz) {
-                    Ok(Some(mapped)) => {
-                        if tx.send(Ok((z0, nz, Level0Slab::Mapped(mapped)))).is_err() {
-                            return (own, recycle_rx);
-                        }
-                        z0 += nz;
-                        continue;
-                    }
-                    Ok(None) => {}
-                    Err(e) => {
-                        let _ = tx.send(Err(e));
-                        return (own, recycle_rx);
-                    }
-                }
-                let mut slab = own.pop().unwrap_or_default();
-                crate::memory::sized(&mut slab, channels * nz as usize * plane);
-                let mut rest: &mut [T] = &mut slab;
-                let mut parts = Vec::new();
-                for s in sources.iter_mut() {
-                    let len = s.info().channels * nz as usize * plane;
-                    let (part, tail) = rest.split_at_mut(len);
-                    parts.push((s, part));
-                    rest = tail;
-                }
-                let result: Result<(), SourceError> =
-                    parts.into_par_iter().try_for_each(|(s, part)| {
-                        for c in 0..s.info().channels {
-                            for dz in 0..nz {
-                                let start = (c * nz as usize + dz as usize) * plane;
-                                s.read_region(
-                                    c,
-                                    z0 + dz,
-                                    region,
-                                    T::plane_out(&mut part[start..start + plane]),
-                                )?;
-                            }
-                        }
-                        Ok(())
-                    });
-                let failed = result.is_err();
-                let message = result.map(|()| (z0, nz, Level0Slab::Decoded(slab)));
-                if tx.send(message).is_err() || failed {
+                let slab = match map_slab::<T>(sources, &mut mapping, z0, nz) {
+                    Ok(Some(mapped)) => Ok(Level0Slab::Mapped(mapped)),
+                    Ok(None) => decode_slab(sources, &mut own, z0, nz, region, channels)
+                        .map(Level0Slab::Decoded),
+                    Err(e) => Err(e),
+                };
+                let failed = slab.is_err();
+                if tx.send(slab.map(|slab| (z0, nz, slab))).is_err() || failed {
                     return (own, recycle_rx);
                 }
                 z0 += nz;

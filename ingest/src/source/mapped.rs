@@ -43,7 +43,7 @@ impl MappedPlane {
         file_len: u64,
         align: usize,
     ) -> Option<Self> {
-        let page = page_size();
+        let page = crate::memory::page_size().unwrap_or(4096);
         let inside = offset.checked_add(len).is_some_and(|end| end <= file_len);
         if !inside || len == 0 {
             return None;
@@ -105,13 +105,6 @@ impl MappedPlane {
         };
         bytemuck::cast_slice(bytes)
     }
-}
-
-/// The system's memory page size in bytes.
-fn page_size() -> u64 {
-    // SAFETY: `sysconf` only reads a system configuration value.
-    let size = unsafe { libc::sysconf(libc::_SC_PAGESIZE) };
-    u64::try_from(size).ok().filter(|&s| s > 0).unwrap_or(4096)
 }
 
 #[cfg(test)]

@@ -9,7 +9,7 @@ use tiff::decoder::Decoder;
 use super::error::SourceError;
 use super::mapped::MappedPlane;
 use super::tiff::{
-    DecodeUnit, DecodedRegion, TiffFile, check_page, open_decoder, page_format, stored_as_decoded,
+    DecodeUnit, DecodedRegion, TiffFile, check_page, map_page, open_decoder, page_format,
 };
 use super::volume::{PlaneRegion, SourceInfo, VolumeSource};
 use crate::sample_format::{PlaneOut, SampleType};
@@ -154,17 +154,8 @@ impl VolumeSource for SliceFolderSource {
         }
         let (mut decoder, tiff, _) = self.open_slice(z)?;
         let [_, ny, nx] = self.info.shape;
-        let Some(stored) = stored_as_decoded(&mut decoder, [ny, nx], format.bytes() as u64) else {
-            return Ok(None);
-        };
         let path = &self.files[z as usize];
-        Ok(MappedPlane::map(
-            decoder.inner().get_ref(),
-            path,
-            stored,
-            tiff.len,
-            format.bytes(),
-        ))
+        Ok(map_page(&mut decoder, path, tiff, [ny, nx], format))
     }
 
     fn read_region(

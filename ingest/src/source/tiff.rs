@@ -574,7 +574,7 @@ impl TiffSource {
 /// uncompressed, without a predictor, black is zero (the decoder inverts white-is-zero pages),
 /// in the machine's byte order (or one-byte samples), each strip as long as its rows and
 /// starting where the one before ends. Returns the run's offset and length.
-pub(super) fn stored_as_decoded(
+fn stored_as_decoded(
     decoder: &mut Decoder<BufReader<File>>,
     [ny, nx]: [u64; 2],
     sample: u64,
@@ -611,6 +611,20 @@ pub(super) fn stored_as_decoded(
     Some((first, end - first))
 }
 
+/// The current page of `decoder` (`page` of `path`, planes of `[ny, nx]` samples in `format`)
+/// mapped from its file, when it is stored as it would be decoded (see [`stored_as_decoded`]).
+pub(super) fn map_page(
+    decoder: &mut Decoder<BufReader<File>>,
+    path: &Path,
+    file: TiffFile,
+    [ny, nx]: [u64; 2],
+    format: SampleType,
+) -> Option<MappedPlane> {
+    let sample = format.bytes();
+    let stored = stored_as_decoded(decoder, [ny, nx], sample as u64)?;
+    MappedPlane::map(decoder.inner().get_ref(), path, stored, file.len, sample)
+}
+
 impl VolumeSource for TiffSource {
     fn info(&self) -> &SourceInfo {
         &self.info
@@ -631,17 +645,13 @@ impl VolumeSource for TiffSource {
         }
         self.seek_page(self.page_of(channel, z))?;
         let [_, ny, nx] = self.info.shape;
-        let sample = format.bytes() as u64;
-        let Some(stored) = stored_as_decoded(&mut self.decoder, [ny, nx], sample) else {
-            return Ok(None);
-        };
-        let file = self.decoder.inner().get_ref();
-        Ok(MappedPlane::map(
-            file,
-            &self.info.path,
-            stored,
-            self.file.len,
-            format.bytes(),
+        let path = &self.info.path;
+        Ok(map_page(
+            &mut self.decoder,
+            path,
+            self.file,
+            [ny, nx],
+            format,
         ))
     }
 
