@@ -86,6 +86,11 @@ pub(crate) struct Pass<'a> {
     pub plan: &'a PartitionPlan,
     /// Bytes of one exact sum (`T::Sum`).
     pub sum_bytes: u64,
+    /// Bytes of one narrow exact sum (`T::Narrow`), which a level whose voxels cover at most
+    /// `narrow_terms` level-0 voxels keeps.
+    pub narrow_sum_bytes: u64,
+    /// The most level-0 voxels a narrow sum covers (`T::NARROW_TERMS`; 0: none).
+    pub narrow_terms: u64,
     /// Bytes of one voxel count (4 for sample types with NaN, 0 for the others, which count
     /// from the geometry).
     pub count_bytes: u64,
@@ -153,8 +158,12 @@ impl Pass<'_> {
                 ly * lx
             };
             if l > 0 {
-                pyramid +=
-                    channels * oz.min(lz) * area * (self.sum_bytes + self.count_bytes + sample);
+                let sum = if level.factor.iter().product::<u64>() <= self.narrow_terms {
+                    self.narrow_sum_bytes
+                } else {
+                    self.sum_bytes
+                };
+                pyramid += channels * oz.min(lz) * area * (sum + self.count_bytes + sample);
             }
             let cells = level.shape.map(|s| s.div_ceil(CELL));
             let bricks: [u64; 3] = std::array::from_fn(|a| level.shape[a].div_ceil(plan.brick[a]));
@@ -189,7 +198,7 @@ impl Pass<'_> {
                 channels * rows * held_by.min(bricks[1]) * held_bx.min(bricks[2]) * histogram;
         }
         if let Some(level) = plan.levels.get(self.written) {
-            // A partition's hand-over level: sums over all its planes.
+            // A partition's hand-over level: wide sums over all its planes.
             let [_, ly, lx] = level.shape;
             pyramid += channels
                 * self.planes.div_ceil(level.factor[0])
@@ -287,6 +296,8 @@ mod tests {
         Pass {
             plan,
             sum_bytes: 8,
+            narrow_sum_bytes: 8,
+            narrow_terms: 0,
             count_bytes: 0,
             decoders: &|_| 0,
             written: plan.levels.len(),
@@ -312,6 +323,21 @@ mod tests {
         assert_eq!(plan.levels.len(), 5);
         let counts = 4 * (32 * 512 * 512 + 16 * 256 * 256 + 8 * 128 * 128 + 4 * 64 * 64);
         assert_eq!(b.pyramid - a.pyramid, counts);
+    }
+
+    #[test]
+    fn narrow_sums_count_for_the_levels_that_keep_them() {
+        let plan = plan([64, 1024, 1024]);
+        let wide = pass(&plan);
+        // Levels 1 (8 level-0 voxels a voxel) and 2 (64) sum narrow; 3 (512) and 4 do not.
+        let narrow = Pass {
+            narrow_sum_bytes: 4,
+            narrow_terms: 64,
+            ..wide
+        };
+        let (a, b) = (wide.estimate([256, 256], 1), narrow.estimate([256, 256], 1));
+        assert_eq!(a.pyramid - b.pyramid, 4 * (32 * 512 * 512 + 16 * 256 * 256));
+        assert_eq!((a.slabs, a.regions), (b.slabs, b.regions));
     }
 
     #[test]

@@ -36,14 +36,14 @@ pub trait Sample:
     /// the level-0 voxels under a voxel from the geometry instead of voxel by voxel.
     const HAS_NAN: bool;
     /// Exact accumulator for sums of many samples.
-    type Sum: Copy
-        + Send
-        + Sync
-        + Default
-        + std::ops::AddAssign
-        + fmt::Debug
-        + serde::Serialize
-        + serde::de::DeserializeOwned;
+    type Sum: SumOf<Self::Sum> + serde::Serialize + serde::de::DeserializeOwned;
+    /// A narrower exact accumulator, for sums of at most [`Sample::NARROW_TERMS`] samples:
+    /// 32 bits for samples of at most 16 bits (half the memory of [`Sample::Sum`], twice the
+    /// sums per vector instruction); [`Sample::Sum`] itself for the others.
+    type Narrow: SumOf<Self::Sum>;
+    /// How many samples a [`Sample::Narrow`] sum holds without overflow, whatever their
+    /// values (0: the type has no narrower sum).
+    const NARROW_TERMS: u64;
 
     /// This sample as a sum term (0 for NaN).
     fn to_sum(self) -> Self::Sum;
@@ -52,11 +52,12 @@ pub trait Sample:
     /// The mean `sum / count`, rounded to nearest once (halves away from zero) for integers.
     /// A zero count gives NaN for floats and 0 for integers.
     fn from_mean(sum: Self::Sum, count: u32) -> Self;
-    /// [`Sample::from_mean`] of each sum in `sums` over the same `count`, into `out`.
+    /// [`Sample::from_mean`] of each sum in `sums` (wide or narrow) over the same `count`,
+    /// into `out`.
     #[inline]
-    fn means(out: &mut [Self], sums: &[Self::Sum], count: u32) {
+    fn means<S: SumOf<Self::Sum>>(out: &mut [Self], sums: &[S], count: u32) {
         for (o, &s) in out.iter_mut().zip(sums) {
-            *o = Self::from_mean(s, count);
+            *o = Self::from_mean(s.widened(), count);
         }
     }
     /// The sum as f64 (for statistics).
@@ -82,6 +83,62 @@ pub trait Sample:
     fn plane_out(out: &mut [Self]) -> PlaneOut<'_>;
 }
 
+/// A type exact sums of samples are kept in, beside the wide one `W` ([`Sample::Sum`]): `W`
+/// itself, or a narrower type for sums of few enough terms ([`Sample::Narrow`]).
+pub trait SumOf<W>:
+    Copy + Send + Sync + Default + std::ops::AddAssign + fmt::Debug + 'static
+{
+    /// The wide sum `wide` in this type: exact when it fits, which the pyramid's plan makes
+    /// sure of (see [`Sample::NARROW_TERMS`]).
+    fn narrowed(wide: W) -> Self;
+    /// This sum in the wide type, exactly.
+    fn widened(self) -> W;
+}
+
+impl SumOf<i64> for i64 {
+    #[inline]
+    fn narrowed(wide: i64) -> Self {
+        wide
+    }
+    #[inline]
+    fn widened(self) -> i64 {
+        self
+    }
+}
+
+impl SumOf<i64> for u32 {
+    #[inline]
+    fn narrowed(wide: i64) -> Self {
+        wide as u32
+    }
+    #[inline]
+    fn widened(self) -> i64 {
+        i64::from(self)
+    }
+}
+
+impl SumOf<i64> for i32 {
+    #[inline]
+    fn narrowed(wide: i64) -> Self {
+        wide as i32
+    }
+    #[inline]
+    fn widened(self) -> i64 {
+        i64::from(self)
+    }
+}
+
+impl SumOf<f64> for f64 {
+    #[inline]
+    fn narrowed(wide: f64) -> Self {
+        wide
+    }
+    #[inline]
+    fn widened(self) -> f64 {
+        self
+    }
+}
+
 /// The smaller of two samples (`a` when they are unordered).
 #[inline]
 pub(crate) fn min_of<T: Sample>(a: T, b: T) -> T {
@@ -98,16 +155,17 @@ pub(crate) fn max_of<T: Sample>(a: T, b: T) -> T {
 /// (every interior voxel of a pyramid level) rounds with a shift, which gives the same value
 /// as the division.
 #[multiversion::multiversion(targets("x86_64+avx2"))]
-fn round_means<T>(sums: &[i64], count: u32, out: &mut [T], to: impl Fn(i64) -> T) {
+fn round_means<S: SumOf<i64>, T>(sums: &[S], count: u32, out: &mut [T], to: impl Fn(i64) -> T) {
     const SAFE: u64 = 1 << 60;
-    if !count.is_power_of_two() || sums.iter().any(|s| s.unsigned_abs() >= SAFE) {
+    if !count.is_power_of_two() || sums.iter().any(|s| s.widened().unsigned_abs() >= SAFE) {
         for (o, &s) in out.iter_mut().zip(sums) {
-            *o = to(round_mean(s, count));
+            *o = to(round_mean(s.widened(), count));
         }
         return;
     }
     let (c, shift) = (i64::from(count), count.trailing_zeros() + 1);
-    for (o, &s) in out.iter_mut().zip(sums) {
+    for (o, s) in out.iter_mut().zip(sums) {
+        let s = s.widened();
         // (2|s| + c) / 2c, the sign put back: halves away from zero, as `round_mean`.
         let r = (2 * s.abs() + c) >> shift;
         *o = to(if s < 0 { -r } else { r });
@@ -137,7 +195,7 @@ fn round_mean(sum: i64, count: u32) -> i64 {
 }
 
 macro_rules! int_sample {
-    ($t:ty, $fmt:ident, $key:expr, $edge:expr, $exact:expr, $exact_value:expr) => {
+    ($t:ty, $fmt:ident, $narrow:ty, $terms:expr, $key:expr, $edge:expr, $exact:expr, $exact_value:expr) => {
         impl Sample for $t {
             fn plane_out(out: &mut [Self]) -> PlaneOut<'_> {
                 PlaneOut::$fmt(out)
@@ -156,6 +214,8 @@ macro_rules! int_sample {
             const HIGHEST: Self = <$t>::MAX;
             const HAS_NAN: bool = false;
             type Sum = i64;
+            type Narrow = $narrow;
+            const NARROW_TERMS: u64 = $terms;
             #[inline]
             fn to_sum(self) -> i64 {
                 self as i64
@@ -169,7 +229,7 @@ macro_rules! int_sample {
                 round_mean(sum, count) as $t
             }
             #[inline]
-            fn means(out: &mut [Self], sums: &[i64], count: u32) {
+            fn means<S: SumOf<i64>>(out: &mut [Self], sums: &[S], count: u32) {
                 round_means(sums, count, out, |m| m as $t);
             }
             fn sum_to_f64(sum: i64) -> f64 {
@@ -211,6 +271,8 @@ macro_rules! int_sample {
 int_sample!(
     u8,
     U8,
+    u32,
+    u32::MAX as u64 / u8::MAX as u64,
     |v| v as usize * 16,
     |k| k.div_ceil(16) as f64,
     |v| Some(v as usize),
@@ -219,6 +281,8 @@ int_sample!(
 int_sample!(
     u16,
     U16,
+    u32,
+    u32::MAX as u64 / u16::MAX as u64,
     |v| (v >> 4) as usize,
     |k| (k * 16) as f64,
     |v| Some(v as usize),
@@ -227,6 +291,8 @@ int_sample!(
 int_sample!(
     i16,
     I16,
+    i32,
+    1 << 16,
     |v| ((v as i32 + 32768) >> 4) as usize,
     |k| (k as f64) * 16.0 - 32768.0,
     |v| Some((v as i32 + 32768) as usize),
@@ -235,6 +301,8 @@ int_sample!(
 int_sample!(
     u32,
     U32,
+    i64,
+    0,
     |v| (v >> 20) as usize,
     |k| (k as f64) * 1048576.0,
     |_| None,
@@ -243,6 +311,8 @@ int_sample!(
 int_sample!(
     i32,
     I32,
+    i64,
+    0,
     |v| ((v as i64 + 2147483648) >> 20) as usize,
     |k| (k as f64) * 1048576.0 - 2147483648.0,
     |_| None,
@@ -268,6 +338,8 @@ impl Sample for f32 {
     const HIGHEST: Self = f32::INFINITY;
     const HAS_NAN: bool = true;
     type Sum = f64;
+    type Narrow = f64;
+    const NARROW_TERMS: u64 = 0;
     #[inline]
     fn to_sum(self) -> f64 {
         if self.is_nan() { 0.0 } else { self as f64 }
@@ -489,6 +561,40 @@ impl PlaneOut<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `NARROW_TERMS` samples of the type's extremes sum exactly in its narrow sum, and one
+    /// more of one of them would not.
+    fn narrow_sums_hold_their_terms<T: Sample<Sum = i64>>() {
+        let terms = T::NARROW_TERMS as i64;
+        let extremes = [T::LOWEST.to_sum(), T::HIGHEST.to_sum()];
+        let exact = |sum: i64| T::Narrow::narrowed(sum).widened() == sum;
+        assert!(extremes.iter().all(|e| exact(e * terms)), "{:?}", T::FORMAT);
+        assert!(
+            !extremes.iter().all(|e| exact(e * (terms + 1))),
+            "{:?}",
+            T::FORMAT
+        );
+    }
+
+    #[test]
+    fn narrow_sums_are_exact_up_to_their_terms() {
+        narrow_sums_hold_their_terms::<u8>();
+        narrow_sums_hold_their_terms::<u16>();
+        narrow_sums_hold_their_terms::<i16>();
+        assert_eq!(
+            [u8::NARROW_TERMS, u16::NARROW_TERMS, i16::NARROW_TERMS],
+            [16_843_009, 65_537, 65_536]
+        );
+        // Wider samples have no narrower sum.
+        assert_eq!(
+            [u32::NARROW_TERMS, i32::NARROW_TERMS, f32::NARROW_TERMS],
+            [0; 3]
+        );
+        // Means of narrow sums are those of the same wide sums.
+        let mut u = [0u16; 3];
+        u16::means(&mut u, &[u32::MAX - 65_534, 7, 9], 65_536);
+        assert_eq!(u, [65_535, 0, 0]);
+    }
 
     #[test]
     fn means_of_a_row_equal_the_mean_of_each_sum() {

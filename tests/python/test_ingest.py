@@ -235,6 +235,32 @@ def test_anisotropic_pyramid_halves_xy_first(tmp_path):
     check_store(out, vol[np.newaxis])
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int16])
+@pytest.mark.parametrize("depth", [16, 32])
+@pytest.mark.parametrize("fill", ["smallest", "largest", "mixed"])
+def test_sums_as_large_as_their_narrow_type_allows_are_exact(tmp_path, dtype, depth, fill):
+    """Levels whose voxels cover few enough level-0 voxels sum in 32 bits. At depth 16 the
+    last level's voxel covers 16 x 64 x 64 = 65,536 voxels, the most an i16 narrow sum holds
+    (at -32768 each they sum to exactly the smallest 32-bit integer; at 65535 each, u16's
+    sum is 65,536 short of the largest unsigned one). At depth 32 it covers twice that, so
+    for u16 and i16 the level before it is narrow and it is wide."""
+    info = np.iinfo(dtype)
+    shape = (depth, 64, 64)
+    if fill == "mixed":
+        vol = RNG.choice(np.array([info.min, info.max, info.max - 1], dtype), size=shape, p=[0.45, 0.5, 0.05])
+    else:
+        vol = np.full(shape, info.min if fill == "smallest" else info.max, dtype)
+    src = tmp_path / "extremes.tif"
+    tifffile.imwrite(src, vol)
+    out = tmp_path / "extremes.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--chunk", "16", "--levels", "7", "--voxel-size", "1,1,1", "--quiet")
+    g = check_store(out, vol[np.newaxis])
+    shapes = [g[d["path"]].shape for d in multiscale(out)["datasets"]]
+    assert shapes[-2:] == [(1, 1, 2, 2), (1, 1, 1, 1)]
+    if fill != "mixed":
+        assert g["6"][...].tolist() == [[[[int(vol.flat[0])]]]]
+
+
 def test_index_adds_metadata_to_a_foreign_store(tmp_path):
     vol = sparse_volume((12, 20, 24), np.uint16)[np.newaxis]
     store = tmp_path / "foreign.ome.zarr"

@@ -26,8 +26,8 @@ pytestmark = pytest.mark.slow
 # deep: whole planes do not fit the limit, columns do.
 SHAPE = (16, 1024, 1536)
 FLAGS = ["--chunk", "8,64,64", "--threads", "2"]
-LIMIT = "96M"
-LIMIT_BYTES = 96 << 20
+LIMIT = "84M"
+LIMIT_BYTES = 84 << 20
 
 
 @pytest.fixture(scope="module")

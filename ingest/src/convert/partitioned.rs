@@ -120,7 +120,8 @@ fn partition_typed<T: Sample>(
         let [_, y, x] = level.shape;
         (
             level.clone(),
-            Accumulator::new(channels, z0, z1 - z0, PlaneRegion::whole([y, x])),
+            // Wide: the hand-over file holds wide sums.
+            Accumulator::new(false, channels, z0, z1 - z0, PlaneRegion::whole([y, x])),
         )
     });
     let stats = new_stats(channels);
@@ -154,7 +155,7 @@ fn partition_typed<T: Sample>(
         sums: handed_over.map(|(_, acc)| LevelSums {
             z0: acc.z0,
             depth: acc.depth,
-            sum: acc.sum,
+            sum: acc.sum.into_wide(),
             count: acc.count,
         }),
     };
@@ -275,7 +276,7 @@ fn feed_sums<T: Sample>(
         for c in 0..channels {
             let dst = (c * acc.depth as usize + zi) * plane;
             let src = (c * sums.depth as usize + p as usize) * plane;
-            acc.sum[dst..dst + plane].copy_from_slice(&sums.sum[src..src + plane]);
+            acc.sum.set_from_wide(dst, &sums.sum[src..src + plane]);
             if T::HAS_NAN {
                 acc.count[dst..dst + plane].copy_from_slice(&sums.count[src..src + plane]);
             }

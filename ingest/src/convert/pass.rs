@@ -13,7 +13,9 @@ use zarrs::array::Array;
 
 use super::error::ConvertError;
 use super::options::ConvertOptions;
-use super::pyramid_sums::{Accumulator, SlabRows, Sums, Values, accumulate, covered};
+use super::pyramid_sums::{
+    Accumulator, SlabRows, Sums, Values, accumulate, covered, narrow_sums, with_sums,
+};
 use super::sink::{SlabSink, planes_of};
 use super::summary::{ConvertSummary, LevelSummary};
 use crate::columns::{ColumnPlan, at_level};
@@ -25,7 +27,7 @@ use crate::region_writer::{
     LevelRegionWriter, RegionWriteError, channel_summaries, region_document,
 };
 use crate::regions::{CELL, CellGrid, ChannelAccumulator, HALO, LevelHistograms, cells_reached};
-use crate::sample_format::Sample;
+use crate::sample_format::{Sample, SumOf};
 use crate::source::{MappedPlane, PlaneRegion, SourceError, VolumeSource};
 use crate::store::{ArrayLayout, Store, StoreWriter, directory_bytes};
 
@@ -188,7 +190,13 @@ pub(crate) fn open_levels<T: Sample>(
         let acc = if i == 0 {
             Accumulator::empty()
         } else {
-            Accumulator::new(channels, z0, outer[0].min(z), window)
+            Accumulator::new(
+                narrow_sums::<T>(level),
+                channels,
+                z0,
+                outer[0].min(z),
+                window,
+            )
         };
         let bricks: [u64; 3] = std::array::from_fn(|a| level.shape[a].div_ceil(brick[a]));
         let regions = match output {
@@ -615,14 +623,14 @@ fn mean_slab<T: Sample>(
     } else {
         row
     };
-    values.par_chunks_mut(row).enumerate().for_each(|(i, out)| {
+    with_sums!(&acc.sum, sums => values.par_chunks_mut(row).enumerate().for_each(|(i, out)| {
         let (y, z) = (i as u64 % w.ny, i as u64 / w.ny % nz);
         let c = i as u64 / w.ny / nz;
         let start = ((c * acc.depth + z) * w.ny + y) as usize * row;
-        let sum = &acc.sum[start..start + row];
+        let sum = &sums[start..start + row];
         if T::HAS_NAN {
-            for ((o, &s), &n) in out.iter_mut().zip(sum).zip(&acc.count[start..]) {
-                *o = T::from_mean(s, n);
+            for ((o, s), &n) in out.iter_mut().zip(sum).zip(&acc.count[start..]) {
+                *o = T::from_mean(s.widened(), n);
             }
             return;
         }
@@ -632,7 +640,7 @@ fn mean_slab<T: Sample>(
             let n = zy * covered(w.x0 + x as u64, f[2], full[2]);
             T::means(&mut out[x..=x], &sum[x..=x], n);
         }
-    });
+    }));
 }
 
 /// The accumulator of the level a partition hands over to `finalize` (the first level it does
@@ -709,17 +717,18 @@ pub(crate) fn flush_if_full<T: Sample>(
     let planes = planes_of(&values, channels * nz as usize, plane);
     levels[l].write_slab(&planes, z0, nz, None)?;
     levels[l].values = values;
-    let acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());
-    let sums = Sums::<T> {
-        sum: &acc.sum,
-        count: &acc.count,
-        nz: nz as usize,
-        oz: acc.depth as usize,
-        plane,
-    };
-    let done = propagate(levels, handed_over, l, z0, nz, &sums);
-    let mut acc = acc;
-    acc.sum.fill(T::Sum::default());
+    let mut acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());
+    let done = with_sums!(&acc.sum, sum => {
+        let sums = Sums {
+            sum,
+            count: &acc.count,
+            nz: nz as usize,
+            oz: acc.depth as usize,
+            plane,
+        };
+        propagate(levels, handed_over, l, z0, nz, &sums)
+    });
+    acc.sum.zero();
     acc.count.fill(0);
     acc.z0 += nz;
     levels[l].acc = acc;

@@ -90,6 +90,8 @@ pub(crate) fn plan_pass<T: Sample>(
     let pass = Pass {
         plan,
         sum_bytes: size_of::<T::Sum>() as u64,
+        narrow_sum_bytes: size_of::<T::Narrow>() as u64,
+        narrow_terms: T::NARROW_TERMS,
         count_bytes: if T::HAS_NAN { 4 } else { 0 },
         decoders: &decoders,
         written,

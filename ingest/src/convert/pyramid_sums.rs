@@ -1,13 +1,66 @@
 //! The exact-sum downsampling: each level ≥ 1 accumulates exact sums and non-NaN counts of
 //! the level-0 voxels under each of its voxels ([`Accumulator`]), from the slabs of the level
-//! below ([`SlabRows`]), and its means are rounded once from them.
+//! below ([`SlabRows`]), and its means are rounded once from them. A level whose voxels cover
+//! few enough level-0 voxels keeps its sums in the sample type's narrow sum
+//! ([`Sample::Narrow`]): half the memory, and twice the sums per vector instruction.
 
 use rayon::prelude::*;
 
 use crate::memory::filled;
 use crate::pyramid::LevelPlan;
-use crate::sample_format::Sample;
+use crate::sample_format::{Sample, SumOf};
 use crate::source::PlaneRegion;
+
+/// A level's exact sums, in the sample type's narrow or wide sum.
+pub(crate) enum SumBuffer<T: Sample> {
+    /// [`Sample::Narrow`] sums, for levels whose voxels cover at most
+    /// [`Sample::NARROW_TERMS`] level-0 voxels (see [`narrow_sums`]).
+    Narrow(Vec<T::Narrow>),
+    /// [`Sample::Sum`] sums.
+    Wide(Vec<T::Sum>),
+}
+
+/// Calls `$body` with `$v` bound to the sums of `$buffer`, whichever their width.
+macro_rules! with_sums {
+    ($buffer:expr, $v:ident => $body:expr) => {
+        match $buffer {
+            $crate::convert::pyramid_sums::SumBuffer::Narrow($v) => $body,
+            $crate::convert::pyramid_sums::SumBuffer::Wide($v) => $body,
+        }
+    };
+}
+pub(crate) use with_sums;
+
+impl<T: Sample> SumBuffer<T> {
+    /// Makes every sum 0.
+    pub(crate) fn zero(&mut self) {
+        with_sums!(self, v => v.fill(Default::default()));
+    }
+
+    /// The sums in the wide type (a narrow buffer is widened, exactly).
+    pub(crate) fn into_wide(self) -> Vec<T::Sum> {
+        match self {
+            Self::Narrow(v) => v.into_iter().map(SumOf::widened).collect(),
+            Self::Wide(v) => v,
+        }
+    }
+
+    /// Sets the sums from `at` on to the wide sums `wide` (exact: the plan that made this
+    /// buffer narrow bounds them).
+    pub(crate) fn set_from_wide(&mut self, at: usize, wide: &[T::Sum]) {
+        with_sums!(self, v => {
+            for (d, &w) in v[at..at + wide.len()].iter_mut().zip(wide) {
+                *d = SumOf::narrowed(w);
+            }
+        });
+    }
+}
+
+/// Whether `level` keeps its sums narrow: each of its voxels covers at most
+/// `factor_z · factor_y · factor_x` level-0 voxels, and [`Sample::NARROW_TERMS`] of them fit.
+pub(crate) fn narrow_sums<T: Sample>(level: &LevelPlan) -> bool {
+    level.factor.iter().product::<u64>() <= T::NARROW_TERMS
+}
 
 /// A level's accumulator: exact sums of level-0 voxels and their non-NaN counts,
 /// `[c][depth][y][x]`, for the level's planes `z0..z0 + depth` over `window` of each.
@@ -19,7 +72,7 @@ pub(crate) struct Accumulator<T: Sample> {
     /// The part of each plane held (the whole plane, or a column).
     pub(crate) window: PlaneRegion,
     /// Exact sums.
-    pub(crate) sum: Vec<T::Sum>,
+    pub(crate) sum: SumBuffer<T>,
     /// Non-NaN level-0 voxel counts matching `sum`.
     pub(crate) count: Vec<u32>,
 }
@@ -27,32 +80,44 @@ pub(crate) struct Accumulator<T: Sample> {
 impl<T: Sample> Accumulator<T> {
     /// An accumulator that holds nothing (level 0's, or one taken out for a while).
     pub(crate) fn empty() -> Self {
-        Self::new(0, 0, 0, PlaneRegion::whole([0, 0]))
+        Self::new(false, 0, 0, 0, PlaneRegion::whole([0, 0]))
     }
 
-    /// Zeroed sums for `depth` planes from `z0` of `channels` channels over `window`, and
-    /// their counts when the sample type has NaN (see [`Sample::HAS_NAN`]).
-    pub(crate) fn new(channels: usize, z0: u64, depth: u64, window: PlaneRegion) -> Self {
+    /// Zeroed sums (narrow ones when `narrow`, see [`narrow_sums`]) for `depth` planes from
+    /// `z0` of `channels` channels over `window`, and their counts when the sample type has
+    /// NaN (see [`Sample::HAS_NAN`]).
+    pub(crate) fn new(
+        narrow: bool,
+        channels: usize,
+        z0: u64,
+        depth: u64,
+        window: PlaneRegion,
+    ) -> Self {
         let mut acc = Self {
             z0,
             depth,
             window,
-            sum: Vec::new(),
+            sum: if narrow {
+                SumBuffer::Narrow(Vec::new())
+            } else {
+                SumBuffer::Wide(Vec::new())
+            },
             count: Vec::new(),
         };
         acc.restart(channels, z0, depth, window);
         acc
     }
 
-    /// Makes this accumulator hold what [`Accumulator::new`] would, in the memory it already
-    /// holds (a column's accumulator is the previous column's, not a fresh allocation).
+    /// Makes this accumulator hold what [`Accumulator::new`] would (sums as narrow as they
+    /// were), in the memory it already holds (a column's accumulator is the previous
+    /// column's, not a fresh allocation).
     ///
     /// The zeros are written, never taken from the allocator as zeroed memory: the first
     /// `+=` on a page the kernel lent zeroed reads it (the shared zero page) and then writes
     /// it, a second fault that flushes every core's TLB.
     pub(crate) fn restart(&mut self, channels: usize, z0: u64, depth: u64, window: PlaneRegion) {
         let len = channels * (depth * window.area()) as usize;
-        filled(&mut self.sum, len, T::Sum::default());
+        with_sums!(&mut self.sum, v => filled(v, len, Default::default()));
         self.count.clear();
         if T::HAS_NAN {
             filled(&mut self.count, len, 0);
@@ -70,14 +135,15 @@ pub(crate) fn covered(i: u64, f: u64, n0: u64) -> u32 {
 /// A slab of one level, as the next level's accumulator reads it: rows of `x` values.
 pub(crate) trait SlabRows<T: Sample>: Sync {
     /// Adds the row starting at `offset` (length `sx`) of the slab's plane `plane` (`c · nz +
-    /// z`) into `sum`/`count`, summing `step_x` (1 or 2) neighbours per destination voxel.
-    fn add_row(
+    /// z`) into `sum`/`count` (sums of either width), summing `step_x` (1 or 2) neighbours
+    /// per destination voxel.
+    fn add_row<S: SumOf<T::Sum>>(
         &self,
         plane: usize,
         offset: usize,
         sx: usize,
         step_x: u64,
-        sum: &mut [T::Sum],
+        sum: &mut [S],
         count: &mut [u32],
     );
 }
@@ -86,13 +152,13 @@ pub(crate) trait SlabRows<T: Sample>: Sync {
 pub(crate) struct Values<'a, T>(pub(crate) &'a [&'a [T]]);
 
 impl<T: Sample> SlabRows<T> for Values<'_, T> {
-    fn add_row(
+    fn add_row<S: SumOf<T::Sum>>(
         &self,
         plane: usize,
         offset: usize,
         sx: usize,
         step_x: u64,
-        sum: &mut [T::Sum],
+        sum: &mut [S],
         count: &mut [u32],
     ) {
         add_values(&self.0[plane][offset..offset + sx], step_x, sum, count);
@@ -101,11 +167,17 @@ impl<T: Sample> SlabRows<T> for Values<'_, T> {
 
 /// Adds a row of level-0 values into `sum`/`count` (see [`SlabRows::add_row`]).
 #[multiversion::multiversion(targets("x86_64+avx2"))]
-fn add_values<T: Sample>(row: &[T], step_x: u64, sum: &mut [T::Sum], count: &mut [u32]) {
+fn add_values<T: Sample, S: SumOf<T::Sum>>(
+    row: &[T],
+    step_x: u64,
+    sum: &mut [S],
+    count: &mut [u32],
+) {
     let sx = row.len();
+    let term = |v: T| S::narrowed(v.to_sum());
     if step_x == 1 {
         for (s, &v) in sum.iter_mut().zip(row) {
-            *s += v.to_sum();
+            *s += term(v);
         }
         if T::HAS_NAN {
             for (n, &v) in count.iter_mut().zip(row) {
@@ -116,8 +188,8 @@ fn add_values<T: Sample>(row: &[T], step_x: u64, sum: &mut [T::Sum], count: &mut
         let pairs = row.chunks_exact(2);
         let tail = pairs.remainder();
         for (s, p) in sum.iter_mut().zip(pairs.clone()) {
-            let mut pair = p[0].to_sum();
-            pair += p[1].to_sum();
+            let mut pair = term(p[0]);
+            pair += term(p[1]);
             *s += pair;
         }
         if T::HAS_NAN {
@@ -127,7 +199,7 @@ fn add_values<T: Sample>(row: &[T], step_x: u64, sum: &mut [T::Sum], count: &mut
         }
         if let [v] = tail {
             let last = sx / 2;
-            sum[last] += v.to_sum();
+            sum[last] += term(*v);
             if T::HAS_NAN {
                 count[last] += v.counts() as u32;
             }
@@ -135,24 +207,24 @@ fn add_values<T: Sample>(row: &[T], step_x: u64, sum: &mut [T::Sum], count: &mut
     }
 }
 
-/// Exact sums and counts of a level ≥ 1 accumulator, laid out `[c][oz][y][x]` (planes of
-/// `plane` voxels) while the slab holds `nz ≤ oz` planes.
-pub(crate) struct Sums<'a, T: Sample> {
-    pub(crate) sum: &'a [T::Sum],
+/// Exact sums (of type `S`, narrow or wide) and counts of a level ≥ 1 accumulator, laid out
+/// `[c][oz][y][x]` (planes of `plane` voxels) while the slab holds `nz ≤ oz` planes.
+pub(crate) struct Sums<'a, S> {
+    pub(crate) sum: &'a [S],
     pub(crate) count: &'a [u32],
     pub(crate) nz: usize,
     pub(crate) oz: usize,
     pub(crate) plane: usize,
 }
 
-impl<T: Sample> SlabRows<T> for Sums<'_, T> {
-    fn add_row(
+impl<T: Sample, S: SumOf<T::Sum>> SlabRows<T> for Sums<'_, S> {
+    fn add_row<D: SumOf<T::Sum>>(
         &self,
         plane: usize,
         offset: usize,
         sx: usize,
         step_x: u64,
-        sum: &mut [T::Sum],
+        sum: &mut [D],
         count: &mut [u32],
     ) {
         let j = (plane / self.nz * self.oz + plane % self.nz) * self.plane + offset;
@@ -162,31 +234,38 @@ impl<T: Sample> SlabRows<T> for Sums<'_, T> {
         } else {
             &[]
         };
+        // A source level's sums are never wider than the next level's (see `narrow_sums`).
+        let term = |v: S| D::narrowed(v.widened());
         if step_x == 1 {
             for (d, &v) in sum.iter_mut().zip(src_sum) {
-                *d += v;
+                *d += term(v);
             }
             for (d, &v) in count.iter_mut().zip(src_count) {
                 *d += v;
             }
         } else {
-            add_pairs(sum, src_sum);
-            add_pairs(count, src_count);
+            add_pairs(sum, src_sum, term);
+            add_pairs(count, src_count, |n| n);
         }
     }
 }
 
-/// Adds each pair of `src` into one element of `dst` (a lone last element into the last).
-fn add_pairs<S: Copy + std::ops::AddAssign>(dst: &mut [S], src: &[S]) {
+/// Adds each pair of `src`, each term made a `D` by `term`, into one element of `dst` (a lone
+/// last element into the last).
+fn add_pairs<S: Copy, D: Copy + std::ops::AddAssign>(
+    dst: &mut [D],
+    src: &[S],
+    term: impl Fn(S) -> D,
+) {
     let pairs = src.chunks_exact(2);
     let tail = pairs.remainder();
     for (d, p) in dst.iter_mut().zip(pairs) {
-        let mut pair = p[0];
-        pair += p[1];
+        let mut pair = term(p[0]);
+        pair += term(p[1]);
         *d += pair;
     }
     if let [v] = tail {
-        dst[src.len() / 2] += *v;
+        dst[src.len() / 2] += term(*v);
     }
 }
 
@@ -202,14 +281,31 @@ pub(crate) fn accumulate<T: Sample>(
     nz: u64,
     src: &impl SlabRows<T>,
 ) {
+    let (dst, oz, a0) = (next.window, next.depth, next.z0);
+    let count = &mut next.count;
+    with_sums!(&mut next.sum, sum => accumulate_into(
+        plan, (sum, count), (dst, oz, a0), channels, window, src_z0, nz, src,
+    ));
+}
+
+/// [`accumulate`] into the sums `sum` (of either width) and counts `count` of an accumulator
+/// over `dst`, `oz` planes from `a0`.
+#[allow(clippy::too_many_arguments)]
+fn accumulate_into<T: Sample, S: SumOf<T::Sum>>(
+    plan: &LevelPlan,
+    (next_sum, next_count): (&mut [S], &mut [u32]),
+    (dst, oz, a0): (PlaneRegion, u64, u64),
+    channels: usize,
+    window: PlaneRegion,
+    src_z0: u64,
+    nz: u64,
+    src: &impl SlabRows<T>,
+) {
     let step = plan.step;
-    let dst = next.window;
-    let oz = next.depth;
-    let a0 = next.z0;
     let [src_y1, _] = window.end();
     // The first column of the destination this window sums into.
     let offset = (window.x0 / step[2] - dst.x0) as usize;
-    let add_rows = |row: usize, sum: &mut [T::Sum], count: &mut [u32]| {
+    let add_rows = |row: usize, sum: &mut [S], count: &mut [u32]| {
         let row = row as u64;
         let y = dst.y0 + row % dst.ny;
         let zi = (row / dst.ny) % oz;
@@ -243,13 +339,13 @@ pub(crate) fn accumulate<T: Sample>(
     };
     let row_len = dst.nx as usize;
     if T::HAS_NAN {
-        next.sum
+        next_sum
             .par_chunks_mut(row_len)
-            .zip(next.count.par_chunks_mut(row_len))
+            .zip(next_count.par_chunks_mut(row_len))
             .enumerate()
             .for_each(|(row, (sum, count))| add_rows(row, sum, count));
     } else {
-        next.sum
+        next_sum
             .par_chunks_mut(row_len)
             .enumerate()
             .for_each(|(row, sum)| add_rows(row, sum, &mut []));
@@ -273,9 +369,16 @@ mod tests {
     #[test]
     fn integer_accumulators_keep_no_counts_and_floats_do() {
         let w = PlaneRegion::whole([3, 5]);
-        let a = Accumulator::<u16>::new(2, 0, 4, w);
-        assert_eq!((a.sum.len(), a.count.len()), (120, 0));
-        let f = Accumulator::<f32>::new(2, 0, 4, w);
-        assert_eq!((f.sum.len(), f.count.len()), (120, 120));
+        let a = Accumulator::<u16>::new(true, 2, 0, 4, w);
+        let narrow = matches!(a.sum, SumBuffer::Narrow(_));
+        assert_eq!(
+            (with_sums!(&a.sum, v => v.len()), a.count.len(), narrow),
+            (120, 0, true)
+        );
+        let f = Accumulator::<f32>::new(false, 2, 0, 4, w);
+        assert_eq!(
+            (with_sums!(&f.sum, v => v.len()), f.count.len()),
+            (120, 120)
+        );
     }
 }
