@@ -198,10 +198,13 @@ pub fn parse_batch(
 
 pub(crate) use residency_store::pyramid::NoSuchBrick;
 
-/// The image arrays of one dataset, opened once through the pyramid reader, for reading
-/// bricks.
+/// A dataset's image, opened once through the pyramid reader: its attributes (the region
+/// metadata among them) and its level arrays.
+pub(crate) type ImagePyramid = Pyramid<dyn ReadableListableStorageTraits>;
+
+/// The image arrays of one dataset, for reading bricks.
 pub(crate) struct ImageArrays {
-    pyramid: Pyramid<dyn ReadableListableStorageTraits>,
+    pyramid: Arc<ImagePyramid>,
     /// Sample type of the bricks.
     pub data_type: SampleType,
     /// Brick shape `z, y, x`.
@@ -211,22 +214,18 @@ pub(crate) struct ImageArrays {
 }
 
 impl ImageArrays {
-    /// Opens the pyramid levels of a dataset's store.
-    ///
-    /// # Errors
-    /// When the store cannot be opened or its pyramid is unusable (see [`Pyramid::open`]).
-    pub fn open(dataset: &DatasetStore) -> Result<Self, PyramidError> {
-        let pyramid = Pyramid::open(dataset.zarr(), dataset.shown())?;
+    /// The image arrays of a dataset's store, from its opened `pyramid`.
+    pub fn new(dataset: &DatasetStore, pyramid: Arc<ImagePyramid>) -> Self {
         let remote = dataset.async_store().map(|store| {
             let bricks = pyramid.async_bricks(store.storage.clone());
             (Arc::new(bricks), store.runtime.handle().clone())
         });
-        Ok(Self {
+        Self {
             data_type: pyramid.sample_type,
             brick_shape: pyramid.brick_shape,
             pyramid,
             remote,
-        })
+        }
     }
 
     /// Decoded bytes of one full brick.

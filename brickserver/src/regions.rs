@@ -16,17 +16,17 @@ use std::sync::Arc;
 
 use axum::body::Bytes;
 use residency_schemas::SampleType;
-use residency_schemas::ome::{ImageAttributes, OmeError, ZarrFormat};
 use residency_schemas::server::{RegionAnswer, RegionHistogram, VoxelBox};
 use residency_schemas::wire::{
     MINMAX_MAGIC, MinMaxGridBlock, MinMaxHierarchyHeader, MinMaxLevelBlock, encode_framed,
 };
 use residency_schemas::{MinMaxGrid, RegionMetadata};
 use residency_store::at_once;
-use residency_store::pyramid::{Pyramid, PyramidError, read_key};
+use residency_store::pyramid::PyramidError;
 use residency_store::region_array::{ArrayPart, RegionArrayError, read_region_array};
 use zarrs::storage::ReadableListableStorageTraits;
 
+use crate::bricks::ImagePyramid;
 use crate::dataset_store::DatasetStore;
 
 /// A pyramid of grids: grid `k` has cells of `cell · 2^k` voxels; each cell of grid `k + 1`
@@ -256,34 +256,20 @@ fn coarser_histograms(fine: &[u64], shape: [u64; 3], bins: usize) -> ([u64; 3], 
 }
 
 impl RegionIndex {
-    /// Loads the region index of a dataset's store, or `None` for a store without region
-    /// metadata.
+    /// Loads the region index of a dataset's store from its opened `pyramid` (whose image
+    /// attributes list the region arrays), or `None` for a store without region metadata.
     ///
     /// # Errors
-    /// [`RegionsError`] when the store, its pyramid or a region array cannot be read, or the
-    /// arrays disagree with the metadata.
-    pub(crate) fn load(dataset: &DatasetStore) -> Result<Option<Self>, RegionsError> {
-        let shown = dataset.shown().to_string();
+    /// [`RegionsError`] when a region array cannot be read, or the arrays disagree with the
+    /// metadata.
+    pub(crate) fn load(
+        dataset: &DatasetStore,
+        pyramid: &ImagePyramid,
+    ) -> Result<Option<Self>, RegionsError> {
         let store = dataset.zarr();
-        // The image group's attributes first: a store that is no OME-Zarr image (a bare
-        // array, a plain group) or has no region metadata has nothing to load.
-        let group = [ZarrFormat::V3, ZarrFormat::V2].into_iter().find_map(|f| {
-            let key = f.group_key();
-            read_key(&*store, key, &format!("{shown}/{key}"))
-                .transpose()
-                .map(|doc| (f, key, doc))
-        });
-        let Some((format, key, doc)) = group else {
+        let Some(meta) = &pyramid.attributes.regions else {
             return Ok(None);
         };
-        let attributes = match ImageAttributes::parse(format, &doc?, &format!("{shown}/{key}")) {
-            Err(OmeError::NotAGroup { .. } | OmeError::NoMultiscales { .. }) => return Ok(None),
-            other => other.map_err(PyramidError::from)?,
-        };
-        let Some(meta) = attributes.regions else {
-            return Ok(None);
-        };
-        let pyramid = Pyramid::open(store.clone(), &shown)?;
         if meta.levels.is_empty() {
             return Err(RegionsError::NoLevel);
         }
@@ -442,7 +428,7 @@ impl RegionIndex {
             })
             .collect();
         Ok(Some(Self {
-            meta,
+            meta: meta.clone(),
             levels,
             minmax_docs,
         }))

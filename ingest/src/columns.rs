@@ -16,6 +16,7 @@
 //! mean is rounded once, so a store made in columns is byte-identical to a whole-plane one.
 
 use crate::partition::plan::PartitionPlan;
+use crate::pyramid::LevelPlan;
 use crate::regions::{CELL, CHUNK_ROWS};
 use crate::sample_format::FINE_KEYS;
 use crate::source::PlaneRegion;
@@ -84,13 +85,11 @@ pub(crate) fn at_level(region: PlaneRegion, factor: [u64; 3], shape: [u64; 3]) -
 pub(crate) struct Pass<'a> {
     /// The store's plan.
     pub plan: &'a PartitionPlan,
-    /// Bytes of one exact sum (`T::Sum`).
+    /// Bytes of one wide exact sum (`T::Sum`), which a partition hands over.
     pub sum_bytes: u64,
-    /// Bytes of one narrow exact sum (`T::Narrow`), which a level whose voxels cover at most
-    /// `narrow_terms` level-0 voxels keeps.
-    pub narrow_sum_bytes: u64,
-    /// The most level-0 voxels a narrow sum covers (`T::NARROW_TERMS`; 0: none).
-    pub narrow_terms: u64,
+    /// Bytes of one exact sum of a level (narrower for levels whose voxels cover few level-0
+    /// voxels, see `convert::pyramid_sums`).
+    pub level_sum_bytes: &'a dyn Fn(&LevelPlan) -> u64,
     /// Bytes of one voxel count (4 for sample types with NaN, 0 for the others, which count
     /// from the geometry).
     pub count_bytes: u64,
@@ -158,11 +157,7 @@ impl Pass<'_> {
                 ly * lx
             };
             if l > 0 {
-                let sum = if level.factor.iter().product::<u64>() <= self.narrow_terms {
-                    self.narrow_sum_bytes
-                } else {
-                    self.sum_bytes
-                };
+                let sum = (self.level_sum_bytes)(level);
                 pyramid += channels * oz.min(lz) * area * (sum + self.count_bytes + sample);
             }
             let cells = level.shape.map(|s| s.div_ceil(CELL));
@@ -296,8 +291,7 @@ mod tests {
         Pass {
             plan,
             sum_bytes: 8,
-            narrow_sum_bytes: 8,
-            narrow_terms: 0,
+            level_sum_bytes: &|_| 8,
             count_bytes: 0,
             decoders: &|_| 0,
             written: plan.levels.len(),
@@ -331,8 +325,13 @@ mod tests {
         let wide = pass(&plan);
         // Levels 1 (8 level-0 voxels a voxel) and 2 (64) sum narrow; 3 (512) and 4 do not.
         let narrow = Pass {
-            narrow_sum_bytes: 4,
-            narrow_terms: 64,
+            level_sum_bytes: &|level: &LevelPlan| {
+                if level.factor.iter().product::<u64>() <= 64 {
+                    4
+                } else {
+                    8
+                }
+            },
             ..wide
         };
         let (a, b) = (wide.estimate([256, 256], 1), narrow.estimate([256, 256], 1));

@@ -86,7 +86,7 @@ pub trait Sample:
 /// A type exact sums of samples are kept in, beside the wide one `W` ([`Sample::Sum`]): `W`
 /// itself, or a narrower type for sums of few enough terms ([`Sample::Narrow`]).
 pub trait SumOf<W>:
-    Copy + Send + Sync + Default + std::ops::AddAssign + fmt::Debug + 'static
+    Copy + Send + Sync + Default + PartialEq + std::ops::AddAssign + fmt::Debug + 'static
 {
     /// The wide sum `wide` in this type: exact when it fits, which the pyramid's plan makes
     /// sure of (see [`Sample::NARROW_TERMS`]).
@@ -590,7 +590,30 @@ mod tests {
             [u32::NARROW_TERMS, i32::NARROW_TERMS, f32::NARROW_TERMS],
             [0; 3]
         );
-        // Means of narrow sums are those of the same wide sums.
+        // Means of narrow sums are those of the same sums held wide, for every kind of count:
+        // the shift (powers of two), the division (edges), halves, the narrow types' extremes.
+        let unsigned = [
+            0,
+            1,
+            3,
+            4,
+            5,
+            12,
+            65_535 * 65_536,
+            u32::MAX - 65_534,
+            u32::MAX,
+        ];
+        let signed = [i32::MIN, i32::MIN + 1, -5, -4, -3, -1, 0, 3, 4, 5, i32::MAX];
+        for count in (1..=9).chain([12, 24, 96, 65_536, 65_537]) {
+            let (mut narrow, mut wide) = ([0u16; 9], [0u16; 9]);
+            u16::means(&mut narrow, &unsigned, count);
+            u16::means(&mut wide, &unsigned.map(i64::from), count);
+            assert_eq!(narrow, wide, "u16, count {count}");
+            let (mut narrow, mut wide) = ([0i16; 11], [0i16; 11]);
+            i16::means(&mut narrow, &signed, count);
+            i16::means(&mut wide, &signed.map(i64::from), count);
+            assert_eq!(narrow, wide, "i16, count {count}");
+        }
         let mut u = [0u16; 3];
         u16::means(&mut u, &[u32::MAX - 65_534, 7, 9], 65_536);
         assert_eq!(u, [65_535, 0, 0]);

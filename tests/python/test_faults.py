@@ -206,8 +206,8 @@ def test_brickserver_answers_502_or_503_naming_the_key_while_the_store_is_down_t
 
 
 def test_a_dataset_that_cannot_be_loaded_answers_502_or_503_then_loads(s3, served):
-    # A server of its own, whose image arrays and region metadata are first needed while the
-    # store is down; failed loads are tried again after 1 s.
+    # A server of its own, whose image (for its region metadata and arrays) is first needed
+    # while the store is down; failed loads are tried again after 1 s.
     proxy, _, local_base = served
     server, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
                                 "--cache-bytes", "0", "--load-retry", "1",
@@ -215,6 +215,9 @@ def test_a_dataset_that_cannot_be_loaded_answers_502_or_503_then_loads(s3, serve
     try:
         proxy.set_mode("fail", "503")
         answered = requests.get(f"{base}/{NAME}/{REGIONS}", timeout=60)
+        # The region index and the bricks share the image: its failure is kept for 1 s.
+        kept = requests.get(f"{base}/{NAME}/{BRICKS}", timeout=60)
+        time.sleep(1.2)
         proxy.set_mode("fail", "reset")
         gone = requests.get(f"{base}/{NAME}/{BRICKS}", timeout=60)
         proxy.set_mode("healthy")
@@ -222,6 +225,7 @@ def test_a_dataset_that_cannot_be_loaded_answers_502_or_503_then_loads(s3, serve
         assert answered.json()["error"].startswith(f"dataset '{NAME}': "), answered.text
         assert "the object store answered an error (" in answered.json()["error"], answered.text
         assert "Retry-After" not in answered.headers
+        assert (kept.status_code, kept.text) == (502, answered.text)
         assert gone.status_code == 503, gone.text
         assert "the object store did not answer (" in gone.json()["error"], gone.text
         assert gone.headers["Retry-After"] == "5"
@@ -335,6 +339,29 @@ def test_the_region_index_is_read_from_the_store_side_by_side(s3):
     finally:
         stop_server(faulty)
         stop_server(local)
+        proxy.stop()
+
+
+def test_the_image_is_opened_once_for_its_region_index_and_its_bricks(s3):
+    """brickserver opens a dataset's image once and shares it between the region index and
+    the bricks: a region query and then a batch of bricks read the store's root metadata and
+    each level's metadata once (the server read the root metadata once more when it started,
+    to check that the location holds a store)."""
+    proxy = FaultProxy(s3["endpoint"], seed=1).start()
+    server, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
+                                env=env())
+    try:
+        store = "/bucket/sample.ome.zarr"
+        assert proxy.paths() == [f"{store}/zarr.json"]
+        assert requests.get(f"{base}/{NAME}/{REGIONS}", timeout=60).status_code == 200
+        assert requests.get(f"{base}/{NAME}/bricks?b=1,0,0,0,0", timeout=60).status_code == 200
+        image = [p for p in proxy.paths()[1:] if p.endswith("/zarr.json")
+                 and not p.startswith(f"{store}/residency/")]
+        levels = [f"{store}/{i}/zarr.json" for i in range(3)]
+        assert sorted(image) == sorted([f"{store}/zarr.json", *levels]), proxy.paths()
+        assert proxy.stats()["faults"] == 0
+    finally:
+        stop_server(server)
         proxy.stop()
 
 

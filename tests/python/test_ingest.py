@@ -14,10 +14,10 @@ import tifffile
 import zarr
 from ome_zarr_models import open_ome_zarr
 
-from support.binaries import run_ingest
+from support.binaries import run_ingest, run_partitions
 from support.paths import BIN, ROOT
 from support.reference import assert_pyramid_exact, assert_region_metadata, assert_same_bits
-from support.stores import multiscale, root_attributes
+from support.stores import files, multiscale, root_attributes
 
 RNG = np.random.default_rng(7)
 
@@ -242,7 +242,7 @@ def test_sums_as_large_as_their_narrow_type_allows_are_exact(tmp_path, dtype, de
     """Levels whose voxels cover few enough level-0 voxels sum in 32 bits. At depth 16 the
     last level's voxel covers 16 x 64 x 64 = 65,536 voxels, the most an i16 narrow sum holds
     (at -32768 each they sum to exactly the smallest 32-bit integer; at 65535 each, u16's
-    sum is 65,536 short of the largest unsigned one). At depth 32 it covers twice that, so
+    sum is 65,535 short of the largest unsigned one). At depth 32 it covers twice that, so
     for u16 and i16 the level before it is narrow and it is wide."""
     info = np.iinfo(dtype)
     shape = (depth, 64, 64)
@@ -259,6 +259,27 @@ def test_sums_as_large_as_their_narrow_type_allows_are_exact(tmp_path, dtype, de
     assert shapes[-2:] == [(1, 1, 2, 2), (1, 1, 1, 1)]
     if fill != "mixed":
         assert g["6"][...].tolist() == [[[[int(vol.flat[0])]]]]
+
+
+@pytest.mark.parametrize("dtype", [np.uint16, np.int16])
+def test_partitions_hand_over_wide_sums_that_narrow_levels_take(tmp_path, dtype):
+    """In 2 partitions the hand-over level (level 1 of 16-plane slabs here: 8 planes a
+    partition) is summed wide, written to the hand-over files, and taken back by `finalize`
+    into the levels that sum narrow and the one that sums wide: the store is the one a single
+    conversion writes, every level exact, with sums at the limits of the narrow types."""
+    info = np.iinfo(dtype)
+    vol = np.full((32, 64, 64), info.max, dtype)
+    vol[::2] = info.min
+    src = tmp_path / "extremes.tif"
+    tifffile.imwrite(src, vol)
+    flags = ["--chunk", "16", "--levels", "7", "--voxel-size", "1,1,1"]
+    whole = tmp_path / "whole" / "x.ome.zarr"
+    run_ingest("convert", src, "-o", whole, *flags, "--quiet")
+    parted = tmp_path / "parted" / "x.ome.zarr"
+    run_partitions([src], parted, 2, *flags)
+    run_ingest("finalize", "-o", parted, "--quiet")
+    assert files(parted) == files(whole)
+    check_store(parted, vol[np.newaxis])
 
 
 def test_index_adds_metadata_to_a_foreign_store(tmp_path):

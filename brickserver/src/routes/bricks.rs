@@ -12,10 +12,8 @@ use schemars::JsonSchema;
 
 use super::api_error::{api_error, load_failed, no_dataset};
 use super::params::DatasetPath;
-use super::state::{AppState, blocking, loaded};
-use crate::bricks::{
-    BatchError, BrickAt, BrickCache, ImageArrays, batch_document, parse_batch, read_bricks,
-};
+use super::state::{AppState, blocking, load_arrays, loaded};
+use crate::bricks::{BatchError, BrickAt, BrickCache, batch_document, parse_batch, read_bricks};
 use crate::cache::{CacheKey, Cached};
 use crate::openapi::{answer, api_errors, binary, responses, with_content};
 
@@ -91,12 +89,7 @@ pub(super) async fn bricks(
         Ok(b) => b,
         Err(e) => return batch_error(&e),
     };
-    let arrays = loaded(
-        &state,
-        index,
-        |l| &l.arrays,
-        |store| ImageArrays::open(store).map(Arc::new),
-    );
+    let arrays = loaded(&state, index, |l| &l.arrays, load_arrays);
     let arrays = match arrays.await {
         Ok(a) => a,
         Err(e) => return load_failed(&e),

@@ -16,7 +16,7 @@ use serde::Deserialize;
 
 use super::api_error::{api_error, load_failed, no_dataset};
 use super::params::DatasetPath;
-use super::state::{AppState, loaded};
+use super::state::{AppState, load_regions, loaded};
 use crate::openapi::{answer, api_errors, binary, json, responses, with_content};
 use crate::regions::{QueryError, RegionIndex};
 
@@ -117,12 +117,7 @@ async fn region_index(
     name: &str,
 ) -> Result<Arc<RegionIndex>, Response<Body>> {
     let index = state.index_of(name).ok_or_else(|| no_dataset(name))?;
-    let regions = loaded(
-        state,
-        index,
-        |l| &l.regions,
-        |store| RegionIndex::load(store).map(|r| r.map(Arc::new)),
-    );
+    let regions = loaded(state, index, |l| &l.regions, load_regions);
     match regions.await {
         Ok(Some(r)) => Ok(r),
         Ok(None) => Err(api_error(

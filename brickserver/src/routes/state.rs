@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
-use crate::bricks::{BatchLimits, ImageArrays};
+use crate::bricks::{BatchLimits, ImageArrays, ImagePyramid};
 use crate::cache::ByteCache;
 use crate::dataset_store::{DatasetStore, OpenError};
 use crate::datasets::Datasets;
@@ -14,6 +14,8 @@ use crate::listing::{PublicUrl, StoreSummary};
 use crate::metrics::Metrics;
 use crate::regions::RegionIndex;
 use crate::viewer_page::ViewerFiles;
+use residency_schemas::ome::OmeError;
+use residency_store::pyramid::{Pyramid, PyramidError};
 
 /// Server-wide options of the router.
 #[derive(Clone, Debug)]
@@ -53,7 +55,7 @@ impl Default for ServerOptions {
 /// [`ServerOptions::load_retry`] by default.
 pub const LOAD_RETRY: Duration = Duration::from_secs(5);
 
-/// A part of a dataset (its region index or image arrays) that could not be loaded; kept for
+/// A part of a dataset (its image pyramid, region index or image arrays) that could not be loaded; kept for
 /// [`ServerOptions::load_retry`], so the requests meanwhile are answered the same (500, or
 /// 502/503 when the object store failed) without trying again.
 #[derive(Clone, Debug, thiserror::Error)]
@@ -89,9 +91,36 @@ impl<T: Clone> LoadCell<T> {
     }
 }
 
+impl LoadError {
+    /// Why dataset `i` of `state` could not be loaded: `source`.
+    fn new(state: &AppState, i: usize, source: impl Error + Send + Sync + 'static) -> Self {
+        Self {
+            dataset: state.datasets.0[i].name.clone(),
+            source: Arc::new(source),
+        }
+    }
+
+    /// Whether the store is no OME-Zarr image at all (no group metadata, or a group without
+    /// multiscales): it then has no region metadata either, rather than a broken pyramid.
+    fn is_not_an_image(&self) -> bool {
+        matches!(
+            self.source.downcast_ref::<PyramidError>(),
+            Some(
+                PyramidError::NotAnImage { .. }
+                    | PyramidError::Ome(
+                        OmeError::NotAGroup { .. } | OmeError::NoMultiscales { .. }
+                    )
+            )
+        )
+    }
+}
+
 /// What is loaded once per dataset, on first use.
 #[derive(Default)]
 pub(crate) struct Loaded {
+    /// The image pyramid (attributes and level arrays), which the region index and the image
+    /// arrays share: opened once, so an object store's metadata is read once.
+    pub(crate) pyramid: LoadCell<Arc<ImagePyramid>>,
     /// The region index (`None`: the dataset has no region metadata).
     pub(crate) regions: LoadCell<Option<Arc<RegionIndex>>>,
     /// The image arrays, for batched bricks.
@@ -172,41 +201,88 @@ impl AppState {
 /// made by `load` on the blocking pool (the first caller loads, later ones wait for it). A
 /// failure keeps the error, with its causes, for [`ServerOptions::load_retry`]; the first
 /// request after that loads again.
-pub(crate) async fn loaded<T, E>(
+pub(crate) async fn loaded<T>(
     state: &Arc<AppState>,
     i: usize,
     cell: fn(&Loaded) -> &LoadCell<T>,
-    load: fn(&DatasetStore) -> Result<T, E>,
+    load: fn(&AppState, usize) -> Result<T, LoadError>,
 ) -> Result<T, LoadError>
 where
     T: Clone + Send + Sync + 'static,
-    E: Error + Send + Sync + 'static,
 {
-    let retry = state.load_retry;
     // Without waiting: a load in progress holds the lock, and is waited for below.
     if let Ok(held) = cell(&state.loaded[i]).0.try_lock()
-        && let Some(done) = LoadCell::current(held.as_ref(), retry)
+        && let Some(done) = LoadCell::current(held.as_ref(), state.load_retry)
     {
         return done;
     }
     let st = state.clone();
-    blocking(move || {
-        let d = &st.datasets.0[i];
-        let mut held = cell(&st.loaded[i])
-            .0
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner);
-        if let Some(done) = LoadCell::current(held.as_ref(), retry) {
-            return done;
-        }
-        let result = load(&st.stores[i]).map_err(|e| LoadError {
-            dataset: d.name.clone(),
-            source: Arc::new(e),
-        });
-        *held = Some((result.clone(), Instant::now()));
-        result
-    })
-    .await
+    blocking(move || load_now(&st, i, cell, load)).await
+}
+
+/// [`loaded`], on the calling (blocking) thread: what `cell` of dataset `i` holds, or what
+/// `load` makes of it.
+fn load_now<T: Clone>(
+    state: &AppState,
+    i: usize,
+    cell: fn(&Loaded) -> &LoadCell<T>,
+    load: impl FnOnce(&AppState, usize) -> Result<T, LoadError>,
+) -> Result<T, LoadError> {
+    let mut held = cell(&state.loaded[i])
+        .0
+        .lock()
+        .unwrap_or_else(PoisonError::into_inner);
+    if let Some(done) = LoadCell::current(held.as_ref(), state.load_retry) {
+        return done;
+    }
+    let result = load(state, i);
+    *held = Some((result.clone(), Instant::now()));
+    result
+}
+
+/// Dataset `i`'s image pyramid, opened on first use (on the calling, blocking, thread).
+///
+/// # Errors
+/// [`LoadError`] when the store's image metadata cannot be read or is unusable.
+fn pyramid_of(state: &AppState, i: usize) -> Result<Arc<ImagePyramid>, LoadError> {
+    load_now(
+        state,
+        i,
+        |l| &l.pyramid,
+        |state, i| {
+            let store = &state.stores[i];
+            Pyramid::open(store.zarr(), store.shown())
+                .map(Arc::new)
+                .map_err(|e| LoadError::new(state, i, e))
+        },
+    )
+}
+
+/// Loads dataset `i`'s image arrays (see [`loaded`]).
+///
+/// # Errors
+/// [`LoadError`] when its pyramid cannot be opened.
+pub(crate) fn load_arrays(state: &AppState, i: usize) -> Result<Arc<ImageArrays>, LoadError> {
+    let pyramid = pyramid_of(state, i)?;
+    Ok(Arc::new(ImageArrays::new(&state.stores[i], pyramid)))
+}
+
+/// Loads dataset `i`'s region index (see [`loaded`]): `None` for a store without region
+/// metadata, or that is no OME-Zarr image.
+///
+/// # Errors
+/// [`LoadError`] when its pyramid or a region array cannot be read.
+pub(crate) fn load_regions(
+    state: &AppState,
+    i: usize,
+) -> Result<Option<Arc<RegionIndex>>, LoadError> {
+    let pyramid = match pyramid_of(state, i) {
+        Err(e) if e.is_not_an_image() => return Ok(None),
+        other => other?,
+    };
+    RegionIndex::load(&state.stores[i], &pyramid)
+        .map(|r| r.map(Arc::new))
+        .map_err(|e| LoadError::new(state, i, e))
 }
 
 /// Runs blocking work off the async threads.

@@ -5,6 +5,7 @@
 use super::error::ConvertError;
 use super::inputs::Inputs;
 use super::options::{ConvertOptions, default_memory_limit};
+use super::pyramid_sums::sum_bytes;
 use crate::columns::{ColumnPlan, Pass};
 use crate::partition::plan::{Cuts, PartitionPlan};
 use crate::pyramid::plan_levels;
@@ -90,8 +91,7 @@ pub(crate) fn plan_pass<T: Sample>(
     let pass = Pass {
         plan,
         sum_bytes: size_of::<T::Sum>() as u64,
-        narrow_sum_bytes: size_of::<T::Narrow>() as u64,
-        narrow_terms: T::NARROW_TERMS,
+        level_sum_bytes: &sum_bytes::<T>,
         count_bytes: if T::HAS_NAN { 4 } else { 0 },
         decoders: &decoders,
         written,

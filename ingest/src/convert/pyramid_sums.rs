@@ -45,12 +45,13 @@ impl<T: Sample> SumBuffer<T> {
         }
     }
 
-    /// Sets the sums from `at` on to the wide sums `wide` (exact: the plan that made this
-    /// buffer narrow bounds them).
+    /// Sets the sums from `at` on to the wide sums `wide` of the same level (exact: the plan
+    /// that made this buffer narrow bounds every sum of the level).
     pub(crate) fn set_from_wide(&mut self, at: usize, wide: &[T::Sum]) {
         with_sums!(self, v => {
             for (d, &w) in v[at..at + wide.len()].iter_mut().zip(wide) {
                 *d = SumOf::narrowed(w);
+                debug_assert!(d.widened() == w, "a sum of {w:?} does not fit this level's sums");
             }
         });
     }
@@ -60,6 +61,15 @@ impl<T: Sample> SumBuffer<T> {
 /// `factor_z · factor_y · factor_x` level-0 voxels, and [`Sample::NARROW_TERMS`] of them fit.
 pub(crate) fn narrow_sums<T: Sample>(level: &LevelPlan) -> bool {
     level.factor.iter().product::<u64>() <= T::NARROW_TERMS
+}
+
+/// Bytes of one of `level`'s exact sums: narrow or wide (see [`narrow_sums`]).
+pub(crate) fn sum_bytes<T: Sample>(level: &LevelPlan) -> u64 {
+    if narrow_sums::<T>(level) {
+        size_of::<T::Narrow>() as u64
+    } else {
+        size_of::<T::Sum>() as u64
+    }
 }
 
 /// A level's accumulator: exact sums of level-0 voxels and their non-NaN counts,
@@ -234,7 +244,8 @@ impl<T: Sample, S: SumOf<T::Sum>> SlabRows<T> for Sums<'_, S> {
         } else {
             &[]
         };
-        // A source level's sums are never wider than the next level's (see `narrow_sums`).
+        // Exact whatever the two widths: a source voxel's level-0 voxels are some of the
+        // destination voxel's, so every source sum fits the destination's type.
         let term = |v: S| D::narrowed(v.widened());
         if step_x == 1 {
             for (d, &v) in sum.iter_mut().zip(src_sum) {
