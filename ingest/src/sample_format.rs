@@ -95,49 +95,43 @@ pub trait SumOf<W>:
     fn widened(self) -> W;
 }
 
-impl SumOf<i64> for i64 {
-    #[inline]
-    fn narrowed(wide: i64) -> Self {
-        wide
-    }
-    #[inline]
-    fn widened(self) -> i64 {
-        self
-    }
+/// A wide sum, as its own narrow sum.
+macro_rules! wide_sum {
+    ($t:ty) => {
+        impl SumOf<$t> for $t {
+            #[inline]
+            fn narrowed(wide: $t) -> Self {
+                wide
+            }
+            #[inline]
+            fn widened(self) -> $t {
+                self
+            }
+        }
+    };
 }
 
-impl SumOf<i64> for u32 {
-    #[inline]
-    fn narrowed(wide: i64) -> Self {
-        wide as u32
-    }
-    #[inline]
-    fn widened(self) -> i64 {
-        i64::from(self)
-    }
+wide_sum!(i64);
+wide_sum!(f64);
+
+/// A 32-bit narrow sum of integer samples, beside their `i64` wide sum.
+macro_rules! narrow_integer_sum {
+    ($t:ty) => {
+        impl SumOf<i64> for $t {
+            #[inline]
+            fn narrowed(wide: i64) -> Self {
+                wide as $t
+            }
+            #[inline]
+            fn widened(self) -> i64 {
+                i64::from(self)
+            }
+        }
+    };
 }
 
-impl SumOf<i64> for i32 {
-    #[inline]
-    fn narrowed(wide: i64) -> Self {
-        wide as i32
-    }
-    #[inline]
-    fn widened(self) -> i64 {
-        i64::from(self)
-    }
-}
-
-impl SumOf<f64> for f64 {
-    #[inline]
-    fn narrowed(wide: f64) -> Self {
-        wide
-    }
-    #[inline]
-    fn widened(self) -> f64 {
-        self
-    }
-}
+narrow_integer_sum!(u32);
+narrow_integer_sum!(i32);
 
 /// The smaller of two samples (`a` when they are unordered).
 #[inline]
