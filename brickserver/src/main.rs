@@ -164,11 +164,27 @@ async fn run(
         shared_port_listeners(bind, threads).with_context(|| format!("cannot listen on {bind}"))?;
     let addr = listeners[0].local_addr()?;
     let shutdown = shutdown_signal()?;
-    for d in &datasets.0 {
-        println!("serving {} at http://{addr}/{}/", d.location, d.name);
+    // Where it serves, for whoever reads stdout; a reader that has gone (a closed pipe) does
+    // not stop the server.
+    let mut stdout = std::io::stdout().lock();
+    let said = datasets
+        .0
+        .iter()
+        .try_for_each(|d| {
+            writeln!(
+                stdout,
+                "serving {} at http://{addr}/{}/",
+                d.location, d.name
+            )
+        })
+        .and_then(|()| writeln!(stdout, "listening on http://{addr}"))
+        .and_then(|()| stdout.flush());
+    if let Err(e) = said
+        && e.kind() != std::io::ErrorKind::BrokenPipe
+    {
+        return Err(e.into());
     }
-    println!("listening on http://{addr}");
-    std::io::stdout().flush()?;
+    drop(stdout);
     let state = Arc::new(AppState::new(datasets, &options)?);
     let viewer = state.viewer();
     match (viewer.built(), viewer.looked_at()) {

@@ -397,7 +397,7 @@ fn run(cli: Cli) -> Result<()> {
                     upload(&output, &summary.folder, &s3, false, None, bytes, quiet)?;
                     summary.folder = PathBuf::from(output.to_string());
                 }
-                print!("{}", summary.report());
+                out(format_args!("{}", summary.report()))?;
                 return Ok(());
             }
             let mut summary = convert(&options)?;
@@ -414,7 +414,7 @@ fn run(cli: Cli) -> Result<()> {
                 )?;
                 summary.output = PathBuf::from(output.to_string());
             }
-            print!("{}", summary.report());
+            out(format_args!("{}", summary.report()))?;
         }
         Command::Finalize {
             output,
@@ -455,7 +455,7 @@ fn run(cli: Cli) -> Result<()> {
                     summary
                 }
             };
-            print!("{}", summary.report());
+            out(format_args!("{}", summary.report()))?;
         }
         Command::Sample {
             output,
@@ -476,18 +476,18 @@ fn run(cli: Cli) -> Result<()> {
             };
             let files = write_samples(&output, &spec, !quiet)?;
             let [z, y, x] = spec.shape;
-            println!(
-                "wrote the {kind} sample stack ({z} x {y} x {x} voxels, z,y,x; {} channels):",
+            out(format_args!(
+                "wrote the {kind} sample stack ({z} x {y} x {x} voxels, z,y,x; {} channels):\n",
                 spec.channels
-            );
+            ))?;
             for f in &files {
-                println!("  {}", f.display());
+                out(format_args!("  {}\n", f.display()))?;
             }
             let list: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
-            println!(
-                "convert it with: ingest convert {} -o sample.ome.zarr",
+            out(format_args!(
+                "convert it with: ingest convert {} -o sample.ome.zarr\n",
                 list.join(" ")
-            );
+            ))?;
         }
         Command::Index {
             store,
@@ -497,14 +497,32 @@ fn run(cli: Cli) -> Result<()> {
             set_threads(threads)?;
             let options = ObjectStoreOptions::for_location(&store, s3_endpoint)?;
             let report = residency_ingest::index::index(&store, &options)?;
-            print!("{report}");
+            out(format_args!("{report}"))?;
         }
         Command::Inspect { store, s3_endpoint } => {
             let options = ObjectStoreOptions::for_location(&store, s3_endpoint)?;
-            print!("{}", residency_ingest::inspect::inspect(&store, &options)?);
+            out(format_args!(
+                "{}",
+                residency_ingest::inspect::inspect(&store, &options)?
+            ))?;
         }
     }
     Ok(())
+}
+
+/// Writes `text` to stdout. When the reader has gone (`ingest inspect STORE | head`), the
+/// program ends quietly with success, as ripgrep does, instead of panicking on a broken pipe:
+/// everything it had to do is done by the time it reports.
+///
+/// # Errors
+/// When stdout cannot be written for another reason.
+fn out(text: std::fmt::Arguments) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout.write_fmt(text).and_then(|()| stdout.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        other => other,
+    }
 }
 
 fn main() -> ExitCode {

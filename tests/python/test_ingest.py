@@ -2,6 +2,7 @@
 zarr-python reads the output, ome-zarr-models validates it, NumPy is the reference."""
 
 import json
+import os
 import pathlib
 import signal
 import subprocess
@@ -328,6 +329,34 @@ def expect_failure(args, *needles):
     for n in needles:
         assert str(n) in p.stderr, p.stderr
     return p
+
+
+def closed_pipe_run(*args):
+    """Runs `ingest ARGS` with stdout a pipe nobody reads any more (its reading end closed
+    first, as `| head` leaves it): returns the exit code and stderr."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        p = subprocess.run([str(BIN / "ingest"), *map(str, args)], stdout=write,
+                           stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write)
+    return p.returncode, p.stderr
+
+
+def test_a_reader_that_stops_reading_ends_the_report_quietly(tmp_path):
+    """`ingest inspect STORE | head` and the like: the report to a closed pipe ends the
+    program with success and nothing on stderr (not a panic), after its work is done."""
+    vol = sparse_volume((9, 20, 20), np.uint16)
+    src = tmp_path / "i.tif"
+    tifffile.imwrite(src, vol)
+    out = tmp_path / "i.ome.zarr"
+    assert closed_pipe_run("convert", src, "-o", out, "--chunk", "8") == (0, "")
+    assert run_ingest("inspect", out).stdout.startswith(f"{out}: OME-Zarr 0.5")
+    assert closed_pipe_run("inspect", out) == (0, "")
+    assert closed_pipe_run("sample", "-o", tmp_path / "s", "--size", "8,16,16") == (0, "")
+    assert sorted(p.name for p in (tmp_path / "s").iterdir()) == [
+        "filaments.ome.tif", "membranes.ome.tif", "nuclei.ome.tif"]
 
 
 def test_truncated_tiff_names_the_file(tmp_path):

@@ -5,7 +5,9 @@ import http.client
 import json
 import os
 import signal
+import socket
 import subprocess
+import time
 import urllib.parse
 
 import numpy as np
@@ -205,6 +207,33 @@ def test_bad_dataset_is_a_clear_error(tmp_path):
     p = subprocess.run([str(BIN / "brickserver"), "serve", str(tmp_path / "missing.ome.zarr")], capture_output=True, text=True)
     assert p.returncode != 0
     assert "missing.ome.zarr: cannot open dataset" in p.stderr
+
+
+def test_a_closed_stdout_does_not_stop_the_server(tmp_path):
+    """`brickserver serve ... | head -1` leaves the server a stdout nobody reads: it says
+    where it listens to nobody, and serves."""
+    store = small_store(tmp_path)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    read, write = os.pipe()
+    os.close(read)
+    proc = subprocess.Popen([str(BIN / "brickserver"), "serve", str(store), "--bind", f"127.0.0.1:{port}"],
+                            stdout=write, stderr=subprocess.PIPE, text=True)
+    os.close(write)
+    try:
+        for _ in range(100):
+            try:
+                if requests.get(f"http://127.0.0.1:{port}/healthz", timeout=1).status_code == 200:
+                    break
+            except requests.ConnectionError:
+                time.sleep(0.05)
+        assert requests.get(f"http://127.0.0.1:{port}/a/zarr.json").content == (store / "zarr.json").read_bytes()
+        assert proc.poll() is None
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10) == 0
+        assert "panicked" not in proc.stderr.read()
 
 
 def test_token_file_guards_everything_but_health(tmp_path):
