@@ -22,7 +22,6 @@ use residency_schemas::wire::{
 };
 use residency_schemas::{MinMaxGrid, RegionMetadata};
 use residency_store::at_once;
-use residency_store::pyramid::PyramidError;
 use residency_store::region_array::{ArrayPart, RegionArrayError, read_region_array};
 use zarrs::storage::ReadableListableStorageTraits;
 
@@ -175,9 +174,6 @@ pub(crate) enum QueryError {
 /// Why a dataset's region metadata could not be loaded.
 #[derive(Debug, thiserror::Error)]
 pub(crate) enum RegionsError {
-    /// The store or its pyramid could not be opened.
-    #[error(transparent)]
-    Store(#[from] PyramidError),
     /// The region metadata lists no level.
     #[error("region metadata lists no level")]
     NoLevel,

@@ -510,18 +510,25 @@ fn run(cli: Cli) -> Result<()> {
     Ok(())
 }
 
+/// The reader of stdout has gone (a closed pipe): the program ends with success, its work done
+/// (see [`out`]).
+#[derive(Debug, thiserror::Error)]
+#[error("the reader of the report has gone")]
+struct ReaderGone;
+
 /// Writes `text` to stdout. When the reader has gone (`ingest inspect STORE | head`), the
 /// program ends quietly with success, as ripgrep does, instead of panicking on a broken pipe:
-/// everything it had to do is done by the time it reports.
+/// everything it had to do is done by the time it reports, and returning (not exiting here)
+/// lets it clean up on the way out (an S3 upload's staging folder).
 ///
 /// # Errors
-/// When stdout cannot be written for another reason.
-fn out(text: std::fmt::Arguments) -> std::io::Result<()> {
+/// [`ReaderGone`] on a broken pipe, or why stdout cannot be written.
+fn out(text: std::fmt::Arguments) -> Result<()> {
     use std::io::Write;
     let mut stdout = std::io::stdout().lock();
     match stdout.write_fmt(text).and_then(|()| stdout.flush()) {
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
-        other => other,
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Err(ReaderGone.into()),
+        other => Ok(other?),
     }
 }
 
@@ -534,6 +541,7 @@ fn main() -> ExitCode {
         .init();
     match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
+        Err(e) if e.is::<ReaderGone>() => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!(
                 "error: {}",

@@ -5,6 +5,7 @@ buckets and whose files are the objects. What they read or serve over S3 must eq
 read or serve from a folder, and what `convert` writes must be byte for byte what it writes to a
 folder."""
 
+import os
 import pathlib
 import shutil
 import subprocess
@@ -115,6 +116,29 @@ def test_convert_to_s3_writes_the_bytes_of_a_local_convert_root_metadata_last(s3
     local32 = tmp_path / "32" / "sample.ome.zarr"
     run_ingest("convert", *s3["inputs"], "-o", local32, "--chunk", "32", "--quiet")
     assert files(remote) == files(local32)
+
+
+def test_convert_to_s3_with_nobody_reading_its_report_uploads_and_cleans_up(s3, tmp_path):
+    """`ingest convert ... -o s3://... | head -0`: the store is uploaded whole, the report to
+    the closed pipe ends the program with success, and its local staging folder is removed
+    on the way out (TMPDIR is a folder of the test's own)."""
+    url = "s3://bucket/piped/sample.ome.zarr"
+    staging = tmp_path / "tmp"
+    staging.mkdir()
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        p = subprocess.run([str(BIN / "ingest"), "convert", *map(str, s3["inputs"]), "-o", url,
+                            "--s3-endpoint", s3["endpoint"], "--chunk", "16"],
+                           stdout=write, stderr=subprocess.PIPE, text=True, timeout=300,
+                           env=env(TMPDIR=str(staging)))
+    finally:
+        os.close(write)
+    assert (p.returncode, p.stderr) == (0, "")
+    assert list(staging.iterdir()) == []
+    local = tmp_path / "sample.ome.zarr"
+    run_ingest("convert", *s3["inputs"], "-o", local, "--chunk", "16", "--quiet")
+    assert files(s3["root"] / "bucket" / "piped" / "sample.ome.zarr") == files(local)
 
 
 def test_index_in_s3_writes_what_a_local_index_writes_root_metadata_last(s3, tmp_path):

@@ -65,11 +65,14 @@ pub(crate) struct LoadError {
     dataset: String,
     /// Why it could not be loaded (shared: the error is kept, and cloned for each answer).
     source: Arc<dyn Error + Send + Sync>,
+    /// When it failed: a part that failed because the image did (the region index, the
+    /// arrays) is tried again when the image is, not later.
+    at: Instant,
 }
 
-/// A part of a dataset loaded on first use: kept once loaded; a failure is kept with when it
-/// happened, and tried again by the first request after [`ServerOptions::load_retry`].
-pub(crate) struct LoadCell<T>(Mutex<Option<(Result<T, LoadError>, Instant)>>);
+/// A part of a dataset loaded on first use: kept once loaded; a failure is kept, and tried
+/// again by the first request after [`ServerOptions::load_retry`] from when it happened.
+pub(crate) struct LoadCell<T>(Mutex<Option<Result<T, LoadError>>>);
 
 impl<T> Default for LoadCell<T> {
     fn default() -> Self {
@@ -80,23 +83,24 @@ impl<T> Default for LoadCell<T> {
 impl<T: Clone> LoadCell<T> {
     /// What is held, unless it is a failure older than `retry` (or nothing is held).
     fn current(
-        held: Option<&(Result<T, LoadError>, Instant)>,
+        held: Option<&Result<T, LoadError>>,
         retry: Duration,
     ) -> Option<Result<T, LoadError>> {
         match held {
-            Some((Ok(v), _)) => Some(Ok(v.clone())),
-            Some((Err(e), at)) if at.elapsed() < retry => Some(Err(e.clone())),
+            Some(Ok(v)) => Some(Ok(v.clone())),
+            Some(Err(e)) if e.at.elapsed() < retry => Some(Err(e.clone())),
             _ => None,
         }
     }
 }
 
 impl LoadError {
-    /// Why dataset `i` of `state` could not be loaded: `source`.
+    /// Why dataset `i` of `state` could not be loaded, now: `source`.
     fn new(state: &AppState, i: usize, source: impl Error + Send + Sync + 'static) -> Self {
         Self {
             dataset: state.datasets.0[i].name.clone(),
             source: Arc::new(source),
+            at: Instant::now(),
         }
     }
 
@@ -236,7 +240,7 @@ fn load_now<T: Clone>(
         return done;
     }
     let result = load(state, i);
-    *held = Some((result.clone(), Instant::now()));
+    *held = Some(result.clone());
     result
 }
 

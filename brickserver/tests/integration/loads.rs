@@ -40,3 +40,36 @@ async fn a_failed_load_is_answered_the_same_then_tried_again_after_the_retry_tim
     let kept = get(&router, path, &[]).await;
     assert_eq!((kept.status, kept.body), (served.status, served.body));
 }
+
+#[tokio::test]
+async fn a_part_that_failed_with_the_image_is_tried_again_with_it() {
+    // The image fails to open; the bricks ask for it again late in the retry time (and get
+    // the image's failure); the region index then reopens the image after the retry time.
+    // The bricks load with it at once: their failure was the image's, timed from when the
+    // image failed, not from when the bricks asked.
+    let dir = tempfile::tempdir().unwrap();
+    let store = v3_store(dir.path(), "cells");
+    let options = ServerOptions {
+        load_retry: Duration::from_millis(600),
+        ..ServerOptions::default()
+    };
+    let router = server(&[("cells", &store)], &options).await;
+    let level = store.join("0/zarr.json");
+    let good = std::fs::read(&level).unwrap();
+    std::fs::write(&level, "not json").unwrap();
+    let (bricks, regions) = (
+        "/cells/bricks?b=0,0,0,0,0&encoding=raw",
+        "/cells/regions?level=0&channel=0&min=0,0,0&max=1,1,1",
+    );
+    let failed = get(&router, regions, &[]).await;
+    assert_eq!(failed.status, 500, "{}", failed.text());
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let same = get(&router, bricks, &[]).await;
+    assert_eq!((same.status, same.text()), (failed.status, failed.text()));
+    std::fs::write(&level, &good).unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let regions_again = get(&router, regions, &[]).await;
+    assert_ne!(regions_again.status, 500, "{}", regions_again.text());
+    let served = get(&router, bricks, &[]).await;
+    assert_eq!(served.status, 200, "{}", served.text());
+}

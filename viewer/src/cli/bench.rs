@@ -331,10 +331,13 @@ pub fn run(args: Args) -> Result<()> {
         Command::Vdi(a) => run_vdi(*a),
         Command::Report(a) => {
             let w = bench::report::write(&a.results, &a.out_dir, &a.command)?;
-            println!("{}", w.report.display());
-            println!("{}", w.summary.display());
+            super::report(format_args!(
+                "{}\n{}\n",
+                w.report.display(),
+                w.summary.display()
+            ))?;
             for p in &w.plots {
-                println!("{}", p.display());
+                super::report(format_args!("{}\n", p.display()))?;
             }
             Ok(())
         }

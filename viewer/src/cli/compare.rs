@@ -39,11 +39,12 @@ pub fn run(args: Args) -> Result<()> {
         metrics::error_map(&a, &b)?.write(path)?;
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&m)?);
+        super::report(format_args!("{}\n", serde_json::to_string_pretty(&m)?))?;
     } else {
-        println!("PSNR {:.3} dB", m.psnr_db);
-        println!("SSIM {:.6}", m.ssim);
-        println!("max abs error {:.6}", m.max_abs_error);
+        super::report(format_args!(
+            "PSNR {:.3} dB\nSSIM {:.6}\nmax abs error {:.6}\n",
+            m.psnr_db, m.ssim, m.max_abs_error
+        ))?;
     }
     Ok(())
 }

@@ -10,6 +10,20 @@ pub mod serve;
 pub mod vdi;
 pub mod view;
 
+/// Writes a command's report to stdout. A reader that has gone (a closed pipe: `viewer compare
+/// A B | head -1`) is no error: the work is done, and the rest of the report goes nowhere.
+///
+/// # Errors
+/// When stdout cannot be written for another reason.
+pub fn report(text: std::fmt::Arguments) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut stdout = std::io::stdout().lock();
+    match stdout.write_fmt(text).and_then(|()| stdout.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => other,
+    }
+}
+
 /// Parses a flag whose values are the variant names of one of the library's named enums
 /// (`--method`, `--filter`, `--mode`, `--experiment`): clap lists them in the help and in the
 /// error for any other value.

@@ -369,7 +369,9 @@ impl ApplicationHandler for App {
             let settled =
                 self.drag.is_none() && self.frames > 0 && (at_rest || self.frames_since_input >= n);
             if self.settled_at.is_none() && settled {
-                println!(
+                // A status line: nobody reading it (a closed pipe) is no error.
+                let _ = writeln!(
+                    std::io::stdout(),
                     "view: {} VDI frames shown, last {:.1} ms at D_I {:.2} ({}x{} rays)",
                     self.frames,
                     self.shown.ms,

@@ -630,7 +630,9 @@ impl ApplicationHandler for App {
                 && (self.frames_shown >= n || (self.idle && self.session.totals().frames > 0));
             if self.settled_at.is_none() && settled {
                 let t = self.session.totals();
-                println!(
+                // A status line: nobody reading it (a closed pipe) is no error.
+                let _ = writeln!(
+                    std::io::stdout(),
                     "view: {} frames shown, {} bricks fetched ({:.2} MiB), {}",
                     t.frames,
                     t.bricks_fetched,
