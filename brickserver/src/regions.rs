@@ -26,7 +26,6 @@ use residency_store::region_array::{ArrayPart, RegionArrayError, read_region_arr
 use zarrs::storage::ReadableListableStorageTraits;
 
 use crate::bricks::ImagePyramid;
-use crate::dataset_store::DatasetStore;
 
 /// A pyramid of grids: grid `k` has cells of `cell · 2^k` voxels; each cell of grid `k + 1`
 /// aggregates the (up to) 2×2×2 cells below it in grid `k`.
@@ -253,16 +252,14 @@ fn coarser_histograms(fine: &[u64], shape: [u64; 3], bins: usize) -> ([u64; 3], 
 
 impl RegionIndex {
     /// Loads the region index of a dataset's store from its opened `pyramid` (whose image
-    /// attributes list the region arrays), or `None` for a store without region metadata.
+    /// attributes list the region arrays, read from the pyramid's store), or `None` for a
+    /// store without region metadata.
     ///
     /// # Errors
     /// [`RegionsError`] when a region array cannot be read, or the arrays disagree with the
     /// metadata.
-    pub(crate) fn load(
-        dataset: &DatasetStore,
-        pyramid: &ImagePyramid,
-    ) -> Result<Option<Self>, RegionsError> {
-        let store = dataset.zarr();
+    pub(crate) fn load(pyramid: &ImagePyramid) -> Result<Option<Self>, RegionsError> {
+        let store = &pyramid.store;
         let Some(meta) = &pyramid.attributes.regions else {
             return Ok(None);
         };
@@ -287,7 +284,7 @@ impl RegionIndex {
             })
             .filter(|wanted| seen.insert(*wanted))
             .collect();
-        let read = at_once::try_read_all(&wanted, |&(path, t)| read_array(&store, path, t));
+        let read = at_once::try_read_all(&wanted, |&(path, t)| read_array(store, path, t));
         let mut read_ahead: HashMap<(String, SampleType), _> = wanted
             .iter()
             .map(|&(path, t)| (path.to_string(), t))
@@ -297,7 +294,7 @@ impl RegionIndex {
         let mut take_array = |path: &str, t| {
             read_ahead
                 .remove(&(path.to_string(), t))
-                .unwrap_or_else(|| read_array(&store, path, t))
+                .unwrap_or_else(|| read_array(store, path, t))
         };
         let mut levels = Vec::new();
         let mut blocks: Vec<Vec<MinMaxLevelBlock>> = vec![Vec::new(); channels];

@@ -284,7 +284,7 @@ pub(crate) fn load_regions(
         Err(e) if e.is_not_an_image() => return Ok(None),
         other => other?,
     };
-    RegionIndex::load(&state.stores[i], &pyramid)
+    RegionIndex::load(&pyramid)
         .map(|r| r.map(Arc::new))
         .map_err(|e| LoadError::new(state, i, e))
 }

@@ -3,24 +3,33 @@
 //! request loads again, so a store that recovers is served again without a restart; once
 //! loaded, a part is kept.
 
+use std::path::PathBuf;
 use std::time::Duration;
 
+use axum::Router;
 use residency_brickserver::ServerOptions;
 
 use crate::common::{get, server, v3_store};
 
-#[tokio::test]
-async fn a_failed_load_is_answered_the_same_then_tried_again_after_the_retry_time() {
-    let dir = tempfile::tempdir().unwrap();
-    let store = v3_store(dir.path(), "cells");
+/// A server of dataset `cells` that retries failed loads after `retry`, whose level-0
+/// metadata is broken: the router, that document's path and its good bytes (to mend it).
+async fn broken_image(dir: &std::path::Path, retry: Duration) -> (Router, PathBuf, Vec<u8>) {
+    let store = v3_store(dir, "cells");
     let options = ServerOptions {
-        load_retry: Duration::from_millis(400),
+        load_retry: retry,
         ..ServerOptions::default()
     };
     let router = server(&[("cells", &store)], &options).await;
     let level = store.join("0/zarr.json");
     let good = std::fs::read(&level).unwrap();
     std::fs::write(&level, "not json").unwrap();
+    (router, level, good)
+}
+
+#[tokio::test]
+async fn a_failed_load_is_answered_the_same_then_tried_again_after_the_retry_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let (router, level, good) = broken_image(dir.path(), Duration::from_millis(400)).await;
     let path = "/cells/bricks?b=0,0,0,0,0&encoding=raw";
     let failed = get(&router, path, &[]).await;
     assert_eq!(failed.status, 500);
@@ -48,15 +57,7 @@ async fn a_part_that_failed_with_the_image_is_tried_again_with_it() {
     // The bricks load with it at once: their failure was the image's, timed from when the
     // image failed, not from when the bricks asked.
     let dir = tempfile::tempdir().unwrap();
-    let store = v3_store(dir.path(), "cells");
-    let options = ServerOptions {
-        load_retry: Duration::from_millis(600),
-        ..ServerOptions::default()
-    };
-    let router = server(&[("cells", &store)], &options).await;
-    let level = store.join("0/zarr.json");
-    let good = std::fs::read(&level).unwrap();
-    std::fs::write(&level, "not json").unwrap();
+    let (router, level, good) = broken_image(dir.path(), Duration::from_millis(600)).await;
     let (bricks, regions) = (
         "/cells/bricks?b=0,0,0,0,0&encoding=raw",
         "/cells/regions?level=0&channel=0&min=0,0,0&max=1,1,1",
