@@ -19,7 +19,7 @@ median run is reported, so background load hits both alike.
 - region queries (`/NAME/regions`, random unaligned boxes) on a store made by `ingest`, at 16
   connections (nginx has no equivalent);
 - optionally a soak: random chunk GETs at 256 connections for `--soak` seconds, sampling the
-  server's RSS every 5 s, counting every non-200 answer and transport error.
+  server's RSS, open descriptors and threads every 5 s, counting every non-200 answer and transport error.
 
 Each server's peak RSS (VmHWM, summed over nginx's processes) is read after its loads.
 Results go to docs/benchmarks/server.md and server-soak.md (with --docs, docs/benchmarks.md
@@ -54,6 +54,9 @@ GRID = (20, 25, 40)  # 20,000 chunks, z, y, x
 OHA = shutil.which("oha") or str(pathlib.Path.home() / ".cargo" / "bin" / "oha")
 WRK_SCRIPT = pathlib.Path(__file__).resolve().parent / "wrk_random_keys.lua"
 CLIENT = "wrk"  # set from --client in main()
+# Chunk files each server holds open: brickserver's default `--open-files`, and the same
+# for each nginx worker (`open_file_cache max=`); each holds a fifth of the store's files.
+OPEN_FILES = 4096
 
 
 def make_store(path: pathlib.Path):
@@ -99,6 +102,23 @@ def rss_mb(pids) -> float:
 
 def current_rss_mb(pids) -> float:
     return status_mb(pids, "VmRSS")
+
+
+def open_descriptors(pid) -> int:
+    """How many file descriptors process `pid` has open (sockets and files held open)."""
+    try:
+        return len(os.listdir(f"/proc/{pid}/fd"))
+    except FileNotFoundError:
+        return 0
+
+
+def threads_of(pid) -> int:
+    """How many threads process `pid` has (serving threads, and blocking-pool threads that read
+    what the page cache does not hold)."""
+    try:
+        return len(os.listdir(f"/proc/{pid}/task"))
+    except FileNotFoundError:
+        return 0
 
 
 def cpu_seconds(pids) -> float:
@@ -206,7 +226,7 @@ events {{ worker_connections 4096; }}
 http {{
   access_log off;
   sendfile on; tcp_nopush on; tcp_nodelay on;
-  open_file_cache max=4000 inactive=60s;  # per worker, well below the open-file limit
+  open_file_cache max={OPEN_FILES} inactive=60s;  # per worker, as many as brickserver holds
   keepalive_requests 1000000;
   keepalive_timeout 65;
   default_type application/octet-stream;
@@ -319,7 +339,7 @@ def run_loads(a, work, store, region_store):
     """The interleaved loads against nginx and brickserver, then the region queries."""
     ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
     ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
-    bs, bs_pids, bs_base = start_brickserver(store, "bench")
+    bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
     try:
         # Warm the page cache once for both (they serve the same files).
         chunk_load(f"{ng_base}/bench", 16, 3)
@@ -456,10 +476,11 @@ def render_s3(s3, a):
 
 
 def run_soak(a, store):
-    """Random chunk GETs at 256 connections for `a.soak` seconds, sampling the server's RSS."""
+    """Random chunk GETs at 256 connections for `a.soak` seconds, sampling the server's RSS,
+    open descriptors and threads every 5 s."""
     soak = None
     if a.soak:
-        bs, bs_pids, bs_base = start_brickserver(store, "bench")
+        bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
         samples = []
         try:
             if CLIENT == "wrk":
@@ -469,7 +490,7 @@ def run_soak(a, store):
             proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
             t0 = time.time()
             while proc.poll() is None:
-                samples.append((round(time.time() - t0), current_rss_mb(bs_pids)))
+                samples.append((round(time.time() - t0), current_rss_mb(bs_pids), open_descriptors(bs.pid), threads_of(bs.pid)))
                 time.sleep(5)
             if CLIENT == "wrk":
                 r = wrk_result(proc.stdout.read())
@@ -512,6 +533,7 @@ def render(results, a):
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
         f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)} "
         "on the same machine as the servers (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
+        f"each server holds up to {OPEN_FILES:,} chunk files open (nginx's `open_file_cache`, per worker; brickserver's `--open-files`, shared); "
         "each load ran on nginx and brickserver in turn, repeatedly, and the median run of each is shown. "
         "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",
         "",
@@ -547,6 +569,8 @@ def render(results, a):
 
 def render_soak(soak, a):
     rss = [s[1] for s in soak["rss_samples"]]
+    fds = [s[2] for s in soak["rss_samples"]]
+    threads = [s[3] for s in soak["rss_samples"]]
     at60 = rss[min(12, len(rss) - 1)]
     return (
         f"Soak measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) by "
@@ -554,7 +578,9 @@ def render_soak(soak, a):
         f"at 256 connections ({client_version(a.client)} on the same machine), {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
         f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors"
         f"{' (wrk counts both as errors)' if a.client == 'wrk' else ''}. Server RSS sampled every 5 s: "
-        f"first {rss[0]:.0f} MB, at 60 s {at60:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB.\n"
+        f"first {rss[0]:.0f} MB, at 60 s {at60:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB. "
+        f"Open descriptors (the 256 connections and the chunk files held open, at most {OPEN_FILES:,}): "
+        f"first {fds[0]:,}, last {fds[-1]:,}, max {max(fds):,}. Threads: first {threads[0]}, last {threads[-1]}, max {max(threads)}.\n"
     )
 
 

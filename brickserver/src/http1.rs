@@ -155,10 +155,10 @@ pub(crate) async fn connection(
             let cors = app.chunks.cors();
             write_head(&mut out, &answer.response, head.version, keep_alive, cors);
             let sent = match answer.body {
-                Some((file, start, end)) if head.method != Method::HEAD => {
+                Some((open, start, end)) if head.method != Method::HEAD => {
                     // The head waits for the file's first bytes (unless there are none).
                     send_head(&stream, &out, end > start).await?;
-                    send_file(&stream, &file, start, end).await?;
+                    send_file(&stream, &open.file, start, end).await?;
                     Some(end - start)
                 }
                 _ => {

@@ -11,8 +11,8 @@ use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use residency_brickserver::bricks::BatchLimits;
 use residency_brickserver::{
-    App, AppState, ConnectionLimits, Datasets, PublicUrl, ServerOptions, serve_on_threads,
-    shared_port_listeners,
+    App, AppState, ConnectionLimits, Datasets, OPEN_FILES, PublicUrl, ServerOptions,
+    serve_on_threads, shared_port_listeners,
 };
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 
@@ -86,6 +86,11 @@ enum Command {
         /// is answered from the failure before a request tries again.
         #[arg(long, default_value_t = 5.0)]
         load_retry: f64,
+        /// Most chunk files of folder stores held open between requests, as nginx's
+        /// open_file_cache (0: each request opens its file); at most a quarter of the
+        /// open-file limit.
+        #[arg(long, value_name = "N", default_value_t = OPEN_FILES)]
+        open_files: usize,
         /// Threads that serve connections, each with a listener of its own on the port and a
         /// single-threaded runtime (a connection stays on the thread that accepted it)
         /// [default: one per core].
@@ -120,7 +125,8 @@ fn read_token(path: &std::path::Path) -> Result<String> {
     Ok(token)
 }
 
-/// Raises the open-file limit to its hard maximum, as servers do: each connection is a file.
+/// Raises the open-file limit to its hard maximum, as servers do: each connection, and each
+/// chunk file held open, is a file.
 fn raise_file_limit() {
     // SAFETY: getrlimit/setrlimit only read and write the struct passed.
     unsafe {
@@ -230,6 +236,7 @@ fn main() -> ExitCode {
             max_batch_bricks,
             max_batch_bytes,
             load_retry,
+            open_files,
             threads,
         } => (|| {
             // Each object-store dataset's client is made here, once, and its requests run on
@@ -275,6 +282,7 @@ fn main() -> ExitCode {
                 public_url,
                 load_retry: Duration::try_from_secs_f64(load_retry)
                     .context("--load-retry must be a number of seconds, 0 or more")?,
+                open_files,
             };
             let limits = ConnectionLimits {
                 max_connections,

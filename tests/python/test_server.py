@@ -4,6 +4,9 @@ requests for headers, and raw requests for path traversal."""
 import http.client
 import json
 import os
+import pathlib
+import resource
+import shutil
 import signal
 import socket
 import subprocess
@@ -324,3 +327,90 @@ def test_web_viewer_pages_files_and_html_listing(tmp_path):
     finally:
         proc.terminate()
         proc.wait()
+
+
+def store_files_held(pid, store):
+    """The files of `store` that server `pid` holds open (a deleted one ends in " (deleted)")."""
+    held = []
+    for fd in pathlib.Path(f"/proc/{pid}/fd").iterdir():
+        try:
+            target = os.readlink(fd)
+        except FileNotFoundError:
+            continue
+        if target.startswith(str(store) + "/"):
+            held.append(target[len(str(store)) + 1 :])
+    return sorted(held)
+
+
+def test_chunk_files_held_open_are_let_go_when_replaced_changed_or_deleted(tmp_path):
+    """A chunk's bytes are answered from its file held open only while the file still has a
+    name and its length and modification time: one renamed over, truncated or rewritten in
+    place, or deleted, is let go and its key opened again, so each answer's bytes are those of
+    its ETag, and a deleted store's files are closed. With `--open-files 0` each request opens
+    its file."""
+    store = small_store(tmp_path)
+    # Keys the server serves verbatim beside the store's chunk.
+    key, long_key = "0/c/0/0/0/0", "0/c/0/0/0/8"
+    (store / long_key).write_bytes(bytes(range(256)) * 40)
+    old = (store / key).read_bytes()
+    proc, base = start_server(store)
+    try:
+        first = requests.get(f"{base}/a/{key}")
+        assert (first.status_code, first.content) == (200, old)
+        assert requests.get(f"{base}/a/{long_key}").content == bytes(range(256)) * 40
+        assert store_files_held(proc.pid, store) == [key, long_key]
+        assert requests.get(f"{base}/a/{key}", headers={"If-None-Match": first.headers["ETag"]}).status_code == 304
+        # Renamed over, the way files are replaced atomically.
+        (store / "replacement").write_bytes(old + b"more bytes")
+        os.replace(store / "replacement", store / key)
+        renamed = requests.get(f"{base}/a/{key}")
+        assert renamed.content == old + b"more bytes" and renamed.headers["ETag"] != first.headers["ETag"]
+        assert requests.get(f"{base}/a/{key}", headers={"If-None-Match": first.headers["ETag"]}).status_code == 200
+        # Rewritten in place with the same length: its modification time tells.
+        same_length = bytes(reversed(old + b"more bytes"))
+        with open(store / key, "r+b") as f:
+            f.write(same_length)
+        os.utime(store / key, ns=(time.time_ns(), time.time_ns() + 5_000_000_000))
+        # A revalidation that matches the held file's ETag is answered without a look at the
+        # file (as nginx does within open_file_cache_valid); an answer with bytes looks.
+        assert requests.get(f"{base}/a/{key}", headers={"If-None-Match": renamed.headers["ETag"]}).status_code == 304
+        rewritten = requests.get(f"{base}/a/{key}")
+        assert rewritten.content == same_length and rewritten.headers["ETag"] != renamed.headers["ETag"]
+        # Cut short in place, within its page (sent from the file) and by pages (read by the router).
+        os.truncate(store / key, 3)
+        assert requests.get(f"{base}/a/{key}").content == same_length[:3]
+        os.truncate(store / long_key, 100)
+        short = requests.get(f"{base}/a/{long_key}")
+        assert (short.content, short.headers["Content-Length"]) == (bytes(range(100)), "100")
+        assert store_files_held(proc.pid, store) == [key, long_key]
+        shutil.rmtree(store)
+        assert store_files_held(proc.pid, store) == [f"{key} (deleted)", f"{long_key} (deleted)"]
+        assert requests.get(f"{base}/a/{key}").status_code == 404
+        assert requests.get(f"{base}/a/{long_key}").status_code == 404
+        assert store_files_held(proc.pid, store) == []
+    finally:
+        stop_server(proc)
+
+    (tmp_path / "again").mkdir()
+    store = small_store(tmp_path / "again")
+    proc, base = start_server(store, "--open-files", "0")
+    try:
+        assert requests.get(f"{base}/a/{key}").content == old
+        assert requests.get(f"{base}/a/{key}").content == old
+        # Each answer closes its file once sent, a moment after the client has it.
+        for _ in range(50):
+            if not store_files_held(proc.pid, store):
+                break
+            time.sleep(0.02)
+        assert store_files_held(proc.pid, store) == []
+    finally:
+        stop_server(proc)
+
+
+def test_open_files_beyond_a_quarter_of_the_open_file_limit_are_lowered(tmp_path):
+    def limit_files():
+        resource.setrlimit(resource.RLIMIT_NOFILE, (1024, 1024))
+
+    proc, _ = start_server(small_store(tmp_path), preexec_fn=limit_files)
+    stop_server(proc)
+    assert "--open-files 4096 lowered to 256, a quarter of the open-file limit (1024)" in proc.stderr.read()

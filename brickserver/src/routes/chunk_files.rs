@@ -2,12 +2,11 @@
 //! connection (`crate::http1`) without the router, the file sent with `sendfile` from the
 //! page cache, never copied through this process, as nginx does. The answer (status and
 //! header fields) is the one the router's `GET /NAME/KEY` gives, built by the same functions;
-//! this module also holds what both share: the remembered `ETag`s that answer revalidations
-//! without a system call, and opening a key with its `304`.
+//! this module also holds what both share: opening a key (or finding it among the files held
+//! open, `crate::open_files`) with its `304`.
 
-use std::fs::{File, Metadata};
+use std::fs::File;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
 
 use axum::body::{Body, Bytes};
 use axum::http::{HeaderMap, HeaderValue, Method, Response, header};
@@ -15,57 +14,29 @@ use residency_schemas::server::bearer_token_matches;
 
 use super::state::AppState;
 use crate::dataset_store::Keys;
+use crate::open_files::OpenFile;
 use crate::responses::{
     RangeRequest, etag_of, is_metadata, not_modified, parse_range, part_response,
 };
 use crate::store_keys::{KeyError, RootDir};
 
-/// How long a remembered chunk `ETag` answers revalidations without a look at the file (as
-/// nginx's `open_file_cache_valid`): chunks are immutable, but a store may be replaced.
-pub(crate) const ETAG_VALID: Duration = Duration::from_mins(1);
-
-/// A borrowed key of [`AppState::etags`] (dataset index, raw key): hashes and compares as the
-/// owned `(usize, String)`, so a look-up allocates nothing.
-#[derive(Hash)]
-struct EtagKey<'a>(usize, &'a str);
-
-impl quick_cache::Equivalent<(usize, String)> for EtagKey<'_> {
-    fn equivalent(&self, key: &(usize, String)) -> bool {
-        self.0 == key.0 && self.1 == key.1
-    }
-}
-
 /// The paths under `/NAME/` that are the server's API, not Zarr keys.
 const API_PATHS: [&str; 4] = ["regions", "minmax", "bricks", "view"];
-
-/// The `304` for a revalidation of chunk `raw_key` of dataset `index` whose `ETag` was seen
-/// in the last [`ETAG_VALID`] and matches: no system call at all.
-pub(crate) fn remembered_not_modified(
-    state: &AppState,
-    index: usize,
-    raw_key: &str,
-    headers: &HeaderMap,
-) -> Option<Response<Body>> {
-    if is_metadata(raw_key) || !headers.contains_key(header::IF_NONE_MATCH) {
-        return None;
-    }
-    let (etag, seen) = state.etags.get(&EtagKey(index, raw_key))?;
-    if seen.elapsed() >= ETAG_VALID {
-        return None;
-    }
-    not_modified(raw_key, &etag, headers)
-}
 
 /// A key of a folder store, opened.
 pub(crate) enum OpenedKey {
     /// `If-None-Match` matched: the `304`.
     NotModified(Response<Body>),
-    /// The file, its metadata and its `ETag`.
-    File(File, Metadata, String),
+    /// The file, with its length and `ETag`.
+    File(Arc<OpenFile>),
 }
 
-/// Opens key `raw_key` of dataset `index` beneath its folder `root`, remembers a chunk's
-/// `ETag`, and answers `304` when the request's `If-None-Match` matches it.
+/// Key `raw_key` of dataset `index` beneath its folder `root`: a chunk from the files held
+/// open (`AppState::open_files`) while it is unchanged, else opened (and a chunk held open);
+/// `304` when the request's `If-None-Match` matches its `ETag`. A revalidation that matches
+/// the `ETag` of a file held open is answered without a look at the file, as nginx answers
+/// within `open_file_cache_valid`. Metadata documents, and keys spelt with percent-escapes
+/// (each spelling would hold a file of its own), are opened every time.
 ///
 /// # Errors
 /// [`KeyError`] when the key is refused, missing or cannot be opened.
@@ -76,21 +47,29 @@ pub(crate) fn open_folder_key(
     raw_key: &str,
     headers: &HeaderMap,
 ) -> Result<OpenedKey, KeyError> {
-    let (file, meta) = root.open_key(raw_key)?;
-    let etag = etag_of(&meta);
-    // Remembered anew when unknown, changed, or seen more than half its validity ago (an
-    // insert costs more than the look-up, and most chunks are asked for again).
-    let known = state.etags.get(&EtagKey(index, raw_key));
-    let fresh = known.is_some_and(|(t, seen)| *t == *etag && seen.elapsed() < ETAG_VALID / 2);
-    if !is_metadata(raw_key) && !fresh {
-        state.etags.insert(
-            (index, raw_key.to_string()),
-            (etag.as_str().into(), Instant::now()),
-        );
+    let held = state
+        .open_files
+        .as_deref()
+        .filter(|_| !is_metadata(raw_key) && !raw_key.contains('%'));
+    if let Some(files) = held
+        && let Some(open) = files.get(index, raw_key)
+    {
+        if let Some(answer) = not_modified(raw_key, &open.etag, headers) {
+            return Ok(OpenedKey::NotModified(answer));
+        }
+        if open.unchanged() {
+            return Ok(OpenedKey::File(open));
+        }
+        files.let_go(index, raw_key, &open);
     }
-    Ok(match not_modified(raw_key, &etag, headers) {
+    let (file, meta) = root.open_key(raw_key)?;
+    let open = Arc::new(OpenFile::new(file, &meta, etag_of(&meta)));
+    if let Some(files) = held {
+        files.insert(index, raw_key, open.clone());
+    }
+    Ok(match not_modified(raw_key, &open.etag, headers) {
         Some(answer) => OpenedKey::NotModified(answer),
-        None => OpenedKey::File(file, meta, etag),
+        None => OpenedKey::File(open),
     })
 }
 
@@ -99,7 +78,7 @@ pub(crate) struct ChunkAnswer {
     /// Status and header fields (its body is empty: the bytes come from the file).
     pub(crate) response: Response<Body>,
     /// The file and the bytes of it to send; `None` for `304` and `416`.
-    pub(crate) body: Option<(File, u64, u64)>,
+    pub(crate) body: Option<(Arc<OpenFile>, u64, u64)>,
 }
 
 /// The direct path for chunk keys of folder stores.
@@ -164,27 +143,21 @@ impl FolderChunks {
         let Keys::Folder(root) = &state.stores[index].keys else {
             return None;
         };
-        if let Some(answer) = remembered_not_modified(state, index, raw_key, headers) {
-            return Some(ChunkAnswer {
-                response: answer,
-                body: None,
-            });
-        }
-        let (file, meta, etag) = match open_folder_key(state, index, root, raw_key, headers).ok()? {
+        let open = match open_folder_key(state, index, root, raw_key, headers).ok()? {
             OpenedKey::NotModified(answer) => {
                 return Some(ChunkAnswer {
                     response: answer,
                     body: None,
                 });
             }
-            OpenedKey::File(file, meta, etag) => (file, meta, etag),
+            OpenedKey::File(open) => open,
         };
-        let len = meta.len();
+        let len = open.len;
         let range = headers
             .get(header::RANGE)
             .and_then(|v| v.to_str().ok())
             .map_or(RangeRequest::Whole, |v| parse_range(v, len));
-        let mut response = part_response(Bytes::new(), len, range, &etag, raw_key);
+        let mut response = part_response(Bytes::new(), len, range, &open.etag, raw_key);
         if range == RangeRequest::Unsatisfiable {
             // Its body is empty, and says so, as the router's answer does.
             response
@@ -192,12 +165,12 @@ impl FolderChunks {
                 .insert(header::CONTENT_LENGTH, HeaderValue::from(0));
         }
         let body = match range {
-            RangeRequest::Whole => Some((file, 0, len)),
-            RangeRequest::Part(start, end) => Some((file, start, end)),
+            RangeRequest::Whole => Some((open, 0, len)),
+            RangeRequest::Part(start, end) => Some((open, start, end)),
             RangeRequest::Unsatisfiable => None,
         };
-        if let Some((file, start, end)) = &body
-            && !in_page_cache(file, *start, *end)
+        if let Some((open, start, end)) = &body
+            && !in_page_cache(&open.file, *start, *end)
         {
             // `sendfile` would wait for the disk on a thread that serves other connections:
             // the router reads what is cached and moves the rest to the blocking pool.
@@ -271,15 +244,6 @@ mod tests {
     use std::os::fd::AsRawFd;
 
     use super::*;
-
-    #[test]
-    fn borrowed_etag_keys_find_the_owned_ones() {
-        let cache = quick_cache::sync::Cache::<(usize, String), u8>::new(16);
-        cache.insert((3, "0/c/0/1/2/3".to_string()), 7);
-        assert_eq!(cache.get(&EtagKey(3, "0/c/0/1/2/3")), Some(7));
-        assert_eq!(cache.get(&EtagKey(2, "0/c/0/1/2/3")), None);
-        assert_eq!(cache.get(&EtagKey(3, "0/c/0/1/2/4")), None);
-    }
 
     #[test]
     fn pages_dropped_from_the_cache_are_seen_as_not_cached() {

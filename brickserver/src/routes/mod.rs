@@ -39,7 +39,8 @@ use crate::metrics::track;
 use crate::openapi;
 
 pub(crate) use chunk_files::FolderChunks;
-pub use state::{AppState, ServerOptions};
+pub(crate) use state::REVALIDATE;
+pub use state::{AppState, OPEN_FILES, ServerOptions};
 
 /// Every route, with its documentation.
 fn api_routes() -> ApiRouter<Arc<AppState>> {

@@ -12,6 +12,7 @@ use crate::dataset_store::{DatasetStore, OpenError};
 use crate::datasets::Datasets;
 use crate::listing::{PublicUrl, StoreSummary};
 use crate::metrics::Metrics;
+use crate::open_files::OpenFiles;
 use crate::regions::RegionIndex;
 use crate::viewer_page::ViewerFiles;
 use residency_schemas::ome::OmeError;
@@ -37,6 +38,10 @@ pub struct ServerOptions {
     /// answered with the same error before the next request tries again (a store that failed
     /// may recover).
     pub load_retry: Duration,
+    /// The most chunk files of folder stores held open between requests, as nginx's
+    /// `open_file_cache` (0: each request opens its file); lowered to a quarter of the
+    /// process's open-file limit.
+    pub open_files: usize,
 }
 
 impl Default for ServerOptions {
@@ -48,9 +53,18 @@ impl Default for ServerOptions {
             viewer_dir: None,
             public_url: None,
             load_retry: LOAD_RETRY,
+            open_files: OPEN_FILES,
         }
     }
 }
+
+/// [`ServerOptions::open_files`] by default.
+pub const OPEN_FILES: usize = 4096;
+
+/// How long what was learnt of a chunk answers for it before the store is looked at again
+/// (as nginx's `open_file_cache_valid`): an object's `ETag` and bytes in memory, and the
+/// longest a chunk file is held open. Chunks are immutable, but a store may be replaced.
+pub(crate) const REVALIDATE: Duration = Duration::from_mins(1);
 
 /// [`ServerOptions::load_retry`] by default.
 pub const LOAD_RETRY: Duration = Duration::from_secs(5);
@@ -151,9 +165,11 @@ pub struct AppState {
     pub(crate) load_retry: Duration,
     /// Where each dataset's keys are read from, by dataset index.
     pub(crate) stores: Vec<DatasetStore>,
-    /// The `ETag` of each chunk key served, by dataset index and raw key, with when it was
-    /// seen.
+    /// The `ETag` of each chunk key of an object store served, by dataset index and raw key,
+    /// with when it was seen.
     pub(crate) etags: quick_cache::sync::Cache<(usize, String), (Arc<str>, Instant)>,
+    /// Chunk files of folder stores held open (`None`: each request opens its file).
+    pub(crate) open_files: Option<Arc<OpenFiles>>,
 }
 
 impl AppState {
@@ -187,6 +203,7 @@ impl AppState {
             load_retry: options.load_retry,
             stores,
             etags: quick_cache::sync::Cache::new(1 << 16),
+            open_files: OpenFiles::new(options.open_files),
         })
     }
 

@@ -15,11 +15,12 @@ use axum::response::IntoResponse;
 use residency_store::location::object_store::GetRange;
 use schemars::json_schema;
 
-use super::chunk_files::{ETAG_VALID, OpenedKey, open_folder_key, remembered_not_modified};
+use super::chunk_files::{OpenedKey, open_folder_key};
 use super::params::KeyPath;
-use super::state::{AppState, blocking};
+use super::state::{AppState, REVALIDATE, blocking};
 use crate::cache::{CacheKey, Cached};
 use crate::dataset_store::{Keys, ObjectKeys, requested_range};
+use crate::open_files::BorrowedKey;
 use crate::openapi::{answer, binary, responses, with_content};
 use crate::responses::{
     RangeRequest, file_response, is_metadata, not_modified, parse_range, part_response,
@@ -101,10 +102,6 @@ pub(super) async fn serve_key(
         .nth(2)
         .unwrap_or_default()
         .to_string();
-    // A revalidation of a chunk whose ETag is remembered needs no system call at all.
-    if let Some(answer) = remembered_not_modified(&state, index, &raw_key, &headers) {
-        return answer;
-    }
     let answer = match &state.stores[index].keys {
         Keys::Folder(root) => folder_key(&state, index, root, &raw_key, &headers).await,
         Keys::Object(objects) => object_key(&state, index, objects, &raw_key, &headers).await,
@@ -126,7 +123,7 @@ pub(super) async fn serve_key(
     }
 }
 
-/// Key `raw_key` of dataset `index`, read from its folder `root`.
+/// Key `raw_key` of dataset `index`, read from its folder `root` (or the file held open).
 async fn folder_key(
     state: &AppState,
     index: usize,
@@ -136,32 +133,40 @@ async fn folder_key(
 ) -> Result<Response<Body>, KeyError> {
     // Open beneath the dataset root and read what the page cache holds right here, as nginx
     // does; only a read that would wait for the disk moves to the blocking pool.
-    let (file, meta, etag) = match open_folder_key(state, index, root, raw_key, headers)? {
+    let open = match open_folder_key(state, index, root, raw_key, headers)? {
         OpenedKey::NotModified(answer) => return Ok(answer),
-        OpenedKey::File(file, meta, etag) => (file, meta, etag),
+        OpenedKey::File(open) => open,
     };
-    let len = meta.len() as usize;
-    let (bytes, whole) = read_cached(&file, len);
+    let len = open.len as usize;
+    let (bytes, whole) = read_cached(&open.file, len);
     let bytes = if whole {
         bytes
     } else {
+        let open = open.clone();
         blocking(move || {
             use std::os::unix::fs::FileExt;
             let mut bytes = bytes;
             let done = bytes.len();
             bytes.resize(len, 0);
-            file.read_exact_at(&mut bytes[done..], done as u64)
+            open.file
+                .read_exact_at(&mut bytes[done..], done as u64)
                 .map(|()| bytes)
                 .map_err(|e| KeyError::Unreadable(e.into()))
         })
         .await?
     };
-    Ok(file_response(Bytes::from(bytes), &etag, raw_key, headers))
+    Ok(file_response(
+        Bytes::from(bytes),
+        &open.etag,
+        raw_key,
+        headers,
+    ))
 }
 
-/// Key `raw_key` of dataset `index`, read from the object store: a chunk read whole in the last
-/// [`ETAG_VALID`] is answered from the memory cache; a `Range` becomes a ranged read, so a
-/// shard's index and chunks are read without the rest of the shard.
+/// Key `raw_key` of dataset `index`, read from the object store: a revalidation of a chunk
+/// whose `ETag` was seen within [`REVALIDATE`] is answered without a request, a chunk read
+/// whole within it from the memory cache; a `Range` becomes a ranged read, so a shard's
+/// index and chunks are read without the rest of the shard.
 async fn object_key(
     state: &AppState,
     index: usize,
@@ -171,6 +176,14 @@ async fn object_key(
 ) -> Result<Response<Body>, KeyError> {
     let key = checked_key(raw_key)?;
     let chunk = !is_metadata(raw_key);
+    if chunk
+        && headers.contains_key(header::IF_NONE_MATCH)
+        && let Some((etag, seen)) = state.etags.get(&BorrowedKey(index, raw_key))
+        && seen.elapsed() < REVALIDATE
+        && let Some(answer) = not_modified(raw_key, &etag, headers)
+    {
+        return Ok(answer);
+    }
     let cache_key = CacheKey::Object {
         dataset: index,
         key: raw_key.to_string(),
@@ -180,7 +193,7 @@ async fn object_key(
             bytes,
             etag: Some((etag, read)),
         }) = state.cache.get(&cache_key)
-        && read.elapsed() < ETAG_VALID
+        && read.elapsed() < REVALIDATE
     {
         let answer = not_modified(raw_key, &etag, headers);
         return Ok(answer.unwrap_or_else(|| file_response(bytes, &etag, raw_key, headers)));

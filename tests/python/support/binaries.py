@@ -28,15 +28,17 @@ def run_partitions(inputs, output, n, *flags, only=None):
         assert out.startswith("wrote partition "), out
 
 
-def start_server(*args, env=None):
+def start_server(*args, env=None, preexec_fn=None):
     """Starts `brickserver serve ARGS --bind 127.0.0.1:0` (in `env`, default this process's
-    environment); returns (process, base URL) once it announces that it listens."""
+    environment; `preexec_fn` runs in the child before it starts); returns (process, base URL)
+    once it announces that it listens."""
     proc = subprocess.Popen(
         [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=env,
+        preexec_fn=preexec_fn,
     )
     for line in proc.stdout:
         if line.startswith("listening on "):

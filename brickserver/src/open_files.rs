@@ -1,0 +1,265 @@
+//! Chunk files held open between requests, as nginx's `open_file_cache`: a chunk asked for
+//! again is answered from its descriptor, without a path look-up, `openat2` or `close`. Before
+//! its bytes are sent, one `statx` of the descriptor checks that the file still has a name and
+//! the length and modification time it had when it was opened; a file deleted, renamed over or
+//! changed in place is let go and its key opened again, so an answer's bytes are always those
+//! of its `ETag` (a matching revalidation is answered `304` without that look, as nginx's is
+//! within `open_file_cache_valid`). The
+//! files are shared by every thread that serves connections (one descriptor per chunk, where
+//! nginx keeps one per worker); the least used are closed when the cache is full, and a sweep
+//! every [`REVALIDATE`] closes those opened longer ago than that, so the files of a store deleted
+//! while nobody asks for them do not hold its disk space for long.
+
+use std::fs::File;
+use std::os::unix::fs::MetadataExt;
+use std::sync::{Arc, Weak};
+use std::time::{Duration, Instant};
+
+use crate::routes::REVALIDATE;
+
+/// A borrowed key of a `(dataset index, raw key)` cache: hashes and compares as the owned
+/// `(usize, String)`, so a look-up allocates nothing.
+#[derive(Hash)]
+pub(crate) struct BorrowedKey<'a>(pub(crate) usize, pub(crate) &'a str);
+
+impl quick_cache::Equivalent<(usize, String)> for BorrowedKey<'_> {
+    fn equivalent(&self, key: &(usize, String)) -> bool {
+        self.0 == key.0 && self.1 == key.1
+    }
+}
+
+/// A chunk file, open, with what its answers need.
+pub(crate) struct OpenFile {
+    /// The file (read at explicit offsets only, so threads share it).
+    pub(crate) file: File,
+    /// Its length in bytes when it was opened.
+    pub(crate) len: u64,
+    /// Its `ETag` (quoted), from its length and modification time when it was opened.
+    pub(crate) etag: String,
+    /// Its modification time when it was opened (seconds, nanoseconds).
+    modified: (i64, i64),
+    /// When it was opened.
+    opened: Instant,
+}
+
+impl OpenFile {
+    /// `file`, opened now, with its metadata `meta` and `etag`.
+    pub(crate) fn new(file: File, meta: &std::fs::Metadata, etag: String) -> Self {
+        Self {
+            file,
+            len: meta.len(),
+            etag,
+            modified: (meta.mtime(), meta.mtime_nsec()),
+            opened: Instant::now(),
+        }
+    }
+
+    /// Whether the file still has a name and the length and modification time it had when it
+    /// was opened (one `statx` of its descriptor).
+    pub(crate) fn unchanged(&self) -> bool {
+        self.file.metadata().is_ok_and(|meta| {
+            meta.nlink() > 0
+                && meta.len() == self.len
+                && (meta.mtime(), meta.mtime_nsec()) == self.modified
+        })
+    }
+}
+
+/// The chunk files held open, by dataset index and raw key.
+pub(crate) struct OpenFiles {
+    files: quick_cache::sync::Cache<(usize, String), Arc<OpenFile>>,
+    /// How long after it was opened a file is let go.
+    max_age: Duration,
+}
+
+impl OpenFiles {
+    /// Up to `asked` files, but at most a quarter of this process's open-file limit (the rest
+    /// is for connections and the store's other reads), each held for at most [`REVALIDATE`];
+    /// `None` when that is none (every request opens its file). A thread closes the files held
+    /// too long, every [`REVALIDATE`], until the cache is dropped.
+    pub(crate) fn new(asked: usize) -> Option<Arc<Self>> {
+        let open = Self::with_max_age(within_file_limit(asked, file_limit()), REVALIDATE)?;
+        let weak = Arc::downgrade(&open);
+        let sweeper = std::thread::Builder::new()
+            .name("open-files".into())
+            .spawn(move || sweep(&weak));
+        if let Err(e) = sweeper {
+            tracing::warn!("no thread to close files held too long ({e}): they close when evicted");
+        }
+        Some(open)
+    }
+
+    /// Up to `capacity` files, each held for at most `max_age`, without the sweep.
+    fn with_max_age(capacity: usize, max_age: Duration) -> Option<Arc<Self>> {
+        (capacity > 0).then(|| {
+            Arc::new(Self {
+                files: quick_cache::sync::Cache::new(capacity),
+                max_age,
+            })
+        })
+    }
+
+    /// Chunk `raw_key` of dataset `index`, if it is held open and not held too long (one held
+    /// too long is let go). Whether it is unchanged is [`OpenFile::unchanged`]'s to say.
+    pub(crate) fn get(&self, index: usize, raw_key: &str) -> Option<Arc<OpenFile>> {
+        let open = self.files.get(&BorrowedKey(index, raw_key))?;
+        if open.opened.elapsed() < self.max_age {
+            return Some(open);
+        }
+        self.let_go(index, raw_key, &open);
+        None
+    }
+
+    /// Lets go of `open`, chunk `raw_key` of dataset `index` (unless another file has taken
+    /// its place), so that the next request opens the key again.
+    pub(crate) fn let_go(&self, index: usize, raw_key: &str, open: &Arc<OpenFile>) {
+        let removed = self
+            .files
+            .remove_if(&BorrowedKey(index, raw_key), |held| Arc::ptr_eq(held, open));
+        drop(removed);
+    }
+
+    /// Holds `open`, chunk `raw_key` of dataset `index`, open (closing the least used file
+    /// when the cache is full, or the one it replaces once no answer is sending from it).
+    pub(crate) fn insert(&self, index: usize, raw_key: &str, open: Arc<OpenFile>) {
+        self.files.insert((index, raw_key.to_string()), open);
+    }
+
+    /// Closes every file held for its maximum age or longer (outside the cache's locks, as
+    /// closing the last descriptor of a deleted file frees its blocks).
+    fn close_stale(&self) {
+        let stale: Vec<_> = self
+            .files
+            .iter()
+            .filter(|(_, open)| open.opened.elapsed() >= self.max_age)
+            .collect();
+        for ((index, key), open) in stale {
+            self.let_go(index, &key, &open);
+        }
+    }
+}
+
+/// Every [`REVALIDATE`], closes the files the cache `open` has held too long, until it is
+/// dropped.
+fn sweep(open: &Weak<OpenFiles>) {
+    loop {
+        std::thread::sleep(REVALIDATE);
+        match open.upgrade() {
+            Some(open) => open.close_stale(),
+            None => return,
+        }
+    }
+}
+
+/// This process's open-file limit (its soft `RLIMIT_NOFILE`), if known.
+fn file_limit() -> Option<u64> {
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
+    // SAFETY: getrlimit only writes the struct passed.
+    (unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &raw mut limit) } == 0).then_some(limit.rlim_cur)
+}
+
+/// `asked` files, lowered to a quarter of the open-file `limit` (with a warning).
+fn within_file_limit(asked: usize, limit: Option<u64>) -> usize {
+    let Some(limit) = limit else {
+        return asked;
+    };
+    let most = usize::try_from(limit / 4).unwrap_or(usize::MAX);
+    if asked > most {
+        tracing::warn!(
+            "--open-files {asked} lowered to {most}, a quarter of the open-file limit ({limit})"
+        );
+    }
+    asked.min(most)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Write;
+
+    use super::*;
+
+    /// A held file of `bytes`, opened `age` ago.
+    fn held(bytes: &[u8], age: Duration) -> (tempfile::NamedTempFile, Arc<OpenFile>) {
+        let mut named = tempfile::NamedTempFile::new().unwrap();
+        named.write_all(bytes).unwrap();
+        let file = named.reopen().unwrap();
+        let meta = file.metadata().unwrap();
+        let mut open = OpenFile::new(file, &meta, format!("\"{:x}-0\"", meta.len()));
+        open.opened = Instant::now().checked_sub(age).unwrap();
+        (named, Arc::new(open))
+    }
+
+    #[test]
+    fn files_are_found_by_dataset_and_key_while_young_and_unchanged() {
+        let files = OpenFiles::with_max_age(16, Duration::from_mins(1)).unwrap();
+        let (_a, a) = held(b"abcde", Duration::ZERO);
+        let (_b, b) = held(b"abcdef", Duration::ZERO);
+        let (_c, old) = held(b"abc", Duration::from_mins(1));
+        files.insert(3, "0/c/0/1/2/3", a);
+        files.insert(2, "0/c/0/1/2/3", b);
+        files.insert(3, "0/c/0/1/2/5", old);
+        assert_eq!(files.get(3, "0/c/0/1/2/3").map(|f| f.len), Some(5));
+        assert_eq!(files.get(2, "0/c/0/1/2/3").map(|f| f.len), Some(6));
+        assert!(files.get(3, "0/c/0/1/2/4").is_none());
+        // Too old: let go.
+        assert!(files.get(3, "0/c/0/1/2/5").is_none());
+        assert_eq!(files.files.len(), 2);
+    }
+
+    #[test]
+    fn a_file_changed_in_place_or_deleted_is_let_go() {
+        let files = OpenFiles::with_max_age(16, Duration::from_mins(1)).unwrap();
+        let (grown, a) = held(b"abcde", Duration::ZERO);
+        let (same_length, b) = held(b"abcde", Duration::ZERO);
+        let (deleted, c) = held(b"abcde", Duration::ZERO);
+        for (key, open) in [("a", &a), ("b", &b), ("c", &c)] {
+            files.insert(0, key, open.clone());
+            assert!(files.get(0, key).is_some() && open.unchanged());
+        }
+        grown.as_file().write_all(b"f").unwrap();
+        // The same length, a later modification time.
+        let later = std::time::SystemTime::now() + Duration::from_secs(5);
+        same_length.as_file().set_modified(later).unwrap();
+        deleted.close().unwrap();
+        for (key, open) in [("a", &a), ("b", &b), ("c", &c)] {
+            assert!(!open.unchanged(), "{key}");
+            files.let_go(0, key, open);
+        }
+        assert_eq!(files.files.len(), 0);
+        // Only the last holder closes it.
+        assert_eq!(Arc::strong_count(&a), 1);
+        // A file that took the place of the one let go stays.
+        let (_d, d) = held(b"abcde", Duration::ZERO);
+        files.insert(0, "a", d.clone());
+        files.let_go(0, "a", &a);
+        assert!(
+            files
+                .get(0, "a")
+                .is_some_and(|open| Arc::ptr_eq(&open, &d) && open.unchanged())
+        );
+    }
+
+    #[test]
+    fn the_sweep_closes_the_files_held_too_long() {
+        let files = OpenFiles::with_max_age(16, Duration::from_mins(1)).unwrap();
+        let (_a, young) = held(b"a", Duration::ZERO);
+        let (_b, old) = held(b"b", Duration::from_mins(2));
+        files.insert(0, "young", young.clone());
+        files.insert(0, "old", old.clone());
+        files.close_stale();
+        assert_eq!(files.files.len(), 1);
+        assert_eq!((Arc::strong_count(&young), Arc::strong_count(&old)), (2, 1));
+    }
+
+    #[test]
+    fn the_cache_is_at_most_a_quarter_of_the_open_file_limit() {
+        assert_eq!(within_file_limit(4096, Some(20_000)), 4096);
+        assert_eq!(within_file_limit(4096, Some(1024)), 256);
+        assert_eq!(within_file_limit(4096, None), 4096);
+        assert!(OpenFiles::with_max_age(0, Duration::from_mins(1)).is_none());
+        assert!(OpenFiles::new(0).is_none());
+    }
+}
