@@ -7,15 +7,13 @@
 //! within `open_file_cache_valid`). The
 //! files are shared by every thread that serves connections (one descriptor per chunk, where
 //! nginx keeps one per worker); the least used are closed when the cache is full, and a sweep
-//! every [`REVALIDATE`] closes those opened longer ago than that, so the files of a store deleted
-//! while nobody asks for them do not hold its disk space for long.
+//! every maximum age (the server's one minute) closes those opened longer ago than that, so the
+//! files of a store deleted while nobody asks for them do not hold its disk space for long.
 
 use std::fs::File;
 use std::os::unix::fs::MetadataExt;
 use std::sync::{Arc, Weak};
 use std::time::{Duration, Instant};
-
-use crate::routes::REVALIDATE;
 
 /// A borrowed key of a `(dataset index, raw key)` cache: hashes and compares as the owned
 /// `(usize, String)`, so a look-up allocates nothing.
@@ -74,15 +72,15 @@ pub(crate) struct OpenFiles {
 
 impl OpenFiles {
     /// Up to `asked` files, but at most a quarter of this process's open-file limit (the rest
-    /// is for connections and the store's other reads), each held for at most [`REVALIDATE`];
+    /// is for connections and the store's other reads), each held for at most `max_age`;
     /// `None` when that is none (every request opens its file). A thread closes the files held
-    /// too long, every [`REVALIDATE`], until the cache is dropped.
-    pub(crate) fn new(asked: usize) -> Option<Arc<Self>> {
-        let open = Self::with_max_age(within_file_limit(asked, file_limit()), REVALIDATE)?;
+    /// too long, every `max_age`, until the cache is dropped.
+    pub(crate) fn new(asked: usize, max_age: Duration) -> Option<Arc<Self>> {
+        let open = Self::with_max_age(within_file_limit(asked, file_limit()), max_age)?;
         let weak = Arc::downgrade(&open);
         let sweeper = std::thread::Builder::new()
             .name("open-files".into())
-            .spawn(move || sweep(&weak));
+            .spawn(move || sweep(&weak, max_age));
         if let Err(e) = sweeper {
             tracing::warn!("no thread to close files held too long ({e}): they close when evicted");
         }
@@ -139,11 +137,10 @@ impl OpenFiles {
     }
 }
 
-/// Every [`REVALIDATE`], closes the files the cache `open` has held too long, until it is
-/// dropped.
-fn sweep(open: &Weak<OpenFiles>) {
+/// Every `max_age`, closes the files the cache `open` has held too long, until it is dropped.
+fn sweep(open: &Weak<OpenFiles>, max_age: Duration) {
     loop {
-        std::thread::sleep(REVALIDATE);
+        std::thread::sleep(max_age);
         match open.upgrade() {
             Some(open) => open.close_stale(),
             None => return,
@@ -260,6 +257,6 @@ mod tests {
         assert_eq!(within_file_limit(4096, Some(1024)), 256);
         assert_eq!(within_file_limit(4096, None), 4096);
         assert!(OpenFiles::with_max_age(0, Duration::from_mins(1)).is_none());
-        assert!(OpenFiles::new(0).is_none());
+        assert!(OpenFiles::new(0, Duration::from_mins(1)).is_none());
     }
 }

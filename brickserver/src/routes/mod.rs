@@ -39,7 +39,6 @@ use crate::metrics::track;
 use crate::openapi;
 
 pub(crate) use chunk_files::FolderChunks;
-pub(crate) use state::REVALIDATE;
 pub use state::{AppState, OPEN_FILES, ServerOptions};
 
 /// Every route, with its documentation.

@@ -203,7 +203,7 @@ impl AppState {
             load_retry: options.load_retry,
             stores,
             etags: quick_cache::sync::Cache::new(1 << 16),
-            open_files: OpenFiles::new(options.open_files),
+            open_files: OpenFiles::new(options.open_files, REVALIDATE),
         })
     }
 
