@@ -12,7 +12,7 @@
 
 use std::fs::File;
 use std::os::unix::fs::MetadataExt;
-use std::sync::{Arc, Weak};
+use std::sync::{Arc, Weak, mpsc};
 use std::time::{Duration, Instant};
 
 /// A borrowed key of a `(dataset index, raw key)` cache: hashes and compares as the owned
@@ -68,6 +68,27 @@ pub(crate) struct OpenFiles {
     files: quick_cache::sync::Cache<(usize, String), Arc<OpenFile>>,
     /// How long after it was opened a file is let go.
     max_age: Duration,
+    /// The sweep's thread, stopped and joined when the cache is dropped (`None` without one).
+    sweeper: Option<Sweeper>,
+}
+
+/// The thread that closes the files held too long, and the channel whose closing stops it.
+struct Sweeper {
+    stop: mpsc::Sender<()>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl Drop for OpenFiles {
+    /// Stops the sweep and waits for its thread, so that nothing is left running (unless the
+    /// sweep itself held the last reference).
+    fn drop(&mut self) {
+        if let Some(Sweeper { stop, thread }) = self.sweeper.take() {
+            drop(stop);
+            if thread.thread().id() != std::thread::current().id() {
+                let _ = thread.join();
+            }
+        }
+    }
 }
 
 impl OpenFiles {
@@ -76,23 +97,40 @@ impl OpenFiles {
     /// `None` when that is none (every request opens its file). A thread closes the files held
     /// too long, every `max_age`, until the cache is dropped.
     pub(crate) fn new(asked: usize, max_age: Duration) -> Option<Arc<Self>> {
-        let open = Self::with_max_age(within_file_limit(asked, file_limit()), max_age)?;
-        let weak = Arc::downgrade(&open);
-        let sweeper = std::thread::Builder::new()
-            .name("open-files".into())
-            .spawn(move || sweep(&weak, max_age));
-        if let Err(e) = sweeper {
-            tracing::warn!("no thread to close files held too long ({e}): they close when evicted");
-        }
-        Some(open)
+        let capacity = within_file_limit(asked, file_limit());
+        (capacity > 0).then(|| {
+            Arc::new_cyclic(|weak: &Weak<Self>| {
+                let weak = weak.clone();
+                let (stop, stopped) = mpsc::channel();
+                let thread = std::thread::Builder::new()
+                    .name("open-files".into())
+                    .spawn(move || sweep(&weak, &stopped, max_age));
+                let sweeper = match thread {
+                    Ok(thread) => Some(Sweeper { stop, thread }),
+                    Err(e) => {
+                        tracing::warn!(
+                            "no thread to close files held too long ({e}): they close when evicted"
+                        );
+                        None
+                    }
+                };
+                Self {
+                    files: quick_cache::sync::Cache::new(capacity),
+                    max_age,
+                    sweeper,
+                }
+            })
+        })
     }
 
     /// Up to `capacity` files, each held for at most `max_age`, without the sweep.
+    #[cfg(test)]
     fn with_max_age(capacity: usize, max_age: Duration) -> Option<Arc<Self>> {
         (capacity > 0).then(|| {
             Arc::new(Self {
                 files: quick_cache::sync::Cache::new(capacity),
                 max_age,
+                sweeper: None,
             })
         })
     }
@@ -137,10 +175,10 @@ impl OpenFiles {
     }
 }
 
-/// Every `max_age`, closes the files the cache `open` has held too long, until it is dropped.
-fn sweep(open: &Weak<OpenFiles>, max_age: Duration) {
-    loop {
-        std::thread::sleep(max_age);
+/// Every `max_age`, closes the files the cache `open` has held too long, until the cache is
+/// dropped (which closes `stopped`'s channel).
+fn sweep(open: &Weak<OpenFiles>, stopped: &mpsc::Receiver<()>, max_age: Duration) {
+    while let Err(mpsc::RecvTimeoutError::Timeout) = stopped.recv_timeout(max_age) {
         match open.upgrade() {
             Some(open) => open.close_stale(),
             None => return,
@@ -258,5 +296,19 @@ mod tests {
         assert_eq!(within_file_limit(4096, None), 4096);
         assert!(OpenFiles::with_max_age(0, Duration::from_mins(1)).is_none());
         assert!(OpenFiles::new(0, Duration::from_mins(1)).is_none());
+    }
+
+    #[test]
+    fn dropping_the_cache_stops_and_joins_its_sweep() {
+        let files = OpenFiles::new(16, Duration::from_mins(1)).unwrap();
+        let sweeper = files.sweeper.as_ref().unwrap().thread.thread().clone();
+        assert_eq!(sweeper.name(), Some("open-files"));
+        let (_a, a) = held(b"a", Duration::ZERO);
+        files.insert(0, "a", a.clone());
+        let started = Instant::now();
+        drop(files);
+        // Joined at once, not after the minute's sleep; the file it held is closed.
+        assert!(started.elapsed() < Duration::from_secs(10));
+        assert_eq!(Arc::strong_count(&a), 1);
     }
 }
