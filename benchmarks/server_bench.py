@@ -104,19 +104,12 @@ def current_rss_mb(pids) -> float:
     return status_mb(pids, "VmRSS")
 
 
-def open_descriptors(pid) -> int:
-    """How many file descriptors process `pid` has open (sockets and files held open)."""
+def proc_entries(pid, folder) -> int:
+    """How many entries `/proc/PID/FOLDER` lists: `fd`, the open descriptors (sockets and files
+    held open); `task`, the threads (serving threads, and blocking-pool threads that read what
+    the page cache does not hold). 0 once the process has gone."""
     try:
-        return len(os.listdir(f"/proc/{pid}/fd"))
-    except FileNotFoundError:
-        return 0
-
-
-def threads_of(pid) -> int:
-    """How many threads process `pid` has (serving threads, and blocking-pool threads that read
-    what the page cache does not hold)."""
-    try:
-        return len(os.listdir(f"/proc/{pid}/task"))
+        return len(os.listdir(f"/proc/{pid}/{folder}"))
     except FileNotFoundError:
         return 0
 
@@ -490,7 +483,7 @@ def run_soak(a, store):
             proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
             t0 = time.time()
             while proc.poll() is None:
-                samples.append((round(time.time() - t0), current_rss_mb(bs_pids), open_descriptors(bs.pid), threads_of(bs.pid)))
+                samples.append((round(time.time() - t0), current_rss_mb(bs_pids), proc_entries(bs.pid, "fd"), proc_entries(bs.pid, "task")))
                 time.sleep(5)
             if CLIENT == "wrk":
                 r = wrk_result(proc.stdout.read())

@@ -15,6 +15,8 @@ use std::os::unix::fs::MetadataExt;
 use std::sync::{Arc, Weak, mpsc};
 use std::time::{Duration, Instant};
 
+use crate::responses::etag_of;
+
 /// A borrowed key of a `(dataset index, raw key)` cache: hashes and compares as the owned
 /// `(usize, String)`, so a look-up allocates nothing.
 #[derive(Hash)]
@@ -32,7 +34,7 @@ pub(crate) struct OpenFile {
     pub(crate) file: File,
     /// Its length in bytes when it was opened.
     pub(crate) len: u64,
-    /// Its `ETag` (quoted), from its length and modification time when it was opened.
+    /// Its `ETag` (quoted, [`etag_of`] its metadata when it was opened).
     pub(crate) etag: String,
     /// Its modification time when it was opened (seconds, nanoseconds).
     modified: (i64, i64),
@@ -41,12 +43,12 @@ pub(crate) struct OpenFile {
 }
 
 impl OpenFile {
-    /// `file`, opened now, with its metadata `meta` and `etag`.
-    pub(crate) fn new(file: File, meta: &std::fs::Metadata, etag: String) -> Self {
+    /// `file`, opened now, with its metadata `meta`.
+    pub(crate) fn new(file: File, meta: &std::fs::Metadata) -> Self {
         Self {
             file,
             len: meta.len(),
-            etag,
+            etag: etag_of(meta),
             modified: (meta.mtime(), meta.mtime_nsec()),
             opened: Instant::now(),
         }
@@ -78,6 +80,26 @@ struct Sweeper {
     thread: std::thread::JoinHandle<()>,
 }
 
+impl Sweeper {
+    /// A thread that, every `max_age`, closes the files the cache `open` has held too long;
+    /// `None` (with a warning) when no thread can be started.
+    fn start(open: Weak<OpenFiles>, max_age: Duration) -> Option<Self> {
+        let (stop, stopped) = mpsc::channel();
+        let thread = std::thread::Builder::new()
+            .name("open-files".into())
+            .spawn(move || sweep(&open, &stopped, max_age));
+        match thread {
+            Ok(thread) => Some(Self { stop, thread }),
+            Err(e) => {
+                tracing::warn!(
+                    "no thread to close files held too long ({e}): they close when evicted"
+                );
+                None
+            }
+        }
+    }
+}
+
 impl Drop for OpenFiles {
     /// Stops the sweep and waits for its thread, so that nothing is left running (unless the
     /// sweep itself held the last reference).
@@ -99,40 +121,21 @@ impl OpenFiles {
     pub(crate) fn new(asked: usize, max_age: Duration) -> Option<Arc<Self>> {
         let capacity = within_file_limit(asked, file_limit());
         (capacity > 0).then(|| {
-            Arc::new_cyclic(|weak: &Weak<Self>| {
-                let weak = weak.clone();
-                let (stop, stopped) = mpsc::channel();
-                let thread = std::thread::Builder::new()
-                    .name("open-files".into())
-                    .spawn(move || sweep(&weak, &stopped, max_age));
-                let sweeper = match thread {
-                    Ok(thread) => Some(Sweeper { stop, thread }),
-                    Err(e) => {
-                        tracing::warn!(
-                            "no thread to close files held too long ({e}): they close when evicted"
-                        );
-                        None
-                    }
-                };
-                Self {
-                    files: quick_cache::sync::Cache::new(capacity),
-                    max_age,
-                    sweeper,
-                }
+            Arc::new_cyclic(|weak| {
+                let mut open = Self::unswept(capacity, max_age);
+                open.sweeper = Sweeper::start(weak.clone(), max_age);
+                open
             })
         })
     }
 
     /// Up to `capacity` files, each held for at most `max_age`, without the sweep.
-    #[cfg(test)]
-    fn with_max_age(capacity: usize, max_age: Duration) -> Option<Arc<Self>> {
-        (capacity > 0).then(|| {
-            Arc::new(Self {
-                files: quick_cache::sync::Cache::new(capacity),
-                max_age,
-                sweeper: None,
-            })
-        })
+    fn unswept(capacity: usize, max_age: Duration) -> Self {
+        Self {
+            files: quick_cache::sync::Cache::new(capacity),
+            max_age,
+            sweeper: None,
+        }
     }
 
     /// Chunk `raw_key` of dataset `index`, if it is held open and not held too long (one held
@@ -149,10 +152,10 @@ impl OpenFiles {
     /// Lets go of `open`, chunk `raw_key` of dataset `index` (unless another file has taken
     /// its place), so that the next request opens the key again.
     pub(crate) fn let_go(&self, index: usize, raw_key: &str, open: &Arc<OpenFile>) {
-        let removed = self
-            .files
+        // The removed file is returned, so it closes (if this was its last holder) after the
+        // cache's lock is released.
+        self.files
             .remove_if(&BorrowedKey(index, raw_key), |held| Arc::ptr_eq(held, open));
-        drop(removed);
     }
 
     /// Holds `open`, chunk `raw_key` of dataset `index`, open (closing the least used file
@@ -222,14 +225,14 @@ mod tests {
         named.write_all(bytes).unwrap();
         let file = named.reopen().unwrap();
         let meta = file.metadata().unwrap();
-        let mut open = OpenFile::new(file, &meta, format!("\"{:x}-0\"", meta.len()));
+        let mut open = OpenFile::new(file, &meta);
         open.opened = Instant::now().checked_sub(age).unwrap();
         (named, Arc::new(open))
     }
 
     #[test]
     fn files_are_found_by_dataset_and_key_while_young_and_unchanged() {
-        let files = OpenFiles::with_max_age(16, Duration::from_mins(1)).unwrap();
+        let files = OpenFiles::unswept(16, Duration::from_mins(1));
         let (_a, a) = held(b"abcde", Duration::ZERO);
         let (_b, b) = held(b"abcdef", Duration::ZERO);
         let (_c, old) = held(b"abc", Duration::from_mins(1));
@@ -246,7 +249,7 @@ mod tests {
 
     #[test]
     fn a_file_changed_in_place_or_deleted_is_let_go() {
-        let files = OpenFiles::with_max_age(16, Duration::from_mins(1)).unwrap();
+        let files = OpenFiles::unswept(16, Duration::from_mins(1));
         let (grown, a) = held(b"abcde", Duration::ZERO);
         let (same_length, b) = held(b"abcde", Duration::ZERO);
         let (deleted, c) = held(b"abcde", Duration::ZERO);
@@ -279,7 +282,7 @@ mod tests {
 
     #[test]
     fn the_sweep_closes_the_files_held_too_long() {
-        let files = OpenFiles::with_max_age(16, Duration::from_mins(1)).unwrap();
+        let files = OpenFiles::unswept(16, Duration::from_mins(1));
         let (_a, young) = held(b"a", Duration::ZERO);
         let (_b, old) = held(b"b", Duration::from_mins(2));
         files.insert(0, "young", young.clone());
@@ -294,7 +297,6 @@ mod tests {
         assert_eq!(within_file_limit(4096, Some(20_000)), 4096);
         assert_eq!(within_file_limit(4096, Some(1024)), 256);
         assert_eq!(within_file_limit(4096, None), 4096);
-        assert!(OpenFiles::with_max_age(0, Duration::from_mins(1)).is_none());
         assert!(OpenFiles::new(0, Duration::from_mins(1)).is_none());
     }
 

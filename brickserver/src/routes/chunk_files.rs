@@ -15,9 +15,7 @@ use residency_schemas::server::bearer_token_matches;
 use super::state::AppState;
 use crate::dataset_store::Keys;
 use crate::open_files::OpenFile;
-use crate::responses::{
-    RangeRequest, etag_of, is_metadata, not_modified, parse_range, part_response,
-};
+use crate::responses::{RangeRequest, is_metadata, not_modified, parse_range, part_response};
 use crate::store_keys::{KeyError, RootDir};
 
 /// The paths under `/NAME/` that are the server's API, not Zarr keys.
@@ -63,7 +61,7 @@ pub(crate) fn open_folder_key(
         files.let_go(index, raw_key, &open);
     }
     let (file, meta) = root.open_key(raw_key)?;
-    let open = Arc::new(OpenFile::new(file, &meta, etag_of(&meta)));
+    let open = Arc::new(OpenFile::new(file, &meta));
     if let Some(files) = held {
         files.insert(index, raw_key, open.clone());
     }
