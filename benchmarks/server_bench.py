@@ -19,7 +19,10 @@ median run is reported, so background load hits both alike.
 - region queries (`/NAME/regions`, random unaligned boxes) on a store made by `ingest`, at 16
   connections (nginx has no equivalent);
 - optionally a soak: random chunk GETs at 256 connections for `--soak` seconds, sampling the
-  server's RSS, open descriptors and threads every 5 s, counting every non-200 answer and transport error.
+  server's RSS, open descriptors and threads every 5 s, counting every non-200 answer and
+  transport error; meanwhile `--soak-evict` random chunk files a second are dropped from the
+  page cache (`POSIX_FADV_DONTNEED`), so that chunks read from the disk (on the server's
+  blocking threads) are served all through it, not only when the machine happens to drop them.
 
 Each server's peak RSS (VmHWM, summed over nginx's processes) is read after its loads.
 Results go to docs/benchmarks/server.md and server-soak.md (with --docs, docs/benchmarks.md
@@ -42,6 +45,7 @@ import shutil
 import signal
 import subprocess
 import tempfile
+import threading
 import time
 
 import numpy as np
@@ -280,6 +284,7 @@ def main():
     ap.add_argument("--repeat", type=int, default=3, help="runs per load and server, interleaved; the median is reported")
     ap.add_argument("--soak", type=int, default=0, help="seconds of soak at 256 connections (0: none)")
     ap.add_argument("--soak-only", action="store_true", help="run only the soak")
+    ap.add_argument("--soak-evict", type=int, default=200, help="chunk files a second dropped from the page cache during the soak")
     ap.add_argument("--work", default=str(ROOT / "bench-data" / "server"))
     ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     ap.add_argument("--s3", action="store_true", help="brickserver from an S3 server (s3s-fs) against from disk")
@@ -468,6 +473,19 @@ def render_s3(s3, a):
     return "\n".join(lines) + "\n"
 
 
+def evict_chunks(store: pathlib.Path, per_second: int, stop: threading.Event):
+    """Until `stop` is set, drops `per_second` random chunk files of `store` from the page cache
+    every second (`POSIX_FADV_DONTNEED`), so that the server must read them from the disk."""
+    rng = np.random.default_rng(11)
+    while per_second > 0 and not stop.wait(1.0):
+        for z, y, x in zip(*(rng.integers(0, n, per_second) for n in GRID)):
+            fd = os.open(store / "0" / "c" / "0" / str(z) / str(y) / str(x), os.O_RDONLY)
+            try:
+                os.posix_fadvise(fd, 0, 0, os.POSIX_FADV_DONTNEED)
+            finally:
+                os.close(fd)
+
+
 def run_soak(a, store):
     """Random chunk GETs at 256 connections for `a.soak` seconds, sampling the server's RSS,
     open descriptors and threads every 5 s."""
@@ -481,10 +499,17 @@ def run_soak(a, store):
             else:
                 cmd = [OHA, "-z", f"{a.soak}s", "-c", "256", "--no-tui", "--output-format", "json", "--rand-regex-url", key_regex(f"{bs_base}/bench")]
             proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+            stop = threading.Event()
+            evictor = threading.Thread(target=evict_chunks, args=(store, a.soak_evict, stop))
+            evictor.start()
             t0 = time.time()
-            while proc.poll() is None:
-                samples.append((round(time.time() - t0), current_rss_mb(bs_pids), proc_entries(bs.pid, "fd"), proc_entries(bs.pid, "task")))
-                time.sleep(5)
+            try:
+                while proc.poll() is None:
+                    samples.append((round(time.time() - t0), current_rss_mb(bs_pids), proc_entries(bs.pid, "fd"), proc_entries(bs.pid, "task")))
+                    time.sleep(5)
+            finally:
+                stop.set()
+                evictor.join()
             if CLIENT == "wrk":
                 r = wrk_result(proc.stdout.read())
                 soak = {"seconds": a.soak, "requests": sum(r["codes"].values()), "non_200": r["codes"].get(0, 0),
@@ -503,6 +528,8 @@ def run_soak(a, store):
         finally:
             bs.send_signal(signal.SIGTERM)
             bs.wait(timeout=20)
+    if soak:
+        soak["evicted_per_second"] = a.soak_evict
     return soak
 
 
@@ -567,8 +594,8 @@ def render_soak(soak, a):
     at60 = rss[min(12, len(rss) - 1)]
     return (
         f"Soak measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}) by "
-        f"`benchmarks/server_bench.py --client {a.client} --soak {soak['seconds']} --soak-only`: {soak['seconds']} s of random chunk GETs "
-        f"at 256 connections ({client_version(a.client)} on the same machine), {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
+        f"`benchmarks/server_bench.py --client {a.client} --soak {soak['seconds']} --soak-only --soak-evict {soak['evicted_per_second']}`: {soak['seconds']} s of random chunk GETs "
+        f"at 256 connections ({client_version(a.client)} on the same machine), {soak['evicted_per_second']} random chunk files a second dropped from the page cache meanwhile, {soak['requests']:,} requests ({soak['rps']:,.0f}/s), "
         f"{soak['non_200']} non-200 answers, {soak['errors']} transport errors"
         f"{' (wrk counts both as errors)' if a.client == 'wrk' else ''}. Server RSS sampled every 5 s: "
         f"first {rss[0]:.0f} MB, at 60 s {at60:.0f} MB, last {rss[-1]:.0f} MB, max {max(rss):.0f} MB. "

@@ -26,7 +26,8 @@ use tokio::net::TcpStream;
 use tokio::sync::watch;
 
 use crate::metrics::Metrics;
-use crate::routes::{self, AppState, FolderChunks, ServerOptions};
+use crate::page_cache;
+use crate::routes::{self, AppState, ChunkAnswer, FolderChunks, ServerOptions};
 
 /// The longest request head (request line and header fields) read: longer ones get a `431`.
 const MAX_HEAD: usize = 64 << 10;
@@ -149,6 +150,13 @@ pub(crate) async fn connection(
         let direct = (head.body_len == 0)
             .then(|| app.chunks.answer(&head.method, &head.target, &head.headers))
             .flatten();
+        let direct = match direct {
+            Some(answer) if !answer.cached => {
+                app.metrics.chunks_read_from_disk.inc();
+                read_into_page_cache(answer).await
+            }
+            direct => direct,
+        };
         let keep_alive = if let Some(answer) = direct {
             out.clear();
             // With the CORS fields the router's layer adds to every answer.
@@ -193,6 +201,23 @@ pub(crate) async fn connection(
         if !keep_alive {
             return stream.shutdown().await;
         }
+    }
+}
+
+/// `answer` once the page cache holds the bytes it sends, read into it on a blocking thread
+/// (`page_cache::fill`); `None` when they cannot be read: the router then reads the key and
+/// answers its error.
+async fn read_into_page_cache(answer: ChunkAnswer) -> Option<ChunkAnswer> {
+    let (open, start, end) = answer.body.clone()?;
+    let filled = tokio::task::spawn_blocking(move || page_cache::fill(&open.file, start, end));
+    match filled.await {
+        Ok(Ok(())) => Some(answer),
+        Ok(Err(e)) => {
+            tracing::debug!("chunk not read into the page cache: {e}");
+            None
+        }
+        // The runtime is shutting down.
+        Err(_) => None,
     }
 }
 

@@ -7,6 +7,7 @@
 //! - [`responses`]: file answers with `ETag`, `Range`, `Cache-Control` and `Content-Type`;
 //! - `cache`: the bounded memory cache;
 //! - `open_files`: chunk files held open between requests, as nginx's `open_file_cache`;
+//! - `page_cache`: what the page cache holds of a chunk file, and reading a chunk into it;
 //! - `regions`: region queries and the min/max hierarchy, from the stored metadata;
 //! - [`bricks`]: batched bricks;
 //! - [`metrics`]: Prometheus metrics;
@@ -33,6 +34,7 @@ pub mod metrics;
 pub mod neuroglancer;
 mod open_files;
 mod openapi;
+mod page_cache;
 mod regions;
 pub mod responses;
 mod routes;

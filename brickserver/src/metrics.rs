@@ -41,6 +41,9 @@ pub struct Metrics {
     pub connections: Gauge,
     /// Connections refused (503) because the connection limit was reached.
     pub connections_refused: Counter,
+    /// Chunks of folder stores read into the page cache before they were sent (the page cache
+    /// did not hold all of them).
+    pub chunks_read_from_disk: Counter,
 }
 
 impl Default for Metrics {
@@ -68,7 +71,7 @@ impl Default for Metrics {
         );
         let (cache_hits, cache_misses) = (Counter::default(), Counter::default());
         let (cache_bytes, connections) = (Gauge::default(), Gauge::default());
-        let connections_refused = Counter::default();
+        let (connections_refused, chunks_read_from_disk) = (Counter::default(), Counter::default());
         registry.register(
             "brickserver_cache_hits",
             "Cache lookups that found their entry",
@@ -94,6 +97,11 @@ impl Default for Metrics {
             "Connections refused because the connection limit was reached",
             connections_refused.clone(),
         );
+        registry.register(
+            "brickserver_chunks_read_from_disk",
+            "Chunks of folder stores read into the page cache before they were sent",
+            chunks_read_from_disk.clone(),
+        );
         let by_class = std::array::from_fn(|i| {
             requests
                 .get_or_create(&StatusClass {
@@ -111,6 +119,7 @@ impl Default for Metrics {
             cache_bytes,
             connections,
             connections_refused,
+            chunks_read_from_disk,
         }
     }
 }

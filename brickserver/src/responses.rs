@@ -78,12 +78,19 @@ fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
         .is_ok_and(|tag| !condition.precondition_passes(&tag))
 }
 
-/// The `Cache-Control` and `Content-Type` of a key.
-fn kind_of(key: &str) -> (&'static str, &'static str) {
+/// The `Content-Type` and `Cache-Control` of a key, as header values that are not copied
+/// (`HeaderValue::from_static`: a chunk's answer allocates only for its `ETag` and length).
+fn kind_of(key: &str) -> (HeaderValue, HeaderValue) {
     if is_metadata(key) {
-        ("application/json", CACHE_REVALIDATE)
+        (
+            HeaderValue::from_static("application/json"),
+            HeaderValue::from_static(CACHE_REVALIDATE),
+        )
     } else {
-        ("application/octet-stream", CACHE_IMMUTABLE)
+        (
+            HeaderValue::from_static("application/octet-stream"),
+            HeaderValue::from_static(CACHE_IMMUTABLE),
+        )
     }
 }
 
@@ -139,7 +146,7 @@ pub(crate) fn part_response(
     let builder = Response::builder()
         .header(header::ETAG, etag)
         .header(header::CACHE_CONTROL, cache)
-        .header(header::ACCEPT_RANGES, "bytes")
+        .header(header::ACCEPT_RANGES, HeaderValue::from_static("bytes"))
         .header(header::CONTENT_TYPE, content_type);
     match range {
         RangeRequest::Unsatisfiable => builder

@@ -5,7 +5,6 @@
 //! this module also holds what both share: opening a key (or finding it among the files held
 //! open, `crate::open_files`) with its `304`.
 
-use std::fs::File;
 use std::sync::Arc;
 
 use axum::body::{Body, Bytes};
@@ -15,6 +14,7 @@ use residency_schemas::server::bearer_token_matches;
 use super::state::AppState;
 use crate::dataset_store::Keys;
 use crate::open_files::OpenFile;
+use crate::page_cache;
 use crate::responses::{RangeRequest, is_metadata, not_modified, parse_range, part_response};
 use crate::store_keys::{KeyError, RootDir};
 
@@ -77,6 +77,10 @@ pub(crate) struct ChunkAnswer {
     pub(crate) response: Response<Body>,
     /// The file and the bytes of it to send; `None` for `304` and `416`.
     pub(crate) body: Option<(Arc<OpenFile>, u64, u64)>,
+    /// Whether the page cache holds all the bytes to send (`crate::page_cache::holds`; always
+    /// for a `HEAD`): if not, they are read into it on a blocking thread before they are sent,
+    /// so that `sendfile` never waits for the disk on a thread that serves other connections.
+    pub(crate) cached: bool,
 }
 
 /// The direct path for chunk keys of folder stores.
@@ -146,6 +150,7 @@ impl FolderChunks {
                 return Some(ChunkAnswer {
                     response: answer,
                     body: None,
+                    cached: true,
                 });
             }
             OpenedKey::File(open) => open,
@@ -167,98 +172,14 @@ impl FolderChunks {
             RangeRequest::Part(start, end) => Some((open, start, end)),
             RangeRequest::Unsatisfiable => None,
         };
-        if let Some((open, start, end)) = &body
-            && !in_page_cache(&open.file, *start, *end)
-        {
-            // `sendfile` would wait for the disk on a thread that serves other connections:
-            // the router reads what is cached and moves the rest to the blocking pool.
-            return None;
-        }
-        Some(ChunkAnswer { response, body })
-    }
-}
-
-/// The `cachestat` system call's number (the same on every architecture; Linux 6.5).
-const SYS_CACHESTAT: libc::c_long = 451;
-
-/// `struct cachestat_range`: the bytes asked about.
-#[repr(C)]
-struct CachestatRange {
-    off: u64,
-    len: u64,
-}
-
-/// `struct cachestat`: what the page cache holds of them (the kernel's field names).
-#[repr(C)]
-#[derive(Default)]
-#[allow(clippy::struct_field_names)]
-struct Cachestat {
-    nr_cache: u64,
-    nr_dirty: u64,
-    nr_writeback: u64,
-    nr_evicted: u64,
-    nr_recently_evicted: u64,
-}
-
-/// The system's page size, the unit `cachestat` counts in (read once).
-fn page_size() -> u64 {
-    static PAGE: std::sync::OnceLock<u64> = std::sync::OnceLock::new();
-    // SAFETY: `sysconf` only reads a system constant.
-    *PAGE
-        .get_or_init(|| u64::try_from(unsafe { libc::sysconf(libc::_SC_PAGESIZE) }).unwrap_or(4096))
-}
-
-/// Whether bytes `start..end` of `file` are all in the page cache (`cachestat`, one system
-/// call), so that sending them cannot wait for the disk. Kernels without `cachestat` (before
-/// 6.5) say yes: the file is sent as nginx sends it, reading the disk if it must.
-fn in_page_cache(file: &File, start: u64, end: u64) -> bool {
-    use std::os::fd::AsRawFd;
-    if end <= start {
-        return true;
-    }
-    let page = page_size();
-    let range = CachestatRange {
-        off: start / page * page,
-        len: end.div_ceil(page) * page - start / page * page,
-    };
-    let mut stat = Cachestat::default();
-    // SAFETY: an open descriptor, and pointers to structs of the layout the kernel reads
-    // and writes.
-    let done = unsafe {
-        libc::syscall(
-            SYS_CACHESTAT,
-            file.as_raw_fd(),
-            &raw const range,
-            &raw mut stat,
-            0,
-        )
-    };
-    done != 0 || stat.nr_cache >= range.len / page
-}
-
-#[cfg(test)]
-mod tests {
-    use std::io::Write;
-    use std::os::fd::AsRawFd;
-
-    use super::*;
-
-    #[test]
-    fn pages_dropped_from_the_cache_are_seen_as_not_cached() {
-        // Beside the sources, not in a /tmp that may be memory (where pages cannot drop).
-        let mut file = tempfile::tempfile_in(env!("CARGO_MANIFEST_DIR")).unwrap();
-        file.write_all(&vec![1u8; 64 << 10]).unwrap();
-        file.sync_all().unwrap();
-        assert!(in_page_cache(&file, 0, 64 << 10));
-        // SAFETY: an open descriptor.
-        let dropped =
-            unsafe { libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED) };
-        assert_eq!(dropped, 0);
-        assert!(!in_page_cache(&file, 0, 64 << 10));
-        assert!(!in_page_cache(&file, 5000, 5001));
-        assert!(in_page_cache(&file, 7, 7));
-        let mut byte = [0u8];
-        std::os::unix::fs::FileExt::read_exact_at(&file, &mut byte, 5000).unwrap();
-        assert!(in_page_cache(&file, 5000, 5001));
+        let cached = *method == Method::HEAD
+            || body
+                .as_ref()
+                .is_none_or(|(open, start, end)| page_cache::holds(&open.file, *start, *end));
+        Some(ChunkAnswer {
+            response,
+            body,
+            cached,
+        })
     }
 }

@@ -38,7 +38,7 @@ use tower_http::cors::{Any, CorsLayer};
 use crate::metrics::track;
 use crate::openapi;
 
-pub(crate) use chunk_files::FolderChunks;
+pub(crate) use chunk_files::{ChunkAnswer, FolderChunks};
 pub use state::{AppState, OPEN_FILES, ServerOptions};
 
 /// Every route, with its documentation.

@@ -542,6 +542,67 @@ fn answers_of_both_paths_are_counted_in_the_metrics() {
     assert_eq!(count("brickserver_response_bytes_total"), bytes.to_string());
 }
 
+/// Drops the file at `path` from the page cache (written back first, so none of it stays
+/// dirty).
+fn drop_from_page_cache(path: &Path) {
+    use std::os::fd::AsRawFd;
+    let file = std::fs::File::open(path).unwrap();
+    file.sync_all().unwrap();
+    // SAFETY: an open descriptor.
+    let dropped = unsafe { libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED) };
+    assert_eq!(dropped, 0);
+}
+
+#[test]
+fn chunks_the_page_cache_dropped_are_read_in_then_sent_whole_and_in_part() {
+    // Beside the sources, not in a /tmp that may be memory (where pages cannot drop).
+    let dir = tempfile::tempdir_in(env!("CARGO_MANIFEST_DIR")).unwrap();
+    let served = served_store(dir.path());
+    let chunk = dir.path().join("cells.ome.zarr/0/c/1/0/0/0");
+    let bytes: Vec<u8> = (0..300_000u32).map(|i| (i * 7 % 251) as u8).collect();
+    std::fs::write(&chunk, &bytes).unwrap();
+    let (mut stream, mut reader) = connect(&served);
+    let mut ask = |request: &str, method: &str| {
+        stream.write_all(request.as_bytes()).unwrap();
+        read_reply(&mut reader, method)
+    };
+    let read_from_disk = |ask: &mut dyn FnMut(&str, &str) -> Reply| {
+        let text = String::from_utf8(ask("GET /metrics HTTP/1.1\r\n\r\n", "GET").body).unwrap();
+        text.lines()
+            .find_map(|l| l.strip_prefix("brickserver_chunks_read_from_disk_total "))
+            .unwrap_or_else(|| panic!("no count of chunks read from disk in\n{text}"))
+            .to_string()
+    };
+    drop_from_page_cache(&chunk);
+    let whole = ask("GET /cells/0/c/1/0/0/0 HTTP/1.1\r\n\r\n", "GET");
+    assert_eq!((whole.status, whole.body == bytes), (200, true));
+    assert_eq!(read_from_disk(&mut ask), "1");
+    // Now cached: sent as it is.
+    let again = ask("GET /cells/0/c/1/0/0/0 HTTP/1.1\r\n\r\n", "GET");
+    assert_eq!((again.status, again.body == bytes), (200, true));
+    assert_eq!(read_from_disk(&mut ask), "1");
+    drop_from_page_cache(&chunk);
+    let part = ask(
+        "GET /cells/0/c/1/0/0/0 HTTP/1.1\r\nRange: bytes=150000-150009\r\n\r\n",
+        "GET",
+    );
+    assert_eq!(part.status, 206);
+    assert_eq!(part.body, bytes[150_000..150_010]);
+    assert_eq!(
+        part.field("content-range"),
+        Some("bytes 150000-150009/300000")
+    );
+    assert_eq!(read_from_disk(&mut ask), "2");
+    // A `HEAD` sends no bytes, so reads none.
+    drop_from_page_cache(&chunk);
+    let head = ask("HEAD /cells/0/c/1/0/0/0 HTTP/1.1\r\n\r\n", "HEAD");
+    assert_eq!(
+        (head.status, head.field("content-length")),
+        (200, Some("300000"))
+    );
+    assert_eq!(read_from_disk(&mut ask), "2");
+}
+
 #[test]
 fn threads_on_one_port_serve_every_connection_share_the_limit_and_stop() {
     let dir = tempfile::tempdir().unwrap();
