@@ -94,6 +94,17 @@ impl ByteCache {
         found
     }
 
+    /// Forgets every entry of dataset `index` (its folder was replaced).
+    pub(crate) fn forget_dataset(&self, index: usize) {
+        if let Some(c) = &self.inner {
+            c.retain(|key, _| match key {
+                CacheKey::Brick { dataset, .. } | CacheKey::Object { dataset, .. } => {
+                    *dataset != index
+                }
+            });
+        }
+    }
+
     /// Stores an entry (an entry larger than the whole budget is not kept).
     pub(crate) fn insert(&self, key: CacheKey, value: Cached) {
         if let Some(c) = &self.inner {

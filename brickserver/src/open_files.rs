@@ -36,6 +36,11 @@ pub(crate) struct OpenFile {
     pub(crate) len: u64,
     /// Its `ETag` (quoted, [`etag_of`] its metadata when it was opened).
     pub(crate) etag: String,
+    /// The dataset folder it was opened beneath ([`RootDir::identity`]): a file of a folder
+    /// since replaced whole is not answered for the new one.
+    ///
+    /// [`RootDir::identity`]: crate::store_keys::RootDir::identity
+    pub(crate) folder: (u64, u64),
     /// Its modification time when it was opened (seconds, nanoseconds).
     modified: (i64, i64),
     /// When it was opened.
@@ -43,12 +48,13 @@ pub(crate) struct OpenFile {
 }
 
 impl OpenFile {
-    /// `file`, opened now, with its metadata `meta`.
-    pub(crate) fn new(file: File, meta: &std::fs::Metadata) -> Self {
+    /// `file`, opened now beneath the dataset folder `folder`, with its metadata `meta`.
+    pub(crate) fn new(file: File, meta: &std::fs::Metadata, folder: (u64, u64)) -> Self {
         Self {
             file,
             len: meta.len(),
             etag: etag_of(meta),
+            folder,
             modified: (meta.mtime(), meta.mtime_nsec()),
             opened: Instant::now(),
         }
@@ -158,6 +164,11 @@ impl OpenFiles {
             .remove_if(&BorrowedKey(index, raw_key), |held| Arc::ptr_eq(held, open));
     }
 
+    /// Lets go of every file held of dataset `index` (its folder was replaced).
+    pub(crate) fn let_go_dataset(&self, index: usize) {
+        self.files.retain(|(held, _), _| *held != index);
+    }
+
     /// Holds `open`, chunk `raw_key` of dataset `index`, open (closing the least used file
     /// when the cache is full, or the one it replaces once no answer is sending from it).
     pub(crate) fn insert(&self, index: usize, raw_key: &str, open: Arc<OpenFile>) {
@@ -225,7 +236,7 @@ mod tests {
         named.write_all(bytes).unwrap();
         let file = named.reopen().unwrap();
         let meta = file.metadata().unwrap();
-        let mut open = OpenFile::new(file, &meta);
+        let mut open = OpenFile::new(file, &meta, (0, 0));
         open.opened = Instant::now().checked_sub(age).unwrap();
         (named, Arc::new(open))
     }

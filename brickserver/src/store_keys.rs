@@ -86,6 +86,8 @@ pub fn resolve(root: &Path, raw_key: &str) -> Result<PathBuf, KeyError> {
 pub struct RootDir {
     path: PathBuf,
     dir: File,
+    /// The folder held open: its device and inode numbers.
+    identity: (u64, u64),
 }
 
 impl RootDir {
@@ -94,10 +96,27 @@ impl RootDir {
     /// # Errors
     /// When the folder cannot be opened.
     pub fn open(path: &Path) -> io::Result<Self> {
+        use std::os::unix::fs::MetadataExt;
+        let dir = File::open(path)?;
+        let meta = dir.metadata()?;
         Ok(Self {
             path: path.to_path_buf(),
-            dir: File::open(path)?,
+            dir,
+            identity: (meta.dev(), meta.ino()),
         })
+    }
+
+    /// The folder held open: its device and inode numbers.
+    pub fn identity(&self) -> (u64, u64) {
+        self.identity
+    }
+
+    /// Whether another folder now has the root folder's path (a store replaced whole, renamed
+    /// over the one held open). A path that names nothing, for now, is not a replacement: a
+    /// swap of folders may be half done.
+    pub fn replaced(&self) -> bool {
+        use std::os::unix::fs::MetadataExt;
+        std::fs::metadata(&self.path).is_ok_and(|meta| (meta.dev(), meta.ino()) != self.identity)
     }
 
     /// The root folder.

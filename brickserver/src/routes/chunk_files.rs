@@ -51,6 +51,7 @@ pub(crate) fn open_folder_key(
         .filter(|_| !is_metadata(raw_key) && !raw_key.contains('%'));
     if let Some(files) = held
         && let Some(open) = files.get(index, raw_key)
+        && open.folder == root.identity()
     {
         if let Some(answer) = not_modified(raw_key, &open.etag, headers) {
             return Ok(OpenedKey::NotModified(answer));
@@ -61,7 +62,7 @@ pub(crate) fn open_folder_key(
         files.let_go(index, raw_key, &open);
     }
     let (file, meta) = root.open_key(raw_key)?;
-    let open = Arc::new(OpenFile::new(file, &meta));
+    let open = Arc::new(OpenFile::new(file, &meta, root.identity()));
     if let Some(files) = held {
         files.insert(index, raw_key, open.clone());
     }
@@ -142,7 +143,8 @@ impl FolderChunks {
         }
         let state = &*self.state;
         let index = state.index_of(name)?;
-        let Keys::Folder(root) = &state.stores[index].keys else {
+        let served = state.served(index);
+        let Keys::Folder(root) = &served.store.keys else {
             return None;
         };
         let open = match open_folder_key(state, index, root, raw_key, headers).ok()? {

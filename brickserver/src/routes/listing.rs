@@ -51,11 +51,13 @@ async fn listed(state: &Arc<AppState>, headers: &HeaderMap) -> Vec<Listed> {
             .datasets
             .0
             .iter()
-            .zip(&st.loaded)
-            .zip(&st.stores)
-            .map(|((d, l), store)| {
-                l.summary
-                    .get_or_init(|| match StoreSummary::read(store) {
+            .enumerate()
+            .map(|(i, d)| {
+                let served = st.served(i);
+                served
+                    .loaded
+                    .summary
+                    .get_or_init(|| match StoreSummary::read(&served.store) {
                         Ok(s) => {
                             if let Err(e) = &s.level0 {
                                 tracing::warn!(

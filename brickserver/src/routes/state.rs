@@ -3,18 +3,20 @@
 
 use std::error::Error;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
 use crate::bricks::{BatchLimits, ImageArrays, ImagePyramid};
 use crate::cache::ByteCache;
-use crate::dataset_store::{DatasetStore, OpenError};
-use crate::datasets::Datasets;
+use crate::dataset_store::{DatasetStore, Keys, OpenError};
+use crate::datasets::{Dataset, Datasets};
 use crate::listing::{PublicUrl, StoreSummary};
 use crate::metrics::Metrics;
 use crate::open_files::OpenFiles;
 use crate::regions::RegionIndex;
 use crate::viewer_page::ViewerFiles;
+use arc_swap::ArcSwap;
 use residency_schemas::ome::OmeError;
 use residency_store::pyramid::{Pyramid, PyramidError};
 
@@ -147,6 +149,89 @@ pub(crate) struct Loaded {
     pub(crate) summary: OnceLock<Option<Arc<StoreSummary>>>,
 }
 
+/// A dataset as it is served now: where its keys are read from, and what was loaded of it.
+pub(crate) struct Served {
+    /// Where its keys are read from.
+    pub(crate) store: DatasetStore,
+    /// What was loaded of it.
+    pub(crate) loaded: Loaded,
+}
+
+/// How often, at most, a folder dataset's path is checked for a folder replaced whole.
+pub(crate) const REPLACED_CHECK: Duration = Duration::from_secs(1);
+
+/// A dataset as it is served now, opened again when its folder is replaced whole (a new store
+/// renamed over the one served, as `ingest convert --overwrite` swaps it into place): the
+/// path is checked against the folder held open at most every [`REPLACED_CHECK`], by the
+/// request that finds the check due.
+pub(crate) struct Current {
+    /// The dataset as served now.
+    now: ArcSwap<Served>,
+    /// When the folder's path was last checked: milliseconds after [`AppState::started`]
+    /// (`u64::MAX` for an object store, never checked).
+    checked: AtomicU64,
+}
+
+impl Current {
+    /// `store`, with nothing loaded yet.
+    fn new(store: DatasetStore) -> Self {
+        let checked = match store.keys {
+            Keys::Folder(_) => 0,
+            Keys::Object(_) => u64::MAX,
+        };
+        Self {
+            now: ArcSwap::from_pointee(Served {
+                store,
+                loaded: Loaded::default(),
+            }),
+            checked: AtomicU64::new(checked),
+        }
+    }
+
+    /// Whether the folder's check is due `now` (milliseconds after the start); the caller
+    /// that gets `true` makes it.
+    fn check_due(&self, now: u64) -> bool {
+        let last = self.checked.load(Ordering::Relaxed);
+        last != u64::MAX
+            && now.saturating_sub(last) >= REPLACED_CHECK.as_millis() as u64
+            && self
+                .checked
+                .compare_exchange(last, now, Ordering::Relaxed, Ordering::Relaxed)
+                .is_ok()
+    }
+
+    /// Opens the dataset's folder again if another folder now has its path; whether it did.
+    fn reopen_if_replaced(&self, dataset: &Dataset) -> bool {
+        let Keys::Folder(root) = &self.now.load().store.keys else {
+            return false;
+        };
+        if !root.replaced() {
+            return false;
+        }
+        match DatasetStore::open(&dataset.location, None) {
+            Ok(store) => {
+                self.now.store(Arc::new(Served {
+                    store,
+                    loaded: Loaded::default(),
+                }));
+                tracing::info!(
+                    "{}: its folder was replaced; serving the new one",
+                    dataset.name
+                );
+                true
+            }
+            Err(e) => {
+                tracing::warn!(
+                    "{}: its folder was replaced, but the new one cannot be opened \
+                     (serving the old one): {e}",
+                    dataset.name
+                );
+                false
+            }
+        }
+    }
+}
+
 /// Shared state of the routes.
 pub struct AppState {
     /// The served datasets.
@@ -159,12 +244,12 @@ pub struct AppState {
     pub(crate) batch: BatchLimits,
     pub(crate) viewer: ViewerFiles,
     pub(crate) public_url: Option<PublicUrl>,
-    /// What is loaded once per dataset, by dataset index.
-    pub(crate) loaded: Vec<Loaded>,
     /// How long a failed load is answered before it is tried again.
     pub(crate) load_retry: Duration,
-    /// Where each dataset's keys are read from, by dataset index.
-    pub(crate) stores: Vec<DatasetStore>,
+    /// Each dataset as served now, by dataset index.
+    served: Vec<Current>,
+    /// When the state was made (the folders' checks count from it).
+    started: Instant,
     /// The `ETag` of each chunk key of an object store served, by dataset index and raw key,
     /// with when it was seen.
     pub(crate) etags: quick_cache::sync::Cache<(usize, String), (Arc<str>, Instant)>,
@@ -186,11 +271,10 @@ impl AppState {
             metrics.cache_misses.clone(),
             metrics.cache_bytes.clone(),
         );
-        let loaded = datasets.0.iter().map(|_| Loaded::default()).collect();
-        let stores = datasets
+        let served = datasets
             .0
             .iter()
-            .map(|d| DatasetStore::open(&d.location, d.object_store.as_ref()))
+            .map(|d| DatasetStore::open(&d.location, d.object_store.as_ref()).map(Current::new))
             .collect::<Result<_, _>>()?;
         Ok(Self {
             datasets,
@@ -199,9 +283,9 @@ impl AppState {
             batch: options.batch,
             viewer: ViewerFiles::new(options.viewer_dir.clone()),
             public_url: options.public_url.clone(),
-            loaded,
             load_retry: options.load_retry,
-            stores,
+            served,
+            started: Instant::now(),
             etags: quick_cache::sync::Cache::new(1 << 16),
             open_files: OpenFiles::new(options.open_files, REVALIDATE),
         })
@@ -215,6 +299,26 @@ impl AppState {
     /// The index of the dataset called `name`.
     pub(crate) fn index_of(&self, name: &str) -> Option<usize> {
         self.datasets.0.iter().position(|d| d.name == name)
+    }
+
+    /// Dataset `i` as served now, for a request's synchronous work. When its folder's check
+    /// is due and another folder has its path, the new folder is opened first, and the files
+    /// held open and the bricks cached of the old one are let go.
+    pub(crate) fn served(&self, i: usize) -> arc_swap::Guard<Arc<Served>> {
+        let current = &self.served[i];
+        let now = u64::try_from(self.started.elapsed().as_millis()).unwrap_or(u64::MAX - 1);
+        if current.check_due(now) && current.reopen_if_replaced(&self.datasets.0[i]) {
+            if let Some(files) = &self.open_files {
+                files.let_go_dataset(i);
+            }
+            self.cache.forget_dataset(i);
+        }
+        current.now.load()
+    }
+
+    /// Dataset `i` as served now (see [`AppState::served`]), to hold across waits.
+    pub(crate) fn served_owned(&self, i: usize) -> Arc<Served> {
+        arc_swap::Guard::into_inner(self.served(i))
     }
 }
 
@@ -232,7 +336,8 @@ where
     T: Clone + Send + Sync + 'static,
 {
     // Without waiting: a load in progress holds the lock, and is waited for below.
-    if let Ok(held) = cell(&state.loaded[i]).0.try_lock()
+    let served = state.served(i);
+    if let Ok(held) = cell(&served.loaded).0.try_lock()
         && let Some(done) = LoadCell::current(held.as_ref(), state.load_retry)
     {
         return done;
@@ -249,7 +354,8 @@ fn load_now<T: Clone>(
     cell: fn(&Loaded) -> &LoadCell<T>,
     load: impl FnOnce(&AppState, usize) -> Result<T, LoadError>,
 ) -> Result<T, LoadError> {
-    let mut held = cell(&state.loaded[i])
+    let served = state.served_owned(i);
+    let mut held = cell(&served.loaded)
         .0
         .lock()
         .unwrap_or_else(PoisonError::into_inner);
@@ -271,7 +377,8 @@ fn pyramid_of(state: &AppState, i: usize) -> Result<Arc<ImagePyramid>, LoadError
         i,
         |l| &l.pyramid,
         |state, i| {
-            let store = &state.stores[i];
+            let served = state.served(i);
+            let store = &served.store;
             Pyramid::open(store.zarr(), store.shown())
                 .map(Arc::new)
                 .map_err(|e| LoadError::new(state, i, e))
@@ -285,7 +392,7 @@ fn pyramid_of(state: &AppState, i: usize) -> Result<Arc<ImagePyramid>, LoadError
 /// [`LoadError`] when its pyramid cannot be opened.
 pub(crate) fn load_arrays(state: &AppState, i: usize) -> Result<Arc<ImageArrays>, LoadError> {
     let pyramid = pyramid_of(state, i)?;
-    Ok(Arc::new(ImageArrays::new(&state.stores[i], pyramid)))
+    Ok(Arc::new(ImageArrays::new(&state.served(i).store, pyramid)))
 }
 
 /// Loads dataset `i`'s region index (see [`loaded`]): `None` for a store without region

@@ -102,7 +102,8 @@ pub(super) async fn serve_key(
         .nth(2)
         .unwrap_or_default()
         .to_string();
-    let answer = match &state.stores[index].keys {
+    let served = state.served_owned(index);
+    let answer = match &served.store.keys {
         Keys::Folder(root) => folder_key(&state, index, root, &raw_key, &headers).await,
         Keys::Object(objects) => object_key(&state, index, objects, &raw_key, &headers).await,
     };

@@ -604,6 +604,55 @@ fn chunks_the_page_cache_dropped_are_read_in_then_sent_whole_and_in_part() {
 }
 
 #[test]
+fn a_store_replaced_whole_is_served_within_a_second() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = v3_store(&dir.path().join("served"), "cells");
+    let served = start(
+        &[("cells", &store)],
+        ServerOptions::default(),
+        ConnectionLimits::default(),
+    );
+    let get = |key: &str| {
+        exchange(
+            &served,
+            "GET",
+            &format!("GET /cells/{key} HTTP/1.1\r\n\r\n"),
+        )
+    };
+    // The old store: its chunk (now held open), its metadata, and its image in the listing.
+    assert_eq!(
+        (get("0/c/0/0/0/0").status, get("0/c/0/0/0/0").body),
+        (200, CHUNK.to_vec())
+    );
+    assert_eq!(get(".zattrs").status, 404);
+    let listed = served.router_get("/datasets", &[]).text();
+    assert!(
+        listed.contains("DAPI") && !listed.contains("gray"),
+        "{listed}"
+    );
+    // A new store (Zarr v2, one channel called gray) swapped into its place, the old one kept
+    // beside it, as `ingest convert --overwrite` does before it deletes the old one.
+    let new = common::v2_store(&dir.path().join("new"), "cells");
+    common::write(&new, "0/0/0/0/0", b"the new store's chunk");
+    std::fs::rename(&store, dir.path().join("served/old.ome.zarr")).unwrap();
+    std::fs::rename(&new, &store).unwrap();
+    std::thread::sleep(Duration::from_millis(1100));
+    let chunk = get("0/0/0/0/0");
+    assert_eq!(
+        (chunk.status, chunk.body.as_slice()),
+        (200, &b"the new store's chunk"[..])
+    );
+    assert_eq!(get("0/c/0/0/0/0").status, 404);
+    assert_eq!(get("zarr.json").status, 404);
+    assert_eq!(get(".zgroup").body, br#"{"zarr_format": 2}"#);
+    let listed = served.router_get("/datasets", &[]).text();
+    assert!(
+        listed.contains("gray") && !listed.contains("DAPI"),
+        "{listed}"
+    );
+}
+
+#[test]
 fn threads_on_one_port_serve_every_connection_share_the_limit_and_stop() {
     let dir = tempfile::tempdir().unwrap();
     let store = v3_store(dir.path(), "cells");
