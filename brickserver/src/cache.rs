@@ -20,6 +20,9 @@ pub(crate) enum CacheKey {
     Brick {
         /// Dataset index.
         dataset: usize,
+        /// The dataset's generation (how many times its folder was replaced whole) when the
+        /// batch began.
+        generation: u64,
         /// Level, channel and brick coordinates `z, y, x`.
         at: (u32, u32, [u64; 3]),
         /// Decoded samples rather than stored bytes.
@@ -102,6 +105,7 @@ impl ByteCache {
                     *dataset != index
                 }
             });
+            self.bytes.set(c.weight() as i64);
         }
     }
 
@@ -130,6 +134,7 @@ mod tests {
         let cache = ByteCache::new(100_000, hits.clone(), misses.clone(), Gauge::default());
         let key = |i: u64| CacheKey::Brick {
             dataset: 0,
+            generation: 0,
             at: (0, 0, [0, 0, i]),
             raw: true,
         };

@@ -151,10 +151,7 @@ pub(crate) async fn connection(
             .then(|| app.chunks.answer(&head.method, &head.target, &head.headers))
             .flatten();
         let direct = match direct {
-            Some(answer) if !answer.cached => {
-                app.metrics.chunks_read_from_disk.inc();
-                read_into_page_cache(answer).await
-            }
+            Some(answer) if !answer.cached => read_into_page_cache(answer, &app.metrics).await,
             direct => direct,
         };
         let keep_alive = if let Some(answer) = direct {
@@ -205,13 +202,16 @@ pub(crate) async fn connection(
 }
 
 /// `answer` once the page cache holds the bytes it sends, read into it on a blocking thread
-/// (`page_cache::fill`); `None` when they cannot be read: the router then reads the key and
-/// answers its error.
-async fn read_into_page_cache(answer: ChunkAnswer) -> Option<ChunkAnswer> {
+/// (`page_cache::fill`, counted in `metrics`); `None` when they cannot be read: the router
+/// then reads the key and answers its error.
+async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<ChunkAnswer> {
     let (open, start, end) = answer.body.clone()?;
     let filled = tokio::task::spawn_blocking(move || page_cache::fill(&open.file, start, end));
     match filled.await {
-        Ok(Ok(())) => Some(answer),
+        Ok(Ok(())) => {
+            metrics.chunks_read_from_disk.inc();
+            Some(answer)
+        }
         Ok(Err(e)) => {
             tracing::debug!("chunk not read into the page cache: {e}");
             None

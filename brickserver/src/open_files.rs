@@ -164,9 +164,17 @@ impl OpenFiles {
             .remove_if(&BorrowedKey(index, raw_key), |held| Arc::ptr_eq(held, open));
     }
 
-    /// Lets go of every file held of dataset `index` (its folder was replaced).
+    /// Lets go of every file held of dataset `index` (its folder was replaced); they close
+    /// after the cache's locks are released.
     pub(crate) fn let_go_dataset(&self, index: usize) {
-        self.files.retain(|(held, _), _| *held != index);
+        let held: Vec<_> = self
+            .files
+            .iter()
+            .filter(|((held, _), _)| *held == index)
+            .collect();
+        for ((index, key), open) in held {
+            self.let_go(index, &key, &open);
+        }
     }
 
     /// Holds `open`, chunk `raw_key` of dataset `index`, open (closing the least used file

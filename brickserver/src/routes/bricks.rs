@@ -85,6 +85,7 @@ pub(super) async fn bricks(
     let Some(index) = state.index_of(&name) else {
         return no_dataset(&name);
     };
+    let generation = state.served(index).generation;
     let (list, encoding) = match parse_batch(query.as_deref().unwrap_or(""), &state.batch) {
         Ok(b) => b,
         Err(e) => return batch_error(&e),
@@ -101,6 +102,7 @@ pub(super) async fn bricks(
     let cache = Arc::new(BatchCache {
         state: state.clone(),
         dataset: index,
+        generation,
         raw: encoding == BrickEncoding::Raw,
     });
     let results = read_bricks(arrays.clone(), bricks.clone(), encoding, cache).await;
@@ -119,6 +121,8 @@ pub(super) async fn bricks(
 struct BatchCache {
     state: Arc<AppState>,
     dataset: usize,
+    /// The dataset's generation when the batch began.
+    generation: u64,
     raw: bool,
 }
 
@@ -126,6 +130,7 @@ impl BatchCache {
     fn key(&self, at: &BrickAt) -> CacheKey {
         CacheKey::Brick {
             dataset: self.dataset,
+            generation: self.generation,
             at: (at.level, at.channel, at.brick),
             raw: self.raw,
         }

@@ -155,6 +155,10 @@ pub(crate) struct Served {
     pub(crate) store: DatasetStore,
     /// What was loaded of it.
     pub(crate) loaded: Loaded,
+    /// How many times its folder was opened again (0 at the start): bricks cached are kept
+    /// under it, so a batch begun before a replacement cannot cache the old store's bricks
+    /// for the new one.
+    pub(crate) generation: u64,
 }
 
 /// How often, at most, a folder dataset's path is checked for a folder replaced whole.
@@ -183,6 +187,7 @@ impl Current {
             now: ArcSwap::from_pointee(Served {
                 store,
                 loaded: Loaded::default(),
+                generation: 0,
             }),
             checked: AtomicU64::new(checked),
         }
@@ -202,7 +207,8 @@ impl Current {
 
     /// Opens the dataset's folder again if another folder now has its path; whether it did.
     fn reopen_if_replaced(&self, dataset: &Dataset) -> bool {
-        let Keys::Folder(root) = &self.now.load().store.keys else {
+        let served = self.now.load_full();
+        let Keys::Folder(root) = &served.store.keys else {
             return false;
         };
         if !root.replaced() {
@@ -213,6 +219,7 @@ impl Current {
                 self.now.store(Arc::new(Served {
                     store,
                     loaded: Loaded::default(),
+                    generation: served.generation + 1,
                 }));
                 tracing::info!(
                     "{}: its folder was replaced; serving the new one",
@@ -307,13 +314,25 @@ impl AppState {
     pub(crate) fn served(&self, i: usize) -> arc_swap::Guard<Arc<Served>> {
         let current = &self.served[i];
         let now = u64::try_from(self.started.elapsed().as_millis()).unwrap_or(u64::MAX - 1);
-        if current.check_due(now) && current.reopen_if_replaced(&self.datasets.0[i]) {
+        if current.check_due(now) {
+            self.reopen_if_replaced(i);
+        }
+        current.now.load()
+    }
+
+    /// Opens dataset `i`'s folder again now if another folder has its path, letting go of the
+    /// files held open and the bricks cached of the old one; whether it did. Called when its
+    /// check is due, and for a key not found (which may be a key of the new folder, swapped in
+    /// since the last check, the old one already deleted).
+    pub(crate) fn reopen_if_replaced(&self, i: usize) -> bool {
+        let reopened = self.served[i].reopen_if_replaced(&self.datasets.0[i]);
+        if reopened {
             if let Some(files) = &self.open_files {
                 files.let_go_dataset(i);
             }
             self.cache.forget_dataset(i);
         }
-        current.now.load()
+        reopened
     }
 
     /// Dataset `i` as served now (see [`AppState::served`]), to hold across waits.
@@ -335,12 +354,15 @@ pub(crate) async fn loaded<T>(
 where
     T: Clone + Send + Sync + 'static,
 {
-    // Without waiting: a load in progress holds the lock, and is waited for below.
-    let served = state.served(i);
-    if let Ok(held) = cell(&served.loaded).0.try_lock()
-        && let Some(done) = LoadCell::current(held.as_ref(), state.load_retry)
+    // Without waiting: a load in progress holds the lock, and is waited for below. (The
+    // dataset's guard is let go before the wait.)
     {
-        return done;
+        let served = state.served(i);
+        if let Ok(held) = cell(&served.loaded).0.try_lock()
+            && let Some(done) = LoadCell::current(held.as_ref(), state.load_retry)
+        {
+            return done;
+        }
     }
     let st = state.clone();
     blocking(move || load_now(&st, i, cell, load)).await

@@ -102,11 +102,11 @@ pub(super) async fn serve_key(
         .nth(2)
         .unwrap_or_default()
         .to_string();
-    let served = state.served_owned(index);
-    let answer = match &served.store.keys {
-        Keys::Folder(root) => folder_key(&state, index, root, &raw_key, &headers).await,
-        Keys::Object(objects) => object_key(&state, index, objects, &raw_key, &headers).await,
-    };
+    let mut answer = read_key(&state, index, &raw_key, &headers).await;
+    if matches!(answer, Err(KeyError::NotFound)) && state.reopen_if_replaced(index) {
+        // A key of a folder swapped in since the last check (the old one already deleted).
+        answer = read_key(&state, index, &raw_key, &headers).await;
+    }
     match answer {
         Ok(response) => response,
         Err(KeyError::NotFound) => (
@@ -121,6 +121,20 @@ pub(super) async fn serve_key(
             let message = format!("cannot read key '{raw_key}' of '{name}': {why}");
             super::api_error::unreadable_key(&message, &*why)
         }
+    }
+}
+
+/// Key `raw_key` of dataset `index` as served now, from its folder or its object store.
+async fn read_key(
+    state: &AppState,
+    index: usize,
+    raw_key: &str,
+    headers: &HeaderMap,
+) -> Result<Response<Body>, KeyError> {
+    let served = state.served_owned(index);
+    match &served.store.keys {
+        Keys::Folder(root) => folder_key(state, index, root, raw_key, headers).await,
+        Keys::Object(objects) => object_key(state, index, objects, raw_key, headers).await,
     }
 }
 

@@ -604,7 +604,7 @@ fn chunks_the_page_cache_dropped_are_read_in_then_sent_whole_and_in_part() {
 }
 
 #[test]
-fn a_store_replaced_whole_is_served_within_a_second() {
+fn a_store_replaced_whole_is_served_within_a_second_or_at_once_when_the_old_one_is_gone() {
     let dir = tempfile::tempdir().unwrap();
     let store = v3_store(&dir.path().join("served"), "cells");
     let served = start(
@@ -650,6 +650,19 @@ fn a_store_replaced_whole_is_served_within_a_second() {
         listed.contains("gray") && !listed.contains("DAPI"),
         "{listed}"
     );
+    // Another swap, the old store deleted at once (as `ingest` does): a key missing beneath
+    // the deleted folder sends the server to the new one before its next check.
+    let third = v3_store(&dir.path().join("third"), "cells");
+    common::write(&third, "0/c/0/0/0/0", b"the third store's chunk");
+    std::fs::rename(&store, dir.path().join("served/second.ome.zarr")).unwrap();
+    std::fs::rename(&third, &store).unwrap();
+    std::fs::remove_dir_all(dir.path().join("served/second.ome.zarr")).unwrap();
+    let chunk = get("0/c/0/0/0/0");
+    assert_eq!(
+        (chunk.status, chunk.body.as_slice()),
+        (200, &b"the third store's chunk"[..])
+    );
+    assert_eq!(get(".zgroup").status, 404);
 }
 
 #[test]
