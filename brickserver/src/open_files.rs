@@ -164,17 +164,9 @@ impl OpenFiles {
             .remove_if(&BorrowedKey(index, raw_key), |held| Arc::ptr_eq(held, open));
     }
 
-    /// Lets go of every file held of dataset `index` (its folder was replaced); they close
-    /// after the cache's locks are released.
+    /// Lets go of every file held of dataset `index` (its folder was replaced).
     pub(crate) fn let_go_dataset(&self, index: usize) {
-        let held: Vec<_> = self
-            .files
-            .iter()
-            .filter(|((held, _), _)| *held == index)
-            .collect();
-        for ((index, key), open) in held {
-            self.let_go(index, &key, &open);
-        }
+        self.let_go_where(|(held, _), _| *held == index);
     }
 
     /// Holds `open`, chunk `raw_key` of dataset `index`, open (closing the least used file
@@ -183,15 +175,21 @@ impl OpenFiles {
         self.files.insert((index, raw_key.to_string()), open);
     }
 
-    /// Closes every file held for its maximum age or longer (outside the cache's locks, as
-    /// closing the last descriptor of a deleted file frees its blocks).
+    /// Closes every file held for its maximum age or longer.
     fn close_stale(&self) {
-        let stale: Vec<_> = self
+        self.let_go_where(|_, open| open.opened.elapsed() >= self.max_age);
+    }
+
+    /// Lets go of every file held that `which` picks, by its key and file; they close after
+    /// the cache's locks are released, as closing the last descriptor of a deleted file frees
+    /// its blocks.
+    fn let_go_where(&self, which: impl Fn(&(usize, String), &OpenFile) -> bool) {
+        let picked: Vec<_> = self
             .files
             .iter()
-            .filter(|(_, open)| open.opened.elapsed() >= self.max_age)
+            .filter(|(key, open)| which(key, open))
             .collect();
-        for ((index, key), open) in stale {
+        for ((index, key), open) in picked {
             self.let_go(index, &key, &open);
         }
     }

@@ -349,34 +349,32 @@ pub(crate) async fn loaded<T>(
     state: &Arc<AppState>,
     i: usize,
     cell: fn(&Loaded) -> &LoadCell<T>,
-    load: fn(&AppState, usize) -> Result<T, LoadError>,
+    load: fn(&AppState, usize, &Served) -> Result<T, LoadError>,
 ) -> Result<T, LoadError>
 where
     T: Clone + Send + Sync + 'static,
 {
-    // Without waiting: a load in progress holds the lock, and is waited for below. (The
-    // dataset's guard is let go before the wait.)
+    // The dataset as served now: its cell, and the store a load reads, are of the same one.
+    let served = state.served_owned(i);
+    // Without waiting: a load in progress holds the lock, and is waited for below.
+    if let Ok(held) = cell(&served.loaded).0.try_lock()
+        && let Some(done) = LoadCell::current(held.as_ref(), state.load_retry)
     {
-        let served = state.served(i);
-        if let Ok(held) = cell(&served.loaded).0.try_lock()
-            && let Some(done) = LoadCell::current(held.as_ref(), state.load_retry)
-        {
-            return done;
-        }
+        return done;
     }
     let st = state.clone();
-    blocking(move || load_now(&st, i, cell, load)).await
+    blocking(move || load_now(&st, i, &served, cell, load)).await
 }
 
-/// [`loaded`], on the calling (blocking) thread: what `cell` of dataset `i` holds, or what
-/// `load` makes of it.
+/// [`loaded`], on the calling (blocking) thread: what `cell` of dataset `i` as `served` holds,
+/// or what `load` makes of it.
 fn load_now<T: Clone>(
     state: &AppState,
     i: usize,
+    served: &Served,
     cell: fn(&Loaded) -> &LoadCell<T>,
-    load: impl FnOnce(&AppState, usize) -> Result<T, LoadError>,
+    load: impl FnOnce(&AppState, usize, &Served) -> Result<T, LoadError>,
 ) -> Result<T, LoadError> {
-    let served = state.served_owned(i);
     let mut held = cell(&served.loaded)
         .0
         .lock()
@@ -384,22 +382,23 @@ fn load_now<T: Clone>(
     if let Some(done) = LoadCell::current(held.as_ref(), state.load_retry) {
         return done;
     }
-    let result = load(state, i);
+    let result = load(state, i, served);
     *held = Some(result.clone());
     result
 }
 
-/// Dataset `i`'s image pyramid, opened on first use (on the calling, blocking, thread).
+/// Dataset `i`'s image pyramid, as `served`, opened on first use (on the calling, blocking,
+/// thread).
 ///
 /// # Errors
 /// [`LoadError`] when the store's image metadata cannot be read or is unusable.
-fn pyramid_of(state: &AppState, i: usize) -> Result<Arc<ImagePyramid>, LoadError> {
+fn pyramid_of(state: &AppState, i: usize, served: &Served) -> Result<Arc<ImagePyramid>, LoadError> {
     load_now(
         state,
         i,
+        served,
         |l| &l.pyramid,
-        |state, i| {
-            let served = state.served(i);
+        |state, i, served| {
             let store = &served.store;
             Pyramid::open(store.zarr(), store.shown())
                 .map(Arc::new)
@@ -408,25 +407,30 @@ fn pyramid_of(state: &AppState, i: usize) -> Result<Arc<ImagePyramid>, LoadError
     )
 }
 
-/// Loads dataset `i`'s image arrays (see [`loaded`]).
+/// Loads dataset `i`'s image arrays, as `served` (see [`loaded`]).
 ///
 /// # Errors
 /// [`LoadError`] when its pyramid cannot be opened.
-pub(crate) fn load_arrays(state: &AppState, i: usize) -> Result<Arc<ImageArrays>, LoadError> {
-    let pyramid = pyramid_of(state, i)?;
-    Ok(Arc::new(ImageArrays::new(&state.served(i).store, pyramid)))
+pub(crate) fn load_arrays(
+    state: &AppState,
+    i: usize,
+    served: &Served,
+) -> Result<Arc<ImageArrays>, LoadError> {
+    let pyramid = pyramid_of(state, i, served)?;
+    Ok(Arc::new(ImageArrays::new(&served.store, pyramid)))
 }
 
-/// Loads dataset `i`'s region index (see [`loaded`]): `None` for a store without region
-/// metadata, or that is no OME-Zarr image.
+/// Loads dataset `i`'s region index, as `served` (see [`loaded`]): `None` for a store
+/// without region metadata, or that is no OME-Zarr image.
 ///
 /// # Errors
 /// [`LoadError`] when its pyramid or a region array cannot be read.
 pub(crate) fn load_regions(
     state: &AppState,
     i: usize,
+    served: &Served,
 ) -> Result<Option<Arc<RegionIndex>>, LoadError> {
-    let pyramid = match pyramid_of(state, i) {
+    let pyramid = match pyramid_of(state, i, served) {
         Err(e) if e.is_not_an_image() => return Ok(None),
         other => other?,
     };
