@@ -14,7 +14,9 @@ Both servers run at once; each load runs on one, then the other, `--repeat` time
 median run is reported, so background load hits both alike.
 
 - random chunk GETs, uniform over a 20,000-chunk store of random bytes with log-normal sizes
-  (median 40 KiB), at 256, 16 and 1 connections;
+  (median 40 KiB), at 256, 16 and 1 connections, and at 1 connection again with the server
+  on the last CPU and the client on the first ("pinned apart": the same placement for both
+  servers, which the scheduler does not give them at 1 connection);
 - `If-None-Match` revalidations answered 304, at 256 connections;
 - region queries (`/NAME/regions`, random unaligned boxes) on a store made by `ingest`, at 16
   connections (nginx has no equivalent);
@@ -257,20 +259,54 @@ def median_run(runs):
     return sorted(runs, key=lambda r: r["rps"])[len(runs) // 2]
 
 
+def set_affinity(pids, cpus):
+    """Runs every thread of `pids` on `cpus` from now on (threads started later inherit it)."""
+    for pid in pids:
+        for tid in os.listdir(f"/proc/{pid}/task"):
+            try:
+                os.sched_setaffinity(int(tid), cpus)
+            except (ProcessLookupError, FileNotFoundError):
+                pass
+
+
+def pinned_load(b, c, seconds, server_pids):
+    """A chunk load with the server's threads on the last CPU and the client on the first, so
+    that both servers run where the other one did: left to the scheduler, a server's thread
+    sometimes shares the client's CPU (its wake-ups then cost less, and the two run one after
+    the other) and sometimes not, and at 1 connection that placement, not the server's work,
+    moves CPU time per request by several µs (docs/benchmarks.md § Server)."""
+    every = os.sched_getaffinity(0)
+    first, last = min(every), max(every)
+    set_affinity(server_pids, {last})
+    os.sched_setaffinity(0, {first})
+    try:
+        return chunk_load(b, c, seconds)
+    finally:
+        os.sched_setaffinity(0, every)
+        set_affinity(server_pids, every)
+
+
 def loads(bases, seconds, repeat, pids):
     """The shared loads against every server in `bases` (name -> URL ending in the dataset
     path), interleaved: each load runs on each server in turn, `repeat` times, so a change in
     background load hits both alike. Returns name -> load -> the median run, with the server's
-    CPU time per request (`pids`: name -> its processes)."""
+    CPU time per request (`pids`: name -> its processes). With two or more CPUs, the load at 1
+    connection runs a second time with server and client pinned apart (`pinned_load`)."""
     out = {name: {} for name in bases}
     etags = {name: etag_of(f"{b}/0/c/0/0/0/0") for name, b in bases.items()}
-    plan = [(f"GET, {c} conn", c, None) for c in (256, 16, 1)] + [("304, 256 conn", 256, "304")]
+    plan = [(f"GET, {c} conn", c, None) for c in (256, 16, 1)]
+    if len(os.sched_getaffinity(0)) >= 2:
+        plan.append(("GET, 1 conn, pinned apart", 1, "pinned"))
+    plan.append(("304, 256 conn", 256, "304"))
     for load, c, kind in plan:
         runs = {name: [] for name in bases}
         for _ in range(repeat):
             for name, b in bases.items():
                 before = cpu_seconds(pids[name])
-                r = chunk_load(b, c, seconds, etags[name] if kind == "304" else None)
+                if kind == "pinned":
+                    r = pinned_load(b, c, seconds, pids[name])
+                else:
+                    r = chunk_load(b, c, seconds, etags[name] if kind == "304" else None)
                 r["cpu_us"] = (cpu_seconds(pids[name]) - before) / max(r["rps"] * seconds, 1) * 1e6
                 runs[name].append(r)
         for name in bases:

@@ -18,7 +18,7 @@ use axum::body::{Body, HttpBody};
 use axum::http::header::{self, HeaderMap, HeaderName, HeaderValue};
 use axum::http::{Method, Request, Response, StatusCode, Version};
 use axum::response::IntoResponse;
-use bytes::{Buf, BytesMut};
+use bytes::{Bytes, BytesMut};
 use hyper::service::Service as _;
 use hyper_util::service::TowerToHyperService;
 use tokio::io::{AsyncReadExt, AsyncWriteExt, Interest};
@@ -83,19 +83,28 @@ impl App {
     }
 }
 
-/// A parsed request head.
+/// A parsed request head. The target and the header fields' values are slices of the bytes
+/// read, shared, not copied.
 #[derive(Debug)]
 struct Head {
     /// The method.
     method: Method,
-    /// The request target as sent: path and query, still percent-encoded.
-    target: String,
+    /// The request target as sent: path and query, still percent-encoded (visible ASCII, as
+    /// `httparse` checks).
+    target: Bytes,
     /// HTTP/1.0 or HTTP/1.1.
     version: Version,
     /// The header fields.
     headers: HeaderMap,
     /// The body's length (`Content-Length`; 0 without one).
     body_len: u64,
+}
+
+impl Head {
+    /// The request target as text.
+    fn target(&self) -> &str {
+        std::str::from_utf8(&self.target).unwrap_or_default()
+    }
 }
 
 /// What reading a request head gave.
@@ -124,8 +133,16 @@ pub(crate) async fn connection(
 ) -> io::Result<()> {
     let mut buf = BytesMut::with_capacity(8 << 10);
     let mut out = Vec::with_capacity(1 << 10);
+    let mut scratch = Scratch::default();
     loop {
-        let head = match read_head(&mut stream, &mut buf, header_timeout, &mut shutdown).await? {
+        let step = read_head(
+            &mut stream,
+            &mut buf,
+            &mut scratch,
+            header_timeout,
+            &mut shutdown,
+        );
+        let head = match step.await? {
             Step::Head(head) => head,
             Step::Close => return Ok(()),
             Step::Refuse(status, why) => {
@@ -148,7 +165,10 @@ pub(crate) async fn connection(
         let keep_alive = keeps_alive(&head) && !*shutdown.borrow();
         let body = read_body(&mut stream, &mut buf, head.body_len).await?;
         let direct = (head.body_len == 0)
-            .then(|| app.chunks.answer(&head.method, &head.target, &head.headers))
+            .then(|| {
+                app.chunks
+                    .answer(&head.method, head.target(), &head.headers)
+            })
             .flatten();
         let direct = match direct {
             Some(answer) if !answer.cached => read_into_page_cache(answer, &app.metrics).await,
@@ -156,14 +176,19 @@ pub(crate) async fn connection(
         };
         let keep_alive = if let Some(answer) = direct {
             out.clear();
+            let file_head = answer.head();
+            let status = file_head.status();
             // With the CORS fields the router's layer adds to every answer.
             let cors = app.chunks.cors();
-            write_head(&mut out, &answer.response, head.version, keep_alive, cors);
-            let sent = match answer.body {
-                Some((open, start, end)) if head.method != Method::HEAD => {
+            write_head(&mut out, status, head.version, keep_alive, cors, |out| {
+                file_head.fields(|name, value| write_field(out, name.as_str(), value.as_bytes()));
+                false
+            });
+            let sent = match answer.body() {
+                Some((start, end)) if head.method != Method::HEAD => {
                     // The head waits for the file's first bytes (unless there are none).
                     send_head(&stream, &out, end > start).await?;
-                    send_file(&stream, &open.file, start, end).await?;
+                    send_file(&stream, &answer.open.file, start, end).await?;
                     Some(end - start)
                 }
                 _ => {
@@ -171,7 +196,9 @@ pub(crate) async fn connection(
                     None
                 }
             };
-            app.metrics.record(answer.response.status(), sent, started);
+            app.metrics.record(status, sent, started);
+            scratch.fields = head.headers;
+            scratch.fields.clear();
             keep_alive
         } else {
             let (method, version) = (head.method.clone(), head.version);
@@ -205,7 +232,8 @@ pub(crate) async fn connection(
 /// (`page_cache::fill`, counted in `metrics`); `None` when they cannot be read: the router
 /// then reads the key and answers its error.
 async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<ChunkAnswer> {
-    let (open, start, end) = answer.body.clone()?;
+    let (start, end) = answer.body()?;
+    let open = answer.open.clone();
     let filled = tokio::task::spawn_blocking(move || page_cache::fill(&open.file, start, end));
     match filled.await {
         Ok(Ok(())) => {
@@ -221,17 +249,19 @@ async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<
     }
 }
 
-/// Reads until `buf` holds a complete request head, waiting at most `timeout`.
+/// Reads until `buf` holds a complete request head, waiting at most `timeout` (with
+/// [`parse_head`]).
 async fn read_head(
     stream: &mut TcpStream,
     buf: &mut BytesMut,
+    scratch: &mut Scratch,
     timeout: Duration,
     shutdown: &mut watch::Receiver<bool>,
 ) -> io::Result<Step> {
     let deadline = tokio::time::Instant::now() + timeout;
     loop {
         if !buf.is_empty() {
-            match parse_head(buf) {
+            match parse_head(buf, scratch) {
                 Ok(Some(head)) => return Ok(Step::Head(head)),
                 Ok(None) if buf.len() >= MAX_HEAD => {
                     return Ok(Step::Refuse(
@@ -262,12 +292,56 @@ async fn read_head(
 /// Why a request head is refused: the status and the message answered.
 type Refusal = (StatusCode, &'static str);
 
+/// Where a part of a request head lies in it: a byte offset and a length.
+#[derive(Clone, Copy, Debug)]
+struct Span {
+    at: usize,
+    len: usize,
+}
+
+impl Span {
+    /// Where `part`, a slice of `head`, lies in it (nowhere, an empty span, if it is not a
+    /// slice of `head`).
+    fn of(part: &[u8], head: &[u8]) -> Self {
+        let at = (part.as_ptr() as usize).wrapping_sub(head.as_ptr() as usize);
+        if at
+            .checked_add(part.len())
+            .is_some_and(|end| end <= head.len())
+        {
+            Self {
+                at,
+                len: part.len(),
+            }
+        } else {
+            Self { at: 0, len: 0 }
+        }
+    }
+
+    /// This part of `head`, shared (nothing is copied).
+    fn of_shared(self, head: &Bytes) -> Bytes {
+        head.slice(self.at..self.at + self.len)
+    }
+}
+
+/// What a connection keeps from one request head to the next, so that parsing one allocates
+/// nothing: the header map of the last request the direct path answered (emptied), and where
+/// the fields lie in the head being parsed.
+#[derive(Default)]
+struct Scratch {
+    /// The next head's header fields go here.
+    fields: HeaderMap,
+    /// Where each field's name and value lie in the head.
+    spans: Vec<(Span, Span)>,
+}
+
 /// The request head at the start of `buf`, removed from it; `None` while it is incomplete.
-fn parse_head(buf: &mut BytesMut) -> Result<Option<Head>, Refusal> {
+/// Its header fields go into `scratch.fields` (emptied first), which the head takes: the
+/// target and the field values are slices of the head's bytes, not copies.
+fn parse_head(buf: &mut BytesMut, scratch: &mut Scratch) -> Result<Option<Head>, Refusal> {
     let bad = |why| (StatusCode::BAD_REQUEST, why);
-    let mut fields = [httparse::EMPTY_HEADER; MAX_FIELDS];
-    let mut request = httparse::Request::new(&mut fields);
-    let len = match request.parse(buf) {
+    let mut parsed = [const { std::mem::MaybeUninit::uninit() }; MAX_FIELDS];
+    let mut request = httparse::Request::new(&mut []);
+    let len = match request.parse_with_uninit_headers(buf, &mut parsed) {
         Ok(httparse::Status::Complete(len)) => len,
         Ok(httparse::Status::Partial) => return Ok(None),
         Err(httparse::Error::TooManyHeaders) => {
@@ -284,23 +358,34 @@ fn parse_head(buf: &mut BytesMut) -> Result<Option<Head>, Refusal> {
         Some(0) => Version::HTTP_10,
         _ => Version::HTTP_11,
     };
-    let target = request.path.unwrap_or_default().to_string();
-    let mut headers = HeaderMap::with_capacity(request.headers.len());
+    // Where the target and each field lie, to take them from the head once it is split off.
+    let target = Span::of(request.path.unwrap_or_default().as_bytes(), buf);
+    let spans = &mut scratch.spans;
+    spans.clear();
     for field in request.headers.iter() {
-        let name = HeaderName::from_bytes(field.name.as_bytes())
-            .map_err(|_| bad("malformed header field name\n"))?;
-        let value =
-            HeaderValue::from_bytes(field.value).map_err(|_| bad("malformed header field\n"))?;
-        headers.append(name, value);
+        spans.push((
+            Span::of(field.name.as_bytes(), buf),
+            Span::of(field.value, buf),
+        ));
     }
-    if headers.contains_key(header::TRANSFER_ENCODING) {
+    let head = buf.split_to(len).freeze();
+    let fields = &mut scratch.fields;
+    fields.clear();
+    for (name, value) in spans.iter() {
+        let name = HeaderName::from_bytes(&head[name.at..name.at + name.len])
+            .map_err(|_| bad("malformed header field name\n"))?;
+        let value = HeaderValue::from_maybe_shared(value.of_shared(&head))
+            .map_err(|_| bad("malformed header field\n"))?;
+        fields.append(name, value);
+    }
+    if fields.contains_key(header::TRANSFER_ENCODING) {
         // No route takes a body; one of unknown length cannot be skipped safely.
         return Err((
             StatusCode::LENGTH_REQUIRED,
             "request bodies need a Content-Length\n",
         ));
     }
-    let mut lengths = headers.get_all(header::CONTENT_LENGTH).iter();
+    let mut lengths = fields.get_all(header::CONTENT_LENGTH).iter();
     let body_len = match (lengths.next(), lengths.next()) {
         (None, _) => 0,
         (Some(value), None) => value
@@ -313,12 +398,11 @@ fn parse_head(buf: &mut BytesMut) -> Result<Option<Head>, Refusal> {
     if body_len > MAX_BODY {
         return Err((StatusCode::PAYLOAD_TOO_LARGE, "request body too large\n"));
     }
-    buf.advance(len);
     Ok(Some(Head {
         method,
-        target,
+        target: target.of_shared(&head),
         version,
-        headers,
+        headers: std::mem::take(fields),
         body_len,
     }))
 }
@@ -357,7 +441,10 @@ async fn read_body(stream: &mut TcpStream, buf: &mut BytesMut, len: u64) -> io::
 fn to_request(head: Head, body: Body) -> Result<Request<Body>, &'static str> {
     let mut request = Request::builder()
         .method(head.method)
-        .uri(head.target.as_str())
+        .uri(
+            axum::http::Uri::from_maybe_shared(head.target)
+                .map_err(|_| "malformed request target\n")?,
+        )
         .version(head.version)
         .body(body)
         .map_err(|_| "malformed request target\n")?;
@@ -365,32 +452,25 @@ fn to_request(head: Head, body: Body) -> Result<Request<Body>, &'static str> {
     Ok(request)
 }
 
-/// Appends the status line and header fields of `response` to `out`, with a `Date`, the
-/// `Connection` field the client needs to know whether the connection stays open, and the
-/// blank line; `extra` holds more fields, each ending in CRLF.
+/// Appends a head to `out`: the status line, the header fields `fields` writes (it says
+/// whether they include a `Date`), a `Date` if not, the `Connection` field the client needs
+/// to know whether the connection stays open, the fields `extra` (each ending in CRLF) and
+/// the blank line.
 fn write_head(
     out: &mut Vec<u8>,
-    response: &Response<Body>,
+    status: StatusCode,
     version: Version,
     keep_alive: bool,
     extra: &[u8],
+    fields: impl FnOnce(&mut Vec<u8>) -> bool,
 ) {
-    let status = response.status();
     out.extend_from_slice(b"HTTP/1.1 ");
     out.extend_from_slice(status.as_str().as_bytes());
     out.push(b' ');
     out.extend_from_slice(status.canonical_reason().unwrap_or("").as_bytes());
     out.extend_from_slice(b"\r\n");
-    for (name, value) in response.headers() {
-        out.extend_from_slice(name.as_str().as_bytes());
-        out.extend_from_slice(b": ");
-        out.extend_from_slice(value.as_bytes());
-        out.extend_from_slice(b"\r\n");
-    }
-    if !response.headers().contains_key(header::DATE) {
-        out.extend_from_slice(b"date: ");
-        out.extend_from_slice(&http_date());
-        out.extend_from_slice(b"\r\n");
+    if !fields(out) {
+        write_field(out, "date", &http_date());
     }
     if !keep_alive {
         out.extend_from_slice(b"connection: close\r\n");
@@ -398,6 +478,14 @@ fn write_head(
         out.extend_from_slice(b"connection: keep-alive\r\n");
     }
     out.extend_from_slice(extra);
+    out.extend_from_slice(b"\r\n");
+}
+
+/// Appends the header field `name: value` and its CRLF to `out`.
+fn write_field(out: &mut Vec<u8>, name: &str, value: &[u8]) {
+    out.extend_from_slice(name.as_bytes());
+    out.extend_from_slice(b": ");
+    out.extend_from_slice(value);
     out.extend_from_slice(b"\r\n");
 }
 
@@ -439,7 +527,12 @@ async fn write_response(
         }
     }
     out.clear();
-    write_head(out, &response, version, keep_alive, b"");
+    write_head(out, status, version, keep_alive, b"", |out| {
+        for (name, value) in response.headers() {
+            write_field(out, name.as_str(), value.as_bytes());
+        }
+        response.headers().contains_key(header::DATE)
+    });
     if no_body {
         stream.write_all(out).await?;
         return Ok(keep_alive);
@@ -588,7 +681,7 @@ mod tests {
 
     fn parsed(text: &str) -> Result<Option<Head>, Refusal> {
         let mut buf = BytesMut::from(text.as_bytes());
-        parse_head(&mut buf)
+        parse_head(&mut buf, &mut Scratch::default())
     }
 
     fn refusal(text: &str) -> Refusal {
@@ -603,9 +696,16 @@ mod tests {
         let mut buf = BytesMut::from(
             &b"GET /d/0/c/0/0/0?x=1 HTTP/1.1\r\nHost: a\r\nX-Two: 1\r\nX-Two: 2\r\n\r\nGET /next"[..],
         );
-        let head = parse_head(&mut buf).unwrap().unwrap();
+        let read = buf.as_ptr() as usize..buf.as_ptr() as usize + buf.len();
+        let head = parse_head(&mut buf, &mut Scratch::default())
+            .unwrap()
+            .unwrap();
+        // The target and the values are the bytes read, not copies of them.
+        let within = |bytes: &[u8]| read.contains(&(bytes.as_ptr() as usize));
+        assert!(within(&head.target));
+        assert!(head.headers.values().all(|v| within(v.as_bytes())));
         assert_eq!(head.method, Method::GET);
-        assert_eq!(head.target, "/d/0/c/0/0/0?x=1");
+        assert_eq!(head.target(), "/d/0/c/0/0/0?x=1");
         assert_eq!(head.version, Version::HTTP_11);
         assert_eq!(head.body_len, 0);
         let twos: Vec<_> = head.headers.get_all("x-two").iter().collect();

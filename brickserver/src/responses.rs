@@ -4,7 +4,7 @@
 use std::time::UNIX_EPOCH;
 
 use axum::body::{Body, Bytes};
-use axum::http::{HeaderMap, HeaderValue, Response, StatusCode, header};
+use axum::http::{HeaderMap, HeaderName, HeaderValue, Response, StatusCode, header};
 use headers::{ETag, HeaderMapExt, IfNoneMatch};
 use http_range_header::RangeUnsatisfiableError;
 
@@ -70,7 +70,7 @@ pub(crate) fn etag_of(meta: &std::fs::Metadata) -> String {
 /// Whether the request's `If-None-Match` matches `etag` (RFC 9110 weak comparison, or `*`),
 /// as the `headers` crate reads the header: every field line, a comma-separated list of
 /// entity tags, malformed ones skipped.
-fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
+pub(crate) fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
     let Some(condition) = headers.typed_get::<IfNoneMatch>() else {
         return false;
     };
@@ -78,37 +78,11 @@ fn if_none_match(headers: &HeaderMap, etag: &str) -> bool {
         .is_ok_and(|tag| !condition.precondition_passes(&tag))
 }
 
-/// The `Content-Type` and `Cache-Control` of a key, as header values that are not copied
-/// (`HeaderValue::from_static`: a chunk's answer allocates only for its `ETag` and length).
-fn kind_of(key: &str) -> (HeaderValue, HeaderValue) {
-    if is_metadata(key) {
-        (
-            HeaderValue::from_static("application/json"),
-            HeaderValue::from_static(CACHE_REVALIDATE),
-        )
-    } else {
-        (
-            HeaderValue::from_static("application/octet-stream"),
-            HeaderValue::from_static(CACHE_IMMUTABLE),
-        )
-    }
-}
-
 /// The `304 Not Modified` answer for key `key` when `If-None-Match` matches `etag`; checked
-/// before the file is read, so revalidations cost no read. It carries what RFC 9110 asks a 304
-/// to repeat of the 200 (`ETag`, `Cache-Control`; the connection adds `Date`), and nothing else.
+/// before the file is read, so revalidations cost no read ([`FileHead::not_modified`]).
 pub(crate) fn not_modified(key: &str, etag: &str, headers: &HeaderMap) -> Option<Response<Body>> {
-    if !if_none_match(headers, etag) {
-        return None;
-    }
-    Some(
-        Response::builder()
-            .status(StatusCode::NOT_MODIFIED)
-            .header(header::ETAG, etag)
-            .header(header::CACHE_CONTROL, kind_of(key).1)
-            .body(Body::empty())
-            .expect("response"),
-    )
+    if_none_match(headers, etag)
+        .then(|| FileHead::not_modified(etag, is_metadata(key)).response(Body::empty()))
 }
 
 /// The answer for a stored file's `bytes` served as Zarr key `key`: 206 or 416 for a
@@ -133,8 +107,7 @@ pub(crate) fn file_response(
 }
 
 /// The answer for `part`, the bytes `range` picks out of a stored file of `len` bytes served
-/// as Zarr key `key`: 206 (with `Content-Range`) for a part, 416 for an unsatisfiable range,
-/// 200 for the whole file.
+/// as Zarr key `key` ([`FileHead::part`]).
 pub(crate) fn part_response(
     part: Bytes,
     len: u64,
@@ -142,32 +115,170 @@ pub(crate) fn part_response(
     etag: &str,
     key: &str,
 ) -> Response<Body> {
-    let (content_type, cache) = kind_of(key);
-    let builder = Response::builder()
-        .header(header::ETAG, etag)
-        .header(header::CACHE_CONTROL, cache)
-        .header(header::ACCEPT_RANGES, HeaderValue::from_static("bytes"))
-        .header(header::CONTENT_TYPE, content_type);
-    match range {
-        RangeRequest::Unsatisfiable => builder
-            .status(StatusCode::RANGE_NOT_SATISFIABLE)
-            .header(header::CONTENT_RANGE, format!("bytes */{len}"))
-            .body(Body::empty())
-            .expect("response"),
-        RangeRequest::Whole => builder
-            .status(StatusCode::OK)
-            .header(header::CONTENT_LENGTH, HeaderValue::from(len))
-            .body(Body::from(part))
-            .expect("response"),
-        RangeRequest::Part(start, end) => builder
-            .status(StatusCode::PARTIAL_CONTENT)
-            .header(
-                header::CONTENT_RANGE,
-                format!("bytes {start}-{}/{len}", end - 1),
-            )
-            .header(header::CONTENT_LENGTH, HeaderValue::from(end - start))
-            .body(Body::from(part))
-            .expect("response"),
+    FileHead::part(len, range, etag, is_metadata(key)).response(Body::from(part))
+}
+
+/// The status and header fields of an answer for a stored file, without its body: the
+/// router's `Response` is built from it, and a connection that sends a chunk file itself
+/// (`crate::http1`) writes it straight into the answer's head, with nothing allocated, so the
+/// two cannot differ.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct FileHead<'a> {
+    /// `200`, `206`, `304` or `416`.
+    status: StatusCode,
+    /// The file's `ETag`.
+    etag: &'a str,
+    /// Whether the key is a metadata document (its `Content-Type` and `Cache-Control`).
+    metadata: bool,
+    /// The file's length and the range answered; `None` for a `304`, which repeats only what
+    /// RFC 9110 asks of it (`ETag`, `Cache-Control`; the connection adds `Date`).
+    range: Option<(u64, RangeRequest)>,
+}
+
+/// A header field's value as [`FileHead::fields`] gives it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum FieldValue<'a> {
+    /// A constant (not copied into a `Response`).
+    Static(&'static str),
+    /// Text of the answer's own.
+    Text(&'a [u8]),
+}
+
+impl FieldValue<'_> {
+    /// The value's bytes.
+    pub(crate) fn as_bytes(&self) -> &[u8] {
+        match self {
+            Self::Static(text) => text.as_bytes(),
+            Self::Text(bytes) => bytes,
+        }
+    }
+}
+
+impl<'a> FileHead<'a> {
+    /// The head of the answer for bytes `range` of a stored file of `len` bytes with `etag`,
+    /// a metadata document or not ([`is_metadata`]): `206` (with `Content-Range`) for a
+    /// part, `416` (with an empty body) for an unsatisfiable range, `200` for the whole file.
+    pub(crate) fn part(len: u64, range: RangeRequest, etag: &'a str, metadata: bool) -> Self {
+        let status = match range {
+            RangeRequest::Whole => StatusCode::OK,
+            RangeRequest::Part(..) => StatusCode::PARTIAL_CONTENT,
+            RangeRequest::Unsatisfiable => StatusCode::RANGE_NOT_SATISFIABLE,
+        };
+        Self {
+            status,
+            etag,
+            metadata,
+            range: Some((len, range)),
+        }
+    }
+
+    /// The head of the `304 Not Modified` answer for a file with `etag`, a metadata document
+    /// or not.
+    pub(crate) fn not_modified(etag: &'a str, metadata: bool) -> Self {
+        Self {
+            status: StatusCode::NOT_MODIFIED,
+            etag,
+            metadata,
+            range: None,
+        }
+    }
+
+    /// The answer's status.
+    pub(crate) fn status(&self) -> StatusCode {
+        self.status
+    }
+
+    /// Calls `field` with each header field, in order: `ETag`, `Cache-Control`, then (unless
+    /// a `304`) `Accept-Ranges`, `Content-Type`, `Content-Range` (for a `206` or `416`) and
+    /// `Content-Length` (of the bytes sent; `0` for a `416`).
+    pub(crate) fn fields(&self, mut field: impl FnMut(HeaderName, FieldValue<'_>)) {
+        let (content_type, cache) = if self.metadata {
+            ("application/json", CACHE_REVALIDATE)
+        } else {
+            ("application/octet-stream", CACHE_IMMUTABLE)
+        };
+        field(header::ETAG, FieldValue::Text(self.etag.as_bytes()));
+        field(header::CACHE_CONTROL, FieldValue::Static(cache));
+        let Some((len, range)) = self.range else {
+            return;
+        };
+        field(header::ACCEPT_RANGES, FieldValue::Static("bytes"));
+        field(header::CONTENT_TYPE, FieldValue::Static(content_type));
+        let mut text = Text::new();
+        let sent = match range {
+            RangeRequest::Whole => len,
+            RangeRequest::Part(start, end) => {
+                text.push(b"bytes ");
+                text.number(start);
+                text.push(b"-");
+                text.number(end - 1);
+                text.push(b"/");
+                text.number(len);
+                field(header::CONTENT_RANGE, FieldValue::Text(text.as_bytes()));
+                end - start
+            }
+            RangeRequest::Unsatisfiable => {
+                text.push(b"bytes */");
+                text.number(len);
+                field(header::CONTENT_RANGE, FieldValue::Text(text.as_bytes()));
+                0
+            }
+        };
+        let mut number = itoa::Buffer::new();
+        field(
+            header::CONTENT_LENGTH,
+            FieldValue::Text(number.format(sent).as_bytes()),
+        );
+    }
+
+    /// The router's answer: this head, with `body`.
+    pub(crate) fn response(&self, body: Body) -> Response<Body> {
+        let mut response = Response::new(body);
+        *response.status_mut() = self.status;
+        let headers = response.headers_mut();
+        self.fields(|name, value| {
+            let value = match value {
+                FieldValue::Static(text) => HeaderValue::from_static(text),
+                FieldValue::Text(bytes) => {
+                    HeaderValue::from_bytes(bytes).expect("an ETag, a range or a length")
+                }
+            };
+            headers.append(name, value);
+        });
+        response
+    }
+}
+
+/// Short text on the stack: a `Content-Range` value.
+struct Text {
+    bytes: [u8; 72],
+    len: usize,
+}
+
+impl Text {
+    /// No text yet.
+    fn new() -> Self {
+        Self {
+            bytes: [0; 72],
+            len: 0,
+        }
+    }
+
+    /// Appends `more` (the longest value written, `bytes A-B/C` with three 20-digit numbers,
+    /// is 68 bytes).
+    fn push(&mut self, more: &[u8]) {
+        self.bytes[self.len..self.len + more.len()].copy_from_slice(more);
+        self.len += more.len();
+    }
+
+    /// Appends `n` in decimal.
+    fn number(&mut self, n: u64) {
+        self.push(itoa::Buffer::new().format(n).as_bytes());
+    }
+
+    /// The text so far.
+    fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..self.len]
     }
 }
 
@@ -252,6 +363,104 @@ mod tests {
         assert!(!matches(&["W/W/\"a-1\""]));
         assert!(not_modified("0/c/0", etag, &with_if_none_match(&["*"])).is_some());
         assert!(not_modified("0/c/0", etag, &HeaderMap::new()).is_none());
+    }
+
+    /// `head`'s fields as text, in order.
+    fn fields_of(head: &FileHead<'_>) -> Vec<(String, String)> {
+        let mut fields = Vec::new();
+        head.fields(|name, value| {
+            let value = String::from_utf8(value.as_bytes().to_vec()).unwrap();
+            fields.push((name.as_str().to_string(), value));
+        });
+        fields
+    }
+
+    #[test]
+    fn file_heads_give_each_answer_its_fields_in_order_and_the_router_the_same() {
+        let etag = "\"bf69-18e\"";
+        let chunk = |rest: &[(&str, &str)]| {
+            let mut fields = vec![
+                ("etag", etag),
+                ("cache-control", CACHE_IMMUTABLE),
+                ("accept-ranges", "bytes"),
+                ("content-type", "application/octet-stream"),
+            ];
+            fields.extend_from_slice(rest);
+            fields
+                .into_iter()
+                .map(|(n, v)| (n.to_string(), v.to_string()))
+                .collect::<Vec<_>>()
+        };
+        let cases = [
+            (
+                FileHead::part(49001, RangeRequest::Whole, etag, false),
+                StatusCode::OK,
+                chunk(&[("content-length", "49001")]),
+            ),
+            (
+                FileHead::part(49001, RangeRequest::Part(100, 49001), etag, false),
+                StatusCode::PARTIAL_CONTENT,
+                chunk(&[
+                    ("content-range", "bytes 100-49000/49001"),
+                    ("content-length", "48901"),
+                ]),
+            ),
+            (
+                FileHead::part(49001, RangeRequest::Unsatisfiable, etag, false),
+                StatusCode::RANGE_NOT_SATISFIABLE,
+                chunk(&[("content-range", "bytes */49001"), ("content-length", "0")]),
+            ),
+            (
+                FileHead::part(
+                    u64::MAX,
+                    RangeRequest::Part(u64::MAX - 2, u64::MAX),
+                    etag,
+                    false,
+                ),
+                StatusCode::PARTIAL_CONTENT,
+                chunk(&[
+                    (
+                        "content-range",
+                        "bytes 18446744073709551613-18446744073709551614/18446744073709551615",
+                    ),
+                    ("content-length", "2"),
+                ]),
+            ),
+            (
+                FileHead::not_modified(etag, false),
+                StatusCode::NOT_MODIFIED,
+                chunk(&[])[..2].to_vec(),
+            ),
+            (
+                FileHead::not_modified(etag, true),
+                StatusCode::NOT_MODIFIED,
+                vec![
+                    ("etag".into(), etag.into()),
+                    ("cache-control".into(), CACHE_REVALIDATE.into()),
+                ],
+            ),
+        ];
+        for (head, status, fields) in cases {
+            assert_eq!(head.status(), status);
+            assert_eq!(fields_of(&head), fields);
+            let response = head.response(Body::empty());
+            assert_eq!(response.status(), status);
+            let router: Vec<_> = response
+                .headers()
+                .iter()
+                .map(|(n, v)| (n.as_str().to_string(), v.to_str().unwrap().to_string()))
+                .collect();
+            assert_eq!(router, fields);
+        }
+        let metadata = FileHead::part(17, RangeRequest::Whole, etag, true);
+        assert_eq!(
+            fields_of(&metadata)[1..4],
+            [
+                ("cache-control".to_string(), CACHE_REVALIDATE.to_string()),
+                ("accept-ranges".to_string(), "bytes".to_string()),
+                ("content-type".to_string(), "application/json".to_string()),
+            ]
+        );
     }
 
     #[test]

@@ -7,15 +7,14 @@
 
 use std::sync::Arc;
 
-use axum::body::{Body, Bytes};
-use axum::http::{HeaderMap, HeaderValue, Method, Response, header};
+use axum::http::{HeaderMap, Method, header};
 use residency_schemas::server::bearer_token_matches;
 
 use super::state::AppState;
 use crate::dataset_store::Keys;
 use crate::open_files::OpenFile;
 use crate::page_cache;
-use crate::responses::{RangeRequest, is_metadata, not_modified, parse_range, part_response};
+use crate::responses::{FileHead, RangeRequest, if_none_match, is_metadata, parse_range};
 use crate::store_keys::{KeyError, RootDir};
 
 /// The paths under `/NAME/` that are the server's API, not Zarr keys.
@@ -23,8 +22,8 @@ const API_PATHS: [&str; 4] = ["regions", "minmax", "bricks", "view"];
 
 /// A key of a folder store, opened.
 pub(crate) enum OpenedKey {
-    /// `If-None-Match` matched: the `304`.
-    NotModified(Response<Body>),
+    /// `If-None-Match` matched the file's `ETag`: answer `304` ([`FileHead::not_modified`]).
+    NotModified(Arc<OpenFile>),
     /// The file, with its length and `ETag`.
     File(Arc<OpenFile>),
 }
@@ -53,8 +52,8 @@ pub(crate) fn open_folder_key(
         && let Some(open) = files.get(index, raw_key)
         && open.folder == root.identity()
     {
-        if let Some(answer) = not_modified(raw_key, &open.etag, headers) {
-            return Ok(OpenedKey::NotModified(answer));
+        if if_none_match(headers, &open.etag) {
+            return Ok(OpenedKey::NotModified(open));
         }
         if open.unchanged() {
             return Ok(OpenedKey::File(open));
@@ -66,22 +65,46 @@ pub(crate) fn open_folder_key(
     if let Some(files) = held {
         files.insert(index, raw_key, open.clone());
     }
-    Ok(match not_modified(raw_key, &open.etag, headers) {
-        Some(answer) => OpenedKey::NotModified(answer),
-        None => OpenedKey::File(open),
+    Ok(if if_none_match(headers, &open.etag) {
+        OpenedKey::NotModified(open)
+    } else {
+        OpenedKey::File(open)
     })
 }
 
-/// A direct answer: the response's head, and the file bytes `start..end` that follow it.
+/// A direct answer: a chunk file, what is answered of it, and whether the page cache holds
+/// the bytes to send.
 pub(crate) struct ChunkAnswer {
-    /// Status and header fields (its body is empty: the bytes come from the file).
-    pub(crate) response: Response<Body>,
-    /// The file and the bytes of it to send; `None` for `304` and `416`.
-    pub(crate) body: Option<(Arc<OpenFile>, u64, u64)>,
+    /// The chunk file.
+    pub(crate) open: Arc<OpenFile>,
+    /// `None` for a `304`, else the range answered (`Whole` for a `200`).
+    range: Option<RangeRequest>,
     /// Whether the page cache holds all the bytes to send (`crate::page_cache::holds`; always
     /// for a `HEAD`): if not, they are read into it on a blocking thread before they are sent,
     /// so that `sendfile` never waits for the disk on a thread that serves other connections.
     pub(crate) cached: bool,
+}
+
+impl ChunkAnswer {
+    /// The answer's status and header fields: those of the router's answer to the same
+    /// request (`routes::zarr`), from the same [`FileHead`].
+    pub(crate) fn head(&self) -> FileHead<'_> {
+        // The direct path answers chunk keys only, never a metadata document.
+        match self.range {
+            None => FileHead::not_modified(&self.open.etag, false),
+            Some(range) => FileHead::part(self.open.len, range, &self.open.etag, false),
+        }
+    }
+
+    /// The bytes of the file to send after the head, `start..end`; `None` for a `304` and a
+    /// `416`.
+    pub(crate) fn body(&self) -> Option<(u64, u64)> {
+        match self.range? {
+            RangeRequest::Whole => Some((0, self.open.len)),
+            RangeRequest::Part(start, end) => Some((start, end)),
+            RangeRequest::Unsatisfiable => None,
+        }
+    }
 }
 
 /// The direct path for chunk keys of folder stores.
@@ -148,40 +171,29 @@ impl FolderChunks {
             return None;
         };
         let open = match open_folder_key(state, index, root, raw_key, headers).ok()? {
-            OpenedKey::NotModified(answer) => {
+            OpenedKey::NotModified(open) => {
                 return Some(ChunkAnswer {
-                    response: answer,
-                    body: None,
+                    open,
+                    range: None,
                     cached: true,
                 });
             }
             OpenedKey::File(open) => open,
         };
-        let len = open.len;
         let range = headers
             .get(header::RANGE)
             .and_then(|v| v.to_str().ok())
-            .map_or(RangeRequest::Whole, |v| parse_range(v, len));
-        let mut response = part_response(Bytes::new(), len, range, &open.etag, raw_key);
-        if range == RangeRequest::Unsatisfiable {
-            // Its body is empty, and says so, as the router's answer does.
-            response
-                .headers_mut()
-                .insert(header::CONTENT_LENGTH, HeaderValue::from(0));
-        }
-        let body = match range {
-            RangeRequest::Whole => Some((open, 0, len)),
-            RangeRequest::Part(start, end) => Some((open, start, end)),
-            RangeRequest::Unsatisfiable => None,
+            .map_or(RangeRequest::Whole, |v| parse_range(v, open.len));
+        let mut answer = ChunkAnswer {
+            open,
+            range: Some(range),
+            cached: true,
         };
-        let cached = *method == Method::HEAD
-            || body
-                .as_ref()
-                .is_none_or(|(open, start, end)| page_cache::holds(&open.file, *start, *end));
-        Some(ChunkAnswer {
-            response,
-            body,
-            cached,
-        })
+        if *method != Method::HEAD
+            && let Some((start, end)) = answer.body()
+        {
+            answer.cached = page_cache::holds(&answer.open.file, start, end);
+        }
+        Some(answer)
     }
 }

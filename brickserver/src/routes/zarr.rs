@@ -23,7 +23,7 @@ use crate::dataset_store::{Keys, ObjectKeys, requested_range};
 use crate::open_files::BorrowedKey;
 use crate::openapi::{answer, binary, responses, with_content};
 use crate::responses::{
-    RangeRequest, file_response, is_metadata, not_modified, parse_range, part_response,
+    FileHead, RangeRequest, file_response, is_metadata, not_modified, parse_range, part_response,
 };
 use crate::store_keys::{KeyError, RootDir, checked_key, read_cached};
 
@@ -149,7 +149,10 @@ async fn folder_key(
     // Open beneath the dataset root and read what the page cache holds right here, as nginx
     // does; only a read that would wait for the disk moves to the blocking pool.
     let open = match open_folder_key(state, index, root, raw_key, headers)? {
-        OpenedKey::NotModified(answer) => return Ok(answer),
+        OpenedKey::NotModified(open) => {
+            let head = FileHead::not_modified(&open.etag, is_metadata(raw_key));
+            return Ok(head.response(Body::empty()));
+        }
         OpenedKey::File(open) => open,
     };
     let len = open.len as usize;
