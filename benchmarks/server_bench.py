@@ -259,31 +259,54 @@ def median_run(runs):
     return sorted(runs, key=lambda r: r["rps"])[len(runs) // 2]
 
 
-def set_affinity(pids, cpus):
-    """Runs every thread of `pids` on `cpus` from now on (threads started later inherit it)."""
+def thread_ids(pids):
+    """The threads of `pids` now (none of a process that has gone)."""
+    tids = []
     for pid in pids:
-        for tid in os.listdir(f"/proc/{pid}/task"):
-            try:
-                os.sched_setaffinity(int(tid), cpus)
-            except (ProcessLookupError, FileNotFoundError):
-                pass
+        try:
+            tids += [int(t) for t in os.listdir(f"/proc/{pid}/task")]
+        except OSError:
+            pass
+    return tids
+
+
+def pin(tids, cpus):
+    """Runs each thread in `tids` on `cpus`; returns each one's mask before, to restore."""
+    before = {}
+    for tid in tids:
+        try:
+            before[tid] = os.sched_getaffinity(tid)
+            os.sched_setaffinity(tid, cpus)
+        except OSError:
+            pass
+    return before
+
+
+def unpin(before):
+    """Gives each thread its mask back (`pin`'s answer); threads gone are skipped."""
+    for tid, cpus in before.items():
+        try:
+            os.sched_setaffinity(tid, cpus)
+        except OSError:
+            pass
 
 
 def pinned_load(b, c, seconds, server_pids):
     """A chunk load with the server's threads on the last CPU and the client on the first, so
-    that both servers run where the other one did: left to the scheduler, a server's thread
-    sometimes shares the client's CPU (its wake-ups then cost less, and the two run one after
-    the other) and sometimes not, and at 1 connection that placement, not the server's work,
-    moves CPU time per request by several µs (docs/benchmarks.md § Server)."""
+    that both servers run where the other one did. Left to the scheduler, at 1 connection the
+    two servers do not run alike beside the client, and CPU time per request moves by several
+    µs with that alone (docs/benchmarks.md § Server): pinned apart, they cost the same. Threads
+    the server starts meanwhile inherit the pinned mask from the thread that starts them, and
+    keep it."""
     every = os.sched_getaffinity(0)
-    first, last = min(every), max(every)
-    set_affinity(server_pids, {last})
-    os.sched_setaffinity(0, {first})
+    before = {}
     try:
+        before = pin(thread_ids(server_pids), {max(every)})
+        os.sched_setaffinity(0, {min(every)})
         return chunk_load(b, c, seconds)
     finally:
         os.sched_setaffinity(0, every)
-        set_affinity(server_pids, every)
+        unpin(before)
 
 
 def loads(bases, seconds, repeat, pids):

@@ -89,7 +89,7 @@ impl App {
 struct Head {
     /// The method.
     method: Method,
-    /// The request target as sent: path and query, still percent-encoded (visible ASCII, as
+    /// The request target as sent: path and query, still percent-encoded (UTF-8, as
     /// `httparse` checks).
     target: Bytes,
     /// HTTP/1.0 or HTTP/1.1.
@@ -324,8 +324,10 @@ impl Span {
 }
 
 /// What a connection keeps from one request head to the next, so that parsing one allocates
-/// nothing: the header map of the last request the direct path answered (emptied), and where
-/// the fields lie in the head being parsed.
+/// nothing in the usual case (a request of standard header names after one the direct path
+/// answered): the header map of that request (emptied), and where the fields lie in the head
+/// being parsed. A request the router answers takes the map with it, and a name `http` does
+/// not know is copied.
 #[derive(Default)]
 struct Scratch {
     /// The next head's header fields go here.
@@ -359,18 +361,20 @@ fn parse_head(buf: &mut BytesMut, scratch: &mut Scratch) -> Result<Option<Head>,
         _ => Version::HTTP_11,
     };
     // Where the target and each field lie, to take them from the head once it is split off.
-    let target = Span::of(request.path.unwrap_or_default().as_bytes(), buf);
+    let read = &buf[..len];
+    let target = Span::of(request.path.unwrap_or_default().as_bytes(), read);
     let spans = &mut scratch.spans;
     spans.clear();
     for field in request.headers.iter() {
         spans.push((
-            Span::of(field.name.as_bytes(), buf),
-            Span::of(field.value, buf),
+            Span::of(field.name.as_bytes(), read),
+            Span::of(field.value, read),
         ));
     }
     let head = buf.split_to(len).freeze();
     let fields = &mut scratch.fields;
     fields.clear();
+    fields.reserve(spans.len());
     for (name, value) in spans.iter() {
         let name = HeaderName::from_bytes(&head[name.at..name.at + name.len])
             .map_err(|_| bad("malformed header field name\n"))?;
@@ -716,6 +720,30 @@ mod tests {
                 .unwrap()
                 .is_none()
         );
+    }
+
+    #[test]
+    fn a_connections_next_head_keeps_none_of_the_last_ones_fields() {
+        let mut scratch = Scratch::default();
+        let mut buf = BytesMut::from(
+            &b"GET /d/0/c/0 HTTP/1.1\r\nRange: bytes=0-9\r\nX-A: 1\r\nIf-None-Match: \"t\"\r\n\r\n"
+                [..],
+        );
+        let first = parse_head(&mut buf, &mut scratch).unwrap().unwrap();
+        assert_eq!(first.headers.len(), 3);
+        // Handed back as the direct path hands it back.
+        scratch.fields = first.headers;
+        scratch.fields.clear();
+        buf.extend_from_slice(b"GET /d/0/c/1 HTTP/1.1\r\nHost: a\r\nX-E:\r\nX-F:   \r\n\r\n");
+        let second = parse_head(&mut buf, &mut scratch).unwrap().unwrap();
+        assert_eq!(second.target(), "/d/0/c/1");
+        let fields: Vec<_> = second
+            .headers
+            .iter()
+            .map(|(n, v)| (n.as_str(), v.to_str().unwrap()))
+            .collect();
+        assert_eq!(fields, [("host", "a"), ("x-e", ""), ("x-f", "")]);
+        assert!(buf.is_empty());
     }
 
     #[test]

@@ -381,6 +381,53 @@ fn other_requests_reach_the_router_on_the_same_connection() {
 }
 
 #[test]
+fn pipelined_chunk_requests_keep_none_of_the_last_ones_fields() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = served_store(dir.path());
+    let etag = exchange(&served, "GET", "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n")
+        .field("etag")
+        .unwrap()
+        .to_string();
+    let (mut stream, mut reader) = connect(&served);
+    // All answered directly, on one connection, each with the fields of its own request only:
+    // a part, the whole, a revalidation, the whole again.
+    let requests = format!(
+        "GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nRange: bytes=2-5\r\n\r\n\
+         GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n\
+         GET /cells/0/c/0/0/0/0 HTTP/1.1\r\nIf-None-Match: {etag}\r\n\r\n\
+         GET /cells/0/c/0/0/0/0 HTTP/1.1\r\n\r\n"
+    );
+    stream.write_all(requests.as_bytes()).unwrap();
+    let part = read_reply(&mut reader, "GET");
+    assert_eq!((part.status, part.body.as_slice()), (206, &CHUNK[2..6]));
+    let names: Vec<_> = part.fields.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(
+        names[..7],
+        [
+            "etag",
+            "cache-control",
+            "accept-ranges",
+            "content-type",
+            "content-range",
+            "content-length",
+            "date"
+        ]
+    );
+    assert_eq!(
+        part.field("content-range"),
+        Some(format!("bytes 2-5/{}", CHUNK.len()).as_str())
+    );
+    let whole = read_reply(&mut reader, "GET");
+    assert_eq!((whole.status, whole.body.as_slice()), (200, CHUNK));
+    assert_eq!(whole.field("content-range"), None);
+    let revalidated = read_reply(&mut reader, "GET");
+    assert_eq!((revalidated.status, revalidated.body.len()), (304, 0));
+    let again = read_reply(&mut reader, "GET");
+    assert_eq!((again.status, again.body.as_slice()), (200, CHUNK));
+    assert_eq!(again.field("etag"), Some(etag.as_str()));
+}
+
+#[test]
 fn connections_close_when_asked_and_after_http_1_0() {
     let dir = tempfile::tempdir().unwrap();
     let served = served_store(dir.path());
