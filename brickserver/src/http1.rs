@@ -134,14 +134,24 @@ pub(crate) async fn connection(
     let mut buf = BytesMut::with_capacity(8 << 10);
     let mut out = Vec::with_capacity(1 << 10);
     let mut scratch = Scratch::default();
+    // The header timeout's timer and the wait for shutdown, made once per connection: a new
+    // timer and a new wait on the shared channel for every request would each be registered
+    // and removed again per request; the timer is moved on instead (which, to a later
+    // deadline, touches no timer wheel).
+    let mut timer = std::pin::pin!(tokio::time::sleep(header_timeout));
+    let stopping = shutdown.clone();
+    let mut stopped = std::pin::pin!(async move {
+        // A closed channel (the server gone) stops the connection as well.
+        let _ = shutdown.changed().await;
+    });
     loop {
-        let step = read_head(
-            &mut stream,
-            &mut buf,
-            &mut scratch,
-            header_timeout,
-            &mut shutdown,
-        );
+        let waits = Waits {
+            timeout: header_timeout,
+            timer: timer.as_mut(),
+            stopping: &stopping,
+            stopped: stopped.as_mut(),
+        };
+        let step = read_head(&mut stream, &mut buf, &mut scratch, waits);
         let head = match step.await? {
             Step::Head(head) => head,
             Step::Close => return Ok(()),
@@ -162,7 +172,7 @@ pub(crate) async fn connection(
             }
         };
         let started = Instant::now();
-        let keep_alive = keeps_alive(&head) && !*shutdown.borrow();
+        let keep_alive = keeps_alive(&head) && !*stopping.borrow();
         let body = read_body(&mut stream, &mut buf, head.body_len).await?;
         let direct = (head.body_len == 0)
             .then(|| {
@@ -249,16 +259,34 @@ async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<
     }
 }
 
-/// Reads until `buf` holds a complete request head, waiting at most `timeout` (with
-/// [`parse_head`]).
-async fn read_head(
+/// What reading a request head waits for besides the client: the header timeout, and the
+/// server shutting down.
+struct Waits<'a, S> {
+    /// How long a head may take, from the start of [`read_head`].
+    timeout: Duration,
+    /// The connection's timer for it.
+    timer: Pin<&'a mut tokio::time::Sleep>,
+    /// Whether the server is shutting down.
+    stopping: &'a watch::Receiver<bool>,
+    /// The connection's wait for the server to start shutting down.
+    stopped: Pin<&'a mut S>,
+}
+
+/// Reads until `buf` holds a complete request head (with [`parse_head`]), waiting at most
+/// `waits.timeout`; closes instead when the server shuts down while no request has begun.
+async fn read_head<S: Future<Output = ()>>(
     stream: &mut TcpStream,
     buf: &mut BytesMut,
     scratch: &mut Scratch,
-    timeout: Duration,
-    shutdown: &mut watch::Receiver<bool>,
+    waits: Waits<'_, S>,
 ) -> io::Result<Step> {
-    let deadline = tokio::time::Instant::now() + timeout;
+    let Waits {
+        timeout,
+        mut timer,
+        stopping,
+        mut stopped,
+    } = waits;
+    timer.as_mut().reset(tokio::time::Instant::now() + timeout);
     loop {
         if !buf.is_empty() {
             match parse_head(buf, scratch) {
@@ -273,7 +301,7 @@ async fn read_head(
                 Err((status, why)) => return Ok(Step::Refuse(status, why)),
             }
         }
-        if buf.is_empty() && *shutdown.borrow() {
+        if buf.is_empty() && *stopping.borrow() {
             return Ok(Step::Close);
         }
         buf.reserve(8 << 10);
@@ -283,8 +311,8 @@ async fn read_head(
                     return Ok(Step::Close);
                 }
             }
-            () = tokio::time::sleep_until(deadline) => return Ok(Step::Close),
-            _ = shutdown.changed(), if buf.is_empty() => return Ok(Step::Close),
+            () = timer.as_mut() => return Ok(Step::Close),
+            () = stopped.as_mut(), if buf.is_empty() => return Ok(Step::Close),
         }
     }
 }
