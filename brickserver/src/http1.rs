@@ -177,9 +177,11 @@ pub(crate) async fn connection(
         let direct = (head.body_len == 0)
             .then(|| {
                 app.chunks
-                    .answer(&head.method, head.target(), &head.headers)
+                    .answer(&head.method, head.target(), &head.headers, started)
             })
             .flatten();
+        // Whether the answer waits for the disk (then the clock is read again for its date).
+        let waits = direct.as_ref().is_some_and(|answer| !answer.cached);
         let direct = match direct {
             Some(answer) if !answer.cached => read_into_page_cache(answer, &app.metrics).await,
             direct => direct,
@@ -190,10 +192,20 @@ pub(crate) async fn connection(
             let status = file_head.status();
             // With the CORS fields the router's layer adds to every answer.
             let cors = app.chunks.cors();
-            write_head(&mut out, status, head.version, keep_alive, cors, |out| {
-                file_head.fields(|name, value| write_field(out, name.as_str(), value.as_bytes()));
-                false
-            });
+            let now = if waits { Instant::now() } else { started };
+            write_head(
+                &mut out,
+                status,
+                head.version,
+                keep_alive,
+                cors,
+                now,
+                |out| {
+                    file_head
+                        .fields(|name, value| write_field(out, name.as_str(), value.as_bytes()));
+                    false
+                },
+            );
             let sent = match answer.body() {
                 Some((start, end)) if head.method != Method::HEAD => {
                     // The head waits for the file's first bytes (unless there are none).
@@ -485,15 +497,16 @@ fn to_request(head: Head, body: Body) -> Result<Request<Body>, &'static str> {
 }
 
 /// Appends a head to `out`: the status line, the header fields `fields` writes (it says
-/// whether they include a `Date`), a `Date` if not, the `Connection` field the client needs
-/// to know whether the connection stays open, the fields `extra` (each ending in CRLF) and
-/// the blank line.
+/// whether they include a `Date`), a `Date` (of `now`) if not, the `Connection` field the
+/// client needs to know whether the connection stays open, the fields `extra` (each ending in
+/// CRLF) and the blank line.
 fn write_head(
     out: &mut Vec<u8>,
     status: StatusCode,
     version: Version,
     keep_alive: bool,
     extra: &[u8],
+    now: Instant,
     fields: impl FnOnce(&mut Vec<u8>) -> bool,
 ) {
     out.extend_from_slice(b"HTTP/1.1 ");
@@ -502,7 +515,7 @@ fn write_head(
     out.extend_from_slice(status.canonical_reason().unwrap_or("").as_bytes());
     out.extend_from_slice(b"\r\n");
     if !fields(out) {
-        write_field(out, "date", &http_date());
+        write_field(out, "date", &http_date(now));
     }
     if !keep_alive {
         out.extend_from_slice(b"connection: close\r\n");
@@ -559,12 +572,20 @@ async fn write_response(
         }
     }
     out.clear();
-    write_head(out, status, version, keep_alive, b"", |out| {
-        for (name, value) in response.headers() {
-            write_field(out, name.as_str(), value.as_bytes());
-        }
-        response.headers().contains_key(header::DATE)
-    });
+    write_head(
+        out,
+        status,
+        version,
+        keep_alive,
+        b"",
+        Instant::now(),
+        |out| {
+            for (name, value) in response.headers() {
+                write_field(out, name.as_str(), value.as_bytes());
+            }
+            response.headers().contains_key(header::DATE)
+        },
+    );
     if no_body {
         stream.write_all(out).await?;
         return Ok(keep_alive);
@@ -685,24 +706,31 @@ async fn send_file(
     Ok(())
 }
 
-/// Today's `Date` field value, formatted once a second per thread.
-fn http_date() -> [u8; 29] {
+/// The `Date` field value at `now` (a moment just past: the request's start), formatted
+/// once a second per thread: until the second it was formatted in ends, by the monotonic
+/// clock, it is reused without reading the clock again.
+fn http_date(now: Instant) -> [u8; 29] {
     thread_local! {
-        static DATE: std::cell::Cell<(u64, [u8; 29])> = const { std::cell::Cell::new((0, [0; 29])) };
+        static DATE: std::cell::Cell<Option<(Instant, [u8; 29])>> = const { std::cell::Cell::new(None) };
     }
-    let now = SystemTime::now();
-    let second = now
-        .duration_since(SystemTime::UNIX_EPOCH)
-        .map_or(0, |d| d.as_secs());
     DATE.with(|cell| {
-        let (at, text) = cell.get();
-        if at == second && text[0] != 0 {
+        if let Some((until, text)) = cell.get()
+            && now < until
+        {
             return text;
         }
+        let wall = SystemTime::now();
+        let into_second = wall
+            .duration_since(SystemTime::UNIX_EPOCH)
+            .map_or(Duration::ZERO, |d| {
+                Duration::from_nanos(d.subsec_nanos().into())
+            });
+        // `now` is no later than the clock read just now, so `until` is no later than the end
+        // of that second: a cached date is never one second behind.
+        let until = now + Duration::from_secs(1).saturating_sub(into_second);
         let mut text = [0u8; 29];
-        let formatted = httpdate::fmt_http_date(now);
-        text.copy_from_slice(&formatted.as_bytes()[..29]);
-        cell.set((second, text));
+        text.copy_from_slice(&httpdate::fmt_http_date(wall).as_bytes()[..29]);
+        cell.set(Some((until, text)));
         text
     })
 }
@@ -821,7 +849,7 @@ mod tests {
 
     #[test]
     fn the_date_is_an_http_date_of_now() {
-        let text = http_date();
+        let text = http_date(Instant::now());
         let text = std::str::from_utf8(&text).unwrap();
         let parsed = httpdate::parse_http_date(text).unwrap();
         let age = SystemTime::now().duration_since(parsed).unwrap();

@@ -3,19 +3,75 @@
 //! `hits / (hits + misses)`), cached bytes, and open and refused connections.
 
 use std::sync::Arc;
-use std::time::Instant;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
 
 use axum::body::{Body, HttpBody};
 use axum::extract::{Request, State};
 use axum::http::{Response, StatusCode, header};
 use axum::middleware::Next;
-use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::encoding::text::encode;
+use prometheus_client::encoding::{EncodeLabelSet, EncodeMetric, MetricEncoder, NoLabelSet};
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
-use prometheus_client::metrics::histogram::Histogram;
+use prometheus_client::metrics::{MetricType, TypedMetric};
 use prometheus_client::registry::Registry;
+
+/// The upper bounds of the request duration histogram's buckets, in seconds (and `+Inf`).
+const LATENCY_BOUNDS: [f64; 12] = [
+    0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0,
+];
+
+/// The request duration histogram: every answer is recorded in it, from every thread that
+/// serves connections, so it counts with atomic adds, not under a lock (as
+/// `prometheus_client`'s `Histogram` does, one lock for all threads); it is written as a
+/// classic Prometheus histogram.
+#[derive(Clone, Debug, Default)]
+struct LatencyHistogram(Arc<LatencyCounts>);
+
+/// The counts of a [`LatencyHistogram`].
+#[derive(Debug, Default)]
+struct LatencyCounts {
+    /// Observations by bucket: one per bound of [`LATENCY_BOUNDS`], then `+Inf`.
+    buckets: [AtomicU64; LATENCY_BOUNDS.len() + 1],
+    /// The sum of the observations, in nanoseconds.
+    sum_nanos: AtomicU64,
+}
+
+impl LatencyHistogram {
+    /// Records one request's duration.
+    fn observe(&self, took: Duration) {
+        let seconds = took.as_secs_f64();
+        let bucket = LATENCY_BOUNDS
+            .iter()
+            .position(|bound| seconds <= *bound)
+            .unwrap_or(LATENCY_BOUNDS.len());
+        self.0.buckets[bucket].fetch_add(1, Ordering::Relaxed);
+        let nanos = u64::try_from(took.as_nanos()).unwrap_or(u64::MAX);
+        self.0.sum_nanos.fetch_add(nanos, Ordering::Relaxed);
+    }
+}
+
+impl TypedMetric for LatencyHistogram {
+    const TYPE: MetricType = MetricType::Histogram;
+}
+
+impl EncodeMetric for LatencyHistogram {
+    fn encode(&self, mut encoder: MetricEncoder) -> std::fmt::Result {
+        let bounds = LATENCY_BOUNDS.iter().copied().chain([f64::INFINITY]);
+        let counts = self.0.buckets.iter().map(|n| n.load(Ordering::Relaxed));
+        let buckets: Vec<(f64, u64)> = bounds.zip(counts).collect();
+        // The count is the buckets' sum, so that the two agree in every scrape.
+        let count = buckets.iter().map(|(_, n)| n).sum();
+        let sum = self.0.sum_nanos.load(Ordering::Relaxed) as f64 / 1e9;
+        encoder.encode_histogram::<NoLabelSet>(sum, count, &buckets, None)
+    }
+
+    fn metric_type(&self) -> MetricType {
+        Self::TYPE
+    }
+}
 
 /// Label of a request counter: the response's status class (`2xx`, `3xx`, `4xx`, `5xx`).
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
@@ -28,7 +84,7 @@ pub(crate) struct StatusClass {
 pub struct Metrics {
     registry: Registry,
     bytes: Counter,
-    latency: Histogram,
+    latency: LatencyHistogram,
     /// The request counters of classes 1xx..5xx, resolved once (no label lookup per request).
     by_class: [Counter; 5],
     /// Cache lookups that found their entry.
@@ -51,9 +107,7 @@ impl Default for Metrics {
         let mut registry = Registry::default();
         let requests = Family::<StatusClass, Counter>::default();
         let bytes = Counter::default();
-        let latency = Histogram::new([
-            0.0001, 0.00025, 0.0005, 0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 1.0,
-        ]);
+        let latency = LatencyHistogram::default();
         registry.register(
             "brickserver_requests",
             "Requests answered, by status class",
@@ -128,7 +182,7 @@ impl Metrics {
     /// Records an answer with `status` and `body_bytes` body bytes (`None`: no body sent)
     /// to a request that arrived at `started`.
     pub(crate) fn record(&self, status: StatusCode, body_bytes: Option<u64>, started: Instant) {
-        self.latency.observe(started.elapsed().as_secs_f64());
+        self.latency.observe(started.elapsed());
         let class = (status.as_u16() / 100).clamp(1, 5) as usize - 1;
         self.by_class[class].inc();
         if let Some(len) = body_bytes {
@@ -164,4 +218,51 @@ pub(crate) async fn track(
         .filter(|_| !head);
     metrics.record(response.status(), sent, started);
     response
+}
+
+#[cfg(test)]
+mod tests {
+    use prometheus_client::metrics::histogram::Histogram;
+
+    use super::*;
+
+    /// `metric`'s text under the name `latency`.
+    fn text_of(metric: impl prometheus_client::registry::Metric) -> String {
+        let mut registry = Registry::default();
+        registry.register("latency", "Durations", metric);
+        let mut out = String::new();
+        encode(&mut out, &registry).unwrap();
+        out
+    }
+
+    #[test]
+    fn the_latency_histogram_is_written_as_prometheus_client_writes_its_own() {
+        let took = [
+            Duration::from_micros(60),
+            Duration::from_micros(100),
+            Duration::from_millis(2),
+            Duration::from_millis(250),
+            Duration::from_secs(2),
+        ];
+        let ours = LatencyHistogram::default();
+        let theirs = Histogram::new(LATENCY_BOUNDS);
+        for t in took {
+            ours.observe(t);
+            theirs.observe(t.as_secs_f64());
+        }
+        let ours = text_of(ours);
+        // The same lines but for the sum, which theirs adds up in floating point.
+        let without_sum = |text: &str| {
+            text.lines()
+                .filter(|l| !l.starts_with("latency_sum"))
+                .map(str::to_string)
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(without_sum(&ours), without_sum(&text_of(theirs)));
+        assert!(ours.contains("latency_sum 2.25216\n"), "{ours}");
+        assert!(ours.contains("latency_count 5\n"), "{ours}");
+        assert!(ours.contains("latency_bucket{le=\"0.0001\"} 2\n"), "{ours}");
+        assert!(ours.contains("latency_bucket{le=\"0.25\"} 4\n"), "{ours}");
+        assert!(ours.contains("latency_bucket{le=\"+Inf\"} 5\n"), "{ours}");
+    }
 }

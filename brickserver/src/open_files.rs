@@ -144,11 +144,12 @@ impl OpenFiles {
         }
     }
 
-    /// Chunk `raw_key` of dataset `index`, if it is held open and not held too long (one held
-    /// too long is let go). Whether it is unchanged is [`OpenFile::unchanged`]'s to say.
-    pub(crate) fn get(&self, index: usize, raw_key: &str) -> Option<Arc<OpenFile>> {
+    /// Chunk `raw_key` of dataset `index`, if it is held open and was not held too long at
+    /// `now` (one held too long is let go). Whether it is unchanged is
+    /// [`OpenFile::unchanged`]'s to say.
+    pub(crate) fn get(&self, index: usize, raw_key: &str, now: Instant) -> Option<Arc<OpenFile>> {
         let open = self.files.get(&BorrowedKey(index, raw_key))?;
-        if open.opened.elapsed() < self.max_age {
+        if now.saturating_duration_since(open.opened) < self.max_age {
             return Some(open);
         }
         self.let_go(index, raw_key, &open);
@@ -256,11 +257,17 @@ mod tests {
         files.insert(3, "0/c/0/1/2/3", a);
         files.insert(2, "0/c/0/1/2/3", b);
         files.insert(3, "0/c/0/1/2/5", old);
-        assert_eq!(files.get(3, "0/c/0/1/2/3").map(|f| f.len), Some(5));
-        assert_eq!(files.get(2, "0/c/0/1/2/3").map(|f| f.len), Some(6));
-        assert!(files.get(3, "0/c/0/1/2/4").is_none());
+        assert_eq!(
+            files.get(3, "0/c/0/1/2/3", Instant::now()).map(|f| f.len),
+            Some(5)
+        );
+        assert_eq!(
+            files.get(2, "0/c/0/1/2/3", Instant::now()).map(|f| f.len),
+            Some(6)
+        );
+        assert!(files.get(3, "0/c/0/1/2/4", Instant::now()).is_none());
         // Too old: let go.
-        assert!(files.get(3, "0/c/0/1/2/5").is_none());
+        assert!(files.get(3, "0/c/0/1/2/5", Instant::now()).is_none());
         assert_eq!(files.files.len(), 2);
     }
 
@@ -272,7 +279,7 @@ mod tests {
         let (deleted, c) = held(b"abcde", Duration::ZERO);
         for (key, open) in [("a", &a), ("b", &b), ("c", &c)] {
             files.insert(0, key, open.clone());
-            assert!(files.get(0, key).is_some() && open.unchanged());
+            assert!(files.get(0, key, Instant::now()).is_some() && open.unchanged());
         }
         grown.as_file().write_all(b"f").unwrap();
         // The same length, a later modification time.
@@ -292,7 +299,7 @@ mod tests {
         files.let_go(0, "a", &a);
         assert!(
             files
-                .get(0, "a")
+                .get(0, "a", Instant::now())
                 .is_some_and(|open| Arc::ptr_eq(&open, &d) && open.unchanged())
         );
     }

@@ -6,6 +6,7 @@
 //! open, `crate::open_files`) with its `304`.
 
 use std::sync::Arc;
+use std::time::Instant;
 
 use axum::http::{HeaderMap, Method, header};
 use residency_schemas::server::bearer_token_matches;
@@ -28,8 +29,8 @@ pub(crate) enum OpenedKey {
     File(Arc<OpenFile>),
 }
 
-/// Key `raw_key` of dataset `index` beneath its folder `root`: a chunk from the files held
-/// open (`AppState::open_files`) while it is unchanged, else opened (and a chunk held open);
+/// Key `raw_key` of dataset `index` beneath its folder `root`, for a request that began at
+/// `now`: a chunk from the files held open (`AppState::open_files`) while it is unchanged, else opened (and a chunk held open);
 /// `304` when the request's `If-None-Match` matches its `ETag`. A revalidation that matches
 /// the `ETag` of a file held open is answered without a look at the file, as nginx answers
 /// within `open_file_cache_valid`. Metadata documents, and keys spelt with percent-escapes
@@ -43,13 +44,14 @@ pub(crate) fn open_folder_key(
     root: &RootDir,
     raw_key: &str,
     headers: &HeaderMap,
+    now: Instant,
 ) -> Result<OpenedKey, KeyError> {
     let held = state
         .open_files
         .as_deref()
         .filter(|_| !is_metadata(raw_key) && !raw_key.contains('%'));
     if let Some(files) = held
-        && let Some(open) = files.get(index, raw_key)
+        && let Some(open) = files.get(index, raw_key, now)
         && open.folder == root.identity()
     {
         if if_none_match(headers, &open.etag) {
@@ -143,6 +145,7 @@ impl FolderChunks {
         method: &Method,
         target: &str,
         headers: &HeaderMap,
+        now: Instant,
     ) -> Option<ChunkAnswer> {
         if !(*method == Method::GET || *method == Method::HEAD) {
             return None;
@@ -166,11 +169,11 @@ impl FolderChunks {
         }
         let state = &*self.state;
         let index = state.index_of(name)?;
-        let served = state.served(index);
+        let served = state.served_at(index, now);
         let Keys::Folder(root) = &served.store.keys else {
             return None;
         };
-        let open = match open_folder_key(state, index, root, raw_key, headers).ok()? {
+        let open = match open_folder_key(state, index, root, raw_key, headers, now).ok()? {
             OpenedKey::NotModified(open) => {
                 return Some(ChunkAnswer {
                     open,

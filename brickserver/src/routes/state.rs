@@ -312,8 +312,15 @@ impl AppState {
     /// is due and another folder has its path, the new folder is opened first, and the files
     /// held open and the bricks cached of the old one are let go.
     pub(crate) fn served(&self, i: usize) -> arc_swap::Guard<Arc<Served>> {
+        self.served_at(i, Instant::now())
+    }
+
+    /// Dataset `i` as served at `now` (a request's start, so that one reading of the clock
+    /// serves all of a request's checks), as [`AppState::served`].
+    pub(crate) fn served_at(&self, i: usize, now: Instant) -> arc_swap::Guard<Arc<Served>> {
         let current = &self.served[i];
-        let now = u64::try_from(self.started.elapsed().as_millis()).unwrap_or(u64::MAX - 1);
+        let since = now.saturating_duration_since(self.started);
+        let now = u64::try_from(since.as_millis()).unwrap_or(u64::MAX - 1);
         if current.check_due(now) {
             self.reopen_if_replaced(i);
         }

@@ -148,7 +148,7 @@ async fn folder_key(
 ) -> Result<Response<Body>, KeyError> {
     // Open beneath the dataset root and read what the page cache holds right here, as nginx
     // does; only a read that would wait for the disk moves to the blocking pool.
-    let open = match open_folder_key(state, index, root, raw_key, headers)? {
+    let open = match open_folder_key(state, index, root, raw_key, headers, Instant::now())? {
         OpenedKey::NotModified(open) => {
             let head = FileHead::not_modified(&open.etag, is_metadata(raw_key));
             return Ok(head.response(Body::empty()));
