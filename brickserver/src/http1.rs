@@ -180,11 +180,14 @@ pub(crate) async fn connection(
                     .answer(&head.method, head.target(), &head.headers, started)
             })
             .flatten();
-        // Whether the answer waits for the disk (then the clock is read again for its date).
-        let waits = direct.as_ref().is_some_and(|answer| !answer.cached);
-        let direct = match direct {
-            Some(answer) if !answer.cached => read_into_page_cache(answer, &app.metrics).await,
-            direct => direct,
+        // The answer's moment for its `Date`: the request's start, unless it waited for the
+        // disk.
+        let (direct, now) = match direct {
+            Some(answer) if !answer.cached => (
+                read_into_page_cache(answer, &app.metrics).await,
+                Instant::now(),
+            ),
+            direct => (direct, started),
         };
         let keep_alive = if let Some(answer) = direct {
             out.clear();
@@ -192,7 +195,6 @@ pub(crate) async fn connection(
             let status = file_head.status();
             // With the CORS fields the router's layer adds to every answer.
             let cors = app.chunks.cors();
-            let now = if waits { Instant::now() } else { started };
             write_head(
                 &mut out,
                 status,
@@ -357,9 +359,9 @@ impl Span {
         }
     }
 
-    /// This part of `head`, shared (nothing is copied).
-    fn of_shared(self, head: &Bytes) -> Bytes {
-        head.slice(self.at..self.at + self.len)
+    /// Its bytes' positions.
+    fn range(self) -> std::ops::Range<usize> {
+        self.at..self.at + self.len
     }
 }
 
@@ -416,9 +418,9 @@ fn parse_head(buf: &mut BytesMut, scratch: &mut Scratch) -> Result<Option<Head>,
     fields.clear();
     fields.reserve(spans.len());
     for (name, value) in spans.iter() {
-        let name = HeaderName::from_bytes(&head[name.at..name.at + name.len])
+        let name = HeaderName::from_bytes(&head[name.range()])
             .map_err(|_| bad("malformed header field name\n"))?;
-        let value = HeaderValue::from_maybe_shared(value.of_shared(&head))
+        let value = HeaderValue::from_maybe_shared(head.slice(value.range()))
             .map_err(|_| bad("malformed header field\n"))?;
         fields.append(name, value);
     }
@@ -444,7 +446,7 @@ fn parse_head(buf: &mut BytesMut, scratch: &mut Scratch) -> Result<Option<Head>,
     }
     Ok(Some(Head {
         method,
-        target: target.of_shared(&head),
+        target: head.slice(target.range()),
         version,
         headers: std::mem::take(fields),
         body_len,

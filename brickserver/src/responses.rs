@@ -1,6 +1,7 @@
 //! Answers for stored files: the bytes verbatim, with `ETag` / `If-None-Match`, single
 //! `Range` requests, `Cache-Control` and `Content-Type` suited to Zarr keys.
 
+use std::io::Write as _;
 use std::time::UNIX_EPOCH;
 
 use axum::body::{Body, Bytes};
@@ -57,6 +58,15 @@ pub fn parse_range(value: &str, len: u64) -> RangeRequest {
     }
 }
 
+/// The range a request's `Range` field asks of a file of `len` bytes ([`parse_range`];
+/// [`RangeRequest::Whole`] without one).
+pub(crate) fn range_of(headers: &HeaderMap, len: u64) -> RangeRequest {
+    headers
+        .get(header::RANGE)
+        .and_then(|v| v.to_str().ok())
+        .map_or(RangeRequest::Whole, |v| parse_range(v, len))
+}
+
 /// The entity tag of a stored file: its length and modification time.
 pub(crate) fn etag_of(meta: &std::fs::Metadata) -> String {
     let mtime = meta
@@ -103,10 +113,7 @@ pub(crate) fn file_response(
     headers: &HeaderMap,
 ) -> Response<Body> {
     let len = bytes.len() as u64;
-    let range = headers
-        .get(header::RANGE)
-        .and_then(|v| v.to_str().ok())
-        .map_or(RangeRequest::Whole, |v| parse_range(v, len));
+    let range = range_of(headers, len);
     let part = match range {
         RangeRequest::Part(start, end) => bytes.slice(start as usize..end as usize),
         RangeRequest::Whole => bytes,
@@ -213,26 +220,24 @@ impl<'a> FileHead<'a> {
         };
         field(header::ACCEPT_RANGES, FieldValue::Static("bytes"));
         field(header::CONTENT_TYPE, FieldValue::Static(content_type));
-        let mut text = Text::new();
+        // `Content-Range`, on the stack: at most `bytes A-B/C` of three 20-digit numbers.
+        let mut text = std::io::Cursor::new([0u8; 72]);
         let sent = match range {
             RangeRequest::Whole => len,
             RangeRequest::Part(start, end) => {
-                text.push(b"bytes ");
-                text.number(start);
-                text.push(b"-");
-                text.number(end - 1);
-                text.push(b"/");
-                text.number(len);
-                field(header::CONTENT_RANGE, FieldValue::Text(text.as_bytes()));
+                write!(text, "bytes {start}-{}/{len}", end - 1).expect("72 bytes suffice");
                 end - start
             }
             RangeRequest::Unsatisfiable => {
-                text.push(b"bytes */");
-                text.number(len);
-                field(header::CONTENT_RANGE, FieldValue::Text(text.as_bytes()));
+                write!(text, "bytes */{len}").expect("72 bytes suffice");
                 0
             }
         };
+        if range != RangeRequest::Whole {
+            let written = usize::try_from(text.position()).expect("at most 72");
+            let value = &text.get_ref()[..written];
+            field(header::CONTENT_RANGE, FieldValue::Text(value));
+        }
         let mut number = itoa::Buffer::new();
         field(
             header::CONTENT_LENGTH,
@@ -255,39 +260,6 @@ impl<'a> FileHead<'a> {
             headers.append(name, value);
         });
         response
-    }
-}
-
-/// Short text on the stack: a `Content-Range` value.
-struct Text {
-    bytes: [u8; 72],
-    len: usize,
-}
-
-impl Text {
-    /// No text yet.
-    fn new() -> Self {
-        Self {
-            bytes: [0; 72],
-            len: 0,
-        }
-    }
-
-    /// Appends `more` (the longest value written, `bytes A-B/C` with three 20-digit numbers,
-    /// is 68 bytes).
-    fn push(&mut self, more: &[u8]) {
-        self.bytes[self.len..self.len + more.len()].copy_from_slice(more);
-        self.len += more.len();
-    }
-
-    /// Appends `n` in decimal.
-    fn number(&mut self, n: u64) {
-        self.push(itoa::Buffer::new().format(n).as_bytes());
-    }
-
-    /// The text so far.
-    fn as_bytes(&self) -> &[u8] {
-        &self.bytes[..self.len]
     }
 }
 

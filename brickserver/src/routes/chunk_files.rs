@@ -15,7 +15,7 @@ use super::state::AppState;
 use crate::dataset_store::Keys;
 use crate::open_files::OpenFile;
 use crate::page_cache;
-use crate::responses::{FileHead, RangeRequest, if_none_match, is_metadata, parse_range};
+use crate::responses::{FileHead, RangeRequest, if_none_match, is_metadata, range_of};
 use crate::store_keys::{KeyError, RootDir};
 
 /// The paths under `/NAME/` that are the server's API, not Zarr keys.
@@ -183,10 +183,7 @@ impl FolderChunks {
             }
             OpenedKey::File(open) => open,
         };
-        let range = headers
-            .get(header::RANGE)
-            .and_then(|v| v.to_str().ok())
-            .map_or(RangeRequest::Whole, |v| parse_range(v, open.len));
+        let range = range_of(headers, open.len);
         let mut answer = ChunkAnswer {
             open,
             range: Some(range),
