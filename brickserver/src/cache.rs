@@ -20,8 +20,8 @@ pub(crate) enum CacheKey {
     Brick {
         /// Dataset index.
         dataset: usize,
-        /// The dataset's generation (how many times its folder was replaced whole) when the
-        /// batch began.
+        /// The generation of the dataset the batch's arrays read (how many times its folder
+        /// had been replaced whole).
         generation: u64,
         /// Level, channel and brick coordinates `z, y, x`.
         at: (u32, u32, [u64; 3]),

@@ -85,13 +85,13 @@ pub(super) async fn bricks(
     let Some(index) = state.index_of(&name) else {
         return no_dataset(&name);
     };
-    let generation = state.served(index).generation;
     let (list, encoding) = match parse_batch(query.as_deref().unwrap_or(""), &state.batch) {
         Ok(b) => b,
         Err(e) => return batch_error(&e),
     };
     let arrays = loaded(&state, index, |l| &l.arrays, load_arrays);
-    let arrays = match arrays.await {
+    // The generation of the dataset the arrays read: a batch caches their bricks under it.
+    let (generation, arrays) = match arrays.await {
         Ok(a) => a,
         Err(e) => return load_failed(&e),
     };
@@ -121,7 +121,7 @@ pub(super) async fn bricks(
 struct BatchCache {
     state: Arc<AppState>,
     dataset: usize,
-    /// The dataset's generation when the batch began.
+    /// The generation of the dataset its arrays read ([`super::state::Served::generation`]).
     generation: u64,
     raw: bool,
 }

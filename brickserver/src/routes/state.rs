@@ -143,8 +143,10 @@ pub(crate) struct Loaded {
     pub(crate) pyramid: LoadCell<Arc<ImagePyramid>>,
     /// The region index (`None`: the dataset has no region metadata).
     pub(crate) regions: LoadCell<Option<Arc<RegionIndex>>>,
-    /// The image arrays, for batched bricks.
-    pub(crate) arrays: LoadCell<Arc<ImageArrays>>,
+    /// The image arrays, for batched bricks, with the generation of the dataset as served
+    /// that they were loaded of ([`Served::generation`]): the bricks a batch caches are kept
+    /// under it.
+    pub(crate) arrays: LoadCell<(u64, Arc<ImageArrays>)>,
     /// What the listing says of the store (`None`: its metadata could not be read).
     pub(crate) summary: OnceLock<Option<Arc<StoreSummary>>>,
 }
@@ -414,7 +416,7 @@ fn pyramid_of(state: &AppState, i: usize, served: &Served) -> Result<Arc<ImagePy
     )
 }
 
-/// Loads dataset `i`'s image arrays, as `served` (see [`loaded`]).
+/// Loads dataset `i`'s image arrays, as `served`, with its generation (see [`loaded`]).
 ///
 /// # Errors
 /// [`LoadError`] when its pyramid cannot be opened.
@@ -422,9 +424,10 @@ pub(crate) fn load_arrays(
     state: &AppState,
     i: usize,
     served: &Served,
-) -> Result<Arc<ImageArrays>, LoadError> {
+) -> Result<(u64, Arc<ImageArrays>), LoadError> {
     let pyramid = pyramid_of(state, i, served)?;
-    Ok(Arc::new(ImageArrays::new(&served.store, pyramid)))
+    let arrays = Arc::new(ImageArrays::new(&served.store, pyramid));
+    Ok((served.generation, arrays))
 }
 
 /// Loads dataset `i`'s region index, as `served` (see [`loaded`]): `None` for a store
