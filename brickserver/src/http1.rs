@@ -144,9 +144,12 @@ pub(crate) async fn connection(
         // A closed channel (the server gone) stops the connection as well.
         let _ = shutdown.changed().await;
     });
+    // When the connection became ready for its next request: the header timeout counts from
+    // here (the moment the last answer was recorded, so the clock is not read again for it).
+    let mut ready = Instant::now();
     loop {
         let waits = Waits {
-            timeout: header_timeout,
+            deadline: ready + header_timeout,
             timer: timer.as_mut(),
             stopping: &stopping,
             stopped: stopped.as_mut(),
@@ -166,8 +169,8 @@ pub(crate) async fn connection(
                     false,
                 )
                 .await?;
-                app.metrics
-                    .record(status, Some(why.len() as u64), Instant::now());
+                let now = Instant::now();
+                app.metrics.record(status, Some(why.len() as u64), now, now);
                 return stream.shutdown().await;
             }
         };
@@ -220,7 +223,8 @@ pub(crate) async fn connection(
                     None
                 }
             };
-            app.metrics.record(status, sent, started);
+            ready = Instant::now();
+            app.metrics.record(status, sent, started, ready);
             scratch.fields = head.headers;
             scratch.fields.clear();
             keep_alive
@@ -236,7 +240,7 @@ pub(crate) async fn connection(
                 }
                 Err(why) => ((StatusCode::BAD_REQUEST, why).into_response(), false),
             };
-            write_response(
+            let keep_alive = write_response(
                 &mut stream,
                 &mut out,
                 response,
@@ -244,7 +248,9 @@ pub(crate) async fn connection(
                 version,
                 keep_alive,
             )
-            .await?
+            .await?;
+            ready = Instant::now();
+            keep_alive
         };
         if !keep_alive {
             return stream.shutdown().await;
@@ -276,8 +282,8 @@ async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<
 /// What reading a request head waits for besides the client: the header timeout, and the
 /// server shutting down.
 struct Waits<'a, S> {
-    /// How long a head may take, from the start of [`read_head`].
-    timeout: Duration,
+    /// When the head must be complete.
+    deadline: Instant,
     /// The connection's timer for it.
     timer: Pin<&'a mut tokio::time::Sleep>,
     /// Whether the server is shutting down.
@@ -286,8 +292,8 @@ struct Waits<'a, S> {
     stopped: Pin<&'a mut S>,
 }
 
-/// Reads until `buf` holds a complete request head (with [`parse_head`]), waiting at most
-/// `waits.timeout`; closes instead when the server shuts down while no request has begun.
+/// Reads until `buf` holds a complete request head (with [`parse_head`]), waiting until
+/// `waits.deadline` at most; closes instead when the server shuts down while no request has begun.
 async fn read_head<S: Future<Output = ()>>(
     stream: &mut TcpStream,
     buf: &mut BytesMut,
@@ -295,12 +301,12 @@ async fn read_head<S: Future<Output = ()>>(
     waits: Waits<'_, S>,
 ) -> io::Result<Step> {
     let Waits {
-        timeout,
+        deadline,
         mut timer,
         stopping,
         mut stopped,
     } = waits;
-    timer.as_mut().reset(tokio::time::Instant::now() + timeout);
+    timer.as_mut().reset(deadline.into());
     loop {
         if !buf.is_empty() {
             match parse_head(buf, scratch) {

@@ -145,19 +145,24 @@ pub fn shared_port_listeners(
 /// Serves the connections `listener` accepts until `stop` turns true (the connections close
 /// once their request in progress is answered; idle ones at once), then waits until every
 /// connection holding one of `permits` has closed, or 10 s.
+///
+/// The connections wait for the stop on a channel of this listener's own, passed on from
+/// `stop`: on [`serve_on_threads`]' runtimes, each thread's connections then look at a channel
+/// only their thread touches, and no lock is shared between threads at each request.
 async fn serve_listener(
     listener: TcpListener,
     app: App,
     limits: ConnectionLimits,
     metrics: Arc<Metrics>,
     permits: Arc<Semaphore>,
-    stop: watch::Receiver<bool>,
+    mut stop: watch::Receiver<bool>,
 ) {
-    let mut stopped = stop.clone();
+    let (stopping, connections_stop) = watch::channel(false);
     tokio::select! {
-        () = accept(listener, &app, limits, &metrics, &permits, &stop) => {},
-        _ = stopped.wait_for(|stopped| *stopped) => {},
+        () = accept(listener, &app, limits, &metrics, &permits, &connections_stop) => {},
+        _ = stop.wait_for(|stopped| *stopped) => {},
     }
+    let _ = stopping.send(true);
     drain(&permits, limits).await;
 }
 

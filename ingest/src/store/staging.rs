@@ -95,10 +95,6 @@ impl WritableStorageTraits for StagingStore {
     }
 }
 
-/// Flushes every file system holding `path` to disk (`syncfs`).
-///
-/// # Errors
-/// When `path` cannot be opened, or the system refuses to sync.
 /// Starts writing `file`'s pages to the disk without waiting (Linux `sync_file_range`), so
 /// the one sync at the end ([`sync_file_system`]) waits for little: the disk works while the
 /// conversion does. Only a hint; failures are left for that sync to report.
@@ -114,6 +110,10 @@ fn start_writeback(file: &std::fs::File) {
     let _ = file;
 }
 
+/// Flushes every file system holding `path` to disk (`syncfs`).
+///
+/// # Errors
+/// When `path` cannot be opened, or the system refuses to sync.
 pub(crate) fn sync_file_system(path: &Path) -> Result<(), StoreError> {
     use std::os::fd::AsRawFd;
     let dir = std::fs::File::open(path).map_err(|source| StoreError::OpenToSync {
