@@ -14,8 +14,8 @@ the same order, so the tools alternate; a row gives the median of the rounds, an
 it gets the stack pre-converted to a plain Zarr v3 array (that conversion is not timed).
 
 Beside each size, the limit probes of benchmarks/ingest_limits.py (reading the input, encoding
-level 0 with the same codec on all cores, writing the store's files, the pyramid's arithmetic
-alone) say how far ingest is from what the machine allows: ingest's fraction of the limit is the
+level 0 with the same codec on all cores, writing the store's files and syncing them to disk,
+the pyramid's arithmetic alone) say how far ingest is from what the machine allows: ingest's fraction of the limit is the
 slowest probe's time over ingest's wall time.
 
 With --flame, one more `ingest` run per size is recorded by `perf record` (DWARF call graphs)
@@ -164,6 +164,9 @@ def limits_line(probes, wall):
     """The limit probes of one size, and ingest's fraction of the limit at its median `wall`."""
     p = probes["probes"]
     parts = ", ".join(f"{name} {p[name]:.3f} s" for name in ("read", "encode", "write", "pyramid"))
+    if "write_unsynced" in probes:
+        parts = parts.replace(f"write {p['write']:.3f} s",
+                              f"write {p['write']:.3f} s (synced; {probes['write_unsynced']:.3f} s before the sync)")
     text = (f"Limit probes on {probes['cores']} cores ([ingest_limits.py](../../benchmarks/ingest_limits.py)): {parts}; "
             f"the limit is {probes['slowest']}, {probes['limit']:.3f} s (all four one after the other: {probes['serial']:.3f} s).")
     if wall:

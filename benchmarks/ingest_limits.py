@@ -10,7 +10,9 @@ probes, each timed alone, the input already in the page cache:
 - encode: level 0 cut into the store's chunks and compressed with the store's codec
   (blosc-lz4, clevel 5, byte shuffle), one chunk per task on every core;
 - write: the store's chunk files (every level, their stored bytes) written to a new folder on
-  every core;
+  every core, then the file system synced (`syncfs`), as ingest syncs its store before it
+  renames it into place: the time for the bytes to reach the disk, not only the page cache
+  (the result also gives the time before the sync, `write_unsynced`);
 - pyramid: the mean-of-2×2×2 levels computed from level 0 (numpy, z-slabs on every core).
 A perfectly overlapped pipeline takes as long as its slowest part: that is the limit, and
 ingest's fraction of it is limit / ingest's wall time. `ingest_bench.py` runs these beside each
@@ -19,6 +21,7 @@ conversion.
 
 import argparse
 import concurrent.futures
+import ctypes
 import json
 import os
 import pathlib
@@ -82,8 +85,23 @@ def probe_encode(volume: np.ndarray, edge: int) -> float:
         return best_of(lambda: list(pool.map(codec.encode, chunks)))
 
 
-def probe_write(store: pathlib.Path) -> float:
-    """Seconds to write the store's chunk files (their stored bytes) anew on every core."""
+def sync_file_system(path: pathlib.Path) -> None:
+    """Flushes the file system holding `path` to disk (Linux `syncfs`; `sync` elsewhere)."""
+    syncfs = getattr(ctypes.CDLL(None, use_errno=True), "syncfs", None)
+    if syncfs is None:
+        os.sync()
+        return
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        if syncfs(fd) != 0:
+            raise OSError(ctypes.get_errno(), f"syncfs of {path} failed")
+    finally:
+        os.close(fd)
+
+
+def probe_write(store: pathlib.Path) -> tuple[float, float]:
+    """Seconds to write the store's chunk files (their stored bytes) anew on every core, then
+    sync the file system; and the seconds before the sync."""
     files = [p for p in store.rglob("*") if p.is_file() and not p.name.endswith(".json")]
     blobs = [(p.relative_to(store), p.read_bytes()) for p in files]
     folders = sorted({rel.parent for rel, _ in blobs})
@@ -106,8 +124,12 @@ def probe_write(store: pathlib.Path) -> float:
         os.sync()
         t = time.perf_counter()
         write_all(out)
-        times.append(time.perf_counter() - t)
+        written = time.perf_counter() - t
+        sync_file_system(out)
+        times.append((time.perf_counter() - t, written))
         shutil.rmtree(out)
+        # The deletes reach the disk before the next round (or the next probe) begins.
+        sync_file_system(store.parent)
     return min(times)
 
 
@@ -146,15 +168,16 @@ def limits(src: pathlib.Path, store: pathlib.Path) -> dict:
     edge = chunk[-1]
     volume = tifffile.imread(src)
     volume = volume.reshape(volume.shape[-3:]) if volume.ndim > 3 else volume
+    write, write_unsynced = probe_write(store)
     probes = {
         "read": probe_read(src),
         "encode": probe_encode(volume, edge),
-        "write": probe_write(store),
+        "write": write,
         "pyramid": probe_pyramid(volume, levels),
     }
     slowest = max(probes, key=probes.get)
     return {"cores": CORES, "probes": probes, "limit": probes[slowest], "slowest": slowest,
-            "serial": sum(probes.values())}
+            "serial": sum(probes.values()), "write_unsynced": write_unsynced}
 
 
 def main():

@@ -312,9 +312,11 @@ def pinned_load(b, c, seconds, server_pids):
 def loads(bases, seconds, repeat, pids):
     """The shared loads against every server in `bases` (name -> URL ending in the dataset
     path), interleaved: each load runs on each server in turn, `repeat` times, so a change in
-    background load hits both alike. Returns name -> load -> the median run, with the server's
-    CPU time per request (`pids`: name -> its processes). With two or more CPUs, the load at 1
-    connection runs a second time with server and client pinned apart (`pinned_load`)."""
+    background load hits both alike; the order of the servers turns round each time, so that
+    neither always runs first. Returns name -> load -> the median run, with the server's CPU
+    time per request and every round's requests/s (`rounds_rps`, in order; `pids`: name -> its
+    processes). With two or more CPUs, the load at 1 connection runs a second time with server
+    and client pinned apart (`pinned_load`)."""
     out = {name: {} for name in bases}
     etags = {name: etag_of(f"{b}/0/c/0/0/0/0") for name, b in bases.items()}
     plan = [(f"GET, {c} conn", c, None) for c in (256, 16, 1)]
@@ -323,8 +325,9 @@ def loads(bases, seconds, repeat, pids):
     plan.append(("304, 256 conn", 256, "304"))
     for load, c, kind in plan:
         runs = {name: [] for name in bases}
-        for _ in range(repeat):
-            for name, b in bases.items():
+        for i in range(repeat):
+            for name in list(bases) if i % 2 == 0 else list(reversed(bases)):
+                b = bases[name]
                 before = cpu_seconds(pids[name])
                 if kind == "pinned":
                     r = pinned_load(b, c, seconds, pids[name])
@@ -333,8 +336,15 @@ def loads(bases, seconds, repeat, pids):
                 r["cpu_us"] = (cpu_seconds(pids[name]) - before) / max(r["rps"] * seconds, 1) * 1e6
                 runs[name].append(r)
         for name in bases:
-            out[name][load] = median_run(runs[name])
+            out[name][load] = dict(median_run(runs[name]), rounds_rps=[r["rps"] for r in runs[name]])
     return out
+
+
+def rounds_ratio(ours, theirs):
+    """The median and range of the rounds' requests/s ratios `ours` / `theirs` (runs of one load,
+    round by round), as text: "1.02 (0.95–1.08)"."""
+    ratios = sorted(o / t for o, t in zip(ours["rounds_rps"], theirs["rounds_rps"]))
+    return f"{ratios[len(ratios) // 2]:.2f} ({ratios[0]:.2f}–{ratios[-1]:.2f})"
 
 
 def main():
@@ -613,11 +623,12 @@ def render(results, a):
         f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)} "
         "on the same machine as the servers (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         f"each server holds up to {OPEN_FILES:,} chunk files open (nginx's `open_file_cache`, per worker; brickserver's `--open-files`, shared); "
-        "each load ran on nginx and brickserver in turn, repeatedly, and the median run of each is shown. "
+        "each load ran on nginx and brickserver in turn, repeatedly (which ran first turning round each time), and the median run of each is shown, "
+        "with the median and range of the rounds' ratios (each round's brickserver run against its nginx run). "
         "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",
         "",
-        "| Load | nginx req/s | brickserver req/s | ratio | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio | CPU µs/req nginx / brickserver |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| Load | nginx req/s | brickserver req/s | ratio | rounds' ratios | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio | CPU µs/req nginx / brickserver |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     ng, bs = results["nginx"], results["brickserver"]
     for load in ng:
@@ -625,7 +636,7 @@ def render(results, a):
             continue
         n, b = ng[load], bs[load]
         lines.append(
-            f"| {load} | {n['rps']:,.0f} | {b['rps']:,.0f} | {b['rps'] / n['rps']:.2f}x | {n['mbps']:,.0f} | {b['mbps']:,.0f} | "
+            f"| {load} | {n['rps']:,.0f} | {b['rps']:,.0f} | {b['rps'] / n['rps']:.2f}x | {rounds_ratio(b, n)} | {n['mbps']:,.0f} | {b['mbps']:,.0f} | "
             f"{n['p50_ms']:.2f} / {n['p99_ms']:.2f} | {b['p50_ms']:.2f} / {b['p99_ms']:.2f} | {b['p99_ms'] / max(n['p99_ms'], 1e-9):.2f}x | "
             f"{n.get('cpu_us', 0):.0f} / {b.get('cpu_us', 0):.0f} |"
         )

@@ -29,6 +29,8 @@ def test_the_probes_time_each_part_and_the_limit_is_the_slowest(tmp_path):
     assert r["limit"] == max(r["probes"].values())
     assert r["probes"][r["slowest"]] == r["limit"]
     assert abs(r["serial"] - sum(r["probes"].values())) < 1e-12
+    # The write probe's time includes the sync that follows the writes.
+    assert 0 < r["write_unsynced"] <= r["probes"]["write"]
     assert sorted(p.name for p in tmp_path.iterdir()) == before
     # The command line gives the same document, with ingest's fraction of the limit.
     p = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "ingest_limits.py"), src, store,
