@@ -39,6 +39,22 @@ pub struct ColumnPlan {
     pub local_levels: usize,
     /// Estimated peak memory of the pass in bytes.
     pub estimate: u64,
+    /// How many neighbouring chunks of one chunk row a worker gathers at once (at least one;
+    /// see [`gather_chunks`]), with the memory they take in `estimate`.
+    pub gather: u64,
+}
+
+/// The most bytes of chunks a worker gathers at once.
+pub const GATHER_BYTES: u64 = 8 << 20;
+
+/// How many neighbouring chunks of one chunk row (`row_chunks` of them) a worker gathers at
+/// once, chunks of `chunk_bytes` each: as many as [`GATHER_BYTES`] holds, and at least one.
+/// Gathering a chunk row's chunks together reads each input row once, whole, instead of in
+/// pieces as far apart as the row is long: on the 2-core development machine, gathering the
+/// 64³ chunks of a 1024² uint16 volume took half the time in groups of 16 (a whole chunk row)
+/// as one by one.
+pub fn gather_chunks(chunk_bytes: u64, row_chunks: u64) -> u64 {
+    (GATHER_BYTES / chunk_bytes.max(1)).clamp(1, row_chunks.max(1))
 }
 
 impl ColumnPlan {
@@ -100,7 +116,8 @@ pub(crate) struct Pass<'a> {
     pub written: usize,
     /// Level-0 planes of the pass.
     pub planes: u64,
-    /// Worker threads, each gathering one chunk at a time.
+    /// Worker threads, each gathering one chunk, or one group of neighbouring chunks, at a
+    /// time.
     pub threads: u64,
 }
 
@@ -220,9 +237,10 @@ impl Pass<'_> {
             edge: [ny, nx],
             local_levels: self.written,
             estimate: self.estimate([ny, nx], self.written).total(),
+            gather: 1,
         };
         if whole.estimate <= limit {
-            return Ok(whole);
+            return Ok(self.with_gather(whole, limit));
         }
         let mut best: Option<(u64, ColumnPlan)> = None;
         let mut smallest = self.estimate([ny, nx], self.written);
@@ -246,6 +264,7 @@ impl Pass<'_> {
                         edge,
                         local_levels: local,
                         estimate: estimate.total(),
+                        gather: 1,
                     };
                     let count = candidate.columns([ny, nx]).len() as u64;
                     let better =
@@ -257,7 +276,22 @@ impl Pass<'_> {
                 m *= 2;
             }
         }
-        best.map(|(_, plan)| plan).ok_or(smallest)
+        best.map(|(_, plan)| self.with_gather(plan, limit))
+            .ok_or(smallest)
+    }
+
+    /// `plan` (chosen with one chunk gathered at a time) with as many chunks gathered at once
+    /// as [`gather_chunks`] allows and the room left under `limit` holds, for every thread;
+    /// their memory is added to its estimate. The columns chosen do not change.
+    fn with_gather(&self, mut plan: ColumnPlan, limit: u64) -> ColumnPlan {
+        let outer = self.plan.outer;
+        let chunk = outer.iter().product::<u64>() * self.plan.format.bytes() as u64;
+        let row = plan.edge[1].min(self.plan.shape[2]).div_ceil(outer[2]);
+        let threads = self.threads.max(1);
+        let room = limit.saturating_sub(plan.estimate) / (threads * chunk).max(1);
+        plan.gather = gather_chunks(chunk, row).min(1 + room);
+        plan.estimate += threads * (plan.gather - 1) * chunk;
+        plan
     }
 }
 
@@ -320,6 +354,33 @@ mod tests {
     }
 
     #[test]
+    fn workers_gather_a_chunk_row_at_once_where_the_limit_leaves_room() {
+        let plan = plan([64, 1024, 1024]);
+        let pass = pass(&plan);
+        // uint16 chunks of 64³: 512 KiB, 16 to a chunk row of the plane, all 16 in 8 MiB.
+        let chunk = 64 * 64 * 64 * 2;
+        assert_eq!(gather_chunks(chunk, 16), 16);
+        assert_eq!(gather_chunks(chunk, 5), 5);
+        assert_eq!(gather_chunks(GATHER_BYTES * 2, 16), 1);
+        let alone = pass.estimate([1024, 1024], plan.levels.len()).total();
+        let roomy = pass.plan_columns(u64::MAX).unwrap();
+        assert_eq!((roomy.edge, roomy.gather), ([1024, 1024], 16));
+        assert_eq!(roomy.estimate, alone + 2 * 15 * chunk);
+        // Room for three more chunks a thread: four at once.
+        let tight = pass.plan_columns(alone + 2 * 3 * chunk + 1).unwrap();
+        assert_eq!((tight.edge, tight.gather), ([1024, 1024], 4));
+        assert_eq!(tight.estimate, alone + 2 * 3 * chunk);
+        // No room: one at a time, and the columns as before.
+        let full = pass.plan_columns(alone).unwrap();
+        assert_eq!((full.gather, full.estimate), (1, alone));
+        let cut = pass.plan_columns(alone / 2).unwrap();
+        assert!(!cut.is_whole([1024, 1024]));
+        assert!(cut.estimate <= alone / 2);
+        let row = cut.edge[1].min(1024) / 64;
+        assert!((1..=row).contains(&cut.gather), "{cut:?}");
+    }
+
+    #[test]
     fn narrow_sums_count_for_the_levels_that_keep_them() {
         let plan = plan([64, 1024, 1024]);
         let wide = pass(&plan);
@@ -345,6 +406,7 @@ mod tests {
             edge: [128, 256],
             local_levels: 2,
             estimate: 0,
+            gather: 1,
         };
         let c = columns.columns([300, 500]);
         assert_eq!(c.len(), 6);

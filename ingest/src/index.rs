@@ -233,6 +233,7 @@ fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
                 array: None,
                 histograms: &histograms,
                 stats: (i == 0).then_some(stats.as_slice()),
+                gather: 1,
             };
             let planes = planes_of(&slab, channels * nz as usize, (ny * nx) as usize);
             let (w, e) = sink.process(&planes, z0, nz, &mut cells)?;

@@ -56,6 +56,8 @@ pub(crate) struct Level<T: Sample> {
     pub(crate) output: PathBuf,
     pub(crate) written: u64,
     pub(crate) empty: u64,
+    /// Chunks of one chunk row a worker gathers at once ([`ColumnPlan::gather`]).
+    pub(crate) gather: u64,
 }
 
 impl<T: Sample> Level<T> {
@@ -79,6 +81,7 @@ impl<T: Sample> Level<T> {
             array: Some(&self.array),
             histograms: &self.histograms,
             stats,
+            gather: self.gather,
         };
         let (written, empty) = sink
             .process(planes, z0, nz, &mut self.cells)
@@ -241,6 +244,7 @@ pub(crate) fn open_levels<T: Sample>(
             output: writer.output.clone(),
             written: 0,
             empty: 0,
+            gather: 1,
         });
     }
     Ok(levels)
@@ -448,6 +452,9 @@ pub(crate) fn run_pass<T: Sample>(
     );
     let local = columns.local_levels;
     let split = !columns.is_whole([ny, nx]);
+    for level in levels.iter_mut() {
+        level.gather = columns.gather;
+    }
     // Every local level is complete at the end of a group: one slab of the first level made
     // from whole planes (all planes when every level is local).
     let group_depth = levels.get(local).map_or(planes.end - planes.start, |l| {

@@ -47,6 +47,9 @@ pub(crate) struct SlabSink<'a> {
     pub array: Option<&'a Array<Store>>,
     pub histograms: &'a LevelHistograms,
     pub stats: Option<&'a [Mutex<ChannelAccumulator>]>,
+    /// Neighbouring chunks of one chunk row a worker gathers at once (at most; fewer when
+    /// that would leave threads without work).
+    pub gather: u64,
 }
 
 /// The `count` planes of a slab held in one buffer `[c][nz][y][x]`, `plane` voxels each (an
@@ -73,16 +76,26 @@ impl SlabSink<'_> {
         let w = self.window;
         let [ny, nx] = w.end();
         let [oz, oy, ox] = self.outer;
-        let tasks: Vec<(usize, u64, u64)> = (0..self.channels)
+        let (rows, columns) = (w.y0 / oy..ny.div_ceil(oy), w.x0 / ox..nx.div_ceil(ox));
+        // Groups of neighbouring chunks of a chunk row, few enough that every thread has two.
+        let chunks = self.channels as u64 * (rows.end - rows.start) * (columns.end - columns.start);
+        let threads = rayon::current_num_threads() as u64;
+        let group = self.gather.min(chunks.div_ceil(2 * threads)).max(1);
+        let tasks: Vec<(usize, u64, std::ops::Range<u64>)> = (0..self.channels)
             .flat_map(|c| {
-                (w.y0 / oy..ny.div_ceil(oy))
-                    .flat_map(move |cy| (w.x0 / ox..nx.div_ceil(ox)).map(move |cx| (c, cy, cx)))
+                let columns = columns.clone();
+                rows.clone().flat_map(move |cy| {
+                    columns
+                        .clone()
+                        .step_by(group as usize)
+                        .map(move |cx| (c, cy, cx..(cx + group).min(columns.end)))
+                })
             })
             .collect();
         let chunk_len = (oz * oy * ox) as usize;
         let counts = tasks
             .into_par_iter()
-            .map(|(c, cy, cx)| -> Result<(u64, u64), ChunkWriteError> {
+            .map(|(c, cy, cxs)| -> Result<(u64, u64), ChunkWriteError> {
                 // This thread's tables and chunk memory, taken while in use (a task that
                 // runs while this one waits inside zarrs makes its own).
                 let mut kept = SCRATCH.take().unwrap_or_default();
@@ -90,27 +103,48 @@ impl SlabSink<'_> {
                     stats: scratch,
                     words,
                 } = &mut *kept;
-                words.resize((chunk_len * size_of::<T>()).div_ceil(8), 0);
-                let chunk = &mut bytemuck::cast_slice_mut::<u64, T>(words)[..chunk_len];
-                let (y0, x0) = (cy * oy, cx * ox);
-                let (vy, vx) = ((ny - y0).min(oy), (nx - x0).min(ox));
-                // Gather the outer chunk, padded with the fill value (0) past the slab.
-                if (nz, vy, vx) != (oz, oy, ox) {
-                    chunk.fill(T::default());
+                let count = (cxs.end - cxs.start) as usize;
+                words.resize((count * chunk_len * size_of::<T>()).div_ceil(8), 0);
+                let gathered = &mut bytemuck::cast_slice_mut::<u64, T>(words)[..count * chunk_len];
+                let y0 = cy * oy;
+                let vy = (ny - y0).min(oy);
+                // The voxels of each chunk inside the level along x.
+                let vx = |cx: u64| (nx - cx * ox).min(ox);
+                // Gather the outer chunks, each padded with the fill value (0) past the slab.
+                for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
+                    if (nz, vy, vx(cx)) != (oz, oy, ox) {
+                        chunk.fill(T::default());
+                    }
                 }
                 for dz in 0..nz {
                     let plane = planes[(c as u64 * nz + dz) as usize];
                     for dy in 0..vy {
-                        let src = ((y0 - w.y0 + dy) * w.nx + x0 - w.x0) as usize;
+                        let row = ((y0 - w.y0 + dy) * w.nx) as usize;
                         let dst = ((dz * oy + dy) * ox) as usize;
-                        chunk[dst..dst + vx as usize]
-                            .copy_from_slice(&plane[src..src + vx as usize]);
+                        for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
+                            let (src, n) = (row + (cx * ox - w.x0) as usize, vx(cx) as usize);
+                            chunk[dst..dst + n].copy_from_slice(&plane[src..src + n]);
+                        }
                     }
                 }
-                let result =
-                    self.process_chunk(chunk, scratch, [c as u64, z0, cy, cx], [nz, vy, vx]);
+                let mut counts = (0, 0);
+                let mut result = Ok(());
+                for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact(chunk_len)) {
+                    match self.process_chunk(
+                        chunk,
+                        scratch,
+                        [c as u64, z0, cy, cx],
+                        [nz, vy, vx(cx)],
+                    ) {
+                        Ok((written, empty)) => counts = (counts.0 + written, counts.1 + empty),
+                        Err(e) => {
+                            result = Err(e);
+                            break;
+                        }
+                    }
+                }
                 SCRATCH.set(Some(kept));
-                result
+                result.map(|()| counts)
             })
             .collect::<Result<Vec<_>, _>>()?;
         cells.add_slab(planes, z0, nz, w);
