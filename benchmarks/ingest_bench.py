@@ -163,10 +163,9 @@ def flame(size_mib, work, report):
 def limits_line(probes, wall):
     """The limit probes of one size, and ingest's fraction of the limit at its median `wall`."""
     p = probes["probes"]
-    parts = ", ".join(f"{name} {p[name]:.3f} s" for name in ("read", "encode", "write", "pyramid"))
-    if "write_unsynced" in probes:
-        parts = parts.replace(f"write {p['write']:.3f} s",
-                              f"write {p['write']:.3f} s (synced; {probes['write_unsynced']:.3f} s before the sync)")
+    unsynced = probes.get("write_unsynced")
+    parts = ", ".join(f"{name} {p[name]:.3f} s" + (f" (synced; {unsynced:.3f} s before the sync)" if name == "write" and unsynced else "")
+                      for name in ("read", "encode", "write", "pyramid"))
     text = (f"Limit probes on {probes['cores']} cores ([ingest_limits.py](../../benchmarks/ingest_limits.py)): {parts}; "
             f"the limit is {probes['slowest']}, {probes['limit']:.3f} s (all four one after the other: {probes['serial']:.3f} s).")
     if wall:

@@ -12,9 +12,9 @@ use axum::http::{Response, StatusCode, header};
 use axum::middleware::Next;
 use prometheus_client::encoding::text::encode;
 use prometheus_client::encoding::{EncodeLabelSet, EncodeMetric, MetricEncoder, NoLabelSet};
+use prometheus_client::metrics::MetricType;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::gauge::Gauge;
-use prometheus_client::metrics::{MetricType, TypedMetric};
 use prometheus_client::registry::Registry;
 
 /// The upper bounds of the request duration histogram's buckets, in seconds (and `+Inf`).
@@ -88,10 +88,6 @@ impl RequestCounts {
 #[derive(Clone, Debug, Default)]
 struct LatencyHistogram(RequestCounts);
 
-impl TypedMetric for LatencyHistogram {
-    const TYPE: MetricType = MetricType::Histogram;
-}
-
 impl EncodeMetric for LatencyHistogram {
     fn encode(&self, mut encoder: MetricEncoder) -> std::fmt::Result {
         let bounds = LATENCY_BOUNDS.iter().copied().chain([f64::INFINITY]);
@@ -104,17 +100,13 @@ impl EncodeMetric for LatencyHistogram {
     }
 
     fn metric_type(&self) -> MetricType {
-        Self::TYPE
+        MetricType::Histogram
     }
 }
 
 /// The requests answered, a counter per status class (`1xx` to `5xx`, all five written).
 #[derive(Clone, Debug, Default)]
 struct RequestsByClass(RequestCounts);
-
-impl TypedMetric for RequestsByClass {
-    const TYPE: MetricType = MetricType::Counter;
-}
 
 impl EncodeMetric for RequestsByClass {
     fn encode(&self, mut encoder: MetricEncoder) -> std::fmt::Result {
@@ -131,17 +123,13 @@ impl EncodeMetric for RequestsByClass {
     }
 
     fn metric_type(&self) -> MetricType {
-        Self::TYPE
+        MetricType::Counter
     }
 }
 
 /// The response body bytes sent, a counter.
 #[derive(Clone, Debug, Default)]
 struct ResponseBytes(RequestCounts);
-
-impl TypedMetric for ResponseBytes {
-    const TYPE: MetricType = MetricType::Counter;
-}
 
 impl EncodeMetric for ResponseBytes {
     fn encode(&self, mut encoder: MetricEncoder) -> std::fmt::Result {
@@ -150,7 +138,7 @@ impl EncodeMetric for ResponseBytes {
     }
 
     fn metric_type(&self) -> MetricType {
-        Self::TYPE
+        MetricType::Counter
     }
 }
 

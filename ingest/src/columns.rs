@@ -51,7 +51,7 @@ pub const GATHER_BYTES: u64 = 8 << 20;
 /// once, chunks of `chunk_bytes` each: as many as [`GATHER_BYTES`] holds, and at least one.
 /// Gathering a chunk row's chunks together reads each input row once, whole, instead of in
 /// pieces as far apart as the row is long: on the 2-core development machine, gathering the
-/// 64³ chunks of a 1024² uint16 volume took half the time in groups of 16 (a whole chunk row)
+/// 64³ chunks of a 1024³ uint16 volume took half the time in groups of 16 (a whole chunk row)
 /// as one by one.
 pub fn gather_chunks(chunk_bytes: u64, row_chunks: u64) -> u64 {
     (GATHER_BYTES / chunk_bytes.max(1)).clamp(1, row_chunks.max(1))

@@ -127,24 +127,20 @@ impl SlabSink<'_> {
                         }
                     }
                 }
-                let mut counts = (0, 0);
-                let mut result = Ok(());
-                for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact(chunk_len)) {
-                    match self.process_chunk(
-                        chunk,
-                        scratch,
-                        [c as u64, z0, cy, cx],
-                        [nz, vy, vx(cx)],
-                    ) {
-                        Ok((written, empty)) => counts = (counts.0 + written, counts.1 + empty),
-                        Err(e) => {
-                            result = Err(e);
-                            break;
-                        }
-                    }
-                }
+                let counts = cxs.zip(gathered.chunks_exact(chunk_len)).try_fold(
+                    (0, 0),
+                    |(written, empty), (cx, chunk)| {
+                        let (w, e) = self.process_chunk(
+                            chunk,
+                            scratch,
+                            [c as u64, z0, cy, cx],
+                            [nz, vy, vx(cx)],
+                        )?;
+                        Ok((written + w, empty + e))
+                    },
+                );
                 SCRATCH.set(Some(kept));
-                result.map(|()| counts)
+                counts
             })
             .collect::<Result<Vec<_>, _>>()?;
         cells.add_slab(planes, z0, nz, w);
