@@ -13,6 +13,13 @@ the same order, so the tools alternate; a row gives the median of the rounds, an
 `ingest` are the median (and range) of the rounds' own ratios. zarrs_ome reads a Zarr array, so
 it gets the stack pre-converted to a plain Zarr v3 array (that conversion is not timed).
 
+No output is deleted while a size is measured: every run writes a folder of its own, and they
+are all removed when the size is done, followed (on ext4 without a journal) by a wait of a
+minute. ext4 without a journal checks each inode it hands out against the inodes deleted in the
+last 60 seconds (`recently_deleted` in fs/ext4/ialloc.c), so a run that follows the deletion of
+the previous run's thousands of files pays a scan per file it makes, and the bench would measure
+its own deletes.
+
 Beside each size, the limit probes of benchmarks/ingest_limits.py (reading the input, encoding
 level 0 with the same codec on all cores, writing the store's files and syncing them to disk,
 the pyramid's arithmetic alone) say how far ingest is from what the machine allows: ingest's fraction of the limit is the
@@ -36,9 +43,10 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 
 from docs_page import point_page_at, write_result
-from file_system import describe
+from file_system import describe, has_journal, mount_of
 from ingest_limits import limits
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
@@ -48,10 +56,26 @@ PY = sys.executable
 ZARRS_OME = shutil.which("zarrs_ome") or "/tmp/zarrs_tools/bin/zarrs_ome"
 
 
+# ext4 without a journal checks each inode it hands out against those deleted within this many
+# seconds (RECENTCY_MIN in fs/ext4/ialloc.c).
+RECENT_DELETES_S = 60
+
+
+def clear(folder):
+    """Removes `folder` (a size's outputs) and, where the file system is ext4 without a journal,
+    waits until its inodes no longer count as recently deleted."""
+    if not folder.exists():
+        return
+    shutil.rmtree(folder)
+    subprocess.run(["sync"], check=True)
+    if has_journal(mount_of(folder.parent)["source"]) is False:
+        time.sleep(RECENT_DELETES_S + 1)
+
+
 def timed(cmd, out):
-    """Runs `cmd` under GNU time; returns (wall seconds, peak RSS MB, CPU %) or an error string."""
-    if out.exists():
-        shutil.rmtree(out)
+    """Runs `cmd` under GNU time (`out` must not exist yet); returns (wall seconds, peak RSS MB,
+    CPU %) or an error string."""
+    assert not out.exists(), f"{out} exists: every run writes a folder of its own"
     subprocess.run(["sync"], check=True)
     p = subprocess.run(["/usr/bin/time", "-f", "%e %M %P", *map(str, cmd)], capture_output=True, text=True)
     if p.returncode != 0:
@@ -73,29 +97,35 @@ def bench(size_mib, work, rounds):
     if not src.exists():
         subprocess.run([INGEST, "sample", "-o", d, "--size", f"{depth},1024,1024", "--quiet"], check=True, capture_output=True)
     input_mb = depth * 1024 * 1024 * 2 / 1e6
-    ours = d / "ingest.ome.zarr"
-    commands = {"ingest": ([INGEST, "convert", src, "-o", ours, "--voxel-size", "1,1,1", "--quiet"], ours)}
-    first = timed(*commands["ingest"])
+    runs = d / "runs"
+    clear(runs)
+    runs.mkdir()
+    ours = runs / "first.ome.zarr"
+    first = timed([INGEST, "convert", src, "-o", ours, "--voxel-size", "1,1,1", "--quiet"], ours)
     if isinstance(first, str):
+        clear(runs)
         return input_mb, 0, {"ingest": [first]}, None
     levels = levels_of(ours)
-    probes = limits(src, ours)
+    probes = limits(src, ours, keep=runs)
+    # Each tool's command, given the folder it writes.
+    commands = {"ingest": lambda out: [INGEST, "convert", src, "-o", out, "--voxel-size", "1,1,1", "--quiet"]}
     for tool in ["tensorstore", "ngff-zarr", "ome-zarr"]:
-        commands[tool] = ([PY, PEERS, tool, src, d / f"{tool}.zarr", levels], d / f"{tool}.zarr")
+        commands[tool] = lambda out, tool=tool: [PY, PEERS, tool, src, out, levels]
     missing = {}
     if os.path.exists(ZARRS_OME):
         plain = d / "plain.zarr"
         if not plain.exists():
             subprocess.run([PY, PEERS, "zarr-array", src, plain, str(levels)], check=True)
-        out = d / "zarrs_ome.zarr"
-        commands["zarrs_ome"] = ([ZARRS_OME, "--ome-zarr-version", "0.5", "--max-levels", levels - 1, plain, out], out)
+        commands["zarrs_ome"] = lambda out: [ZARRS_OME, "--ome-zarr-version", "0.5", "--max-levels", levels - 1, plain, out]
     else:
         missing["zarrs_ome"] = "not run: zarrs_ome not installed (cargo install zarrs_tools --features ome)"
     # Rounds: every tool once per round, in the same order.
     rows = {tool: [] for tool in commands}
-    for _ in range(rounds):
-        for tool, (cmd, out) in commands.items():
-            rows[tool].append(timed(cmd, out))
+    for i in range(rounds):
+        for tool, command in commands.items():
+            out = runs / f"{tool}-{i}.zarr"
+            rows[tool].append(timed(command(out), out))
+    clear(runs)
     rows.update({tool: [why] for tool, why in missing.items()})
     return input_mb, levels, rows, probes
 
@@ -143,8 +173,7 @@ def flame(size_mib, work, report):
         return None, "no flame graph: needs perf and inferno (cargo install inferno)"
     d = work / f"{size_mib}MiB"
     out, data = d / "flame.ome.zarr", d / "perf.data"
-    if out.exists():
-        shutil.rmtree(out)
+    clear(out)
     subprocess.run(["sync"], check=True)
     subprocess.run(["perf", "record", "-F", "999", "--call-graph", "dwarf,32768", "-o", data, "--",
                     INGEST, "convert", d / "nuclei.ome.tif", "-o", out, "--voxel-size", "1,1,1", "--quiet"],
@@ -156,7 +185,7 @@ def flame(size_mib, work, report):
                           "--minwidth", "0.5"], input=folded, check=True, capture_output=True).stdout
     (ROOT / "docs" / "benchmarks" / name).write_bytes(svg)
     data.unlink()
-    shutil.rmtree(out)
+    clear(out)
     return name, None
 
 

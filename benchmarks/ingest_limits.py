@@ -99,9 +99,11 @@ def sync_file_system(path: pathlib.Path) -> None:
         os.close(fd)
 
 
-def probe_write(store: pathlib.Path) -> tuple[float, float]:
+def probe_write(store: pathlib.Path, keep: pathlib.Path | None = None) -> tuple[float, float]:
     """Seconds to write the store's chunk files (their stored bytes) anew on every core, then
-    sync the file system; and the seconds before the sync."""
+    sync the file system; and the seconds before the sync. The copies are left in the folder
+    `keep` when one is given (see `ingest_bench.py`: deleting files just before making others
+    slows ext4 without a journal), else removed."""
     files = [p for p in store.rglob("*") if p.is_file() and not p.name.endswith(".json")]
     blobs = [(p.relative_to(store), p.read_bytes()) for p in files]
     folders = sorted({rel.parent for rel, _ in blobs})
@@ -120,14 +122,15 @@ def probe_write(store: pathlib.Path) -> tuple[float, float]:
 
     times = []
     for _ in range(3):
-        out = pathlib.Path(tempfile.mkdtemp(prefix="write-probe-", dir=store.parent))
+        out = pathlib.Path(tempfile.mkdtemp(prefix="write-probe-", dir=keep or store.parent))
         os.sync()
         t = time.perf_counter()
         write_all(out)
         written = time.perf_counter() - t
         sync_file_system(out)
         times.append((time.perf_counter() - t, written))
-        shutil.rmtree(out)
+        if keep is None:
+            shutil.rmtree(out)
     return min(times)
 
 
@@ -157,8 +160,9 @@ def probe_pyramid(volume: np.ndarray, levels: int) -> float:
     return best_of(pyramid)
 
 
-def limits(src: pathlib.Path, store: pathlib.Path) -> dict:
-    """Every probe's seconds for the conversion of `src` into `store`, and the limit."""
+def limits(src: pathlib.Path, store: pathlib.Path, keep: pathlib.Path | None = None) -> dict:
+    """Every probe's seconds for the conversion of `src` into `store`, and the limit (the
+    write probe's copies left in `keep`, when given)."""
     meta = json.loads((store / "zarr.json").read_text())
     levels = len(meta["attributes"]["ome"]["multiscales"][0]["datasets"])
     array = json.loads((store / "0" / "zarr.json").read_text())
@@ -167,7 +171,7 @@ def limits(src: pathlib.Path, store: pathlib.Path) -> dict:
     volume = tifffile.imread(src)
     volume = volume.reshape(volume.shape[-3:]) if volume.ndim > 3 else volume
     probes = {"read": probe_read(src), "encode": probe_encode(volume, edge)}
-    probes["write"], write_unsynced = probe_write(store)
+    probes["write"], write_unsynced = probe_write(store, keep)
     probes["pyramid"] = probe_pyramid(volume, levels)
     slowest = max(probes, key=probes.get)
     return {"cores": CORES, "probes": probes, "limit": probes[slowest], "slowest": slowest,

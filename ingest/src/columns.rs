@@ -158,7 +158,8 @@ impl Pass<'_> {
         let slab = channels * oz.min(depth) * column.area() * sample;
         let chunk = plan.outer.iter().product::<u64>() * sample;
         // Two slabs, the decoders' planes and strips, the cell scratch of a slab (a
-        // sixteenth), a chunk per thread.
+        // sixteenth: what a whole slab's cells take; workers fold theirs band by band, which
+        // takes less), a chunk per thread.
         let slabs = 2 * slab
             + channels * column.area() * sample
             + (self.decoders)(column)

@@ -236,7 +236,7 @@ fn index_typed<T: Sample, S: ReadableStorageTraits + ?Sized + 'static>(
                 gather: 1,
             };
             let planes = planes_of(&slab, channels * nz as usize, (ny * nx) as usize);
-            let (w, e) = sink.process(&planes, z0, nz, &mut cells)?;
+            let (w, e, _) = sink.process(&planes, z0, nz, &mut cells, None)?;
             written += w;
             empty += e;
             z0 += nz;

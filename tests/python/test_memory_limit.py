@@ -1,7 +1,7 @@
 """`ingest convert --memory-limit` is a promise: the peak resident set of the process (its
 `ru_maxrss`, from `wait4`) stays within the limit for every input kind ingest reads (strips,
 one strip per page, tiles, zlib strips, zlib with a predictor, one zlib strip per page, a tiled
-zlib BigTIFF, raw, a slice folder), for each process of a partitioned conversion and for a store written to S3, at
+zlib BigTIFF, raw, a slice folder), for a sharded store, for each process of a partitioned conversion and for a store written to S3, at
 a limit whole planes do not fit, so the conversion must cut them into columns; and the store it
 writes is byte for byte the one written in whole planes (which peaks above the limit)."""
 
@@ -138,6 +138,26 @@ def test_columns_within_the_limit_write_the_store_whole_planes_write(inputs, tmp
     cut = tmp_path / "cut" / "x.ome.zarr"
     assert_within_limit(tmp_path, inputs[kind], "-o", cut, *FLAGS, "--quiet")
     assert files(cut) == files(whole)
+
+
+# Shards of 8 × 128 × 128 voxels (256 KiB): a worker gathers a shard row of its column at once,
+# and each shard's 4 inner chunks are encoded on the worker that gathered it.
+SHARDED = ["--ome-zarr-version", "0.5", "--shard", "8,128,128"]
+
+
+def test_a_sharded_store_in_columns_peaks_within_the_limit_and_matches_whole_planes(
+        inputs, tmp_path):
+    whole = tmp_path / "whole" / "x.ome.zarr"
+    code, out, err, peak = run_measured(tmp_path, "convert", inputs["raw"], "-o", whole, *FLAGS,
+                                        *SHARDED, "--quiet")
+    assert code == 0, err
+    assert " columns of " not in out
+    assert peak > LIMIT_BYTES, f"whole planes peaked at {peak / 2**20:.1f} MiB"
+    cut = tmp_path / "cut" / "x.ome.zarr"
+    assert_within_limit(tmp_path, inputs["raw"], "-o", cut, *FLAGS, *SHARDED, "--quiet")
+    assert files(cut) == files(whole)
+    # Level 0 is 8 × 12 shards of a plane, 2 slabs deep: every shard holds data.
+    assert len(list((cut / "0" / "c" / "0").rglob("*"))) == 2 + 2 * 8 + 2 * 8 * 12
 
 
 def test_each_partition_peaks_within_the_limit(inputs, tmp_path):

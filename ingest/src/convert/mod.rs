@@ -48,6 +48,7 @@ use crate::with_sample_type;
 pub fn convert(options: &ConvertOptions) -> Result<ConvertSummary, ConvertError> {
     let inputs = open_inputs(options)?;
     let result = with_sample_type!(inputs.format, T => convert_typed::<T>(options, inputs));
+    sink::release_scratch();
     if result.is_err() {
         // A failed run leaves nothing behind (a killed one leaves only the hidden partial
         // folder, which has no root metadata and which the next run removes).

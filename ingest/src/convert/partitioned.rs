@@ -91,7 +91,10 @@ pub fn convert_partition(
     partition: Partition,
 ) -> Result<PartitionSummary, ConvertError> {
     let inputs = open_inputs(options)?;
-    with_sample_type!(inputs.format, T => partition_typed::<T>(options, inputs, partition))
+    let result =
+        with_sample_type!(inputs.format, T => partition_typed::<T>(options, inputs, partition));
+    super::sink::release_scratch();
+    result
 }
 
 fn partition_typed<T: Sample>(
@@ -199,7 +202,10 @@ pub fn finalize(
     let partial = crate::store::partial_path(output);
     let handoffs = Handoffs::find(&partial, shown)?;
     let format = handoffs.plan.format;
-    with_sample_type!(format, T => finalize_typed::<T>(output, overwrite, progress, &handoffs))
+    let result =
+        with_sample_type!(format, T => finalize_typed::<T>(output, overwrite, progress, &handoffs));
+    super::sink::release_scratch();
+    result
 }
 
 fn finalize_typed<T: Sample>(

@@ -14,7 +14,8 @@ use zarrs::array::Array;
 use super::error::ConvertError;
 use super::options::ConvertOptions;
 use super::pyramid_sums::{
-    Accumulator, SlabRows, Sums, Values, accumulate, covered, narrow_sums, with_sums,
+    Accumulator, BandSums, BandWork, SlabRows, Sums, Values, accumulate, covered, narrow_sums,
+    with_sums,
 };
 use super::sink::{SlabSink, planes_of};
 use super::summary::{ConvertSummary, LevelSummary};
@@ -62,14 +63,16 @@ pub(crate) struct Level<T: Sample> {
 
 impl<T: Sample> Level<T> {
     /// Writes one slab of this level's values (`planes[c · nz + z]`) and records its region
-    /// metadata.
+    /// metadata, doing `bands`' work on each band of it where the workers gather whole chunk
+    /// rows; returns whether they did.
     pub(crate) fn write_slab(
         &mut self,
         planes: &[&[T]],
         z0: u64,
         nz: u64,
         stats: Option<&[Mutex<ChannelAccumulator>]>,
-    ) -> Result<(), ConvertError> {
+        bands: Option<&dyn BandWork<T>>,
+    ) -> Result<bool, ConvertError> {
         let bricks_z = self.plan.shape[0].div_ceil(self.brick[0]);
         self.histograms
             .extend_to((z0 + nz).div_ceil(self.brick[0]), bricks_z);
@@ -83,8 +86,8 @@ impl<T: Sample> Level<T> {
             stats,
             gather: self.gather,
         };
-        let (written, empty) = sink
-            .process(planes, z0, nz, &mut self.cells)
+        let (written, empty, banded) = sink
+            .process(planes, z0, nz, &mut self.cells, bands)
             .map_err(|source| ConvertError::WriteLevel0 {
                 path: self.output.clone(),
                 source,
@@ -92,7 +95,7 @@ impl<T: Sample> Level<T> {
         self.written += written;
         self.empty += empty;
         self.release(z0 + nz)?;
-        Ok(())
+        Ok(banded)
     }
 
     /// Starts a column's blocks of region metadata, for the level's planes `planes` over its
@@ -686,8 +689,30 @@ fn process_level0<T: Sample>(
     z0: u64,
     nz: u64,
 ) -> Result<(), ConvertError> {
-    levels[0].write_slab(planes, z0, nz, Some(stats))?;
-    propagate(levels, handed_over, 0, z0, nz, &Values(planes))
+    // Level 1's sums are added band by band by the workers that write level 0 (the slab's
+    // rows in their cache), where they gather whole chunk rows; else after, as for the
+    // other levels.
+    let summed = match levels {
+        [first, next, ..] => {
+            let (channels, window, oy) = (first.cells.channels, first.window, first.outer[1]);
+            let acc = &mut next.acc;
+            let held = acc.held();
+            let (plan, count) = (&next.plan, &mut acc.count);
+            with_sums!(&mut acc.sum, sum => {
+                let bands = BandSums::new(
+                    plan, held, (sum, count), channels, window, z0, nz, oy,
+                );
+                first.write_slab(planes, z0, nz, Some(stats), Some(&bands))?
+            })
+        }
+        [first] => first.write_slab(planes, z0, nz, Some(stats), None)?,
+        [] => false,
+    };
+    if summed {
+        flush_if_full(levels, handed_over, 1, z0 + nz)
+    } else {
+        propagate(levels, handed_over, 0, z0, nz, &Values(planes))
+    }
 }
 
 /// Flushes level `l`'s accumulator when the level below has delivered everything it covers
@@ -722,7 +747,7 @@ pub(crate) fn flush_if_full<T: Sample>(
         &mut values,
     );
     let planes = planes_of(&values, channels * nz as usize, plane);
-    levels[l].write_slab(&planes, z0, nz, None)?;
+    levels[l].write_slab(&planes, z0, nz, None, None)?;
     levels[l].values = values;
     let mut acc = std::mem::replace(&mut levels[l].acc, Accumulator::empty());
     let done = with_sums!(&acc.sum, sum => {

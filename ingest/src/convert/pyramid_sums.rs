@@ -87,7 +87,27 @@ pub(crate) struct Accumulator<T: Sample> {
     pub(crate) count: Vec<u32>,
 }
 
+/// The planes, and the part of each plane, an accumulator holds.
+#[derive(Clone, Copy)]
+pub(crate) struct Held {
+    /// First plane held.
+    pub(crate) z0: u64,
+    /// Planes per channel.
+    pub(crate) depth: u64,
+    /// The part of each plane held.
+    pub(crate) window: PlaneRegion,
+}
+
 impl<T: Sample> Accumulator<T> {
+    /// The planes, and the part of each plane, it holds.
+    pub(crate) fn held(&self) -> Held {
+        Held {
+            z0: self.z0,
+            depth: self.depth,
+            window: self.window,
+        }
+    }
+
     /// An accumulator that holds nothing (level 0's, or one taken out for a while).
     pub(crate) fn empty() -> Self {
         Self::new(false, 0, 0, 0, PlaneRegion::whole([0, 0]))
@@ -292,39 +312,82 @@ pub(crate) fn accumulate<T: Sample>(
     nz: u64,
     src: &impl SlabRows<T>,
 ) {
-    let (dst, oz, a0) = (next.window, next.depth, next.z0);
+    let target = Target::new(plan, next.held(), channels, window, src_z0, nz);
     let count = &mut next.count;
-    with_sums!(&mut next.sum, sum => accumulate_into(
-        plan, (sum, count), (dst, oz, a0), channels, window, src_z0, nz, src,
-    ));
+    with_sums!(&mut next.sum, sum => accumulate_into(target, (sum, count), src));
 }
 
-/// [`accumulate`] into the sums `sum` (of either width) and counts `count` of an accumulator
-/// over `dst`, `oz` planes from `a0`.
-#[allow(clippy::too_many_arguments)]
-fn accumulate_into<T: Sample, S: SumOf<T::Sum>>(
-    plan: &LevelPlan,
-    (next_sum, next_count): (&mut [S], &mut [u32]),
-    (dst, oz, a0): (PlaneRegion, u64, u64),
+/// Where the rows of a slab of one level go in the next level's accumulator: what
+/// [`accumulate`] and [`BandSums`] share.
+#[derive(Clone, Copy)]
+struct Target {
+    /// Source voxels per destination voxel, `z, y, x`.
+    step: [u64; 3],
+    /// The accumulator's window, planes held and first plane.
+    dst: PlaneRegion,
+    oz: u64,
+    a0: u64,
     channels: usize,
+    /// The slab's window, first plane (in the source level) and planes.
     window: PlaneRegion,
     src_z0: u64,
     nz: u64,
-    src: &impl SlabRows<T>,
-) {
-    let step = plan.step;
-    let [src_y1, _] = window.end();
-    // The first column of the destination this window sums into.
-    let offset = (window.x0 / step[2] - dst.x0) as usize;
-    let add_rows = |row: usize, sum: &mut [S], count: &mut [u32]| {
-        let row = row as u64;
-        let y = dst.y0 + row % dst.ny;
-        let zi = (row / dst.ny) % oz;
-        let c = (row / dst.ny / oz) as usize;
-        if c >= channels {
-            return;
+}
+
+impl Target {
+    fn new(
+        plan: &LevelPlan,
+        next: Held,
+        channels: usize,
+        window: PlaneRegion,
+        src_z0: u64,
+        nz: u64,
+    ) -> Self {
+        Self {
+            step: plan.step,
+            dst: next.window,
+            oz: next.depth,
+            a0: next.z0,
+            channels,
+            window,
+            src_z0,
+            nz,
         }
-        let z = a0 + zi;
+    }
+
+    /// The channel, accumulator plane and level row of destination row `row` (rows are
+    /// `[c][oz][y]`), or none past the channels.
+    fn row(&self, row: u64) -> Option<(usize, u64, u64)> {
+        let c = (row / self.dst.ny / self.oz) as usize;
+        (c < self.channels).then(|| {
+            let y = self.dst.y0 + row % self.dst.ny;
+            (c, self.a0 + (row / self.dst.ny) % self.oz, y)
+        })
+    }
+
+    /// Whether any source plane of destination plane `z` is in the slab.
+    fn reaches(&self, z: u64) -> bool {
+        let first = z * self.step[0];
+        first < self.src_z0 + self.nz && first + self.step[0] > self.src_z0
+    }
+
+    /// Adds the slab's rows under destination row `row` into its sums `sum` (of either
+    /// width) and counts `count` (empty for sample types without NaN).
+    fn add_row<T: Sample, S: SumOf<T::Sum>>(
+        &self,
+        row: u64,
+        sum: &mut [S],
+        count: &mut [u32],
+        src: &impl SlabRows<T>,
+    ) {
+        let Some((c, z, y)) = self.row(row) else {
+            return;
+        };
+        let step = self.step;
+        let (window, src_z0, nz) = (self.window, self.src_z0, self.nz);
+        let [src_y1, _] = window.end();
+        // The first column of the destination this window sums into.
+        let offset = (window.x0 / step[2] - self.dst.x0) as usize;
         // Counts are kept only for sample types with NaN.
         let count = if count.is_empty() {
             count
@@ -347,19 +410,113 @@ fn accumulate_into<T: Sample, S: SumOf<T::Sum>>(
                 src.add_row(plane, at, sx, step_x, &mut sum[offset..], count);
             }
         }
-    };
-    let row_len = dst.nx as usize;
+    }
+}
+
+/// [`accumulate`] into the sums `sum` (of either width) and counts `count` of an accumulator,
+/// row by row on every thread.
+fn accumulate_into<T: Sample, S: SumOf<T::Sum>>(
+    target: Target,
+    (next_sum, next_count): (&mut [S], &mut [u32]),
+    src: &impl SlabRows<T>,
+) {
+    let row_len = target.dst.nx as usize;
     if T::HAS_NAN {
         next_sum
             .par_chunks_mut(row_len)
             .zip(next_count.par_chunks_mut(row_len))
             .enumerate()
-            .for_each(|(row, (sum, count))| add_rows(row, sum, count));
+            .for_each(|(row, (sum, count))| target.add_row(row as u64, sum, count, src));
     } else {
         next_sum
             .par_chunks_mut(row_len)
             .enumerate()
-            .for_each(|(row, sum)| add_rows(row, sum, &mut []));
+            .for_each(|(row, sum)| target.add_row(row as u64, sum, &mut [], src));
+    }
+}
+
+/// Rows of an accumulator's sums and counts (`row`, sums, counts) that one band sums into.
+type BandRows<'a, S> = Vec<(u64, &'a mut [S], &'a mut [u32])>;
+
+/// A level-0 slab's sums into the next level's accumulator, band by band: the worker that
+/// gathers the chunks of a band (one chunk row of one channel, whole) adds its rows while they
+/// are in its cache (see [`SlabSink::process`](super::sink::SlabSink::process)), instead of a
+/// pass over the whole slab after it is written. The bands' rows of the accumulator are
+/// apart, so each band's are lent to its worker alone.
+pub(crate) struct BandSums<'a, S> {
+    target: Target,
+    /// Level-0 rows per band.
+    band_rows: u64,
+    /// Bands per channel.
+    bands: usize,
+    /// The rows each band sums into, `[c][band]`.
+    rows: Vec<std::sync::Mutex<BandRows<'a, S>>>,
+}
+
+impl<'a, S: Send> BandSums<'a, S> {
+    /// Lends the rows of the accumulator that holds `next` (`sum`, `count`: its sums, of
+    /// either width, and counts) that
+    /// each band of `band_rows` level-0 rows of the slab (`channels` channels over `window`,
+    /// planes `src_z0..src_z0 + nz`) sums into.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        plan: &LevelPlan,
+        next: Held,
+        (sum, count): (&'a mut [S], &'a mut [u32]),
+        channels: usize,
+        window: PlaneRegion,
+        src_z0: u64,
+        nz: u64,
+        band_rows: u64,
+    ) -> Self {
+        let target = Target::new(plan, next, channels, window, src_z0, nz);
+        let bands = window.ny.div_ceil(band_rows).max(1) as usize;
+        let mut rows: Vec<_> = (0..channels * bands).map(|_| Vec::new()).collect();
+        let row_len = target.dst.nx as usize;
+        let mut counts = count.chunks_mut(row_len);
+        for (r, sum) in sum.chunks_mut(row_len).enumerate() {
+            let count = counts.next().unwrap_or_default();
+            let Some((c, z, y)) = target.row(r as u64) else {
+                continue;
+            };
+            if !target.reaches(z) {
+                continue;
+            }
+            // A band's rows start on a multiple of the step, so each destination row's
+            // source rows are in one band.
+            let band = ((y * target.step[1]).max(window.y0) - window.y0) / band_rows;
+            let band = (band as usize).min(bands - 1);
+            rows[c * bands + band].push((r as u64, sum, count));
+        }
+        Self {
+            target,
+            band_rows,
+            bands,
+            rows: rows.into_iter().map(std::sync::Mutex::new).collect(),
+        }
+    }
+}
+
+/// Work a worker does on each band of a slab besides writing it: see [`BandSums`].
+pub(crate) trait BandWork<T: Sample>: Sync {
+    /// Level-0 rows per band (the chunk's edge `y`).
+    fn band_rows(&self) -> u64;
+
+    /// Does the work of channel `c`'s band `band` (counted from the window's first row) of
+    /// the slab whose planes are `planes` (`[c · nz + z]`, each `[y][x]` over the window).
+    fn band(&self, c: usize, band: usize, planes: &[&[T]]);
+}
+
+impl<T: Sample, S: SumOf<T::Sum>> BandWork<T> for BandSums<'_, S> {
+    fn band_rows(&self) -> u64 {
+        self.band_rows
+    }
+
+    fn band(&self, c: usize, band: usize, planes: &[&[T]]) {
+        let mut rows = self.rows[c * self.bands + band].lock().expect("band rows");
+        for (r, sum, count) in rows.iter_mut() {
+            self.target.add_row(*r, sum, count, &Values(planes));
+        }
     }
 }
 
@@ -375,6 +532,96 @@ mod tests {
         assert_eq!([covered(5, 1, 6), covered(1, 8, 16)], [1, 8]);
         // Past the extent: nothing.
         assert_eq!(covered(3, 4, 10), 0);
+    }
+
+    /// Sums a slab of `channels` channels (`nz` planes from `z0`, over `window`) into a level
+    /// of `step` with `accumulate`, and band by band (bands of `band_rows` rows, in reverse
+    /// order); both accumulators' sums and counts.
+    fn both_ways<T: Sample>(
+        values: &[T],
+        channels: usize,
+        (z0, nz, window): (u64, u64, PlaneRegion),
+        step: [u64; 3],
+        band_rows: u64,
+    ) -> [(Vec<T::Sum>, Vec<u32>); 2] {
+        let plan = LevelPlan {
+            shape: [0; 3],
+            step,
+            factor: step,
+            voxel_size: [1.0; 3],
+        };
+        let dst = crate::columns::at_level(window, step, [u64::MAX; 3]);
+        let new = || Accumulator::<T>::new(false, channels, 0, 3, dst);
+        let planes =
+            crate::convert::sink::planes_of(values, channels * nz as usize, window.area() as usize);
+        let mut whole = new();
+        accumulate(
+            &plan,
+            &mut whole,
+            channels,
+            window,
+            z0,
+            nz,
+            &Values(&planes),
+        );
+        let mut banded = new();
+        let held = banded.held();
+        let SumBuffer::Wide(sum) = &mut banded.sum else {
+            unreachable!("wide sums")
+        };
+        let bands = BandSums::new(
+            &plan,
+            held,
+            (sum, &mut banded.count),
+            channels,
+            window,
+            z0,
+            nz,
+            band_rows,
+        );
+        for c in 0..channels {
+            for band in (0..window.ny.div_ceil(band_rows) as usize).rev() {
+                BandWork::<T>::band(&bands, c, band, &planes);
+            }
+        }
+        drop(bands);
+        [whole, banded].map(|a| (a.sum.into_wide(), a.count))
+    }
+
+    #[test]
+    fn sums_added_band_by_band_are_the_sums_added_row_by_row() {
+        // A column window 8 rows down and 4 across, 3 bands of 6 rows (the last 2), odd
+        // extents, two channels; planes 2..6 of the level below.
+        let window = PlaneRegion {
+            y0: 12,
+            x0: 4,
+            ny: 14,
+            nx: 9,
+        };
+        let n = 2 * 4 * 14 * 9;
+        let ints: Vec<u16> = (0..n).map(|i| (i * 7919 % 65521) as u16).collect();
+        let [a, b] = both_ways(&ints, 2, (2, 4, window), [2, 2, 2], 6);
+        assert_eq!(a, b);
+        assert!(a.0.iter().any(|&s| s != 0));
+        // Anisotropic steps, and floats with NaN (counted).
+        let floats: Vec<f32> = (0..n)
+            .map(|i| {
+                if i % 13 == 0 {
+                    f32::NAN
+                } else {
+                    i as f32 * 0.25
+                }
+            })
+            .collect();
+        let [a, b] = both_ways(&floats, 2, (2, 4, window), [1, 2, 2], 6);
+        assert_eq!(a.0.len(), b.0.len());
+        assert!(
+            a.0.iter()
+                .zip(&b.0)
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        );
+        assert_eq!(a.1, b.1);
+        assert!(a.1.iter().any(|&n| n > 0 && n < 4));
     }
 
     #[test]

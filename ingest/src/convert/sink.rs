@@ -4,9 +4,13 @@
 use std::sync::Mutex;
 
 use rayon::prelude::*;
-use zarrs::array::{Array, ArrayError};
+use zarrs::array::{Array, ArrayError, CodecOptions};
 
-use crate::regions::{BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, StatsScratch};
+use super::pyramid_sums::BandWork;
+use crate::regions::{
+    BrickStats, CellGrid, ChannelAccumulator, LevelHistograms, SliceCells, StatsScratch,
+    slice_cells,
+};
 use crate::sample_format::Sample;
 use crate::source::PlaneRegion;
 use crate::store::Store;
@@ -34,6 +38,13 @@ struct SinkScratch {
 thread_local! {
     /// This thread's [`SinkScratch`], absent while a task uses it.
     static SCRATCH: std::cell::Cell<Option<Box<SinkScratch>>> = const { std::cell::Cell::new(None) };
+}
+
+/// Hands back the memory every worker thread keeps for gathering chunks (up to
+/// [`GATHER_BYTES`](crate::columns::GATHER_BYTES) each), so that a process that goes on after
+/// a conversion (the Python module's) does not hold it.
+pub(crate) fn release_scratch() {
+    rayon::broadcast(|_| drop(SCRATCH.take()));
 }
 
 /// Reusable per-level context for the slab processing that is common to `convert` and
@@ -64,15 +75,21 @@ pub(crate) fn planes_of<T>(slab: &[T], count: usize, plane: usize) -> Vec<&[T]> 
 impl SlabSink<'_> {
     /// Writes (when an array is given) the chunks of a slab of the window starting at `z0`,
     /// given plane by plane (`planes[c · nz + z]`, each `[y][x]`), records brick histograms
-    /// and statistics, and folds the slab into the min/max `cells`.
-    /// Returns (bricks written, bricks empty).
+    /// and statistics, and folds the slab into the min/max `cells`; and does `bands`' work
+    /// on each band of the slab (a chunk row of a channel) when a worker gathers whole chunk
+    /// rows. Returns (bricks written, bricks empty, whether `bands`' work was done).
+    ///
+    /// The slab is read once: a task gathers the chunks of (part of) a chunk row plane by
+    /// plane, finds the min/max cells of that plane's rows while they are in its cache, and
+    /// then does the band's work.
     pub fn process<T: Sample>(
         &self,
         planes: &[&[T]],
         z0: u64,
         nz: u64,
         cells: &mut CellGrid<T>,
-    ) -> Result<(u64, u64), ChunkWriteError> {
+        bands: Option<&dyn BandWork<T>>,
+    ) -> Result<(u64, u64, bool), ChunkWriteError> {
         let w = self.window;
         let [ny, nx] = w.end();
         let [oz, oy, ox] = self.outer;
@@ -81,6 +98,7 @@ impl SlabSink<'_> {
         let chunks = self.channels as u64 * (rows.end - rows.start) * (columns.end - columns.start);
         let threads = rayon::current_num_threads() as u64;
         let group = self.gather.min(chunks.div_ceil(2 * threads)).max(1);
+        let bands = bands.filter(|b| group >= columns.end - columns.start && b.band_rows() == oy);
         let tasks: Vec<(usize, u64, std::ops::Range<u64>)> = (0..self.channels)
             .flat_map(|c| {
                 let columns = columns.clone();
@@ -93,11 +111,27 @@ impl SlabSink<'_> {
             })
             .collect();
         let chunk_len = (oz * oy * ox) as usize;
+        let grid = cells.start_slab(z0, nz, w);
+        let cells = Mutex::new(cells);
+        // No task may start on a thread while another waits there: rayon lets a thread that
+        // waits for work it shared take any waiting task, and that one would gather into
+        // memory of its own, beyond the estimate. With a task for every thread, each encodes
+        // its own chunks (no shard's inner chunks or blosc blocks shared). With fewer (then a
+        // chunk each), one thread takes them in turn, and the pool encodes each.
+        let (per_job, codec) = if tasks.len() as u64 >= threads {
+            (1, CodecOptions::default().with_concurrent_target(1))
+        } else {
+            let all = threads as usize;
+            (
+                tasks.len().max(1),
+                CodecOptions::default().with_concurrent_target(all),
+            )
+        };
         let counts = tasks
             .into_par_iter()
+            .with_min_len(per_job)
             .map(|(c, cy, cxs)| -> Result<(u64, u64), ChunkWriteError> {
-                // This thread's tables and chunk memory, taken while in use (a task that
-                // runs while this one waits inside zarrs makes its own).
+                // This thread's tables and chunk memory, taken while in use.
                 let mut kept = SCRATCH.take().unwrap_or_default();
                 let SinkScratch {
                     stats: scratch,
@@ -116,6 +150,16 @@ impl SlabSink<'_> {
                         chunk.fill(T::default());
                     }
                 }
+                // The part of the window these chunks hold, and its min/max cells plane by plane.
+                let x0 = cxs.start * ox;
+                let band = PlaneRegion {
+                    y0,
+                    x0,
+                    ny: vy,
+                    nx: (cxs.end * ox).min(nx) - x0,
+                };
+                let first = ((y0 - w.y0) * w.nx + (x0 - w.x0)) as usize;
+                let mut band_cells: Vec<SliceCells<T>> = Vec::with_capacity(nz as usize);
                 for dz in 0..nz {
                     let plane = planes[(c as u64 * nz + dz) as usize];
                     for dy in 0..vy {
@@ -126,6 +170,16 @@ impl SlabSink<'_> {
                             chunk[dst..dst + n].copy_from_slice(&plane[src..src + n]);
                         }
                     }
+                    band_cells.push(slice_cells(&plane[first..], w.nx as usize, band, grid));
+                }
+                {
+                    let mut cells = cells.lock().expect("cells");
+                    for (dz, found) in band_cells.iter().enumerate() {
+                        cells.fold_slice(c, z0 + dz as u64, found);
+                    }
+                }
+                if let Some(work) = bands {
+                    work.band(c, (cy - rows.start) as usize, planes);
                 }
                 let counts = cxs.zip(gathered.chunks_exact(chunk_len)).try_fold(
                     (0, 0),
@@ -133,6 +187,7 @@ impl SlabSink<'_> {
                         let (w, e) = self.process_chunk(
                             chunk,
                             scratch,
+                            &codec,
                             [c as u64, z0, cy, cx],
                             [nz, vy, vx(cx)],
                         )?;
@@ -143,19 +198,20 @@ impl SlabSink<'_> {
                 counts
             })
             .collect::<Result<Vec<_>, _>>()?;
-        cells.add_slab(planes, z0, nz, w);
-        Ok(counts
+        let (written, empty) = counts
             .into_iter()
-            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1)))
+            .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        Ok((written, empty, bands.is_some()))
     }
 
     /// Records the bricks of one gathered outer chunk (channel `c`, first plane `z0`, chunk
     /// column `cy, cx`; `nz, vy, vx` voxels of it inside the level) and writes the chunk
-    /// unless every brick is empty. Returns (bricks written, bricks empty).
+    /// (encoded with `codec`) unless every brick is empty. Returns (bricks written, bricks empty).
     fn process_chunk<T: Sample>(
         &self,
         chunk: &[T],
         scratch: &mut StatsScratch,
+        codec: &CodecOptions,
         [c, z0, cy, cx]: [u64; 4],
         [nz, vy, vx]: [u64; 3],
     ) -> Result<(u64, u64), ChunkWriteError> {
@@ -197,12 +253,44 @@ impl SlabSink<'_> {
         {
             let indices = [c as u64, z0 / oz, cy, cx];
             array
-                .store_chunk(&indices, chunk)
+                .store_chunk_opt(&indices, chunk, codec)
                 .map_err(|source| ChunkWriteError {
                     chunk: indices,
                     source: Box::new(source),
                 })?;
         }
         Ok((written, empty))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The chunk memory each worker of `pool` keeps, in words.
+    fn kept(pool: &rayon::ThreadPool) -> Vec<usize> {
+        pool.broadcast(|_| {
+            let scratch = SCRATCH.take();
+            let words = scratch.as_ref().map_or(0, |s| s.words.capacity());
+            SCRATCH.set(scratch);
+            words
+        })
+    }
+
+    #[test]
+    fn released_scratch_leaves_no_worker_holding_chunk_memory() {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(3)
+            .build()
+            .expect("a pool");
+        pool.broadcast(|_| {
+            SCRATCH.set(Some(Box::new(SinkScratch {
+                stats: StatsScratch::default(),
+                words: Vec::with_capacity(1 << 20),
+            })));
+        });
+        assert_eq!(kept(&pool), [1 << 20; 3]);
+        pool.install(release_scratch);
+        assert_eq!(kept(&pool), [0; 3]);
     }
 }

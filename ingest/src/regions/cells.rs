@@ -256,15 +256,10 @@ impl<T: Sample> CellGrid<T> {
         ((c as u64 * self.grid[0] + z) * gy * gx + y * gx + x) as usize
     }
 
-    /// Folds one slab of voxels (`planes[c · nz + z]`, each `[y][x]` over `window` of its
-    /// plane, starting at depth `z0` of the level) into the cells. Slabs and windows may arrive in any
-    /// order: a cell at a window's edge takes its halo from the next window's voxels when
-    /// they come.
-    pub fn add_slab(&mut self, planes: &[&[T]], z0: u64, nz: u64, window: PlaneRegion) {
-        use rayon::prelude::*;
-        if nz == 0 {
-            return;
-        }
+    /// Makes room for the rows that a slab of `nz` planes from depth `z0` over `window` of
+    /// its planes reaches (halos included), and returns the level's cells per plane row and
+    /// column, `gy, gx`, that [`slice_cells`] takes for the windows of that slab.
+    pub fn start_slab(&mut self, z0: u64, nz: u64, window: PlaneRegion) -> [u64; 2] {
         // The level's cells per row (a block holds the cells its column reaches).
         let gy = (window.y0 + window.ny)
             .div_ceil(CELL)
@@ -273,41 +268,61 @@ impl<T: Sample> CellGrid<T> {
             .div_ceil(CELL)
             .max(self.x0 + self.grid[2]);
         // The rows these planes reach, halos included, may start past the window's end.
-        self.extend_to(*cells_of(z0 + nz - 1, self.depth).end() + 1);
+        if nz > 0 {
+            self.extend_to(*cells_of(z0 + nz - 1, self.depth).end() + 1);
+        }
+        [gy, gx]
+    }
+
+    /// Folds into the cells what [`slice_cells`] found in a window of plane `z` of channel
+    /// `c`, after [`start_slab`](Self::start_slab) for the slab of that plane.
+    pub fn fold_slice(&mut self, c: usize, z: u64, cells: &SliceCells<T>) {
+        let held = self.z0..self.z0 + self.grid[0];
+        let (hy, hx) = (&cells.haloed_cells[0], &cells.haloed_cells[1]);
+        let w = (hx.end - hx.start) as usize;
+        for cz in cells_of(z, self.depth).filter(|cz| held.contains(cz)) {
+            for (j, cy) in hy.clone().enumerate() {
+                let base = self.index(c, cz - self.z0, cy - self.y0, hx.start - self.x0);
+                for i in 0..w {
+                    let k = j * w + i;
+                    self.haloed
+                        .fold(base + i, cells.haloed.min[k], cells.haloed.max[k]);
+                }
+            }
+        }
+        let (ey, ex) = (&cells.exact_cells[0], &cells.exact_cells[1]);
+        let w = (ex.end - ex.start) as usize;
+        for (j, cy) in ey.clone().enumerate() {
+            let base = self.index(c, z / CELL - self.z0, cy - self.y0, ex.start - self.x0);
+            for i in 0..w {
+                let k = j * w + i;
+                self.exact
+                    .fold(base + i, cells.exact.min[k], cells.exact.max[k]);
+            }
+        }
+    }
+
+    /// Folds one slab of voxels (`planes[c · nz + z]`, each `[y][x]` over `window` of its
+    /// plane, starting at depth `z0` of the level) into the cells. Slabs and windows may arrive in any
+    /// order: a cell at a window's edge takes its halo from the next window's voxels when
+    /// they come. (Conversions fold each chunk row's window as its chunks are gathered, see
+    /// `SlabSink::process`; this is the same, a whole plane at a time.)
+    #[cfg(test)]
+    pub fn add_slab(&mut self, planes: &[&[T]], z0: u64, nz: u64, window: PlaneRegion) {
+        use rayon::prelude::*;
+        let grid = self.start_slab(z0, nz, window);
         let slices: Vec<(usize, u64, SliceCells<T>)> = (0..self.channels)
             .flat_map(|c| (0..nz).map(move |dz| (c, dz)))
             .collect::<Vec<_>>()
             .into_par_iter()
             .map(|(c, dz)| {
                 let plane = planes[(c as u64 * nz + dz) as usize];
-                let cells = slice_cells(plane, window, [gy, gx]);
+                let cells = slice_cells(plane, window.nx as usize, window, grid);
                 (c, z0 + dz, cells)
             })
             .collect();
         for (c, z, cells) in slices {
-            let held = self.z0..self.z0 + self.grid[0];
-            let (hy, hx) = (&cells.haloed_cells[0], &cells.haloed_cells[1]);
-            let w = (hx.end - hx.start) as usize;
-            for cz in cells_of(z, self.depth).filter(|cz| held.contains(cz)) {
-                for (j, cy) in hy.clone().enumerate() {
-                    let base = self.index(c, cz - self.z0, cy - self.y0, hx.start - self.x0);
-                    for i in 0..w {
-                        let k = j * w + i;
-                        self.haloed
-                            .fold(base + i, cells.haloed.min[k], cells.haloed.max[k]);
-                    }
-                }
-            }
-            let (ey, ex) = (&cells.exact_cells[0], &cells.exact_cells[1]);
-            let w = (ex.end - ex.start) as usize;
-            for (j, cy) in ey.clone().enumerate() {
-                let base = self.index(c, z / CELL - self.z0, cy - self.y0, ex.start - self.x0);
-                for i in 0..w {
-                    let k = j * w + i;
-                    self.exact
-                        .fold(base + i, cells.exact.min[k], cells.exact.max[k]);
-                }
-            }
+            self.fold_slice(c, z, &cells);
         }
     }
 
@@ -359,21 +374,27 @@ impl<T: Sample> CellGrid<T> {
 
 /// The cells one window of a slice reaches: haloed ranges (x and y halo; z is the caller's)
 /// over the cells `haloed_cells` (rows, columns), and exact ranges over `exact_cells`.
-struct SliceCells<T: Sample> {
+pub struct SliceCells<T: Sample> {
     haloed_cells: [std::ops::Range<u64>; 2],
     haloed: Ranges<T>,
     exact_cells: [std::ops::Range<u64>; 2],
     exact: Ranges<T>,
 }
 
-/// Min/max cells of one window of a slice (`window.ny × window.nx` values) of a level whose
-/// planes have `grid` = `gy, gx` cells: haloed in x and y, and exact, over the cells the
-/// window's voxels reach.
+/// Min/max cells of one window of a slice (`window.ny` rows of `window.nx` values, each row
+/// `stride` values after the one before) of a level whose planes have `grid` = `gy, gx` cells
+/// (see [`CellGrid::start_slab`]): haloed in x and y, and exact, over the cells the window's
+/// voxels reach.
 ///
 /// Each row of cells is folded column by column first (the rows of a cell, then its halo
 /// rows: whole rows of values at once, which the compiler vectorizes), and each cell's
 /// columns of the result are folded after.
-fn slice_cells<T: Sample>(slice: &[T], window: PlaneRegion, [gy, gx]: [u64; 2]) -> SliceCells<T> {
+pub fn slice_cells<T: Sample>(
+    slice: &[T],
+    stride: usize,
+    window: PlaneRegion,
+    [gy, gx]: [u64; 2],
+) -> SliceCells<T> {
     let [y1, x1] = window.end();
     let haloed_cells = [
         cells_reached(window.y0..y1, gy),
@@ -393,7 +414,7 @@ fn slice_cells<T: Sample>(slice: &[T], window: PlaneRegion, [gy, gx]: [u64; 2]) 
         exact_cells,
     };
     let nx = window.nx as usize;
-    let row = |y: u64| &slice[(y - window.y0) as usize * nx..][..nx];
+    let row = |y: u64| &slice[(y - window.y0) as usize * stride..][..nx];
     // The voxels of `first..end` (level coordinates along one axis) inside `window`'s
     // `start..stop`, relative to `start`.
     let inside = |first: u64, end: u64, start: u64, stop: u64| {

@@ -23,6 +23,6 @@ pub(crate) mod cells;
 pub(crate) mod histograms;
 pub(crate) mod statistics;
 
-pub use self::cells::{CELL, CHUNK_ROWS, CellGrid, HALO, cells_reached};
+pub use self::cells::{CELL, CHUNK_ROWS, CellGrid, HALO, SliceCells, cells_reached, slice_cells};
 pub use self::histograms::{Binning, BrickStats, HistogramBlock, LevelHistograms, StatsScratch};
 pub use self::statistics::ChannelAccumulator;
