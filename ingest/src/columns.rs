@@ -159,12 +159,15 @@ impl Pass<'_> {
         let chunk = plan.outer.iter().product::<u64>() * sample;
         // Two slabs, the decoders' planes and strips, the cell scratch of a slab (a
         // sixteenth: what a whole slab's cells take; workers fold theirs band by band, which
-        // takes less), a chunk per thread.
+        // takes less), a chunk per thread; and for shards, another per thread, which a thread
+        // waiting inside a shard's encode may gather for a task it takes meanwhile (see
+        // `SlabSink::process`).
+        let in_flight = if plan.sharded { 2 } else { 1 };
         let slabs = 2 * slab
             + channels * column.area() * sample
             + (self.decoders)(column)
             + slab / 16
-            + self.threads * chunk;
+            + in_flight * self.threads * chunk;
         let mut pyramid = 0;
         let mut regions = 0;
         for (l, level) in plan.levels.iter().enumerate().take(self.written) {
@@ -379,6 +382,22 @@ mod tests {
         assert!(cut.estimate <= alone / 2);
         let row = cut.edge[1].min(1024) / 64;
         assert!((1..=row).contains(&cut.gather), "{cut:?}");
+    }
+
+    #[test]
+    fn a_sharded_store_counts_a_second_shard_per_thread() {
+        // Shards of 64³ (the plan's outer chunk): a thread waiting inside one shard's encode
+        // may gather another.
+        let plain = plan([64, 1024, 1024]);
+        let sharded = PartitionPlan {
+            sharded: true,
+            ..plain.clone()
+        };
+        let shard = 64 * 64 * 64 * 2;
+        let estimate = |p: &PartitionPlan| pass(p).estimate([1024, 1024], p.levels.len());
+        let (a, b) = (estimate(&plain), estimate(&sharded));
+        assert_eq!(b.slabs, a.slabs + 2 * shard);
+        assert_eq!((b.pyramid, b.regions), (a.pyramid, a.regions));
     }
 
     #[test]

@@ -482,8 +482,9 @@ impl<'a, S: Send> BandSums<'a, S> {
             if !target.reaches(z) {
                 continue;
             }
-            // A band's rows start on a multiple of the step, so each destination row's
-            // source rows are in one band.
+            // The band of the destination row's first source row (its others are in the same
+            // band when the band's edge is a multiple of the step; either way `add_row` reads
+            // them from the whole slab, so only where the work is done depends on it).
             let band = ((y * target.step[1]).max(window.y0) - window.y0) / band_rows;
             let band = (band as usize).min(bands - 1);
             rows[c * bands + band].push((r as u64, sum, count));

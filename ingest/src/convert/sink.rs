@@ -40,11 +40,12 @@ thread_local! {
     static SCRATCH: std::cell::Cell<Option<Box<SinkScratch>>> = const { std::cell::Cell::new(None) };
 }
 
-/// Hands back the memory every worker thread keeps for gathering chunks (up to
-/// [`GATHER_BYTES`](crate::columns::GATHER_BYTES) each), so that a process that goes on after
-/// a conversion (the Python module's) does not hold it.
+/// Hands back the memory every worker thread (and this thread) keeps for gathering chunks (up
+/// to [`GATHER_BYTES`](crate::columns::GATHER_BYTES) each), so that a process that goes on
+/// after a conversion (the Python module's) does not hold it.
 pub(crate) fn release_scratch() {
     rayon::broadcast(|_| drop(SCRATCH.take()));
+    drop(SCRATCH.take());
 }
 
 /// Reusable per-level context for the slab processing that is common to `convert` and
@@ -113,91 +114,91 @@ impl SlabSink<'_> {
         let chunk_len = (oz * oy * ox) as usize;
         let grid = cells.start_slab(z0, nz, w);
         let cells = Mutex::new(cells);
-        // No task may start on a thread while another waits there: rayon lets a thread that
-        // waits for work it shared take any waiting task, and that one would gather into
-        // memory of its own, beyond the estimate. With a task for every thread, each encodes
-        // its own chunks (no shard's inner chunks or blosc blocks shared). With fewer (then a
-        // chunk each), one thread takes them in turn, and the pool encodes each.
-        let (per_job, codec) = if tasks.len() as u64 >= threads {
-            (1, CodecOptions::default().with_concurrent_target(1))
-        } else {
-            let all = threads as usize;
-            (
-                tasks.len().max(1),
-                CodecOptions::default().with_concurrent_target(all),
-            )
-        };
-        let counts = tasks
-            .into_par_iter()
-            .with_min_len(per_job)
-            .map(|(c, cy, cxs)| -> Result<(u64, u64), ChunkWriteError> {
-                // This thread's tables and chunk memory, taken while in use.
-                let mut kept = SCRATCH.take().unwrap_or_default();
-                let SinkScratch {
-                    stats: scratch,
-                    words,
-                } = &mut *kept;
-                let count = (cxs.end - cxs.start) as usize;
-                words.resize((count * chunk_len * size_of::<T>()).div_ceil(8), 0);
-                let gathered = &mut bytemuck::cast_slice_mut::<u64, T>(words)[..count * chunk_len];
-                let y0 = cy * oy;
-                let vy = (ny - y0).min(oy);
-                // The voxels of each chunk inside the level along x.
-                let vx = |cx: u64| (nx - cx * ox).min(ox);
-                // Gather the outer chunks, each padded with the fill value (0) past the slab.
-                for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
-                    if (nz, vy, vx(cx)) != (oz, oy, ox) {
-                        chunk.fill(T::default());
-                    }
-                }
-                // The part of the window these chunks hold, and its min/max cells plane by plane.
-                let x0 = cxs.start * ox;
-                let band = PlaneRegion {
-                    y0,
-                    x0,
-                    ny: vy,
-                    nx: (cxs.end * ox).min(nx) - x0,
-                };
-                let first = ((y0 - w.y0) * w.nx + (x0 - w.x0)) as usize;
-                let mut band_cells: Vec<SliceCells<T>> = Vec::with_capacity(nz as usize);
-                for dz in 0..nz {
-                    let plane = planes[(c as u64 * nz + dz) as usize];
-                    for dy in 0..vy {
-                        let row = ((y0 - w.y0 + dy) * w.nx) as usize;
-                        let dst = ((dz * oy + dy) * ox) as usize;
-                        for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
-                            let (src, n) = (row + (cx * ox - w.x0) as usize, vx(cx) as usize);
-                            chunk[dst..dst + n].copy_from_slice(&plane[src..src + n]);
+        // A thread that waits for work it shared with rayon takes any waiting task, which
+        // gathers into memory of its own. With a task for every thread, each encodes its own
+        // chunks (a shard's inner chunks are not shared out), so no thread waits and no task
+        // starts inside another. With fewer tasks (a chunk each), the threads left over encode
+        // the inner chunks of a shard, and a thread waiting there may start one more task: a
+        // shard per thread that the estimate counts for sharded stores (`Pass::estimate`).
+        // Plain chunks are encoded on one thread whatever the target.
+        let codec = CodecOptions::default()
+            .with_concurrent_target((threads as usize).div_ceil(tasks.len().max(1)));
+        // In the pool, so that the memory a task keeps is a worker's, which
+        // [`release_scratch`] hands back (a lone task would otherwise run on this thread).
+        let counts = rayon::scope(|_| {
+            tasks
+                .into_par_iter()
+                .map(|(c, cy, cxs)| -> Result<(u64, u64), ChunkWriteError> {
+                    // This thread's tables and chunk memory, taken while in use.
+                    let mut kept = SCRATCH.take().unwrap_or_default();
+                    let SinkScratch {
+                        stats: scratch,
+                        words,
+                    } = &mut *kept;
+                    let count = (cxs.end - cxs.start) as usize;
+                    words.resize((count * chunk_len * size_of::<T>()).div_ceil(8), 0);
+                    let gathered =
+                        &mut bytemuck::cast_slice_mut::<u64, T>(words)[..count * chunk_len];
+                    let y0 = cy * oy;
+                    let vy = (ny - y0).min(oy);
+                    // The voxels of each chunk inside the level along x.
+                    let vx = |cx: u64| (nx - cx * ox).min(ox);
+                    // Gather the outer chunks, each padded with the fill value (0) past the slab.
+                    for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
+                        if (nz, vy, vx(cx)) != (oz, oy, ox) {
+                            chunk.fill(T::default());
                         }
                     }
-                    band_cells.push(slice_cells(&plane[first..], w.nx as usize, band, grid));
-                }
-                {
-                    let mut cells = cells.lock().expect("cells");
-                    for (dz, found) in band_cells.iter().enumerate() {
-                        cells.fold_slice(c, z0 + dz as u64, found);
+                    // The part of the window these chunks hold, and its min/max cells plane by plane.
+                    let x0 = cxs.start * ox;
+                    let band = PlaneRegion {
+                        y0,
+                        x0,
+                        ny: vy,
+                        nx: (cxs.end * ox).min(nx) - x0,
+                    };
+                    let first = ((y0 - w.y0) * w.nx + (x0 - w.x0)) as usize;
+                    let mut band_cells: Vec<SliceCells<T>> = Vec::with_capacity(nz as usize);
+                    for dz in 0..nz {
+                        let plane = planes[(c as u64 * nz + dz) as usize];
+                        for dy in 0..vy {
+                            let row = ((y0 - w.y0 + dy) * w.nx) as usize;
+                            let dst = ((dz * oy + dy) * ox) as usize;
+                            for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len))
+                            {
+                                let (src, n) = (row + (cx * ox - w.x0) as usize, vx(cx) as usize);
+                                chunk[dst..dst + n].copy_from_slice(&plane[src..src + n]);
+                            }
+                        }
+                        band_cells.push(slice_cells(&plane[first..], w.nx as usize, band, grid));
                     }
-                }
-                if let Some(work) = bands {
-                    work.band(c, (cy - rows.start) as usize, planes);
-                }
-                let counts = cxs.zip(gathered.chunks_exact(chunk_len)).try_fold(
-                    (0, 0),
-                    |(written, empty), (cx, chunk)| {
-                        let (w, e) = self.process_chunk(
-                            chunk,
-                            scratch,
-                            &codec,
-                            [c as u64, z0, cy, cx],
-                            [nz, vy, vx(cx)],
-                        )?;
-                        Ok((written + w, empty + e))
-                    },
-                );
-                SCRATCH.set(Some(kept));
-                counts
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+                    {
+                        let mut cells = cells.lock().expect("cells");
+                        for (dz, found) in band_cells.iter().enumerate() {
+                            cells.fold_slice(c, z0 + dz as u64, found);
+                        }
+                    }
+                    if let Some(work) = bands {
+                        work.band(c, (cy - rows.start) as usize, planes);
+                    }
+                    let counts = cxs.zip(gathered.chunks_exact(chunk_len)).try_fold(
+                        (0, 0),
+                        |(written, empty), (cx, chunk)| {
+                            let (w, e) = self.process_chunk(
+                                chunk,
+                                scratch,
+                                &codec,
+                                [c as u64, z0, cy, cx],
+                                [nz, vy, vx(cx)],
+                            )?;
+                            Ok((written + w, empty + e))
+                        },
+                    );
+                    SCRATCH.set(Some(kept));
+                    counts
+                })
+                .collect::<Result<Vec<_>, _>>()
+        })?;
         let (written, empty) = counts
             .into_iter()
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));

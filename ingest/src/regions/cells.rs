@@ -305,7 +305,7 @@ impl<T: Sample> CellGrid<T> {
     /// Folds one slab of voxels (`planes[c · nz + z]`, each `[y][x]` over `window` of its
     /// plane, starting at depth `z0` of the level) into the cells. Slabs and windows may arrive in any
     /// order: a cell at a window's edge takes its halo from the next window's voxels when
-    /// they come. (Conversions fold each chunk row's window as its chunks are gathered, see
+    /// they come. (Conversions fold each gather group's window as its chunks are gathered, see
     /// `SlabSink::process`; this is the same, a whole plane at a time.)
     #[cfg(test)]
     pub fn add_slab(&mut self, planes: &[&[T]], z0: u64, nz: u64, window: PlaneRegion) {
@@ -365,11 +365,18 @@ impl<T: Sample> CellGrid<T> {
                 &ranges.max[c * n..(c + 1) * n],
             );
             let empty = |i: usize| mn[i] > mx[i];
-            out.extend((0..n).map(|i| if empty(i) { nan } else { mn[i] }));
-            out.extend((0..n).map(|i| if empty(i) { nan } else { mx[i] }));
+            out.extend((0..n).map(|i| if empty(i) { nan } else { unsigned_zero(mn[i]) }));
+            out.extend((0..n).map(|i| if empty(i) { nan } else { unsigned_zero(mx[i]) }));
         }
         out
     }
+}
+
+/// `v`, with −0.0 written as 0.0. Of two equal values a range keeps the one it saw first,
+/// and the order in which a cell's voxels are seen depends on how the workers share the
+/// slab, so a cell holding both zeros would otherwise get either sign.
+fn unsigned_zero<T: Sample>(v: T) -> T {
+    if v == T::default() { T::default() } else { v }
 }
 
 /// The cells one window of a slice reaches: haloed ranges (x and y halo; z is the caller's)
@@ -606,6 +613,34 @@ mod tests {
         assert_eq!(cells_of(8, 4), 0..=1);
         assert_eq!(cells_of(9, 4), 1..=1);
         assert_eq!(cells_of(31, 4), 3..=3);
+    }
+
+    #[test]
+    fn a_cell_of_both_zeros_is_written_as_0_whichever_comes_first() {
+        // 1 × 1 × 8 planes: one cell of zeros, -0.0 first or last.
+        for first in [-0.0f32, 0.0] {
+            let mut plane = [-first; 8];
+            plane[0] = first;
+            let mut g = CellGrid::<f32>::for_shape(1, [1, 1, 8]);
+            g.add_slab(&planes_of(&plane, 1, 8), 0, 1, PlaneRegion::whole([1, 8]));
+            for exact in [true, false] {
+                let bits: Vec<u32> = g
+                    .to_min_max_array(exact)
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect();
+                assert_eq!(bits, [0, 0], "-0.0 first: {}", first.is_sign_negative());
+            }
+        }
+        // Other values keep their sign.
+        let mut g = CellGrid::<f32>::for_shape(1, [1, 1, 2]);
+        g.add_slab(
+            &planes_of(&[-1.5, 2.0], 1, 2),
+            0,
+            1,
+            PlaneRegion::whole([1, 2]),
+        );
+        assert_eq!(g.to_min_max_array(true), [-1.5, 2.0]);
     }
 
     #[test]

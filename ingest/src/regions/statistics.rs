@@ -45,8 +45,10 @@ impl ChannelAccumulator {
         self.sum += other.sum;
         self.count += other.count;
         self.nan += other.nan;
-        self.min = self.min.min(other.min);
-        self.max = self.max.max(other.max);
+        // `+ 0.0` makes −0.0 0.0: which zero `min` and `max` give is unspecified, and the
+        // order bricks come in varies.
+        self.min = self.min.min(other.min) + 0.0;
+        self.max = self.max.max(other.max) + 0.0;
         for (k, n) in self.keys.iter_mut().zip(&other.keys) {
             *k += n;
         }
@@ -63,8 +65,10 @@ impl ChannelAccumulator {
         self.sum += brick.sum;
         self.count += brick.count;
         self.nan += brick.nan;
-        self.min = self.min.min(brick.min);
-        self.max = self.max.max(brick.max);
+        // `+ 0.0` makes −0.0 0.0: which zero `min` and `max` give is unspecified, and the
+        // order bricks come in varies.
+        self.min = self.min.min(brick.min) + 0.0;
+        self.max = self.max.max(brick.max) + 0.0;
         for (i, &n) in brick.fine.counts.iter().enumerate() {
             self.keys[brick.fine.first_key as usize + i] += n as u64;
         }
@@ -153,6 +157,24 @@ mod tests {
 
     use super::*;
     use crate::regions::histograms::StatsScratch;
+
+    #[test]
+    fn a_channel_of_both_zeros_has_range_0_whichever_brick_comes_first() {
+        let mut scratch = StatsScratch::default();
+        let negative = BrickStats::of_rows([&[-0.0f32][..]].into_iter(), &mut scratch, false);
+        let positive = BrickStats::of_rows([&[0.0f32][..]].into_iter(), &mut scratch, false);
+        assert_eq!(negative.min.to_bits(), (-0.0f64).to_bits());
+        for order in [[&negative, &positive], [&positive, &negative]] {
+            let mut acc = ChannelAccumulator::default();
+            for brick in order {
+                acc.add(brick);
+            }
+            assert_eq!([acc.min.to_bits(), acc.max.to_bits()], [0, 0]);
+            let mut merged = ChannelAccumulator::default();
+            merged.merge(&acc);
+            assert_eq!([merged.min.to_bits(), merged.max.to_bits()], [0, 0]);
+        }
+    }
 
     #[test]
     fn percentiles_reaching_infinities_are_those_infinities() {
