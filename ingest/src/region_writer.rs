@@ -66,7 +66,7 @@ pub(crate) fn channel_summaries<T: Sample>(
     let mut displays = Vec::new();
     let mut binnings = Vec::new();
     for (c, s) in stats.iter().enumerate() {
-        let binning = s.binning::<T>();
+        let binning = s.binning();
         let percentiles = s.percentiles::<T>(&PERCENTS);
         let valid = s.count > 0;
         let at = |p: f64| percentiles.iter().find(|x| x.percent == p).map(|x| x.value);

@@ -39,16 +39,34 @@ impl Default for ChannelAccumulator {
     }
 }
 
+/// The smaller of two extremes in the order of their keys, so −0.0 before 0.0: the same
+/// whichever comes first (`f64::min` may return either zero), whatever order the bricks are
+/// added in. A NaN (never an extreme) is passed over.
+fn least(a: f64, b: f64) -> f64 {
+    if b.total_cmp(&a).is_lt() && !b.is_nan() || a.is_nan() {
+        b
+    } else {
+        a
+    }
+}
+
+/// The larger of two extremes in the order of their keys, so 0.0 after −0.0 (see [`least`]).
+fn greatest(a: f64, b: f64) -> f64 {
+    if b.total_cmp(&a).is_gt() && !b.is_nan() || a.is_nan() {
+        b
+    } else {
+        a
+    }
+}
+
 impl ChannelAccumulator {
     /// Adds the statistics of another pass over other voxels of the channel (a partition's).
     pub fn merge(&mut self, other: &Self) {
         self.sum += other.sum;
         self.count += other.count;
         self.nan += other.nan;
-        // `+ 0.0` makes −0.0 0.0: which zero `min` and `max` give is unspecified, and the
-        // order bricks come in varies.
-        self.min = self.min.min(other.min) + 0.0;
-        self.max = self.max.max(other.max) + 0.0;
+        self.min = least(self.min, other.min);
+        self.max = greatest(self.max, other.max);
         for (k, n) in self.keys.iter_mut().zip(&other.keys) {
             *k += n;
         }
@@ -65,10 +83,8 @@ impl ChannelAccumulator {
         self.sum += brick.sum;
         self.count += brick.count;
         self.nan += brick.nan;
-        // `+ 0.0` makes −0.0 0.0: which zero `min` and `max` give is unspecified, and the
-        // order bricks come in varies.
-        self.min = self.min.min(brick.min) + 0.0;
-        self.max = self.max.max(brick.max) + 0.0;
+        self.min = least(self.min, brick.min);
+        self.max = greatest(self.max, brick.max);
         for (i, &n) in brick.fine.counts.iter().enumerate() {
             self.keys[brick.fine.first_key as usize + i] += n as u64;
         }
@@ -142,12 +158,19 @@ impl ChannelAccumulator {
             .collect()
     }
 
-    /// The binning for this channel's range.
-    pub fn binning<T: Sample>(&self) -> Binning {
-        if self.count == 0 {
-            return Binning::spanning(0, 0);
+    /// The binning for this channel's range: from the first fine key that holds a voxel to the
+    /// last, so every brick's fine histogram falls in it (a brick's extreme is the first of
+    /// equal values it meets, so a channel whose smallest values are zeros of both signs may
+    /// give 0.0 as its minimum though −0.0, a key lower, is among its voxels).
+    pub fn binning(&self) -> Binning {
+        let held = |k: &&u64| **k > 0;
+        match (
+            self.keys.iter().position(|k| held(&k)),
+            self.keys.iter().rposition(|k| held(&k)),
+        ) {
+            (Some(first), Some(last)) => Binning::spanning(first, last),
+            _ => Binning::spanning(0, 0),
         }
-        Binning::spanning(T::from_f64(self.min).key(), T::from_f64(self.max).key())
     }
 }
 
@@ -159,21 +182,32 @@ mod tests {
     use crate::regions::histograms::StatsScratch;
 
     #[test]
-    fn a_channel_of_both_zeros_has_range_0_whichever_brick_comes_first() {
+    fn a_channel_of_both_zeros_has_range_minus_0_to_0_whichever_brick_comes_first() {
         let mut scratch = StatsScratch::default();
         let negative = BrickStats::of_rows([&[-0.0f32][..]].into_iter(), &mut scratch, false);
         let positive = BrickStats::of_rows([&[0.0f32][..]].into_iter(), &mut scratch, false);
-        assert_eq!(negative.min.to_bits(), (-0.0f64).to_bits());
+        // A brick that meets 0.0 first gives it as both extremes, though it holds -0.0.
+        let both = BrickStats::of_rows([&[0.0f32, -0.0][..]].into_iter(), &mut scratch, false);
+        assert_eq!([both.min.to_bits(), both.max.to_bits()], [0, 0]);
+        let range = [(-0.0f64).to_bits(), 0];
         for order in [[&negative, &positive], [&positive, &negative]] {
             let mut acc = ChannelAccumulator::default();
             for brick in order {
                 acc.add(brick);
             }
-            assert_eq!([acc.min.to_bits(), acc.max.to_bits()], [0, 0]);
+            assert_eq!([acc.min.to_bits(), acc.max.to_bits()], range);
             let mut merged = ChannelAccumulator::default();
             merged.merge(&acc);
-            assert_eq!([merged.min.to_bits(), merged.max.to_bits()], [0, 0]);
+            assert_eq!([merged.min.to_bits(), merged.max.to_bits()], range);
         }
+        // The binning holds both zeros' keys even where the extremes say 0.0 to 0.0.
+        let mut acc = ChannelAccumulator::default();
+        acc.add(&both);
+        let binning = acc.binning();
+        assert_eq!(binning, Binning::spanning((-0.0f32).key(), 0.0f32.key()));
+        let mut bins = [0u32; HISTOGRAM_BINS];
+        binning.bin_into(&both.fine, &mut bins);
+        assert_eq!(bins.iter().sum::<u32>(), 2);
     }
 
     #[test]
@@ -224,7 +258,7 @@ mod tests {
         let mut acc = ChannelAccumulator::default();
         acc.add(&brick);
         assert_eq!(acc.percentiles::<u16>(&[50.0])[0].value, 101.0);
-        let b = acc.binning::<u16>();
+        let b = acc.binning();
         let edges = b.edges::<u16>();
         let mut bins = vec![0u32; HISTOGRAM_BINS];
         b.bin_into(&fine, &mut bins);
