@@ -141,6 +141,11 @@ impl MemoryEstimate {
 }
 
 impl Pass<'_> {
+    /// Bytes of one outer chunk (a shard, when sharded) of level 0.
+    fn chunk_bytes(&self) -> u64 {
+        self.plan.outer.iter().product::<u64>() * self.plan.format.bytes() as u64
+    }
+
     /// The estimate for columns of `edge` level-0 voxels with `local` levels made in columns.
     pub fn estimate(&self, edge: [u64; 2], local: usize) -> MemoryEstimate {
         let plan = self.plan;
@@ -156,7 +161,7 @@ impl Pass<'_> {
         let split = column.ny < ny || column.nx < nx;
         let oz = plan.outer[0];
         let slab = channels * oz.min(depth) * column.area() * sample;
-        let chunk = plan.outer.iter().product::<u64>() * sample;
+        let chunk = self.chunk_bytes();
         // Two slabs, the decoders' planes and strips, the cell scratch of a slab (a
         // sixteenth: what a whole slab's cells take; workers fold theirs band by band, which
         // takes less), a chunk per thread; and for shards, another per thread, which a thread
@@ -288,9 +293,10 @@ impl Pass<'_> {
     /// as [`gather_chunks`] allows and the room left under `limit` holds, for every thread;
     /// their memory is added to its estimate. The columns chosen do not change.
     fn with_gather(&self, mut plan: ColumnPlan, limit: u64) -> ColumnPlan {
-        let outer = self.plan.outer;
-        let chunk = outer.iter().product::<u64>() * self.plan.format.bytes() as u64;
-        let row = plan.edge[1].min(self.plan.shape[2]).div_ceil(outer[2]);
+        let chunk = self.chunk_bytes();
+        let row = plan.edge[1]
+            .min(self.plan.shape[2])
+            .div_ceil(self.plan.outer[2]);
         let threads = self.threads.max(1);
         let room = limit.saturating_sub(plan.estimate) / (threads * chunk).max(1);
         plan.gather = gather_chunks(chunk, row).min(1 + room);

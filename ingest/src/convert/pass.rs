@@ -14,8 +14,8 @@ use zarrs::array::Array;
 use super::error::ConvertError;
 use super::options::ConvertOptions;
 use super::pyramid_sums::{
-    Accumulator, BandSums, BandWork, SlabRows, Sums, Values, accumulate, covered, narrow_sums,
-    with_sums,
+    Accumulator, BandSums, BandWork, SlabRows, Sums, Target, Values, accumulate, covered,
+    narrow_sums, with_sums,
 };
 use super::sink::{SlabSink, planes_of};
 use super::summary::{ConvertSummary, LevelSummary};
@@ -694,14 +694,11 @@ fn process_level0<T: Sample>(
     // other levels.
     let summed = match levels {
         [first, next, ..] => {
-            let (channels, window, oy) = (first.cells.channels, first.window, first.outer[1]);
+            let channels = first.cells.channels;
+            let target = Target::new(&next.plan, &next.acc, channels, first.window, z0, nz);
             let acc = &mut next.acc;
-            let held = acc.held();
-            let (plan, count) = (&next.plan, &mut acc.count);
             with_sums!(&mut acc.sum, sum => {
-                let bands = BandSums::new(
-                    plan, held, (sum, count), channels, window, z0, nz, oy,
-                );
+                let bands = BandSums::new(target, (sum, &mut acc.count), first.outer[1]);
                 first.write_slab(planes, z0, nz, Some(stats), Some(&bands))?
             })
         }

@@ -87,27 +87,7 @@ pub(crate) struct Accumulator<T: Sample> {
     pub(crate) count: Vec<u32>,
 }
 
-/// The planes, and the part of each plane, an accumulator holds.
-#[derive(Clone, Copy)]
-pub(crate) struct Held {
-    /// First plane held.
-    pub(crate) z0: u64,
-    /// Planes per channel.
-    pub(crate) depth: u64,
-    /// The part of each plane held.
-    pub(crate) window: PlaneRegion,
-}
-
 impl<T: Sample> Accumulator<T> {
-    /// The planes, and the part of each plane, it holds.
-    pub(crate) fn held(&self) -> Held {
-        Held {
-            z0: self.z0,
-            depth: self.depth,
-            window: self.window,
-        }
-    }
-
     /// An accumulator that holds nothing (level 0's, or one taken out for a while).
     pub(crate) fn empty() -> Self {
         Self::new(false, 0, 0, 0, PlaneRegion::whole([0, 0]))
@@ -312,7 +292,7 @@ pub(crate) fn accumulate<T: Sample>(
     nz: u64,
     src: &impl SlabRows<T>,
 ) {
-    let target = Target::new(plan, next.held(), channels, window, src_z0, nz);
+    let target = Target::new(plan, next, channels, window, src_z0, nz);
     let count = &mut next.count;
     with_sums!(&mut next.sum, sum => accumulate_into(target, (sum, count), src));
 }
@@ -320,7 +300,7 @@ pub(crate) fn accumulate<T: Sample>(
 /// Where the rows of a slab of one level go in the next level's accumulator: what
 /// [`accumulate`] and [`BandSums`] share.
 #[derive(Clone, Copy)]
-struct Target {
+pub(crate) struct Target {
     /// Source voxels per destination voxel, `z, y, x`.
     step: [u64; 3],
     /// The accumulator's window, planes held and first plane.
@@ -335,9 +315,11 @@ struct Target {
 }
 
 impl Target {
-    fn new(
+    /// Where a slab of `channels` channels over `window`, planes `src_z0..src_z0 + nz` of the
+    /// level below, goes in `next`, the accumulator of the level `plan` plans.
+    pub(crate) fn new<T: Sample>(
         plan: &LevelPlan,
-        next: Held,
+        next: &Accumulator<T>,
         channels: usize,
         window: PlaneRegion,
         src_z0: u64,
@@ -454,24 +436,16 @@ pub(crate) struct BandSums<'a, S> {
 }
 
 impl<'a, S: Send> BandSums<'a, S> {
-    /// Lends the rows of the accumulator that holds `next` (`sum`, `count`: its sums, of
-    /// either width, and counts) that
-    /// each band of `band_rows` level-0 rows of the slab (`channels` channels over `window`,
-    /// planes `src_z0..src_z0 + nz`) sums into.
-    #[allow(clippy::too_many_arguments)]
+    /// Lends the rows of `target`'s accumulator (`sum`, `count`: its sums, of either width,
+    /// and counts) that each band of `band_rows` level-0 rows of the slab sums into.
     pub(crate) fn new(
-        plan: &LevelPlan,
-        next: Held,
+        target: Target,
         (sum, count): (&'a mut [S], &'a mut [u32]),
-        channels: usize,
-        window: PlaneRegion,
-        src_z0: u64,
-        nz: u64,
         band_rows: u64,
     ) -> Self {
-        let target = Target::new(plan, next, channels, window, src_z0, nz);
+        let window = target.window;
         let bands = window.ny.div_ceil(band_rows).max(1) as usize;
-        let mut rows: Vec<_> = (0..channels * bands).map(|_| Vec::new()).collect();
+        let mut rows: Vec<_> = (0..target.channels * bands).map(|_| Vec::new()).collect();
         let row_len = target.dst.nx as usize;
         let mut counts = count.chunks_mut(row_len);
         for (r, sum) in sum.chunks_mut(row_len).enumerate() {
@@ -566,20 +540,11 @@ mod tests {
             &Values(&planes),
         );
         let mut banded = new();
-        let held = banded.held();
+        let target = Target::new(&plan, &banded, channels, window, z0, nz);
         let SumBuffer::Wide(sum) = &mut banded.sum else {
             unreachable!("wide sums")
         };
-        let bands = BandSums::new(
-            &plan,
-            held,
-            (sum, &mut banded.count),
-            channels,
-            window,
-            z0,
-            nz,
-            band_rows,
-        );
+        let bands = BandSums::new(target, (sum, &mut banded.count), band_rows);
         for c in 0..channels {
             for band in (0..window.ny.div_ceil(band_rows) as usize).rev() {
                 BandWork::<T>::band(&bands, c, band, &planes);
@@ -591,7 +556,7 @@ mod tests {
 
     #[test]
     fn sums_added_band_by_band_are_the_sums_added_row_by_row() {
-        // A column window 8 rows down and 4 across, 3 bands of 6 rows (the last 2), odd
+        // A column window 12 rows down and 4 across, 3 bands of 6 rows (the last 2), odd
         // extents, two channels; planes 2..6 of the level below.
         let window = PlaneRegion {
             y0: 12,

@@ -64,6 +64,23 @@ pub(crate) struct SlabSink<'a> {
     pub gather: u64,
 }
 
+/// One slab as [`SlabSink::process`]'s tasks share it.
+struct Slab<'s, 'c, T: Sample> {
+    /// `planes[c · nz + z]`, each `[y][x]` over the window.
+    planes: &'s [&'s [T]],
+    /// First plane and planes.
+    z0: u64,
+    nz: u64,
+    /// The level's cells per plane row and column (see [`CellGrid::start_slab`]).
+    grid: [u64; 2],
+    cells: Mutex<&'c mut CellGrid<T>>,
+    bands: Option<&'s dyn BandWork<T>>,
+    /// The window's first chunk row (band 0).
+    first_row: u64,
+    /// How chunks are encoded.
+    codec: CodecOptions,
+}
+
 /// The `count` planes of a slab held in one buffer `[c][nz][y][x]`, `plane` voxels each (an
 /// empty window's planes are empty), as the slab's consumers take them (see
 /// [`SlabSink::process`]).
@@ -93,7 +110,7 @@ impl SlabSink<'_> {
     ) -> Result<(u64, u64, bool), ChunkWriteError> {
         let w = self.window;
         let [ny, nx] = w.end();
-        let [oz, oy, ox] = self.outer;
+        let [_, oy, ox] = self.outer;
         let (rows, columns) = (w.y0 / oy..ny.div_ceil(oy), w.x0 / ox..nx.div_ceil(ox));
         // Groups of neighbouring chunks of a chunk row, few enough that every thread has two.
         let chunks = self.channels as u64 * (rows.end - rows.start) * (columns.end - columns.start);
@@ -111,9 +128,7 @@ impl SlabSink<'_> {
                 })
             })
             .collect();
-        let chunk_len = (oz * oy * ox) as usize;
         let grid = cells.start_slab(z0, nz, w);
-        let cells = Mutex::new(cells);
         // A thread that waits for work it shared with rayon takes any waiting task, which
         // gathers into memory of its own. With a task for every thread, each encodes its own
         // chunks (a shard's inner chunks are not shared out), so no thread waits and no task
@@ -123,86 +138,135 @@ impl SlabSink<'_> {
         // Plain chunks are encoded on one thread whatever the target.
         let codec = CodecOptions::default()
             .with_concurrent_target((threads as usize).div_ceil(tasks.len().max(1)));
+        let slab = Slab {
+            planes,
+            z0,
+            nz,
+            grid,
+            cells: Mutex::new(cells),
+            bands,
+            first_row: rows.start,
+            codec,
+        };
         // In the pool, so that the memory a task keeps is a worker's, which
         // [`release_scratch`] hands back (a lone task would otherwise run on this thread).
         let counts = rayon::scope(|_| {
             tasks
                 .into_par_iter()
-                .map(|(c, cy, cxs)| -> Result<(u64, u64), ChunkWriteError> {
-                    // This thread's tables and chunk memory, taken while in use.
-                    let mut kept = SCRATCH.take().unwrap_or_default();
-                    let SinkScratch {
-                        stats: scratch,
-                        words,
-                    } = &mut *kept;
-                    let count = (cxs.end - cxs.start) as usize;
-                    words.resize((count * chunk_len * size_of::<T>()).div_ceil(8), 0);
-                    let gathered =
-                        &mut bytemuck::cast_slice_mut::<u64, T>(words)[..count * chunk_len];
-                    let y0 = cy * oy;
-                    let vy = (ny - y0).min(oy);
-                    // The voxels of each chunk inside the level along x.
-                    let vx = |cx: u64| (nx - cx * ox).min(ox);
-                    // Gather the outer chunks, each padded with the fill value (0) past the slab.
-                    for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
-                        if (nz, vy, vx(cx)) != (oz, oy, ox) {
-                            chunk.fill(T::default());
-                        }
-                    }
-                    // The part of the window these chunks hold, and its min/max cells plane by plane.
-                    let x0 = cxs.start * ox;
-                    let band = PlaneRegion {
-                        y0,
-                        x0,
-                        ny: vy,
-                        nx: (cxs.end * ox).min(nx) - x0,
-                    };
-                    let first = ((y0 - w.y0) * w.nx + (x0 - w.x0)) as usize;
-                    let mut band_cells: Vec<SliceCells<T>> = Vec::with_capacity(nz as usize);
-                    for dz in 0..nz {
-                        let plane = planes[(c as u64 * nz + dz) as usize];
-                        for dy in 0..vy {
-                            let row = ((y0 - w.y0 + dy) * w.nx) as usize;
-                            let dst = ((dz * oy + dy) * ox) as usize;
-                            for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len))
-                            {
-                                let (src, n) = (row + (cx * ox - w.x0) as usize, vx(cx) as usize);
-                                chunk[dst..dst + n].copy_from_slice(&plane[src..src + n]);
-                            }
-                        }
-                        band_cells.push(slice_cells(&plane[first..], w.nx as usize, band, grid));
-                    }
-                    {
-                        let mut cells = cells.lock().expect("cells");
-                        for (dz, found) in band_cells.iter().enumerate() {
-                            cells.fold_slice(c, z0 + dz as u64, found);
-                        }
-                    }
-                    if let Some(work) = bands {
-                        work.band(c, (cy - rows.start) as usize, planes);
-                    }
-                    let counts = cxs.zip(gathered.chunks_exact(chunk_len)).try_fold(
-                        (0, 0),
-                        |(written, empty), (cx, chunk)| {
-                            let (w, e) = self.process_chunk(
-                                chunk,
-                                scratch,
-                                &codec,
-                                [c as u64, z0, cy, cx],
-                                [nz, vy, vx(cx)],
-                            )?;
-                            Ok((written + w, empty + e))
-                        },
-                    );
-                    SCRATCH.set(Some(kept));
-                    counts
-                })
+                .map(|(c, cy, cxs)| self.process_group(&slab, c, cy, cxs))
                 .collect::<Result<Vec<_>, _>>()
         })?;
         let (written, empty) = counts
             .into_iter()
             .fold((0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         Ok((written, empty, bands.is_some()))
+    }
+
+    /// The rows of chunk row `cy` inside the window.
+    fn rows_inside(&self, cy: u64) -> u64 {
+        let oy = self.outer[1];
+        (self.window.end()[0] - cy * oy).min(oy)
+    }
+
+    /// The columns of chunk column `cx` inside the window.
+    fn columns_inside(&self, cx: u64) -> u64 {
+        let ox = self.outer[2];
+        (self.window.end()[1] - cx * ox).min(ox)
+    }
+
+    /// One task of [`process`](Self::process): gathers the chunks `cxs` of chunk row `cy` of
+    /// channel `c` (in this thread's memory), folds their min/max cells and does the band's
+    /// work, then records and writes each chunk. Returns (bricks written, bricks empty).
+    fn process_group<T: Sample>(
+        &self,
+        slab: &Slab<'_, '_, T>,
+        c: usize,
+        cy: u64,
+        cxs: std::ops::Range<u64>,
+    ) -> Result<(u64, u64), ChunkWriteError> {
+        let [oz, oy, ox] = self.outer;
+        let chunk_len = (oz * oy * ox) as usize;
+        let (nz, vy, vx) = (slab.nz, self.rows_inside(cy), |cx| self.columns_inside(cx));
+        // This thread's tables and chunk memory, taken while in use.
+        let mut kept = SCRATCH.take().unwrap_or_default();
+        let SinkScratch {
+            stats: scratch,
+            words,
+        } = &mut *kept;
+        let count = (cxs.end - cxs.start) as usize;
+        words.resize((count * chunk_len * size_of::<T>()).div_ceil(8), 0);
+        let gathered = &mut bytemuck::cast_slice_mut::<u64, T>(words)[..count * chunk_len];
+        // Each chunk padded with the fill value (0) past the slab.
+        for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
+            if (nz, vy, vx(cx)) != (oz, oy, ox) {
+                chunk.fill(T::default());
+            }
+        }
+        let found = self.gather(slab, c, cy, cxs.clone(), gathered);
+        {
+            let mut cells = slab.cells.lock().expect("cells");
+            for (dz, cells_of_plane) in found.iter().enumerate() {
+                cells.fold_slice(c, slab.z0 + dz as u64, cells_of_plane);
+            }
+        }
+        if let Some(work) = slab.bands {
+            work.band(c, (cy - slab.first_row) as usize, slab.planes);
+        }
+        let counts = cxs.zip(gathered.chunks_exact(chunk_len)).try_fold(
+            (0, 0),
+            |(written, empty), (cx, chunk)| {
+                let (w, e) = self.process_chunk(
+                    chunk,
+                    scratch,
+                    &slab.codec,
+                    [c as u64, slab.z0, cy, cx],
+                    [nz, vy, vx(cx)],
+                )?;
+                Ok((written + w, empty + e))
+            },
+        );
+        SCRATCH.set(Some(kept));
+        counts
+    }
+
+    /// Copies the rows of chunks `cxs` of chunk row `cy` of channel `c` out of the slab's
+    /// planes into `gathered` (a chunk after another), plane by plane, and finds each plane's
+    /// min/max cells over those rows while they are in the cache.
+    fn gather<T: Sample>(
+        &self,
+        slab: &Slab<'_, '_, T>,
+        c: usize,
+        cy: u64,
+        cxs: std::ops::Range<u64>,
+        gathered: &mut [T],
+    ) -> Vec<SliceCells<T>> {
+        let w = self.window;
+        let [oz, oy, ox] = self.outer;
+        let chunk_len = (oz * oy * ox) as usize;
+        let (y0, x0, vy) = (cy * oy, cxs.start * ox, self.rows_inside(cy));
+        // The part of the window these chunks hold.
+        let band = PlaneRegion {
+            y0,
+            x0,
+            ny: vy,
+            nx: (cxs.end * ox).min(w.end()[1]) - x0,
+        };
+        let first = ((y0 - w.y0) * w.nx + (x0 - w.x0)) as usize;
+        (0..slab.nz)
+            .map(|dz| {
+                let plane = slab.planes[(c as u64 * slab.nz + dz) as usize];
+                for dy in 0..vy {
+                    let row = ((y0 - w.y0 + dy) * w.nx) as usize;
+                    let dst = ((dz * oy + dy) * ox) as usize;
+                    for (cx, chunk) in cxs.clone().zip(gathered.chunks_exact_mut(chunk_len)) {
+                        let src = row + (cx * ox - w.x0) as usize;
+                        let n = self.columns_inside(cx) as usize;
+                        chunk[dst..dst + n].copy_from_slice(&plane[src..src + n]);
+                    }
+                }
+                slice_cells(&plane[first..], w.nx as usize, band, slab.grid)
+            })
+            .collect()
     }
 
     /// Records the bricks of one gathered outer chunk (channel `c`, first plane `z0`, chunk

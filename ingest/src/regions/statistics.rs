@@ -43,20 +43,20 @@ impl Default for ChannelAccumulator {
 /// whichever comes first (`f64::min` may return either zero), whatever order the bricks are
 /// added in. A NaN (never an extreme) is passed over.
 fn least(a: f64, b: f64) -> f64 {
-    if b.total_cmp(&a).is_lt() && !b.is_nan() || a.is_nan() {
-        b
-    } else {
-        a
-    }
+    [a, b]
+        .into_iter()
+        .filter(|v| !v.is_nan())
+        .min_by(f64::total_cmp)
+        .unwrap_or(b)
 }
 
 /// The larger of two extremes in the order of their keys, so 0.0 after −0.0 (see [`least`]).
 fn greatest(a: f64, b: f64) -> f64 {
-    if b.total_cmp(&a).is_gt() && !b.is_nan() || a.is_nan() {
-        b
-    } else {
-        a
-    }
+    [a, b]
+        .into_iter()
+        .filter(|v| !v.is_nan())
+        .max_by(f64::total_cmp)
+        .unwrap_or(b)
 }
 
 impl ChannelAccumulator {
@@ -163,10 +163,9 @@ impl ChannelAccumulator {
     /// equal values it meets, so a channel whose smallest values are zeros of both signs may
     /// give 0.0 as its minimum though −0.0, a key lower, is among its voxels).
     pub fn binning(&self) -> Binning {
-        let held = |k: &&u64| **k > 0;
         match (
-            self.keys.iter().position(|k| held(&k)),
-            self.keys.iter().rposition(|k| held(&k)),
+            self.keys.iter().position(|&k| k > 0),
+            self.keys.iter().rposition(|&k| k > 0),
         ) {
             (Some(first), Some(last)) => Binning::spanning(first, last),
             _ => Binning::spanning(0, 0),
