@@ -16,6 +16,19 @@
 // that no supersegment reaches is crossed in one step, to the first face of its tile or bin
 // the ray meets. The ray stops once transmittance falls below 1/255.
 //
+// That is the paper's nearest-list filter: each point takes the list whose cell holds it, so a
+// surface that V_O sees edge-on (a cell wall along its rays) is as wide as whole lists, and from
+// the side its lists show as stripes. With the linear filter (the pipeline constant LINEAR)
+// the VDI is read as a medium whose extinction and emission at a point are the bilinear mix,
+// over V_O's image plane, of the four lists whose centres surround the point; each
+// supersegment holds its extinction (−ln(1 − α) over its own length) and its colour per
+// opacity constant over [front, back]. The ray then walks the grid of list centres (one cell
+// more each way, the half lists at the edges) and merges the four lists by depth, so that
+// between two consecutive supersegment ends of any of them the medium is homogeneous and
+// composited exactly, with the weights of the middle of that part. The skipping grid's masks
+// are then each tile's together with its eight neighbours' (a cell of centres reads lists of
+// two tiles a side).
+//
 // Positions are relative to V_O's eye, in world units.
 
 struct VdiView {
@@ -45,6 +58,9 @@ struct VdiView {
     grid_bin: f32, // depth per bin of the skipping grid
 }
 
+// The linear filter across lists (a pipeline constant: each filter compiles only its own code).
+override LINEAR: bool = false;
+
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
 const MAX_LIST_STEPS: u32 = 65535u; // loop guard per ray
 
@@ -56,7 +72,8 @@ const MAX_LIST_STEPS: u32 = 65535u; // loop guard per ray
 // vec4(pack2x16float(r, g), pack2x16float(b, a), front, back).
 @group(0) @binding(2) var<storage, read> slots: array<vec4<f32>>;
 // Per tile of V.tile × V.tile lists, bit b set where a supersegment of its lists reaches depth
-// bin b: [grid_near + b·grid_bin, grid_near + (b + 1)·grid_bin] (VDI_DEPTH_BINS bins).
+// bin b: [grid_near + b·grid_bin, grid_near + (b + 1)·grid_bin] (VDI_DEPTH_BINS bins); then the
+// same masks each ORed with its eight neighbours', for the linear filter.
 @group(0) @binding(3) var<storage, read> tiles: array<u32>;
 @group(0) @binding(4) var<storage, read_write> image: array<vec4<f32>>;
 // The displayed image, out_width × out_height, upsampled from `image` (entry `upsample`).
@@ -118,15 +135,232 @@ fn supersegment(i: u32) -> Supersegment {
     return Supersegment(vec3<f32>(rg, ba.x), ba.y, s.z, s.w);
 }
 
+// The mask of the tile that holds the ray's cell (ix, iy): a list, or with the linear filter a
+// cell of the grid of centres (its lists ix − 1 and ix, iy − 1 and iy, clamped to the image).
 fn tile_mask(ix: i32, iy: i32) -> u32 {
-    let tx = u32(ix) / V.tile;
-    let ty = u32(iy) / V.tile;
-    return tiles[ty * V.tiles_x + tx];
+    let tx = u32(min(ix, i32(V.lists_x) - 1)) / V.tile;
+    let ty = u32(min(iy, i32(V.lists_y) - 1)) / V.tile;
+    let tiles_y = (V.lists_y + V.tile - 1u) / V.tile;
+    return tiles[select(0u, V.tiles_x * tiles_y, LINEAR) + ty * V.tiles_x + tx];
 }
 
 // The skipping grid's depth bin of depth `z`, clamped to the grid.
 fn depth_bin(z: f32) -> i32 {
     return clamp(i32(floor((z - V.grid_near) / V.grid_bin)), 0, i32(VDI_DEPTH_BINS) - 1);
+}
+
+// One of the four lists of the linear filter.
+struct Corner {
+    base: u32,
+    count: u32,
+    cos_list: f32, // the cosine of its ray off V_O's forward: depth = distance · cos
+}
+
+// List (x, y), clamped to the image.
+fn corner(x: i32, y: i32) -> Corner {
+    let w = i32(V.lists_x);
+    let h = i32(V.lists_y);
+    let cx = clamp(x, 0, w - 1);
+    let cy = clamp(y, 0, h - 1);
+    let list = u32(cy) * V.lists_x + u32(cx);
+    let base = starts[list];
+    let centre = vec2<f32>(
+        (f32(cx) + 0.5) / f32(w) * 2.0 - 1.0,
+        1.0 - (f32(cy) + 0.5) / f32(h) * 2.0,
+    );
+    let off = centre * vec2<f32>(V.o_tan_x, V.o_tan_y);
+    return Corner(base, starts[list + 1u] - base, inverseSqrt(1.0 + dot(off, off)));
+}
+
+// A supersegment as a homogeneous medium, its depth span in the ray's order: [near, far] in
+// depth going forward, in minus depth going backward.
+struct Medium {
+    near: f32,
+    far: f32,
+    extinction: f32, // per unit of length
+    color: vec3<f32>, // colour per opacity
+}
+
+// The index in `slots` of corner `c`'s `j`-th supersegment in the ray's order.
+fn ordered(c: Corner, j: u32, forward: bool) -> u32 {
+    return c.base + select(c.count - 1u - j, j, forward);
+}
+
+// Where corner `c`'s `j`-th supersegment in the ray's order ends, in that order.
+fn far_end(c: Corner, j: u32, forward: bool) -> f32 {
+    let s = slots[ordered(c, j, forward)];
+    return select(-s.z, s.w, forward) * c.cos_list;
+}
+
+fn medium(c: Corner, j: u32, forward: bool) -> Medium {
+    let s = supersegment(ordered(c, j, forward));
+    let f = s.front * c.cos_list;
+    let b = s.back * c.cos_list;
+    let own = max(s.back - s.front, 1e-30);
+    let extinction = -log(1.0 - min(s.alpha, 0.999999)) / own;
+    let color = select(vec3<f32>(0.0), s.color / s.alpha, s.alpha > 0.0);
+    return Medium(select(-b, f, forward), select(-f, b, forward), extinction, color);
+}
+
+// The first of corner `c`'s supersegments in the ray's order that ends past `q`.
+fn first_past(c: Corner, q: f32, forward: bool) -> u32 {
+    var lo = 0u;
+    var hi = c.count;
+    loop {
+        if lo >= hi {
+            break;
+        }
+        let mid = (lo + hi) / 2u;
+        if far_end(c, mid, forward) <= q {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+// Where the ray is at distance `t` within cell (ix, iy) of the grid of list centres: 0 at
+// the centres of lists ix − 1 and iy − 1, 1 at those of ix and iy.
+fn in_cell(r: OriginRay, ix: i32, iy: i32, t: f32) -> vec2<f32> {
+    let m = ndc_at(r, t);
+    return vec2<f32>(
+        (m.x + 1.0) * 0.5 * f32(V.lists_x) + 0.5 - f32(ix),
+        (1.0 - m.y) * 0.5 * f32(V.lists_y) + 0.5 - f32(iy),
+    );
+}
+
+// The bilinear weights at `f` (`in_cell`) of the four lists, in the order of
+// `composite_linear`'s corners.
+fn weights(f: vec2<f32>) -> vec4<f32> {
+    let c = clamp(f, vec2<f32>(0.0), vec2<f32>(1.0));
+    return vec4<f32>((1.0 - c.x) * (1.0 - c.y), c.x * (1.0 - c.y), (1.0 - c.x) * c.y, c.x * c.y);
+}
+
+// A corner's list as the linear filter reads it along the ray: its next supersegment (in the
+// ray's order) that ends past the ray's depth, held as a medium. Four of these live in
+// separate variables, not an array, so that a GPU keeps them in registers.
+struct Reader {
+    c: Corner,
+    next: u32,
+    held: Medium,
+}
+
+fn reader(c: Corner, q: f32, forward: bool) -> Reader {
+    let next = first_past(c, q, forward);
+    var held = Medium(3.0e38, 3.0e38, 0.0, vec3<f32>(0.0));
+    if next < c.count {
+        held = medium(c, next, forward);
+    }
+    return Reader(c, next, held);
+}
+
+// What a reader's list holds at depth `q` (in the ray's order): the medium there (its
+// extinction 0 in a gap), and where that ends. Moves the reader past what ends by `q`.
+fn read_at(rd: ptr<function, Reader>, q: f32, forward: bool) -> Medium {
+    loop {
+        if (*rd).next >= (*rd).c.count || (*rd).held.far > q {
+            break;
+        }
+        (*rd).next++;
+        if (*rd).next < (*rd).c.count {
+            (*rd).held = medium((*rd).c, (*rd).next, forward);
+        }
+    }
+    if (*rd).next >= (*rd).c.count {
+        return Medium(q, 3.0e38, 0.0, vec3<f32>(0.0));
+    }
+    let s = (*rd).held;
+    if s.near <= q {
+        return s;
+    }
+    return Medium(q, s.near, 0.0, vec3<f32>(0.0));
+}
+
+// The linear filter over the ray's part [t, t_next] in cell (ix, iy) of the grid of list
+// centres (`dz`: the ray's depth per unit of length), composited into `acc` (colour,
+// transmittance). The weights are taken in the middle of each homogeneous part: exact for the
+// optical depth where they vary linearly along the ray, so that where the ray's parts are cut
+// (skipping's bins of depth) changes next to nothing.
+//
+// `r0` to `r3` read the cell's lists (ix − 1, iy − 1), (ix, iy − 1), (ix − 1, iy) and (ix, iy)
+// (clamped to the image); `held` is the cell they read for before: a neighbour's two readers
+// shared with this cell go on from where they stopped (the ray's depth only grows in its own
+// order), so that a step to the next cell starts two lists instead of four.
+fn composite_linear(r: OriginRay, ix: i32, iy: i32, t: f32, t_next: f32, dz: f32,
+    acc: ptr<function, vec4<f32>>, held: ptr<function, vec2<i32>>, r0: ptr<function, Reader>,
+    r1: ptr<function, Reader>, r2: ptr<function, Reader>, r3: ptr<function, Reader>) {
+    let forward = dz >= 0.0;
+    let za = depth_at(r, t);
+    let zb = depth_at(r, t_next);
+    var q = select(-max(za, zb), min(za, zb), forward);
+    let q_end = select(-min(za, zb), max(za, zb), forward);
+    // A ray (nearly) at right angles to V_O's view keeps its depth.
+    let flat = q_end - q <= 1e-6 * abs(q_end);
+    let moved = vec2<i32>(ix, iy) - *held;
+    if moved.x == 1 && moved.y == 0 {
+        *r0 = *r1;
+        *r2 = *r3;
+        *r1 = reader(corner(ix, iy - 1), q, forward);
+        *r3 = reader(corner(ix, iy), q, forward);
+    } else if moved.x == -1 && moved.y == 0 {
+        *r1 = *r0;
+        *r3 = *r2;
+        *r0 = reader(corner(ix - 1, iy - 1), q, forward);
+        *r2 = reader(corner(ix - 1, iy), q, forward);
+    } else if moved.x == 0 && moved.y == 1 {
+        *r0 = *r2;
+        *r1 = *r3;
+        *r2 = reader(corner(ix - 1, iy), q, forward);
+        *r3 = reader(corner(ix, iy), q, forward);
+    } else if moved.x == 0 && moved.y == -1 {
+        *r2 = *r0;
+        *r3 = *r1;
+        *r0 = reader(corner(ix - 1, iy - 1), q, forward);
+        *r1 = reader(corner(ix, iy - 1), q, forward);
+    } else if moved.x != 0 || moved.y != 0 {
+        *r0 = reader(corner(ix - 1, iy - 1), q, forward);
+        *r1 = reader(corner(ix, iy - 1), q, forward);
+        *r2 = reader(corner(ix - 1, iy), q, forward);
+        *r3 = reader(corner(ix, iy), q, forward);
+    }
+    *held = vec2<i32>(ix, iy);
+    // Within a cell the ray's place in V_O's image moves along a line: taken as linear in t
+    // between the cell's ends.
+    let f_start = in_cell(r, ix, iy, t);
+    let f_step = (in_cell(r, ix, iy, t_next) - f_start) / max(t_next - t, 1e-30);
+    var color = (*acc).xyz;
+    var trans = (*acc).w;
+    let o_depth = dot(r.o, V.o_forward);
+    // Each turn ends where a supersegment begins or ends: at most two a supersegment.
+    for (var turn = 0u; turn < 8u * 256u; turn++) {
+        let m0 = read_at(r0, q, forward);
+        let m1 = read_at(r1, q, forward);
+        let m2 = read_at(r2, q, forward);
+        let m3 = read_at(r3, q, forward);
+        let q_next = min(min(min(m0.far, m1.far), min(m2.far, m3.far)), q_end);
+        var length = t_next - t;
+        var middle = 0.5 * (t + t_next);
+        if !flat {
+            length = (q_next - q) / abs(dz);
+            middle = (select(-0.5, 0.5, forward) * (q + q_next) - o_depth) / dz;
+        }
+        let weighted = vec4<f32>(m0.extinction, m1.extinction, m2.extinction, m3.extinction)
+            * weights(f_start + (middle - t) * f_step);
+        let sigma = weighted.x + weighted.y + weighted.z + weighted.w;
+        if sigma > 0.0 && length > 0.0 {
+            let emission = weighted.x * m0.color + weighted.y * m1.color + weighted.z * m2.color
+                + weighted.w * m3.color;
+            let alpha = 1.0 - exp(-sigma * length);
+            color += trans * (emission / sigma) * alpha;
+            trans *= 1.0 - alpha;
+        }
+        if flat || q_next >= q_end || trans < T_MIN {
+            break;
+        }
+        q = q_next;
+    }
+    *acc = vec4<f32>(color, trans);
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -157,6 +391,12 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
     if span.y > span.x {
         let w = i32(V.lists_x);
         let h = i32(V.lists_y);
+        // The cells the ray walks: the lists, or with the linear filter the cells between
+        // list centres, whose edges lie half a list off the lists' (one more each way).
+        let linear = LINEAR;
+        let half = select(0.0, 0.5, linear);
+        let gw = w + select(0, 1, linear);
+        let gh = h + select(0, 1, linear);
         // Which way the ray's ndc move (monotonic along a line: the sign of the derivative
         // of a ratio of linear functions is constant).
         let mid = 0.5 * (span.x + span.y);
@@ -168,10 +408,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let skipping = (V.flags & VDI_FLAG_SKIPPING) != 0u;
         var t = span.x;
         let first = ndc_at(r, t);
-        var ix = clamp(i32(floor((first.x + 1.0) * 0.5 * f32(w))), 0, w - 1);
-        var iy = clamp(i32(floor((1.0 - first.y) * 0.5 * f32(h))), 0, h - 1);
+        var ix = clamp(i32(floor((first.x + 1.0) * 0.5 * f32(w) + half)), 0, gw - 1);
+        var iy = clamp(i32(floor((1.0 - first.y) * 0.5 * f32(h) + half)), 0, gh - 1);
         var iz = depth_bin(depth_at(r, t));
         var previous = 0u;
+        // The linear filter's readers of four lists, and the cell they read for (none yet).
+        var readers_of = vec2<i32>(-2, -2);
+        var r0: Reader;
+        var r1: Reader;
+        var r2: Reader;
+        var r3: Reader;
         for (var n = 0u; n < MAX_LIST_STEPS; n++) {
             // The cell the ray crosses next: a list, or (skipping) a cell of the grid that
             // no supersegment reaches: a tile of lists over one bin of depth, or over every
@@ -191,9 +437,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if empty_tile {
                 let e = i32(V.tile);
                 lo_x = ix / e * e;
-                hi_x = min(lo_x + e, w);
+                hi_x = min(lo_x + e, gw);
                 lo_y = iy / e * e;
-                hi_y = min(lo_y + e, h);
+                hi_y = min(lo_y + e, gh);
                 let next_z = iz + step_z;
                 if mask != 0u && next_z >= 0 && next_z < i32(VDI_DEPTH_BINS) && abs(dz) > 1e-30 {
                     let face = V.grid_near + f32(select(iz, iz + 1, step_z > 0)) * V.grid_bin;
@@ -207,14 +453,23 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
             let edge_x = select(lo_x, hi_x, step_x > 0);
             let edge_y = select(lo_y, hi_y, step_y > 0);
-            let kx = f32(edge_x) / f32(w) * 2.0 - 1.0;
-            let ky = 1.0 - f32(edge_y) / f32(h) * 2.0;
+            let kx = (f32(edge_x) - half) / f32(w) * 2.0 - 1.0;
+            let ky = 1.0 - (f32(edge_y) - half) / f32(h) * 2.0;
             var tx = crossing(r, V.o_right, V.o_tan_x, kx);
             var ty = crossing(r, V.o_up, V.o_tan_y, ky);
-            tx = select(3.0e38, tx, tx > t);
-            ty = select(3.0e38, ty, ty > t);
+            // A crossing a rounding error behind t is where the ray is now (it passes through
+            // a corner of its cell: both edges at once): crossed with a step of no length, so
+            // that neither index is left behind. One further behind lies behind V_O's eye.
+            let tie = t - 1e-5 * max(abs(t), 1.0);
+            tx = select(3.0e38, max(tx, t), tx > tie);
+            ty = select(3.0e38, max(ty, t), ty > tie);
             let t_next = min(min(min(tx, ty), tz), span.y);
-            if !empty_tile {
+            if !empty_tile && linear {
+                var acc = vec4<f32>(color, trans);
+                composite_linear(r, ix, iy, t, t_next, dz, &acc, &readers_of, &r0, &r1, &r2, &r3);
+                color = acc.xyz;
+                trans = acc.w;
+            } else if !empty_tile {
                 let list = u32(iy) * V.lists_x + u32(ix);
                 let base = starts[list];
                 let count = starts[list + 1u] - base;
@@ -302,8 +557,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if empty_tile {
                 let at = ndc_at(r, t + 1e-3 * (min(min(tx, ty), span.y) - t));
                 reached = vec2<i32>(
-                    clamp(i32(floor((at.x + 1.0) * 0.5 * f32(w))), lo_x, hi_x - 1),
-                    clamp(i32(floor((1.0 - at.y) * 0.5 * f32(h))), lo_y, hi_y - 1),
+                    clamp(i32(floor((at.x + 1.0) * 0.5 * f32(w) + half)), lo_x, hi_x - 1),
+                    clamp(i32(floor((1.0 - at.y) * 0.5 * f32(h) + half)), lo_y, hi_y - 1),
                 );
             }
             if tz < min(tx, ty) {
@@ -320,7 +575,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 iy = select(lo_y - 1, hi_y, step_y > 0);
                 ix = reached.x;
             }
-            if ix < 0 || ix >= w || iy < 0 || iy >= h {
+            if ix < 0 || ix >= gw || iy < 0 || iy >= gh {
                 break;
             }
             if skipping && (!empty_tile || mask == 0u) {

@@ -50,10 +50,12 @@ def test_short_mode_measures_every_dataset_and_validates(tmp_path):
             assert 0 < s["mean_supersegments"] <= 20 and s["marches_per_ray"] >= 1
         assert [(v["supersegments"], v["deviation_degrees"]) for v in r["views"]] == [(20, 0.0), (20, 10.0)]
         for v in r["views"]:
-            for k in ("vdi_ms", "vdi_no_skip_ms", "dvr_ms"):
+            for k in ("vdi_ms", "vdi_no_skip_ms", "linear_ms", "dvr_ms"):
                 assert math.isfinite(v[k]) and v[k] > 0, (f.name, k)
-            assert 0 < v["ssim"] <= 1
+            assert 0 < v["ssim"] <= 1 and 0 < v["linear_ssim"] <= 1
         at_origin = r["views"][0]
         # From its own camera a VDI gives back the DVR image, up to its half-float colour.
         psnr = at_origin["psnr_db"]
         assert at_origin["ssim"] > 0.99 and (psnr is None or psnr > 35), (f.name, at_origin)
+        psnr = at_origin["linear_psnr_db"]
+        assert at_origin["linear_ssim"] > 0.99 and (psnr is None or psnr > 35), (f.name, at_origin)

@@ -5,8 +5,9 @@
 //! renderer converges the view and generates a VDI (timed: the VDI pass alone, bricks
 //! resident). Then, for each deviation (the camera turned about its target, around its own
 //! up axis), the DVR image of the deviated camera is converged and timed, and the VDI is ray
-//! cast from it with and without empty-space skipping (timed); the VDI's image is compared
-//! with the DVR image (SSIM, PSNR). Sizes: the slots as the GPU holds them (16 bytes each,
+//! cast from it with and without empty-space skipping (timed), and with the linear filter
+//! across lists (timed, with skipping); each VDI image is compared with the DVR image (SSIM,
+//! PSNR). Sizes: the slots as the GPU holds them (16 bytes each,
 //! `N_S` per pixel), the paper's raw layout (24 bytes a slot: RGBA and two depths in `f32`),
 //! and the file (`residency_schemas::vdi`, LZ4), beside the volume's bytes.
 
@@ -24,7 +25,7 @@ use crate::gpu::device::Gpu;
 use crate::gpu::error::GpuError;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{Budget, Fetcher, converge};
-use crate::gpu::vdi_render::VdiRenderer;
+use crate::gpu::vdi_render::{VdiFilter, VdiRenderer};
 use crate::metrics::{self, MetricsError};
 use crate::scene::{Camera, Scene};
 use crate::source::BrickSource;
@@ -109,7 +110,8 @@ pub struct VdiViewRecord {
     pub supersegments: u32,
     /// Degrees from the camera of generation.
     pub deviation_degrees: f64,
-    /// SSIM of the VDI's image against the DVR image of the same camera.
+    /// SSIM of the VDI's image (the nearest filter, the paper's) against the DVR image of the
+    /// same camera.
     pub ssim: f64,
     /// PSNR of the same, dB (`null` for identical images).
     #[schemars(with = "Option<f64>")]
@@ -122,6 +124,16 @@ pub struct VdiViewRecord {
     pub vdi_no_skip_ms: f64,
     /// Median GPU ms of the same.
     pub vdi_no_skip_gpu_ms: Option<f64>,
+    /// SSIM against DVR of the VDI's image with the linear filter across lists
+    /// ([`VdiFilter::Linear`]).
+    pub linear_ssim: f64,
+    /// PSNR of the same, dB (`null` for identical images).
+    #[schemars(with = "Option<f64>")]
+    pub linear_psnr_db: f64,
+    /// Median wall ms of a frame with the linear filter (with skipping).
+    pub linear_ms: f64,
+    /// Median GPU ms of the same.
+    pub linear_gpu_ms: Option<f64>,
     /// SSIM against DVR of the preview (rays at `D_I` = [`PREVIEW_SCALE`], upsampled).
     pub preview_ssim: f64,
     /// Median wall ms of a preview frame (with skipping).
@@ -252,19 +264,23 @@ pub fn run(
             paper_raw_bytes: pixels * u64::from(n) * PAPER_SLOT_BYTES,
             file_bytes: vdi.encode()?.len() as u64,
         });
-        let vdi_renderer = VdiRenderer::new(gpu, vdi, width, height)?;
+        let mut vdi_renderer = VdiRenderer::new(gpu, vdi, width, height)?;
         for (&degrees, (camera, truth, dvr_ms, dvr_gpu_ms)) in plan.deviations.iter().zip(&truths) {
-            let cast = |skipping: bool, scale: f64| {
+            let mut cast = |filter: VdiFilter, skipping: bool, scale: f64| {
+                vdi_renderer.set_filter(gpu, filter);
                 timed(plan.timed_frames, || {
                     let frame = vdi_renderer.render_preview(gpu, camera, skipping, scale)?;
                     Ok((frame.pixels, frame.gpu_time_ms))
                 })
             };
-            let (image, vdi_ms, vdi_gpu_ms) = cast(true, 1.0)?;
-            let (_, vdi_no_skip_ms, vdi_no_skip_gpu_ms) = cast(false, 1.0)?;
-            let (preview, preview_ms, preview_gpu_ms) = cast(true, PREVIEW_SCALE)?;
+            let (image, vdi_ms, vdi_gpu_ms) = cast(VdiFilter::Nearest, true, 1.0)?;
+            let (_, vdi_no_skip_ms, vdi_no_skip_gpu_ms) = cast(VdiFilter::Nearest, false, 1.0)?;
+            let (preview, preview_ms, preview_gpu_ms) =
+                cast(VdiFilter::Nearest, true, PREVIEW_SCALE)?;
+            let (linear, linear_ms, linear_gpu_ms) = cast(VdiFilter::Linear, true, 1.0)?;
             let m = metrics::compare(&to_image(width, height, &image), truth)?;
             let p = metrics::compare(&to_image(width, height, &preview), truth)?;
+            let l = metrics::compare(&to_image(width, height, &linear), truth)?;
             views.push(VdiViewRecord {
                 supersegments: n,
                 deviation_degrees: degrees,
@@ -274,6 +290,10 @@ pub fn run(
                 vdi_gpu_ms,
                 vdi_no_skip_ms,
                 vdi_no_skip_gpu_ms,
+                linear_ssim: l.ssim,
+                linear_psnr_db: l.psnr_db,
+                linear_ms,
+                linear_gpu_ms,
                 preview_ssim: p.ssim,
                 preview_ms,
                 preview_gpu_ms,
@@ -340,15 +360,18 @@ pub fn markdown(r: &VdiBenchResults) -> String {
     }
     out.push_str(
         "\n| N_S | deviation | SSIM (goal ≥ 0.97 within 10°, ≥ 0.94 at 30°) | PSNR dB | VDI ms | \
-         VDI ms, no skipping | DVR ms | DVR / VDI (goal ≥ 3 within 10°) | preview SSIM | preview \
-         ms |\n|---|---|---|---|---|---|---|---|---|---|\n",
+         VDI ms, no skipping | DVR ms | DVR / VDI (goal ≥ 3 within 10°) | linear filter: SSIM | \
+         linear filter: PSNR dB | linear filter: ms | DVR / linear | preview SSIM | preview \
+         ms |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for v in &r.views {
         let ms = |wall: f64, gpu: Option<f64>| gpu.unwrap_or(wall);
         let (vdi, dvr) = (ms(v.vdi_ms, v.vdi_gpu_ms), ms(v.dvr_ms, v.dvr_gpu_ms));
+        let linear = ms(v.linear_ms, v.linear_gpu_ms);
         writeln!(
             out,
-            "| {} | {}° | {:.4} | {:.2} | {:.3} | {:.3} | {:.3} | {:.2}× | {:.4} | {:.3} |",
+            "| {} | {}° | {:.4} | {:.2} | {:.3} | {:.3} | {:.3} | {:.2}× | {:.4} | {:.2} | {:.3} | \
+             {:.2}× | {:.4} | {:.3} |",
             v.supersegments,
             v.deviation_degrees,
             v.ssim,
@@ -357,6 +380,10 @@ pub fn markdown(r: &VdiBenchResults) -> String {
             ms(v.vdi_no_skip_ms, v.vdi_no_skip_gpu_ms),
             dvr,
             dvr / vdi.max(1e-9),
+            v.linear_ssim,
+            v.linear_psnr_db,
+            linear,
+            dvr / linear.max(1e-9),
             v.preview_ssim,
             ms(v.preview_ms, v.preview_gpu_ms),
         )
@@ -371,15 +398,18 @@ pub fn markdown(r: &VdiBenchResults) -> String {
         out,
         "\nTimes are medians of {timing}. The preview casts rays for D_I = {PREVIEW_SCALE} of the \
          width and height and upsamples them (the paper's Sec. 4.4: 150 fps at SSIM 0.94 with \
-         D_I = 0.6 and D_R = 0.14). The paper (RTX 3090, 1920×1080, N_S = 20): SSIM 0.97 \
-         near the viewpoint of generation, a minor loss up to 40°, about 45 fps.\n"
+         D_I = 0.6 and D_R = 0.14). The linear filter reads the bilinear mix of the four lists \
+         around each point instead of the nearest list (the paper's). The paper (RTX 3090, \
+         1920×1080, N_S = 20): SSIM 0.97 near the viewpoint of generation, a minor loss up to \
+         40°, about 45 fps.\n"
     )
     .expect("writing to a String cannot fail");
     out
 }
 
-/// The plot of `r`: SSIM against deviation (one line per `N_S`, and the goals) and ms per
-/// frame (the VDI per `N_S`, and DVR), written as PNG to `path`.
+/// The plot of `r`: SSIM against deviation (one line per `N_S`, the linear filter at the
+/// first `N_S`, and the goals) and ms per frame (the VDI per `N_S`, the linear filter, and
+/// DVR), written as PNG to `path`.
 ///
 /// # Errors
 /// A [`PlotError`] when the plot cannot be drawn or written.
@@ -399,22 +429,37 @@ pub fn plot(r: &VdiBenchResults, path: &std::path::Path) -> Result<(), PlotError
             })
             .collect()
     };
+    // The first N_S's views, for the linear filter's and DVR's lines.
+    let first: Vec<&VdiViewRecord> = r.sizes.first().map_or_else(Vec::new, |first| {
+        r.views
+            .iter()
+            .filter(|v| v.supersegments == first.supersegments)
+            .collect()
+    });
+    let of_first = |label: String, value: &dyn Fn(&VdiViewRecord) -> f64| Line {
+        label,
+        points: first
+            .iter()
+            .map(|v| (v.deviation_degrees, value(v)))
+            .collect(),
+    };
+    let linear_label = || {
+        r.sizes.first().map_or_else(String::new, |s| {
+            format!("VDI, linear filter, N_S {}", s.supersegments)
+        })
+    };
     let mut ssim = per_count(&|v| v.ssim);
+    ssim.push(of_first(linear_label(), &|v| v.linear_ssim));
     ssim.push(Line {
         label: "goal".into(),
         points: vec![(0.0, 0.97), (10.0, 0.97), (30.0, 0.94), (40.0, 0.94)],
     });
     let mut times = per_count(&|v| ms(v.vdi_ms, v.vdi_gpu_ms));
-    if let Some(first) = r.sizes.first() {
-        times.push(Line {
-            label: "DVR".into(),
-            points: r
-                .views
-                .iter()
-                .filter(|v| v.supersegments == first.supersegments)
-                .map(|v| (v.deviation_degrees, ms(v.dvr_ms, v.dvr_gpu_ms)))
-                .collect(),
-        });
+    if !first.is_empty() {
+        times.push(of_first(linear_label(), &|v| {
+            ms(v.linear_ms, v.linear_gpu_ms)
+        }));
+        times.push(of_first("DVR".into(), &|v| ms(v.dvr_ms, v.dvr_gpu_ms)));
     }
     panels(
         path,

@@ -9,6 +9,7 @@ use anyhow::{Result, bail, ensure};
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
+use residency_viewer::gpu::vdi_render::VdiFilter;
 use residency_viewer::interactive::display::PresentPath;
 use residency_viewer::interactive::session::Session;
 use residency_viewer::interactive::vdi_window::{self, VdiViewConfig};
@@ -98,6 +99,11 @@ pub struct Args {
     /// With `--vdi`: cross the VDI's empty tiles of lists one by one (a baseline).
     #[arg(long)]
     pub vdi_no_skipping: bool,
+    /// With `--vdi`: how rays read the VDI between its lists: `nearest` (the paper's, the
+    /// default) or `linear` (the bilinear mix of the four lists around each point: closer to
+    /// DVR away from the VDI's camera, several times slower).
+    #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilter>())]
+    pub vdi_filter: Option<VdiFilter>,
 }
 
 /// Runs `viewer view`.
@@ -119,6 +125,7 @@ pub fn run(args: Args) -> Result<()> {
     let vdi_only = [
         (args.target_fps.is_some(), "--target-fps"),
         (args.vdi_no_skipping, "--vdi-no-skipping"),
+        (args.vdi_filter.is_some(), "--vdi-filter"),
     ];
     if let Some((_, flag)) = vdi_only.iter().find(|(given, _)| *given) {
         bail!("{flag} applies to a VDI only (with --vdi)");
@@ -185,6 +192,7 @@ fn view_vdi(args: &Args, path: &Path) -> Result<()> {
             render_scale: args.render_scale,
             target_ms: 1000.0 / fps,
             skipping: !args.vdi_no_skipping,
+            filter: args.vdi_filter.unwrap_or_default(),
             exit_after_frames: args.exit_after_frames,
             exit_delay: Duration::from_millis(args.exit_delay_ms),
             present: args.present,

@@ -3,22 +3,69 @@
 //! supersegments as the generator packs them, and the skipping grid derived from them),
 //! then one compute pass per frame for a camera; for preview rendering (the paper's Sec. 4.4)
 //! rays are cast for a fraction `D_I` of the width and height and a second pass upsamples
-//! them (`crate::frame_rate` picks `D_I` to hold a frame time).
+//! them (`crate::frame_rate` picks `D_I` to hold a frame time). Between lists it reads the
+//! nearest one (the paper's) or, with [`VdiFilter::Linear`], the bilinear mix of the four
+//! around each point.
 
 use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
 
 use super::buffers::{
     check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
 };
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
 use super::contract::{VDI_DEPTH_BINS, VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
 use super::timer::PassTimer;
+use crate::names::{Named, UnknownName};
 use crate::scene::Camera;
 
 /// Lists per tile edge of the skipping grid.
 pub const SKIP_TILE: u32 = 8;
+
+/// How a ray reads a VDI between the centres of its lists (`V_O`'s pixels).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    Serialize,
+    Deserialize,
+    JsonSchema,
+    strum::EnumCount,
+    strum::EnumString,
+    strum::IntoStaticStr,
+    strum::VariantArray,
+    strum::VariantNames,
+)]
+#[serde(rename_all = "kebab-case")]
+#[strum(
+    serialize_all = "kebab-case",
+    parse_err_ty = UnknownName<VdiFilter>,
+    parse_err_fn = UnknownName::new
+)]
+pub enum VdiFilter {
+    /// The list whose cell holds the point (the paper's): the fastest. A surface `V_O` sees
+    /// edge-on is as wide as whole lists, and shows as stripes from the side.
+    #[default]
+    Nearest,
+    /// The bilinear mix of the four lists whose centres surround the point, each
+    /// supersegment a homogeneous medium (its extinction and colour per opacity), composited
+    /// exactly between the four lists' supersegment ends: closer to DVR away from `V_O`
+    /// (`viewer bench vdi` measures both), at several times the nearest filter's cost.
+    Linear,
+}
+
+crate::names::strum_names!(VdiFilter, all);
+
+impl Named for VdiFilter {
+    const NOUN: &'static str = "VDI filter";
+}
 
 /// One frame of a VDI rendered for a camera.
 #[derive(Clone, Debug)]
@@ -76,6 +123,47 @@ fn skipping_grid_of(vdi: &VolumetricDepthImage, starts: &[usize]) -> (Vec<u32>, 
     (tiles, tiles_x)
 }
 
+/// The skipping grid of the linear filter: each mask of `tiles` (`tiles_x` a row) ORed with
+/// its eight neighbours', since a cell between list centres reads lists of two tiles a side.
+pub fn widened_grid(tiles: &[u32], tiles_x: u32) -> Vec<u32> {
+    let w = tiles_x as usize;
+    let rows = tiles.len() / w.max(1);
+    let mut out = vec![0u32; tiles.len()];
+    for y in 0..rows {
+        for x in 0..w {
+            for ny in y.saturating_sub(1)..(y + 2).min(rows) {
+                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                    out[y * w + x] |= tiles[ny * w + nx];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `vdi_render.wgsl`'s entry point `name` compiled with the pipeline constant `LINEAR`
+/// (the linear filter across lists) set to `linear`.
+fn compile(
+    gpu: &Gpu,
+    module: &wgpu::ShaderModule,
+    layout: &wgpu::PipelineLayout,
+    name: &str,
+    linear: bool,
+) -> wgpu::ComputePipeline {
+    gpu.device
+        .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(name),
+            layout: Some(layout),
+            module,
+            entry_point: Some(name),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("LINEAR", f64::from(u8::from(linear)))],
+                ..Default::default()
+            },
+            cache: None,
+        })
+}
+
 /// The skipping grid's depth bins for a VDI of `header`: the nearest depth and the depth per
 /// bin, [`VDI_DEPTH_BINS`] bins from the header's `near` to its `far`.
 pub fn grid_bins(header: &VdiHeader) -> (f32, f32) {
@@ -108,10 +196,16 @@ pub struct VdiRenderer {
     width: u32,
     height: u32,
     tiles_x: u32,
+    filter: VdiFilter,
+    /// The ray caster compiled for the nearest filter, and for the linear one once asked for.
     pipeline: wgpu::ComputePipeline,
+    linear: Option<wgpu::ComputePipeline>,
+    module: wgpu::ShaderModule,
+    pipeline_layout: wgpu::PipelineLayout,
     upsample: wgpu::ComputePipeline,
     view: wgpu::Buffer,
-    /// The VDI's list starts, slots and skipping grid, uploaded once.
+    /// The VDI's list starts, slots and skipping grid (the nearest filter's masks, then the
+    /// linear filter's: [`widened_grid`]), uploaded once.
     vdi: [wgpu::Buffer; 3],
     layout: wgpu::BindGroupLayout,
     image: wgpu::Buffer,
@@ -190,7 +284,8 @@ impl VdiRenderer {
         let starts: Vec<u32> = list_starts.iter().map(|&s| s as u32).collect();
         let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
         let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
-        let (tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
+        let (mut tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
+        tiles.extend(widened_grid(&tiles, tiles_x));
         let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
         let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -213,16 +308,7 @@ impl VdiRenderer {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let entry = |name: &str| {
-            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some(name),
-                layout: Some(&pipeline_layout),
-                module: &module,
-                entry_point: Some(name),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                cache: None,
-            })
-        };
+        let entry = |name: &str| compile(gpu, &module, &pipeline_layout, name, false);
         let (pipeline, upsample) = (entry("main"), entry("upsample"));
         let vdi_buffers = [starts, slots, tiles];
         let sized = Self::sized(gpu, &layout, &view, &vdi_buffers, width, height)?;
@@ -231,7 +317,11 @@ impl VdiRenderer {
             width,
             height,
             tiles_x,
+            filter: VdiFilter::default(),
             pipeline,
+            linear: None,
+            module,
+            pipeline_layout,
             upsample,
             view,
             vdi: vdi_buffers,
@@ -410,7 +500,11 @@ impl VdiRenderer {
                 label: Some("vdi render"),
                 timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
             });
-            pass.set_pipeline(&self.pipeline);
+            let linear = self
+                .linear
+                .as_ref()
+                .filter(|_| self.filter == VdiFilter::Linear);
+            pass.set_pipeline(linear.unwrap_or(&self.pipeline));
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);
             if !full {
@@ -456,6 +550,26 @@ impl VdiRenderer {
             rays,
             gpu_time_ms,
         })
+    }
+
+    /// Makes the frames that follow read the VDI with `filter` ([`VdiFilter::Nearest`] until
+    /// this is called); the linear filter's pipeline is compiled the first time it is asked for.
+    pub fn set_filter(&mut self, gpu: &Gpu, filter: VdiFilter) {
+        if filter == VdiFilter::Linear && self.linear.is_none() {
+            self.linear = Some(compile(
+                gpu,
+                &self.module,
+                &self.pipeline_layout,
+                "main",
+                true,
+            ));
+        }
+        self.filter = filter;
+    }
+
+    /// The filter frames read the VDI with.
+    pub fn filter(&self) -> VdiFilter {
+        self.filter
     }
 
     /// The output size, `(width, height)`.

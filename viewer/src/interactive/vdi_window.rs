@@ -21,7 +21,7 @@ use super::display::{Display, Frame, Overlays, PresentPath};
 use super::window::{ViewError, open_window, panel_scale, render_size, wheel_steps};
 use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
-use crate::gpu::vdi_render::VdiRenderer;
+use crate::gpu::vdi_render::{VdiFilter, VdiRenderer};
 use crate::scene::Camera;
 
 /// How long after the last input the view counts as at rest (and renders at full resolution).
@@ -41,6 +41,8 @@ pub struct VdiViewConfig {
     pub target_ms: f64,
     /// Cross the VDI's empty tiles of lists in one step.
     pub skipping: bool,
+    /// How rays read the VDI between its lists.
+    pub filter: VdiFilter,
     /// Print a summary line on standard output whenever the view settles (at rest with a
     /// frame at full resolution, or this many frames shown since the last input), and quit
     /// when no input follows within `exit_delay`.
@@ -177,11 +179,12 @@ impl App {
             (format!("{name}  VDI frame {}", self.frames), WHITE),
             (
                 format!(
-                    "{}x{} lists, N_S {}  skipping {}",
+                    "{}x{} lists, N_S {}  skipping {}  {}",
                     h.width,
                     h.height,
                     h.supersegments,
-                    if self.config.skipping { "on" } else { "off" }
+                    if self.config.skipping { "on" } else { "off" },
+                    self.config.filter.name()
                 ),
                 WHITE,
             ),
@@ -203,9 +206,12 @@ impl App {
             return Ok(());
         };
         let size = self.render_size(win);
-        match &mut self.renderer {
-            Some(renderer) => renderer.resize(&self.gpu, size.0, size.1)?,
-            None => self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?),
+        if let Some(renderer) = &mut self.renderer {
+            renderer.resize(&self.gpu, size.0, size.1)?;
+        } else {
+            let mut renderer = VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?;
+            renderer.set_filter(&self.gpu, self.config.filter);
+            self.renderer = Some(renderer);
         }
         let overlays = Overlays::shown(
             self.overlay.then(|| self.panel_lines()),

@@ -38,6 +38,20 @@ fn a_vdi_file_gives_back_the_image_of_its_view() {
     viewer_ok(&[
         "render", "--vdi", &vdi, "--width", "40", "--height", "32", "--out", &cast,
     ]);
+    let linear = s(&dir.path().join("linear.exr"));
+    viewer_ok(&[
+        "render",
+        "--vdi",
+        &vdi,
+        "--vdi-filter",
+        "linear",
+        "--width",
+        "40",
+        "--height",
+        "32",
+        "--out",
+        &linear,
+    ]);
 
     let image = VolumetricDepthImage::decode(&std::fs::read(&vdi).unwrap(), &vdi).unwrap();
     let h = &image.header;
@@ -74,6 +88,12 @@ fn a_vdi_file_gives_back_the_image_of_its_view() {
     assert!(
         m.max_abs_error <= 5e-3,
         "VDI ray cast from its camera vs DVR: {m:?}"
+    );
+    // The linear filter too: from V_O each ray reads its own list alone.
+    let m = metrics::compare(&RgbImage::read(Path::new(&linear)).unwrap(), &dvr).unwrap();
+    assert!(
+        m.max_abs_error <= 5e-3,
+        "VDI ray cast with the linear filter from its camera vs DVR: {m:?}"
     );
 }
 
@@ -128,6 +148,33 @@ fn bad_vdi_input_fails_with_a_clear_error() {
     ]);
     assert!(
         err.contains("error: --vdi-no-skipping applies to a VDI only (with --vdi)"),
+        "{err}"
+    );
+    let err = fails(&[
+        "render",
+        "--store",
+        &store,
+        "--vdi-filter",
+        "linear",
+        "--out",
+        &png,
+    ]);
+    assert!(
+        err.contains("error: --vdi-filter applies to a VDI only (with --vdi)"),
+        "{err}"
+    );
+    let err = fails(&[
+        "render",
+        "--vdi",
+        "x.vdi",
+        "--vdi-filter",
+        "cubic",
+        "--out",
+        &png,
+    ]);
+    assert!(
+        err.contains("invalid value 'cubic' for '--vdi-filter <FILTER>'")
+            && err.contains("[possible values: nearest, linear]"),
         "{err}"
     );
 }

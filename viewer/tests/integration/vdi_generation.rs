@@ -15,15 +15,17 @@ use residency_viewer::gpu::renderer::{RenderOptions, Renderer};
 use residency_viewer::gpu::streaming::{Budget, Fetcher, converge};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::gpu::vdi::VdiGeneration;
-use residency_viewer::gpu::vdi_render::{SKIP_TILE, VdiRenderer, grid_bins, skipping_grid};
+use residency_viewer::gpu::vdi_render::{
+    SKIP_TILE, VdiFilter, VdiRenderer, grid_bins, skipping_grid, widened_grid,
+};
 use residency_viewer::image::RgbImage;
 use residency_viewer::metrics;
 use residency_viewer::scene::{Filter, Scene};
 use residency_viewer::source::{BrickSource, SampleType};
 
-/// Three balls of different values one behind the other along x, in two channels (the second
-/// shifted along y): 48 × 32 × 32 voxels, bricks 16³.
-fn balls() -> Arc<SyntheticSource> {
+/// A two-channel `u16` volume of 48 × 32 × 32 voxels, bricks 16³, of the values `value`
+/// gives per channel and voxel.
+fn synthetic(value: impl Fn(usize, [u64; 3]) -> f64) -> Arc<SyntheticSource> {
     Arc::new(SyntheticSource::new(
         SampleType::U16,
         [48, 32, 32],
@@ -31,22 +33,28 @@ fn balls() -> Arc<SyntheticSource> {
         [16; 3],
         8,
         2,
-        |c, [x, y, z]| {
-            let centres = [(8.0, 12000.0), (24.0, 20000.0), (40.0, 28000.0)];
-            let mut v: f64 = 0.0;
-            for (cx, value) in centres {
-                let d = [
-                    x as f64 - cx,
-                    y as f64 - 15.5 - c as f64 * 4.0,
-                    z as f64 - 15.5,
-                ];
-                if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 42.0 {
-                    v = v.max(value);
-                }
-            }
-            v
-        },
+        value,
     ))
+}
+
+/// Three balls of different values one behind the other along x, in two channels (the second
+/// shifted along y): 48 × 32 × 32 voxels, bricks 16³.
+fn balls() -> Arc<SyntheticSource> {
+    synthetic(|c, [x, y, z]| {
+        let centres = [(8.0, 12000.0), (24.0, 20000.0), (40.0, 28000.0)];
+        let mut v: f64 = 0.0;
+        for (cx, value) in centres {
+            let d = [
+                x as f64 - cx,
+                y as f64 - 15.5 - c as f64 * 4.0,
+                z as f64 - 15.5,
+            ];
+            if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] < 42.0 {
+                v = v.max(value);
+            }
+        }
+        v
+    })
 }
 
 fn scene(channels: usize) -> Scene {
@@ -66,15 +74,21 @@ fn scene(channels: usize) -> Scene {
 /// A slab of graded values filling the whole volume, so that every ray's supersegments reach
 /// the volume's faces.
 fn slab() -> Arc<SyntheticSource> {
-    Arc::new(SyntheticSource::new(
-        SampleType::U16,
-        [48, 32, 32],
-        [1.0; 3],
-        [16; 3],
-        8,
-        2,
-        |c, [x, y, z]| 9000.0 + (400 * (x + y + z + 3 * c as u64) % 12000) as f64,
-    ))
+    synthetic(|c, [x, y, z]| 9000.0 + (400 * (x + y + z + 3 * c as u64) % 12000) as f64)
+}
+
+/// Thin walls that the scene's camera sees edge-on (V_O's rays run along them): planes of
+/// constant y in channel 0 and of constant z in channel 1, two voxels thick every eight, in
+/// the middle of the volume along x.
+fn walls() -> Arc<SyntheticSource> {
+    synthetic(|c, [x, y, z]| {
+        let across = if c == 0 { y } else { z };
+        if (8..40).contains(&x) && across % 8 >= 3 && across % 8 < 5 {
+            20000.0 + 6000.0 * c as f64
+        } else {
+            0.0
+        }
+    })
 }
 
 /// A converged view of `scene`, its last image, and its VDI with at most `supersegments`.
@@ -360,5 +374,89 @@ fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_sid
         let skipped = renderer.render(gpu(), &camera, true).expect("render");
         let walked = renderer.render(gpu(), &camera, false).expect("render");
         assert_eq!(skipped.pixels, walked.pixels, "{degrees}°");
+    }
+}
+
+#[test]
+fn the_widened_grid_holds_each_tile_and_its_eight_neighbours() {
+    // 3 × 2 tiles, one bin each.
+    let tiles = [1, 0, 0, 0, 0, 1 << 5];
+    assert_eq!(
+        widened_grid(&tiles, 3),
+        [1, 1 | 1 << 5, 1 << 5, 1, 1 | 1 << 5, 1 << 5]
+    );
+    assert_eq!(widened_grid(&[7], 1), [7]);
+}
+
+#[test]
+fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_alike() {
+    let scene = scene(2);
+    let (w, h) = (48, 40);
+    let (_, generation) = generate(&scene, full_res(w, h), 20);
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    assert_eq!(renderer.filter(), VdiFilter::Nearest);
+    renderer.set_filter(gpu(), VdiFilter::Linear);
+    assert_eq!(renderer.filter(), VdiFilter::Linear);
+    // From V_O each ray runs along its own list's ray, where the other lists weigh nothing.
+    let own = renderer.render(gpu(), &scene.camera, true).expect("render");
+    let off = max_diff(&own.pixels, &generation.dvr);
+    eprintln!("linear filter from V_O vs DVR: {off}");
+    assert!(off <= 5e-3, "linear filter from V_O vs DVR: {off}");
+    // Skipping (the widened grid) cuts the ray's parts at bins of depth, where the weights of
+    // the middle of each part are taken: it changes next to nothing, from any side.
+    for degrees in [0.0, 10.0, 30.0, 90.0, 150.0, -30.0] {
+        let camera = turned(&scene.camera, degrees);
+        let skipped = renderer.render(gpu(), &camera, true).expect("render");
+        let walked = renderer.render(gpu(), &camera, false).expect("render");
+        let off = max_diff(&skipped.pixels, &walked.pixels);
+        eprintln!("{degrees}°: skipping changed a pixel by at most {off}");
+        assert!(off <= 1e-3, "{degrees}°: skipping changed a pixel by {off}");
+    }
+    // Back to the nearest filter: the frames of a renderer that never filtered linearly.
+    renderer.set_filter(gpu(), VdiFilter::Nearest);
+    let camera = turned(&scene.camera, 10.0);
+    let fresh = VdiRenderer::new(gpu(), &generation.image, w, h)
+        .expect("vdi renderer")
+        .render(gpu(), &camera, true)
+        .expect("render");
+    assert_eq!(
+        renderer
+            .render(gpu(), &camera, true)
+            .expect("render")
+            .pixels,
+        fresh.pixels
+    );
+}
+
+#[test]
+fn the_linear_filter_draws_walls_seen_edge_on_closer_to_dvr_than_the_nearest_list() {
+    let scene = scene(2);
+    let (w, h) = (48, 40);
+    let (_, generation) = generate_from(walls(), &scene, full_res(w, h), 20);
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    for degrees in [5.0, 10.0, 30.0] {
+        let moved = Scene {
+            camera: turned(&scene.camera, degrees),
+            ..scene.clone()
+        };
+        let (truth, _) = generate_from(walls(), &moved, full_res(w, h), 1);
+        let truth = RgbImage::from_rgba(w, h, &truth);
+        let mut compare = |filter| {
+            renderer.set_filter(gpu(), filter);
+            let frame = renderer.render(gpu(), &moved.camera, true).expect("render");
+            metrics::compare(&RgbImage::from_rgba(w, h, &frame.pixels), &truth).unwrap()
+        };
+        let nearest = compare(VdiFilter::Nearest);
+        let linear = compare(VdiFilter::Linear);
+        eprintln!(
+            "{degrees}°: nearest SSIM {:.4} PSNR {:.2} dB; linear SSIM {:.4} PSNR {:.2} dB",
+            nearest.ssim, nearest.psnr_db, linear.ssim, linear.psnr_db
+        );
+        // Measured: SSIM 0.908 → 0.960 at 5°, 0.867 → 0.924 at 10°, 0.831 → 0.876 at 30°;
+        // PSNR 0.8–1.4 dB higher.
+        assert!(
+            linear.ssim > nearest.ssim + 0.03 && linear.psnr_db > nearest.psnr_db + 0.5,
+            "{degrees}°: linear {linear:?} vs nearest {nearest:?}"
+        );
     }
 }

@@ -97,6 +97,17 @@ fn view_presents_the_same_pixels_on_the_gpu_as_by_the_cpu_blit_under_xvfb() {
     args.extend(["--width", "64", "--height", "48", "--max-level", "0"]);
     viewer_ok(&args);
     same_on_both_paths(&display, &["--vdi", &vdi, "--render-scale", "0.5"]);
+    same_on_both_paths(
+        &display,
+        &[
+            "--vdi",
+            &vdi,
+            "--render-scale",
+            "0.5",
+            "--vdi-filter",
+            "linear",
+        ],
+    );
 }
 
 #[test]
@@ -134,6 +145,11 @@ fn view_vdi_refuses_what_does_not_apply_to_a_vdi() {
     let err = fails(&["view", "--store", "x.ome.zarr", "--vdi-no-skipping"]);
     assert!(
         err.contains("error: --vdi-no-skipping applies to a VDI only (with --vdi)"),
+        "{err}"
+    );
+    let err = fails(&["view", "--store", "x.ome.zarr", "--vdi-filter", "linear"]);
+    assert!(
+        err.contains("error: --vdi-filter applies to a VDI only (with --vdi)"),
         "{err}"
     );
     let err = fails(&["view", "--vdi", &vdi, "--present", "screen"]);
