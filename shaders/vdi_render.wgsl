@@ -26,8 +26,8 @@
 // more each way, the half lists at the edges) and merges the four lists by depth, so that
 // between two consecutive supersegment ends of any of them the medium is homogeneous and
 // composited exactly, with the weights of the middle of that part. The skipping grid's masks
-// are then each tile's together with its eight neighbours' (a cell of centres reads lists of
-// two tiles a side).
+// are then each tile's together with those of the tiles before it in x, in y and in both (a
+// cell of centres in a tile reads lists from one before the tile's first).
 //
 // Positions are relative to V_O's eye, in world units.
 
@@ -73,7 +73,7 @@ const MAX_LIST_STEPS: u32 = 65535u; // loop guard per ray
 @group(0) @binding(2) var<storage, read> slots: array<vec4<f32>>;
 // Per tile of V.tile × V.tile lists, bit b set where a supersegment of its lists reaches depth
 // bin b: [grid_near + b·grid_bin, grid_near + (b + 1)·grid_bin] (VDI_DEPTH_BINS bins); then the
-// same masks each ORed with its eight neighbours', for the linear filter.
+// same masks each ORed with the tiles' before it in x, y and both, for the linear filter.
 @group(0) @binding(3) var<storage, read> tiles: array<u32>;
 @group(0) @binding(4) var<storage, read_write> image: array<vec4<f32>>;
 // The displayed image, out_width × out_height, upsampled from `image` (entry `upsample`).
@@ -325,28 +325,26 @@ fn composite_linear(r: OriginRay, ix: i32, iy: i32, t: f32, t_next: f32, dz: f32
         *r3 = reader(corner(ix, iy), q, forward);
     }
     *held = vec2<i32>(ix, iy);
-    // Within a cell the ray's place in V_O's image moves along a line: taken as linear in t
-    // between the cell's ends.
-    let f_start = in_cell(r, ix, iy, t);
-    let f_step = (in_cell(r, ix, iy, t_next) - f_start) / max(t_next - t, 1e-30);
     var color = (*acc).xyz;
     var trans = (*acc).w;
-    let o_depth = dot(r.o, V.o_forward);
-    // Each turn ends where a supersegment begins or ends: at most two a supersegment.
-    for (var turn = 0u; turn < 8u * 256u; turn++) {
+    let q_start = q;
+    // Each turn ends where a supersegment begins or ends: at most two a supersegment of each
+    // list (N_S ≤ VDI_MAX_SUPERSEGMENTS), and the part's end.
+    for (var turn = 0u; turn <= 8u * VDI_MAX_SUPERSEGMENTS; turn++) {
         let m0 = read_at(r0, q, forward);
         let m1 = read_at(r1, q, forward);
         let m2 = read_at(r2, q, forward);
         let m3 = read_at(r3, q, forward);
         let q_next = min(min(min(m0.far, m1.far), min(m2.far, m3.far)), q_end);
+        // The turn's length along the ray, and its middle's distance from t.
         var length = t_next - t;
-        var middle = 0.5 * (t + t_next);
+        var middle = 0.5 * length;
         if !flat {
             length = (q_next - q) / abs(dz);
-            middle = (select(-0.5, 0.5, forward) * (q + q_next) - o_depth) / dz;
+            middle = (0.5 * (q + q_next) - q_start) / abs(dz);
         }
         let weighted = vec4<f32>(m0.extinction, m1.extinction, m2.extinction, m3.extinction)
-            * weights(f_start + (middle - t) * f_step);
+            * weights(in_cell(r, ix, iy, t + middle));
         let sigma = weighted.x + weighted.y + weighted.z + weighted.w;
         if sigma > 0.0 && length > 0.0 {
             let emission = weighted.x * m0.color + weighted.y * m1.color + weighted.z * m2.color

@@ -527,6 +527,10 @@ pub fn wgsl_prelude() -> String {
         u("FLAG_SUBSTITUTION", FLAG_SUBSTITUTION),
         u("VDI_STATE_SLOTS", VDI_STATE_SLOTS),
         u("VDI_FLAG_SKIPPING", VDI_FLAG_SKIPPING),
+        u(
+            "VDI_MAX_SUPERSEGMENTS",
+            residency_schemas::vdi::MAX_SUPERSEGMENTS,
+        ),
         u("VDI_DEPTH_BINS", VDI_DEPTH_BINS),
         u("FILTER_MANUAL", FILTER_MANUAL),
         u("FILTER_HARDWARE", FILTER_HARDWARE),

@@ -124,15 +124,16 @@ fn skipping_grid_of(vdi: &VolumetricDepthImage, starts: &[usize]) -> (Vec<u32>, 
 }
 
 /// The skipping grid of the linear filter: each mask of `tiles` (`tiles_x` a row) ORed with
-/// its eight neighbours', since a cell between list centres reads lists of two tiles a side.
+/// those of the tiles before it in x, in y and in both, since the cells between list centres
+/// `i − 1` and `i` that a tile holds (`i` its lists) read lists from one before its first.
 pub fn widened_grid(tiles: &[u32], tiles_x: u32) -> Vec<u32> {
     let w = tiles_x as usize;
     let rows = tiles.len() / w.max(1);
     let mut out = vec![0u32; tiles.len()];
     for y in 0..rows {
         for x in 0..w {
-            for ny in y.saturating_sub(1)..(y + 2).min(rows) {
-                for nx in x.saturating_sub(1)..(x + 2).min(w) {
+            for ny in y.saturating_sub(1)..=y {
+                for nx in x.saturating_sub(1)..=x {
                     out[y * w + x] |= tiles[ny * w + nx];
                 }
             }
