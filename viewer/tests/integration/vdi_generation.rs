@@ -471,7 +471,7 @@ fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_
         let walked = renderer.render(gpu(), &camera, false).expect("render");
         let off = max_diff(&skipped.pixels, &walked.pixels);
         eprintln!("{degrees}°: skipping changed a pixel by at most {off}");
-        assert!(off <= 1e-3, "{degrees}°: skipping changed a pixel by {off}");
+        assert!(off <= 2e-4, "{degrees}°: skipping changed a pixel by {off}");
     }
     // Back to the nearest filter: the frames of a renderer that never filtered linearly.
     renderer.set_filter(gpu(), VdiFilter::Nearest);
