@@ -137,6 +137,22 @@ fn supersegment(i: u32) -> Supersegment {
 
 // The mask of the tile that holds the ray's cell (ix, iy): a list, or with the linear filter a
 // cell of the grid of centres (its lists ix − 1 and ix, iy − 1 and iy, clamped to the image).
+// The cosine of list (x, y)'s ray off V_O's forward: its depth = distance · cos.
+fn list_cos(x: i32, y: i32) -> f32 {
+    let centre = vec2<f32>(
+        (f32(x) + 0.5) / f32(V.lists_x) * 2.0 - 1.0,
+        1.0 - (f32(y) + 0.5) / f32(V.lists_y) * 2.0,
+    );
+    let off = centre * vec2<f32>(V.o_tan_x, V.o_tan_y);
+    return inverseSqrt(1.0 + dot(off, off));
+}
+
+// V_O's normalised device coordinates `m` in lists from the top left: list (x, y) spans
+// [x, x + 1] × [y, y + 1].
+fn in_lists(m: vec2<f32>) -> vec2<f32> {
+    return vec2<f32>((m.x + 1.0) * 0.5 * f32(V.lists_x), (1.0 - m.y) * 0.5 * f32(V.lists_y));
+}
+
 fn tile_mask(ix: i32, iy: i32) -> u32 {
     let tx = u32(min(ix, i32(V.lists_x) - 1)) / V.tile;
     let ty = u32(min(iy, i32(V.lists_y) - 1)) / V.tile;
@@ -158,18 +174,11 @@ struct Corner {
 
 // List (x, y), clamped to the image.
 fn corner(x: i32, y: i32) -> Corner {
-    let w = i32(V.lists_x);
-    let h = i32(V.lists_y);
-    let cx = clamp(x, 0, w - 1);
-    let cy = clamp(y, 0, h - 1);
+    let cx = clamp(x, 0, i32(V.lists_x) - 1);
+    let cy = clamp(y, 0, i32(V.lists_y) - 1);
     let list = u32(cy) * V.lists_x + u32(cx);
     let base = starts[list];
-    let centre = vec2<f32>(
-        (f32(cx) + 0.5) / f32(w) * 2.0 - 1.0,
-        1.0 - (f32(cy) + 0.5) / f32(h) * 2.0,
-    );
-    let off = centre * vec2<f32>(V.o_tan_x, V.o_tan_y);
-    return Corner(base, starts[list + 1u] - base, inverseSqrt(1.0 + dot(off, off)));
+    return Corner(base, starts[list + 1u] - base, list_cos(cx, cy));
 }
 
 // A supersegment as a homogeneous medium, its depth span in the ray's order: [near, far] in
@@ -223,11 +232,7 @@ fn first_past(c: Corner, q: f32, forward: bool) -> u32 {
 // Where the ray is at distance `t` within cell (ix, iy) of the grid of list centres: 0 at
 // the centres of lists ix − 1 and iy − 1, 1 at those of ix and iy.
 fn in_cell(r: OriginRay, ix: i32, iy: i32, t: f32) -> vec2<f32> {
-    let m = ndc_at(r, t);
-    return vec2<f32>(
-        (m.x + 1.0) * 0.5 * f32(V.lists_x) + 0.5 - f32(ix),
-        (1.0 - m.y) * 0.5 * f32(V.lists_y) + 0.5 - f32(iy),
-    );
+    return in_lists(ndc_at(r, t)) + 0.5 - vec2<f32>(f32(ix), f32(iy));
 }
 
 // The bilinear weights at `f` (`in_cell`) of the four lists, in the order of
@@ -406,8 +411,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let skipping = (V.flags & VDI_FLAG_SKIPPING) != 0u;
         var t = span.x;
         let first = ndc_at(r, t);
-        var ix = clamp(i32(floor((first.x + 1.0) * 0.5 * f32(w) + half)), 0, gw - 1);
-        var iy = clamp(i32(floor((1.0 - first.y) * 0.5 * f32(h) + half)), 0, gh - 1);
+        let first_cell = vec2<i32>(floor(in_lists(first) + half));
+        var ix = clamp(first_cell.x, 0, gw - 1);
+        var iy = clamp(first_cell.y, 0, gh - 1);
         var iz = depth_bin(depth_at(r, t));
         var previous = 0u;
         // The linear filter's readers of four lists, and the cell they read for (none yet).
@@ -472,13 +478,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 let base = starts[list];
                 let count = starts[list + 1u] - base;
                 if count > 0u {
-                    // The list's ray: depth = distance · cos, its angle off V_O's forward.
-                    let centre = vec2<f32>(
-                        (f32(ix) + 0.5) / f32(w) * 2.0 - 1.0,
-                        1.0 - (f32(iy) + 0.5) / f32(h) * 2.0,
-                    );
-                    let off = centre * vec2<f32>(V.o_tan_x, V.o_tan_y);
-                    let cos_list = inverseSqrt(1.0 + dot(off, off));
+                    let cos_list = list_cos(ix, iy);
                     let za = depth_at(r, t);
                     let zb = depth_at(r, t_next);
                     let z_lo = min(za, zb);
@@ -554,9 +554,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var reached = vec2<i32>(ix, iy);
             if empty_tile {
                 let at = ndc_at(r, t + 1e-3 * (min(min(tx, ty), span.y) - t));
-                reached = vec2<i32>(
-                    clamp(i32(floor((at.x + 1.0) * 0.5 * f32(w) + half)), lo_x, hi_x - 1),
-                    clamp(i32(floor((1.0 - at.y) * 0.5 * f32(h) + half)), lo_y, hi_y - 1),
+                reached = clamp(
+                    vec2<i32>(floor(in_lists(at) + half)),
+                    vec2<i32>(lo_x, lo_y),
+                    vec2<i32>(hi_x - 1, hi_y - 1),
                 );
             }
             if tz < min(tx, ty) {

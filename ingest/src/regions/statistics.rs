@@ -1,6 +1,8 @@
 //! Whole-channel statistics: sums, counts, extremes and key counts of level 0, from which the
 //! percentiles and the histogram binning of each channel follow.
 
+use std::cmp::Ordering::{self, Greater, Less};
+
 use residency_schemas::Percentile;
 
 use super::histograms::{Binning, BrickStats};
@@ -39,24 +41,16 @@ impl Default for ChannelAccumulator {
     }
 }
 
-/// The smaller of two extremes in the order of their keys, so −0.0 before 0.0: the same
-/// whichever comes first (`f64::min` may return either zero), whatever order the bricks are
-/// added in. A NaN (never an extreme) is passed over.
-fn least(a: f64, b: f64) -> f64 {
-    [a, b]
-        .into_iter()
-        .filter(|v| !v.is_nan())
-        .min_by(f64::total_cmp)
-        .unwrap_or(b)
-}
-
-/// The larger of two extremes in the order of their keys, so 0.0 after −0.0 (see [`least`]).
-fn greatest(a: f64, b: f64) -> f64 {
-    [a, b]
-        .into_iter()
-        .filter(|v| !v.is_nan())
-        .max_by(f64::total_cmp)
-        .unwrap_or(b)
+/// Of two extremes, `a` where it comes `side` of `b` in the order of their keys (`Less`: the
+/// smaller, so −0.0 before 0.0; `Greater`: the larger), else `b`: the same whichever comes
+/// first (`f64::min` may return either zero), whatever order the bricks are added in. A NaN
+/// (never an extreme) is passed over.
+fn extreme(a: f64, b: f64, side: Ordering) -> f64 {
+    if a.is_nan() || (!b.is_nan() && a.total_cmp(&b) != side) {
+        b
+    } else {
+        a
+    }
 }
 
 impl ChannelAccumulator {
@@ -65,8 +59,8 @@ impl ChannelAccumulator {
         self.sum += other.sum;
         self.count += other.count;
         self.nan += other.nan;
-        self.min = least(self.min, other.min);
-        self.max = greatest(self.max, other.max);
+        self.min = extreme(self.min, other.min, Less);
+        self.max = extreme(self.max, other.max, Greater);
         for (k, n) in self.keys.iter_mut().zip(&other.keys) {
             *k += n;
         }
@@ -83,8 +77,8 @@ impl ChannelAccumulator {
         self.sum += brick.sum;
         self.count += brick.count;
         self.nan += brick.nan;
-        self.min = least(self.min, brick.min);
-        self.max = greatest(self.max, brick.max);
+        self.min = extreme(self.min, brick.min, Less);
+        self.max = extreme(self.max, brick.max, Greater);
         for (i, &n) in brick.fine.counts.iter().enumerate() {
             self.keys[brick.fine.first_key as usize + i] += n as u64;
         }

@@ -501,11 +501,10 @@ impl VdiRenderer {
                 label: Some("vdi render"),
                 timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
             });
-            let linear = self
-                .linear
-                .as_ref()
-                .filter(|_| self.filter == VdiFilter::Linear);
-            pass.set_pipeline(linear.unwrap_or(&self.pipeline));
+            pass.set_pipeline(match self.filter {
+                VdiFilter::Nearest => &self.pipeline,
+                VdiFilter::Linear => self.linear.as_ref().expect("compiled by set_filter"),
+            });
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);
             if !full {
