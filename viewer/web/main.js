@@ -13,7 +13,10 @@
 // (viewer/src/web/remote.rs decides when to ask; only the latest request matters: a newer one
 // aborts the fetch in flight; an answer 429 or 503 is asked again after its Retry-After, at
 // most 3 times). `?target_fps=N` is the frame rate its frame-rate controller holds while the
-// camera moves (default 60).
+// camera moves (default 60). `?vdi_filter=nearest|linear` (and the *VDI filter* menu) is how
+// the page reads a VDI between its lists: the nearest list (the paper's, the default, the
+// fastest) or the bilinear mix of the four around each point (closer to DVR away from the
+// VDI's camera, at several times the cost).
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
@@ -79,13 +82,19 @@ function presentWanted() {
   return ["auto", "gpu", "cpu"].includes(value) ? value : null;
 }
 
-/** The render service of the remote mode: {url, token, frameMs (NaN: the default)}, or null. */
+/** The render service of the remote mode: {url, token, frameMs (NaN: the default), vdiFilter
+ * (null: the default)}, or null. */
 function renderService() {
   const params = new URLSearchParams(location.search);
   const url = params.get("render");
   if (!url) return null;
   const fps = parseFloat(params.get("target_fps") ?? "");
-  return { url: url.replace(/\/+$/, ""), token: params.get("render_token"), frameMs: fps > 0 ? 1000 / fps : NaN };
+  return {
+    url: url.replace(/\/+$/, ""),
+    token: params.get("render_token"),
+    frameMs: fps > 0 ? 1000 / fps : NaN,
+    vdiFilter: params.get("vdi_filter"),
+  };
 }
 
 const service = renderService();
@@ -221,7 +230,7 @@ function showStats() {
       `remote: ${r.mode}${r.converged ? " (converged)" : ""}\n` +
       (r.service_adapter ? `service GPU ${r.service_adapter.name} (${r.service_adapter.backend})\n` : "") +
       `VDIs received ${r.vdis_received} (${(r.vdi_bytes_received / (1 << 20)).toFixed(1)} MiB) · requests ${r.requests_sent} · retried ${r.requests_retried} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
-      `D_I ${r.d_i.toFixed(2)}` + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
+      `D_I ${r.d_i.toFixed(2)} · ${r.vdi_filter} filter` + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
       (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n";
   }
   if (s.error) {
@@ -481,6 +490,10 @@ function listen() {
       remoteShown = false;
     }
   });
+  // How the remote mode reads a VDI between its lists: drawn again at once, not asked again.
+  const vdiFilter = document.getElementById("vdi-filter");
+  vdiFilter.disabled = !service;
+  vdiFilter.addEventListener("change", (e) => viewer.set_vdi_filter(e.target.value));
   document.getElementById("reset").addEventListener("click", reset);
   window.addEventListener("keydown", (e) => {
     if ((e.key === "r" || e.key === "R") && e.target.tagName !== "INPUT") reset();
@@ -681,6 +694,16 @@ async function main() {
   listen();
   if (service) {
     viewer.remote_begin(service.url, service.frameMs);
+    if (service.vdiFilter != null) {
+      try {
+        viewer.set_vdi_filter(service.vdiFilter);
+      } catch (e) {
+        failure = `?vdi_filter: ${e}`;
+        show(failure);
+        return;
+      }
+      document.getElementById("vdi-filter").value = service.vdiFilter;
+    }
     await openService();
   }
   requestAnimationFrame(loop);

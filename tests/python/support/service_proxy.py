@@ -43,7 +43,7 @@ class ServiceProxy(BackgroundServer):
     """The proxy, on `127.0.0.1` (a free port) in front of `target` (`http://host:port`), from
     `start()` (or `with`) until `stop()`. `failures`: `(status, retry_after)` answers of the
     first `POST /vdi` requests, in order (`retry_after` the `Retry-After` header's text, or
-    None for none)."""
+    None for none); an entry None forwards that request."""
 
     def __init__(self, target: str, failures=()):
         parsed = urllib.parse.urlsplit(target)

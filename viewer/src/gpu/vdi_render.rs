@@ -7,6 +7,9 @@
 //! nearest one (the paper's) or, with [`VdiFilter::Linear`], the bilinear mix of the four
 //! around each point.
 
+use std::cell::{Cell, OnceCell};
+use std::rc::Rc;
+
 use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
 
 use super::buffers::{
@@ -191,104 +194,24 @@ fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
         .collect()
 }
 
-/// A VDI on the GPU, with the pipeline and image of one output size.
-pub struct VdiRenderer {
-    vdi_header: VdiHeader,
-    width: u32,
-    height: u32,
-    tiles_x: u32,
-    filter: VdiFilter,
-    /// The ray caster compiled for the nearest filter, and for the linear one once asked for.
-    pipeline: wgpu::ComputePipeline,
-    linear: Option<wgpu::ComputePipeline>,
+/// The VDI ray caster's shader, layouts and pipelines: made once per device and shared by
+/// every VDI drawn on it (the page draws a new VDI each time its render service answers;
+/// compiling the shader for each would cost every answer that time).
+pub struct VdiPipelines {
     module: wgpu::ShaderModule,
-    pipeline_layout: wgpu::PipelineLayout,
-    upsample: wgpu::ComputePipeline,
-    view: wgpu::Buffer,
-    /// The VDI's list starts, slots and skipping grid (the nearest filter's masks, then the
-    /// linear filter's: [`widened_grid`]), uploaded once.
-    vdi: [wgpu::Buffer; 3],
     layout: wgpu::BindGroupLayout,
-    image: wgpu::Buffer,
-    display: wgpu::Buffer,
-    readback: wgpu::Buffer,
-    bind_group: wgpu::BindGroup,
-    timer: Option<PassTimer>,
+    pipeline_layout: wgpu::PipelineLayout,
+    /// The ray caster compiled for the nearest filter.
+    nearest: wgpu::ComputePipeline,
+    /// The ray caster compiled for the linear filter, the first time it is asked for.
+    linear: OnceCell<wgpu::ComputePipeline>,
+    upsample: wgpu::ComputePipeline,
 }
 
-/// The buffers of one output size, and the bind group over them and the VDI.
-struct Sized {
-    image: wgpu::Buffer,
-    display: wgpu::Buffer,
-    readback: wgpu::Buffer,
-    bind_group: wgpu::BindGroup,
-}
-
-impl VdiRenderer {
-    /// Uploads `vdi` and builds the pass for `width × height` images.
-    ///
-    /// # Errors
-    /// [`GpuError::EmptyImage`] for an empty image, a [`GpuError`] naming the buffer over the
-    /// device's storage-buffer limit, or a GPU error while setting up.
-    #[cfg(not(target_arch = "wasm32"))]
-    pub fn new(
-        gpu: &Gpu,
-        vdi: &VolumetricDepthImage,
-        width: u32,
-        height: u32,
-    ) -> Result<Self, GpuError> {
-        pollster::block_on(Self::create(gpu, vdi, width, height))
-    }
-
-    /// [`VdiRenderer::new`], awaited (the browser).
-    ///
-    /// # Errors
-    /// As [`VdiRenderer::new`].
-    pub async fn create(
-        gpu: &Gpu,
-        vdi: &VolumetricDepthImage,
-        width: u32,
-        height: u32,
-    ) -> Result<Self, GpuError> {
-        if width == 0 || height == 0 {
-            return Err(GpuError::EmptyImage { width, height });
-        }
-        gpu.checked_async("setting up the VDI renderer", async {
-            Self::build(gpu, vdi, width, height)
-        })
-        .await
-    }
-
-    fn build(
-        gpu: &Gpu,
-        vdi: &VolumetricDepthImage,
-        width: u32,
-        height: u32,
-    ) -> Result<Self, GpuError> {
-        let slots = packed_slots(vdi);
-        let slot_bytes = (slots.len() * 16) as u64;
-        check_binding(
-            gpu,
-            "the VDI's supersegments",
-            slot_bytes,
-            "use a smaller VDI",
-        )?;
+impl VdiPipelines {
+    /// Compiles `vdi_render.wgsl` for the nearest filter and the upsampling pass.
+    pub fn new(gpu: &Gpu) -> Self {
         let device = &gpu.device;
-        let upload = |label: &str, bytes: &[u8]| {
-            let buffer =
-                storage_buffer(gpu, label, bytes.len() as u64, wgpu::BufferUsages::empty());
-            gpu.queue.write_buffer(&buffer, 0, bytes);
-            buffer
-        };
-        let list_starts = vdi.starts();
-        // Σ counts ≤ MAX_VDI_SLOTS fits a u32.
-        let starts: Vec<u32> = list_starts.iter().map(|&s| s as u32).collect();
-        let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
-        let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
-        let (mut tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
-        tiles.extend(widened_grid(&tiles, tiles_x));
-        let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
-        let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("vdi_render.wgsl"),
             source: wgpu::ShaderSource::Wgsl(vdi_render_source().into()),
@@ -310,23 +233,143 @@ impl VdiRenderer {
             immediate_size: 0,
         });
         let entry = |name: &str| compile(gpu, &module, &pipeline_layout, name, false);
-        let (pipeline, upsample) = (entry("main"), entry("upsample"));
+        let (nearest, upsample) = (entry("main"), entry("upsample"));
+        Self {
+            module,
+            layout,
+            pipeline_layout,
+            nearest,
+            linear: OnceCell::new(),
+            upsample,
+        }
+    }
+
+    /// The ray caster for `filter`, the linear filter's compiled now if it was not yet.
+    fn caster(&self, gpu: &Gpu, filter: VdiFilter) -> &wgpu::ComputePipeline {
+        match filter {
+            VdiFilter::Nearest => &self.nearest,
+            VdiFilter::Linear => self
+                .linear
+                .get_or_init(|| compile(gpu, &self.module, &self.pipeline_layout, "main", true)),
+        }
+    }
+
+    /// Whether the linear filter's ray caster has been compiled.
+    pub fn linear_compiled(&self) -> bool {
+        self.linear.get().is_some()
+    }
+}
+
+/// A VDI on the GPU, with the image of one output size, drawn by shared [`VdiPipelines`].
+pub struct VdiRenderer {
+    vdi_header: VdiHeader,
+    width: u32,
+    height: u32,
+    tiles_x: u32,
+    filter: Cell<VdiFilter>,
+    pipelines: Rc<VdiPipelines>,
+    view: wgpu::Buffer,
+    /// The VDI's list starts, slots and skipping grid (the nearest filter's masks, then the
+    /// linear filter's: [`widened_grid`]), uploaded once.
+    vdi: [wgpu::Buffer; 3],
+    image: wgpu::Buffer,
+    display: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+    timer: Option<PassTimer>,
+}
+
+/// The buffers of one output size, and the bind group over them and the VDI.
+struct Sized {
+    image: wgpu::Buffer,
+    display: wgpu::Buffer,
+    readback: wgpu::Buffer,
+    bind_group: wgpu::BindGroup,
+}
+
+impl VdiRenderer {
+    /// Uploads `vdi` and builds the pass for `width × height` images, with pipelines of its
+    /// own ([`VdiRenderer::create`] shares them between VDIs).
+    ///
+    /// # Errors
+    /// [`GpuError::EmptyImage`] for an empty image, a [`GpuError`] naming the buffer over the
+    /// device's storage-buffer limit, or a GPU error while setting up.
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn new(
+        gpu: &Gpu,
+        vdi: &VolumetricDepthImage,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, GpuError> {
+        let pipelines =
+            pollster::block_on(gpu.checked_async("compiling the VDI renderer", async {
+                Ok(Rc::new(VdiPipelines::new(gpu)))
+            }))?;
+        pollster::block_on(Self::create(gpu, &pipelines, vdi, width, height))
+    }
+
+    /// Uploads `vdi` and builds the pass for `width × height` images with `pipelines`,
+    /// awaited (the browser).
+    ///
+    /// # Errors
+    /// As [`VdiRenderer::new`].
+    pub async fn create(
+        gpu: &Gpu,
+        pipelines: &Rc<VdiPipelines>,
+        vdi: &VolumetricDepthImage,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, GpuError> {
+        if width == 0 || height == 0 {
+            return Err(GpuError::EmptyImage { width, height });
+        }
+        gpu.checked_async("setting up the VDI renderer", async {
+            Self::build(gpu, pipelines, vdi, width, height)
+        })
+        .await
+    }
+
+    fn build(
+        gpu: &Gpu,
+        pipelines: &Rc<VdiPipelines>,
+        vdi: &VolumetricDepthImage,
+        width: u32,
+        height: u32,
+    ) -> Result<Self, GpuError> {
+        let slots = packed_slots(vdi);
+        let slot_bytes = (slots.len() * 16) as u64;
+        check_binding(
+            gpu,
+            "the VDI's supersegments",
+            slot_bytes,
+            "use a smaller VDI",
+        )?;
+        let upload = |label: &str, bytes: &[u8]| {
+            let buffer =
+                storage_buffer(gpu, label, bytes.len() as u64, wgpu::BufferUsages::empty());
+            gpu.queue.write_buffer(&buffer, 0, bytes);
+            buffer
+        };
+        let list_starts = vdi.starts();
+        // Σ counts ≤ MAX_VDI_SLOTS fits a u32.
+        let starts: Vec<u32> = list_starts.iter().map(|&s| s as u32).collect();
+        let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
+        let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
+        let (mut tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
+        tiles.extend(widened_grid(&tiles, tiles_x));
+        let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
+        let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let vdi_buffers = [starts, slots, tiles];
-        let sized = Self::sized(gpu, &layout, &view, &vdi_buffers, width, height)?;
+        let sized = Self::sized(gpu, &pipelines.layout, &view, &vdi_buffers, width, height)?;
         Ok(Self {
             vdi_header: vdi.header.clone(),
             width,
             height,
             tiles_x,
-            filter: VdiFilter::default(),
-            pipeline,
-            linear: None,
-            module,
-            pipeline_layout,
-            upsample,
+            filter: Cell::new(VdiFilter::default()),
+            pipelines: Rc::clone(pipelines),
             view,
             vdi: vdi_buffers,
-            layout,
             image: sized.image,
             display: sized.display,
             readback: sized.readback,
@@ -388,7 +431,14 @@ impl VdiRenderer {
         if (width, height) == (self.width, self.height) {
             return Ok(());
         }
-        let sized = Self::sized(gpu, &self.layout, &self.view, &self.vdi, width, height)?;
+        let sized = Self::sized(
+            gpu,
+            &self.pipelines.layout,
+            &self.view,
+            &self.vdi,
+            width,
+            height,
+        )?;
         (self.image, self.display, self.readback, self.bind_group) =
             (sized.image, sized.display, sized.readback, sized.bind_group);
         (self.width, self.height) = (width, height);
@@ -501,14 +551,11 @@ impl VdiRenderer {
                 label: Some("vdi render"),
                 timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
             });
-            pass.set_pipeline(match self.filter {
-                VdiFilter::Nearest => &self.pipeline,
-                VdiFilter::Linear => self.linear.as_ref().expect("compiled by set_filter"),
-            });
+            pass.set_pipeline(self.pipelines.caster(gpu, self.filter.get()));
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);
             if !full {
-                pass.set_pipeline(&self.upsample);
+                pass.set_pipeline(&self.pipelines.upsample);
                 pass.dispatch_workgroups(self.width.div_ceil(8), self.height.div_ceil(8), 1);
             }
         }
@@ -553,23 +600,21 @@ impl VdiRenderer {
     }
 
     /// Makes the frames that follow read the VDI with `filter` ([`VdiFilter::Nearest`] until
-    /// this is called); the linear filter's pipeline is compiled the first time it is asked for.
-    pub fn set_filter(&mut self, gpu: &Gpu, filter: VdiFilter) {
-        if filter == VdiFilter::Linear && self.linear.is_none() {
-            self.linear = Some(compile(
-                gpu,
-                &self.module,
-                &self.pipeline_layout,
-                "main",
-                true,
-            ));
-        }
-        self.filter = filter;
+    /// this is called); the linear filter's pipeline is compiled the first time any renderer
+    /// of these pipelines asks for it.
+    pub fn set_filter(&self, gpu: &Gpu, filter: VdiFilter) {
+        self.pipelines.caster(gpu, filter);
+        self.filter.set(filter);
     }
 
     /// The filter frames read the VDI with.
     pub fn filter(&self) -> VdiFilter {
-        self.filter
+        self.filter.get()
+    }
+
+    /// The pipelines this renderer draws with.
+    pub fn pipelines(&self) -> &Rc<VdiPipelines> {
+        &self.pipelines
     }
 
     /// The output size, `(width, height)`.

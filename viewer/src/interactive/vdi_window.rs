@@ -209,7 +209,7 @@ impl App {
         if let Some(renderer) = &mut self.renderer {
             renderer.resize(&self.gpu, size.0, size.1)?;
         } else {
-            let mut renderer = VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?;
+            let renderer = VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?;
             renderer.set_filter(&self.gpu, self.config.filter);
             self.renderer = Some(renderer);
         }

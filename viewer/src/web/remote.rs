@@ -18,7 +18,8 @@
 //!   request has superseded it.
 //! - [`step`] draws: the newest VDI ray cast for the current camera, at the image-space
 //!   sampling `D_I` a [`FrameRateController`] picks while the camera moves, at full resolution
-//!   once it rests.
+//!   once it rests, read between its lists with the filter [`Viewer::set_vdi_filter`] chose.
+//!   Every VDI is drawn by the same [`VdiPipelines`], compiled when the first one arrives.
 
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -31,7 +32,7 @@ use super::{Inner, Viewer, present};
 use crate::error_chain;
 use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
-use crate::gpu::vdi_render::VdiRenderer;
+use crate::gpu::vdi_render::{VdiFilter, VdiPipelines, VdiRenderer};
 use crate::scene::{Camera, RenderMode, Scene};
 use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
@@ -184,6 +185,8 @@ pub struct RemoteReport {
     last_error: Option<String>,
     /// `D_I` of the last frame.
     d_i: f64,
+    /// How the VDIs are read between their lists.
+    vdi_filter: VdiFilter,
     /// Time of the last frame (ray cast and readback), ms.
     frame_ms: Option<f64>,
     /// The camera of generation of the VDI drawn.
@@ -209,6 +212,8 @@ pub(super) struct Remote {
     arrived: Option<Arrived>,
     drawn: Option<Drawn>,
     controller: FrameRateController,
+    /// The ray caster's pipelines, compiled for the first VDI drawn.
+    pipelines: Option<Rc<VdiPipelines>>,
     /// The camera last seen, and when it last changed (ms, `performance.now()`).
     camera: Option<Camera>,
     changed_ms: f64,
@@ -268,6 +273,7 @@ impl Remote {
             arrived: None,
             drawn: None,
             controller: FrameRateController::new(target_frame_ms, MIN_SCALE),
+            pipelines: None,
             camera: None,
             changed_ms: f64::NEG_INFINITY,
             last_sent_ms: f64::NEG_INFINITY,
@@ -469,6 +475,33 @@ impl Viewer {
         inner.render_needed = true;
         inner.totals.converged = false;
         on
+    }
+
+    /// Reads the VDIs between their lists with the filter named `name` (`nearest`, the
+    /// default, or `linear`): the VDI drawn is drawn again with it, and so are those that
+    /// follow; the service is not asked again (the filter is the page's, not the VDI's).
+    ///
+    /// # Errors
+    /// The [`UnknownName`](crate::names::UnknownName) message, the filter unchanged; or
+    /// without [`Viewer::remote_begin`].
+    pub fn set_vdi_filter(&self, name: &str) -> Result<(), JsValue> {
+        let filter: VdiFilter = name.parse().map_err(|e| super::js_error(&e))?;
+        let mut inner = self.inner.borrow_mut();
+        let gpu = Rc::clone(&inner.gpu);
+        let Some(remote) = inner.remote.as_mut() else {
+            return Err(JsValue::from_str("no render service given"));
+        };
+        if remote.report.vdi_filter == filter {
+            return Ok(());
+        }
+        remote.report.vdi_filter = filter;
+        if let Some(drawn) = &remote.drawn {
+            drawn.renderer.set_filter(&gpu, filter);
+        }
+        remote.need_frame = true;
+        inner.render_needed = true;
+        inner.totals.converged = false;
+        Ok(())
     }
 
     /// The body of the `POST /vdi` request to send now (JSON, its `request` the sequence
@@ -719,25 +752,45 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
 
 /// Uploads the VDI that arrived, if any, in place of the one drawn.
 async fn upload(inner: &Rc<RefCell<Inner>>) {
-    let (gpu, arrived, width, height) = {
+    let (gpu, arrived, pipelines, width, height) = {
         let mut i = inner.borrow_mut();
-        let Some(arrived) = i.remote.as_mut().and_then(|r| r.arrived.take()) else {
+        let i = &mut *i;
+        let Some(remote) = i.remote.as_mut() else {
+            return;
+        };
+        let Some(arrived) = remote.arrived.take() else {
             return;
         };
         (
             Rc::clone(&i.gpu),
             arrived,
+            remote.pipelines.clone(),
             i.options.width,
             i.options.height,
         )
     };
-    let created = VdiRenderer::create(&gpu, &arrived.vdi, width, height).await;
+    let created = async {
+        let pipelines = match pipelines {
+            Some(p) => p,
+            None => {
+                gpu.checked_async("compiling the VDI renderer", async {
+                    Ok(Rc::new(VdiPipelines::new(&gpu)))
+                })
+                .await?
+            }
+        };
+        let renderer = VdiRenderer::create(&gpu, &pipelines, &arrived.vdi, width, height).await?;
+        Ok::<_, GpuError>((pipelines, renderer))
+    }
+    .await;
     let mut i = inner.borrow_mut();
     let Some(remote) = i.remote.as_mut() else {
         return;
     };
     match created {
-        Ok(renderer) => {
+        Ok((pipelines, renderer)) => {
+            remote.pipelines = Some(pipelines);
+            renderer.set_filter(&gpu, remote.report.vdi_filter);
             if remote
                 .drawn
                 .as_ref()
