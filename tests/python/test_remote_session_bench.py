@@ -1,10 +1,11 @@
 """The remote-session bench's short mode (CI's): `benchmarks/remote_session_bench.py --short`
-replays the same camera path in the page in the remote mode (VDIs from `viewer serve`) and in
-the streaming mode (bricks from brickserver), both links through the throttling proxy, into a
-temporary folder. What must hold whatever the machine's speed: both modes are measured at
-every sample, the remote mode fetches no brick and the streaming mode no VDI, the proxies
+replays the same camera path in the page in the remote mode (VDIs from `viewer serve`, read
+with the nearest list and with the linear filter) and in the streaming mode (bricks from
+brickserver), both links through the throttling proxy, into a temporary folder. What must hold
+whatever the machine's speed: every mode is measured at every sample, the remote modes fetch
+no brick (and read with their filter) and the streaming mode no VDI, the proxies
 carried what the page received plus HTTP's overhead (and what the page aborted: at most the
-rest of a body's Content-Length, or a whole answer), both converge on the last camera to
+rest of a body's Content-Length, or a whole answer), all converge on the last camera to
 `viewer render`'s DVR image, and the report has its tables. Nothing here is about speed."""
 
 import json
@@ -42,7 +43,7 @@ def bench(tmp_path_factory):
     return json.loads((d / "report" / "remote-session.json").read_text()), (d / "report" / "remote-session.md").read_text()
 
 
-def test_both_modes_are_measured_at_every_sample_on_the_same_path(bench):
+def test_every_mode_is_measured_at_every_sample_on_the_same_path(bench):
     r, _ = bench
     assert r["short"] is True and (r["width"], r["height"]) == (96, 72)
     assert r["link"] == {"mbit_per_s": 100.0, "rtt_ms": 20.0, "one_way_delay_ms": 10.0}
@@ -50,7 +51,7 @@ def test_both_modes_are_measured_at_every_sample_on_the_same_path(bench):
     times = r["path"]["samples"]
     assert times[-1] == r["path"]["segments"][-1]["end"]
     assert r["scenes_equal"] is True
-    for mode in ("remote", "streaming"):
+    for mode in ("remote", "remote-linear", "streaming"):
         m = r["modes"][mode]
         assert [s["t"] for s in m["samples"]] == times, mode
         assert [row["segment"] for row in m["segments"]] == SEGMENTS
@@ -64,15 +65,17 @@ def test_both_modes_are_measured_at_every_sample_on_the_same_path(bench):
     assert r["machine"]["page_adapter"] and r["machine"]["service_adapter"], r["machine"]
 
 
-def test_the_remote_mode_fetches_no_brick_and_the_streaming_mode_no_vdi(bench):
+def test_the_remote_modes_fetch_no_brick_and_the_streaming_mode_no_vdi(bench):
     r, _ = bench
-    remote, streaming = r["modes"]["remote"], r["modes"]["streaming"]
-    assert remote["remote_mode"] == "on"
-    assert remote["bricks_before"] == 0 and remote["bricks_fetched"] == 0
-    assert remote["link_bytes"]["brick"] == {"up": 0, "down": 0}
-    assert remote["vdis_received"] >= 1 and remote["requests_sent"] >= remote["vdis_received"]
-    assert all(s["bricks_fetched"] == 0 for s in remote["samples"])
-    assert streaming["remote_mode"] == "off" and streaming["requests_sent"] == 0 and streaming["vdis_received"] == 0
+    streaming = r["modes"]["streaming"]
+    for mode, vdi_filter in (("remote", "nearest"), ("remote-linear", "linear")):
+        remote = r["modes"][mode]
+        assert remote["remote_mode"] == "on" and remote["vdi_filter"] == vdi_filter, mode
+        assert remote["bricks_before"] == 0 and remote["bricks_fetched"] == 0
+        assert remote["link_bytes"]["brick"] == {"up": 0, "down": 0}
+        assert remote["vdis_received"] >= 1 and remote["requests_sent"] >= remote["vdis_received"]
+        assert all(s["bricks_fetched"] == 0 for s in remote["samples"])
+    assert streaming["remote_mode"] == "off" and streaming["vdi_filter"] is None and streaming["requests_sent"] == 0 and streaming["vdis_received"] == 0
     assert streaming["link_bytes"]["service"] == {"up": 0, "down": 0}
     assert streaming["page_bytes"]["service"] == 0
     # The first image needed bricks (fetched before the path started).
@@ -81,7 +84,7 @@ def test_the_remote_mode_fetches_no_brick_and_the_streaming_mode_no_vdi(bench):
 
 def test_the_proxies_carried_what_the_page_received_plus_http_overhead(bench):
     r, _ = bench
-    for mode, link in (("remote", "service"), ("streaming", "brick")):
+    for mode, link in (("remote", "service"), ("remote-linear", "service"), ("streaming", "brick")):
         m = r["modes"][mode]
         carried, received = m["link_bytes"][link]["down"], m["page_bytes"][link]
         requests = m["page_fetches"][link] + m["page_fetches_failed"][link] + m["requests_sent"]
@@ -97,11 +100,11 @@ def test_the_proxies_carried_what_the_page_received_plus_http_overhead(bench):
     assert remote["page_bytes"]["service"] >= 1024 * remote["vdis_received"]
 
 
-def test_both_modes_converge_on_the_last_camera_to_the_dvr_image(bench):
+def test_every_mode_converges_on_the_last_camera_to_the_dvr_image(bench):
     """Off the schedule, at rest: the VDI of the last camera ray cast at full resolution, and
     the page's own DVR, each against `viewer render`'s (measured SSIM 0.99999 and 1.0)."""
     r, _ = bench
-    for mode in ("remote", "streaming"):
+    for mode in ("remote", "remote-linear", "streaming"):
         final = r["modes"][mode]["final"]
         assert final["converged"] is True, (mode, final)
         assert final["ssim"] >= 0.999, (mode, final)
@@ -113,8 +116,10 @@ def test_the_report_has_a_table_per_mode_and_the_link(bench):
     assert "at 100 Mbit/s each way and 20 ms round trip" in report
     assert f"headless on **{r['machine']['page_adapter']}**" in report
     for title in ("## Remote: VDIs from `viewer serve`, ray cast in the page",
+                  "## Remote, linear filter: the same, each VDI read with `?vdi_filter=linear`",
                   "## Streaming: the page fetches bricks and ray casts them itself",
-                  "## Remote against streaming"):
+                  "## Remote against streaming",
+                  "## Linear filter against nearest list (remote)"):
         assert title in report
     for name in SEGMENTS:
-        assert report.count(f"| {name} |") == 4, name
+        assert report.count(f"| {name} |") == 6, name
