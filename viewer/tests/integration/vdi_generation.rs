@@ -459,11 +459,25 @@ fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_
     assert_eq!(renderer.filter(), VdiFilter::Nearest);
     renderer.set_filter(gpu(), VdiFilter::Linear);
     assert_eq!(renderer.filter(), VdiFilter::Linear);
-    // From V_O each ray runs along its own list's ray, where the other lists weigh nothing.
+    // From V_O each ray runs along its own list's ray, where the other lists weigh nothing:
+    // the nearest filter's image, drawn by its pipeline.
     let own = renderer.render(gpu(), &scene.camera, true).expect("render");
-    let off = max_diff(&own.pixels, &generation.dvr);
-    eprintln!("linear filter from V_O vs DVR: {off}");
-    assert!(off <= 5e-3, "linear filter from V_O vs DVR: {off}");
+    let nearest = VdiRenderer::new(gpu(), &generation.image, w, h)
+        .expect("vdi renderer")
+        .render(gpu(), &scene.camera, true)
+        .expect("render");
+    assert_eq!(own.pixels, nearest.pixels);
+    // A thousandth of a degree away the linear pipeline draws, and gives back the DVR image.
+    let near = renderer
+        .render(gpu(), &turned(&scene.camera, 1e-3), true)
+        .expect("render");
+    let off = max_diff(&near.pixels, &generation.dvr);
+    eprintln!("linear filter 0.001° from V_O vs DVR at V_O: {off}");
+    assert!(
+        off <= 5e-3,
+        "linear filter 0.001° from V_O vs DVR at V_O: {off}"
+    );
+    assert_ne!(near.pixels, nearest.pixels);
     // Skipping (the widened grid) cuts the ray's parts at bins of depth, where the weights of
     // the middle of each part are taken: it changes next to nothing, from any side.
     for degrees in [0.0, 10.0, 30.0, 90.0, 150.0, -30.0] {
