@@ -56,17 +56,23 @@ def scene_of(fragment):
     return json.loads(urllib.parse.unquote(fragment[len("#scene="):]))
 
 
-def dvr(store, scene, out):
-    """`viewer render` (DVR, converged) of `scene` on `store`, SIZE × SIZE, as a PNG."""
+def viewer_of_scene(command, scene, out, *flags):
+    """`viewer COMMAND ... --scene S --width SIZE --height SIZE --out OUT` with `scene` written
+    beside `out`; returns `out`."""
     path = out.with_suffix(".scene.json")
     path.write_text(json.dumps(scene))
     p = subprocess.run(
-        [str(BIN / "viewer"), "render", "--store", str(store), "--scene", str(path),
+        [str(BIN / "viewer"), command, *map(str, flags), "--scene", str(path),
          "--width", str(SIZE), "--height", str(SIZE), "--out", str(out)],
         capture_output=True, text=True, env=ENV,
     )
     assert p.returncode == 0, p.stderr
     return out
+
+
+def dvr(store, scene, out):
+    """`viewer render` (DVR, converged) of `scene` on `store`, SIZE × SIZE, as a PNG."""
+    return viewer_of_scene("render", scene, out, "--store", store)
 
 
 def assert_matches(image, reference):
@@ -382,15 +388,7 @@ def orbited(scene, degrees):
 
 def vdi_render(vdi, scene, vdi_filter, out):
     """`viewer render --vdi VDI` of `scene`'s camera with `vdi_filter`, SIZE × SIZE, as a PNG."""
-    path = out.with_suffix(".scene.json")
-    path.write_text(json.dumps(scene))
-    p = subprocess.run(
-        [str(BIN / "viewer"), "render", "--vdi", str(vdi), "--scene", str(path),
-         "--vdi-filter", vdi_filter, "--width", str(SIZE), "--height", str(SIZE), "--out", str(out)],
-        capture_output=True, text=True, env=ENV,
-    )
-    assert p.returncode == 0, p.stderr
-    return out
+    return viewer_of_scene("render", scene, out, "--vdi", vdi, "--vdi-filter", vdi_filter)
 
 
 def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(servers, stores, tmp_path):
@@ -410,39 +408,30 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
             [
                 {"do": "converge"},
                 {"do": "setScene", "scene": moved},
-                {"do": "waitState", "when": "s.remote.requests_retried >= 1"},
-                # Past REST_MS: the last frame is at full resolution for the rested camera.
-                {"do": "sleep", "ms": 1000},
-                {"do": "state"},
+                # Rested: the last frame drew the first VDI for the moved camera at full
+                # resolution, while the request for that camera waits to be sent again.
+                {"do": "waitState", "when": "s.remote.requests_retried >= 1 && s.remote.frame_current"},
                 {"do": "snapshot", "path": str(tmp_path / "linear.png")},
                 {"do": "select", "selector": "#vdi-filter", "value": "nearest"},
-                {"do": "sleep", "ms": 1000},
-                {"do": "state"},
+                {"do": "waitState", "when": "s.remote.vdi_filter === 'nearest' && s.remote.frame_current"},
                 {"do": "snapshot", "path": str(tmp_path / "nearest.png")},
             ],
         )
         posts = proxy.posts()
-    first, linear, nearest = results[0], results[4], results[8]
+    first, linear, nearest = results[0], results[2], results[5]
     assert first["converged"] and first["remote"]["vdi_filter"] == "linear", first
     for state, name in ((linear, "linear"), (nearest, "nearest")):
         remote = state["remote"]
-        assert remote["vdi_filter"] == name, remote
+        assert remote["vdi_filter"] == name and remote["frame_current"], remote
         assert remote["vdi_camera"] == scene["camera"] and remote["d_i"] == 1.0, remote
+        assert not remote["converged"] and not state["converged"], remote
         assert (remote["requests_sent"], remote["vdis_received"], remote["in_flight"]) == (2, 1, 2), remote
     assert nearest["remote"]["frames"] > linear["remote"]["frames"]
     assert [p.status for p in posts] == [200, 503], posts
 
     # The service's VDI of the first view, made again here: the page drew it as `viewer render
     # --vdi` draws it from the moved camera, with each filter.
-    request = tmp_path / "first.scene.json"
-    request.write_text(json.dumps(scene))
-    vdi = tmp_path / "first.vdi"
-    p = subprocess.run(
-        [str(BIN / "viewer"), "vdi", "--store", str(stores["u16x3"]), "--scene", str(request),
-         "--width", str(SIZE), "--height", str(SIZE), "--out", str(vdi)],
-        capture_output=True, text=True, env=ENV,
-    )
-    assert p.returncode == 0, p.stderr
+    vdi = viewer_of_scene("vdi", scene, tmp_path / "first.vdi", "--store", stores["u16x3"])
     want_linear = vdi_render(vdi, moved, "linear", tmp_path / "want-linear.png")
     want_nearest = vdi_render(vdi, moved, "nearest", tmp_path / "want-nearest.png")
     assert_matches(tmp_path / "linear.png", want_linear)

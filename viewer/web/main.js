@@ -702,8 +702,9 @@ async function main() {
         show(failure);
         return;
       }
-      document.getElementById("vdi-filter").value = service.vdiFilter;
     }
+    // The menu shows the viewer's filter (not a value the browser kept from before a reload).
+    document.getElementById("vdi-filter").value = state().remote.vdi_filter;
     await openService();
   }
   requestAnimationFrame(loop);

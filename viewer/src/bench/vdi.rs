@@ -12,7 +12,6 @@
 //! and the file (`residency_schemas::vdi`, LZ4), beside the volume's bytes.
 
 use std::fmt::Write;
-use std::rc::Rc;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -245,7 +244,7 @@ pub fn run(
     let mut sizes = Vec::new();
     let mut views = Vec::new();
     // The ray caster's pipelines, compiled once for every VDI.
-    let pipelines = Rc::new(VdiPipelines::new(gpu));
+    let pipelines = pollster::block_on(VdiPipelines::create(gpu))?;
     // The VDI pass is compiled on first use: once before anything is timed.
     settle(&mut renderer, &scene.camera, 0.0)?;
     renderer.generate_vdi(gpu, plan.supersegments.first().copied().unwrap_or(1))?;
@@ -267,10 +266,10 @@ pub fn run(
             paper_raw_bytes: pixels * u64::from(n) * PAPER_SLOT_BYTES,
             file_bytes: vdi.encode()?.len() as u64,
         });
-        let vdi_renderer =
+        let mut vdi_renderer =
             pollster::block_on(VdiRenderer::create(gpu, &pipelines, vdi, width, height))?;
         for (&degrees, (camera, truth, dvr_ms, dvr_gpu_ms)) in plan.deviations.iter().zip(&truths) {
-            let cast = |filter: VdiFilter, skipping: bool, scale: f64| {
+            let mut cast = |filter: VdiFilter, skipping: bool, scale: f64| {
                 vdi_renderer.set_filter(gpu, filter);
                 timed(plan.timed_frames, || {
                     let frame = vdi_renderer.render_preview(gpu, camera, skipping, scale)?;

@@ -116,7 +116,7 @@ fn render_vdi(args: &Args, path: &std::path::Path) -> Result<()> {
     let (vdi, camera) = args.scene.open_vdi(path)?;
     let start = Instant::now();
     let gpu = Gpu::new()?;
-    let renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;
+    let mut renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;
     renderer.set_filter(&gpu, args.vdi_filter.unwrap_or_default());
     let frame = renderer.render(&gpu, &camera, !args.vdi_no_skipping)?;
     let image = RgbImage::from_rgba(args.width, args.height, &frame.pixels);

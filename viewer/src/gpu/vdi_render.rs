@@ -7,7 +7,7 @@
 //! nearest one (the paper's) or, with [`VdiFilter::Linear`], the bilinear mix of the four
 //! around each point.
 
-use std::cell::{Cell, OnceCell};
+use std::cell::OnceCell;
 use std::rc::Rc;
 
 use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
@@ -209,7 +209,19 @@ pub struct VdiPipelines {
 }
 
 impl VdiPipelines {
-    /// Compiles `vdi_render.wgsl` for the nearest filter and the upsampling pass.
+    /// [`VdiPipelines::new`] in an error scope, shared.
+    ///
+    /// # Errors
+    /// A [`GpuError`] while compiling.
+    pub async fn create(gpu: &Gpu) -> Result<Rc<Self>, GpuError> {
+        gpu.checked_async("compiling the VDI renderer", async {
+            Ok(Rc::new(Self::new(gpu)))
+        })
+        .await
+    }
+
+    /// Compiles `vdi_render.wgsl` for the nearest filter and the upsampling pass (the linear
+    /// filter's the first time a frame asks for it).
     pub fn new(gpu: &Gpu) -> Self {
         let device = &gpu.device;
         let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -266,7 +278,8 @@ pub struct VdiRenderer {
     width: u32,
     height: u32,
     tiles_x: u32,
-    filter: Cell<VdiFilter>,
+    /// The filter of `render` and `render_preview`.
+    filter: VdiFilter,
     pipelines: Rc<VdiPipelines>,
     view: wgpu::Buffer,
     /// The VDI's list starts, slots and skipping grid (the nearest filter's masks, then the
@@ -301,10 +314,10 @@ impl VdiRenderer {
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
-        let pipelines =
-            pollster::block_on(gpu.checked_async("compiling the VDI renderer", async {
-                Ok(Rc::new(VdiPipelines::new(gpu)))
-            }))?;
+        if width == 0 || height == 0 {
+            return Err(GpuError::EmptyImage { width, height });
+        }
+        let pipelines = pollster::block_on(VdiPipelines::create(gpu))?;
         pollster::block_on(Self::create(gpu, &pipelines, vdi, width, height))
     }
 
@@ -366,7 +379,7 @@ impl VdiRenderer {
             width,
             height,
             tiles_x,
-            filter: Cell::new(VdiFilter::default()),
+            filter: VdiFilter::default(),
             pipelines: Rc::clone(pipelines),
             view,
             vdi: vdi_buffers,
@@ -534,7 +547,7 @@ impl VdiRenderer {
     ) -> Result<VdiFrame, GpuError> {
         pollster::block_on(gpu.checked_async(
             "rendering a VDI",
-            self.render_async(gpu, camera, skipping, scale),
+            self.render_async(gpu, camera, skipping, scale, self.filter),
         ))
     }
 
@@ -545,10 +558,11 @@ impl VdiRenderer {
         (of(self.width), of(self.height))
     }
 
-    /// Records the passes of a frame for `camera` at `D_I` = `scale` into `encoder`, timed
-    /// where the device has timestamp queries, and returns the buffer that then holds the
-    /// image (linear RGBA `vec4<f32>` per pixel, `width × height`, row-major from the top),
-    /// for presenting on the GPU without a readback, and the rays cast.
+    /// Records the passes of a frame for `camera` at `D_I` = `scale`, reading the VDI with
+    /// `filter`, into `encoder`, timed where the device has timestamp queries, and returns the
+    /// buffer that then holds the image (linear RGBA `vec4<f32>` per pixel, `width × height`,
+    /// row-major from the top), for presenting on the GPU without a readback, and the rays
+    /// cast. The linear filter's pipeline is compiled here the first time it is asked for.
     pub fn encode(
         &self,
         gpu: &Gpu,
@@ -556,6 +570,7 @@ impl VdiRenderer {
         camera: &Camera,
         skipping: bool,
         scale: f64,
+        filter: VdiFilter,
     ) -> (&wgpu::Buffer, (u32, u32)) {
         let rays = self.rays(scale);
         let full = rays == (self.width, self.height);
@@ -567,7 +582,7 @@ impl VdiRenderer {
                 label: Some("vdi render"),
                 timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
             });
-            let filter = match self.filter.get() {
+            let filter = match filter {
                 VdiFilter::Linear if self.along_lists(&view) => VdiFilter::Nearest,
                 filter => filter,
             };
@@ -582,7 +597,7 @@ impl VdiRenderer {
         (if full { &self.image } else { &self.display }, rays)
     }
 
-    /// [`VdiRenderer::render_preview`], awaited.
+    /// [`VdiRenderer::render_preview`] reading the VDI with `filter`, awaited.
     ///
     /// # Errors
     /// As [`VdiRenderer::render`].
@@ -592,13 +607,14 @@ impl VdiRenderer {
         camera: &Camera,
         skipping: bool,
         scale: f64,
+        filter: VdiFilter,
     ) -> Result<VdiFrame, GpuError> {
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("vdi frame"),
             });
-        let (shown, rays) = self.encode(gpu, &mut encoder, camera, skipping, scale);
+        let (shown, rays) = self.encode(gpu, &mut encoder, camera, skipping, scale, filter);
         encoder.copy_buffer_to_buffer(shown, 0, &self.readback, 0, shown.size());
         let mut maps = vec![&self.readback];
         if let Some(timer) = &self.timer {
@@ -619,17 +635,18 @@ impl VdiRenderer {
         })
     }
 
-    /// Makes the frames that follow read the VDI with `filter` ([`VdiFilter::Nearest`] until
-    /// this is called); the linear filter's pipeline is compiled the first time any renderer
-    /// of these pipelines asks for it.
-    pub fn set_filter(&self, gpu: &Gpu, filter: VdiFilter) {
+    /// Makes the frames of [`VdiRenderer::render`] and [`VdiRenderer::render_preview`] read
+    /// the VDI with `filter` ([`VdiFilter::Nearest`] until this is called); the linear
+    /// filter's pipeline is compiled the first time any renderer of these pipelines asks for
+    /// it.
+    pub fn set_filter(&mut self, gpu: &Gpu, filter: VdiFilter) {
         self.pipelines.caster(gpu, filter);
-        self.filter.set(filter);
+        self.filter = filter;
     }
 
-    /// The filter frames read the VDI with.
+    /// The filter of [`VdiRenderer::render`] and [`VdiRenderer::render_preview`].
     pub fn filter(&self) -> VdiFilter {
-        self.filter.get()
+        self.filter
     }
 
     /// The pipelines this renderer draws with.

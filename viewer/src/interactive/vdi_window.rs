@@ -209,7 +209,7 @@ impl App {
         if let Some(renderer) = &mut self.renderer {
             renderer.resize(&self.gpu, size.0, size.1)?;
         } else {
-            let renderer = VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?;
+            let mut renderer = VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?;
             renderer.set_filter(&self.gpu, self.config.filter);
             self.renderer = Some(renderer);
         }
@@ -234,7 +234,14 @@ impl App {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("vdi view"),
                 });
-            let (image, rays) = renderer.encode(gpu, &mut encoder, &self.camera, skipping, scale);
+            let (image, rays) = renderer.encode(
+                gpu,
+                &mut encoder,
+                &self.camera,
+                skipping,
+                scale,
+                renderer.filter(),
+            );
             gpu.queue.submit([encoder.finish()]);
             let shown = display.show(gpu, Frame::Gpu(image, size), overlays)?;
             // The frame's time to the GPU's end: what the controller holds.

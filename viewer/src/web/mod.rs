@@ -489,8 +489,8 @@ impl Viewer {
                 Some(r) => canvas.show(&gpu, encoder, r.image_buffer(), size),
                 None => return Ok(false),
             },
-            present::Shown::Remote(vdi, camera, scale) => {
-                let (image, _) = vdi.encode(&gpu, &mut encoder, camera, true, *scale);
+            present::Shown::Remote(vdi, camera, scale, filter) => {
+                let (image, _) = vdi.encode(&gpu, &mut encoder, camera, true, *scale, *filter);
                 canvas.show(&gpu, encoder, image, size)
             }
         };
@@ -499,7 +499,7 @@ impl Viewer {
 
     /// The frame on show as 8-bit sRGB RGBA (as [`Viewer::rgba`]): on the GPU path read back
     /// now (the local renderer's image buffer, or the VDI ray cast again for the frame's
-    /// camera and `D_I`, which gives the same pixels), one readback; on the CPU path the last
+    /// camera, `D_I` and filter, which gives the same pixels), one readback; on the CPU path the last
     /// frame's pixels, no readback. Resolves to an empty array before the first frame.
     ///
     /// # Errors
@@ -747,10 +747,10 @@ async fn snapshot(inner: &Rc<RefCell<Inner>>) -> Result<(), GpuError> {
         (present::Shown::Local, Some(r)) => {
             Some(present::read_image(&gpu, r.image_buffer(), pixels).await)
         }
-        (present::Shown::Remote(vdi, camera, scale), _) => Some(
+        (present::Shown::Remote(vdi, camera, scale, filter), _) => Some(
             gpu.checked_async(
                 "rendering a VDI",
-                vdi.render_async(&gpu, camera, true, *scale),
+                vdi.render_async(&gpu, camera, true, *scale, *filter),
             )
             .await
             .map(|f| f.pixels),

@@ -14,7 +14,7 @@ use crate::gpu::GpuError;
 use crate::gpu::buffers::{map_for_reading, readback_buffer};
 use crate::gpu::device::Gpu;
 use crate::gpu::present::{PresentError, Presenter, surface_format};
-use crate::gpu::vdi_render::VdiRenderer;
+use crate::gpu::vdi_render::{VdiFilter, VdiRenderer};
 use crate::image::linear_to_srgb8;
 use crate::scene::Camera;
 
@@ -58,8 +58,8 @@ pub(super) struct CanvasPresenter {
 pub(super) enum Shown {
     /// The local renderer's image buffer.
     Local,
-    /// A VDI ray cast for `camera` at `D_I` = `scale`.
-    Remote(Rc<VdiRenderer>, Camera, f64),
+    /// A VDI ray cast for `camera` at `D_I` = `scale` with a filter.
+    Remote(Rc<VdiRenderer>, Camera, f64, VdiFilter),
 }
 
 impl CanvasPresenter {

@@ -191,6 +191,9 @@ pub struct RemoteReport {
     frame_ms: Option<f64>,
     /// The camera of generation of the VDI drawn.
     vdi_camera: Option<Camera>,
+    /// The last frame drew the VDI held for the current camera at full resolution, with the
+    /// current filter (whether or not a newer VDI is asked for).
+    frame_current: bool,
     /// The VDI drawn was made for the page's current style (channels, background, filter).
     scene_current: bool,
     /// The VDI drawn was made for the page's current scene, camera included, and the last
@@ -212,14 +215,14 @@ pub(super) struct Remote {
     arrived: Option<Arrived>,
     drawn: Option<Drawn>,
     controller: FrameRateController,
-    /// The ray caster's pipelines, compiled for the first VDI drawn.
+    /// The ray caster's pipelines, compiled when the first VDI arrives.
     pipelines: Option<Rc<VdiPipelines>>,
     /// The camera last seen, and when it last changed (ms, `performance.now()`).
     camera: Option<Camera>,
     changed_ms: f64,
     last_sent_ms: f64,
-    /// The camera and `D_I` of the last frame.
-    frame: Option<(Camera, f64)>,
+    /// The camera, `D_I` and filter of the last frame.
+    frame: Option<(Camera, f64, VdiFilter)>,
     pub(super) need_frame: bool,
 }
 
@@ -343,16 +346,21 @@ impl Remote {
         self.report.last_error = Some(error_chain(error));
     }
 
+    /// Whether the last frame drew the VDI held for `camera` at full resolution with the
+    /// current filter, and none is waiting to be drawn.
+    fn frame_current(&self, camera: &Camera) -> bool {
+        self.frame
+            .as_ref()
+            .is_some_and(|(c, s, f)| c == camera && *s == 1.0 && *f == self.report.vdi_filter)
+            && !self.need_frame
+    }
+
     /// Whether the VDI drawn is of `scene` at full resolution, nothing in flight or pending.
     fn converged(&self, scene: &Scene) -> bool {
         self.drawn.as_ref().is_some_and(|d| d.scene == *scene)
-            && self
-                .frame
-                .as_ref()
-                .is_some_and(|(c, s)| *c == scene.camera && *s == 1.0)
+            && self.frame_current(&scene.camera)
             && self.in_flight.is_none()
             && self.arrived.is_none()
-            && !self.need_frame
     }
 
     /// The report, brought up to date for `scene`.
@@ -361,6 +369,7 @@ impl Remote {
             in_flight: self.in_flight.as_ref().map(|f| f.sequence),
             drawn_request: self.drawn.as_ref().map(|d| d.sequence),
             vdi_camera: self.drawn.as_ref().map(|d| d.scene.camera.clone()),
+            frame_current: self.drawn.is_some() && self.frame_current(&scene.camera),
             scene_current: self
                 .drawn
                 .as_ref()
@@ -487,20 +496,20 @@ impl Viewer {
     pub fn set_vdi_filter(&self, name: &str) -> Result<(), JsValue> {
         let filter: VdiFilter = name.parse().map_err(|e| super::js_error(&e))?;
         let mut inner = self.inner.borrow_mut();
-        let gpu = Rc::clone(&inner.gpu);
+        let on = inner.remote_on();
         let Some(remote) = inner.remote.as_mut() else {
             return Err(JsValue::from_str("no render service given"));
         };
         if remote.report.vdi_filter == filter {
             return Ok(());
         }
+        // The next frame draws with it (its pipeline compiled then, in that frame's error
+        // scope): the last frame's filter differs.
         remote.report.vdi_filter = filter;
-        if let Some(drawn) = &remote.drawn {
-            drawn.renderer.set_filter(&gpu, filter);
+        if on {
+            inner.render_needed = true;
+            inner.totals.converged = false;
         }
-        remote.need_frame = true;
-        inner.render_needed = true;
-        inner.totals.converged = false;
         Ok(())
     }
 
@@ -652,7 +661,7 @@ impl Viewer {
 pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     upload(inner).await;
     let now = now_ms();
-    let (gpu, renderer, camera, scale, moving) = {
+    let (gpu, renderer, camera, scale, filter, moving) = {
         let mut i = inner.borrow_mut();
         let i = &mut *i;
         let scene = &i.scene;
@@ -665,9 +674,10 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
             i.totals.converged = false;
             return Ok(false);
         };
+        let filter = remote.report.vdi_filter;
         let due = remote.need_frame
             || match &remote.frame {
-                Some((c, s)) => *c != scene.camera || (!moving && *s < 1.0),
+                Some((c, s, f)) => *c != scene.camera || (!moving && *s < 1.0) || *f != filter,
                 None => true,
             };
         if !due {
@@ -679,11 +689,14 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         } else {
             1.0
         };
+        // Taken now: what changes while this frame is drawn is drawn by the next.
+        remote.need_frame = false;
         (
             Rc::clone(&i.gpu),
             Rc::clone(&drawn.renderer),
             scene.camera.clone(),
             scale,
+            filter,
             moving,
         )
     };
@@ -694,7 +707,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         // GPU's work instead.
         gpu.checked_async("rendering a VDI", async {
             let mut encoder = present::frame_encoder(&gpu);
-            let (image, _) = renderer.encode(&gpu, &mut encoder, &camera, true, scale);
+            let (image, _) = renderer.encode(&gpu, &mut encoder, &camera, true, scale, filter);
             let size = renderer.size();
             {
                 let mut i = inner.borrow_mut();
@@ -707,6 +720,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
                     Rc::clone(&renderer),
                     camera.clone(),
                     scale,
+                    filter,
                 ));
             }
             present::work_done(&gpu).await;
@@ -717,7 +731,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         Some(
             gpu.checked_async(
                 "rendering a VDI",
-                renderer.render_async(&gpu, &camera, true, scale),
+                renderer.render_async(&gpu, &camera, true, scale, filter),
             )
             .await?,
         )
@@ -738,8 +752,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     if moving {
         remote.controller.update(ms);
     }
-    remote.need_frame = false;
-    remote.frame = Some((camera, scale));
+    remote.frame = Some((camera, scale, filter));
     remote.report.frames += 1;
     if scale < 1.0 {
         remote.report.frames_subsampled += 1;
@@ -769,28 +782,32 @@ async fn upload(inner: &Rc<RefCell<Inner>>) {
             i.options.height,
         )
     };
-    let created = async {
-        let pipelines = match pipelines {
-            Some(p) => p,
-            None => {
-                gpu.checked_async("compiling the VDI renderer", async {
-                    Ok(Rc::new(VdiPipelines::new(&gpu)))
-                })
-                .await?
-            }
+    let pipelines = if let Some(p) = pipelines {
+        p
+    } else {
+        let created = VdiPipelines::create(&gpu).await;
+        let mut i = inner.borrow_mut();
+        let Some(remote) = i.remote.as_mut() else {
+            return;
         };
-        let renderer = VdiRenderer::create(&gpu, &pipelines, &arrived.vdi, width, height).await?;
-        Ok::<_, GpuError>((pipelines, renderer))
-    }
-    .await;
+        match created {
+            Ok(p) => {
+                remote.pipelines = Some(Rc::clone(&p));
+                p
+            }
+            Err(e) => {
+                remote.fail(&RemoteError::Gpu(Box::new(e)));
+                return;
+            }
+        }
+    };
+    let created = VdiRenderer::create(&gpu, &pipelines, &arrived.vdi, width, height).await;
     let mut i = inner.borrow_mut();
     let Some(remote) = i.remote.as_mut() else {
         return;
     };
     match created {
-        Ok((pipelines, renderer)) => {
-            remote.pipelines = Some(pipelines);
-            renderer.set_filter(&gpu, remote.report.vdi_filter);
+        Ok(renderer) => {
             if remote
                 .drawn
                 .as_ref()

@@ -304,7 +304,7 @@ fn a_vdi_seen_from_nearby_is_closer_to_dvr_there_than_the_image_it_came_from() {
     let scene = scene(2);
     let (w, h) = (48, 40);
     let (at_origin, generation) = generate(&scene, full_res(w, h), 20);
-    let renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
     for degrees in [5.0, 10.0] {
         let moved = Scene {
             camera: turned(&scene.camera, degrees),
@@ -353,7 +353,7 @@ fn a_uniform_box_looks_the_same_through_both_filters_from_any_side() {
     let scene = scene(1);
     let (w, h) = (48, 40);
     let (_, generation) = generate_from(uniform(), &scene, full_res(w, h), 20);
-    let renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
     for degrees in [10.0, 60.0, 120.0, 160.0] {
         let moved = Scene {
             camera: turned(&scene.camera, degrees),
@@ -361,7 +361,7 @@ fn a_uniform_box_looks_the_same_through_both_filters_from_any_side() {
         };
         let (truth, _) = generate_from(uniform(), &moved, full_res(w, h), 1);
         let truth = RgbImage::from_rgba(w, h, &truth);
-        let cast = |filter| {
+        let mut cast = |filter| {
             renderer.set_filter(gpu(), filter);
             let frame = renderer.render(gpu(), &moved.camera, true).expect("render");
             RgbImage::from_rgba(w, h, &frame.pixels)
@@ -455,7 +455,7 @@ fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_
     let scene = scene(2);
     let (w, h) = (48, 40);
     let (_, generation) = generate(&scene, full_res(w, h), 20);
-    let renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
     assert_eq!(renderer.filter(), VdiFilter::Nearest);
     renderer.set_filter(gpu(), VdiFilter::Linear);
     assert_eq!(renderer.filter(), VdiFilter::Linear);
@@ -515,17 +515,19 @@ fn vdis_drawn_by_shared_pipelines_look_as_with_pipelines_of_their_own() {
     let shared = |vdi| {
         pollster::block_on(VdiRenderer::create(gpu(), &pipelines, vdi, w, h)).expect("renderer")
     };
-    let (first, second) = (shared(&a.image), shared(&b.image));
+    let (mut first, mut second) = (shared(&a.image), shared(&b.image));
+    assert!(Rc::ptr_eq(first.pipelines(), second.pipelines()));
+    assert!(Rc::ptr_eq(first.pipelines(), &pipelines));
     assert!(!pipelines.linear_compiled());
     // The linear filter is compiled once, for every renderer of the pipelines.
     first.set_filter(gpu(), VdiFilter::Linear);
-    assert!(second.pipelines().linear_compiled());
+    assert!(pipelines.linear_compiled());
     assert_eq!(second.filter(), VdiFilter::Nearest);
     let camera = turned(&scene.camera, 10.0);
-    for (vdi, renderer) in [(&a.image, &first), (&b.image, &second)] {
+    for (vdi, renderer) in [(&a.image, &mut first), (&b.image, &mut second)] {
         for filter in [VdiFilter::Nearest, VdiFilter::Linear] {
             renderer.set_filter(gpu(), filter);
-            let own = VdiRenderer::new(gpu(), vdi, w, h).expect("vdi renderer");
+            let mut own = VdiRenderer::new(gpu(), vdi, w, h).expect("vdi renderer");
             own.set_filter(gpu(), filter);
             assert_eq!(
                 renderer
@@ -544,7 +546,7 @@ fn the_linear_filter_draws_walls_seen_edge_on_closer_to_dvr_than_the_nearest_lis
     let scene = scene(2);
     let (w, h) = (48, 40);
     let (_, generation) = generate_from(walls(), &scene, full_res(w, h), 20);
-    let renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    let mut renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
     for degrees in [5.0, 10.0, 30.0] {
         let moved = Scene {
             camera: turned(&scene.camera, degrees),
@@ -552,7 +554,7 @@ fn the_linear_filter_draws_walls_seen_edge_on_closer_to_dvr_than_the_nearest_lis
         };
         let (truth, _) = generate_from(walls(), &moved, full_res(w, h), 1);
         let truth = RgbImage::from_rgba(w, h, &truth);
-        let compare = |filter| {
+        let mut compare = |filter| {
             renderer.set_filter(gpu(), filter);
             let frame = renderer.render(gpu(), &moved.camera, true).expect("render");
             metrics::compare(&RgbImage::from_rgba(w, h, &frame.pixels), &truth).unwrap()
