@@ -20,7 +20,7 @@ what the user should see then, so lag and subsampling while moving count against
 
 Writes remote-session.md and remote-session.json to docs/benchmarks/ (full; `--short`:
 benchmarks/data/short-remote-session/) unless --out-dir says otherwise. `--short` (CI's mode,
-under a minute): a 48³ store, a shorter path, samples every 0.5 s. The full run: the 128³ sparse
+about a minute): a 48³ store, a shorter path, samples every 0.5 s. The full run: the 128³ sparse
 store of benchmarks/render_bench.py, about 35 s of path per mode; 96 × 72 in both (a VDI of
 the 128³ store at 192 × 144 takes lavapipe 7–9 s to make here).
 `--docs` also writes docs/benchmarks.md's summary line between its remote-session markers.
@@ -267,7 +267,11 @@ def summarize(mode, run, segments):
     rows = []
     prev = {"bytes": out["start"]["bytes"], "state": out["start"]["state"]}
     for i, g in enumerate(segments):
-        inside = [s for s in samples if g["start"] < s["t"] <= g["end"]]
+        # A sample at a rest's end is the next move's first (that move begins then); the path's
+        # last sample ends the last rest.
+        last_segment = i == len(segments) - 1
+        inside = [s for s in samples
+                  if g["start"] <= s["t"] < g["end"] or (last_segment and s["t"] == g["end"])]
         moving = [s for s in inside if s["t"] <= g["move_end"]]
         times = [b - a for a, b in zip(draws, draws[1:]) if g["start"] <= a < g["move_end"]]
         last = inside[-1]
@@ -372,7 +376,10 @@ def report(result, stamp):
         "the page is converged on the rested camera (remote: the VDI of that camera drawn at full "
         "resolution; streaming: every brick the view needs resident and drawn); — when not before "
         "the segment ends. Bytes received: the bodies of the page's fetch() calls in the segment "
-        "(the proxies' counts, headers included, are given for the whole path).",
+        "(the proxies' counts, headers included, are given for the whole path). A segment's samples "
+        "run from its move's start to just before its rest's end (SSIM rested: the rest's last "
+        "sample). The modes run one after the other, in the order of the tables, against the same "
+        "brickserver and render service, so the later sessions find the service's bricks loaded.",
     ]
     for mode in MODES:
         r = result["modes"][mode]
@@ -447,7 +454,7 @@ def summary_line(result):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--short", action="store_true", help="CI's mode: a 48³ store, a shorter path (under a minute)")
+    ap.add_argument("--short", action="store_true", help="CI's mode: a 48³ store, a shorter path (about a minute)")
     ap.add_argument("--docs", action="store_true", help="also write the summary into docs/benchmarks.md")
     ap.add_argument("--out-dir", type=pathlib.Path, help="where to write remote-session.md/.json")
     ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data")
