@@ -266,6 +266,12 @@ impl VdiPipelines {
         }
     }
 
+    /// Compiles the ray caster for `filter` if it is not yet, so that the first frame that
+    /// uses it need not wait for it.
+    pub fn prepare(&self, gpu: &Gpu, filter: VdiFilter) {
+        self.caster(gpu, filter);
+    }
+
     /// Whether the linear filter's ray caster has been compiled.
     pub fn linear_compiled(&self) -> bool {
         self.linear.get().is_some()

@@ -737,6 +737,16 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         )
     };
     let ms = now_ms() - start;
+    if !moving {
+        // A frame at rest with the linear filter is drawn by the nearest pipeline when the
+        // camera is the VDI's own: have the linear one compiled now, while the view rests,
+        // rather than in the first frame of the next move.
+        gpu.checked_async("compiling the VDI renderer", async {
+            renderer.pipelines().prepare(&gpu, filter);
+            Ok(())
+        })
+        .await?;
+    }
     let mut i = inner.borrow_mut();
     let i = &mut *i;
     if let Some(frame) = frame {
