@@ -272,7 +272,8 @@ def summarize(mode, run, segments):
         last_segment = i == len(segments) - 1
         inside = [s for s in samples
                   if g["start"] <= s["t"] < g["end"] or (last_segment and s["t"] == g["end"])]
-        moving = [s for s in inside if s["t"] <= g["move_end"]]
+        # The move's samples: after its start (the sample there shows the rest before it).
+        moving = [s for s in inside if g["start"] < s["t"] <= g["move_end"]]
         times = [b - a for a, b in zip(draws, draws[1:]) if g["start"] <= a < g["move_end"]]
         last = inside[-1]
         got = {link: last["bytes"].get(o, 0) - prev["bytes"].get(o, 0) for link, o in origins.items()}
@@ -371,14 +372,15 @@ def report(result, stamp):
         "is compared with the converged DVR (`viewer render`) of the path's camera at that time. "
         "Frame time: median interval between frames drawn into the canvas while the camera moves "
         "(the page draws nothing once converged); page frame ms: the page's own median measure "
-        "while moving (remote: `remote.frame_ms`, the VDI's ray cast and readback; streaming: "
+        "while moving (remote: `remote.frame_ms`, the VDI's ray cast and present; streaming: "
         "`gpu_time_ms`). Rested: seconds from the end of the move until "
         "the page is converged on the rested camera (remote: the VDI of that camera drawn at full "
         "resolution; streaming: every brick the view needs resident and drawn); — when not before "
         "the segment ends. Bytes received: the bodies of the page's fetch() calls in the segment "
         "(the proxies' counts, headers included, are given for the whole path). A segment's samples "
-        "run from its move's start to just before its rest's end (SSIM rested: the rest's last "
-        "sample). The modes run one after the other, in the order of the tables, against the same "
+        "run from its move's start to just before its rest's end, the last segment's to the path's "
+        "end (SSIM rested: the rest's last sample); the statistics while moving take the samples "
+        "after the move's start, to its end. The modes run one after the other, in the order of the tables, against the same "
         "brickserver and render service, so the later sessions find the service's bricks loaded.",
     ]
     for mode in MODES:

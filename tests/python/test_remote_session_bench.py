@@ -56,6 +56,12 @@ def test_every_mode_is_measured_at_every_sample_on_the_same_path(bench):
         assert [s["t"] for s in m["samples"]] == times, mode
         assert [row["segment"] for row in m["segments"]] == SEGMENTS
         assert sum(row["samples"] for row in m["segments"]) == len(times)
+        # A segment holds the samples from its move's start to before its rest's end (the
+        # sample there is the next move's first), the last one to the path's end.
+        for k, (row, g) in enumerate(zip(m["segments"], r["path"]["segments"])):
+            last = k == len(SEGMENTS) - 1
+            want = [t for t in times if g["start"] <= t < g["end"] or (last and t == g["end"])]
+            assert row["samples"] == len(want), (mode, row, want)
         for s in m["samples"]:
             assert 0.0 <= s["ssim"] <= 1.0 and s["late_ms"] >= 0.0, (mode, s)
         for row, g in zip(m["segments"], r["path"]["segments"]):

@@ -162,7 +162,8 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
     assert (remote["requests_sent"], remote["vdis_received"], remote["requests_aborted"]) == (1, 1, 0)
     # No brick streamed: the page draws the service's VDIs only.
     assert first["bricks_requested"] == 0 and first["bricks_fetched"] == 0, first
-    assert remote["d_i"] == 1.0
+    assert remote["d_i"] == 1.0 and remote["vdi_filter"] == "nearest"
+    assert not remote["linear_compiled"], remote
     scene = scene_of(first_hash)
     assert remote["vdi_camera"] == scene["camera"]
     assert_matches(tmp_path / "first.png", dvr(stores["u16x3"], scene, tmp_path / "dvr1.png"))
@@ -420,6 +421,9 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
         posts = proxy.posts()
     first, linear, nearest = results[0], results[2], results[5]
     assert first["converged"] and first["remote"]["vdi_filter"] == "linear", first
+    # Compiled while the first view rested (a frame at rest from the VDI's camera is drawn by
+    # the nearest pipeline).
+    assert first["remote"]["linear_compiled"], first
     for state, name in ((linear, "linear"), (nearest, "nearest")):
         remote = state["remote"]
         assert remote["vdi_filter"] == name and remote["frame_current"], remote

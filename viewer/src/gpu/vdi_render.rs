@@ -521,7 +521,7 @@ impl VdiRenderer {
             (0..3).all(|i| (a[i] - b[i]).abs() <= 1e-6 * (1.0 + b[i].abs()))
         };
         (view.width, view.height) == (view.lists_x, view.lists_y)
-            && view.eye == [0.0; 3]
+            && glam::Vec3::from(view.eye).length() <= 1e-6 * self.vdi_header.near
             && close(view.forward, rays.forward)
             && close(view.right, rays.right)
             && close(view.up, rays.up)
@@ -568,7 +568,9 @@ impl VdiRenderer {
     /// `filter`, into `encoder`, timed where the device has timestamp queries, and returns the
     /// buffer that then holds the image (linear RGBA `vec4<f32>` per pixel, `width × height`,
     /// row-major from the top), for presenting on the GPU without a readback, and the rays
-    /// cast. The linear filter's pipeline is compiled here the first time it is asked for.
+    /// cast. A frame that casts the VDI's own rays is drawn by the nearest pipeline whatever
+    /// `filter` (the two coincide there); otherwise the linear filter's pipeline is compiled
+    /// here the first time it is asked for.
     pub fn encode(
         &self,
         gpu: &Gpu,

@@ -32,7 +32,7 @@ use super::{Inner, Viewer, present};
 use crate::error_chain;
 use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
-use crate::gpu::vdi_render::{VdiFilter, VdiPipelines, VdiRenderer};
+use crate::gpu::vdi_render::{VdiFilter, VdiFrame, VdiPipelines, VdiRenderer};
 use crate::scene::{Camera, RenderMode, Scene};
 use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
@@ -153,6 +153,10 @@ pub enum RemoteMode {
 
 /// What `state()` reports of the remote mode (`remote` in [`Viewer::state_json`]).
 #[derive(Clone, Debug, Default, Serialize)]
+#[expect(
+    clippy::struct_excessive_bools,
+    reason = "a report of independent facts, read by the page and its tests"
+)]
 pub struct RemoteReport {
     /// The render service's base URL.
     service: String,
@@ -187,8 +191,10 @@ pub struct RemoteReport {
     d_i: f64,
     /// How the VDIs are read between their lists.
     vdi_filter: VdiFilter,
-    /// Time of the last frame (ray cast and readback), ms.
+    /// Time of the last frame (ray cast, then presented and the GPU done, or read back), ms.
     frame_ms: Option<f64>,
+    /// The linear filter's pipeline is compiled (the page compiles it while the view rests).
+    linear_compiled: bool,
     /// The camera of generation of the VDI drawn.
     vdi_camera: Option<Camera>,
     /// The last frame drew the VDI held for the current camera at full resolution, with the
@@ -197,7 +203,8 @@ pub struct RemoteReport {
     /// The VDI drawn was made for the page's current style (channels, background, filter).
     scene_current: bool,
     /// The VDI drawn was made for the page's current scene, camera included, and the last
-    /// frame drew it at full resolution; no request is in flight.
+    /// frame drew it at full resolution with the current filter; no request is in flight and
+    /// no VDI waits to be uploaded.
     converged: bool,
 }
 
@@ -370,6 +377,7 @@ impl Remote {
             drawn_request: self.drawn.as_ref().map(|d| d.sequence),
             vdi_camera: self.drawn.as_ref().map(|d| d.scene.camera.clone()),
             frame_current: self.drawn.is_some() && self.frame_current(&scene.camera),
+            linear_compiled: self.pipelines.as_ref().is_some_and(|p| p.linear_compiled()),
             scene_current: self
                 .drawn
                 .as_ref()
@@ -702,7 +710,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     };
     let start = now_ms();
     let on_gpu = inner.borrow().canvas.is_some();
-    let frame = if on_gpu {
+    let drawn = if on_gpu {
         // Presented from the VDI renderer's image, no readback: the frame time waits for the
         // GPU's work instead.
         gpu.checked_async("rendering a VDI", async {
@@ -726,27 +734,55 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
             present::work_done(&gpu).await;
             Ok(None)
         })
-        .await?
+        .await
     } else {
-        Some(
-            gpu.checked_async(
-                "rendering a VDI",
-                renderer.render_async(&gpu, &camera, true, scale, filter),
-            )
-            .await?,
+        gpu.checked_async(
+            "rendering a VDI",
+            renderer.render_async(&gpu, &camera, true, scale, filter),
         )
+        .await
+        .map(Some)
     };
     let ms = now_ms() - start;
-    if !moving {
-        // A frame at rest with the linear filter is drawn by the nearest pipeline when the
-        // camera is the VDI's own: have the linear one compiled now, while the view rests,
-        // rather than in the first frame of the next move.
-        gpu.checked_async("compiling the VDI renderer", async {
-            renderer.pipelines().prepare(&gpu, filter);
-            Ok(())
-        })
-        .await?;
+    let frame = match drawn {
+        Ok(frame) => frame,
+        Err(e) => {
+            // Not drawn: due again at the next step.
+            if let Some(remote) = inner.borrow_mut().remote.as_mut() {
+                remote.need_frame = true;
+            }
+            return Err(e);
+        }
+    };
+    if !moving && filter == VdiFilter::Linear && !renderer.pipelines().linear_compiled() {
+        // A frame at rest from the VDI's own camera is drawn by the nearest pipeline: have the
+        // linear one compiled now, while the view rests, rather than in the first frame of
+        // the next move (before the frame is filed, so that the page is converged only then).
+        let compiled = gpu
+            .checked_async("compiling the VDI renderer", async {
+                renderer.pipelines().prepare(&gpu, filter);
+                Ok(())
+            })
+            .await;
+        if let (Err(e), Some(remote)) = (compiled, inner.borrow_mut().remote.as_mut()) {
+            remote.fail(&RemoteError::Gpu(Box::new(e)));
+        }
     }
+    record_frame(inner, frame, camera, scale, filter, moving, ms);
+    Ok(true)
+}
+
+/// Files a frame drawn for `camera` at `D_I` = `scale` with `filter` in `ms` (its pixels
+/// when read back): the page's image and totals, and the remote mode's report.
+fn record_frame(
+    inner: &Rc<RefCell<Inner>>,
+    frame: Option<VdiFrame>,
+    camera: Camera,
+    scale: f64,
+    filter: VdiFilter,
+    moving: bool,
+    ms: f64,
+) {
     let mut i = inner.borrow_mut();
     let i = &mut *i;
     if let Some(frame) = frame {
@@ -757,7 +793,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         i.totals.gpu_time_ms = None;
     }
     let Some(remote) = i.remote.as_mut() else {
-        return Ok(true);
+        return;
     };
     if moving {
         remote.controller.update(ms);
@@ -770,7 +806,6 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     remote.report.d_i = scale;
     remote.report.frame_ms = Some(ms);
     i.totals.converged = remote.converged(&i.scene);
-    Ok(true)
 }
 
 /// Uploads the VDI that arrived, if any, in place of the one drawn.

@@ -21,7 +21,7 @@ use residency_viewer::gpu::vdi_render::{
 };
 use residency_viewer::image::RgbImage;
 use residency_viewer::metrics;
-use residency_viewer::scene::{Filter, Scene};
+use residency_viewer::scene::{Camera, Filter, Scene};
 use residency_viewer::source::{BrickSource, SampleType};
 
 /// A two-channel `u16` volume of 48 × 32 × 32 voxels, bricks 16³, of the values `value`
@@ -477,7 +477,11 @@ fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_
         off <= 5e-3,
         "linear filter 0.001° from V_O vs DVR at V_O: {off}"
     );
-    assert_ne!(near.pixels, nearest.pixels);
+    let nearest_there = VdiRenderer::new(gpu(), &generation.image, w, h)
+        .expect("vdi renderer")
+        .render(gpu(), &turned(&scene.camera, 1e-3), true)
+        .expect("render");
+    assert_ne!(near.pixels, nearest_there.pixels);
     // Skipping (the widened grid) cuts the ray's parts at bins of depth, where the weights of
     // the middle of each part are taken: it changes next to nothing, from any side.
     for degrees in [0.0, 10.0, 30.0, 90.0, 150.0, -30.0] {
@@ -502,6 +506,44 @@ fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_
             .pixels,
         fresh.pixels
     );
+}
+
+#[test]
+fn a_frame_along_the_vdis_own_rays_is_drawn_by_the_nearest_pipeline() {
+    let scene = scene(2);
+    let (w, h) = (48, 40);
+    let (_, generation) = generate(&scene, full_res(w, h), 20);
+    // Whether a linear frame of `camera` at D_I `scale`, `size` pixels, compiled the linear
+    // pipeline (fresh pipelines each time).
+    let compiles_linear = |camera: &Camera, scale: f64, size: (u32, u32)| {
+        let pipelines = Rc::new(VdiPipelines::new(gpu()));
+        let renderer = pollster::block_on(VdiRenderer::create(
+            gpu(),
+            &pipelines,
+            &generation.image,
+            size.0,
+            size.1,
+        ))
+        .expect("vdi renderer");
+        pollster::block_on(gpu().checked_async(
+            "rendering a VDI",
+            renderer.render_async(gpu(), camera, true, scale, VdiFilter::Linear),
+        ))
+        .expect("render");
+        pipelines.linear_compiled()
+    };
+    // V_O's own rays, one a list: the nearest pipeline draws.
+    assert!(!compiles_linear(&scene.camera, 1.0, (w, h)));
+    // Half the rays (D_I 0.5), another image size, another field of view, another eye: the
+    // linear pipeline.
+    assert!(compiles_linear(&scene.camera, 0.5, (w, h)));
+    assert!(compiles_linear(&scene.camera, 1.0, (2 * w, 2 * h)));
+    let wider = Camera {
+        fov_y_degrees: scene.camera.fov_y_degrees + 1.0,
+        ..scene.camera.clone()
+    };
+    assert!(compiles_linear(&wider, 1.0, (w, h)));
+    assert!(compiles_linear(&turned(&scene.camera, 1e-3), 1.0, (w, h)));
 }
 
 #[test]
