@@ -342,6 +342,11 @@ def fmt(v, spec="{:.3f}", none="—"):
     return none if v is None else spec.format(v)
 
 
+def ratio(a, b, key):
+    """`a[key] / b[key]`, or None where either is missing or zero."""
+    return None if not a[key] or not b[key] else a[key] / b[key]
+
+
 def report(result, stamp):
     m, link = result["machine"], result["link"]
     lines = [
@@ -416,8 +421,7 @@ def report(result, stamp):
     rm, st = result["modes"]["remote"], result["modes"]["streaming"]
     lines += ["", "## Remote against streaming", "", "| segment | frame time remote / streaming | SSIM median remote − streaming | rested remote / streaming (s) |", "|---|---|---|---|"]
     for a, b in zip(rm["segments"], st["segments"]):
-        ratio = (None if not a["frame_ms_median"] or not b["frame_ms_median"] else a["frame_ms_median"] / b["frame_ms_median"])
-        lines.append(f"| {a['segment']} | {fmt(ratio, '{:.2f}')} | {a['ssim_median'] - b['ssim_median']:+.4f} | "
+        lines.append(f"| {a['segment']} | {fmt(ratio(a, b, 'frame_ms_median'), '{:.2f}')} | {a['ssim_median'] - b['ssim_median']:+.4f} | "
                      f"{fmt(a['rested_s'], '{:.2f}')} / {fmt(b['rested_s'], '{:.2f}')} |")
     li = result["modes"]["remote-linear"]
     lines += ["", "## Linear filter against nearest list (remote)", "",
@@ -426,12 +430,10 @@ def report(result, stamp):
               "| segment | frame time linear / nearest | page frame ms linear / nearest | SSIM median linear − nearest | SSIM median while moving, linear − nearest |",
               "|---|---|---|---|---|"]
     for a, b in zip(li["segments"], rm["segments"]):
-        def ratio(key):
-            return None if not a[key] or not b[key] else a[key] / b[key]
         moving = (None if a["ssim_moving_median"] is None or b["ssim_moving_median"] is None
                   else a["ssim_moving_median"] - b["ssim_moving_median"])
-        lines.append(f"| {a['segment']} | {fmt(ratio('frame_ms_median'), '{:.2f}')} | "
-                     f"{fmt(ratio('page_frame_ms_median'), '{:.2f}')} | {a['ssim_median'] - b['ssim_median']:+.4f} | "
+        lines.append(f"| {a['segment']} | {fmt(ratio(a, b, 'frame_ms_median'), '{:.2f}')} | "
+                     f"{fmt(ratio(a, b, 'page_frame_ms_median'), '{:.2f}')} | {a['ssim_median'] - b['ssim_median']:+.4f} | "
                      f"{fmt(moving, '{:+.4f}')} |")
     lines += ["", "Raw data: remote-session.json (every sample: time, lateness, SSIM, PSNR, the page's state).", ""]
     return "\n".join(lines)

@@ -278,6 +278,14 @@ impl VdiPipelines {
     }
 }
 
+/// [`GpuError::EmptyImage`] for an image without pixels.
+fn nonempty(width: u32, height: u32) -> Result<(), GpuError> {
+    if width == 0 || height == 0 {
+        return Err(GpuError::EmptyImage { width, height });
+    }
+    Ok(())
+}
+
 /// A VDI on the GPU, with the image of one output size, drawn by shared [`VdiPipelines`].
 pub struct VdiRenderer {
     vdi_header: VdiHeader,
@@ -320,9 +328,7 @@ impl VdiRenderer {
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
-        if width == 0 || height == 0 {
-            return Err(GpuError::EmptyImage { width, height });
-        }
+        nonempty(width, height)?;
         let pipelines = pollster::block_on(VdiPipelines::create(gpu))?;
         pollster::block_on(Self::create(gpu, &pipelines, vdi, width, height))
     }
@@ -339,9 +345,7 @@ impl VdiRenderer {
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
-        if width == 0 || height == 0 {
-            return Err(GpuError::EmptyImage { width, height });
-        }
+        nonempty(width, height)?;
         gpu.checked_async("setting up the VDI renderer", async {
             Self::build(gpu, pipelines, vdi, width, height)
         })
@@ -444,9 +448,7 @@ impl VdiRenderer {
     /// [`GpuError::EmptyImage`] for an empty image, or a [`GpuError`] naming the image over
     /// the device's storage-buffer limit.
     pub fn resize(&mut self, gpu: &Gpu, width: u32, height: u32) -> Result<(), GpuError> {
-        if width == 0 || height == 0 {
-            return Err(GpuError::EmptyImage { width, height });
-        }
+        nonempty(width, height)?;
         if (width, height) == (self.width, self.height) {
             return Ok(());
         }
@@ -648,7 +650,7 @@ impl VdiRenderer {
     /// filter's pipeline is compiled the first time any renderer of these pipelines asks for
     /// it.
     pub fn set_filter(&mut self, gpu: &Gpu, filter: VdiFilter) {
-        self.pipelines.caster(gpu, filter);
+        self.pipelines.prepare(gpu, filter);
         self.filter = filter;
     }
 

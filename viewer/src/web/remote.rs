@@ -376,7 +376,7 @@ impl Remote {
             in_flight: self.in_flight.as_ref().map(|f| f.sequence),
             drawn_request: self.drawn.as_ref().map(|d| d.sequence),
             vdi_camera: self.drawn.as_ref().map(|d| d.scene.camera.clone()),
-            frame_current: self.drawn.is_some() && self.frame_current(&scene.camera),
+            frame_current: self.frame_current(&scene.camera),
             linear_compiled: self.pipelines.as_ref().is_some_and(|p| p.linear_compiled()),
             scene_current: self
                 .drawn
