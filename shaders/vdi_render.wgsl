@@ -25,9 +25,10 @@
 // opacity constant over [front, back]. The ray then walks the grid of list centres (one cell
 // more each way, the half lists at the edges) and merges the four lists by depth, so that
 // between two consecutive supersegment ends of any of them the medium is homogeneous and
-// composited exactly, with the weights of the middle of that part. The skipping grid's masks
-// are then each tile's together with those of the tiles before it in x, in y and in both (a
-// cell of centres in a tile reads lists from one before the tile's first).
+// composited exactly, with the weights of the middle of that part (ends a small fraction of a
+// list apart, of the lists that weigh little there, taken as one: END_MERGE). The skipping
+// grid's masks are then each tile's together with those of the tiles before it in x, in y and
+// in both (a cell of centres in a tile reads lists from one before the tile's first).
 //
 // Positions are relative to V_O's eye, in world units.
 
@@ -63,6 +64,13 @@ override LINEAR: bool = false;
 
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
 const MAX_LIST_STEPS: u32 = 65535u; // loop guard per ray
+// The linear filter takes an end of one of its four lists as at the turn's start when it lies
+// closer past it than this fraction of a list's height at that depth, times one minus the
+// list's weight there: fewer turns (neighbouring lists end at nearly the same depths), and a
+// list that weighs all (a ray along its own list's ray) keeps its ends exactly. Measured on
+// lavapipe (the VDI bench's three scenes, 128×128, N_S 20, at 10° and 30°): 10-25 % less time
+// than merging every end exactly (0), SSIM against DVR within 0.001 of it.
+const END_MERGE: f32 = 0.125;
 
 @group(0) @binding(0) var<uniform> V: VdiView;
 // Where each list's supersegments begin in `slots`, lists row-major from the top; one more
@@ -260,13 +268,14 @@ fn reader(c: Corner, q: f32, forward: bool) -> Reader {
     return Reader(c, next, held);
 }
 
-// What a reader's list holds at depth `q` (in the ray's order): the medium there (its
-// extinction 0 in a gap), and where that ends. Moves the reader past what ends by `q`.
-fn read_at(rd: ptr<function, Reader>, q: f32, forward: bool) -> Medium {
-    loop {
-        if (*rd).next >= (*rd).c.count || (*rd).held.far > q {
-            break;
-        }
+// What a reader's list holds at depth `q` (in the ray's order), its ends up to `merge` past
+// `q` taken as at `q` (END_MERGE): the medium there (its extinction 0 in a gap), and where that
+// ends. Moves the reader on by at most one supersegment (an `if`, not a loop: lanes that loop
+// different numbers of times wait for each other): `q` is where the previous turn ended, at
+// the nearest end of the four lists', so the one the reader holds ends at or past it. One
+// that ends by then is passed now; a second (of no more length than `merge`) at the next turn.
+fn read_at(rd: ptr<function, Reader>, q: f32, forward: bool, merge: f32) -> Medium {
+    if (*rd).next < (*rd).c.count && (*rd).held.far <= q + merge {
         (*rd).next++;
         if (*rd).next < (*rd).c.count {
             (*rd).held = medium((*rd).c, (*rd).next, forward);
@@ -276,7 +285,7 @@ fn read_at(rd: ptr<function, Reader>, q: f32, forward: bool) -> Medium {
         return Medium(q, 3.0e38, 0.0, vec3<f32>(0.0));
     }
     let s = (*rd).held;
-    if s.near <= q {
+    if s.near <= q + merge {
         return s;
     }
     return Medium(q, s.near, 0.0, vec3<f32>(0.0));
@@ -303,31 +312,49 @@ fn composite_linear(r: OriginRay, ix: i32, iy: i32, t: f32, t_next: f32, dz: f32
     // A ray (nearly) at right angles to V_O's view keeps its depth.
     let flat = q_end - q <= 1e-6 * abs(q_end);
     let moved = vec2<i32>(ix, iy) - *held;
-    if moved.x == 1 && moved.y == 0 {
-        *r0 = *r1;
-        *r2 = *r3;
-        *r1 = reader(corner(ix, iy - 1), q, forward);
-        *r3 = reader(corner(ix, iy), q, forward);
-    } else if moved.x == -1 && moved.y == 0 {
-        *r1 = *r0;
-        *r3 = *r2;
-        *r0 = reader(corner(ix - 1, iy - 1), q, forward);
-        *r2 = reader(corner(ix - 1, iy), q, forward);
-    } else if moved.x == 0 && moved.y == 1 {
-        *r0 = *r2;
-        *r1 = *r3;
-        *r2 = reader(corner(ix - 1, iy), q, forward);
-        *r3 = reader(corner(ix, iy), q, forward);
-    } else if moved.x == 0 && moved.y == -1 {
-        *r2 = *r0;
-        *r3 = *r1;
-        *r0 = reader(corner(ix - 1, iy - 1), q, forward);
-        *r1 = reader(corner(ix, iy - 1), q, forward);
-    } else if moved.x != 0 || moved.y != 0 {
-        *r0 = reader(corner(ix - 1, iy - 1), q, forward);
-        *r1 = reader(corner(ix, iy - 1), q, forward);
-        *r2 = reader(corner(ix - 1, iy), q, forward);
-        *r3 = reader(corner(ix, iy), q, forward);
+    if moved.x != 0 || moved.y != 0 {
+        // The lists new to this cell: after a step, the column or row on the side it moved
+        // to; after a jump (or at the ray's first cell), all four. Each lane reads its two
+        // lists at the same place in the code, whichever way it moved (on a GPU lanes that
+        // took different branches would each wait for the others' reads).
+        let step = abs(moved.x) + abs(moved.y) == 1;
+        let along_x = step && moved.x != 0;
+        let along_y = step && moved.y != 0;
+        let col = select(ix - 1, ix, moved.x > 0);
+        let row = select(iy - 1, iy, moved.y > 0);
+        // a and b: (col, iy − 1) and (col, iy) after a step along x, (ix − 1, row) and
+        // (ix, row) after one along y, (ix − 1, iy − 1) and (ix, iy − 1) after a jump.
+        let first_row = select(iy - 1, row, along_y);
+        let a_at = select(vec2<i32>(ix - 1, first_row), vec2<i32>(col, iy - 1), along_x);
+        let b_at = select(vec2<i32>(ix, first_row), vec2<i32>(col, iy), along_x);
+        let a = reader(corner(a_at.x, a_at.y), q, forward);
+        let b = reader(corner(b_at.x, b_at.y), q, forward);
+        if !step {
+            *r0 = a;
+            *r1 = b;
+            *r2 = reader(corner(ix - 1, iy), q, forward);
+            *r3 = reader(corner(ix, iy), q, forward);
+        } else if moved.x == 1 {
+            *r0 = *r1;
+            *r2 = *r3;
+            *r1 = a;
+            *r3 = b;
+        } else if moved.x == -1 {
+            *r1 = *r0;
+            *r3 = *r2;
+            *r0 = a;
+            *r2 = b;
+        } else if moved.y == 1 {
+            *r0 = *r2;
+            *r1 = *r3;
+            *r2 = a;
+            *r3 = b;
+        } else {
+            *r2 = *r0;
+            *r3 = *r1;
+            *r0 = a;
+            *r1 = b;
+        }
     }
     *held = vec2<i32>(ix, iy);
     var color = (*acc).xyz;
@@ -336,11 +363,19 @@ fn composite_linear(r: OriginRay, ix: i32, iy: i32, t: f32, t_next: f32, dz: f32
     // Each turn ends where a supersegment begins or ends: at most two a supersegment of each
     // list (N_S ≤ VDI_MAX_SUPERSEGMENTS), and the part's end.
     for (var turn = 0u; turn <= 8u * VDI_MAX_SUPERSEGMENTS; turn++) {
-        let m0 = read_at(r0, q, forward);
-        let m1 = read_at(r1, q, forward);
-        let m2 = read_at(r2, q, forward);
-        let m3 = read_at(r3, q, forward);
-        let q_next = min(min(min(m0.far, m1.far), min(m2.far, m3.far)), q_end);
+        // Each list's merging distance (END_MERGE), by its weight at the turn's start.
+        var start = t;
+        if !flat {
+            start = t + (q - q_start) / abs(dz);
+        }
+        let list_height = abs(q) * 2.0 * V.o_tan_y / f32(V.lists_y);
+        let merge = END_MERGE * list_height * (1.0 - weights(in_cell(r, ix, iy, start)));
+        let m0 = read_at(r0, q, forward, merge.x);
+        let m1 = read_at(r1, q, forward, merge.y);
+        let m2 = read_at(r2, q, forward, merge.z);
+        let m3 = read_at(r3, q, forward, merge.w);
+        // Never behind q (a supersegment of no length behind it: see read_at).
+        let q_next = max(q, min(min(min(m0.far, m1.far), min(m2.far, m3.far)), q_end));
         // The turn's length along the ray, and its middle's distance from t.
         var length = t_next - t;
         var middle = 0.5 * length;
