@@ -390,6 +390,62 @@ fn a_uniform_box_looks_the_same_through_both_filters_from_any_side() {
 }
 
 #[test]
+fn the_linear_filter_keeps_thin_shells() {
+    // Every list holds one thin, nearly opaque shell where it enters the box, far thinner than
+    // the depth the linear filter merges ends within (END_MERGE: an eighth of a list's height
+    // there). From the side the nearest list draws it as a staircase of plates that rays slip
+    // between; the linear filter mixes four lists' shells, whose weights sum to 1, into one
+    // surface: it covers every pixel the staircase covers and more, as opaque there. A shell
+    // is shifted by the merging, never dropped.
+    let scene = scene(1);
+    let (w, h) = (48, 40);
+    let (_, generation) = generate_from(uniform(), &scene, full_res(w, h), 20);
+    let mut shells = generation.image.clone();
+    for (depth, colour) in shells.depth.iter_mut().zip(&mut shells.colour) {
+        *depth = [depth[0], depth[0] + 0.01];
+        *colour = [0.9, 0.45, 0.0, 0.9];
+    }
+    let mut renderer = VdiRenderer::new(gpu(), &shells, w, h).expect("vdi renderer");
+    for degrees in [10.0, 30.0] {
+        let camera = turned(&scene.camera, degrees);
+        let mut alpha = |filter| {
+            renderer.set_filter(gpu(), filter);
+            let frame = renderer.render(gpu(), &camera, true).expect("render");
+            frame.pixels.iter().map(|p| p[3]).collect::<Vec<f32>>()
+        };
+        let (nearest, linear) = (alpha(VdiFilter::Nearest), alpha(VdiFilter::Linear));
+        let covered = |v: &[f32]| v.iter().filter(|&&a| a > 0.5).count();
+        let both: Vec<(f32, f32)> = nearest
+            .iter()
+            .zip(&linear)
+            .filter(|&(&n, _)| n > 0.5)
+            .map(|(&n, &l)| (n, l))
+            .collect();
+        let lost = both.iter().filter(|&&(_, l)| l < 0.45).count();
+        let mean = |f: fn(&(f32, f32)) -> f32| both.iter().map(f).sum::<f32>() / both.len() as f32;
+        let (mean_nearest, mean_linear) = (mean(|p| p.0), mean(|p| p.1));
+        eprintln!(
+            "{degrees}°: the shell covers {} pixels with the nearest list, {} with the linear \
+             filter, which loses {lost} of the former; mean alpha there {mean_nearest:.4} and \
+             {mean_linear:.4}",
+            covered(&nearest),
+            covered(&linear)
+        );
+        assert!(covered(&nearest) > nearest.len() / 4, "{degrees}°");
+        assert!(covered(&linear) >= covered(&nearest), "{degrees}°");
+        assert!(
+            lost * 50 <= both.len(),
+            "{degrees}°: {lost} of {} lost",
+            both.len()
+        );
+        assert!(
+            mean_linear > mean_nearest - 0.03,
+            "{degrees}°: mean alpha {mean_linear} against {mean_nearest}"
+        );
+    }
+}
+
+#[test]
 fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_side() {
     let scene = scene(2);
     let (w, h) = (48, 40);
