@@ -366,6 +366,8 @@ fn composite_linear(r: OriginRay, ix: i32, iy: i32, t: f32, t_next: f32, dz: f32
     var color = (*acc).xyz;
     var trans = (*acc).w;
     let q_start = q;
+    // END_MERGE's distance per unit of depth: a list's height there, an eighth of it.
+    let merge_per_depth = END_MERGE * 2.0 * V.o_tan_y / f32(V.lists_y);
     // Each turn ends where a supersegment begins or ends: at most two a supersegment of each
     // list (N_S ≤ VDI_MAX_SUPERSEGMENTS), and the part's end.
     for (var turn = 0u; turn <= 8u * VDI_MAX_SUPERSEGMENTS; turn++) {
@@ -375,10 +377,9 @@ fn composite_linear(r: OriginRay, ix: i32, iy: i32, t: f32, t_next: f32, dz: f32
             start = t + (q - q_start) / abs(dz);
         }
         // (None at V_O's eye, depth 0, where the weights are 0/0.)
-        let list_height = abs(q) * 2.0 * V.o_tan_y / f32(V.lists_y);
         let merge = select(vec4<f32>(0.0),
-            END_MERGE * list_height * (1.0 - weights(in_cell(r, ix, iy, start))),
-            list_height > 0.0);
+            merge_per_depth * abs(q) * (1.0 - weights(in_cell(r, ix, iy, start))),
+            q != 0.0);
         let m0 = read_at(r0, q, forward, merge.x);
         let m1 = read_at(r1, q, forward, merge.y);
         let m2 = read_at(r2, q, forward, merge.z);
