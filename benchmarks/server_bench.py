@@ -1,6 +1,6 @@
 """Server benchmark: `brickserver` against nginx serving the same store directory, in one run,
 with `wrk` (default) or `oha` as the load generator on the same machine (client and servers
-share the cores).
+share the cores, or are pinned apart: see the loads).
 
     python3 benchmarks/server_bench.py [--client wrk|oha] [--duration 10] [--soak 300] [--docs]
 
@@ -14,10 +14,11 @@ Both servers run at once; each load runs on one, then the other, `--repeat` time
 median run is reported, so background load hits both alike.
 
 - random chunk GETs, uniform over a 20,000-chunk store of random bytes with log-normal sizes
-  (median 40 KiB), at 256, 16 and 1 connections, and at 1 connection again with the server
-  on the last CPU and the client on the first ("pinned apart": the same placement for both
-  servers, which the scheduler does not give them at 1 connection);
+  (median 40 KiB), at 256, 16 and 1 connections;
 - `If-None-Match` revalidations answered 304, at 256 connections;
+- with two or more CPUs, each of these loads again with the server on the last CPU and the
+  client on the others ("pinned apart": the client has cores of its own, and both servers the
+  same one, a placement the scheduler does not give them at 1 connection);
 - region queries (`/NAME/regions`, random unaligned boxes) on a store made by `ingest`, at 16
   connections (nginx has no equivalent);
 - optionally a soak: random chunk GETs at 256 connections for `--soak` seconds, sampling the
@@ -291,19 +292,19 @@ def unpin(before):
             pass
 
 
-def pinned_load(b, c, seconds, server_pids):
-    """A chunk load with the server's threads on the last CPU and the client on the first, so
-    that both servers run where the other one did. Left to the scheduler, at 1 connection the
-    two servers do not run alike beside the client, and CPU time per request moves by several
-    µs with that alone (docs/benchmarks.md § Server): pinned apart, they cost the same. Threads
-    the server starts meanwhile inherit the pinned mask from the thread that starts them, and
-    keep it."""
+def pinned_load(b, c, seconds, server_pids, etag=None):
+    """A chunk load (`chunk_load`) with the server's threads on the last CPU and the client on
+    the others, so that the client has cores of its own and both servers run where the other
+    one did. Left to the scheduler, at 1 connection the two servers do not run alike beside
+    the client, and CPU time per request moves by several µs with that alone
+    (docs/benchmarks.md § Server): pinned apart, they cost the same. Threads the server starts
+    meanwhile inherit the pinned mask from the thread that starts them, and keep it."""
     every = os.sched_getaffinity(0)
     before = {}
     try:
         before = pin(thread_ids(server_pids), {max(every)})
-        os.sched_setaffinity(0, {min(every)})
-        return chunk_load(b, c, seconds)
+        os.sched_setaffinity(0, every - {max(every)})
+        return chunk_load(b, c, seconds, etag)
     finally:
         os.sched_setaffinity(0, every)
         unpin(before)
@@ -315,24 +316,25 @@ def loads(bases, seconds, repeat, pids):
     background load hits both alike; the order of the servers turns round each time, so that
     neither always runs first. Returns name -> load -> the median run, with the server's CPU
     time per request and every round's requests/s (`rounds_rps`, in order; `pids`: name -> its
-    processes). With two or more CPUs, the load at 1 connection runs a second time with server
-    and client pinned apart (`pinned_load`)."""
+    processes). With two or more CPUs, each load runs a second time with server and client
+    pinned apart (`pinned_load`)."""
     out = {name: {} for name in bases}
     etags = {name: etag_of(f"{b}/0/c/0/0/0/0") for name, b in bases.items()}
-    plan = [(f"GET, {c} conn", c, None) for c in (256, 16, 1)]
+    shared = [(f"GET, {c} conn", c, False) for c in (256, 16, 1)] + [("304, 256 conn", 256, True)]
+    plan = [(load, c, revalidate, False) for load, c, revalidate in shared]
     if len(os.sched_getaffinity(0)) >= 2:
-        plan.append(("GET, 1 conn, pinned apart", 1, "pinned"))
-    plan.append(("304, 256 conn", 256, "304"))
-    for load, c, kind in plan:
+        plan += [(f"{load}, pinned apart", c, revalidate, True) for load, c, revalidate in shared]
+    for load, c, revalidate, pinned in plan:
         runs = {name: [] for name in bases}
         for i in range(repeat):
             for name in list(bases) if i % 2 == 0 else list(reversed(bases)):
                 b = bases[name]
                 before = cpu_seconds(pids[name])
-                if kind == "pinned":
-                    r = pinned_load(b, c, seconds, pids[name])
+                etag = etags[name] if revalidate else None
+                if pinned:
+                    r = pinned_load(b, c, seconds, pids[name], etag)
                 else:
-                    r = chunk_load(b, c, seconds, etags[name] if kind == "304" else None)
+                    r = chunk_load(b, c, seconds, etag)
                 r["cpu_us"] = (cpu_seconds(pids[name]) - before) / max(r["rps"] * seconds, 1) * 1e6
                 runs[name].append(r)
         for name in bases:
@@ -621,7 +623,8 @@ def render(results, a):
     lines = [
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
         f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)} "
-        "on the same machine as the servers (they share the cores), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
+        "on the same machine as the servers (they share the cores, but in the rows pinned apart, where the servers' threads run on the last CPU "
+        "and the client on the others), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         f"each server holds up to {OPEN_FILES:,} chunk files open (nginx's `open_file_cache`, per worker; brickserver's `--open-files`, shared); "
         "each load ran on nginx and brickserver in turn, repeatedly (which ran first turning round each time), and the median run of each is shown, "
         "with the median and range of the rounds' ratios (each round's brickserver run against its nginx run). "
