@@ -620,11 +620,14 @@ def client_version(client):
 
 
 def render(results, a):
+    ng, bs = results["nginx"], results["brickserver"]
+    placement = "they share the cores"
+    if any(load.endswith(", pinned apart") for load in ng):
+        placement += ", except in the rows pinned apart, where the servers' threads run on the last CPU and the client on the others"
     lines = [
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
         f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)} "
-        "on the same machine as the servers (they share the cores, but in the rows pinned apart, where the servers' threads run on the last CPU "
-        "and the client on the others), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
+        f"on the same machine as the servers ({placement}), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         f"each server holds up to {OPEN_FILES:,} chunk files open (nginx's `open_file_cache`, per worker; brickserver's `--open-files`, shared); "
         "each load ran on nginx and brickserver in turn, repeatedly (which ran first turning round each time), and the median run of each is shown, "
         "with the median and range of the rounds' ratios (each round's brickserver run against its nginx run). "
@@ -633,7 +636,6 @@ def render(results, a):
         "| Load | nginx req/s | brickserver req/s | ratio | rounds' ratios | nginx MB/s | brickserver MB/s | nginx p50 / p99 ms | brickserver p50 / p99 ms | p99 ratio | CPU µs/req nginx / brickserver |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    ng, bs = results["nginx"], results["brickserver"]
     for load in ng:
         if load == "rss":
             continue
