@@ -18,9 +18,11 @@ multi-channel store mixed into one VDI (the paper's are single-channel).
 
 Builds nothing: it needs `target/release/ingest` and `target/release/viewer`, or the folder
 named by RESIDENCY_BIN. `--short` runs tiny sizes (CI's mode; it asserts nothing about speed);
-`--size` sets the image edge (128 by default); `--width 1920 --height 1080` gives the paper's HD
-frames on a GPU. `--volume N` sets the edge of the sparse and mixing volumes (128 by default) and
-the CyCIF store's plane (24×2N×2N).
+the images are 640×360 by default, the paper's 16:9 frame as large as lavapipe's 128 MiB
+storage-buffer binding holds a VDI of N_S = 30 (34 slots of 16 bytes a pixel, 125 MB).
+`--size N` makes them N×N; `--width 1920 --height 1080` gives the paper's HD frames on a GPU.
+`--volume N` sets the edge of the sparse and mixing volumes (128 by default) and the CyCIF
+store's plane (24×2N×2N).
 """
 
 import argparse
@@ -56,7 +58,7 @@ def main():
     ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     ap.add_argument("--out-dir", type=pathlib.Path, help="report folder [docs/benchmarks, or benchmarks/data/short-report with --short]")
     ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data", help="scratch folder for datasets")
-    ap.add_argument("--size", type=int, help="image edge in pixels [128; 32 with --short]")
+    ap.add_argument("--size", type=int, help="square images of this edge in pixels [640×360; 32×32 with --short]")
     ap.add_argument("--width", type=int, help="image width in pixels [--size]")
     ap.add_argument("--height", type=int, help="image height in pixels [--size]")
     ap.add_argument("--volume", type=int, default=128, help="edge of the sparse and mixing volumes [128]")
@@ -70,8 +72,9 @@ def main():
     raw.mkdir(parents=True, exist_ok=True)
     for old in [*raw.glob("*.json"), *raw.glob("*.md"), *raw.glob("*.png")]:  # a stale file would be mistaken for this run's
         old.unlink()
-    size = args.size or (32 if args.short else 128)
-    width, height = args.width or size, args.height or size
+    default = (32, 32) if args.short else (640, 360)
+    width = args.width or args.size or default[0]
+    height = args.height or args.size or default[1]
     frames = args.timed_frames or (1 if args.short else 3)
     data = Data(args.data_dir, ingest_has_kind())
     started = time.time()
