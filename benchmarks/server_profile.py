@@ -1,0 +1,190 @@
+"""Where brickserver's and nginx's CPU time per request goes, under the same chunk load: the
+server bench's store and servers (`benchmarks/server_bench.py`), each loaded in turn by wrk for
+`--seconds` at `--connections`, for `--rounds` rounds, while `perf record -g` samples the
+server's threads and `perf stat` counts its system calls, packets sent, context switches and
+CPU migrations. Each sample is put in one bucket by its call stack (the first that matches):
+
+- waking the client: the kernel waking the reader of a socket the server wrote to
+  (`sock_def_readable`: on loopback the client's receive path runs in the server's send);
+- sleeping and switching: the server's own thread going to sleep and coming back (`schedule`);
+- sending: the rest of writing answers (`sendfile`, `sendmsg`, TCP, loopback);
+- receiving: reading requests;
+- opening files: path lookups, `open`, `stat`, `close`;
+- other kernel;
+- user space: the server's own code and its libraries.
+
+It prints, per server, the medians over rounds of requests/s, CPU µs per request (from
+/proc, as the server bench counts it), each bucket's µs per request (samples ÷ frequency ÷
+requests) and the counters per request; `--markdown F` writes the same as a table.
+
+    .venv/bin/python benchmarks/server_profile.py [--connections 1] [--seconds 6] [--rounds 3]
+                                                  [--work DIR] [--markdown F]
+
+Needs what the server bench needs (wrk, nginx, a release build, numpy) and `perf` (Debian's
+`linux-perf`), run as root or with `kernel.perf_event_paranoid` at most 1.
+"""
+
+import argparse
+import datetime
+import os
+import pathlib
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
+import server_bench as sb  # noqa: E402
+
+FREQUENCY = 4999  # samples a second
+KERNEL_START = 0xFFFF800000000000  # x86-64 and arm64: addresses from here on are the kernel's
+# (bucket, kernel functions that put a stack in it), first match wins; user space is the
+# samples whose innermost frame is not the kernel's.
+BUCKETS = [
+    ("waking the client", ("sock_def_readable",)),
+    ("sleeping and switching", ("schedule",)),
+    ("sending", ("do_sendfile", "tcp_sendmsg", "sock_sendmsg", "__tcp_push_pending_frames", "do_tcp_setsockopt", "tcp_write_xmit")),
+    ("receiving", ("tcp_recvmsg", "sock_recvmsg", "__sys_recvfrom", "ksys_read")),
+    ("opening files", ("path_openat", "do_sys_openat2", "vfs_statx", "vfs_fstat", "__x64_sys_close", "filp_close")),
+]
+USER = "user space"
+OTHER = "other kernel"
+ORDER = [b for b, _ in BUCKETS] + [OTHER, USER]
+COUNTERS = ["raw_syscalls:sys_enter", "net:net_dev_queue", "context-switches", "cpu-migrations"]
+COUNTER_NAMES = {"raw_syscalls:sys_enter": "system calls", "net:net_dev_queue": "packets sent",
+                 "context-switches": "context switches", "cpu-migrations": "CPU migrations"}
+
+
+def bucket_of(stack):
+    """The bucket of one sample's call stack (innermost frame first, `(is_kernel, symbol)`)."""
+    if not stack or not stack[0][0]:
+        return USER
+    symbols = [s for _, s in stack]
+    for name, functions in BUCKETS:
+        if any(s.startswith(f) for s in symbols for f in functions):
+            return name
+    return OTHER
+
+
+def stacks(script: str):
+    """The call stacks in `perf script -F ip,sym` output, innermost frame first, each frame
+    `(is_kernel, symbol)`."""
+    for block in script.split("\n\n"):
+        stack = []
+        for line in block.strip().splitlines():
+            parts = line.split(None, 1)
+            stack.append((int(parts[0], 16) >= KERNEL_START, parts[1] if len(parts) > 1 else ""))
+        if stack:
+            yield stack
+
+
+def samples_by_bucket(data: pathlib.Path):
+    """Samples per bucket in a `perf record -g` file."""
+    script = subprocess.run(["perf", "script", "-i", str(data), "-F", "ip,sym"], capture_output=True, text=True, check=True).stdout
+    counts = dict.fromkeys(ORDER, 0)
+    for stack in stacks(script):
+        counts[bucket_of(stack)] += 1
+    return counts
+
+
+def counters(path: pathlib.Path):
+    """`perf stat -x,` output: counter → value."""
+    found = {}
+    for line in path.read_text().splitlines():
+        fields = line.split(",")
+        if len(fields) > 3 and fields[0].replace(".", "").isdigit():
+            found[fields[2]] = float(fields[0])
+    return found
+
+
+def profile(name, base, pids, connections, seconds, scratch: pathlib.Path):
+    """One load of `base` by wrk, sampled and counted: requests/s and per-request figures."""
+    data, stat = scratch / f"{name}.data", scratch / f"{name}.stat"
+    targets = ",".join(map(str, pids))
+    record = subprocess.Popen(["perf", "record", "-q", "-F", str(FREQUENCY), "-g", "-p", targets, "-o", str(data)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    count = subprocess.Popen(["perf", "stat", "-x,", "-e", ",".join(COUNTERS), "-p", targets, "-o", str(stat)])
+    cpu = sb.cpu_seconds(pids)
+    result = sb.wrk(base, connections, seconds)
+    cpu = sb.cpu_seconds(pids) - cpu
+    for p in (record, count):
+        p.send_signal(signal.SIGINT)
+        p.wait()
+    requests = result["rps"] * seconds
+    us = {b: n / FREQUENCY / requests * 1e6 for b, n in samples_by_bucket(data).items()}
+    found = counters(stat)
+    return {
+        "rps": result["rps"],
+        "cpu_us": cpu / requests * 1e6,
+        "sampled_us": sum(us.values()),
+        "buckets": us,
+        "counters": {COUNTER_NAMES[c]: found.get(c, 0.0) / requests for c in COUNTERS},
+    }
+
+
+def medians(runs):
+    """Per figure, the median over rounds."""
+    med = lambda xs: statistics.median(xs)  # noqa: E731
+    return {
+        "rps": med([r["rps"] for r in runs]),
+        "cpu_us": med([r["cpu_us"] for r in runs]),
+        "sampled_us": med([r["sampled_us"] for r in runs]),
+        "buckets": {b: med([r["buckets"][b] for r in runs]) for b in ORDER},
+        "counters": {c: med([r["counters"][c] for r in runs]) for c in COUNTER_NAMES.values()},
+    }
+
+
+def table(results, a):
+    """The report: one column per server."""
+    names = list(results)
+    rows = [f"| | {' | '.join(names)} |", "|---|" + "---|" * len(names)]
+    rows.append("| requests/s | " + " | ".join(f"{results[n]['rps']:,.0f}" for n in names) + " |")
+    rows.append("| CPU µs a request (/proc) | " + " | ".join(f"{results[n]['cpu_us']:.1f}" for n in names) + " |")
+    rows.append("| sampled µs a request | " + " | ".join(f"{results[n]['sampled_us']:.1f}" for n in names) + " |")
+    for b in ORDER:
+        rows.append(f"| — {b} | " + " | ".join(f"{results[n]['buckets'][b]:.1f}" for n in names) + " |")
+    for c in COUNTER_NAMES.values():
+        rows.append(f"| {c} a request | " + " | ".join(f"{results[n]['counters'][c]:.3f}" for n in names) + " |")
+    head = (f"Measured {datetime.date.today().isoformat()} on {sb.cpu_name()} ({os.cpu_count()} CPUs) by "
+            f"`benchmarks/server_profile.py --connections {a.connections} --seconds {a.seconds} --rounds {a.rounds}`: "
+            f"wrk, random chunk GETs, servers and client sharing the CPUs; medians of {a.rounds} rounds.")
+    return head + "\n\n" + "\n".join(rows) + "\n"
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--connections", type=int, default=1, help="wrk's connections [1]")
+    ap.add_argument("--seconds", type=int, default=6, help="seconds per load [6]")
+    ap.add_argument("--rounds", type=int, default=3, help="loads per server, alternating [3]")
+    ap.add_argument("--work", default=str(sb.ROOT / "bench-data" / "server"), help="the server bench's work folder (its store is made there if missing)")
+    ap.add_argument("--markdown", type=pathlib.Path, help="write the table here too")
+    a = ap.parse_args()
+    work = pathlib.Path(a.work)
+    store = work / "www" / "bench"
+    store.mkdir(parents=True, exist_ok=True)
+    sb.make_store(store)
+    scratch = pathlib.Path(tempfile.mkdtemp(prefix="server-profile-"))
+    ng, ng_pids, ng_base = sb.start_nginx(work / "www", scratch, 18080)
+    bs, bs_pids, bs_base = sb.start_brickserver(store, "bench", f"--open-files={sb.OPEN_FILES}")
+    servers = {"brickserver": (f"{bs_base}/bench", bs_pids), "nginx": (f"{ng_base}/bench", ng_pids)}
+    runs = {n: [] for n in servers}
+    try:
+        for base, _ in servers.values():
+            sb.wrk(base, 16, 3)  # the page cache and both servers' open files warm
+        for _ in range(a.rounds):
+            for name, (base, pids) in servers.items():
+                runs[name].append(profile(name, base, pids, a.connections, a.seconds, scratch))
+    finally:
+        ng.send_signal(signal.SIGQUIT)
+        ng.wait(timeout=10)
+        bs.send_signal(signal.SIGTERM)
+        bs.wait(timeout=20)
+    report = table({n: medians(r) for n, r in runs.items()}, a)
+    print(report)
+    if a.markdown:
+        a.markdown.write_text(report)
+
+
+if __name__ == "__main__":
+    main()
