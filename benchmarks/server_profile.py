@@ -1,21 +1,27 @@
 """Where brickserver's and nginx's CPU time per request goes, under the same chunk load: the
 server bench's store and servers (`benchmarks/server_bench.py`), each loaded in turn by wrk for
-`--seconds` at `--connections`, for `--rounds` rounds, while `perf record -g` samples the
-server's threads and `perf stat` counts its system calls, packets sent, context switches and
-CPU migrations. Each sample is put in one bucket by its call stack (the first that matches):
+`--seconds` at `--connections`, for `--rounds` rounds (which server goes first turning round
+each round), while `perf record -g -e cpu-clock` samples the server's threads and `perf stat`
+counts its system calls, packets sent, context switches and CPU migrations. Each sample's time
+(its period, in ns of CPU) goes to one bucket by the kernel functions on its call stack (the
+first bucket that matches, by name prefix):
 
-- waking the client: the kernel waking the reader of a socket the server wrote to
-  (`sock_def_readable`: on loopback the client's receive path runs in the server's send);
+- waking the client: `sock_def_readable`, the kernel waking the reader of a socket the server
+  wrote to (on loopback the client's receive path runs inside the server's send, and wakes the
+  client from there; the rest of that receive path counts as sending). It would also hold the
+  server's own socket's wake-ups run in the server's context, which a request-answer load
+  hardly has;
 - sleeping and switching: the server's own thread going to sleep and coming back (`schedule`);
 - sending: the rest of writing answers (`sendfile`, `sendmsg`, TCP, loopback);
 - receiving: reading requests;
 - opening files: path lookups, `open`, `stat`, `close`;
 - other kernel;
-- user space: the server's own code and its libraries.
+- user space: samples whose innermost frame is not the kernel's (the server's own code and its
+  libraries).
 
 It prints, per server, the medians over rounds of requests/s, CPU µs per request (from
-/proc, as the server bench counts it), each bucket's µs per request (samples ÷ frequency ÷
-requests) and the counters per request; `--markdown F` writes the same as a table.
+/proc, as the server bench counts it), each bucket's µs per request, the sampled total and the
+counters per request; `--markdown F` writes the same as a table.
 
     .venv/bin/python benchmarks/server_profile.py [--connections 1] [--seconds 6] [--rounds 3]
                                                   [--work DIR] [--markdown F]
@@ -28,19 +34,21 @@ import argparse
 import datetime
 import os
 import pathlib
+import shutil
 import signal
 import statistics
 import subprocess
 import sys
 import tempfile
+import time
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 import server_bench as sb  # noqa: E402
 
-FREQUENCY = 4999  # samples a second
+FREQUENCY = 4999  # samples a second asked of perf (each sample carries its own period)
 KERNEL_START = 0xFFFF800000000000  # x86-64 and arm64: addresses from here on are the kernel's
-# (bucket, kernel functions that put a stack in it), first match wins; user space is the
-# samples whose innermost frame is not the kernel's.
+# (bucket, prefixes of kernel functions that put a stack in it), first match wins; user space
+# is the samples whose innermost frame is not the kernel's.
 BUCKETS = [
     ("waking the client", ("sock_def_readable",)),
     ("sleeping and switching", ("schedule",)),
@@ -60,32 +68,43 @@ def bucket_of(stack):
     """The bucket of one sample's call stack (innermost frame first, `(is_kernel, symbol)`)."""
     if not stack or not stack[0][0]:
         return USER
-    symbols = [s for _, s in stack]
-    for name, functions in BUCKETS:
-        if any(s.startswith(f) for s in symbols for f in functions):
+    kernel = [symbol for is_kernel, symbol in stack if is_kernel]
+    for name, prefixes in BUCKETS:
+        if any(symbol.startswith(prefix) for symbol in kernel for prefix in prefixes):
             return name
     return OTHER
 
 
-def stacks(script: str):
-    """The call stacks in `perf script -F ip,sym` output, innermost frame first, each frame
-    `(is_kernel, symbol)`."""
-    for block in script.split("\n\n"):
-        stack = []
-        for line in block.strip().splitlines():
+def samples(script: str):
+    """The samples in `perf script -F period,ip,sym` output: `(period, stack)`, the stack
+    innermost frame first, each frame `(is_kernel, symbol)`. A sample is a line of its period,
+    then a tab-indented line per frame; lines of any other shape are skipped."""
+    period, stack = None, []
+    for line in script.splitlines():
+        if line.startswith("\t"):
             parts = line.split(None, 1)
-            stack.append((int(parts[0], 16) >= KERNEL_START, parts[1] if len(parts) > 1 else ""))
-        if stack:
-            yield stack
+            try:
+                ip = int(parts[0], 16)
+            except (IndexError, ValueError):
+                continue
+            stack.append((ip >= KERNEL_START, parts[1] if len(parts) > 1 else ""))
+            continue
+        if period is not None and stack:
+            yield period, stack
+        period, stack = None, []
+        if line.strip().isdigit():
+            period = int(line)
+    if period is not None and stack:
+        yield period, stack
 
 
-def samples_by_bucket(data: pathlib.Path):
-    """Samples per bucket in a `perf record -g` file."""
-    script = subprocess.run(["perf", "script", "-i", str(data), "-F", "ip,sym"], capture_output=True, text=True, check=True).stdout
-    counts = dict.fromkeys(ORDER, 0)
-    for stack in stacks(script):
-        counts[bucket_of(stack)] += 1
-    return counts
+def time_by_bucket(data: pathlib.Path):
+    """Nanoseconds of CPU per bucket in a `perf record -g -e cpu-clock` file."""
+    script = subprocess.run(["perf", "script", "-i", str(data), "-F", "period,ip,sym"], capture_output=True, text=True, check=True).stdout
+    ns = dict.fromkeys(ORDER, 0)
+    for period, stack in samples(script):
+        ns[bucket_of(stack)] += period
+    return ns
 
 
 def counters(path: pathlib.Path):
@@ -102,17 +121,20 @@ def profile(name, base, pids, connections, seconds, scratch: pathlib.Path):
     """One load of `base` by wrk, sampled and counted: requests/s and per-request figures."""
     data, stat = scratch / f"{name}.data", scratch / f"{name}.stat"
     targets = ",".join(map(str, pids))
-    record = subprocess.Popen(["perf", "record", "-q", "-F", str(FREQUENCY), "-g", "-p", targets, "-o", str(data)],
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    record = subprocess.Popen(["perf", "record", "-q", "-e", "cpu-clock", "-F", str(FREQUENCY), "-g", "-p", targets, "-o", str(data)],
+                              stdout=subprocess.DEVNULL)
     count = subprocess.Popen(["perf", "stat", "-x,", "-e", ",".join(COUNTERS), "-p", targets, "-o", str(stat)])
-    cpu = sb.cpu_seconds(pids)
-    result = sb.wrk(base, connections, seconds)
-    cpu = sb.cpu_seconds(pids) - cpu
-    for p in (record, count):
-        p.send_signal(signal.SIGINT)
-        p.wait()
-    requests = result["rps"] * seconds
-    us = {b: n / FREQUENCY / requests * 1e6 for b, n in samples_by_bucket(data).items()}
+    try:
+        time.sleep(0.5)  # both attached before the load begins (the server idles meanwhile)
+        cpu = sb.cpu_seconds(pids)
+        result = sb.wrk(base, connections, seconds)
+        cpu = sb.cpu_seconds(pids) - cpu
+    finally:
+        for p in (record, count):
+            p.send_signal(signal.SIGINT)
+            p.wait()
+    requests = sum(result["codes"].values())
+    us = {b: ns / 1e3 / requests for b, ns in time_by_bucket(data).items()}
     found = counters(stat)
     return {
         "rps": result["rps"],
@@ -141,7 +163,7 @@ def table(results, a):
     rows = [f"| | {' | '.join(names)} |", "|---|" + "---|" * len(names)]
     rows.append("| requests/s | " + " | ".join(f"{results[n]['rps']:,.0f}" for n in names) + " |")
     rows.append("| CPU µs a request (/proc) | " + " | ".join(f"{results[n]['cpu_us']:.1f}" for n in names) + " |")
-    rows.append("| sampled µs a request | " + " | ".join(f"{results[n]['sampled_us']:.1f}" for n in names) + " |")
+    rows.append("| sampled µs a request (median of the rounds' sums) | " + " | ".join(f"{results[n]['sampled_us']:.1f}" for n in names) + " |")
     for b in ORDER:
         rows.append(f"| — {b} | " + " | ".join(f"{results[n]['buckets'][b]:.1f}" for n in names) + " |")
     for c in COUNTER_NAMES.values():
@@ -165,21 +187,25 @@ def main():
     store.mkdir(parents=True, exist_ok=True)
     sb.make_store(store)
     scratch = pathlib.Path(tempfile.mkdtemp(prefix="server-profile-"))
-    ng, ng_pids, ng_base = sb.start_nginx(work / "www", scratch, 18080)
-    bs, bs_pids, bs_base = sb.start_brickserver(store, "bench", f"--open-files={sb.OPEN_FILES}")
-    servers = {"brickserver": (f"{bs_base}/bench", bs_pids), "nginx": (f"{ng_base}/bench", ng_pids)}
-    runs = {n: [] for n in servers}
+    servers, stops = {}, []
     try:
+        ng, ng_pids, ng_base = sb.start_nginx(work / "www", scratch, 18080)
+        stops.append(lambda: (ng.send_signal(signal.SIGQUIT), ng.wait(timeout=10)))
+        bs, bs_pids, bs_base = sb.start_brickserver(store, "bench", f"--open-files={sb.OPEN_FILES}")
+        stops.append(lambda: (bs.send_signal(signal.SIGTERM), bs.wait(timeout=20)))
+        servers = {"brickserver": (f"{bs_base}/bench", bs_pids), "nginx": (f"{ng_base}/bench", ng_pids)}
+        runs = {n: [] for n in servers}
         for base, _ in servers.values():
             sb.wrk(base, 16, 3)  # the page cache and both servers' open files warm
-        for _ in range(a.rounds):
-            for name, (base, pids) in servers.items():
+        for round_ in range(a.rounds):
+            order = list(servers) if round_ % 2 == 0 else list(reversed(servers))
+            for name in order:
+                base, pids = servers[name]
                 runs[name].append(profile(name, base, pids, a.connections, a.seconds, scratch))
     finally:
-        ng.send_signal(signal.SIGQUIT)
-        ng.wait(timeout=10)
-        bs.send_signal(signal.SIGTERM)
-        bs.wait(timeout=20)
+        for stop in stops:
+            stop()
+        shutil.rmtree(scratch, ignore_errors=True)
     report = table({n: medians(r) for n, r in runs.items()}, a)
     print(report)
     if a.markdown:

@@ -18,9 +18,10 @@ multi-channel store mixed into one VDI (the paper's are single-channel).
 
 Builds nothing: it needs `target/release/ingest` and `target/release/viewer`, or the folder
 named by RESIDENCY_BIN. `--short` runs tiny sizes (CI's mode; it asserts nothing about speed);
-the images are 640×360 by default, the paper's 16:9 frame as large as lavapipe's 128 MiB
-storage-buffer binding holds a VDI of N_S = 30 (34 slots of 16 bytes a pixel, 125 MB).
-`--size N` makes them N×N; `--width 1920 --height 1080` gives the paper's HD frames on a GPU.
+the images are 640×360 by default: a 16:9 frame, as the paper's, that fits a VDI of N_S = 30
+in lavapipe's 128 MiB storage-buffer binding (34 slots of 16 bytes a pixel, 125 MB). `--size N`
+makes them N×N; `--width` and `--height` set each side (each defaults to `--size`, else to
+640×360's); `--width 1920 --height 1080` gives the paper's HD frames on a GPU.
 `--volume N` sets the edge of the sparse and mixing volumes (128 by default) and the CyCIF
 store's plane (24×2N×2N).
 """
@@ -59,8 +60,8 @@ def main():
     ap.add_argument("--out-dir", type=pathlib.Path, help="report folder [docs/benchmarks, or benchmarks/data/short-report with --short]")
     ap.add_argument("--data-dir", type=pathlib.Path, default=ROOT / "benchmarks" / "data", help="scratch folder for datasets")
     ap.add_argument("--size", type=int, help="square images of this edge in pixels [640×360; 32×32 with --short]")
-    ap.add_argument("--width", type=int, help="image width in pixels [--size]")
-    ap.add_argument("--height", type=int, help="image height in pixels [--size]")
+    ap.add_argument("--width", type=int, help="image width in pixels [--size, else 640; 32 with --short]")
+    ap.add_argument("--height", type=int, help="image height in pixels [--size, else 360; 32 with --short]")
     ap.add_argument("--volume", type=int, default=128, help="edge of the sparse and mixing volumes [128]")
     ap.add_argument("--timed-frames", type=int, help="frames timed per measurement [3; 1 with --short]")
     args = ap.parse_args()
