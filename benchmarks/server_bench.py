@@ -39,6 +39,7 @@ at 16 connections. Results go to docs/benchmarks/server-s3.md (docs/benchmarks.m
 """
 
 import argparse
+import contextlib
 import datetime
 import json
 import os
@@ -83,6 +84,14 @@ def make_store(path: pathlib.Path):
                 off = int(rng.integers(0, 64))
                 (d / str(x)).write_bytes(blob[off : off + int(sizes[z, y, x])][: int(sizes[z, y, x])])
     (path / "done").write_text("")
+
+
+def bench_store(work: pathlib.Path) -> pathlib.Path:
+    """The chunk store under `work` (`www/bench`, inside nginx's root), made if missing."""
+    store = work / "www" / "bench"
+    store.mkdir(parents=True, exist_ok=True)
+    make_store(store)
+    return store
 
 
 def key_regex(base: str) -> str:
@@ -249,6 +258,30 @@ http {{
     return p, [p.pid, *map(int, children)], f"http://127.0.0.1:{port}"
 
 
+@contextlib.contextmanager
+def chunk_servers(work: pathlib.Path, store: pathlib.Path):
+    """nginx (its root `work`/www) and brickserver serving `store` as the dataset `bench`, both
+    stopped on leaving, whatever happened: name -> (the dataset's base URL, the processes)."""
+    ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
+    stops = []
+    try:
+        ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
+        stops.append(lambda: (ng.send_signal(signal.SIGQUIT), ng.wait(timeout=10)))
+        bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
+        stops.append(lambda: (bs.send_signal(signal.SIGTERM), bs.wait(timeout=20)))
+        yield {"nginx": (f"{ng_base}/bench", ng_pids), "brickserver": (f"{bs_base}/bench", bs_pids)}
+    finally:
+        for stop in stops:
+            stop()
+        shutil.rmtree(ng_work, ignore_errors=True)
+
+
+def turn_order(names, i):
+    """`names` in order in even rounds and reversed in odd ones, so that none always runs first."""
+    names = list(names)
+    return names if i % 2 == 0 else names[::-1]
+
+
 def etag_of(url):
     import urllib.request
 
@@ -327,7 +360,7 @@ def loads(bases, seconds, repeat, pids):
     for load, c, revalidate, pinned in plan:
         runs = {name: [] for name in bases}
         for i in range(repeat):
-            for name in list(bases) if i % 2 == 0 else list(reversed(bases)):
+            for name in turn_order(bases, i):
                 b = bases[name]
                 before = cpu_seconds(pids[name])
                 etag = etags[name] if revalidate else None
@@ -364,9 +397,7 @@ def main():
     global CLIENT
     CLIENT = a.client
     work = pathlib.Path(a.work)
-    store = work / "www" / "bench"
-    store.mkdir(parents=True, exist_ok=True)
-    make_store(store)
+    store = bench_store(work)
     sample = work / "sample"
     region_store = work / "regions.ome.zarr"
     if not region_store.exists():
@@ -406,21 +437,13 @@ def main():
 
 def run_loads(a, work, store, region_store):
     """The interleaved loads against nginx and brickserver, then the region queries."""
-    ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
-    ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
-    bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
-    try:
+    with chunk_servers(work, store) as servers:
         # Warm the page cache once for both (they serve the same files).
-        chunk_load(f"{ng_base}/bench", 16, 3)
-        results = loads({"nginx": f"{ng_base}/bench", "brickserver": f"{bs_base}/bench"}, a.duration, a.repeat,
-                        {"nginx": ng_pids, "brickserver": bs_pids})
-        results["nginx"]["rss"] = rss_mb(ng_pids)
-        results["brickserver"]["rss"] = rss_mb(bs_pids)
-    finally:
-        ng.send_signal(signal.SIGQUIT)
-        ng.wait(timeout=10)
-        bs.send_signal(signal.SIGTERM)
-        bs.wait(timeout=20)
+        chunk_load(servers["nginx"][0], 16, 3)
+        results = loads({n: base for n, (base, _) in servers.items()}, a.duration, a.repeat,
+                        {n: pids for n, (_, pids) in servers.items()})
+        for name, (_, pids) in servers.items():
+            results[name]["rss"] = rss_mb(pids)
 
     if not pathlib.Path(OHA).exists():
         print("oha not installed: no region query loads (they need oha's random URLs)")

@@ -34,7 +34,6 @@ import argparse
 import datetime
 import os
 import pathlib
-import shutil
 import signal
 import statistics
 import subprocess
@@ -59,9 +58,9 @@ BUCKETS = [
 USER = "user space"
 OTHER = "other kernel"
 ORDER = [b for b, _ in BUCKETS] + [OTHER, USER]
-COUNTERS = ["raw_syscalls:sys_enter", "net:net_dev_queue", "context-switches", "cpu-migrations"]
-COUNTER_NAMES = {"raw_syscalls:sys_enter": "system calls", "net:net_dev_queue": "packets sent",
-                 "context-switches": "context switches", "cpu-migrations": "CPU migrations"}
+# perf's event -> what the report calls it.
+COUNTERS = {"raw_syscalls:sys_enter": "system calls", "net:net_dev_queue": "packets sent",
+            "context-switches": "context switches", "cpu-migrations": "CPU migrations"}
 
 
 def bucket_of(stack):
@@ -141,19 +140,19 @@ def profile(name, base, pids, connections, seconds, scratch: pathlib.Path):
         "cpu_us": cpu / requests * 1e6,
         "sampled_us": sum(us.values()),
         "buckets": us,
-        "counters": {COUNTER_NAMES[c]: found.get(c, 0.0) / requests for c in COUNTERS},
+        "counters": {name: found.get(event, 0.0) / requests for event, name in COUNTERS.items()},
     }
 
 
 def medians(runs):
     """Per figure, the median over rounds."""
-    med = lambda xs: statistics.median(xs)  # noqa: E731
+    med = statistics.median
     return {
-        "rps": med([r["rps"] for r in runs]),
-        "cpu_us": med([r["cpu_us"] for r in runs]),
-        "sampled_us": med([r["sampled_us"] for r in runs]),
-        "buckets": {b: med([r["buckets"][b] for r in runs]) for b in ORDER},
-        "counters": {c: med([r["counters"][c] for r in runs]) for c in COUNTER_NAMES.values()},
+        "rps": med(r["rps"] for r in runs),
+        "cpu_us": med(r["cpu_us"] for r in runs),
+        "sampled_us": med(r["sampled_us"] for r in runs),
+        "buckets": {b: med(r["buckets"][b] for r in runs) for b in ORDER},
+        "counters": {c: med(r["counters"][c] for r in runs) for c in COUNTERS.values()},
     }
 
 
@@ -161,13 +160,17 @@ def table(results, a):
     """The report: one column per server."""
     names = list(results)
     rows = [f"| | {' | '.join(names)} |", "|---|" + "---|" * len(names)]
-    rows.append("| requests/s | " + " | ".join(f"{results[n]['rps']:,.0f}" for n in names) + " |")
-    rows.append("| CPU µs a request (/proc) | " + " | ".join(f"{results[n]['cpu_us']:.1f}" for n in names) + " |")
-    rows.append("| sampled µs a request (median of the rounds' sums) | " + " | ".join(f"{results[n]['sampled_us']:.1f}" for n in names) + " |")
+
+    def row(label, value, form):
+        rows.append(f"| {label} | " + " | ".join(format(value(results[n]), form) for n in names) + " |")
+
+    row("requests/s", lambda r: r["rps"], ",.0f")
+    row("CPU µs a request (/proc)", lambda r: r["cpu_us"], ".1f")
+    row("sampled µs a request (median of the rounds' sums)", lambda r: r["sampled_us"], ".1f")
     for b in ORDER:
-        rows.append(f"| — {b} | " + " | ".join(f"{results[n]['buckets'][b]:.1f}" for n in names) + " |")
-    for c in COUNTER_NAMES.values():
-        rows.append(f"| {c} a request | " + " | ".join(f"{results[n]['counters'][c]:.3f}" for n in names) + " |")
+        row(f"— {b}", lambda r: r["buckets"][b], ".1f")
+    for c in COUNTERS.values():
+        row(f"{c} a request", lambda r: r["counters"][c], ".3f")
     head = (f"Measured {datetime.date.today().isoformat()} on {sb.cpu_name()} ({os.cpu_count()} CPUs) by "
             f"`benchmarks/server_profile.py --connections {a.connections} --seconds {a.seconds} --rounds {a.rounds}`: "
             f"wrk, random chunk GETs, servers and client sharing the CPUs; medians of {a.rounds} rounds.")
@@ -183,29 +186,15 @@ def main():
     ap.add_argument("--markdown", type=pathlib.Path, help="write the table here too")
     a = ap.parse_args()
     work = pathlib.Path(a.work)
-    store = work / "www" / "bench"
-    store.mkdir(parents=True, exist_ok=True)
-    sb.make_store(store)
-    scratch = pathlib.Path(tempfile.mkdtemp(prefix="server-profile-"))
-    servers, stops = {}, []
-    try:
-        ng, ng_pids, ng_base = sb.start_nginx(work / "www", scratch, 18080)
-        stops.append(lambda: (ng.send_signal(signal.SIGQUIT), ng.wait(timeout=10)))
-        bs, bs_pids, bs_base = sb.start_brickserver(store, "bench", f"--open-files={sb.OPEN_FILES}")
-        stops.append(lambda: (bs.send_signal(signal.SIGTERM), bs.wait(timeout=20)))
-        servers = {"brickserver": (f"{bs_base}/bench", bs_pids), "nginx": (f"{ng_base}/bench", ng_pids)}
-        runs = {n: [] for n in servers}
+    store = sb.bench_store(work)
+    runs = {"brickserver": [], "nginx": []}  # the report's columns, in this order
+    with sb.chunk_servers(work, store) as servers, tempfile.TemporaryDirectory(prefix="server-profile-") as scratch:
         for base, _ in servers.values():
             sb.wrk(base, 16, 3)  # the page cache and both servers' open files warm
-        for round_ in range(a.rounds):
-            order = list(servers) if round_ % 2 == 0 else list(reversed(servers))
-            for name in order:
+        for i in range(a.rounds):
+            for name in sb.turn_order(runs, i):
                 base, pids = servers[name]
-                runs[name].append(profile(name, base, pids, a.connections, a.seconds, scratch))
-    finally:
-        for stop in stops:
-            stop()
-        shutil.rmtree(scratch, ignore_errors=True)
+                runs[name].append(profile(name, base, pids, a.connections, a.seconds, pathlib.Path(scratch)))
     report = table({n: medians(r) for n, r in runs.items()}, a)
     print(report)
     if a.markdown:
