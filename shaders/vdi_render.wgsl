@@ -26,9 +26,9 @@
 // more each way, the half lists at the edges) and merges the four lists by depth, so that
 // between two consecutive supersegment ends of any of them the medium is homogeneous and
 // composited exactly, with the weights of the middle of that part (ends a small fraction of a
-// list apart, of the lists that weigh little there, taken as one: END_MERGE). The skipping
-// grid's masks are then each tile's together with those of the tiles before it in x, in y and
-// in both (a cell of centres in a tile reads lists from one before the tile's first).
+// list apart, of the lists that weigh little there, taken as one: END_MERGE). Its skipping
+// grid is over tiles of those cells: each mask holds the bins of the lists the tile's cells
+// read, its own and the one before its first in x and in y.
 //
 // Positions are relative to V_O's eye, in world units.
 
@@ -83,7 +83,7 @@ const END_MERGE: f32 = 0.125;
 @group(0) @binding(2) var<storage, read> slots: array<vec4<f32>>;
 // Per tile of V.tile × V.tile lists, bit b set where a supersegment of its lists reaches depth
 // bin b: [grid_near + b·grid_bin, grid_near + (b + 1)·grid_bin] (VDI_DEPTH_BINS bins); then the
-// same masks each ORed with the tiles' before it in x, y and both, for the linear filter.
+// linear filter's, per tile of cells between list centres: the bins of the lists they read.
 @group(0) @binding(3) var<storage, read> tiles: array<u32>;
 @group(0) @binding(4) var<storage, read_write> image: array<vec4<f32>>;
 // The displayed image, out_width × out_height, upsampled from `image` (entry `upsample`).
@@ -530,27 +530,40 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                     let z_hi = max(za, zb);
                     let forward = dz >= 0.0;
                     // Start from the previous list's index, then walk to the first
-                    // supersegment the ray meets here, in the order it meets them.
+                    // supersegment the ray meets here, in the order it meets them. A list's
+                    // supersegments follow each other (each begins at or past where the one
+                    // before it ends), so one that reaches past the ray's span here rules its
+                    // neighbour on that side out unread: most lists take one or two reads.
                     var j = min(previous, count - 1u);
+                    var s = supersegment(base + j);
                     if forward {
                         loop {
-                            if j == 0u || supersegment(base + j - 1u).back * cos_list < z_lo {
+                            if j == 0u || s.front * cos_list < z_lo {
+                                break;
+                            }
+                            let before = supersegment(base + j - 1u);
+                            if before.back * cos_list < z_lo {
                                 break;
                             }
                             j--;
+                            s = before;
                         }
                     } else {
                         loop {
-                            if j + 1u >= count || supersegment(base + j + 1u).front * cos_list > z_hi {
+                            if j + 1u >= count || s.back * cos_list > z_hi {
+                                break;
+                            }
+                            let after = supersegment(base + j + 1u);
+                            if after.front * cos_list > z_hi {
                                 break;
                             }
                             j++;
+                            s = after;
                         }
                     }
                     // A ray (nearly) at right angles to V_O's view keeps its depth.
                     let flat = z_hi - z_lo <= 1e-6 * z_hi;
                     loop {
-                        let s = supersegment(base + j);
                         let f = s.front * cos_list;
                         let b = s.back * cos_list;
                         if (forward && f > z_hi) || (!forward && b < z_lo) {
@@ -572,20 +585,17 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                             trans *= 1.0 - alpha;
                         }
                         previous = j;
-                        if trans < T_MIN {
+                        // Done at the end of the list, or past the span's far end.
+                        if trans < T_MIN || (forward && (j + 1u >= count || b > z_hi))
+                            || (!forward && (j == 0u || f < z_lo)) {
                             break;
                         }
                         if forward {
-                            if j + 1u >= count {
-                                break;
-                            }
                             j++;
                         } else {
-                            if j == 0u {
-                                break;
-                            }
                             j--;
                         }
+                        s = supersegment(base + j);
                     }
                 }
             }

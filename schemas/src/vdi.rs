@@ -38,7 +38,8 @@
 //!   additively; opacity in `[0, 1]`) as four IEEE half floats (format `f16`, 8
 //!   bytes) or four `f32` (format `f32`, 16 bytes);
 //! - **depth**: the same slots, each `[front, back]`, distances from the eye along the list's
-//!   ray in world units with `0 ≤ front ≤ back`, as two `f32` (format `f32`, 8 bytes) or two
+//!   ray in world units with `0 ≤ front ≤ back`, each slot's front at or past the back of the
+//!   slot before it in its list, as two `f32` (format `f32`, 8 bytes) or two
 //!   `u16` (format `u16`, 4 bytes) quantised linearly between the header's `near` and `far`:
 //!   `q = round((d − near)/(far − near)·65535)`, clamped to `0..=65535`, read back as
 //!   `near + q/65535·(far − near)`.
@@ -55,8 +56,8 @@
 //! length within the rest of the input, and its raw length (for LZ4 the announced one, checked
 //! before decompressing) exactly what the header and counts imply; counts at most N_S; no
 //! trailing bytes; and in every used slot finite values, a colour of at least 0, an opacity in
-//! `[0, 1]` and
-//! `0 ≤ front ≤ back`.
+//! `[0, 1]`, `0 ≤ front ≤ back`, and a front at or past the back of the slot before it in
+//! its list (renderers find where a ray is by that order).
 //! [`VolumetricDepthImage::encode`] checks the same, so that what it writes always reads back.
 
 use std::borrow::Cow;
@@ -290,7 +291,7 @@ pub struct VolumetricDepthImage {
     /// order over the background and you get the DVR pixel).
     pub colour: Vec<[f32; 4]>,
     /// The same supersegments' `[front, back]`: distances from the eye along the list's ray,
-    /// world units, front ≤ back.
+    /// world units, front ≤ back, each front at or past the back before it in its list.
     pub depth: Vec<[f32; 2]>,
 }
 
@@ -417,12 +418,14 @@ fn check_header(header: &VdiHeader, file: &str) -> Result<Shape, VdiError> {
     })
 }
 
-/// Checks one used slot: finite, colour at least 0, opacity in `[0, 1]`, `0 ≤ front ≤ back`.
+/// Checks one used slot: finite, colour at least 0, opacity in `[0, 1]`, `0 ≤ front ≤ back`,
+/// and its front not before `previous_back`, the back of the slot before it in its list.
 fn check_slot(
     file: &str,
     (x, y, slot): (u32, u32, u32),
     colour: [f32; 4],
     depth: [f32; 2],
+    previous_back: Option<f32>,
 ) -> Result<(), VdiError> {
     let non_finite = |what| VdiError::NonFinite {
         file: file.to_owned(),
@@ -456,6 +459,18 @@ fn check_slot(
             slot,
             front,
             back,
+        });
+    }
+    if let Some(previous_back) = previous_back
+        && front < previous_back
+    {
+        return Err(VdiError::ListOrder {
+            file: file.to_owned(),
+            x,
+            y,
+            slot,
+            front,
+            previous_back,
         });
     }
     Ok(())
@@ -677,8 +692,8 @@ impl VolumetricDepthImage {
     /// A [`VdiError`] naming `VDI to encode` when the image is one
     /// [`VolumetricDepthImage::decode`] would refuse: a header out of range, arrays of other
     /// lengths than the header implies, a count above N_S, or a used slot with a non-finite
-    /// value, a colour below 0, an opacity outside `[0, 1]`, or depths not
-    /// `0 ≤ front ≤ back`.
+    /// value, a colour below 0, an opacity outside `[0, 1]`, depths not
+    /// `0 ≤ front ≤ back`, or a front before the back of the slot before it in its list.
     pub fn encode(&self) -> Result<Vec<u8>, VdiError> {
         let header = &self.header;
         let shape = check_header(header, ENCODING)?;
@@ -715,7 +730,8 @@ impl VolumetricDepthImage {
             );
             for s in 0..usize::from(count) {
                 let (c, d) = (self.colour[start + s], self.depth[start + s]);
-                check_slot(ENCODING, (x, y, s as u32), c, d)?;
+                let previous_back = (s > 0).then(|| self.depth[start + s - 1][1]);
+                check_slot(ENCODING, (x, y, s as u32), c, d, previous_back)?;
                 match header.colour {
                     ColourFormat::F16 => {
                         for v in c {
@@ -856,7 +872,8 @@ impl VolumetricDepthImage {
                         dequantise(u16::from_le_bytes([d[2 * i], d[2 * i + 1]]), near, far)
                     }),
                 };
-                check_slot(file, (x, y, s as u32), c, d)?;
+                let previous_back = (s > 0).then(|| image.depth[image.depth.len() - 1][1]);
+                check_slot(file, (x, y, s as u32), c, d, previous_back)?;
                 image.colour.push(c);
                 image.depth.push(d);
             }

@@ -385,6 +385,45 @@ fn front_beyond_back_is_refused() {
 }
 
 #[test]
+fn a_supersegment_before_the_end_of_the_one_before_it_is_refused() {
+    let mut bytes = plain();
+    let end = bytes.len();
+    // List (1, 1) holds slots 7, 8 and 9 of 11 (8 bytes each, the depth plane last): its
+    // second supersegment made to begin before its first ends.
+    let slot = |k: usize| end - (11 - k) * 8;
+    let back0 = f32::from_le_bytes(bytes[slot(7) + 4..slot(7) + 8].try_into().unwrap());
+    let front = back0 - 0.25;
+    bytes[slot(8)..slot(8) + 4].copy_from_slice(&front.to_le_bytes());
+    let error = VolumetricDepthImage::decode(&bytes, FILE).unwrap_err();
+    assert!(
+        matches!(error, VdiError::ListOrder { slot: 1, .. }),
+        "{error:?}"
+    );
+    assert_eq!(
+        error.to_string(),
+        format!(
+            "a.vdi: list (1, 1) supersegment 1 begins at {front}, before supersegment 0 ends at \
+             {back0}: a list's supersegments must follow each other front to back"
+        )
+    );
+    // Touching is following: a supersegment may begin where the one before it ends.
+    bytes[slot(8)..slot(8) + 4].copy_from_slice(&back0.to_le_bytes());
+    let image = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
+    assert_eq!(image.depth[8][0], back0);
+    // Encoding refuses it too.
+    let mut image = sample(ColourFormat::F32, DepthFormat::F32, Compression::None);
+    image.depth[9][0] = image.depth[8][1] - 0.5;
+    assert_eq!(
+        image.encode().unwrap_err().to_string(),
+        format!(
+            "VDI to encode: list (1, 1) supersegment 2 begins at {}, before supersegment 1 ends \
+             at {}: a list's supersegments must follow each other front to back",
+            image.depth[9][0], image.depth[8][1]
+        )
+    );
+}
+
+#[test]
 fn trailing_bytes_are_refused() {
     let mut bytes = plain();
     bytes.extend_from_slice(&[0, 0, 0]);

@@ -246,4 +246,25 @@ pub enum VdiError {
         /// Back distance.
         back: f32,
     },
+    /// A used slot begins before the one before it in its list ends: a list's supersegments
+    /// follow each other front to back, which readers rely on to find where a ray is.
+    #[error(
+        "{file}: list ({x}, {y}) supersegment {slot} begins at {front}, before supersegment {} \
+         ends at {previous_back}: a list's supersegments must follow each other front to back",
+        slot - 1
+    )]
+    ListOrder {
+        /// The file.
+        file: String,
+        /// Column of the list.
+        x: u32,
+        /// Row of the list.
+        y: u32,
+        /// Index of the supersegment in its list (at least 1).
+        slot: u32,
+        /// Its front distance.
+        front: f32,
+        /// The back distance of the supersegment before it.
+        previous_back: f32,
+    },
 }

@@ -81,68 +81,75 @@ pub struct VdiFrame {
     pub gpu_time_ms: Option<f64>,
 }
 
-/// The skipping grid of `vdi` (the paper's Sec. 4.3): per `SKIP_TILE × SKIP_TILE` tile of
-/// lists, row-major, a mask whose bit `b` is set where a supersegment of the tile reaches
-/// depth bin `b` of [`grid_bins`]; and the tiles per row.
+/// The skipping grid of `vdi` for `filter` (the paper's Sec. 4.3): per `SKIP_TILE × SKIP_TILE`
+/// tile of the cells a ray walks, row-major, a mask whose bit `b` is set where a supersegment
+/// of a list those cells read reaches depth bin `b` of [`grid_bins`]; and the tiles per row.
+/// See [`tile_masks`] for the cells of each filter.
+pub fn skipping_grid(vdi: &VolumetricDepthImage, filter: VdiFilter) -> (Vec<u32>, u32) {
+    tile_masks(&list_masks(vdi, &vdi.starts()), vdi.header.width, filter)
+}
+
+/// Per list of `vdi` (row-major from the top; `starts` its [`VolumetricDepthImage::starts`]),
+/// the mask of the depth bins of [`grid_bins`] its supersegments reach.
 ///
 /// A supersegment's depth is its distance along its list's ray times the cosine of that ray
 /// off `V_O`'s forward, as the shader computes it; each reaches the bins of its depth span
 /// widened by a hundredth of a bin, so that rounding in the shader never skips it.
-pub fn skipping_grid(vdi: &VolumetricDepthImage) -> (Vec<u32>, u32) {
-    skipping_grid_of(vdi, &vdi.starts())
-}
-
-/// [`skipping_grid`] given the VDI's list starts ([`VolumetricDepthImage::starts`]).
-fn skipping_grid_of(vdi: &VolumetricDepthImage, starts: &[usize]) -> (Vec<u32>, u32) {
+fn list_masks(vdi: &VolumetricDepthImage, starts: &[usize]) -> Vec<u32> {
     let h = &vdi.header;
     let (w, rows) = (h.width, h.height);
-    let tiles_x = w.div_ceil(SKIP_TILE);
-    let tiles_y = rows.div_ceil(SKIP_TILE);
-    let mut tiles = vec![0u32; (tiles_x * tiles_y) as usize];
     let (near, bin) = grid_bins(h);
     let tan_x = glam::Vec3::from(h.rays.right).length();
     let tan_y = glam::Vec3::from(h.rays.up).length();
     let last = VDI_DEPTH_BINS as f32 - 1.0;
     let bin_of = |z: f32| ((z - near) / bin).floor().clamp(0.0, last) as u32;
+    let mut masks = vec![0u32; (w * rows) as usize];
     for y in 0..rows {
         let oy = (1.0 - (y as f32 + 0.5) / rows as f32 * 2.0) * tan_y;
         for x in 0..w {
             let list = (y * w + x) as usize;
-            let (first, end) = (starts[list], starts[list + 1]);
-            if first == end {
-                continue;
-            }
             let ox = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan_x;
             let cos = (1.0 + ox * ox + oy * oy).sqrt().recip();
-            let mut mask = 0u32;
-            for [front, back] in &vdi.depth[first..end] {
+            for [front, back] in &vdi.depth[starts[list]..starts[list + 1]] {
                 let lo = bin_of(front * cos - 0.01 * bin);
                 let hi = bin_of(back * cos + 0.01 * bin).max(lo);
-                mask |= (u32::MAX >> (31 - (hi - lo))) << lo;
+                masks[list] |= (u32::MAX >> (31 - (hi - lo))) << lo;
             }
-            tiles[((y / SKIP_TILE) * tiles_x + x / SKIP_TILE) as usize] |= mask;
         }
     }
-    (tiles, tiles_x)
+    masks
 }
 
-/// The skipping grid of the linear filter: each mask of `tiles` (`tiles_x` a row) ORed with
-/// those of the tiles before it in x, in y and in both, since the cells between list centres
-/// `i − 1` and `i` that a tile holds (`i` its lists) read lists from one before its first.
-pub fn widened_grid(tiles: &[u32], tiles_x: u32) -> Vec<u32> {
-    let w = tiles_x as usize;
-    let rows = tiles.len() / w.max(1);
-    let mut out = vec![0u32; tiles.len()];
+/// The skipping grid from per-list masks (`width` lists a row): per tile of `SKIP_TILE ×
+/// SKIP_TILE` cells of the grid a ray walks with `filter`, the OR of the masks of the lists
+/// those cells read; and the tiles per row.
+///
+/// With the nearest filter a cell is a list. With the linear filter cell `c` (in x or y) lies
+/// between the centres of lists `c − 1` and `c`, clamped to the image, and cell `width` goes
+/// with the tile of cell `width − 1` (as `vdi_render.wgsl`'s `tile_mask` looks it up): so a
+/// tile of cells reads its own lists and the one before its first, and list `x` is read by
+/// the tiles of cells `x` and `x + 1`.
+pub fn tile_masks(masks: &[u32], width: u32, filter: VdiFilter) -> (Vec<u32>, u32) {
+    let rows = masks.len() as u32 / width.max(1);
+    let tiles_x = width.div_ceil(SKIP_TILE);
+    let mut tiles = vec![0u32; (tiles_x * rows.div_ceil(SKIP_TILE)) as usize];
+    let reach = u32::from(filter == VdiFilter::Linear);
+    // The tiles whose cells read list `i` of `n`.
+    let tiles_of = |i: u32, n: u32| i / SKIP_TILE..=(i + reach).min(n - 1) / SKIP_TILE;
     for y in 0..rows {
-        for x in 0..w {
-            for ny in y.saturating_sub(1)..=y {
-                for nx in x.saturating_sub(1)..=x {
-                    out[y * w + x] |= tiles[ny * w + nx];
+        for x in 0..width {
+            let mask = masks[(y * width + x) as usize];
+            if mask == 0 {
+                continue;
+            }
+            for ty in tiles_of(y, rows) {
+                for tx in tiles_of(x, width) {
+                    tiles[(ty * tiles_x + tx) as usize] |= mask;
                 }
             }
         }
     }
-    out
+    (tiles, tiles_x)
 }
 
 /// `vdi_render.wgsl`'s entry point `name` compiled with the pipeline constant `LINEAR`
@@ -296,8 +303,8 @@ pub struct VdiRenderer {
     filter: VdiFilter,
     pipelines: Rc<VdiPipelines>,
     view: wgpu::Buffer,
-    /// The VDI's list starts, slots and skipping grid (the nearest filter's masks, then the
-    /// linear filter's: [`widened_grid`]), uploaded once.
+    /// The VDI's list starts, slots and skipping grids (the nearest filter's masks, then the
+    /// linear filter's: [`tile_masks`]), uploaded once.
     vdi: [wgpu::Buffer; 3],
     image: wgpu::Buffer,
     display: wgpu::Buffer,
@@ -378,8 +385,9 @@ impl VdiRenderer {
         let starts: Vec<u32> = list_starts.iter().map(|&s| s as u32).collect();
         let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
         let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
-        let (mut tiles, tiles_x) = skipping_grid_of(vdi, &list_starts);
-        tiles.extend(widened_grid(&tiles, tiles_x));
+        let masks = list_masks(vdi, &list_starts);
+        let (mut tiles, tiles_x) = tile_masks(&masks, vdi.header.width, VdiFilter::Nearest);
+        tiles.extend(tile_masks(&masks, vdi.header.width, VdiFilter::Linear).0);
         let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
         let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let vdi_buffers = [starts, slots, tiles];

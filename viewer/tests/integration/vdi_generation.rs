@@ -17,7 +17,7 @@ use residency_viewer::gpu::streaming::{Budget, Fetcher, converge};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::gpu::vdi::VdiGeneration;
 use residency_viewer::gpu::vdi_render::{
-    SKIP_TILE, VdiFilter, VdiPipelines, VdiRenderer, grid_bins, skipping_grid, widened_grid,
+    SKIP_TILE, VdiFilter, VdiPipelines, VdiRenderer, grid_bins, skipping_grid, tile_masks,
 };
 use residency_viewer::image::RgbImage;
 use residency_viewer::metrics;
@@ -451,7 +451,8 @@ fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_sid
     let (w, h) = (48, 40);
     let (_, generation) = generate(&scene, full_res(w, h), 20);
     let vdi = &generation.image;
-    let (tiles, tiles_x) = skipping_grid(vdi);
+    let (tiles, tiles_x) = skipping_grid(vdi, VdiFilter::Nearest);
+    let (linear, _) = skipping_grid(vdi, VdiFilter::Linear);
     let (near, bin) = grid_bins(&vdi.header);
     assert_eq!(tiles_x, w.div_ceil(SKIP_TILE));
     assert_eq!(tiles.len() as u32, tiles_x * h.div_ceil(SKIP_TILE));
@@ -467,11 +468,20 @@ fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_sid
             let oy = (1.0 - (y as f32 + 0.5) / h as f32 * 2.0) * tan_y;
             let cos = 1.0 / (1.0 + ox * ox + oy * oy).sqrt();
             let mask = tiles[((y / SKIP_TILE) * tiles_x + x / SKIP_TILE) as usize];
+            // The linear filter's cells x and x + 1 (y and y + 1) read the list, clamped to
+            // the image as the shader's tile_mask is.
+            let linear_masks = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)].map(|(cx, cy)| {
+                let (tx, ty) = (cx.min(w - 1) / SKIP_TILE, cy.min(h - 1) / SKIP_TILE);
+                linear[(ty * tiles_x + tx) as usize]
+            });
             for [front, back] in &vdi.depth[starts[list]..starts[list + 1]] {
                 let first = ((front * cos - near) / bin).floor().max(0.0) as u32;
                 let last = (((back * cos - near) / bin).floor() as u32).min(VDI_DEPTH_BINS - 1);
                 for b in first..=last {
                     assert_ne!(mask & 1 << b, 0, "list ({x}, {y}) bin {b}");
+                    for m in linear_masks {
+                        assert_ne!(m & 1 << b, 0, "linear: list ({x}, {y}) bin {b}");
+                    }
                 }
                 reached += 1;
             }
@@ -496,14 +506,24 @@ fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_sid
 }
 
 #[test]
-fn the_widened_grid_holds_each_tile_and_those_before_it() {
-    // 3 × 2 tiles, one bin each.
-    let tiles = [1, 0, 1 << 3, 0, 1 << 5, 0];
-    assert_eq!(
-        widened_grid(&tiles, 3),
-        [1, 1, 1 << 3, 1, 1 | 1 << 5, 1 << 3 | 1 << 5]
-    );
-    assert_eq!(widened_grid(&[7], 1), [7]);
+fn each_filters_tiles_hold_the_lists_their_cells_read() {
+    // 17 × 10 lists: 3 × 2 tiles of 8 × 8, the last column and row partly filled.
+    let (w, h) = (17, 10);
+    let mut masks = vec![0u32; (w * h) as usize];
+    masks[0] = 1 << 3; // list (0, 0)
+    masks[7] = 1; // (7, 0): the last column of tile 0
+    masks[(7 * w + 8) as usize] = 1 << 2; // (8, 7): the last row of tile row 0
+    masks[(9 * w + 16) as usize] = 1 << 1; // (16, 9): the image's last list
+    let (nearest, tiles_x) = tile_masks(&masks, w, VdiFilter::Nearest);
+    assert_eq!(tiles_x, 3);
+    assert_eq!(nearest, [1 << 3 | 1, 1 << 2, 0, 0, 0, 1 << 1]);
+    // The linear filter's cell 8 lies between lists 7 and 8: list (7, 0) is read by tiles 0
+    // and 1 of row 0, list (8, 7) by tile 1 of rows 0 and 1; the cells past the last list
+    // (x 17, y 10) go with the last tiles, which hold that list already.
+    let (linear, _) = tile_masks(&masks, w, VdiFilter::Linear);
+    assert_eq!(linear, [1 << 3 | 1, 1 | 1 << 2, 0, 0, 1 << 2, 1 << 1]);
+    // One list, one tile, either way.
+    assert_eq!(tile_masks(&[7], 1, VdiFilter::Linear), (vec![7], 1));
 }
 
 #[test]
@@ -538,7 +558,7 @@ fn the_linear_filter_gives_back_the_dvr_image_from_the_vdis_viewpoint_and_skips_
         .render(gpu(), &turned(&scene.camera, 1e-3), true)
         .expect("render");
     assert_ne!(near.pixels, nearest_there.pixels);
-    // Skipping (the widened grid) cuts the ray's parts at bins of depth, where the weights of
+    // Skipping (the linear filter's grid) cuts the ray's parts at bins of depth, where the weights of
     // the middle of each part are taken: it changes next to nothing, from any side.
     for degrees in [0.0, 10.0, 30.0, 90.0, 150.0, -30.0] {
         let camera = turned(&scene.camera, degrees);
