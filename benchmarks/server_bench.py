@@ -16,9 +16,10 @@ median run is reported, so background load hits both alike.
 - random chunk GETs, uniform over a 20,000-chunk store of random bytes with log-normal sizes
   (median 40 KiB), at 256, 16 and 1 connections;
 - `If-None-Match` revalidations answered 304, at 256 connections;
-- with two or more CPUs, each of these loads again with the server on the last CPU and the
-  client on the others ("pinned apart": the client has cores of its own, and both servers the
-  same one, a placement the scheduler does not give them at 1 connection);
+- with two or more CPUs, each of these loads again with the server on the upper half of the
+  CPUs and the client on the lower half (on 2 CPUs, the last and the first: "pinned apart",
+  the client has cores of its own, and both servers the same ones, a placement the scheduler
+  does not give them at 1 connection);
 - region queries (`/NAME/regions`, random unaligned boxes) on a store made by `ingest`, at 16
   connections (nginx has no equivalent);
 - optionally a soak: random chunk GETs at 256 connections for `--soak` seconds, sampling the
@@ -61,6 +62,8 @@ BIN = pathlib.Path(os.environ.get("RESIDENCY_BIN", ROOT / "target" / "release"))
 GRID = (20, 25, 40)  # 20,000 chunks, z, y, x
 OHA = shutil.which("oha") or str(pathlib.Path.home() / ".cargo" / "bin" / "oha")
 WRK_SCRIPT = pathlib.Path(__file__).resolve().parent / "wrk_random_keys.lua"
+# wrk's threads: half the CPUs (the client's share when pinned apart), at least 2.
+WRK_THREADS = max(2, len(os.sched_getaffinity(0)) // 2)
 CLIENT = "wrk"  # set from --client in main()
 # Chunk files each server holds open: brickserver's default `--open-files`, and the same
 # for each nginx worker (`open_file_cache max=`); each holds a fifth of the store's files.
@@ -147,7 +150,7 @@ def wrk_command(base, connections, seconds, etag=None):
     """The wrk command of random chunk GETs under `base` (scheme://host:port/PREFIX), or with
     `etag` revalidations of one chunk, for `seconds` at `connections` connections."""
     origin, prefix = base.split("/", 3)[2], "/" + base.split("/", 3)[3]
-    cmd = ["wrk", f"-t{min(2, connections)}", f"-c{connections}", f"-d{seconds}s", "--latency",
+    cmd = ["wrk", f"-t{min(WRK_THREADS, connections)}", f"-c{connections}", f"-d{seconds}s", "--latency",
            "-s", str(WRK_SCRIPT), f"http://{origin}", "--", prefix, *map(str, GRID)]
     return cmd + [etag] if etag else cmd
 
@@ -325,18 +328,36 @@ def unpin(before):
             pass
 
 
+def cpu_list(cpus) -> str:
+    """`cpus` as words: "CPU 1", or "CPUs 8–15" for a run."""
+    c = sorted(cpus)
+    if len(c) == 1:
+        return f"CPU {c[0]}"
+    if c == list(range(c[0], c[-1] + 1)):
+        return f"CPUs {c[0]}–{c[-1]}"
+    return "CPUs " + ", ".join(map(str, c))
+
+
+def halves():
+    """The CPUs this process may use, split for `pinned_load`: (the client's, the servers'),
+    the lower half and the upper half (on 2 CPUs, the first and the last)."""
+    every = sorted(os.sched_getaffinity(0))
+    return set(every[: len(every) // 2]), set(every[len(every) // 2 :])
+
+
 def pinned_load(b, c, seconds, server_pids, etag=None):
-    """A chunk load (`chunk_load`) with the server's threads on the last CPU and the client on
-    the others, so that the client has cores of its own and both servers run where the other
-    one did. Left to the scheduler, at 1 connection the two servers do not run alike beside
+    """A chunk load (`chunk_load`) with the server's threads on the upper half of the CPUs and
+    the client on the lower half (`halves`), so that the client has cores of its own and both
+    servers run where the other one did. Left to the scheduler, at 1 connection the two servers do not run alike beside
     the client, and CPU time per request moves by several µs with that alone
     (docs/benchmarks.md § Server): pinned apart, they cost the same. Threads the server starts
     meanwhile inherit the pinned mask from the thread that starts them, and keep it."""
     every = os.sched_getaffinity(0)
+    client, servers = halves()
     before = {}
     try:
-        before = pin(thread_ids(server_pids), {max(every)})
-        os.sched_setaffinity(0, every - {max(every)})
+        before = pin(thread_ids(server_pids), servers)
+        os.sched_setaffinity(0, client)
         return chunk_load(b, c, seconds, etag)
     finally:
         os.sched_setaffinity(0, every)
@@ -646,11 +667,13 @@ def render(results, a):
     ng, bs = results["nginx"], results["brickserver"]
     placement = "they share the cores"
     if any(load.endswith(", pinned apart") for load in ng):
-        placement += ", except in the rows pinned apart, where the servers' threads run on the last CPU and the client on the others"
+        client, servers = halves()
+        placement += (", except in the rows pinned apart, where the servers' threads run on "
+                      f"{cpu_list(servers)} and the client on {cpu_list(client)}")
     lines = [
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu_name()}), Linux {platform.release()}, "
-        f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)} "
-        f"on the same machine as the servers ({placement}), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
+        f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)}"
+        f"{f' ({WRK_THREADS} threads)' if a.client == 'wrk' else ''} on the same machine as the servers ({placement}), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         f"each server holds up to {OPEN_FILES:,} chunk files open (nginx's `open_file_cache`, per worker; brickserver's `--open-files`, shared); "
         "each load ran on nginx and brickserver in turn, repeatedly (which ran first turning round each time), and the median run of each is shown, "
         "with the median and range of the rounds' ratios (each round's brickserver run against its nginx run). "
