@@ -15,6 +15,8 @@
 # (PYTHON: a python3 with numpy, default python3, which on the GPU machine has it.)
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# shellcheck source=benchmarks/device/common.sh
+. benchmarks/device/common.sh
 : "${OUT:?set OUT to the folder the results go to}"
 DURATION="${DURATION:-4}" REPEAT="${REPEAT:-3}" LIMIT_S="${LIMIT_S:-420}" PYTHON="${PYTHON:-python3}"
 
@@ -31,11 +33,7 @@ if [ -z "${BIN_DIR:-}" ]; then
     done
     export PATH="$root/bin:$PATH"
     BIN_DIR=/tmp/residency-bin
-    mkdir -p "$BIN_DIR"
-    for exe in brickserver ingest; do
-        gunzip -c ".gpu-bin/$exe.gz" > "$BIN_DIR/$exe"
-        chmod +x "$BIN_DIR/$exe"
-    done
+    unpack_bins "$BIN_DIR" brickserver ingest
 fi
 echo "$(nproc) CPUs; $(wrk --version 2>&1 | head -1); $(nginx -v 2>&1)"
 export RESIDENCY_BIN="$BIN_DIR" PYTHONUNBUFFERED=1

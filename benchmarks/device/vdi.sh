@@ -12,6 +12,8 @@
 #                                      # here, on lavapipe
 set -euo pipefail
 cd "$(dirname "$0")/../.."
+# shellcheck source=benchmarks/device/common.sh
+. benchmarks/device/common.sh
 : "${OUT:?set OUT to the folder the results go to}"
 WIDTH="${WIDTH:-1920}" HEIGHT="${HEIGHT:-1080}" VOLUME="${VOLUME:-256}" LIMIT_S="${LIMIT_S:-420}"
 
@@ -22,11 +24,7 @@ if [ -z "${BIN_DIR:-}" ]; then
         export VK_DRIVER_FILES=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
     fi
     BIN_DIR=/tmp/residency-bin
-    mkdir -p "$BIN_DIR"
-    for exe in viewer ingest; do
-        gunzip -c ".gpu-bin/$exe.gz" > "$BIN_DIR/$exe"
-        chmod +x "$BIN_DIR/$exe"
-    done
+    unpack_bins "$BIN_DIR" viewer ingest
 fi
 command -v nvidia-smi >/dev/null && nvidia-smi --query-gpu=name,driver_version --format=csv,noheader
 export RESIDENCY_BIN="$BIN_DIR" XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}" PYTHONUNBUFFERED=1
