@@ -343,10 +343,17 @@ def loop_problems(root: Path) -> list[str]:
 
 
 def self_test() -> None:
-    """The checker finds a loop, follows re-exports, and flags a long file."""
+    """The checker finds a loop, follows re-exports, and flags a long file; the trees it writes
+    are removed afterwards, whatever happens."""
+    with tempfile.TemporaryDirectory(prefix="check-structure-") as scratch:
+        self_test_in(Path(scratch))
+
+
+def self_test_in(scratch: Path) -> None:
+    """`self_test`, its trees written under `scratch`."""
 
     def tree(files: dict[str, str]) -> Path:
-        d = Path(tempfile.mkdtemp(prefix="check-structure-"))
+        d = Path(tempfile.mkdtemp(dir=scratch))
         for name, text in files.items():
             (d / name).parent.mkdir(parents=True, exist_ok=True)
             (d / name).write_text(text)
