@@ -261,22 +261,22 @@ http {{
     return p, [p.pid, *map(int, children)], f"http://127.0.0.1:{port}"
 
 
+def stop(p, sig=signal.SIGTERM, timeout=20):
+    """Sends server `p` the signal `sig` and waits for it to exit."""
+    p.send_signal(sig)
+    p.wait(timeout=timeout)
+
+
 @contextlib.contextmanager
 def chunk_servers(work: pathlib.Path, store: pathlib.Path):
     """nginx (its root `work`/www) and brickserver serving `store` as the dataset `bench`, both
     stopped on leaving, whatever happened: name -> (the dataset's base URL, the processes)."""
-    ng_work = pathlib.Path(tempfile.mkdtemp(prefix="nginx-"))
-    stops = []
-    try:
-        ng, ng_pids, ng_base = start_nginx(work / "www", ng_work, 18080)
-        stops.append(lambda: (ng.send_signal(signal.SIGQUIT), ng.wait(timeout=10)))
+    with tempfile.TemporaryDirectory(prefix="nginx-") as ng_work, contextlib.ExitStack() as stops:
+        ng, ng_pids, ng_base = start_nginx(work / "www", pathlib.Path(ng_work), 18080)
+        stops.callback(stop, ng, signal.SIGQUIT, 10)
         bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
-        stops.append(lambda: (bs.send_signal(signal.SIGTERM), bs.wait(timeout=20)))
+        stops.callback(stop, bs)
         yield {"nginx": (f"{ng_base}/bench", ng_pids), "brickserver": (f"{bs_base}/bench", bs_pids)}
-    finally:
-        for stop in stops:
-            stop()
-        shutil.rmtree(ng_work, ignore_errors=True)
 
 
 def turn_order(names, i):
@@ -477,8 +477,7 @@ def run_loads(a, work, store, region_store):
         results["regions_1"] = oha(url, 1, a.duration)
         results["regions"]["rss"] = rss_mb(rs_pids)
     finally:
-        rs.send_signal(signal.SIGTERM)
-        rs.wait(timeout=20)
+        stop(rs)
     return results
 
 
@@ -553,8 +552,7 @@ def run_s3_loads(a, work, store, region_store):
         return out
     finally:
         for p, _, _ in servers.values():
-            p.send_signal(signal.SIGTERM)
-            p.wait(timeout=20)
+            stop(p)
         s3.terminate()
         s3.wait(timeout=10)
 
@@ -641,8 +639,7 @@ def run_soak(a, store):
                     "rss_samples": samples,
                 }
         finally:
-            bs.send_signal(signal.SIGTERM)
-            bs.wait(timeout=20)
+            stop(bs)
     if soak:
         soak["evicted_per_second"] = a.soak_evict
     return soak

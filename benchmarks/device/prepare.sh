@@ -25,15 +25,17 @@ done
 for dir in /.gpu-bin/ /.gl/ /.srv/; do
     grep -qxF "$dir" .git/info/exclude 2>/dev/null || echo "$dir" >> .git/info/exclude
 done
-# download DIR PACKAGE...: the packages' amd64 .debs into DIR, unless DIR holds the first's.
+# download DIR PACKAGE...: the packages' amd64 .debs into DIR, unless DIR holds the first's;
+# the package lists are fetched once, by the first download that needs them.
+o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
+lists=""
 download() {
     local dir=$1
     shift
     if ! ls "$dir/$1"_*.deb >/dev/null 2>&1; then
         mkdir -p "$dir" /tmp/amd64/partial
-        local o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
         # shellcheck disable=SC2086
-        apt-get $o update
+        [ -n "$lists" ] || { apt-get $o update && lists=1; }
         # shellcheck disable=SC2086
         (cd "$dir" && apt-get $o download "$@")
     fi
