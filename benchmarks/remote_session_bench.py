@@ -1,8 +1,9 @@
 """Remote-session bench: the web page over a throttled link, rendering a VDI from `viewer serve`
 (the remote mode) against streaming bricks from brickserver and ray casting them itself (the
 streaming mode), along the same recorded camera path, on the same store, in the same run. The
-remote mode runs twice: reading the VDIs with the nearest list (the default) and with the
-linear filter across lists (`?vdi_filter=linear`).
+remote mode runs twice: reading the VDIs with the nearest list (`?vdi_filter=nearest`) and with
+the linear filter across lists (`?vdi_filter=linear`). The page's default, `auto`, draws as the
+first while the camera moves and as the second at rest.
 
     python3 benchmarks/remote_session_bench.py [--short] [--docs] [--out-dir DIR] [--data-dir DIR]
         [--mbit 100] [--rtt-ms 20]
@@ -53,7 +54,7 @@ ENV = {**os.environ, "XDG_RUNTIME_DIR": os.environ.get("XDG_RUNTIME_DIR", "/tmp"
 MODES = ("remote", "remote-linear", "streaming")
 """The page's modes: remote with each VDI filter, and streaming."""
 TITLES = {
-    "remote": "Remote: VDIs from `viewer serve`, ray cast in the page",
+    "remote": "Remote: VDIs from `viewer serve`, ray cast in the page with the nearest list (`?vdi_filter=nearest`)",
     "remote-linear": "Remote, linear filter: the same, each VDI read with `?vdi_filter=linear`",
     "streaming": "Streaming: the page fetches bricks and ray casts them itself",
 }
@@ -197,7 +198,7 @@ def measure(args):
             spec = {"viewport": {"width": max(size[0] + 420, 800), "height": max(size[1] + 200, 600)},
                     "keys": keys, "segments": segments, "samples": samples, "input_ms": 33,
                     "timeout_s": 300, "converge_s": 180, "final_s": 60}
-            urls = {"remote": page_base + "&render=" + remote_url,
+            urls = {"remote": page_base + "&render=" + remote_url + "&vdi_filter=nearest",
                     "remote-linear": page_base + "&render=" + remote_url + "&vdi_filter=linear",
                     "streaming": page_base}
             for mode in MODES:

@@ -121,7 +121,7 @@ def test_the_report_has_a_table_per_mode_and_the_link(bench):
     assert report.startswith("# Remote session over a throttled link\n")
     assert "at 100 Mbit/s each way and 20 ms round trip" in report
     assert f"headless on **{r['machine']['page_adapter']}**" in report
-    for title in ("## Remote: VDIs from `viewer serve`, ray cast in the page",
+    for title in ("## Remote: VDIs from `viewer serve`, ray cast in the page with the nearest list (`?vdi_filter=nearest`)",
                   "## Remote, linear filter: the same, each VDI read with `?vdi_filter=linear`",
                   "## Streaming: the page fetches bricks and ray casts them itself",
                   "## Remote against streaming",

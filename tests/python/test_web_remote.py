@@ -162,8 +162,10 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
     assert (remote["requests_sent"], remote["vdis_received"], remote["requests_aborted"]) == (1, 1, 0)
     # No brick streamed: the page draws the service's VDIs only.
     assert first["bricks_requested"] == 0 and first["bricks_fetched"] == 0, first
-    assert remote["d_i"] == 1.0 and remote["vdi_filter"] == "nearest"
-    assert not remote["linear_compiled"], remote
+    # `auto` by default: at rest the linear filter, whose pipeline is compiled while the view
+    # rests (from the VDI's own camera the nearest pipeline draws it: the two coincide there).
+    assert remote["d_i"] == 1.0 and remote["vdi_filter"] == "auto" and remote["frame_filter"] == "linear", remote
+    assert remote["linear_compiled"], remote
     scene = scene_of(first_hash)
     assert remote["vdi_camera"] == scene["camera"]
     assert_matches(tmp_path / "first.png", dvr(stores["u16x3"], scene, tmp_path / "dvr1.png"))
@@ -396,9 +398,10 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
     """Opened with `?vdi_filter=linear`, the page draws the first VDI; the camera then turns
     20° while the service (through a proxy) answers 503 with `Retry-After: 60`, so the page
     keeps drawing the first VDI from the new camera: with the linear filter, as `viewer render
-    --vdi --vdi-filter linear` draws that VDI there, and after the *VDI filter* menu picks
-    `nearest`, as the nearest filter draws it, without asking the service again. An unknown
-    filter is refused with its name."""
+    --vdi --vdi-filter linear` draws that VDI there; after the *VDI filter* menu picks
+    `nearest`, as the nearest filter draws it; and after it picks `auto`, at rest, with the
+    linear filter again, without asking the service again. An unknown filter is refused with
+    its name."""
     base, service = servers
     results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
     scene = scene_of(results[1])
@@ -416,21 +419,26 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
                 {"do": "select", "selector": "#vdi-filter", "value": "nearest"},
                 {"do": "waitState", "when": "s.remote.vdi_filter === 'nearest' && s.remote.frame_current"},
                 {"do": "snapshot", "path": str(tmp_path / "nearest.png")},
+                {"do": "select", "selector": "#vdi-filter", "value": "auto"},
+                {"do": "waitState", "when": "s.remote.vdi_filter === 'auto' && s.remote.frame_current"},
+                {"do": "snapshot", "path": str(tmp_path / "auto.png")},
             ],
         )
         posts = proxy.posts()
-    first, linear, nearest = results[0], results[2], results[5]
+    first, linear, nearest, auto = results[0], results[2], results[5], results[8]
     assert first["converged"] and first["remote"]["vdi_filter"] == "linear", first
     # Compiled while the first view rested (a frame at rest from the VDI's camera is drawn by
     # the nearest pipeline).
     assert first["remote"]["linear_compiled"], first
-    for state, name in ((linear, "linear"), (nearest, "nearest")):
+    for state, name, frame_filter in ((linear, "linear", "linear"), (nearest, "nearest", "nearest"),
+                                      (auto, "auto", "linear")):
         remote = state["remote"]
         assert remote["vdi_filter"] == name and remote["frame_current"], remote
+        assert remote["frame_filter"] == frame_filter, remote
         assert remote["vdi_camera"] == scene["camera"] and remote["d_i"] == 1.0, remote
         assert not remote["converged"] and not state["converged"], remote
         assert (remote["requests_sent"], remote["vdis_received"], remote["in_flight"]) == (2, 1, 2), remote
-    assert nearest["remote"]["frames"] > linear["remote"]["frames"]
+    assert auto["remote"]["frames"] > nearest["remote"]["frames"] > linear["remote"]["frames"]
     assert [p.status for p in posts] == [200, 503], posts
 
     # The service's VDI of the first view, made again here: the page drew it as `viewer render
@@ -440,6 +448,7 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
     want_nearest = vdi_render(vdi, moved, "nearest", tmp_path / "want-nearest.png")
     assert_matches(tmp_path / "linear.png", want_linear)
     assert_matches(tmp_path / "nearest.png", want_nearest)
+    assert_matches(tmp_path / "auto.png", want_linear)
     # The two filters draw that view differently, so each match above says which was used.
     a = read_png(want_linear)[:, :, :3].astype(int)
     b = read_png(want_nearest)[:, :, :3].astype(int)
@@ -447,4 +456,4 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
     assert errors(console, ["status of 503"]) == []
 
     results, _ = drive(page(base, "u16x3", service, extra="&vdi_filter=cubic"), [{"do": "waitMessage"}])
-    assert results[0] == "?vdi_filter: unknown VDI filter 'cubic' (nearest or linear)"
+    assert results[0] == "?vdi_filter: unknown VDI filter 'cubic' (auto, nearest or linear)"

@@ -14,6 +14,8 @@
 //!   the progressive streaming loop;
 //! - [`defaults`]: the default view of a volume (camera, colours, transfer functions);
 //! - [`frame_rate`]: the PI controller that holds a frame time by the image-space sampling;
+//! - [`vdi_filter_choice`]: which filter a VDI's frames use, the nearest list while the camera
+//!   moves and the linear filter at rest by default;
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
 //! - [`bench`](mod@bench): the renderer benchmark suite (`viewer bench`);
 //! - [`names`]: the enums named on the command line and in files, and the one error for an
@@ -49,6 +51,7 @@ pub mod scene;
 #[cfg(all(feature = "serve", not(target_arch = "wasm32")))]
 pub mod service;
 pub mod source;
+pub mod vdi_filter_choice;
 pub mod vdi_service;
 #[cfg(target_arch = "wasm32")]
 pub mod web;

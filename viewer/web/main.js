@@ -13,10 +13,11 @@
 // (viewer/src/web/remote.rs decides when to ask; only the latest request matters: a newer one
 // aborts the fetch in flight; an answer 429 or 503 is asked again after its Retry-After, at
 // most 3 times). `?target_fps=N` is the frame rate its frame-rate controller holds while the
-// camera moves (default 60). `?vdi_filter=nearest|linear` (and the *VDI filter* menu) is how
-// the page reads a VDI between its lists: the nearest list (the paper's, the default, the
-// fastest) or the bilinear mix of the four around each point (closer to DVR away from the
-// VDI's camera, at several times the cost).
+// camera moves (default 60). `?vdi_filter=auto|nearest|linear` (and the *VDI filter* menu) is
+// how the page reads a VDI between its lists: the nearest list (the paper's, the fastest), the
+// bilinear mix of the four around each point (closer to DVR away from the VDI's camera, at
+// several times the cost), or `auto` (the default): the nearest list while the camera moves,
+// the linear filter once it rests.
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
@@ -230,7 +231,7 @@ function showStats() {
       `remote: ${r.mode}${r.converged ? " (converged)" : ""}\n` +
       (r.service_adapter ? `service GPU ${r.service_adapter.name} (${r.service_adapter.backend})\n` : "") +
       `VDIs received ${r.vdis_received} (${(r.vdi_bytes_received / (1 << 20)).toFixed(1)} MiB) · requests ${r.requests_sent} · retried ${r.requests_retried} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
-      `D_I ${r.d_i.toFixed(2)} · ${r.vdi_filter} filter` + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
+      `D_I ${r.d_i.toFixed(2)} · ${r.vdi_filter} filter` + (r.vdi_filter === "auto" && r.frame_filter ? ` (${r.frame_filter})` : "") + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
       (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n";
   }
   if (s.error) {

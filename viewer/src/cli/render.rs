@@ -13,8 +13,9 @@ use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::streaming::{RenderStats, render_progressive};
-use residency_viewer::gpu::vdi_render::{VdiFilter, VdiRenderer};
+use residency_viewer::gpu::vdi_render::VdiRenderer;
 use residency_viewer::image::{ImageFormat, RgbImage};
+use residency_viewer::vdi_filter_choice::VdiFilterChoice;
 
 /// Arguments of `viewer render`.
 #[derive(clap::Args, Debug)]
@@ -51,11 +52,12 @@ pub struct Args {
     /// baseline).
     #[arg(long)]
     pub vdi_no_skipping: bool,
-    /// With `--vdi`: how rays read the VDI between its lists: `nearest` (the paper's, the
-    /// default) or `linear` (the bilinear mix of the four lists around each point: closer to
-    /// DVR away from the VDI's camera, several times slower).
-    #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilter>())]
-    pub vdi_filter: Option<VdiFilter>,
+    /// With `--vdi`: how rays read the VDI between its lists: `auto` (the default: a single
+    /// image is a frame at rest, so `linear`), `nearest` (the paper's: the list whose cell holds
+    /// each point, the fastest) or `linear` (the bilinear mix of the four lists around each
+    /// point: closer to DVR away from the VDI's camera, several times slower).
+    #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilterChoice>())]
+    pub vdi_filter: Option<VdiFilterChoice>,
 }
 
 /// Runs `viewer render`.
@@ -117,16 +119,19 @@ fn render_vdi(args: &Args, path: &std::path::Path) -> Result<()> {
     let start = Instant::now();
     let gpu = Gpu::new()?;
     let mut renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;
-    renderer.set_filter(&gpu, args.vdi_filter.unwrap_or_default());
+    // A single image is a frame at rest.
+    let filter = args.vdi_filter.unwrap_or_default().filter(false);
+    renderer.set_filter(&gpu, filter);
     let frame = renderer.render(&gpu, &camera, !args.vdi_no_skipping)?;
     let image = RgbImage::from_rgba(args.width, args.height, &frame.pixels);
     image.write(&args.out)?;
     tracing::info!(
-        "wrote {} ({}×{}) from {} in {:.2} s{}",
+        "wrote {} ({}×{}) from {} with the {} filter in {:.2} s{}",
         args.out.display(),
         args.width,
         args.height,
         path.display(),
+        filter.name(),
         start.elapsed().as_secs_f64(),
         frame
             .gpu_time_ms

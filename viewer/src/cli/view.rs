@@ -9,11 +9,11 @@ use anyhow::{Result, bail, ensure};
 use super::renderer_args::{RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
-use residency_viewer::gpu::vdi_render::VdiFilter;
 use residency_viewer::interactive::display::PresentPath;
 use residency_viewer::interactive::session::Session;
 use residency_viewer::interactive::vdi_window::{self, VdiViewConfig};
 use residency_viewer::interactive::window::{self, ViewConfig};
+use residency_viewer::vdi_filter_choice::VdiFilterChoice;
 
 /// The mouse and key controls, shown by `viewer view --help`.
 pub const CONTROLS: &str = "\
@@ -99,11 +99,12 @@ pub struct Args {
     /// With `--vdi`: cross the VDI's empty tiles of lists one by one (a baseline).
     #[arg(long)]
     pub vdi_no_skipping: bool,
-    /// With `--vdi`: how rays read the VDI between its lists: `nearest` (the paper's, the
-    /// default) or `linear` (the bilinear mix of the four lists around each point: closer to
-    /// DVR away from the VDI's camera, several times slower).
-    #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilter>())]
-    pub vdi_filter: Option<VdiFilter>,
+    /// With `--vdi`: how rays read the VDI between its lists: `auto` (the default: `nearest`
+    /// while the camera moves, `linear` once it rests), `nearest` (the paper's: the list whose
+    /// cell holds each point, the fastest) or `linear` (the bilinear mix of the four lists
+    /// around each point: closer to DVR away from the VDI's camera, several times slower).
+    #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilterChoice>())]
+    pub vdi_filter: Option<VdiFilterChoice>,
 }
 
 /// Runs `viewer view`.

@@ -3,6 +3,8 @@
 //! ([`super::display`]; where no surface can be made, each frame is read back and blitted).
 //! While the camera moves, a [`FrameRateController`] sets the image-space sampling `D_I` to
 //! hold the target frame time; once input stops for [`REST`], one frame at full resolution.
+//! Each frame reads the VDI with the filter the user's [`VdiFilterChoice`] gives for a moving
+//! camera or one at rest (by default the nearest list while moving, the linear filter at rest).
 
 use std::io::Write;
 use std::sync::Arc;
@@ -23,6 +25,7 @@ use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
 use crate::gpu::vdi_render::{VdiFilter, VdiRenderer};
 use crate::scene::Camera;
+use crate::vdi_filter_choice::VdiFilterChoice;
 
 /// How long after the last input the view counts as at rest (and renders at full resolution).
 pub const REST: Duration = Duration::from_millis(150);
@@ -41,8 +44,8 @@ pub struct VdiViewConfig {
     pub target_ms: f64,
     /// Cross the VDI's empty tiles of lists in one step.
     pub skipping: bool,
-    /// How rays read the VDI between its lists.
-    pub filter: VdiFilter,
+    /// How rays read the VDI between its lists, moving and at rest.
+    pub filter: VdiFilterChoice,
     /// Print a summary line on standard output whenever the view settles (at rest with a
     /// frame at full resolution, or this many frames shown since the last input), and quit
     /// when no input follows within `exit_delay`.
@@ -66,6 +69,8 @@ struct Shown {
     ms: f64,
     /// Its `D_I`.
     scale: f64,
+    /// The filter it read the VDI with.
+    filter: VdiFilter,
     /// Rays cast per row and rows.
     rays: (u32, u32),
 }
@@ -148,9 +153,9 @@ pub fn run(
 }
 
 impl App {
-    /// Whether the last frame was at full resolution.
+    /// Whether the last frame was the one at rest: at full resolution, with the filter at rest.
     fn full(&self) -> bool {
-        self.shown.scale >= 1.0
+        self.shown.scale >= 1.0 && self.shown.filter == self.config.filter.filter(false)
     }
 
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: ViewError) {
@@ -184,7 +189,7 @@ impl App {
                     h.height,
                     h.supersegments,
                     if self.config.skipping { "on" } else { "off" },
-                    self.config.filter.name()
+                    self.shown.filter.name()
                 ),
                 WHITE,
             ),
@@ -200,8 +205,8 @@ impl App {
         ]
     }
 
-    /// Renders and shows one frame at `D_I` = `scale`.
-    fn frame(&mut self, scale: f64) -> Result<(), ViewError> {
+    /// Renders and shows one frame at `D_I` = `scale`, reading the VDI with `filter`.
+    fn frame(&mut self, scale: f64, filter: VdiFilter) -> Result<(), ViewError> {
         let Some(win) = self.window.as_ref().map(|w| w.inner_size()) else {
             return Ok(());
         };
@@ -209,9 +214,7 @@ impl App {
         if let Some(renderer) = &mut self.renderer {
             renderer.resize(&self.gpu, size.0, size.1)?;
         } else {
-            let mut renderer = VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?;
-            renderer.set_filter(&self.gpu, self.config.filter);
-            self.renderer = Some(renderer);
+            self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?);
         }
         let overlays = Overlays::shown(
             self.overlay.then(|| self.panel_lines()),
@@ -221,7 +224,7 @@ impl App {
             win.height,
         );
         let (Some(window), Some(display), Some(renderer)) =
-            (&self.window, &mut self.display, &self.renderer)
+            (&self.window, &mut self.display, &mut self.renderer)
         else {
             return Ok(());
         };
@@ -234,14 +237,8 @@ impl App {
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                     label: Some("vdi view"),
                 });
-            let (image, rays) = renderer.encode(
-                gpu,
-                &mut encoder,
-                &self.camera,
-                skipping,
-                scale,
-                renderer.filter(),
-            );
+            let (image, rays) =
+                renderer.encode(gpu, &mut encoder, &self.camera, skipping, scale, filter);
             gpu.queue.submit([encoder.finish()]);
             let shown = display.show(gpu, Frame::Gpu(image, size), overlays)?;
             // The frame's time to the GPU's end: what the controller holds.
@@ -250,6 +247,7 @@ impl App {
                 .map_err(|e| ViewError::from(crate::gpu::GpuError::Poll(e)))?;
             (shown, rays)
         } else {
+            renderer.set_filter(gpu, filter);
             let frame = renderer.render_preview(gpu, &self.camera, skipping, scale)?;
             let shown = display.show(gpu, Frame::Cpu(&frame.pixels, size), overlays)?;
             (shown, frame.rays)
@@ -259,7 +257,12 @@ impl App {
             return Ok(());
         }
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        self.shown = Shown { ms, scale, rays };
+        self.shown = Shown {
+            ms,
+            scale,
+            filter,
+            rays,
+        };
         self.frames += 1;
         self.frames_since_input += 1;
         self.dirty = false;
@@ -365,7 +368,7 @@ impl ApplicationHandler for App {
         let moving = self.moving();
         if self.dirty || !self.full() && !moving {
             let scale = if moving { self.controller.scale() } else { 1.0 };
-            if let Err(e) = self.frame(scale) {
+            if let Err(e) = self.frame(scale, self.config.filter.filter(moving)) {
                 return self.fail(event_loop, e);
             }
             if moving {
@@ -385,12 +388,13 @@ impl ApplicationHandler for App {
                 // A status line: nobody reading it (a closed pipe) is no error.
                 let _ = writeln!(
                     std::io::stdout(),
-                    "view: {} VDI frames shown, last {:.1} ms at D_I {:.2} ({}x{} rays)",
+                    "view: {} VDI frames shown, last {:.1} ms at D_I {:.2} ({}x{} rays, {} filter)",
                     self.frames,
                     self.shown.ms,
                     self.shown.scale,
                     self.shown.rays.0,
-                    self.shown.rays.1
+                    self.shown.rays.1,
+                    self.shown.filter.name()
                 );
                 let _ = std::io::stdout().flush();
                 self.settled_at = Some(Instant::now());

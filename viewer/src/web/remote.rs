@@ -18,7 +18,9 @@
 //!   request has superseded it.
 //! - [`step`] draws: the newest VDI ray cast for the current camera, at the image-space
 //!   sampling `D_I` a [`FrameRateController`] picks while the camera moves, at full resolution
-//!   once it rests, read between its lists with the filter [`Viewer::set_vdi_filter`] chose.
+//!   once it rests, read between its lists with the filter that the choice of
+//!   [`Viewer::set_vdi_filter`] gives for a moving camera or one at rest (by default the
+//!   nearest list while moving, the linear filter at rest).
 //!   Every VDI is drawn by the same [`VdiPipelines`], compiled when the first one arrives.
 
 use std::cell::RefCell;
@@ -34,6 +36,7 @@ use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::{VdiFilter, VdiFrame, VdiPipelines, VdiRenderer};
 use crate::scene::{Camera, RenderMode, Scene};
+use crate::vdi_filter_choice::VdiFilterChoice;
 use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
 /// A camera this many degrees of orbit (or roll) away from the latest request's asks again.
@@ -189,8 +192,11 @@ pub struct RemoteReport {
     last_error: Option<String>,
     /// `D_I` of the last frame.
     d_i: f64,
-    /// How the VDIs are read between their lists.
-    vdi_filter: VdiFilter,
+    /// How the VDIs are read between their lists, as the user chose (`auto`: the nearest list
+    /// while the camera moves, the linear filter at rest).
+    vdi_filter: VdiFilterChoice,
+    /// The filter the last frame read its VDI with.
+    frame_filter: Option<VdiFilter>,
     /// Time of the last frame (ray cast, then presented and the GPU done, or read back), ms.
     frame_ms: Option<f64>,
     /// The linear filter's pipeline is compiled (the page compiles it while the view rests).
@@ -356,10 +362,9 @@ impl Remote {
     /// Whether the last frame drew the VDI held for `camera` at full resolution with the
     /// current filter, and none is waiting to be drawn.
     fn frame_current(&self, camera: &Camera) -> bool {
-        self.frame
-            .as_ref()
-            .is_some_and(|(c, s, f)| c == camera && *s == 1.0 && *f == self.report.vdi_filter)
-            && !self.need_frame
+        self.frame.as_ref().is_some_and(|(c, s, f)| {
+            c == camera && *s == 1.0 && *f == self.report.vdi_filter.filter(false)
+        }) && !self.need_frame
     }
 
     /// Whether the VDI drawn is of `scene` at full resolution, nothing in flight or pending.
@@ -494,15 +499,17 @@ impl Viewer {
         on
     }
 
-    /// Reads the VDIs between their lists with the filter named `name` (`nearest`, the
-    /// default, or `linear`): the VDI drawn is drawn again with it, and so are those that
-    /// follow; the service is not asked again (the filter is the page's, not the VDI's).
+    /// Reads the VDIs between their lists with the filter choice named `name` (`auto`, the
+    /// default: the nearest list while the camera moves, the linear filter at rest; `nearest`;
+    /// or `linear`): the VDI drawn is drawn again with it where the filter of its frame
+    /// changes, and so are those that follow; the service is not asked again (the filter is the
+    /// page's, not the VDI's).
     ///
     /// # Errors
     /// The [`UnknownName`](crate::names::UnknownName) message, the filter unchanged; or
     /// without [`Viewer::remote_begin`].
     pub fn set_vdi_filter(&self, name: &str) -> Result<(), JsValue> {
-        let filter: VdiFilter = name.parse().map_err(|e| super::js_error(&e))?;
+        let filter: VdiFilterChoice = name.parse().map_err(|e| super::js_error(&e))?;
         let mut inner = self.inner.borrow_mut();
         let on = inner.remote_on();
         let Some(remote) = inner.remote.as_mut() else {
@@ -512,7 +519,7 @@ impl Viewer {
             return Ok(());
         }
         // The next frame draws with it (its pipeline compiled then, in that frame's error
-        // scope): the last frame's filter differs.
+        // scope), if the last frame's filter differs from the one it gives.
         remote.report.vdi_filter = filter;
         if on {
             inner.render_needed = true;
@@ -682,7 +689,7 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
             i.totals.converged = false;
             return Ok(false);
         };
-        let filter = remote.report.vdi_filter;
+        let filter = remote.report.vdi_filter.filter(moving);
         let due = remote.need_frame
             || match &remote.frame {
                 Some((c, s, f)) => *c != scene.camera || (!moving && *s < 1.0) || *f != filter,
@@ -756,8 +763,9 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     };
     if !moving && filter == VdiFilter::Linear && !renderer.pipelines().linear_compiled() {
         // A frame at rest from the VDI's own camera is drawn by the nearest pipeline: have the
-        // linear one compiled now, while the view rests, rather than in the first frame of
-        // the next move (before the frame is filed, so that the page is converged only then).
+        // linear one compiled now, while the view rests, rather than in the first frame that
+        // reads it away from that camera (before the frame is filed, so that the page is
+        // converged only then).
         let compiled = gpu
             .checked_async("compiling the VDI renderer", async {
                 renderer.pipelines().prepare(&gpu, filter);
@@ -804,6 +812,7 @@ fn record_frame(
         remote.report.frames_subsampled += 1;
     }
     remote.report.d_i = scale;
+    remote.report.frame_filter = Some(filter);
     remote.report.frame_ms = Some(ms);
     i.totals.converged = remote.converged(&i.scene);
 }

@@ -97,6 +97,40 @@ fn a_vdi_file_gives_back_the_image_of_its_view() {
     );
 }
 
+/// A single image from away from the VDI's camera is a frame at rest: `auto`, the default,
+/// draws it with the linear filter, pixel for pixel, and the nearest list draws it otherwise.
+#[test]
+fn render_reads_a_vdi_with_the_linear_filter_by_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = s(&store(dir.path()));
+    let vdi = s(&dir.path().join("blob.vdi"));
+    let size = ["--width", "40", "--height", "32"];
+    let mut args = vec!["vdi", "--store", &store, "--max-level", "0", "--out", &vdi];
+    args.extend(VIEW);
+    args.extend(size);
+    viewer_ok(&args);
+    // VIEW's camera turned about 15° about its target.
+    let moved = "-13.8,-51.0,70:20,16,24";
+    let cast = |filter: Option<&str>| {
+        let out = s(&dir
+            .path()
+            .join(format!("{}.exr", filter.unwrap_or("default"))));
+        let mut args = vec!["render", "--vdi", &vdi, "--camera", moved, "--out", &out];
+        args.extend(size);
+        if let Some(f) = filter {
+            args.extend(["--vdi-filter", f]);
+        }
+        viewer_ok(&args);
+        RgbImage::read(Path::new(&out)).unwrap()
+    };
+    let (default, auto) = (cast(None), cast(Some("auto")));
+    let (linear, nearest) = (cast(Some("linear")), cast(Some("nearest")));
+    assert_eq!(default.pixels, linear.pixels);
+    assert_eq!(auto.pixels, linear.pixels);
+    let m = metrics::compare(&nearest, &linear).unwrap();
+    assert!(m.max_abs_error > 1e-3, "the filters agree: {m:?}");
+}
+
 #[test]
 fn bad_vdi_input_fails_with_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
@@ -174,7 +208,7 @@ fn bad_vdi_input_fails_with_a_clear_error() {
     ]);
     assert!(
         err.contains("invalid value 'cubic' for '--vdi-filter <FILTER>'")
-            && err.contains("[possible values: nearest, linear]"),
+            && err.contains("[possible values: auto, nearest, linear]"),
         "{err}"
     );
 }

@@ -17,9 +17,9 @@ const WINDOW: (u32, u32) = (320, 240);
 const PANEL_ROWS: usize = 100;
 
 /// Runs `viewer view ARGS --present PATH` on `display` until its view settles and the window
-/// holds still, takes a screenshot, quits it with `q`, and returns its stderr (logged at info)
-/// and the window's pixels below the panel.
-fn shown(display: &str, args: &[&str], present: &str) -> (String, Vec<[u8; 3]>) {
+/// holds still, takes a screenshot, quits it with `q`, and returns its stderr (logged at info),
+/// its summary line and the window's pixels below the panel.
+fn shown(display: &str, args: &[&str], present: &str) -> (String, String, Vec<[u8; 3]>) {
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_viewer"));
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         cmd.env("XDG_RUNTIME_DIR", "/tmp");
@@ -51,17 +51,18 @@ fn shown(display: &str, args: &[&str], present: &str) -> (String, Vec<[u8; 3]>) 
     let below: Vec<[u8; 3]> = (PANEL_ROWS..h)
         .flat_map(|y| pixels[y * SCREEN.0 as usize..][..w].to_vec())
         .collect();
-    (stderr, below)
+    (stderr, line, below)
 }
 
-/// Asserts both ways of presenting show the same, lit pixels.
-fn same_on_both_paths(display: &str, args: &[&str]) {
-    let (gpu_log, gpu) = shown(display, args, "gpu");
+/// Asserts both ways of presenting show the same, lit pixels, and returns the summary line of
+/// the GPU path.
+fn same_on_both_paths(display: &str, args: &[&str]) -> String {
+    let (gpu_log, line, gpu) = shown(display, args, "gpu");
     assert!(
         gpu_log.contains("presenting on the GPU ("),
         "no GPU surface under Xvfb: {gpu_log}"
     );
-    let (cpu_log, cpu) = shown(display, args, "cpu");
+    let (cpu_log, _, cpu) = shown(display, args, "cpu");
     assert!(
         cpu_log.contains("presenting by a CPU blit (--present cpu)"),
         "{cpu_log}"
@@ -70,6 +71,7 @@ fn same_on_both_paths(display: &str, args: &[&str]) {
     assert!(lit >= gpu.len() / 20, "{args:?}: blank window ({lit} lit)");
     let differ = gpu.iter().zip(&cpu).filter(|(a, b)| a != b).count();
     assert_eq!(differ, 0, "{args:?}: GPU and CPU presentation differ");
+    line
 }
 
 #[test]
@@ -96,18 +98,21 @@ fn view_presents_the_same_pixels_on_the_gpu_as_by_the_cpu_blit_under_xvfb() {
     args.extend(VIEW);
     args.extend(["--width", "64", "--height", "48", "--max-level", "0"]);
     viewer_ok(&args);
-    same_on_both_paths(&display, &["--vdi", &vdi, "--render-scale", "0.5"]);
-    same_on_both_paths(
+    let line = same_on_both_paths(&display, &["--vdi", &vdi, "--render-scale", "0.5"]);
+    assert!(line.ends_with(" (160x120 rays, linear filter)"), "{line}");
+    // From a camera turned away from the VDI's, at rest: the linear filter by default.
+    let line = same_on_both_paths(
         &display,
         &[
             "--vdi",
             &vdi,
             "--render-scale",
             "0.5",
-            "--vdi-filter",
-            "linear",
+            "--camera",
+            "-13.8,-51.0,70:20,16,24",
         ],
     );
+    assert!(line.ends_with(" (160x120 rays, linear filter)"), "{line}");
 }
 
 #[test]
