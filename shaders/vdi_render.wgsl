@@ -12,9 +12,10 @@
 // search that starts from the previous list's index (the data are smooth from list to list),
 // and composites each with its opacity corrected to the length the ray spends in it.
 // Empty-space skipping (the paper's Sec. 4.3) uses a grid over V_O's frustum: tiles of lists
-// by bins of depth along V_O's forward (planes, so a ray meets each bin's faces once). A cell
-// that no supersegment reaches is crossed in one step, to the first face of its tile or bin
-// the ray meets. The ray stops once transmittance falls below 1/255.
+// by bins of depth along V_O's forward (planes, so a ray meets each bin's faces once). From a
+// cell that no supersegment reaches, the ray crosses the tile's whole run of empty bins ahead of
+// it in one step, to the first face of its tile or of that run it meets. The ray stops once
+// transmittance falls below 1/255.
 //
 // That is the paper's nearest-list filter: each point takes the list whose cell holds it, so a
 // surface that V_O sees edge-on (a cell wall along its rays) is as wide as whole lists, and from
@@ -61,6 +62,10 @@ struct VdiView {
 
 // The linear filter across lists (a pipeline constant: each filter compiles only its own code).
 override LINEAR: bool = false;
+// A measure of the work instead of a colour (VdiRenderer::work): each pixel gets (the ray's
+// steps through the grid, the steps into a cell its skipping grid could not skip, the
+// supersegments read, 1). The same counts on any device, for a device without a GPU's clock.
+override COUNT_WORK: bool = false;
 
 const T_MIN: f32 = 0.003921569; // early ray termination: transmittance below 1/255
 const MAX_LIST_STEPS: u32 = 65535u; // loop guard per ray
@@ -138,7 +143,11 @@ struct Supersegment {
     back: f32,
 }
 
+// Supersegments read by this invocation (COUNT_WORK).
+var<private> reads: u32 = 0u;
+
 fn supersegment(i: u32) -> Supersegment {
+    reads++;
     let s = slots[i];
     let rg = unpack2x16float(bitcast<u32>(s.x));
     let ba = unpack2x16float(bitcast<u32>(s.y));
@@ -207,6 +216,7 @@ fn ordered(c: Corner, j: u32, forward: bool) -> u32 {
 
 // Where corner `c`'s `j`-th supersegment in the ray's order ends, in that order.
 fn far_end(c: Corner, j: u32, forward: bool) -> f32 {
+    reads++;
     let s = slots[ordered(c, j, forward)];
     return select(-s.z, s.w, forward) * c.cos_list;
 }
@@ -436,6 +446,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
 
     var color = vec3<f32>(0.0);
     var trans = 1.0;
+    // COUNT_WORK's counts.
+    var steps = 0u;
+    var cells = 0u;
     if span.y > span.x {
         let w = i32(V.lists_x);
         let h = i32(V.lists_y);
@@ -480,22 +493,33 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 mask = tile_mask(ix, iy);
             }
             let empty_tile = (mask & (1u << u32(iz))) == 0u;
-            // Where the ray leaves the cell's bin of depth (none for a tile without
-            // supersegments, or past the grid's last bin).
+            // Where the ray leaves the cell's run of empty bins of depth, the bin it enters
+            // there (none for a tile without supersegments, or with none ahead in the ray's
+            // direction of depth).
             var tz = 3.0e38;
+            var bin_ahead = iz;
             if empty_tile {
                 let e = i32(V.tile);
                 lo_x = ix / e * e;
                 hi_x = min(lo_x + e, gw);
                 lo_y = iy / e * e;
                 hi_y = min(lo_y + e, gh);
-                let next_z = iz + step_z;
-                if mask != 0u && next_z >= 0 && next_z < i32(VDI_DEPTH_BINS) && abs(dz) > 1e-30 {
-                    let face = V.grid_near + f32(select(iz, iz + 1, step_z > 0)) * V.grid_bin;
+                // The tile's bins ahead of this one in the ray's direction of depth.
+                let ahead = select(
+                    mask & ((1u << u32(iz)) - 1u),
+                    select(0u, mask >> u32(iz + 1), iz + 1 < i32(VDI_DEPTH_BINS)),
+                    step_z > 0,
+                );
+                if ahead != 0u && abs(dz) > 1e-30 {
+                    // The nearest of them: every bin up to it is empty in the whole tile, so
+                    // the ray crosses them in one step, to that bin's face.
+                    bin_ahead = select(i32(firstLeadingBit(ahead)),
+                        iz + 1 + i32(firstTrailingBit(ahead)), step_z > 0);
+                    let face = V.grid_near + f32(select(bin_ahead + 1, bin_ahead, step_z > 0)) * V.grid_bin;
                     tz = (face - dot(r.o, V.o_forward)) / dz;
                     if tz <= t {
-                        // Already on the face (rounding): into the next bin without a step.
-                        iz = next_z;
+                        // Already on the face (rounding): into that bin without a step.
+                        iz = bin_ahead;
                         continue;
                     }
                 }
@@ -513,6 +537,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             tx = select(3.0e38, max(tx, t), tx > tie);
             ty = select(3.0e38, max(ty, t), ty > tie);
             let t_next = min(min(min(tx, ty), tz), span.y);
+            steps++;
+            cells += select(0u, 1u, !empty_tile);
             if !empty_tile && linear {
                 var acc = vec4<f32>(color, trans);
                 composite_linear(r, ix, iy, t, t_next, dz, &acc, &readers_of, &r0, &r1, &r2, &r3);
@@ -616,8 +642,8 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 );
             }
             if tz < min(tx, ty) {
-                // Into the next bin of depth, in the same tile.
-                iz += step_z;
+                // Into the bin ahead, in the same tile.
+                iz = bin_ahead;
                 ix = reached.x;
                 iy = reached.y;
                 continue;
@@ -632,12 +658,16 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if ix < 0 || ix >= gw || iy < 0 || iy >= gh {
                 break;
             }
-            if skipping && (!empty_tile || mask == 0u) {
-                // Across a list, or a tile skipped at every depth, the depth moved on by any
-                // amount: its bin again.
+            if skipping && (!empty_tile || tz >= 3.0e38) {
+                // Across a list, or a tile with no bin ahead (skipped to its edge across any
+                // number of bins), the depth moved on by any amount: its bin again.
                 iz = depth_bin(depth_at(r, t));
             }
         }
+    }
+    if COUNT_WORK {
+        image[gid.y * V.width + gid.x] = vec4<f32>(f32(steps), f32(cells), f32(reads), 1.0);
+        return;
     }
     image[gid.y * V.width + gid.x] = vec4<f32>(color + trans * V.background, 1.0 - trans);
 }

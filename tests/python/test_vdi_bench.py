@@ -53,6 +53,17 @@ def test_short_mode_measures_every_dataset_and_validates(tmp_path):
             for k in ("vdi_ms", "vdi_no_skip_ms", "linear_ms", "dvr_ms"):
                 assert math.isfinite(v[k]) and v[k] > 0, (f.name, k)
             assert 0 < v["ssim"] <= 1 and 0 < v["linear_ssim"] <= 1
+            # The work counts: without skipping every step enters a list; skipping enters no
+            # more lists and reads no more supersegments, and on the sparse volume off the
+            # VDI's camera it takes fewer steps. (Along its own rays a ray stays in one list,
+            # where skipping's steps over empty depth bins are extra: 1.38 against 0.81 a pixel
+            # on the sparse volume; on the small dense CyCIF stack at 10°, 1.447 against 1.442.)
+            work, walked = v["work"], v["work_no_skip"]
+            assert walked["steps"] == walked["cells"] > 0, (f.name, walked)
+            assert work["cells"] <= min(work["steps"], walked["cells"]), (f.name, work, walked)
+            assert work["reads"] <= walked["reads"], (f.name, work, walked)
+            if v["deviation_degrees"] > 0 and f.name.startswith("00-sparse"):
+                assert work["steps"] < walked["steps"], (f.name, work, walked)
         at_origin = r["views"][0]
         # From its own camera a VDI gives back the DVR image, up to its half-float colour.
         psnr = at_origin["psnr_db"]

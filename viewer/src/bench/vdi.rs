@@ -25,7 +25,7 @@ use crate::gpu::device::Gpu;
 use crate::gpu::error::GpuError;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{Budget, Fetcher, converge};
-use crate::gpu::vdi_render::{VdiFilter, VdiPipelines, VdiRenderer};
+use crate::gpu::vdi_render::{VdiFilter, VdiPipelines, VdiRenderer, VdiWork};
 use crate::metrics::{self, MetricsError};
 use crate::scene::{Camera, Scene};
 use crate::source::BrickSource;
@@ -124,6 +124,13 @@ pub struct VdiViewRecord {
     pub vdi_no_skip_ms: f64,
     /// Median GPU ms of the same.
     pub vdi_no_skip_gpu_ms: Option<f64>,
+    /// What the rays of the VDI frame with skipping did, per pixel (the same on any device;
+    /// absent in results written before 2026-12-06).
+    #[serde(default)]
+    pub work: Option<VdiWork>,
+    /// The same without skipping.
+    #[serde(default)]
+    pub work_no_skip: Option<VdiWork>,
     /// SSIM against DVR of the VDI's image with the linear filter across lists
     /// ([`VdiFilter::Linear`]).
     pub linear_ssim: f64,
@@ -281,6 +288,8 @@ pub fn run(
             let (preview, preview_ms, preview_gpu_ms) =
                 cast(VdiFilter::Nearest, true, PREVIEW_SCALE)?;
             let (linear, linear_ms, linear_gpu_ms) = cast(VdiFilter::Linear, true, 1.0)?;
+            let work = vdi_renderer.work(gpu, camera, true, VdiFilter::Nearest)?;
+            let work_no_skip = vdi_renderer.work(gpu, camera, false, VdiFilter::Nearest)?;
             let m = metrics::compare(&to_image(width, height, &image), truth)?;
             let p = metrics::compare(&to_image(width, height, &preview), truth)?;
             let l = metrics::compare(&to_image(width, height, &linear), truth)?;
@@ -293,6 +302,8 @@ pub fn run(
                 vdi_gpu_ms,
                 vdi_no_skip_ms,
                 vdi_no_skip_gpu_ms,
+                work: Some(work),
+                work_no_skip: Some(work_no_skip),
                 linear_ssim: l.ssim,
                 linear_psnr_db: l.psnr_db,
                 linear_ms,
@@ -318,6 +329,15 @@ pub fn run(
         sizes,
         views,
     })
+}
+
+/// A count of the VDI frame's work with and without skipping, as `3.71 (14.72)`; `–` for
+/// results without counts.
+fn work_pair(v: &VdiViewRecord, count: impl Fn(&VdiWork) -> f64) -> String {
+    match (&v.work, &v.work_no_skip) {
+        (Some(a), Some(b)) => format!("{:.2} ({:.2})", count(a), count(b)),
+        _ => "–".to_owned(),
+    }
 }
 
 /// The results as markdown: the size table and the quality and speed table, with the paper's
@@ -363,9 +383,10 @@ pub fn markdown(r: &VdiBenchResults) -> String {
     }
     out.push_str(
         "\n| N_S | deviation | SSIM (goal ≥ 0.97 within 10°, ≥ 0.94 at 30°) | PSNR dB | VDI ms | \
-         VDI ms, no skipping | DVR ms | DVR / VDI (goal ≥ 3 within 10°) | linear filter: SSIM | \
-         linear filter: PSNR dB | linear filter: ms | DVR / linear | preview SSIM | preview \
-         ms |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+         VDI ms, no skipping | steps / px (no skipping) | reads / px (no skipping) | DVR ms | \
+         DVR / VDI (goal ≥ 3 within 10°) | linear filter: SSIM | linear filter: PSNR dB | \
+         linear filter: ms | DVR / linear | preview SSIM | preview ms \
+         |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for v in &r.views {
         let ms = |wall: f64, gpu: Option<f64>| gpu.unwrap_or(wall);
@@ -373,14 +394,16 @@ pub fn markdown(r: &VdiBenchResults) -> String {
         let linear = ms(v.linear_ms, v.linear_gpu_ms);
         writeln!(
             out,
-            "| {} | {}° | {:.4} | {:.2} | {:.3} | {:.3} | {:.3} | {:.2}× | {:.4} | {:.2} | {:.3} | \
-             {:.2}× | {:.4} | {:.3} |",
+            "| {} | {}° | {:.4} | {:.2} | {:.3} | {:.3} | {} | {} | {:.3} | {:.2}× | {:.4} | {:.2} | \
+             {:.3} | {:.2}× | {:.4} | {:.3} |",
             v.supersegments,
             v.deviation_degrees,
             v.ssim,
             v.psnr_db,
             vdi,
             ms(v.vdi_no_skip_ms, v.vdi_no_skip_gpu_ms),
+            work_pair(v, |w| w.steps),
+            work_pair(v, |w| w.reads),
             dvr,
             dvr / vdi.max(1e-9),
             v.linear_ssim,
@@ -401,7 +424,9 @@ pub fn markdown(r: &VdiBenchResults) -> String {
         out,
         "\nTimes are medians of {timing}. The preview casts rays for D_I = {PREVIEW_SCALE} of the \
          width and height and upsamples them (the paper's Sec. 4.4: 150 fps at SSIM 0.94 with \
-         D_I = 0.6 and D_R = 0.14). The linear filter reads the bilinear mix of the four lists \
+         D_I = 0.6 and D_R = 0.14). Steps and reads are per pixel of the VDI frame, the same on \
+         any device: steps through the grid of lists (a skipped tile or run of empty depth bins \
+         is one), supersegments read. The linear filter reads the bilinear mix of the four lists \
          around each point instead of the nearest list (the paper's). The paper (RTX 3090, \
          1920×1080, N_S = 20): SSIM 0.97 near the viewpoint of generation, a minor loss up to \
          40°, about 45 fps.\n"

@@ -70,6 +70,22 @@ impl Named for VdiFilter {
     const NOUN: &'static str = "VDI filter";
 }
 
+/// What the rays of a VDI frame did, on average per pixel ([`VdiRenderer::work`]): the same
+/// counts on any device, so that a device without a GPU's clock can still compare the work of
+/// two ways of drawing.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct VdiWork {
+    /// Steps through the grid of cells the rays walk (lists, or with the linear filter the
+    /// cells between list centres), each skipped tile or run of empty depth bins one step.
+    pub steps: f64,
+    /// Of those, the steps into a cell the skipping grid could not skip (every step without
+    /// skipping).
+    pub cells: f64,
+    /// Supersegments read.
+    pub reads: f64,
+}
+
 /// One frame of a VDI rendered for a camera.
 #[derive(Clone, Debug)]
 pub struct VdiFrame {
@@ -152,14 +168,16 @@ pub fn tile_masks(masks: &[u32], width: u32, filter: VdiFilter) -> (Vec<u32>, u3
     (tiles, tiles_x)
 }
 
-/// `vdi_render.wgsl`'s entry point `name` compiled with the pipeline constant `LINEAR`
-/// (the linear filter across lists) set to `linear`.
+/// `vdi_render.wgsl`'s entry point `name` compiled with the pipeline constants `LINEAR`
+/// (the linear filter across lists) set to `linear` and `COUNT_WORK` (a frame's counts
+/// instead of its colours: [`VdiRenderer::work`]) to `count_work`.
 fn compile(
     gpu: &Gpu,
     module: &wgpu::ShaderModule,
     layout: &wgpu::PipelineLayout,
     name: &str,
     linear: bool,
+    count_work: bool,
 ) -> wgpu::ComputePipeline {
     gpu.device
         .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
@@ -168,7 +186,10 @@ fn compile(
             module,
             entry_point: Some(name),
             compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &[("LINEAR", f64::from(u8::from(linear)))],
+                constants: &[
+                    ("LINEAR", f64::from(u8::from(linear))),
+                    ("COUNT_WORK", f64::from(u8::from(count_work))),
+                ],
                 ..Default::default()
             },
             cache: None,
@@ -212,6 +233,9 @@ pub struct VdiPipelines {
     nearest: wgpu::ComputePipeline,
     /// The ray caster compiled for the linear filter, the first time it is asked for.
     linear: OnceCell<wgpu::ComputePipeline>,
+    /// The ray caster counting its work ([`VdiRenderer::work`]) for the nearest and the
+    /// linear filter, each the first time it is asked for.
+    counting: [OnceCell<wgpu::ComputePipeline>; 2],
     upsample: wgpu::ComputePipeline,
 }
 
@@ -251,7 +275,7 @@ impl VdiPipelines {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let entry = |name: &str| compile(gpu, &module, &pipeline_layout, name, false);
+        let entry = |name: &str| compile(gpu, &module, &pipeline_layout, name, false, false);
         let (nearest, upsample) = (entry("main"), entry("upsample"));
         Self {
             module,
@@ -259,18 +283,43 @@ impl VdiPipelines {
             pipeline_layout,
             nearest,
             linear: OnceCell::new(),
+            counting: [OnceCell::new(), OnceCell::new()],
             upsample,
         }
     }
 
     /// The ray caster for `filter`, the linear filter's compiled now if it was not yet.
     fn caster(&self, gpu: &Gpu, filter: VdiFilter) -> &wgpu::ComputePipeline {
+        let linear = filter == VdiFilter::Linear;
         match filter {
             VdiFilter::Nearest => &self.nearest,
-            VdiFilter::Linear => self
-                .linear
-                .get_or_init(|| compile(gpu, &self.module, &self.pipeline_layout, "main", true)),
+            VdiFilter::Linear => self.linear.get_or_init(|| {
+                compile(
+                    gpu,
+                    &self.module,
+                    &self.pipeline_layout,
+                    "main",
+                    linear,
+                    false,
+                )
+            }),
         }
+    }
+
+    /// The ray caster for `filter` that counts its work instead of compositing, compiled now
+    /// if it was not yet.
+    fn counter(&self, gpu: &Gpu, filter: VdiFilter) -> &wgpu::ComputePipeline {
+        let linear = filter == VdiFilter::Linear;
+        self.counting[usize::from(linear)].get_or_init(|| {
+            compile(
+                gpu,
+                &self.module,
+                &self.pipeline_layout,
+                "main",
+                linear,
+                true,
+            )
+        })
     }
 
     /// Compiles the ray caster for `filter` if it is not yet, so that the first frame that
@@ -579,8 +628,9 @@ impl VdiRenderer {
     /// buffer that then holds the image (linear RGBA `vec4<f32>` per pixel, `width × height`,
     /// row-major from the top), for presenting on the GPU without a readback, and the rays
     /// cast. A frame that casts the VDI's own rays is drawn by the nearest pipeline whatever
-    /// `filter` (the two coincide there); otherwise the linear filter's pipeline is compiled
-    /// here the first time it is asked for.
+    /// `filter` (the two coincide there), and without skipping (each ray stays in its list,
+    /// where skipping only adds steps over empty depth bins); otherwise the linear filter's
+    /// pipeline is compiled here the first time it is asked for.
     pub fn encode(
         &self,
         gpu: &Gpu,
@@ -590,9 +640,34 @@ impl VdiRenderer {
         scale: f64,
         filter: VdiFilter,
     ) -> (&wgpu::Buffer, (u32, u32)) {
+        self.record(gpu, encoder, camera, skipping, scale, filter, false)
+    }
+
+    /// [`VdiRenderer::encode`], or with `count_work` the same frame's counts per pixel
+    /// ([`VdiRenderer::work`]) in place of its colours.
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "encode's frame settings, and which pipeline draws them"
+    )]
+    fn record(
+        &self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        skipping: bool,
+        scale: f64,
+        filter: VdiFilter,
+        count_work: bool,
+    ) -> (&wgpu::Buffer, (u32, u32)) {
         let rays = self.rays(scale);
         let full = rays == (self.width, self.height);
-        let view = self.view(camera, skipping, rays);
+        let mut view = self.view(camera, skipping, rays);
+        let along_lists = self.along_lists(&view);
+        if along_lists {
+            // Each ray stays in its own list, where crossing the tile's empty depth bins is
+            // only extra steps (same pixels: the skipping tests).
+            view.flags &= !VDI_FLAG_SKIPPING;
+        }
         gpu.queue
             .write_buffer(&self.view, 0, bytemuck::bytes_of(&view));
         {
@@ -600,11 +675,16 @@ impl VdiRenderer {
                 label: Some("vdi render"),
                 timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
             });
-            let filter = match filter {
-                VdiFilter::Linear if self.along_lists(&view) => VdiFilter::Nearest,
-                filter => filter,
+            let filter = if along_lists {
+                VdiFilter::Nearest
+            } else {
+                filter
             };
-            pass.set_pipeline(self.pipelines.caster(gpu, filter));
+            pass.set_pipeline(if count_work {
+                self.pipelines.counter(gpu, filter)
+            } else {
+                self.pipelines.caster(gpu, filter)
+            });
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);
             if !full {
@@ -627,12 +707,62 @@ impl VdiRenderer {
         scale: f64,
         filter: VdiFilter,
     ) -> Result<VdiFrame, GpuError> {
+        self.read_frame(gpu, camera, skipping, scale, filter, false)
+            .await
+    }
+
+    /// What the rays of a frame for `camera` at full resolution with `filter` did, on
+    /// average per pixel: a measure of the frame's work that is the same on any device (the
+    /// frame is drawn by a pipeline that counts instead of compositing, so that the frames
+    /// the user sees pay nothing for it).
+    ///
+    /// # Errors
+    /// As [`VdiRenderer::render`].
+    #[cfg(not(target_arch = "wasm32"))]
+    pub fn work(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        skipping: bool,
+        filter: VdiFilter,
+    ) -> Result<VdiWork, GpuError> {
+        let frame = pollster::block_on(gpu.checked_async(
+            "counting a VDI frame's work",
+            self.read_frame(gpu, camera, skipping, 1.0, filter, true),
+        ))?;
+        let n = frame.pixels.len() as f64;
+        let mean = |c: usize| frame.pixels.iter().map(|p| f64::from(p[c])).sum::<f64>() / n;
+        Ok(VdiWork {
+            steps: mean(0),
+            cells: mean(1),
+            reads: mean(2),
+        })
+    }
+
+    /// [`VdiRenderer::render_async`], or with `count_work` the frame's counts per pixel.
+    async fn read_frame(
+        &self,
+        gpu: &Gpu,
+        camera: &Camera,
+        skipping: bool,
+        scale: f64,
+        filter: VdiFilter,
+        count_work: bool,
+    ) -> Result<VdiFrame, GpuError> {
         let mut encoder = gpu
             .device
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("vdi frame"),
             });
-        let (shown, rays) = self.encode(gpu, &mut encoder, camera, skipping, scale, filter);
+        let (shown, rays) = self.record(
+            gpu,
+            &mut encoder,
+            camera,
+            skipping,
+            scale,
+            filter,
+            count_work,
+        );
         encoder.copy_buffer_to_buffer(shown, 0, &self.readback, 0, shown.size());
         let mut maps = vec![&self.readback];
         if let Some(timer) = &self.timer {

@@ -505,6 +505,56 @@ fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_sid
     }
 }
 
+/// The work counts of `VdiRenderer::work`: without skipping every step enters a cell; with it
+/// rays take fewer steps, enter fewer cells and read no more supersegments (the images are the
+/// same: the test above); and a ray crosses a tile's run of empty depth bins in one step. The
+/// last is pinned to this scene's counts on lavapipe (within 2 %): with one bin a step the
+/// nearest filter took 5.631 steps a pixel at 10° and 9.116 at 30°, for the same cells.
+#[test]
+fn skipping_saves_steps_cells_and_reads_and_crosses_runs_of_empty_bins_at_once() {
+    let scene = scene(2);
+    let (w, h) = (96, 80);
+    let (_, generation) = generate(&scene, full_res(w, h), 20);
+    let renderer = VdiRenderer::new(gpu(), &generation.image, w, h).expect("vdi renderer");
+    // Along the VDI's own rays each ray stays in its list: the frame walks, skipping or not
+    // (skipping's steps over empty depth bins would only add to it).
+    let own = |skipping| {
+        let work = renderer.work(gpu(), &scene.camera, skipping, VdiFilter::Linear);
+        work.expect("work")
+    };
+    assert_eq!(own(true), own(false));
+    // One step a ray that meets the box (89 % of them here), into its own list.
+    let work = own(true);
+    assert!(work.steps == work.cells && work.steps > 0.8, "{work:?}");
+    for filter in [VdiFilter::Nearest, VdiFilter::Linear] {
+        for degrees in [10.0, 30.0] {
+            let camera = turned(&scene.camera, degrees);
+            let walked = renderer.work(gpu(), &camera, false, filter).expect("work");
+            let skipped = renderer.work(gpu(), &camera, true, filter).expect("work");
+            assert_eq!(walked.steps, walked.cells, "{filter:?} {degrees}°");
+            assert!(
+                skipped.steps < walked.steps,
+                "{filter:?} {degrees}°: {skipped:?} {walked:?}"
+            );
+            assert!(
+                skipped.cells < walked.cells,
+                "{filter:?} {degrees}°: {skipped:?} {walked:?}"
+            );
+            assert!(
+                skipped.reads <= walked.reads,
+                "{filter:?} {degrees}°: {skipped:?} {walked:?}"
+            );
+            if filter == VdiFilter::Nearest {
+                let pinned = if degrees == 10.0 { 3.6447 } else { 7.4215 };
+                assert!(
+                    (skipped.steps - pinned).abs() <= 0.02 * pinned,
+                    "{degrees}°: {skipped:?}, pinned {pinned} steps a pixel"
+                );
+            }
+        }
+    }
+}
+
 #[test]
 fn each_filters_tiles_hold_the_lists_their_cells_read() {
     // 17 × 10 lists: 3 × 2 tiles of 8 × 8, the last column and row partly filled.
