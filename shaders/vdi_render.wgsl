@@ -505,11 +505,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 lo_y = iy / e * e;
                 hi_y = min(lo_y + e, gh);
                 // The tile's bins ahead of this one in the ray's direction of depth.
-                let ahead = select(
-                    mask & ((1u << u32(iz)) - 1u),
-                    select(0u, mask >> u32(iz + 1), iz + 1 < i32(VDI_DEPTH_BINS)),
-                    step_z > 0,
-                );
+                let ahead = select(mask & ((1u << u32(iz)) - 1u), (mask >> u32(iz)) >> 1u, step_z > 0);
                 if ahead != 0u && abs(dz) > 1e-30 {
                     // The nearest of them: every bin up to it is empty in the whole tile, so
                     // the ray crosses them in one step, to that bin's face.
@@ -658,9 +654,9 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if ix < 0 || ix >= gw || iy < 0 || iy >= gh {
                 break;
             }
-            if skipping && (!empty_tile || tz >= 3.0e38) {
-                // Across a list, or a tile with no bin ahead (skipped to its edge across any
-                // number of bins), the depth moved on by any amount: its bin again.
+            if skipping {
+                // Across a list, or across a tile's empty bins (any number of them, up to the
+                // run's far face), the depth moved on by any amount: its bin again.
                 iz = depth_bin(depth_at(r, t));
             }
         }

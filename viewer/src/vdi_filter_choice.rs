@@ -36,7 +36,7 @@ pub enum VdiFilterChoice {
     /// The nearest list while the camera moves, the linear filter once it rests: on the VDI
     /// bench's scenes the linear filter's SSIM against DVR is higher than the nearest list's
     /// away from the VDI's camera (16 channels at 10°: 0.988 against 0.970), or within 0.0001
-    /// of it, at 3.8–5.6 times its frame time at 10° on lavapipe, paid once a rest.
+    /// of it, at 3.9–5.4 times its frame time at 10° on lavapipe, paid once a rest.
     #[default]
     Auto,
     /// [`VdiFilter::Nearest`] for every frame.

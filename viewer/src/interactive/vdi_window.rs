@@ -174,7 +174,9 @@ impl App {
         render_size(size, self.config.render_scale)
     }
 
-    fn panel_lines(&self) -> Vec<(String, u32)> {
+    /// The panel's lines while the frame of `filter` is drawn (its `D_I` and time are the last
+    /// frame's).
+    fn panel_lines(&self, filter: VdiFilter) -> Vec<(String, u32)> {
         const WHITE: u32 = 0x00ff_ffff;
         const GREY: u32 = 0x00b0_b0b0;
         let h = &self.vdi.header;
@@ -189,7 +191,7 @@ impl App {
                     h.height,
                     h.supersegments,
                     if self.config.skipping { "on" } else { "off" },
-                    self.shown.filter.name()
+                    filter.name()
                 ),
                 WHITE,
             ),
@@ -217,7 +219,7 @@ impl App {
             self.renderer = Some(VdiRenderer::new(&self.gpu, &self.vdi, size.0, size.1)?);
         }
         let overlays = Overlays::shown(
-            self.overlay.then(|| self.panel_lines()),
+            self.overlay.then(|| self.panel_lines(filter)),
             panel_scale(win),
             &self.camera,
             None,
