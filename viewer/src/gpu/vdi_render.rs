@@ -229,13 +229,10 @@ pub struct VdiPipelines {
     module: wgpu::ShaderModule,
     layout: wgpu::BindGroupLayout,
     pipeline_layout: wgpu::PipelineLayout,
-    /// The ray caster compiled for the nearest filter.
-    nearest: wgpu::ComputePipeline,
-    /// The ray caster compiled for the linear filter, the first time it is asked for.
-    linear: OnceCell<wgpu::ComputePipeline>,
-    /// The ray caster counting its work ([`VdiRenderer::work`]) for the nearest and the
-    /// linear filter, each the first time it is asked for.
-    counting: [OnceCell<wgpu::ComputePipeline>; 2],
+    /// The ray caster for each filter, compositing and counting its work
+    /// ([`VdiRenderer::work`]), at [`VdiPipelines::variant`]: the nearest filter's compositing
+    /// one compiled up front, the others the first time they are asked for.
+    casters: [OnceCell<wgpu::ComputePipeline>; 4],
     upsample: wgpu::ComputePipeline,
 }
 
@@ -275,49 +272,35 @@ impl VdiPipelines {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let entry = |name: &str| compile(gpu, &module, &pipeline_layout, name, false, false);
-        let (nearest, upsample) = (entry("main"), entry("upsample"));
-        Self {
+        let upsample = compile(gpu, &module, &pipeline_layout, "upsample", false, false);
+        let pipelines = Self {
             module,
             layout,
             pipeline_layout,
-            nearest,
-            linear: OnceCell::new(),
-            counting: [OnceCell::new(), OnceCell::new()],
+            casters: [(); 4].map(|()| OnceCell::new()),
             upsample,
-        }
+        };
+        pipelines.prepare(gpu, VdiFilter::Nearest);
+        pipelines
     }
 
-    /// The ray caster for `filter`, the linear filter's compiled now if it was not yet.
-    fn caster(&self, gpu: &Gpu, filter: VdiFilter) -> &wgpu::ComputePipeline {
-        let linear = filter == VdiFilter::Linear;
-        match filter {
-            VdiFilter::Nearest => &self.nearest,
-            VdiFilter::Linear => self.linear.get_or_init(|| {
-                compile(
-                    gpu,
-                    &self.module,
-                    &self.pipeline_layout,
-                    "main",
-                    linear,
-                    false,
-                )
-            }),
-        }
+    /// Where the ray caster for `filter`, compositing or counting its work, is kept.
+    fn variant(filter: VdiFilter, count_work: bool) -> usize {
+        usize::from(filter == VdiFilter::Linear) + 2 * usize::from(count_work)
     }
 
-    /// The ray caster for `filter` that counts its work instead of compositing, compiled now
-    /// if it was not yet.
-    fn counter(&self, gpu: &Gpu, filter: VdiFilter) -> &wgpu::ComputePipeline {
-        let linear = filter == VdiFilter::Linear;
-        self.counting[usize::from(linear)].get_or_init(|| {
+    /// The ray caster for `filter`, compositing or (`count_work`) counting its work, compiled
+    /// now if it was not yet.
+    fn caster(&self, gpu: &Gpu, filter: VdiFilter, count_work: bool) -> &wgpu::ComputePipeline {
+        self.casters[Self::variant(filter, count_work)].get_or_init(|| {
+            let linear = filter == VdiFilter::Linear;
             compile(
                 gpu,
                 &self.module,
                 &self.pipeline_layout,
                 "main",
                 linear,
-                true,
+                count_work,
             )
         })
     }
@@ -325,12 +308,14 @@ impl VdiPipelines {
     /// Compiles the ray caster for `filter` if it is not yet, so that the first frame that
     /// uses it need not wait for it.
     pub fn prepare(&self, gpu: &Gpu, filter: VdiFilter) {
-        self.caster(gpu, filter);
+        self.caster(gpu, filter, false);
     }
 
     /// Whether the linear filter's ray caster has been compiled.
     pub fn linear_compiled(&self) -> bool {
-        self.linear.get().is_some()
+        self.casters[Self::variant(VdiFilter::Linear, false)]
+            .get()
+            .is_some()
     }
 }
 
@@ -680,11 +665,7 @@ impl VdiRenderer {
             } else {
                 filter
             };
-            pass.set_pipeline(if count_work {
-                self.pipelines.counter(gpu, filter)
-            } else {
-                self.pipelines.caster(gpu, filter)
-            });
+            pass.set_pipeline(self.pipelines.caster(gpu, filter, count_work));
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);
             if !full {

@@ -383,6 +383,7 @@ impl Remote {
             vdi_camera: self.drawn.as_ref().map(|d| d.scene.camera.clone()),
             frame_current: self.frame_current(&scene.camera),
             linear_compiled: self.pipelines.as_ref().is_some_and(|p| p.linear_compiled()),
+            frame_filter: self.frame.as_ref().map(|(_, _, filter)| *filter),
             scene_current: self
                 .drawn
                 .as_ref()
@@ -812,7 +813,6 @@ fn record_frame(
         remote.report.frames_subsampled += 1;
     }
     remote.report.d_i = scale;
-    remote.report.frame_filter = Some(filter);
     remote.report.frame_ms = Some(ms);
     i.totals.converged = remote.converged(&i.scene);
 }
