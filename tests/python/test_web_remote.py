@@ -457,3 +457,47 @@ def test_the_page_reads_a_vdi_with_the_filter_asked_for_from_a_moved_camera(serv
 
     results, _ = drive(page(base, "u16x3", service, extra="&vdi_filter=cubic"), [{"do": "waitMessage"}])
     assert results[0] == "?vdi_filter: unknown VDI filter 'cubic' (auto, nearest or linear)"
+
+
+def test_auto_moves_with_the_linear_filter_where_its_frames_hold_the_target(servers):
+    """Under `auto` (the default) a moving camera's frames read the VDI with the linear filter,
+    at full resolution, where the last frame the linear filter drew at full resolution held the
+    target frame time, and with the nearest list at the controller's D_I where it did not. The
+    page draws the first VDI, the camera turns 20° while the service (through a proxy) answers
+    503 with `Retry-After: 60` (so the first VDI stays drawn and the view rests on a frame the
+    linear filter draws), then a drag turns it on: with 1 frame a second to hold, the drag's
+    frames are linear and none is subsampled; with 1000, none is linear and they are
+    subsampled."""
+    base, service = servers
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    moved = orbited(scene_of(results[1]), 20.0)
+    for fps in (1, 1000):
+        with ServiceProxy(service, failures=[None] + [(503, "60")] * 8) as proxy:
+            results, console = drive(
+                page(base, "u16x3", proxy.url, extra=f"&target_fps={fps}"),
+                [
+                    {"do": "converge"},
+                    {"do": "setScene", "scene": moved},
+                    {"do": "waitState", "when": "s.remote.requests_retried >= 1 && s.remote.frame_current"},
+                    # 12 px, about 7° of orbit, in moves 50 ms apart (a frame each).
+                    {"do": "drag", "dx": 12, "dy": 0, "moves": 6, "delay_ms": 50},
+                    {"do": "waitState", "when": "s.remote.frame_current"},
+                ],
+            )
+        first, rested, dragged = results[0]["remote"], results[2]["remote"], results[4]["remote"]
+        # From the VDI's own camera the nearest pipeline draws the frame at rest: nothing
+        # learnt of the linear filter yet, so the frames of the turn read the nearest list.
+        assert first["linear_frame_ms"] is None and first["moving_frames_linear"] == 0, first
+        assert rested["frame_filter"] == "linear" and rested["moving_frames_linear"] == 0, rested
+        assert 0 < rested["linear_frame_ms"] < 1000, rested
+        assert rested["vdis_received"] == 1 and dragged["vdis_received"] == 1, dragged
+        assert dragged["frames"] > rested["frames"], (rested, dragged)
+        assert dragged["frame_filter"] == "linear" and dragged["d_i"] == 1.0, dragged
+        if fps == 1:
+            assert dragged["moving_frames_linear"] >= 1, dragged
+            assert dragged["frames_subsampled"] == rested["frames_subsampled"], (rested, dragged)
+        else:
+            assert rested["linear_frame_ms"] > 1, rested
+            assert dragged["moving_frames_linear"] == 0, dragged
+            assert dragged["frames_subsampled"] > rested["frames_subsampled"], (rested, dragged)
+        assert errors(console, ["status of 503"]) == []

@@ -14,8 +14,9 @@
 //!   the progressive streaming loop;
 //! - [`defaults`]: the default view of a volume (camera, colours, transfer functions);
 //! - [`frame_rate`]: the PI controller that holds a frame time by the image-space sampling;
-//! - [`vdi_filter_choice`]: which filter a VDI's frames use, the nearest list while the camera
-//!   moves and the linear filter at rest by default;
+//! - [`vdi_filter_choice`]: which filter a VDI's frames use, as the user picks it (by default
+//!   the linear filter at rest, and while the camera moves where the device has time for it);
+//! - [`vdi_frame_plan`]: each VDI frame's filter and image-space sampling, moving or at rest;
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
 //! - [`bench`](mod@bench): the renderer benchmark suite (`viewer bench`);
 //! - [`names`]: the enums named on the command line and in files, and the one error for an
@@ -52,6 +53,7 @@ pub mod scene;
 pub mod service;
 pub mod source;
 pub mod vdi_filter_choice;
+pub mod vdi_frame_plan;
 pub mod vdi_service;
 #[cfg(target_arch = "wasm32")]
 pub mod web;

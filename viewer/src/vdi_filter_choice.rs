@@ -1,9 +1,11 @@
 //! Which filter a frame reads a volumetric depth image with, as the user picks it
 //! (`--vdi-filter`, the page's *VDI filter* menu and `?vdi_filter=`): one filter for every
-//! frame, or [`VdiFilterChoice::Auto`], the nearest list while the camera moves (the fastest,
-//! for the frame rate) and the linear filter once it rests (closer to direct volume rendering
-//! away from the VDI's camera, for the image a user looks at). A single image, as `viewer render
-//! --vdi` draws, is a frame at rest.
+//! frame, or [`VdiFilterChoice::Auto`], the linear filter once the camera rests (closer to
+//! direct volume rendering away from the VDI's camera, for the image a user looks at) and the
+//! nearest list while it moves (the fastest, for the frame rate), unless the device draws the
+//! linear filter within the frame time the moving frames hold
+//! ([`crate::vdi_frame_plan`]). A single image, as `viewer render --vdi` draws, is a frame at
+//! rest.
 
 use serde::{Deserialize, Serialize};
 
@@ -33,10 +35,11 @@ use crate::names::{Named, UnknownName};
     parse_err_fn = UnknownName::new
 )]
 pub enum VdiFilterChoice {
-    /// The nearest list while the camera moves, the linear filter once it rests: on the VDI
-    /// bench's scenes the linear filter's SSIM against DVR is higher than the nearest list's
-    /// away from the VDI's camera (16 channels at 10°: 0.988 against 0.970), or within 0.0001
-    /// of it, at 3.9–5.4 times its frame time at 10° on lavapipe, paid once a rest.
+    /// The linear filter once the camera rests, and while it moves where its last frame at
+    /// full resolution held the target frame time; else the nearest list while it moves. On
+    /// the VDI bench's scenes the linear filter's SSIM against DVR is higher than the nearest
+    /// list's away from the VDI's camera (16 channels at 10°: 0.988 against 0.970), or within
+    /// 0.0001 of it, at 3.9–5.4 times its frame time at 10° on lavapipe.
     #[default]
     Auto,
     /// [`VdiFilter::Nearest`] for every frame.
@@ -52,7 +55,9 @@ impl Named for VdiFilterChoice {
 }
 
 impl VdiFilterChoice {
-    /// The filter of a frame drawn while the camera moves (`moving`) or at rest.
+    /// The filter of a frame drawn while the camera moves (`moving`) or at rest, where nothing
+    /// is known of what the linear filter costs (a planner that knows:
+    /// [`crate::vdi_frame_plan::VdiFramePlanner`]).
     pub fn filter(self, moving: bool) -> VdiFilter {
         match self {
             Self::Auto if moving => VdiFilter::Nearest,

@@ -16,8 +16,9 @@
 // camera moves (default 60). `?vdi_filter=auto|nearest|linear` (and the *VDI filter* menu) is
 // how the page reads a VDI between its lists: the nearest list (the paper's, the fastest), the
 // bilinear mix of the four around each point (closer to DVR away from the VDI's camera, at
-// several times the cost), or `auto` (the default): the nearest list while the camera moves,
-// the linear filter once it rests.
+// several times the cost), or `auto` (the default): the linear filter once the camera rests,
+// and while it moves where the last linear frame at full resolution held the target frame
+// rate, else the nearest list.
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no

@@ -99,8 +99,9 @@ pub struct Args {
     /// With `--vdi`: cross the VDI's empty tiles of lists one by one (a baseline).
     #[arg(long)]
     pub vdi_no_skipping: bool,
-    /// With `--vdi`: how rays read the VDI between its lists: `auto` (the default: `nearest`
-    /// while the camera moves, `linear` once it rests), `nearest` (the paper's: the list whose
+    /// With `--vdi`: how rays read the VDI between its lists: `auto` (the default: `linear`
+    /// once the camera rests, and while it moves where the last linear frame held the target
+    /// frame rate, else `nearest`), `nearest` (the paper's: the list whose
     /// cell holds each point, the fastest) or `linear` (the bilinear mix of the four lists
     /// around each point: closer to DVR away from the VDI's camera, several times slower).
     #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilterChoice>())]

@@ -571,6 +571,18 @@ impl VdiRenderer {
             && close(view.up, rays.up)
     }
 
+    /// The pipeline that draws the frame of `camera` at `D_I` = `scale` asked with `filter`:
+    /// the nearest one for a frame along the VDI's own rays ([`VdiRenderer::encode`]), else
+    /// `filter`'s. What a frame's time says the filter costs.
+    pub fn drawn_with(&self, camera: &Camera, scale: f64, filter: VdiFilter) -> VdiFilter {
+        let view = self.view(camera, true, self.rays(scale));
+        if self.along_lists(&view) {
+            VdiFilter::Nearest
+        } else {
+            filter
+        }
+    }
+
     /// Renders the VDI for `camera` (with or without skipping empty tiles of lists) and reads
     /// the image back.
     ///
@@ -646,6 +658,7 @@ impl VdiRenderer {
     ) -> (&wgpu::Buffer, (u32, u32)) {
         let rays = self.rays(scale);
         let full = rays == (self.width, self.height);
+        let filter = self.drawn_with(camera, scale, filter);
         let mut view = self.view(camera, skipping, rays);
         let along_lists = self.along_lists(&view);
         if along_lists {
@@ -660,11 +673,6 @@ impl VdiRenderer {
                 label: Some("vdi render"),
                 timestamp_writes: self.timer.as_ref().map(|t| t.writes(true)),
             });
-            let filter = if along_lists {
-                VdiFilter::Nearest
-            } else {
-                filter
-            };
             pass.set_pipeline(self.pipelines.caster(gpu, filter, count_work));
             pass.set_bind_group(0, &self.bind_group, &[]);
             pass.dispatch_workgroups(rays.0.div_ceil(8), rays.1.div_ceil(8), 1);

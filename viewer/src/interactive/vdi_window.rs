@@ -1,10 +1,10 @@
 //! `viewer view --vdi`: a volumetric depth image in a window, ray cast for the window's camera
 //! on the GPU ([`VdiRenderer::encode`]) and presented there with no readback
 //! ([`super::display`]; where no surface can be made, each frame is read back and blitted).
-//! While the camera moves, a [`FrameRateController`] sets the image-space sampling `D_I` to
-//! hold the target frame time; once input stops for [`REST`], one frame at full resolution.
-//! Each frame reads the VDI with the filter the user's [`VdiFilterChoice`] gives for a moving
-//! camera or one at rest (by default the nearest list while moving, the linear filter at rest).
+//! A [`VdiFramePlanner`] plans each frame: while the camera moves, the image-space sampling
+//! `D_I` that holds the target frame time (or, under `auto` where the linear filter held the
+//! target, that filter at full resolution); once input stops for [`REST`], one frame at full
+//! resolution with the filter the user's [`VdiFilterChoice`] gives at rest.
 
 use std::io::Write;
 use std::sync::Arc;
@@ -21,17 +21,14 @@ use winit::window::{Window, WindowId};
 use super::camera_control::{orbit, pan, zoom};
 use super::display::{Display, Frame, Overlays, PresentPath};
 use super::window::{ViewError, open_window, panel_scale, render_size, wheel_steps};
-use crate::frame_rate::FrameRateController;
 use crate::gpu::device::Gpu;
 use crate::gpu::vdi_render::{VdiFilter, VdiRenderer};
 use crate::scene::Camera;
 use crate::vdi_filter_choice::VdiFilterChoice;
+use crate::vdi_frame_plan::{VdiFramePlan, VdiFramePlanner};
 
 /// How long after the last input the view counts as at rest (and renders at full resolution).
 pub const REST: Duration = Duration::from_millis(150);
-
-/// The smallest `D_I` the controller may choose (as the page's remote mode).
-pub const MIN_SCALE: f64 = 0.25;
 
 /// Settings of the VDI window.
 #[derive(Clone, Debug)]
@@ -85,7 +82,7 @@ struct App {
     /// The VDI's volume diagonal (the least zoom distance is a thousandth of it).
     diagonal: f64,
     renderer: Option<VdiRenderer>,
-    controller: FrameRateController,
+    planner: VdiFramePlanner,
     window: Option<Arc<Window>>,
     display: Option<Display>,
     modifiers: ModifiersState,
@@ -120,7 +117,7 @@ pub fn run(
     let h = &vdi.header;
     let diagonal =
         crate::scene::box_diagonal(std::array::from_fn(|a| h.volume_max[a] - h.volume_min[a]));
-    let controller = FrameRateController::new(config.target_ms, MIN_SCALE);
+    let planner = VdiFramePlanner::new(config.filter, config.target_ms);
     let mut app = App {
         gpu,
         vdi,
@@ -130,7 +127,7 @@ pub fn run(
         camera,
         diagonal,
         renderer: None,
-        controller,
+        planner,
         window: None,
         display: None,
         modifiers: ModifiersState::empty(),
@@ -155,7 +152,7 @@ pub fn run(
 impl App {
     /// Whether the last frame was the one at rest: at full resolution, with the filter at rest.
     fn full(&self) -> bool {
-        self.shown.scale >= 1.0 && self.shown.filter == self.config.filter.filter(false)
+        self.shown.scale >= 1.0 && self.shown.filter == self.planner.filter_at_rest()
     }
 
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: ViewError) {
@@ -207,8 +204,9 @@ impl App {
         ]
     }
 
-    /// Renders and shows one frame at `D_I` = `scale`, reading the VDI with `filter`.
-    fn frame(&mut self, scale: f64, filter: VdiFilter) -> Result<(), ViewError> {
+    /// Renders and shows the frame of `plan`, and files its time with the planner.
+    fn frame(&mut self, plan: VdiFramePlan) -> Result<(), ViewError> {
+        let VdiFramePlan { filter, scale, .. } = plan;
         let Some(win) = self.window.as_ref().map(|w| w.inner_size()) else {
             return Ok(());
         };
@@ -259,6 +257,8 @@ impl App {
             return Ok(());
         }
         let ms = start.elapsed().as_secs_f64() * 1e3;
+        self.planner
+            .record(plan, renderer.drawn_with(&self.camera, scale, filter), ms);
         self.shown = Shown {
             ms,
             scale,
@@ -368,14 +368,10 @@ impl ApplicationHandler for App {
             return;
         }
         let moving = self.moving();
-        if self.dirty || !self.full() && !moving {
-            let scale = if moving { self.controller.scale() } else { 1.0 };
-            if let Err(e) = self.frame(scale, self.config.filter.filter(moving)) {
-                return self.fail(event_loop, e);
-            }
-            if moving {
-                self.controller.update(self.shown.ms);
-            }
+        if (self.dirty || !self.full() && !moving)
+            && let Err(e) = self.frame(self.planner.next(moving))
+        {
+            return self.fail(event_loop, e);
         }
         let now = Instant::now();
         // At the end of the rest period: the frame at full resolution.

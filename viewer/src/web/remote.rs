@@ -16,11 +16,12 @@
 //!   unavailable for a while) is sent again after the answer's `Retry-After` while
 //!   [`Viewer::remote_retry`] allows, at most [`MAX_RETRIES`] times, and never once a newer
 //!   request has superseded it.
-//! - [`step`] draws: the newest VDI ray cast for the current camera, at the image-space
-//!   sampling `D_I` a [`FrameRateController`] picks while the camera moves, at full resolution
-//!   once it rests, read between its lists with the filter that the choice of
-//!   [`Viewer::set_vdi_filter`] gives for a moving camera or one at rest (by default the
-//!   nearest list while moving, the linear filter at rest).
+//! - [`step`] draws: the newest VDI ray cast for the current camera, as a [`VdiFramePlanner`]
+//!   plans each frame from the choice of [`Viewer::set_vdi_filter`]: while the camera moves,
+//!   at the image-space sampling `D_I` that holds the target frame time (under `auto`, with
+//!   the nearest list, or with the linear filter at full resolution where its last frame held
+//!   the target); once it rests, at full resolution with the filter the choice gives at rest
+//!   (under `auto`, the linear filter).
 //!   Every VDI is drawn by the same [`VdiPipelines`], compiled when the first one arrives.
 
 use std::cell::RefCell;
@@ -32,11 +33,11 @@ use wasm_bindgen::prelude::*;
 
 use super::{Inner, Viewer, present};
 use crate::error_chain;
-use crate::frame_rate::FrameRateController;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::{VdiFilter, VdiFrame, VdiPipelines, VdiRenderer};
 use crate::scene::{Camera, RenderMode, Scene};
 use crate::vdi_filter_choice::VdiFilterChoice;
+use crate::vdi_frame_plan::{VdiFramePlan, VdiFramePlanner};
 use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
 
 /// A camera this many degrees of orbit (or roll) away from the latest request's asks again.
@@ -63,9 +64,6 @@ pub const TARGET_FRAME_MS: f64 = 1000.0 / 60.0;
 /// How many times one request answered 429 or 503 is sent again before its failure is the
 /// remote mode's error.
 pub const MAX_RETRIES: u32 = 3;
-
-/// The smallest `D_I` the controller may choose.
-const MIN_SCALE: f64 = 0.25;
 
 /// Why the remote mode cannot use the service or an answer of it. Shown on the page as the
 /// service's own errors are.
@@ -192,11 +190,17 @@ pub struct RemoteReport {
     last_error: Option<String>,
     /// `D_I` of the last frame.
     d_i: f64,
-    /// How the VDIs are read between their lists, as the user chose (`auto`: the nearest list
-    /// while the camera moves, the linear filter at rest).
+    /// How the VDIs are read between their lists, as the user chose (`auto`: the linear
+    /// filter at rest, and while the camera moves where its last frame at full resolution held
+    /// the target frame time, else the nearest list).
     vdi_filter: VdiFilterChoice,
     /// The filter the last frame read its VDI with.
     frame_filter: Option<VdiFilter>,
+    /// Frames drawn while the camera moved with the linear filter.
+    moving_frames_linear: u64,
+    /// Time of the last frame the linear filter's pipeline drew at full resolution, ms (what
+    /// `auto` weighs against the target frame time while the camera moves).
+    linear_frame_ms: Option<f64>,
     /// Time of the last frame (ray cast, then presented and the GPU done, or read back), ms.
     frame_ms: Option<f64>,
     /// The linear filter's pipeline is compiled (the page compiles it while the view rests).
@@ -227,7 +231,7 @@ pub(super) struct Remote {
     settled: Option<Scene>,
     arrived: Option<Arrived>,
     drawn: Option<Drawn>,
-    controller: FrameRateController,
+    planner: VdiFramePlanner,
     /// The ray caster's pipelines, compiled when the first VDI arrives.
     pipelines: Option<Rc<VdiPipelines>>,
     /// The camera last seen, and when it last changed (ms, `performance.now()`).
@@ -288,7 +292,7 @@ impl Remote {
             settled: None,
             arrived: None,
             drawn: None,
-            controller: FrameRateController::new(target_frame_ms, MIN_SCALE),
+            planner: VdiFramePlanner::new(VdiFilterChoice::default(), target_frame_ms),
             pipelines: None,
             camera: None,
             changed_ms: f64::NEG_INFINITY,
@@ -363,7 +367,7 @@ impl Remote {
     /// current filter, and none is waiting to be drawn.
     fn frame_current(&self, camera: &Camera) -> bool {
         self.frame.as_ref().is_some_and(|(c, s, f)| {
-            c == camera && *s == 1.0 && *f == self.report.vdi_filter.filter(false)
+            c == camera && *s == 1.0 && *f == self.planner.filter_at_rest()
         }) && !self.need_frame
     }
 
@@ -384,6 +388,8 @@ impl Remote {
             frame_current: self.frame_current(&scene.camera),
             linear_compiled: self.pipelines.as_ref().is_some_and(|p| p.linear_compiled()),
             frame_filter: self.frame.as_ref().map(|(_, _, filter)| *filter),
+            vdi_filter: self.planner.choice(),
+            linear_frame_ms: self.planner.linear_ms(),
             scene_current: self
                 .drawn
                 .as_ref()
@@ -501,8 +507,9 @@ impl Viewer {
     }
 
     /// Reads the VDIs between their lists with the filter choice named `name` (`auto`, the
-    /// default: the nearest list while the camera moves, the linear filter at rest; `nearest`;
-    /// or `linear`): the VDI drawn is drawn again with it where the filter of its frame
+    /// default: the linear filter at rest, and while the camera moves where its last frame at
+    /// full resolution held the target frame time, else the nearest list; `nearest`; or
+    /// `linear`): the VDI drawn is drawn again with it where the filter of its frame
     /// changes, and so are those that follow; the service is not asked again (the filter is the
     /// page's, not the VDI's).
     ///
@@ -516,12 +523,12 @@ impl Viewer {
         let Some(remote) = inner.remote.as_mut() else {
             return Err(JsValue::from_str("no render service given"));
         };
-        if remote.report.vdi_filter == filter {
+        if remote.planner.choice() == filter {
             return Ok(());
         }
         // The next frame draws with it (its pipeline compiled then, in that frame's error
         // scope), if the last frame's filter differs from the one it gives.
-        remote.report.vdi_filter = filter;
+        remote.planner.set_choice(filter);
         if on {
             inner.render_needed = true;
             inner.totals.converged = false;
@@ -677,7 +684,7 @@ impl Viewer {
 pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
     upload(inner).await;
     let now = now_ms();
-    let (gpu, renderer, camera, scale, filter, moving) = {
+    let (gpu, renderer, camera, plan, moving) = {
         let mut i = inner.borrow_mut();
         let i = &mut *i;
         let scene = &i.scene;
@@ -690,32 +697,27 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
             i.totals.converged = false;
             return Ok(false);
         };
-        let filter = remote.report.vdi_filter.filter(moving);
+        let plan = remote.planner.next(moving);
         let due = remote.need_frame
             || match &remote.frame {
-                Some((c, s, f)) => *c != scene.camera || (!moving && *s < 1.0) || *f != filter,
+                Some((c, s, f)) => *c != scene.camera || (!moving && *s < 1.0) || *f != plan.filter,
                 None => true,
             };
         if !due {
             i.totals.converged = remote.converged(scene);
             return Ok(false);
         }
-        let scale = if moving {
-            remote.controller.scale()
-        } else {
-            1.0
-        };
         // Taken now: what changes while this frame is drawn is drawn by the next.
         remote.need_frame = false;
         (
             Rc::clone(&i.gpu),
             Rc::clone(&drawn.renderer),
             scene.camera.clone(),
-            scale,
-            filter,
+            plan,
             moving,
         )
     };
+    let VdiFramePlan { filter, scale, .. } = plan;
     let start = now_ms();
     let on_gpu = inner.borrow().canvas.is_some();
     let drawn = if on_gpu {
@@ -777,21 +779,24 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
             remote.fail(&RemoteError::Gpu(Box::new(e)));
         }
     }
-    record_frame(inner, frame, camera, scale, filter, moving, ms);
+    let drawn = renderer.drawn_with(&camera, scale, filter);
+    record_frame(inner, frame, camera, plan, drawn, moving, ms);
     Ok(true)
 }
 
-/// Files a frame drawn for `camera` at `D_I` = `scale` with `filter` in `ms` (its pixels
-/// when read back): the page's image and totals, and the remote mode's report.
+/// Files a frame drawn for `camera` as `plan` planned, by the pipeline of `drawn`, in `ms`
+/// (its pixels when read back): the page's image and totals, the remote mode's report, and
+/// the planner's measures.
 fn record_frame(
     inner: &Rc<RefCell<Inner>>,
     frame: Option<VdiFrame>,
     camera: Camera,
-    scale: f64,
-    filter: VdiFilter,
+    plan: VdiFramePlan,
+    drawn: VdiFilter,
     moving: bool,
     ms: f64,
 ) {
+    let VdiFramePlan { filter, scale, .. } = plan;
     let mut i = inner.borrow_mut();
     let i = &mut *i;
     if let Some(frame) = frame {
@@ -804,8 +809,9 @@ fn record_frame(
     let Some(remote) = i.remote.as_mut() else {
         return;
     };
-    if moving {
-        remote.controller.update(ms);
+    remote.planner.record(plan, drawn, ms);
+    if moving && filter == VdiFilter::Linear {
+        remote.report.moving_frames_linear += 1;
     }
     remote.frame = Some((camera, scale, filter));
     remote.report.frames += 1;
