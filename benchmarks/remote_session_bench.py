@@ -3,7 +3,8 @@
 streaming mode), along the same recorded camera path, on the same store, in the same run. The
 remote mode runs twice: reading the VDIs with the nearest list (`?vdi_filter=nearest`) and with
 the linear filter across lists (`?vdi_filter=linear`). The page's default, `auto`, draws as the
-first while the camera moves and as the second at rest.
+second at rest, and while the camera moves as the second where its frames hold the target frame
+rate, else as the first.
 
     python3 benchmarks/remote_session_bench.py [--short] [--docs] [--out-dir DIR] [--data-dir DIR]
         [--mbit 100] [--rtt-ms 20]

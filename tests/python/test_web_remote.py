@@ -494,10 +494,13 @@ def test_auto_moves_with_the_linear_filter_where_its_frames_hold_the_target(serv
         assert dragged["frames"] > rested["frames"], (rested, dragged)
         assert dragged["frame_filter"] == "linear" and dragged["d_i"] == 1.0, dragged
         if fps == 1:
-            assert dragged["moving_frames_linear"] >= 1, dragged
+            # Every frame since the rest was a moving linear one, and the last of them, at
+            # full resolution with the filter at rest, is the frame at rest too.
+            assert dragged["moving_frames_linear"] == dragged["frames"] - rested["frames"] >= 1, (rested, dragged)
             assert dragged["frames_subsampled"] == rested["frames_subsampled"], (rested, dragged)
         else:
-            assert rested["linear_frame_ms"] > 1, rested
+            # On SwiftShader (a real GPU might draw it within the 1 ms, and 1.1 ms of slack).
+            assert rested["linear_frame_ms"] > 1.1, rested
             assert dragged["moving_frames_linear"] == 0, dragged
             assert dragged["frames_subsampled"] > rested["frames_subsampled"], (rested, dragged)
         assert errors(console, ["status of 503"]) == []

@@ -11,7 +11,10 @@
 //! closer to direct volume rendering away from the VDI's camera (16 channels at 10° on the VDI
 //! bench: SSIM 0.988 against the nearest list's 0.970), so a device with time to spare spends
 //! it on that. A linear frame over the target hands the rest of the motion to the nearest list
-//! and the controller; the next frame at rest measures the linear filter again. Until a linear
+//! and the controller; the next linear frame at full resolution, at rest, measures the linear
+//! filter again (where the last frame of a motion is a linear one, it is the rest frame: the
+//! next motion then reads the nearest list, and the rest after it measures). "Held" allows
+//! [`TARGET_SLACK`]. Until a linear
 //! frame has been measured (a frame along the VDI's own rays is drawn by the nearest pipeline,
 //! whatever the filter asked), moving frames read the nearest list: no device pays a slow
 //! frame to find out.
@@ -22,6 +25,11 @@ use crate::vdi_filter_choice::VdiFilterChoice;
 
 /// The smallest `D_I` the controller may choose.
 pub const MIN_SCALE: f64 = 0.25;
+
+/// A linear frame this many times the target still holds it: a window's frames paced by the
+/// display's refresh (a FIFO surface waits for it) take the target itself, give or take the
+/// clock, whatever the ray caster costs below it.
+pub const TARGET_SLACK: f64 = 1.1;
 
 /// One frame to draw.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -93,7 +101,7 @@ impl VdiFramePlanner {
         }
         let linear_fits = self
             .linear_ms
-            .is_some_and(|ms| ms <= self.controller.target_ms);
+            .is_some_and(|ms| ms <= TARGET_SLACK * self.controller.target_ms);
         if self.choice == VdiFilterChoice::Auto && linear_fits {
             return at(VdiFilter::Linear, 1.0, false);
         }
@@ -145,11 +153,12 @@ mod tests {
         // resolution, and leave the controller alone.
         p.record(p.next(false), Linear, 8.0);
         assert_eq!((p.linear_ms(), next(&p, true)), (Some(8.0), (Linear, 1.0)));
-        p.record(p.next(true), Linear, 10.0);
+        p.record(p.next(true), Linear, 11.0);
         assert_eq!(next(&p, true), (Linear, 1.0));
-        // One over the target: the rest of the motion is the nearest list's, at the D_I the
-        // controller had (its slow frames above), until a linear frame holds the target again.
-        p.record(p.next(true), Linear, 10.5);
+        // One over the target and its slack: the rest of the motion is the nearest list's, at
+        // the D_I the controller had (its slow frames above), until a linear frame holds the
+        // target again.
+        p.record(p.next(true), Linear, 11.5);
         assert_eq!(next(&p, true), (Nearest, scale));
         p.record(p.next(false), Linear, 9.0);
         assert_eq!(next(&p, true), (Linear, 1.0));

@@ -192,7 +192,7 @@ pub struct RemoteReport {
     d_i: f64,
     /// How the VDIs are read between their lists, as the user chose (`auto`: the linear
     /// filter at rest, and while the camera moves where its last frame at full resolution held
-    /// the target frame time, else the nearest list).
+    /// the target frame time, else the nearest list); the planner's, filled in by `report()`.
     vdi_filter: VdiFilterChoice,
     /// The filter the last frame read its VDI with.
     frame_filter: Option<VdiFilter>,
@@ -700,7 +700,13 @@ pub(super) async fn step(inner: &Rc<RefCell<Inner>>) -> Result<bool, GpuError> {
         let plan = remote.planner.next(moving);
         let due = remote.need_frame
             || match &remote.frame {
-                Some((c, s, f)) => *c != scene.camera || (!moving && *s < 1.0) || *f != plan.filter,
+                // A frame of this camera at full resolution with the filter at rest is as good
+                // as any the plan could draw now (a moving linear frame over the target is
+                // followed by the nearest list's, but not of the same view).
+                Some((c, s, f)) => {
+                    let best = *s >= 1.0 && *f == remote.planner.filter_at_rest();
+                    *c != scene.camera || (!moving && *s < 1.0) || (*f != plan.filter && !best)
+                }
                 None => true,
             };
         if !due {
