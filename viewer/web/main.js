@@ -233,6 +233,8 @@ function showStats() {
       (r.service_adapter ? `service GPU ${r.service_adapter.name} (${r.service_adapter.backend})\n` : "") +
       `VDIs received ${r.vdis_received} (${(r.vdi_bytes_received / (1 << 20)).toFixed(1)} MiB) · requests ${r.requests_sent} · retried ${r.requests_retried} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
       `D_I ${r.d_i.toFixed(2)} · ${r.vdi_filter} filter` + (r.vdi_filter === "auto" && r.frame_filter ? ` (${r.frame_filter})` : "") + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
+      // What decides auto's filter while the camera moves: the last linear frame's time.
+      (r.vdi_filter === "auto" && r.linear_frame_ms != null ? ` · linear ${r.linear_frame_ms.toFixed(1)} ms` : "") +
       (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n";
   }
   if (s.error) {
@@ -612,7 +614,8 @@ window.residency = {
   /** {frame, converged, bricks_fetched, bytes_fetched, error, controls_built, ..., remote:
    * {mode, service_adapter: {name, backend}, requests_sent, requests_retried,
    * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, last_error, d_i,
-   * vdi_camera, converged, ...} with a render service, else null}. */
+   * vdi_filter, frame_filter, linear_frame_ms, moving_frames_linear, vdi_camera, converged,
+   * ...} with a render service, else null}. */
   state,
   /** What the orientation overlay shows: {scale: {length, unit, pixels}, axes: {x, y, z: the
    * screen direction [right, down] of each world axis}}; null before the first frame. */

@@ -179,7 +179,7 @@ impl App {
         let h = &self.vdi.header;
         let name: String = self.name.chars().take(16).collect();
         let s = &self.shown;
-        vec![
+        let mut lines = vec![
             (format!("{name}  VDI frame {}", self.frames), WHITE),
             (
                 format!(
@@ -201,7 +201,12 @@ impl App {
             ),
             ("drag orbit, shift/right pan, wheel zoom".into(), GREY),
             ("r h q".into(), GREY),
-        ]
+        ];
+        // What decides `auto`'s filter while the camera moves.
+        if let (VdiFilterChoice::Auto, Some(ms)) = (self.config.filter, self.planner.linear_ms()) {
+            lines.insert(3, (format!("last linear frame {ms:.1} ms"), GREY));
+        }
+        lines
     }
 
     /// Renders and shows the frame of `plan`, and files its time with the planner.
