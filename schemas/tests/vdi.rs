@@ -599,3 +599,41 @@ fn encode_refuses_what_decode_would() {
         "VDI to encode: colour has 11 entries, the header and counts imply 12"
     );
 }
+
+/// `encode` checks and converts bands of rows in parallel, yet refuses with the first bad slot
+/// in the file's order, and writes the same bytes as one band at a time would (the round trip
+/// gives every value back).
+#[test]
+fn encode_names_the_first_bad_slot_in_the_files_order_across_bands() {
+    let mut h = header(
+        ColourFormat::F16,
+        DepthFormat::F32,
+        Compression::ShuffledLz4,
+    );
+    h.height = 40;
+    let mut good = VolumetricDepthImage::new(h);
+    good.counts = (0..120).map(|i| (i % 3) as u8).collect();
+    for (i, &count) in good.counts.clone().iter().enumerate() {
+        for s in 0..count {
+            good.colour.push([0.25, 0.5, 0.125, 0.5]);
+            let front = 1.0 + 0.01 * i as f32 + s as f32;
+            good.depth.push([front, front + 0.5]);
+        }
+    }
+    let back = VolumetricDepthImage::decode(&good.encode().unwrap(), FILE).unwrap();
+    assert_eq!(back, good);
+    // Slots of lists (1, 35) and (2, 3): rows 35 and 3, bands apart.
+    let slot_of = |x: usize, y: usize| good.starts()[y * 3 + x];
+    let mut image = good.clone();
+    image.colour[slot_of(1, 35)][3] = 2.0;
+    assert_eq!(
+        image.encode().unwrap_err().to_string(),
+        "VDI to encode: list (1, 35) supersegment 0 has colour and opacity [0.25, 0.5, 0.125, 2.0]: \
+         a colour below 0 or an opacity outside [0, 1]"
+    );
+    image.depth[slot_of(2, 3) + 1] = [f32::INFINITY, 1.0];
+    assert_eq!(
+        image.encode().unwrap_err().to_string(),
+        "VDI to encode: list (2, 3) supersegment 1 has a non-finite depth"
+    );
+}
