@@ -63,10 +63,10 @@
 use std::borrow::Cow;
 
 use half::f16;
-use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+mod encode;
 mod error;
 
 pub use error::VdiError;
@@ -224,20 +224,7 @@ pub enum Compression {
     ShuffledLz4,
 }
 
-/// `raw`'s bytes regrouped by their place in a value of `width` bytes (the shuffle of
-/// [`Compression::ShuffledLz4`]); `raw` holds whole values.
-fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
-    let n = raw.len() / width;
-    let mut out = vec![0; raw.len()];
-    for (i, value) in raw.chunks_exact(width).enumerate() {
-        for (b, &byte) in value.iter().enumerate() {
-            out[b * n + i] = byte;
-        }
-    }
-    out
-}
-
-/// The inverse of [`shuffle`].
+/// The inverse of [`encode::shuffle`].
 fn unshuffle(shuffled: &[u8], width: usize) -> Vec<u8> {
     let n = shuffled.len() / width;
     let mut out = vec![0; shuffled.len()];
@@ -591,27 +578,6 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// One plane of values of `width` bytes as the file stores it: compressed as the header says.
-fn stored_plane(raw: &[u8], compression: Compression, width: usize) -> Cow<'_, [u8]> {
-    match compression {
-        Compression::None => Cow::Borrowed(raw),
-        Compression::Lz4 => Cow::Owned(lz4_flex::block::compress_prepend_size(raw)),
-        Compression::ShuffledLz4 => {
-            Cow::Owned(lz4_flex::block::compress_prepend_size(&shuffle(raw, width)))
-        }
-    }
-}
-
-/// Appends a plane as [`stored_plane`] made it: its length, then its bytes.
-fn push_plane(out: &mut Vec<u8>, stored: &[u8]) {
-    out.extend_from_slice(&(stored.len() as u64).to_le_bytes());
-    out.extend_from_slice(stored);
-}
-
-/// Rows of lists per band that [`VolumetricDepthImage::encode`] checks and converts at once,
-/// the bands in parallel.
-const ENCODE_BAND_ROWS: usize = 16;
-
 impl VolumetricDepthImage {
     /// An image of `header`'s sizes with every list empty (all counts zero, no
     /// supersegments).
@@ -692,153 +658,6 @@ impl VolumetricDepthImage {
             (rgb[i] + transmittance * f64::from(self.header.background[i])) as f32
         });
         [r, g, b, (1.0 - transmittance) as f32]
-    }
-
-    /// The image as a VDI file (the layout in the module documentation).
-    ///
-    /// # Errors
-    /// A [`VdiError`] naming `VDI to encode` when the image is one
-    /// [`VolumetricDepthImage::decode`] would refuse: a header out of range, arrays of other
-    /// lengths than the header implies, a count above N_S, or a used slot with a non-finite
-    /// value, a colour below 0, an opacity outside `[0, 1]`, depths not
-    /// `0 ≤ front ≤ back`, or a front before the back of the slot before it in its list.
-    pub fn encode(&self) -> Result<Vec<u8>, VdiError> {
-        let header = &self.header;
-        let shape = check_header(header, ENCODING)?;
-        let length_error = |array, length, expected: usize| VdiError::Length {
-            file: ENCODING.to_owned(),
-            array,
-            length,
-            expected: expected as u64,
-        };
-        if self.counts.len() != shape.lists {
-            return Err(length_error("counts", self.counts.len(), shape.lists));
-        }
-        let slots = used_slots(&self.counts, header, ENCODING)?;
-        for (array, length) in [("colour", self.colour.len()), ("depth", self.depth.len())] {
-            if length != slots {
-                return Err(length_error(array, length, slots));
-            }
-        }
-        let json = serde_json::to_vec(header).expect("a checked VDI header always serializes");
-        let header_length = json.len() as u64;
-        if header_length > u64::from(MAX_HEADER_BYTES) {
-            return Err(VdiError::HeaderTooLong {
-                file: ENCODING.to_owned(),
-                length: header_length,
-            });
-        }
-        let (colour, depth) = self.slot_planes(slots)?;
-        // The three planes compressed at once (the colour and depth planes are the work).
-        let compression = header.compression;
-        let ((counts, colour), depth) = rayon::join(
-            || {
-                rayon::join(
-                    || stored_plane(&self.counts, compression, 1),
-                    || stored_plane(&colour, compression, header.colour.value_bytes()),
-                )
-            },
-            || stored_plane(&depth, compression, header.depth.value_bytes()),
-        );
-        let mut out =
-            Vec::with_capacity(12 + json.len() + 24 + counts.len() + colour.len() + depth.len());
-        out.extend_from_slice(&VDI_MAGIC);
-        out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-        out.extend_from_slice(&json);
-        push_plane(&mut out, &counts);
-        push_plane(&mut out, &colour);
-        push_plane(&mut out, &depth);
-        Ok(out)
-    }
-
-    /// The colour and depth planes of [`VolumetricDepthImage::encode`], uncompressed, of the
-    /// `slots` supersegments the counts imply: every slot checked as `decode` would, and
-    /// converted to the header's formats, in bands of [`ENCODE_BAND_ROWS`] rows in parallel.
-    ///
-    /// # Errors
-    /// The [`VdiError`] of the first slot, in the file's order, that `decode` would refuse.
-    fn slot_planes(&self, slots: usize) -> Result<(Vec<u8>, Vec<u8>), VdiError> {
-        let header = &self.header;
-        let (colour_bytes, depth_bytes) = (header.colour.slot_bytes(), header.depth.slot_bytes());
-        let mut colour = vec![0; slots * colour_bytes];
-        let mut depth = vec![0; slots * depth_bytes];
-        let starts = self.starts();
-        let width = header.width as usize;
-        let band = ENCODE_BAND_ROWS * width;
-        let mut bands = Vec::new();
-        let (mut colour_rest, mut depth_rest) = (&mut colour[..], &mut depth[..]);
-        for first in (0..self.counts.len()).step_by(band.max(1)) {
-            let lists = first..(first + band).min(self.counts.len());
-            let n = starts[lists.end] - starts[lists.start];
-            let (c, c_rest) = colour_rest.split_at_mut(n * colour_bytes);
-            let (d, d_rest) = depth_rest.split_at_mut(n * depth_bytes);
-            (colour_rest, depth_rest) = (c_rest, d_rest);
-            bands.push((lists, c, d));
-        }
-        let checked: Vec<Result<(), VdiError>> = bands
-            .into_par_iter()
-            .map(|(lists, c, d)| self.encode_lists(lists, &starts, c, d))
-            .collect();
-        checked
-            .into_iter()
-            .find_map(Result::err)
-            .map_or(Ok(()), Err)?;
-        Ok((colour, depth))
-    }
-
-    /// Checks and converts the supersegments of `lists` (indices, row-major) into `colour`
-    /// and `depth`, the planes' bytes of exactly those supersegments.
-    ///
-    /// # Errors
-    /// The [`VdiError`] of the first slot `decode` would refuse.
-    fn encode_lists(
-        &self,
-        lists: std::ops::Range<usize>,
-        starts: &[usize],
-        colour: &mut [u8],
-        depth: &mut [u8],
-    ) -> Result<(), VdiError> {
-        let header = &self.header;
-        let width = header.width as usize;
-        let mut colour_slots = colour.chunks_exact_mut(header.colour.slot_bytes());
-        let mut depth_slots = depth.chunks_exact_mut(header.depth.slot_bytes());
-        for index in lists {
-            let (x, y) = ((index % width) as u32, (index / width) as u32);
-            let start = starts[index];
-            for s in 0..starts[index + 1] - start {
-                let (c, d) = (self.colour[start + s], self.depth[start + s]);
-                let previous_back = (s > 0).then(|| self.depth[start + s - 1][1]);
-                check_slot(ENCODING, (x, y, s as u32), c, d, previous_back)?;
-                let (Some(c_out), Some(d_out)) = (colour_slots.next(), depth_slots.next()) else {
-                    unreachable!("a band's planes hold exactly its supersegments");
-                };
-                match header.colour {
-                    ColourFormat::F16 => {
-                        for (o, v) in c_out.chunks_exact_mut(2).zip(c) {
-                            o.copy_from_slice(&f16::from_f32(v).to_le_bytes());
-                        }
-                    }
-                    ColourFormat::F32 => {
-                        for (o, v) in c_out.chunks_exact_mut(4).zip(c) {
-                            o.copy_from_slice(&v.to_le_bytes());
-                        }
-                    }
-                }
-                match header.depth {
-                    DepthFormat::F32 => {
-                        for (o, v) in d_out.chunks_exact_mut(4).zip(d) {
-                            o.copy_from_slice(&v.to_le_bytes());
-                        }
-                    }
-                    DepthFormat::U16 => {
-                        for (o, v) in d_out.chunks_exact_mut(2).zip(d) {
-                            o.copy_from_slice(&quantise(v, header.near, header.far).to_le_bytes());
-                        }
-                    }
-                }
-            }
-        }
-        Ok(())
     }
 
     /// Reads a VDI file (the layout in the module documentation); `source` (the file name or
@@ -942,6 +761,7 @@ impl VolumetricDepthImage {
 
 #[cfg(test)]
 mod tests {
+    use super::encode::shuffle;
     use super::*;
 
     #[test]

@@ -600,40 +600,113 @@ fn encode_refuses_what_decode_would() {
     );
 }
 
-/// `encode` checks and converts bands of rows in parallel, yet refuses with the first bad slot
-/// in the file's order, and writes the same bytes as one band at a time would (the round trip
-/// gives every value back).
+/// The file as the module documentation lays it out, written one slot after the other: the
+/// reference the parallel encoder must match byte for byte.
+fn reference_encoding(image: &VolumetricDepthImage) -> Vec<u8> {
+    let h = &image.header;
+    let (mut colour, mut depth) = (Vec::new(), Vec::new());
+    for (c, d) in image.colour.iter().zip(&image.depth) {
+        for &v in c {
+            match h.colour {
+                ColourFormat::F16 => colour.extend_from_slice(&f16::from_f32(v).to_le_bytes()),
+                ColourFormat::F32 => colour.extend_from_slice(&v.to_le_bytes()),
+            }
+        }
+        for &v in d {
+            match h.depth {
+                DepthFormat::F32 => depth.extend_from_slice(&v.to_le_bytes()),
+                DepthFormat::U16 => {
+                    let t =
+                        (f64::from(v) - f64::from(h.near)) / (f64::from(h.far) - f64::from(h.near));
+                    let q = (t * 65535.0).round().clamp(0.0, 65535.0) as u16;
+                    depth.extend_from_slice(&q.to_le_bytes());
+                }
+            }
+        }
+    }
+    let plane = |raw: &[u8], width: usize| match h.compression {
+        Compression::None => raw.to_vec(),
+        Compression::Lz4 => lz4_flex::block::compress_prepend_size(raw),
+        Compression::ShuffledLz4 => {
+            let n = raw.len() / width;
+            let mut shuffled = vec![0; raw.len()];
+            for (i, value) in raw.chunks_exact(width).enumerate() {
+                for (b, &byte) in value.iter().enumerate() {
+                    shuffled[b * n + i] = byte;
+                }
+            }
+            lz4_flex::block::compress_prepend_size(&shuffled)
+        }
+    };
+    let json = serde_json::to_vec(h).unwrap();
+    let mut out = VDI_MAGIC.to_vec();
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(&json);
+    let colour_width = if h.colour == ColourFormat::F16 { 2 } else { 4 };
+    let depth_width = if h.depth == DepthFormat::U16 { 2 } else { 4 };
+    for p in [
+        plane(&image.counts, 1),
+        plane(&colour, colour_width),
+        plane(&depth, depth_width),
+    ] {
+        out.extend_from_slice(&(p.len() as u64).to_le_bytes());
+        out.extend_from_slice(&p);
+    }
+    out
+}
+
+/// `encode` checks and converts bands of 16 rows of lists in parallel, yet writes the bytes a
+/// slot-by-slot encoder writes, in every format, and refuses with the first bad slot in the
+/// file's order.
 #[test]
-fn encode_names_the_first_bad_slot_in_the_files_order_across_bands() {
-    let mut h = header(
-        ColourFormat::F16,
-        DepthFormat::F32,
-        Compression::ShuffledLz4,
-    );
+fn encode_in_bands_writes_the_files_bytes_and_names_its_first_bad_slot() {
+    let mut h = header(ColourFormat::F16, DepthFormat::F32, Compression::None);
     h.height = 40;
     let mut good = VolumetricDepthImage::new(h);
+    // Every third list empty, so that a list often follows an empty one.
     good.counts = (0..120).map(|i| (i % 3) as u8).collect();
     for (i, &count) in good.counts.clone().iter().enumerate() {
         for s in 0..count {
-            good.colour.push([0.25, 0.5, 0.125, 0.5]);
-            let front = 1.0 + 0.01 * i as f32 + s as f32;
+            let a = 0.25 + 0.005 * i as f32 + 0.125 * f32::from(s);
+            good.colour
+                .push([0.5 * a, 0.25 * a, 0.125 + 0.001 * i as f32, a]);
+            let front = 1.0 + 0.05 * i as f32 + f32::from(s);
             good.depth.push([front, front + 0.5]);
         }
     }
-    let back = VolumetricDepthImage::decode(&good.encode().unwrap(), FILE).unwrap();
-    assert_eq!(back, good);
-    // Slots of lists (1, 35) and (2, 3): rows 35 and 3, bands apart.
+    for colour in [ColourFormat::F16, ColourFormat::F32] {
+        for depth in [DepthFormat::F32, DepthFormat::U16] {
+            for compression in [
+                Compression::None,
+                Compression::Lz4,
+                Compression::ShuffledLz4,
+            ] {
+                let mut image = good.clone();
+                (image.header.colour, image.header.depth) = (colour, depth);
+                image.header.compression = compression;
+                let bytes = image.encode().unwrap();
+                assert_eq!(
+                    bytes,
+                    reference_encoding(&image),
+                    "{colour:?} {depth:?} {compression:?}"
+                );
+                let back = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
+                assert_eq!(back.counts, image.counts);
+            }
+        }
+    }
+    // The last slot of band 0 (list (2, 15)) and a slot of band 2 (list (1, 35)).
     let slot_of = |x: usize, y: usize| good.starts()[y * 3 + x];
     let mut image = good.clone();
     image.colour[slot_of(1, 35)][3] = 2.0;
-    assert_eq!(
-        image.encode().unwrap_err().to_string(),
-        "VDI to encode: list (1, 35) supersegment 0 has colour and opacity [0.25, 0.5, 0.125, 2.0]: \
-         a colour below 0 or an opacity outside [0, 1]"
+    let message = image.encode().unwrap_err().to_string();
+    assert!(
+        message.starts_with("VDI to encode: list (1, 35) supersegment 0 has colour and opacity ["),
+        "{message}"
     );
-    image.depth[slot_of(2, 3) + 1] = [f32::INFINITY, 1.0];
+    image.depth[slot_of(2, 15) + 1] = [f32::INFINITY, 1.0];
     assert_eq!(
         image.encode().unwrap_err().to_string(),
-        "VDI to encode: list (2, 3) supersegment 1 has a non-finite depth"
+        "VDI to encode: list (2, 15) supersegment 1 has a non-finite depth"
     );
 }
