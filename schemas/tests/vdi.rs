@@ -65,6 +65,24 @@ fn sample(
     image
 }
 
+/// Every colour format, depth format and compression, each with each.
+fn every_format() -> impl Iterator<Item = (ColourFormat, DepthFormat, Compression)> {
+    [ColourFormat::F16, ColourFormat::F32]
+        .into_iter()
+        .flat_map(|colour| {
+            [DepthFormat::F32, DepthFormat::U16]
+                .into_iter()
+                .flat_map(move |depth| {
+                    [
+                        Compression::Lz4,
+                        Compression::None,
+                        Compression::ShuffledLz4,
+                    ]
+                    .map(|compression| (colour, depth, compression))
+                })
+        })
+}
+
 /// Where the planes start: after the magic, the header length and the header.
 fn planes_start(bytes: &[u8]) -> usize {
     12 + u32::from_le_bytes(bytes[8..12].try_into().unwrap()) as usize
@@ -95,49 +113,41 @@ fn plain() -> Vec<u8> {
 
 #[test]
 fn every_format_round_trips_within_its_precision() {
-    for colour in [ColourFormat::F16, ColourFormat::F32] {
-        for depth in [DepthFormat::F32, DepthFormat::U16] {
-            for compression in [
-                Compression::Lz4,
-                Compression::None,
-                Compression::ShuffledLz4,
-            ] {
-                let image = sample(colour, depth, compression);
-                let bytes = image.encode().unwrap();
-                let back = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
-                let case = format!("{colour:?} {depth:?} {compression:?}");
-                assert_eq!(back.header, image.header, "{case}");
-                assert_eq!(back.counts, image.counts, "{case}");
-                assert_eq!((back.colour.len(), back.depth.len()), (11, 11), "{case}");
-                assert_eq!(back.starts(), [0, 2, 2, 6, 7, 10, 11], "{case}");
-                for (i, (b, a)) in back.colour.iter().zip(&image.colour).enumerate() {
-                    for (&b, &a) in b.iter().zip(a) {
-                        match colour {
-                            ColourFormat::F32 => assert_eq!(b.to_bits(), a.to_bits(), "{case}"),
-                            ColourFormat::F16 => {
-                                assert_eq!(b, f16::from_f32(a).to_f32(), "{case} slot {i}");
-                                assert!((b - a).abs() <= a * 2f32.powi(-11), "{case} {a} {b}");
-                            }
-                        }
+    for (colour, depth, compression) in every_format() {
+        let image = sample(colour, depth, compression);
+        let bytes = image.encode().unwrap();
+        let back = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
+        let case = format!("{colour:?} {depth:?} {compression:?}");
+        assert_eq!(back.header, image.header, "{case}");
+        assert_eq!(back.counts, image.counts, "{case}");
+        assert_eq!((back.colour.len(), back.depth.len()), (11, 11), "{case}");
+        assert_eq!(back.starts(), [0, 2, 2, 6, 7, 10, 11], "{case}");
+        for (i, (b, a)) in back.colour.iter().zip(&image.colour).enumerate() {
+            for (&b, &a) in b.iter().zip(a) {
+                match colour {
+                    ColourFormat::F32 => assert_eq!(b.to_bits(), a.to_bits(), "{case}"),
+                    ColourFormat::F16 => {
+                        assert_eq!(b, f16::from_f32(a).to_f32(), "{case} slot {i}");
+                        assert!((b - a).abs() <= a * 2f32.powi(-11), "{case} {a} {b}");
                     }
                 }
-                let step = (9.0 - 1.0) / 65535.0;
-                for (b, a) in back.depth.iter().zip(&image.depth) {
-                    for (&b, &a) in b.iter().zip(a) {
-                        match depth {
-                            DepthFormat::F32 => assert_eq!(b.to_bits(), a.to_bits(), "{case}"),
-                            DepthFormat::U16 => assert!(
-                                f64::from((b - a).abs()) <= step / 2.0 + f64::from(a) * 1e-7,
-                                "{case} {a} {b}"
-                            ),
-                        }
-                    }
-                }
-                // A second trip changes nothing.
-                let again = VolumetricDepthImage::decode(&back.encode().unwrap(), FILE).unwrap();
-                assert_eq!(again, back, "{case}");
             }
         }
+        let step = (9.0 - 1.0) / 65535.0;
+        for (b, a) in back.depth.iter().zip(&image.depth) {
+            for (&b, &a) in b.iter().zip(a) {
+                match depth {
+                    DepthFormat::F32 => assert_eq!(b.to_bits(), a.to_bits(), "{case}"),
+                    DepthFormat::U16 => assert!(
+                        f64::from((b - a).abs()) <= step / 2.0 + f64::from(a) * 1e-7,
+                        "{case} {a} {b}"
+                    ),
+                }
+            }
+        }
+        // A second trip changes nothing.
+        let again = VolumetricDepthImage::decode(&back.encode().unwrap(), FILE).unwrap();
+        assert_eq!(again, back, "{case}");
     }
 }
 
@@ -674,26 +684,18 @@ fn encode_in_bands_writes_the_files_bytes_and_names_its_first_bad_slot() {
             good.depth.push([front, front + 0.5]);
         }
     }
-    for colour in [ColourFormat::F16, ColourFormat::F32] {
-        for depth in [DepthFormat::F32, DepthFormat::U16] {
-            for compression in [
-                Compression::None,
-                Compression::Lz4,
-                Compression::ShuffledLz4,
-            ] {
-                let mut image = good.clone();
-                (image.header.colour, image.header.depth) = (colour, depth);
-                image.header.compression = compression;
-                let bytes = image.encode().unwrap();
-                assert_eq!(
-                    bytes,
-                    reference_encoding(&image),
-                    "{colour:?} {depth:?} {compression:?}"
-                );
-                let back = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
-                assert_eq!(back.counts, image.counts);
-            }
-        }
+    for (colour, depth, compression) in every_format() {
+        let mut image = good.clone();
+        (image.header.colour, image.header.depth) = (colour, depth);
+        image.header.compression = compression;
+        let bytes = image.encode().unwrap();
+        assert_eq!(
+            bytes,
+            reference_encoding(&image),
+            "{colour:?} {depth:?} {compression:?}"
+        );
+        let back = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
+        assert_eq!(back.counts, image.counts);
     }
     // The last slot of band 0 (list (2, 15)) and a slot of band 2 (list (1, 35)).
     let slot_of = |x: usize, y: usize| good.starts()[y * 3 + x];

@@ -576,7 +576,13 @@ impl VdiRenderer {
     /// `filter`'s. What a frame's time says the filter costs.
     pub fn drawn_with(&self, camera: &Camera, scale: f64, filter: VdiFilter) -> VdiFilter {
         let view = self.view(camera, true, self.rays(scale));
-        if self.along_lists(&view) {
+        Self::pipeline_filter(self.along_lists(&view), filter)
+    }
+
+    /// [`VdiRenderer::drawn_with`] for a frame that casts the VDI's own rays (`along_lists`)
+    /// or not.
+    fn pipeline_filter(along_lists: bool, filter: VdiFilter) -> VdiFilter {
+        if along_lists {
             VdiFilter::Nearest
         } else {
             filter
@@ -658,9 +664,9 @@ impl VdiRenderer {
     ) -> (&wgpu::Buffer, (u32, u32)) {
         let rays = self.rays(scale);
         let full = rays == (self.width, self.height);
-        let filter = self.drawn_with(camera, scale, filter);
         let mut view = self.view(camera, skipping, rays);
         let along_lists = self.along_lists(&view);
+        let filter = Self::pipeline_filter(along_lists, filter);
         if along_lists {
             // Each ray stays in its own list, where crossing the tile's empty depth bins is
             // only extra steps (same pixels: the skipping tests).
