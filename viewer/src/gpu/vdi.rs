@@ -154,7 +154,6 @@ impl VdiCompactor {
             ],
         );
         let (state, readback) = (&target.state, &target.state_readback);
-        let slots = read_back(gpu, &self.gather, &gather, grid, state, readback).await?;
         let mut generation = VdiGeneration {
             image: VolumetricDepthImage::new(header),
             dvr: Vec::with_capacity(pixels as usize),
@@ -163,15 +162,18 @@ impl VdiCompactor {
         };
         let mut starts = Vec::with_capacity(pixels as usize);
         let mut used = 0u32;
-        for (p, pair) in slots.chunks_exact(2).enumerate() {
-            let count = pair[1][0].to_bits().min(n);
-            generation.dvr.push(pair[0]);
-            generation.gamma.push(pair[1][1]);
-            generation.marches += u64::from(pair[1][2].to_bits());
-            generation.image.counts[p] = count as u8;
-            starts.push(used);
-            used += count;
-        }
+        read_back(gpu, &self.gather, &gather, grid, state, readback, |slots| {
+            for (p, pair) in slots.chunks_exact(2).enumerate() {
+                let count = pair[1][0].to_bits().min(n);
+                generation.dvr.push(pair[0]);
+                generation.gamma.push(pair[1][1]);
+                generation.marches += u64::from(pair[1][2].to_bits());
+                generation.image.counts[p] = count as u8;
+                starts.push(used);
+                used += count;
+            }
+        })
+        .await?;
         gpu.queue
             .write_buffer(&target.starts, 0, bytemuck::cast_slice(&starts));
         let packed_bytes = u64::from(used) * SLOT_BYTES;
@@ -197,21 +199,25 @@ impl VdiCompactor {
             ],
         );
         let readback = readback_buffer(gpu, "vdi packed readback", packed.size());
-        let slots = read_back(gpu, &self.scatter, &scatter, grid, &packed, &readback).await?;
         let image = &mut generation.image;
-        image.colour.reserve_exact(used as usize);
-        image.depth.reserve_exact(used as usize);
-        for slot in &slots[..used as usize] {
-            let [r, g] = unpack_half2(slot[0]);
-            let [b, a] = unpack_half2(slot[1]);
-            image.colour.push([r, g, b, a]);
-            image.depth.push([slot[2], slot[3]]);
-        }
+        read_back(
+            gpu,
+            &self.scatter,
+            &scatter,
+            grid,
+            &packed,
+            &readback,
+            |slots| {
+                unpack_slots(&slots[..used as usize], &mut image.colour, &mut image.depth);
+            },
+        )
+        .await?;
         Ok(generation)
     }
 }
 
-/// Runs `pipeline` over the grid and reads `output` back through `readback` (of its size).
+/// Runs `pipeline` over the grid, copies `output` into `readback` (of its size), maps it and
+/// hands its slots to `read` where they lie (the mapped memory, no copy of it).
 async fn read_back(
     gpu: &Gpu,
     pipeline: &wgpu::ComputePipeline,
@@ -219,7 +225,8 @@ async fn read_back(
     grid: (u32, u32),
     output: &wgpu::Buffer,
     readback: &wgpu::Buffer,
-) -> Result<Vec<[f32; 4]>, GpuError> {
+    read: impl FnOnce(&[[f32; 4]]),
+) -> Result<(), GpuError> {
     let mut encoder = gpu
         .device
         .create_command_encoder(&wgpu::CommandEncoderDescriptor {
@@ -237,9 +244,29 @@ async fn read_back(
     encoder.copy_buffer_to_buffer(output, 0, readback, 0, output.size());
     gpu.queue.submit([encoder.finish()]);
     map_for_reading(&gpu.device, &[readback]).await?;
-    let slots = bytemuck::cast_slice(&readback.get_mapped_range(..)?).to_vec();
+    read(bytemuck::cast_slice(&readback.get_mapped_range(..)?));
     readback.unmap();
-    Ok(slots)
+    Ok(())
+}
+
+/// The packed slots as the VDI holds them: each slot's colour (four half floats in its first
+/// two words) as `f32`, and its front and back depths. Native builds unpack on rayon's
+/// threads.
+fn unpack_slots(slots: &[[f32; 4]], colour: &mut Vec<[f32; 4]>, depth: &mut Vec<[f32; 2]>) {
+    let unpack = |slot: &[f32; 4]| {
+        let [r, g] = unpack_half2(slot[0]);
+        let [b, a] = unpack_half2(slot[1]);
+        ([r, g, b, a], [slot[2], slot[3]])
+    };
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        use rayon::prelude::*;
+        slots.par_iter().map(unpack).unzip_into_vecs(colour, depth);
+    }
+    #[cfg(target_arch = "wasm32")]
+    {
+        (*colour, *depth) = slots.iter().map(unpack).unzip();
+    }
 }
 
 /// What the VDI pass found for one image, beside the VDI itself.
