@@ -60,12 +60,12 @@
 //! its list (renderers find where a ray is by that order).
 //! [`VolumetricDepthImage::encode`] checks the same, so that what it writes always reads back.
 
-use std::borrow::Cow;
-
-use half::f16;
+#[cfg(not(target_arch = "wasm32"))]
+use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+mod decode;
 mod encode;
 mod error;
 
@@ -222,18 +222,6 @@ pub enum Compression {
     /// neighbouring floats repeat, so LZ4 finds them (a third smaller than `lz4` on rendered
     /// VDIs).
     ShuffledLz4,
-}
-
-/// The inverse of [`encode::shuffle`].
-fn unshuffle(shuffled: &[u8], width: usize) -> Vec<u8> {
-    let n = shuffled.len() / width;
-    let mut out = vec![0; shuffled.len()];
-    for (i, value) in out.chunks_exact_mut(width).enumerate() {
-        for (b, byte) in value.iter_mut().enumerate() {
-            *byte = shuffled[b * n + i];
-        }
-    }
-    out
 }
 
 impl ColourFormat {
@@ -408,7 +396,34 @@ fn check_header(header: &VdiHeader, file: &str) -> Result<Shape, VdiError> {
 
 /// Checks one used slot: finite, colour at least 0, opacity in `[0, 1]`, `0 ≤ front ≤ back`,
 /// and its front not before `previous_back`, the back of the slot before it in its list.
+#[inline]
 fn check_slot(
+    file: &str,
+    at: (u32, u32, u32),
+    colour: [f32; 4],
+    depth: [f32; 2],
+    previous_back: Option<f32>,
+) -> Result<(), VdiError> {
+    // The same checks as `slot_error`'s, as one expression, for the common case.
+    let [front, back] = depth;
+    let valid = colour.iter().chain(&depth).all(|v| v.is_finite())
+        && colour[..3].iter().all(|&c| c >= 0.0)
+        && (0.0..=1.0).contains(&colour[3])
+        && 0.0 <= front
+        && front <= back
+        && previous_back.is_none_or(|p| front >= p);
+    if valid {
+        Ok(())
+    } else {
+        slot_error(file, at, colour, depth, previous_back)
+    }
+}
+
+/// [`check_slot`] of a slot that failed its quick check: the error of the first check it
+/// fails.
+#[cold]
+#[inline(never)]
+fn slot_error(
     file: &str,
     (x, y, slot): (u32, u32, u32),
     colour: [f32; 4],
@@ -464,6 +479,53 @@ fn check_slot(
     Ok(())
 }
 
+/// Rows of lists per band that are checked and converted at once, when encoding and decoding.
+const BAND_ROWS: usize = 16;
+
+/// A band of [`BAND_ROWS`] rows of lists (fewer at the bottom): where its lists and
+/// supersegments begin, its counts and how many supersegments they hold.
+struct Band<'c> {
+    first_list: usize,
+    first_slot: usize,
+    counts: &'c [u8],
+    slots: usize,
+}
+
+/// The image's lists of `counts` (`width` a row), top to bottom in bands.
+fn bands(counts: &[u8], width: usize) -> impl Iterator<Item = Band<'_>> {
+    let mut first_slot = 0;
+    counts
+        .chunks(BAND_ROWS * width)
+        .enumerate()
+        .map(move |(i, counts)| {
+            let slots = counts.iter().map(|&c| usize::from(c)).sum();
+            let band = Band {
+                first_list: i * BAND_ROWS * width,
+                first_slot,
+                counts,
+                slots,
+            };
+            first_slot += slots;
+            band
+        })
+}
+
+/// `a` and `b`, on two threads where the platform has them.
+fn join<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
+    #[cfg(not(target_arch = "wasm32"))]
+    return rayon::join(a, b);
+    #[cfg(target_arch = "wasm32")]
+    return (a(), b());
+}
+
+/// `f` of each item, in the items' order, on several threads where the platform has them.
+fn map_in_order<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync + Send) -> Vec<R> {
+    #[cfg(not(target_arch = "wasm32"))]
+    return items.into_par_iter().map(f).collect();
+    #[cfg(target_arch = "wasm32")]
+    return items.into_iter().map(f).collect();
+}
+
 /// Whether `near` and `far` suit quantised `u16` depth: `0 ≤ near < far`, with a quantisation
 /// step `(far − near)/65535` wider than the f32 spacing (ulp) at `far` (by a margin for the f64
 /// arithmetic), so that every level reads back as an f32 within less than half a step of it,
@@ -487,95 +549,6 @@ fn quantise(d: f32, near: f32, far: f32) -> u16 {
 fn dequantise(q: u16, near: f32, far: f32) -> f32 {
     let (near, far) = (f64::from(near), f64::from(far));
     (near + f64::from(q) / 65535.0 * (far - near)) as f32
-}
-
-/// Reads the input front to back, refusing to run past its end.
-struct Reader<'a> {
-    bytes: &'a [u8],
-    file: &'a str,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, needed: u64, what: impl FnOnce() -> String) -> Result<&'a [u8], VdiError> {
-        let available = self.bytes.len() as u64;
-        if needed > available {
-            return Err(VdiError::Truncated {
-                file: self.file.to_owned(),
-                what: what(),
-                needed,
-                available,
-            });
-        }
-        let (taken, rest) = self.bytes.split_at(needed as usize);
-        self.bytes = rest;
-        Ok(taken)
-    }
-
-    fn array<const N: usize>(
-        &mut self,
-        what: impl FnOnce() -> String,
-    ) -> Result<[u8; N], VdiError> {
-        let mut out = [0; N];
-        out.copy_from_slice(self.take(N as u64, what)?);
-        Ok(out)
-    }
-
-    /// One plane of values of `width` bytes, decompressed (and unshuffled), checked to be
-    /// exactly `expected` bytes.
-    fn plane(
-        &mut self,
-        plane: &'static str,
-        compression: Compression,
-        expected: usize,
-        width: usize,
-    ) -> Result<Cow<'a, [u8]>, VdiError> {
-        let stored = u64::from_le_bytes(self.array(|| format!("length of the {plane} plane"))?);
-        let data = self.take(stored, || format!("{plane} plane"))?;
-        let file = self.file;
-        match compression {
-            Compression::None => {
-                if data.len() != expected {
-                    return Err(VdiError::PlaneSize {
-                        file: file.to_owned(),
-                        plane,
-                        stored,
-                        expected: expected as u64,
-                    });
-                }
-                Ok(Cow::Borrowed(data))
-            }
-            Compression::Lz4 | Compression::ShuffledLz4 => {
-                let lz4 = |source| VdiError::Lz4 {
-                    file: file.to_owned(),
-                    plane,
-                    source,
-                };
-                let (announced, block) = lz4_flex::block::uncompressed_size(data).map_err(lz4)?;
-                if announced != expected {
-                    return Err(VdiError::AnnouncedSize {
-                        file: file.to_owned(),
-                        plane,
-                        announced: announced as u64,
-                        expected: expected as u64,
-                    });
-                }
-                let mut raw = vec![0; expected];
-                let actual = lz4_flex::block::decompress_into(block, &mut raw).map_err(lz4)?;
-                if actual != expected {
-                    return Err(VdiError::ShortPlane {
-                        file: file.to_owned(),
-                        plane,
-                        actual: actual as u64,
-                        expected: expected as u64,
-                    });
-                }
-                if compression == Compression::ShuffledLz4 {
-                    raw = unshuffle(&raw, width);
-                }
-                Ok(Cow::Owned(raw))
-            }
-        }
-    }
 }
 
 impl VolumetricDepthImage {
@@ -659,108 +632,11 @@ impl VolumetricDepthImage {
         });
         [r, g, b, (1.0 - transmittance) as f32]
     }
-
-    /// Reads a VDI file (the layout in the module documentation); `source` (the file name or
-    /// URL) starts every error message.
-    ///
-    /// It never panics on any input, and allocates at most what the header's sizes imply
-    /// (bounded by [`MAX_VDI_SLOTS`]) beside what the input itself holds: an LZ4 plane's
-    /// announced size is checked before it is decompressed.
-    ///
-    /// # Errors
-    /// A [`VdiError`] for the first of the checks in the module documentation that fails.
-    pub fn decode(bytes: &[u8], source: &str) -> Result<Self, VdiError> {
-        let file = source;
-        if bytes.get(..VDI_MAGIC.len()) != Some(&VDI_MAGIC[..]) {
-            return Err(VdiError::BadMagic {
-                file: file.to_owned(),
-            });
-        }
-        let mut reader = Reader {
-            bytes: &bytes[VDI_MAGIC.len()..],
-            file,
-        };
-        let length = u32::from_le_bytes(reader.array(|| "header length".to_owned())?);
-        if length > MAX_HEADER_BYTES {
-            return Err(VdiError::HeaderTooLong {
-                file: file.to_owned(),
-                length: u64::from(length),
-            });
-        }
-        let json = reader.take(u64::from(length), || "header".to_owned())?;
-        let header: VdiHeader =
-            serde_json::from_slice(json).map_err(|source| VdiError::BadHeader {
-                file: file.to_owned(),
-                source,
-            })?;
-        let shape = check_header(&header, file)?;
-        let compression = header.compression;
-        let counts = reader.plane("counts", compression, shape.lists, 1)?;
-        let width = header.width as usize;
-        let used = used_slots(&counts, &header, file)?;
-        let colour = reader.plane(
-            "colour",
-            compression,
-            used * header.colour.slot_bytes(),
-            header.colour.value_bytes(),
-        )?;
-        let depth = reader.plane(
-            "depth",
-            compression,
-            used * header.depth.slot_bytes(),
-            header.depth.value_bytes(),
-        )?;
-        if !reader.bytes.is_empty() {
-            return Err(VdiError::Trailing {
-                file: file.to_owned(),
-                extra: reader.bytes.len() as u64,
-            });
-        }
-
-        let mut colours = colour.chunks_exact(header.colour.slot_bytes());
-        let mut depths = depth.chunks_exact(header.depth.slot_bytes());
-        let (near, far) = (header.near, header.far);
-        let (colour_format, depth_format) = (header.colour, header.depth);
-        let mut image = Self::new(header);
-        image.counts.copy_from_slice(&counts);
-        image.colour.reserve_exact(used);
-        image.depth.reserve_exact(used);
-        for (index, &count) in counts.iter().enumerate() {
-            let (x, y) = ((index % width) as u32, (index / width) as u32);
-            // The planes hold exactly `Σ counts` slots (checked above), so neither runs out.
-            for (s, (c, d)) in (&mut colours)
-                .zip(&mut depths)
-                .take(usize::from(count))
-                .enumerate()
-            {
-                let c: [f32; 4] = match colour_format {
-                    ColourFormat::F16 => std::array::from_fn(|i| {
-                        f16::from_le_bytes([c[2 * i], c[2 * i + 1]]).to_f32()
-                    }),
-                    ColourFormat::F32 => std::array::from_fn(|i| {
-                        f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]])
-                    }),
-                };
-                let d: [f32; 2] = match depth_format {
-                    DepthFormat::F32 => std::array::from_fn(|i| {
-                        f32::from_le_bytes([d[4 * i], d[4 * i + 1], d[4 * i + 2], d[4 * i + 3]])
-                    }),
-                    DepthFormat::U16 => std::array::from_fn(|i| {
-                        dequantise(u16::from_le_bytes([d[2 * i], d[2 * i + 1]]), near, far)
-                    }),
-                };
-                let previous_back = (s > 0).then(|| image.depth[image.depth.len() - 1][1]);
-                check_slot(file, (x, y, s as u32), c, d, previous_back)?;
-                image.colour.push(c);
-                image.depth.push(d);
-            }
-        }
-        Ok(image)
-    }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::decode::unshuffle;
     use super::encode::shuffle;
     use super::*;
 
@@ -772,6 +648,14 @@ mod tests {
         assert_eq!(shuffle(&raw, 1), raw);
         assert_eq!(unshuffle(&shuffle(&raw, 2), 2), raw);
         assert_eq!(unshuffle(&shuffle(&raw, 3), 3), raw);
+        let twelve: Vec<u8> = (1..=12).collect();
+        assert_eq!(shuffle(&twelve, 4), [1, 5, 9, 2, 6, 10, 3, 7, 11, 4, 8, 12]);
+        assert_eq!(shuffle(&twelve, 2), [1, 3, 5, 7, 9, 11, 2, 4, 6, 8, 10, 12]);
+        for width in 1..=4 {
+            let bytes: Vec<u8> = (0..4096u32 * 12).map(|i| (i * 7919 % 251) as u8).collect();
+            assert_eq!(unshuffle(&shuffle(&bytes, width), width), bytes, "{width}");
+            assert!(shuffle(&[], width).is_empty() && unshuffle(&[], width).is_empty());
+        }
         // Neighbouring floats share their high bytes: grouped, LZ4 finds them.
         let ramp: Vec<u8> = (0..4096)
             .flat_map(|i| (1.0f32 + i as f32 * 1e-3).to_le_bytes())

@@ -669,7 +669,7 @@ fn reference_encoding(image: &VolumetricDepthImage) -> Vec<u8> {
 /// slot-by-slot encoder writes, in every format, and refuses with the first bad slot in the
 /// file's order.
 #[test]
-fn encode_in_bands_writes_the_files_bytes_and_names_its_first_bad_slot() {
+fn bands_encode_and_decode_the_files_bytes_and_name_the_first_bad_slot() {
     let mut h = header(ColourFormat::F16, DepthFormat::F32, Compression::None);
     h.height = 40;
     let mut good = VolumetricDepthImage::new(h);
@@ -696,6 +696,16 @@ fn encode_in_bands_writes_the_files_bytes_and_names_its_first_bad_slot() {
         );
         let back = VolumetricDepthImage::decode(&bytes, FILE).unwrap();
         assert_eq!(back.counts, image.counts);
+        // Every slot read back where the file put it: written again, the same bytes.
+        assert_eq!(
+            back.encode().unwrap(),
+            bytes,
+            "{colour:?} {depth:?} {compression:?}"
+        );
+        if (colour, depth) == (ColourFormat::F32, DepthFormat::F32) {
+            assert_eq!(back.colour, image.colour);
+            assert_eq!(back.depth, image.depth);
+        }
     }
     // The last slot of band 0 (list (2, 15)) and a slot of band 2 (list (1, 35)).
     let slot_of = |x: usize, y: usize| good.starts()[y * 3 + x];
@@ -706,9 +716,29 @@ fn encode_in_bands_writes_the_files_bytes_and_names_its_first_bad_slot() {
         message.starts_with("VDI to encode: list (1, 35) supersegment 0 has colour and opacity ["),
         "{message}"
     );
+    // The decoder, of files with the same bad slots (written without checks), names the same.
+    let mut file_of = image.clone();
+    file_of.header.colour = ColourFormat::F32;
+    let decoded = VolumetricDepthImage::decode(&reference_encoding(&file_of), FILE);
+    let message = decoded.unwrap_err().to_string();
+    assert!(
+        message.starts_with(&format!(
+            "{FILE}: list (1, 35) supersegment 0 has colour and opacity ["
+        )),
+        "{message}"
+    );
     image.depth[slot_of(2, 15) + 1] = [f32::INFINITY, 1.0];
     assert_eq!(
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (2, 15) supersegment 1 has a non-finite depth"
     );
+    for compression in [Compression::None, Compression::ShuffledLz4] {
+        let mut file_of = image.clone();
+        file_of.header.compression = compression;
+        let decoded = VolumetricDepthImage::decode(&reference_encoding(&file_of), FILE);
+        assert_eq!(
+            decoded.unwrap_err().to_string(),
+            format!("{FILE}: list (2, 15) supersegment 1 has a non-finite depth")
+        );
+    }
 }

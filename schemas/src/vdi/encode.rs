@@ -1,21 +1,17 @@
 //! Writing a VDI file ([`VolumetricDepthImage::encode`]): every supersegment checked as the
 //! reader would check it and converted to the header's formats, in bands of rows of lists at
 //! once, then the three planes compressed at once. Native builds run the bands and planes on
-//! rayon's threads; the web build (which only reads VDIs) one after the other.
+//! rayon's threads; the web build one after the other.
 
 use std::borrow::Cow;
 
 use half::f16;
-#[cfg(not(target_arch = "wasm32"))]
-use rayon::prelude::*;
 
 use super::{
-    ColourFormat, Compression, DepthFormat, ENCODING, MAX_HEADER_BYTES, VDI_MAGIC, VdiError,
-    VolumetricDepthImage, check_header, check_slot, quantise, used_slots,
+    Band, ColourFormat, Compression, DepthFormat, ENCODING, MAX_HEADER_BYTES, VDI_MAGIC, VdiError,
+    VolumetricDepthImage, bands, check_header, check_slot, join, map_in_order, quantise,
+    used_slots,
 };
-
-/// Rows of lists per band that are checked and converted at once.
-const BAND_ROWS: usize = 16;
 
 impl VolumetricDepthImage {
     /// The image as a VDI file (the layout in the module documentation).
@@ -78,7 +74,7 @@ impl VolumetricDepthImage {
     }
 
     /// The colour and depth planes, uncompressed, of the `slots` supersegments the counts
-    /// imply (the arrays hold exactly those): in bands of [`BAND_ROWS`] rows, each written
+    /// imply (the arrays hold exactly those): in bands of [`super::BAND_ROWS`] rows, each written
     /// into its own part of the planes.
     ///
     /// # Errors
@@ -88,25 +84,15 @@ impl VolumetricDepthImage {
         let (colour_bytes, depth_bytes) = (header.colour.slot_bytes(), header.depth.slot_bytes());
         let mut colour = vec![0; slots * colour_bytes];
         let mut depth = vec![0; slots * depth_bytes];
-        let band = BAND_ROWS * header.width as usize;
-        let mut bands = Vec::new();
+        let mut parts = Vec::new();
         let (mut colour_rest, mut depth_rest) = (&mut colour[..], &mut depth[..]);
-        let mut start = 0;
-        for (i, counts) in self.counts.chunks(band).enumerate() {
-            let n: usize = counts.iter().map(|&c| usize::from(c)).sum();
-            let (c, c_rest) = colour_rest.split_at_mut(n * colour_bytes);
-            let (d, d_rest) = depth_rest.split_at_mut(n * depth_bytes);
+        for band in bands(&self.counts, header.width as usize) {
+            let (c, c_rest) = colour_rest.split_at_mut(band.slots * colour_bytes);
+            let (d, d_rest) = depth_rest.split_at_mut(band.slots * depth_bytes);
             (colour_rest, depth_rest) = (c_rest, d_rest);
-            bands.push(Band {
-                first_list: i * band,
-                first_slot: start,
-                counts,
-                colour: c,
-                depth: d,
-            });
-            start += n;
+            parts.push((band, c, d));
         }
-        map_in_order(bands, |b| self.encode_band(b))
+        map_in_order(parts, |(band, c, d)| self.encode_band(&band, c, d))
             .into_iter()
             .find_map(Result::err)
             .map_or(Ok((colour, depth)), Err)
@@ -116,11 +102,16 @@ impl VolumetricDepthImage {
     ///
     /// # Errors
     /// The [`VdiError`] of the band's first slot that `decode` would refuse.
-    fn encode_band(&self, band: Band<'_, '_>) -> Result<(), VdiError> {
+    fn encode_band(
+        &self,
+        band: &Band<'_>,
+        colour: &mut [u8],
+        depth: &mut [u8],
+    ) -> Result<(), VdiError> {
         let header = &self.header;
         let width = header.width as usize;
-        let mut colour_slots = band.colour.chunks_exact_mut(header.colour.slot_bytes());
-        let mut depth_slots = band.depth.chunks_exact_mut(header.depth.slot_bytes());
+        let mut colour_slots = colour.chunks_exact_mut(header.colour.slot_bytes());
+        let mut depth_slots = depth.chunks_exact_mut(header.depth.slot_bytes());
         let mut start = band.first_slot;
         for (i, &count) in band.counts.iter().enumerate() {
             let index = band.first_list + i;
@@ -163,16 +154,6 @@ impl VolumetricDepthImage {
     }
 }
 
-/// A band of lists to encode: its counts, where its lists and supersegments begin, and its
-/// parts of the colour and depth planes.
-struct Band<'c, 'p> {
-    first_list: usize,
-    first_slot: usize,
-    counts: &'c [u8],
-    colour: &'p mut [u8],
-    depth: &'p mut [u8],
-}
-
 /// One plane of values of `width` bytes as the file stores it: compressed as the header says.
 fn stored_plane(raw: &[u8], compression: Compression, width: usize) -> Cow<'_, [u8]> {
     match compression {
@@ -189,26 +170,37 @@ fn stored_plane(raw: &[u8], compression: Compression, width: usize) -> Cow<'_, [
 pub(super) fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
     let n = raw.len() / width;
     let mut out = vec![0; raw.len()];
-    for (i, value) in raw.chunks_exact(width).enumerate() {
-        for (b, &byte) in value.iter().enumerate() {
-            out[b * n + i] = byte;
+    if n == 0 {
+        return out;
+    }
+    // One pass over the values, each scattered to the `width` groups: the widths a VDI has
+    // spelled out, so that the compiler sees fixed-size values.
+    match width {
+        2 => {
+            let (first, second) = out.split_at_mut(n);
+            for (value, (a, b)) in raw.chunks_exact(2).zip(first.iter_mut().zip(second)) {
+                (*a, *b) = (value[0], value[1]);
+            }
+        }
+        4 => {
+            let mut groups = out.chunks_exact_mut(n);
+            let (Some(g0), Some(g1), Some(g2), Some(g3)) =
+                (groups.next(), groups.next(), groups.next(), groups.next())
+            else {
+                unreachable!("four groups of n bytes");
+            };
+            let quads = g0.iter_mut().zip(g1).zip(g2.iter_mut().zip(g3));
+            for (value, ((a, b), (c, d))) in raw.chunks_exact(4).zip(quads) {
+                (*a, *b, *c, *d) = (value[0], value[1], value[2], value[3]);
+            }
+        }
+        _ => {
+            for (i, value) in raw.chunks_exact(width).enumerate() {
+                for (b, &byte) in value.iter().enumerate() {
+                    out[b * n + i] = byte;
+                }
+            }
         }
     }
     out
-}
-
-/// `a` and `b`, on two threads where the platform has them.
-fn join<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + Send) -> (A, B) {
-    #[cfg(not(target_arch = "wasm32"))]
-    return rayon::join(a, b);
-    #[cfg(target_arch = "wasm32")]
-    return (a(), b());
-}
-
-/// `f` of each item, in the items' order, on several threads where the platform has them.
-fn map_in_order<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync + Send) -> Vec<R> {
-    #[cfg(not(target_arch = "wasm32"))]
-    return items.into_par_iter().map(f).collect();
-    #[cfg(target_arch = "wasm32")]
-    return items.into_iter().map(f).collect();
 }

@@ -207,19 +207,25 @@ pub fn grid_bins(header: &VdiHeader) -> (f32, f32) {
 
 /// The supersegments of `vdi`, lists one after the other as the file holds them, each as the
 /// generator's pass writes a slot: `vec4(pack2x16float(r, g), pack2x16float(b, a), front,
-/// back)`; one zero slot for a VDI without any (a binding is never empty).
+/// back)`; one zero slot for a VDI without any (a binding is never empty). Native builds pack
+/// on rayon's threads.
 fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
     let pack = |a: f32, b: f32| {
         let lo = u32::from(half::f16::from_f32(a).to_bits());
         let hi = u32::from(half::f16::from_f32(b).to_bits());
         f32::from_bits(lo | hi << 16)
     };
-    vdi.colour
-        .iter()
-        .zip(&vdi.depth)
-        .map(|(c, d)| [pack(c[0], c[1]), pack(c[2], c[3]), d[0], d[1]])
-        .chain(vdi.colour.is_empty().then_some([0.0; 4]))
-        .collect()
+    let slot = |(c, d): (&[f32; 4], &[f32; 2])| [pack(c[0], c[1]), pack(c[2], c[3]), d[0], d[1]];
+    if vdi.colour.is_empty() {
+        return vec![[0.0; 4]];
+    }
+    #[cfg(not(target_arch = "wasm32"))]
+    return {
+        use rayon::prelude::*;
+        vdi.colour.par_iter().zip(&vdi.depth).map(slot).collect()
+    };
+    #[cfg(target_arch = "wasm32")]
+    return vdi.colour.iter().zip(&vdi.depth).map(slot).collect();
 }
 
 /// The VDI ray caster's shader, layouts and pipelines: made once per device and shared by
