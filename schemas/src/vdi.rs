@@ -518,12 +518,20 @@ fn join<A: Send, B: Send>(a: impl FnOnce() -> A + Send, b: impl FnOnce() -> B + 
     return (a(), b());
 }
 
-/// `f` of each item, in the items' order, on several threads where the platform has them.
-fn map_in_order<T: Send, R: Send>(items: Vec<T>, f: impl Fn(T) -> R + Sync + Send) -> Vec<R> {
+/// `f` of each item, on several threads where the platform has them; the first error in the
+/// items' order, if any.
+fn try_in_order<T: Send>(
+    items: Vec<T>,
+    f: impl Fn(T) -> Result<(), VdiError> + Sync + Send,
+) -> Result<(), VdiError> {
     #[cfg(not(target_arch = "wasm32"))]
-    return items.into_par_iter().map(f).collect();
+    let results: Vec<_> = items.into_par_iter().map(f).collect();
     #[cfg(target_arch = "wasm32")]
-    return items.into_iter().map(f).collect();
+    let results: Vec<_> = items.into_iter().map(f).collect();
+    results
+        .into_iter()
+        .find_map(Result::err)
+        .map_or(Ok(()), Err)
 }
 
 /// Whether `near` and `far` suit quantised `u16` depth: `0 ≤ near < far`, with a quantisation
@@ -651,6 +659,8 @@ mod tests {
         let twelve: Vec<u8> = (1..=12).collect();
         assert_eq!(shuffle(&twelve, 4), [1, 5, 9, 2, 6, 10, 3, 7, 11, 4, 8, 12]);
         assert_eq!(shuffle(&twelve, 2), [1, 3, 5, 7, 9, 11, 2, 4, 6, 8, 10, 12]);
+        // Bytes past the last whole value stay 0, as before the one-pass shuffles.
+        assert_eq!(unshuffle(&[1, 2, 3, 4], 3), [1, 2, 3, 0]);
         for width in 1..=4 {
             let bytes: Vec<u8> = (0..4096u32 * 12).map(|i| (i * 7919 % 251) as u8).collect();
             assert_eq!(unshuffle(&shuffle(&bytes, width), width), bytes, "{width}");

@@ -665,8 +665,9 @@ fn reference_encoding(image: &VolumetricDepthImage) -> Vec<u8> {
     out
 }
 
-/// `encode` checks and converts bands of 16 rows of lists in parallel, yet writes the bytes a
-/// slot-by-slot encoder writes, in every format, and refuses with the first bad slot in the
+/// `encode` and `decode` check and convert bands of 16 rows of lists in parallel, yet
+/// `encode` writes the bytes a slot-by-slot encoder writes, in every format, `decode` reads
+/// back every slot where the file put it, and both refuse with the first bad slot in the
 /// file's order.
 #[test]
 fn bands_encode_and_decode_the_files_bytes_and_name_the_first_bad_slot() {

@@ -9,7 +9,7 @@ use half::f16;
 
 use super::{
     Band, ColourFormat, Compression, DepthFormat, MAX_HEADER_BYTES, VDI_MAGIC, VdiError, VdiHeader,
-    VolumetricDepthImage, bands, check_header, check_slot, dequantise, map_in_order, used_slots,
+    VolumetricDepthImage, bands, check_header, check_slot, dequantise, try_in_order, used_slots,
 };
 
 impl VolumetricDepthImage {
@@ -97,12 +97,9 @@ impl VolumetricDepthImage {
             let depth_in = &depth[slots.start * depth_bytes..slots.end * depth_bytes];
             parts.push((band, colour_in, depth_in, c, d));
         }
-        map_in_order(parts, |(band, colour_in, depth_in, c, d)| {
+        try_in_order(parts, |(band, colour_in, depth_in, c, d)| {
             read_band(header, &band, (colour_in, depth_in), (c, d), file)
         })
-        .into_iter()
-        .find_map(Result::err)
-        .map_or(Ok(()), Err)
     }
 }
 
@@ -150,25 +147,24 @@ fn colour_of(format: ColourFormat, bytes: &[u8]) -> [f32; 4] {
             let b: &[u8; 8] = bytes.first_chunk().expect("an f16 colour slot is 8 bytes");
             std::array::from_fn(|i| f16::from_le_bytes([b[2 * i], b[2 * i + 1]]).to_f32())
         }
-        ColourFormat::F32 => {
-            let b: &[u8; 16] = bytes.first_chunk().expect("an f32 colour slot is 16 bytes");
-            std::array::from_fn(|i| {
-                f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
-            })
-        }
+        ColourFormat::F32 => f32s(bytes),
     }
+}
+
+/// The first `N` little-endian `f32` of `bytes` (a slot of at least `4·N` bytes).
+#[inline]
+fn f32s<const N: usize>(bytes: &[u8]) -> [f32; N] {
+    std::array::from_fn(|i| {
+        let b = bytes[4 * i..4 * i + 4].first_chunk().expect("4 bytes");
+        f32::from_le_bytes(*b)
+    })
 }
 
 /// One slot's front and back distances, from its bytes in the depth plane.
 #[inline]
 fn depth_of(format: DepthFormat, bytes: &[u8], near: f32, far: f32) -> [f32; 2] {
     match format {
-        DepthFormat::F32 => {
-            let b: &[u8; 8] = bytes.first_chunk().expect("an f32 depth slot is 8 bytes");
-            std::array::from_fn(|i| {
-                f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
-            })
-        }
+        DepthFormat::F32 => f32s(bytes),
         DepthFormat::U16 => {
             let b: &[u8; 4] = bytes.first_chunk().expect("a u16 depth slot is 4 bytes");
             std::array::from_fn(|i| {
@@ -297,7 +293,7 @@ pub(super) fn unshuffle(shuffled: &[u8], width: usize) -> Vec<u8> {
             }
         }
         _ => {
-            for (b, group) in shuffled.chunks_exact(n).enumerate() {
+            for (b, group) in shuffled.chunks_exact(n).take(width).enumerate() {
                 for (value, &byte) in out.chunks_exact_mut(width).zip(group) {
                     value[b] = byte;
                 }

@@ -9,7 +9,7 @@ use half::f16;
 
 use super::{
     Band, ColourFormat, Compression, DepthFormat, ENCODING, MAX_HEADER_BYTES, VDI_MAGIC, VdiError,
-    VolumetricDepthImage, bands, check_header, check_slot, join, map_in_order, quantise,
+    VolumetricDepthImage, bands, check_header, check_slot, join, quantise, try_in_order,
     used_slots,
 };
 
@@ -92,10 +92,8 @@ impl VolumetricDepthImage {
             (colour_rest, depth_rest) = (c_rest, d_rest);
             parts.push((band, c, d));
         }
-        map_in_order(parts, |(band, c, d)| self.encode_band(&band, c, d))
-            .into_iter()
-            .find_map(Result::err)
-            .map_or(Ok((colour, depth)), Err)
+        try_in_order(parts, |(band, c, d)| self.encode_band(&band, c, d))?;
+        Ok((colour, depth))
     }
 
     /// Checks and converts the supersegments of one band into its parts of the planes.

@@ -120,19 +120,30 @@ fn list_masks(vdi: &VolumetricDepthImage, starts: &[usize]) -> Vec<u32> {
     let last = VDI_DEPTH_BINS as f32 - 1.0;
     let bin_of = |z: f32| ((z - near) / bin).floor().clamp(0.0, last) as u32;
     let mut masks = vec![0u32; (w * rows) as usize];
-    for y in 0..rows {
+    let fill_row = |(y, row): (usize, &mut [u32])| {
         let oy = (1.0 - (y as f32 + 0.5) / rows as f32 * 2.0) * tan_y;
-        for x in 0..w {
-            let list = (y * w + x) as usize;
+        for (x, mask) in row.iter_mut().enumerate() {
+            let list = y * w as usize + x;
             let ox = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan_x;
             let cos = (1.0 + ox * ox + oy * oy).sqrt().recip();
             for [front, back] in &vdi.depth[starts[list]..starts[list + 1]] {
                 let lo = bin_of(front * cos - 0.01 * bin);
                 let hi = bin_of(back * cos + 0.01 * bin).max(lo);
-                masks[list] |= (u32::MAX >> (31 - (hi - lo))) << lo;
+                *mask |= (u32::MAX >> (31 - (hi - lo))) << lo;
             }
         }
+    };
+    // Rows on rayon's threads natively, one after the other in the page.
+    #[cfg(not(target_arch = "wasm32"))]
+    {
+        use rayon::prelude::*;
+        masks
+            .par_chunks_mut(w as usize)
+            .enumerate()
+            .for_each(fill_row);
     }
+    #[cfg(target_arch = "wasm32")]
+    masks.chunks_mut(w as usize).enumerate().for_each(fill_row);
     masks
 }
 
