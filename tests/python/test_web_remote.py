@@ -166,6 +166,9 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
     # rests (from the VDI's own camera the nearest pipeline draws it: the two coincide there).
     assert remote["d_i"] == 1.0 and remote["vdi_filter"] == "auto" and remote["frame_filter"] == "linear", remote
     assert remote["linear_compiled"], remote
+    # The page's share of the answer's latency: the VDI read, then set up for the ray caster.
+    for took in ("vdi_decode_ms", "vdi_setup_ms"):
+        assert remote[took] is not None and 0 <= remote[took] < 60_000, remote
     scene = scene_of(first_hash)
     assert remote["vdi_camera"] == scene["camera"]
     assert_matches(tmp_path / "first.png", dvr(stores["u16x3"], scene, tmp_path / "dvr1.png"))
@@ -295,6 +298,7 @@ def test_a_request_refused_more_than_three_times_shows_the_last_refusal(servers)
     remote = state["remote"]
     assert (remote["requests_sent"], remote["requests_retried"], remote["vdis_received"],
             remote["vdi_bytes_received"], remote["last_error"]) == (1, 3, 0, 0, expected), remote
+    assert (remote["vdi_decode_ms"], remote["vdi_setup_ms"]) == (None, None), remote
     assert [p.status for p in posts] == [503] * 4, posts
     assert errors(console, ["status of 503"]) == []
 

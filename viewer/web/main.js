@@ -235,7 +235,9 @@ function showStats() {
       `D_I ${r.d_i.toFixed(2)} · ${r.vdi_filter} filter` + (r.vdi_filter === "auto" && r.frame_filter ? ` (${r.frame_filter})` : "") + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
       // What decides auto's filter while the camera moves: the last linear frame's time.
       (r.vdi_filter === "auto" && r.linear_frame_ms != null ? ` · linear ${r.linear_frame_ms.toFixed(1)} ms` : "") +
-      (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n";
+      (r.drawn_request != null && !r.scene_current ? " · VDI of an older style" : "") + "\n" +
+      // This side's share of each answer's latency: reading the VDI, then setting it up.
+      (r.vdi_decode_ms != null && r.vdi_setup_ms != null ? `last VDI read in ${r.vdi_decode_ms.toFixed(1)} ms · set up in ${r.vdi_setup_ms.toFixed(1)} ms\n` : "");
   }
   if (s.error) {
     const hint = r && r.mode !== "off" ? "" : "Is the brick server still running? ";
@@ -614,7 +616,8 @@ window.residency = {
   /** {frame, converged, bricks_fetched, bytes_fetched, error, controls_built, ..., remote:
    * {mode, service_adapter: {name, backend}, requests_sent, requests_retried,
    * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, last_error, d_i,
-   * vdi_filter, frame_filter, linear_frame_ms, moving_frames_linear, vdi_camera, converged,
+   * vdi_filter, frame_filter, linear_frame_ms, moving_frames_linear, vdi_decode_ms,
+   * vdi_setup_ms, vdi_camera, converged,
    * ...} with a render service, else null}. */
   state,
   /** What the orientation overlay shows: {scale: {length, unit, pixels}, axes: {x, y, z: the

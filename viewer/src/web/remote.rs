@@ -203,6 +203,12 @@ pub struct RemoteReport {
     linear_frame_ms: Option<f64>,
     /// Time of the last frame (ray cast, then presented and the GPU done, or read back), ms.
     frame_ms: Option<f64>,
+    /// Time the page took to read the last VDI answer it could read (decompressed, converted and
+    /// checked), ms: this side's share of each answer's latency, with `vdi_setup_ms`.
+    vdi_decode_ms: Option<f64>,
+    /// Time the page took to set up the ray caster for the last VDI it drew (its slots packed
+    /// and uploaded, its skipping grid built), ms.
+    vdi_setup_ms: Option<f64>,
     /// The linear filter's pipeline is compiled (the page compiles it while the view rests).
     linear_compiled: bool,
     /// The camera of generation of the VDI drawn.
@@ -589,26 +595,29 @@ impl Viewer {
         let Some(flight) = remote.settle(sequence) else {
             return;
         };
-        let checked = VolumetricDepthImage::decode(bytes, "the render service's answer")
-            .map_err(RemoteError::Decode)
-            .and_then(|vdi| {
-                let h = &vdi.header;
-                if (h.width, h.height) != (width, height) {
-                    return Err(RemoteError::WrongSize {
-                        vdi_width: h.width,
-                        vdi_height: h.height,
-                        width,
-                        height,
-                    });
-                }
-                match &h.dataset {
-                    Some(served) if *served != page => Err(RemoteError::OtherDataset {
-                        served: served.clone(),
-                        page,
-                    }),
-                    _ => Ok(vdi),
-                }
-            });
+        let started = now_ms();
+        let decoded = VolumetricDepthImage::decode(bytes, "the render service's answer");
+        if decoded.is_ok() {
+            remote.report.vdi_decode_ms = Some(now_ms() - started);
+        }
+        let checked = decoded.map_err(RemoteError::Decode).and_then(|vdi| {
+            let h = &vdi.header;
+            if (h.width, h.height) != (width, height) {
+                return Err(RemoteError::WrongSize {
+                    vdi_width: h.width,
+                    vdi_height: h.height,
+                    width,
+                    height,
+                });
+            }
+            match &h.dataset {
+                Some(served) if *served != page => Err(RemoteError::OtherDataset {
+                    served: served.clone(),
+                    page,
+                }),
+                _ => Ok(vdi),
+            }
+        });
         match checked {
             Ok(vdi) => {
                 if remote.arrived.is_some() {
@@ -867,13 +876,16 @@ async fn upload(inner: &Rc<RefCell<Inner>>) {
             }
         }
     };
+    let started = now_ms();
     let created = VdiRenderer::create(&gpu, &pipelines, &arrived.vdi, width, height).await;
+    let setup_ms = now_ms() - started;
     let mut i = inner.borrow_mut();
     let Some(remote) = i.remote.as_mut() else {
         return;
     };
     match created {
         Ok(renderer) => {
+            remote.report.vdi_setup_ms = Some(setup_ms);
             if remote
                 .drawn
                 .as_ref()
