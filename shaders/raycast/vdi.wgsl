@@ -13,7 +13,13 @@
 // until a march gives between (1 − 15 %)·N_S and N_S supersegments (or VDI_BISECTIONS marches
 // have run: then the smallest γ known, or assumed, to fit), and a last march writes them. A
 // march that counts stops as soon as it passes N_S. In that last march the last slot takes
-// everything after it, so a list never holds more than N_S.
+// everything after it, so a list never holds more than N_S. The bisection is geometric (the
+// next γ is √(lo·hi), the midpoint of ln γ): the γ that suit a ray lie within a factor of a few
+// of each other anywhere in those five and a half decades, where halving [lo, hi] spends its
+// first marches above them (on the VDI bench's mixing volume at 640×360, 3.82 marches a ray
+// with a fifth of the rays reaching the 13th, against 2.24 and none past the 9th, the same
+// images). Rays the bisection has not placed in the window by then are those whose count jumps
+// over it at one γ, so more marches would not place them either.
 //
 // The VDI target buffer (binding IMAGE, `out_color`) holds per pixel P.supersegments slots,
 // then VDI_STATE_SLOTS slots of the ray's VDI state between passes (`VdiRay`); a finished
@@ -30,7 +36,7 @@ const VDI_FIRST: u32 = 2u; // the first march: writes up to N_S, counts on, neve
 const VDI_GAMMA_FIRST: f32 = 1e-5;
 const VDI_GAMMA_MAX: f32 = 1.7320508; // √3: the largest L2 distance of two RGB colours in [0, 1]
 const VDI_TOLERANCE: f32 = 0.15; // a count down to (1 − this)·N_S is accepted
-const VDI_BISECTIONS: u32 = 12u; // marches before the writing one, at most
+const VDI_BISECTIONS: u32 = 8u; // marches before the writing one, at most (a ray's 9 in all)
 
 // A ray's VDI state: the open supersegment, the bisection of γ, and the march's count.
 struct VdiRay {
@@ -162,7 +168,7 @@ fn vdi_next_march(v: ptr<function, VdiRay>) -> bool {
             (*v).gamma = (*v).hi;
             (*v).phase = VDI_WRITING;
         } else {
-            (*v).gamma = 0.5 * ((*v).lo + (*v).hi);
+            (*v).gamma = sqrt((*v).lo * (*v).hi);
         }
     }
     (*v).count = 0u;
