@@ -209,7 +209,11 @@ fn gamma_is_bisected_per_ray_only_where_the_first_march_finds_too_many() {
         assert!(narrow.gamma[p] > 1e-5, "pixel {p}: γ {}", narrow.gamma[p]);
         assert!(narrow.image.counts[p] >= 1, "pixel {p}");
         let at = (f64::from(narrow.gamma[p]) / first).ln() / span * 256.0;
-        assert!((at - at.round()).abs() < 1e-2, "pixel {p}: γ {} at {at}", narrow.gamma[p]);
+        assert!(
+            (at - at.round()).abs() < 1e-2,
+            "pixel {p}: γ {} at {at}",
+            narrow.gamma[p]
+        );
     }
     for p in (0..pixels as usize).filter(|p| !over.contains(p)) {
         assert_eq!(narrow.gamma[p], 1e-5, "pixel {p}");
