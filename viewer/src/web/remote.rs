@@ -203,8 +203,9 @@ pub struct RemoteReport {
     linear_frame_ms: Option<f64>,
     /// Time of the last frame (ray cast, then presented and the GPU done, or read back), ms.
     frame_ms: Option<f64>,
-    /// Time the page took to read the last VDI answer it could read (decompressed, converted and
-    /// checked), ms: this side's share of each answer's latency, with `vdi_setup_ms`.
+    /// Time the page took to read the last VDI answer it could read (decompressed, converted,
+    /// its values checked; its size and dataset are checked after), ms: this side's share of
+    /// each answer's latency, with `vdi_setup_ms`.
     vdi_decode_ms: Option<f64>,
     /// Time the page took to set up the ray caster for the last VDI it drew (its slots packed
     /// and uploaded, its skipping grid built), ms.
@@ -885,7 +886,6 @@ async fn upload(inner: &Rc<RefCell<Inner>>) {
     };
     match created {
         Ok(renderer) => {
-            remote.report.vdi_setup_ms = Some(setup_ms);
             if remote
                 .drawn
                 .as_ref()
@@ -899,6 +899,7 @@ async fn upload(inner: &Rc<RefCell<Inner>>) {
                 scene: arrived.scene,
                 renderer: Rc::new(renderer),
             });
+            remote.report.vdi_setup_ms = Some(setup_ms);
             remote.report.vdis_received += 1;
             remote.report.last_error = None;
             remote.need_frame = true;
