@@ -17,7 +17,7 @@ impl VolumetricDepthImage {
     /// URL) starts every error message.
     ///
     /// It never panics on any input, and allocates at most what the header's sizes imply
-    /// (bounded by [`MAX_VDI_SLOTS`]) beside what the input itself holds: an LZ4 plane's
+    /// (bounded by [`super::MAX_VDI_SLOTS`]) beside what the input itself holds: an LZ4 plane's
     /// announced size is checked before it is decompressed.
     ///
     /// # Errors
