@@ -36,7 +36,9 @@
 //! - **colour**: for each list its used slots only, front to back (`Σ counts` slots in all),
 //!   each premultiplied `[r, g, b, a]` (colour at least 0, and above 1 where channels mix
 //!   additively; opacity in `[0, 1]`) as four IEEE half floats (format `f16`, 8
-//!   bytes) or four `f32` (format `f32`, 16 bytes);
+//!   bytes) or four `f32` (format `f32`, 16 bytes). The in-memory image holds half floats, as
+//!   the GPU generates and draws them: format `f32` writes them widened, and reading it
+//!   rounds each value to the nearest half float;
 //! - **depth**: the same slots, each `[front, back]`, distances from the eye along the list's
 //!   ray in world units with `0 ≤ front ≤ back`, each slot's front at or past the back of the
 //!   slot before it in its list, as two `f32` (format `f32`, 8 bytes) or two
@@ -55,11 +57,13 @@
 //! `far` (so that every level reads back as an f32 that quantises to it again); every plane's stored
 //! length within the rest of the input, and its raw length (for LZ4 the announced one, checked
 //! before decompressing) exactly what the header and counts imply; counts at most N_S; no
-//! trailing bytes; and in every used slot finite values, a colour of at least 0, an opacity in
+//! trailing bytes; and in every used slot finite values (the colour as the image holds it,
+//! in half floats: an `f32` colour past 65504 is infinite there), a colour of at least 0, an opacity in
 //! `[0, 1]`, `0 ≤ front ≤ back`, and a front at or past the back of the slot before it in
 //! its list (renderers find where a ray is by that order).
 //! [`VolumetricDepthImage::encode`] checks the same, so that what it writes always reads back.
 
+use half::f16;
 #[cfg(not(target_arch = "wasm32"))]
 use rayon::prelude::*;
 use schemars::JsonSchema;
@@ -84,8 +88,8 @@ pub const MAX_SUPERSEGMENTS: u32 = 64;
 pub const MAX_VDI_PIXELS: u64 = 8192 * 8192;
 
 /// The most slots (`width·height·N_S`) a VDI may have: the in-memory image holds every slot,
-/// 24 bytes each, so this bounds what a file can make [`VolumetricDepthImage::decode`]
-/// allocate (1 GiB of colour and 512 MiB of depth; 1920×1080 lists of 32 supersegments fit).
+/// 16 bytes each, so this bounds what a file can make [`VolumetricDepthImage::decode`]
+/// allocate (512 MiB of colour and 512 MiB of depth; 1920×1080 lists of 32 supersegments fit).
 pub const MAX_VDI_SLOTS: u64 = 1 << 26;
 
 /// The longest header, in bytes.
@@ -192,7 +196,8 @@ pub struct RayBasis {
 pub enum ColourFormat {
     /// Four IEEE 754 half floats (8 bytes a slot).
     F16,
-    /// Four `f32` (16 bytes a slot).
+    /// Four `f32` (16 bytes a slot): the image's half floats widened; reading rounds each to
+    /// the nearest half float.
     F32,
 }
 
@@ -264,8 +269,9 @@ pub struct VolumetricDepthImage {
     /// front to back (`Σ counts` entries, as the file stores them; [`Self::starts`] gives
     /// where each list begins): premultiplied colour and opacity `[r, g, b, a]` (what
     /// front-to-back compositing of its samples gives: composite a list's supersegments in
-    /// order over the background and you get the DVR pixel).
-    pub colour: Vec<[f32; 4]>,
+    /// order over the background and you get the DVR pixel), as half floats: the precision
+    /// the GPU generates and draws them in, whatever the file's colour format.
+    pub colour: Vec<[f16; 4]>,
     /// The same supersegments' `[front, back]`: distances from the eye along the list's ray,
     /// world units, front ≤ back, each front at or past the back before it in its list.
     pub depth: Vec<[f32; 2]>,
@@ -400,15 +406,17 @@ fn check_header(header: &VdiHeader, file: &str) -> Result<Shape, VdiError> {
 fn check_slot(
     file: &str,
     at: (u32, u32, u32),
-    colour: [f32; 4],
+    colour: [f16; 4],
     depth: [f32; 2],
     previous_back: Option<f32>,
 ) -> Result<(), VdiError> {
-    // The same checks as `slot_error`'s, as one expression, for the common case.
+    // The same checks as `slot_error`'s, as one expression, for the common case; the half
+    // floats compared as they are (no conversion: `half` orders them by their bits).
     let [front, back] = depth;
-    let valid = colour.iter().chain(&depth).all(|v| v.is_finite())
-        && colour[..3].iter().all(|&c| c >= 0.0)
-        && (0.0..=1.0).contains(&colour[3])
+    let valid = colour.iter().all(|c| c.is_finite())
+        && depth.iter().all(|v| v.is_finite())
+        && colour[..3].iter().all(|&c| c >= f16::ZERO)
+        && (f16::ZERO..=f16::ONE).contains(&colour[3])
         && 0.0 <= front
         && front <= back
         && previous_back.is_none_or(|p| front >= p);
@@ -426,10 +434,11 @@ fn check_slot(
 fn slot_error(
     file: &str,
     (x, y, slot): (u32, u32, u32),
-    colour: [f32; 4],
+    colour: [f16; 4],
     depth: [f32; 2],
     previous_back: Option<f32>,
 ) -> Result<(), VdiError> {
+    let colour = colour.map(f16::to_f32);
     let non_finite = |what| VdiError::NonFinite {
         file: file.to_owned(),
         x,
@@ -590,7 +599,7 @@ impl VolumetricDepthImage {
     ///
     /// # Panics
     /// When `(x, y)` is outside the image or the arrays are shorter than the counts say.
-    pub fn list(&self, x: u32, y: u32) -> (&[[f32; 4]], &[[f32; 2]]) {
+    pub fn list(&self, x: u32, y: u32) -> (&[[f16; 4]], &[[f32; 2]]) {
         assert!(
             x < self.header.width && y < self.header.height,
             "list ({x}, {y}) is outside a {}×{} VDI",
@@ -615,7 +624,7 @@ impl VolumetricDepthImage {
     }
 
     /// Every list's colour and depth, row-major from the top, in one pass.
-    pub fn lists(&self) -> impl Iterator<Item = (&[[f32; 4]], &[[f32; 2]])> {
+    pub fn lists(&self) -> impl Iterator<Item = (&[[f16; 4]], &[[f32; 2]])> {
         let mut start = 0usize;
         self.counts.iter().map(move |&count| {
             let end = start + usize::from(count);
@@ -626,7 +635,7 @@ impl VolumetricDepthImage {
     }
 
     /// The supersegments `colour` of one list composited as [`Self::composite`] does.
-    pub fn composite_list(&self, colour: &[[f32; 4]]) -> [f32; 4] {
+    pub fn composite_list(&self, colour: &[[f16; 4]]) -> [f32; 4] {
         let mut rgb = [0.0f64; 3];
         let mut transmittance = 1.0f64;
         for c in colour {

@@ -9,6 +9,11 @@ use residency_schemas::vdi::{
 
 const FILE: &str = "a.vdi";
 
+/// `[r, g, b, a]` as the image holds it: each value rounded to the nearest half float.
+fn half4(colour: [f32; 4]) -> [f16; 4] {
+    colour.map(f16::from_f32)
+}
+
 fn header(colour: ColourFormat, depth: DepthFormat, compression: Compression) -> VdiHeader {
     VdiHeader {
         version: 1,
@@ -42,8 +47,8 @@ fn header(colour: ColourFormat, depth: DepthFormat, compression: Compression) ->
     }
 }
 
-/// Lists of 2, 0, 4 / 1, 3, 1 supersegments with colours that f16 cannot hold exactly and
-/// depths between `near` and `far`.
+/// Lists of 2, 0, 4 / 1, 3, 1 supersegments with colours rounded to half floats from values
+/// that f16 cannot hold exactly, and depths between `near` and `far`.
 fn sample(
     colour: ColourFormat,
     depth: DepthFormat,
@@ -57,7 +62,7 @@ fn sample(
             let tint = [0.3 + 0.1 * i as f32, 0.77, 0.123];
             image
                 .colour
-                .push([a * tint[0], a * tint[1], a * tint[2], a]);
+                .push(half4([a * tint[0], a * tint[1], a * tint[2], a]));
             let front = 1.0 + 0.37 * (i + 1) as f32 + 0.9 * s as f32;
             image.depth.push([front, front + 0.41]);
         }
@@ -122,16 +127,9 @@ fn every_format_round_trips_within_its_precision() {
         assert_eq!(back.counts, image.counts, "{case}");
         assert_eq!((back.colour.len(), back.depth.len()), (11, 11), "{case}");
         assert_eq!(back.starts(), [0, 2, 2, 6, 7, 10, 11], "{case}");
+        // The image holds half floats, which both colour formats store exactly.
         for (i, (b, a)) in back.colour.iter().zip(&image.colour).enumerate() {
-            for (&b, &a) in b.iter().zip(a) {
-                match colour {
-                    ColourFormat::F32 => assert_eq!(b.to_bits(), a.to_bits(), "{case}"),
-                    ColourFormat::F16 => {
-                        assert_eq!(b, f16::from_f32(a).to_f32(), "{case} slot {i}");
-                        assert!((b - a).abs() <= a * 2f32.powi(-11), "{case} {a} {b}");
-                    }
-                }
-            }
+            assert_eq!(b.map(f16::to_bits), a.map(f16::to_bits), "{case} slot {i}");
         }
         let step = (9.0 - 1.0) / 65535.0;
         for (b, a) in back.depth.iter().zip(&image.depth) {
@@ -186,7 +184,7 @@ fn the_layout_is_as_documented() {
     h.dataset = None;
     let mut image = VolumetricDepthImage::new(h.clone());
     image.counts[0] = 1;
-    image.colour.push([0.25, 0.5, 0.125, 0.75]);
+    image.colour.push(half4([0.25, 0.5, 0.125, 0.75]));
     image.depth.push([2.0, 3.5]);
     let json = serde_json::to_vec(&h).unwrap();
     assert!(!String::from_utf8_lossy(&json).contains("dataset"));
@@ -234,13 +232,22 @@ fn composite_blends_front_to_back_over_the_background() {
         Compression::None,
     ));
     image.counts[4] = 2;
-    image.colour = vec![[0.25, 0.5, 0.125, 0.5], [0.5, 0.25, 0.75, 0.75]];
+    image.colour = vec![
+        half4([0.25, 0.5, 0.125, 0.5]),
+        half4([0.5, 0.25, 0.75, 0.75]),
+    ];
     image.depth = vec![[1.0, 2.0], [2.5, 4.0]];
     // rgb = c0 + 0.5·c1 + 0.5·0.25·background, a = 1 − 0.5·0.25.
     assert_eq!(image.composite(1, 1), [0.53125, 0.6875, 0.625, 0.875]);
     assert_eq!(image.composite(0, 0), [0.25, 0.5, 1.0, 0.0]);
     let (colour, depth) = image.list(1, 1);
-    assert_eq!(colour, [[0.25, 0.5, 0.125, 0.5], [0.5, 0.25, 0.75, 0.75]]);
+    assert_eq!(
+        colour,
+        [
+            half4([0.25, 0.5, 0.125, 0.5]),
+            half4([0.5, 0.25, 0.75, 0.75])
+        ]
+    );
     assert_eq!(depth, [[1.0, 2.0], [2.5, 4.0]]);
     assert_eq!(image.list(2, 1), (&[][..], &[][..]));
     // In one pass, the same lists and composites.
@@ -465,6 +472,18 @@ fn non_finite_and_out_of_range_values_are_refused() {
         refusal(&bad),
         "a.vdi: list (0, 0) supersegment 0 has a non-finite colour"
     );
+    // An f32 colour is held as the nearest half float: one past f16's range (65504) is
+    // infinite there, and refused; one within it is rounded.
+    let mut bad = bytes.clone();
+    bad[colour + 4..colour + 8].copy_from_slice(&70000f32.to_le_bytes());
+    assert_eq!(
+        refusal(&bad),
+        "a.vdi: list (0, 0) supersegment 0 has a non-finite colour"
+    );
+    let mut rounded = bytes.clone();
+    rounded[colour + 4..colour + 8].copy_from_slice(&1000.3f32.to_le_bytes());
+    let image = VolumetricDepthImage::decode(&rounded, FILE).unwrap();
+    assert_eq!(image.colour[0][1], f16::from_f32(1000.5));
     let mut bad = bytes.clone();
     bad[colour + 16 + 12..colour + 32].copy_from_slice(&1.5f32.to_le_bytes());
     let message = refusal(&bad);
@@ -577,7 +596,7 @@ fn encode_refuses_what_decode_would() {
         "VDI to encode: colour has 10 entries, the header and counts imply 11"
     );
     let mut image = good.clone();
-    image.colour[3] = [0.5, 0.5, 0.5, 1.25];
+    image.colour[3] = half4([0.5, 0.5, 0.5, 1.25]);
     assert_eq!(
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (2, 0) supersegment 1 has colour and opacity [0.5, 0.5, 0.5, 1.25]: \
@@ -585,11 +604,11 @@ fn encode_refuses_what_decode_would() {
     );
     // Channels mix additively: a premultiplied colour past 1 is kept.
     let mut image = good.clone();
-    image.colour[3] = [1.5, 0.5, 2.25, 1.0];
+    image.colour[3] = half4([1.5, 0.5, 2.25, 1.0]);
     let back = VolumetricDepthImage::decode(&image.encode().unwrap(), "a.vdi").unwrap();
-    assert_eq!(back.colour[3], [1.5, 0.5, 2.25, 1.0]);
+    assert_eq!(back.colour[3], half4([1.5, 0.5, 2.25, 1.0]));
     let mut image = good.clone();
-    image.colour[3] = [-0.25, 0.5, 0.5, 1.0];
+    image.colour[3] = half4([-0.25, 0.5, 0.5, 1.0]);
     assert_eq!(
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (2, 0) supersegment 1 has colour and opacity [-0.25, 0.5, 0.5, 1.0]: \
@@ -618,8 +637,8 @@ fn reference_encoding(image: &VolumetricDepthImage) -> Vec<u8> {
     for (c, d) in image.colour.iter().zip(&image.depth) {
         for &v in c {
             match h.colour {
-                ColourFormat::F16 => colour.extend_from_slice(&f16::from_f32(v).to_le_bytes()),
-                ColourFormat::F32 => colour.extend_from_slice(&v.to_le_bytes()),
+                ColourFormat::F16 => colour.extend_from_slice(&v.to_le_bytes()),
+                ColourFormat::F32 => colour.extend_from_slice(&v.to_f32().to_le_bytes()),
             }
         }
         for &v in d {
@@ -680,7 +699,7 @@ fn bands_encode_and_decode_the_files_bytes_and_name_the_first_bad_slot() {
         for s in 0..count {
             let a = 0.25 + 0.005 * i as f32 + 0.125 * f32::from(s);
             good.colour
-                .push([0.5 * a, 0.25 * a, 0.125 + 0.001 * i as f32, a]);
+                .push(half4([0.5 * a, 0.25 * a, 0.125 + 0.001 * i as f32, a]));
             let front = 1.0 + 0.05 * i as f32 + f32::from(s);
             good.depth.push([front, front + 0.5]);
         }
@@ -703,15 +722,19 @@ fn bands_encode_and_decode_the_files_bytes_and_name_the_first_bad_slot() {
             bytes,
             "{colour:?} {depth:?} {compression:?}"
         );
-        if (colour, depth) == (ColourFormat::F32, DepthFormat::F32) {
-            assert_eq!(back.colour, image.colour);
+        // Colour in either format reads back exactly (the image's half floats).
+        assert_eq!(
+            back.colour, image.colour,
+            "{colour:?} {depth:?} {compression:?}"
+        );
+        if depth == DepthFormat::F32 {
             assert_eq!(back.depth, image.depth);
         }
     }
     // The last slot of band 0 (list (2, 15)) and a slot of band 2 (list (1, 35)).
     let slot_of = |x: usize, y: usize| good.starts()[y * 3 + x];
     let mut image = good.clone();
-    image.colour[slot_of(1, 35)][3] = 2.0;
+    image.colour[slot_of(1, 35)][3] = f16::from_f32(2.0);
     let message = image.encode().unwrap_err().to_string();
     assert!(
         message.starts_with("VDI to encode: list (1, 35) supersegment 0 has colour and opacity ["),

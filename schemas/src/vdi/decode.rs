@@ -75,8 +75,8 @@ impl VolumetricDepthImage {
     }
 
     /// Fills the supersegments, for the counts already set, from the raw `colour` and `depth`
-    /// planes (exactly the slots the counts imply), converted to `f32` and checked as
-    /// [`check_slot`] checks them.
+    /// planes (exactly the slots the counts imply), converted to the image's types (colour in
+    /// half floats, depth in `f32`) and checked as [`check_slot`] checks them.
     ///
     /// # Errors
     /// The [`VdiError`] of the first slot, in the file's order, that fails a check.
@@ -84,7 +84,7 @@ impl VolumetricDepthImage {
         let header = &self.header;
         let (colour_bytes, depth_bytes) = (header.colour.slot_bytes(), header.depth.slot_bytes());
         let used = colour.len() / colour_bytes;
-        self.colour = vec![[0.0; 4]; used];
+        self.colour = vec![[f16::ZERO; 4]; used];
         self.depth = vec![[0.0; 2]; used];
         let (mut colour_rest, mut depth_rest) = (&mut self.colour[..], &mut self.depth[..]);
         let mut parts = Vec::new();
@@ -112,7 +112,7 @@ fn read_band(
     header: &VdiHeader,
     band: &Band<'_>,
     (colour_in, depth_in): (&[u8], &[u8]),
-    (colour, depth): (&mut [[f32; 4]], &mut [[f32; 2]]),
+    (colour, depth): (&mut [[f16; 4]], &mut [[f32; 2]]),
     file: &str,
 ) -> Result<(), VdiError> {
     let width = header.width as usize;
@@ -139,15 +139,16 @@ fn read_band(
     Ok(())
 }
 
-/// One slot's colour as `f32`, from its bytes in the colour plane.
+/// One slot's colour as the image holds it, from its bytes in the colour plane: half floats
+/// as they are, `f32` rounded to the nearest half float.
 #[inline]
-fn colour_of(format: ColourFormat, bytes: &[u8]) -> [f32; 4] {
+fn colour_of(format: ColourFormat, bytes: &[u8]) -> [f16; 4] {
     match format {
         ColourFormat::F16 => {
             let b: &[u8; 8] = bytes.first_chunk().expect("an f16 colour slot is 8 bytes");
-            std::array::from_fn(|i| f16::from_le_bytes([b[2 * i], b[2 * i + 1]]).to_f32())
+            std::array::from_fn(|i| f16::from_le_bytes([b[2 * i], b[2 * i + 1]]))
         }
-        ColourFormat::F32 => f32s(bytes),
+        ColourFormat::F32 => f32s(bytes).map(f16::from_f32),
     }
 }
 

@@ -5,8 +5,6 @@
 
 use std::borrow::Cow;
 
-use half::f16;
-
 use super::{
     Band, ColourFormat, Compression, DepthFormat, ENCODING, MAX_HEADER_BYTES, VDI_MAGIC, VdiError,
     VolumetricDepthImage, bands, check_header, check_slot, join, quantise, try_in_order,
@@ -124,12 +122,12 @@ impl VolumetricDepthImage {
                 match header.colour {
                     ColourFormat::F16 => {
                         for (o, v) in c_out.chunks_exact_mut(2).zip(c) {
-                            o.copy_from_slice(&f16::from_f32(v).to_le_bytes());
+                            o.copy_from_slice(&v.to_le_bytes());
                         }
                     }
                     ColourFormat::F32 => {
                         for (o, v) in c_out.chunks_exact_mut(4).zip(c) {
-                            o.copy_from_slice(&v.to_le_bytes());
+                            o.copy_from_slice(&v.to_f32().to_le_bytes());
                         }
                     }
                 }

@@ -273,6 +273,35 @@ pub const CLIP_PLANE_SLOTS: usize = MAX_CLIP_PLANES + 1;
 /// its DVR colour (slot 0) and its supersegment count, `γ` and marches (slot 1).
 pub const VDI_STATE_SLOTS: u32 = 4;
 
+/// A supersegment as the VDI shaders hold it (`shaders/raycast/vdi.wgsl` writes it,
+/// `shaders/vdi_render.wgsl` reads it): `vec4<f32>(pack2x16float(r, g), pack2x16float(b, a),
+/// front, back)`, the premultiplied colour's half floats two to a word, the first in the low
+/// half.
+pub fn vdi_slot(colour: [half::f16; 4], depth: [f32; 2]) -> [f32; 4] {
+    let pack = |lo: half::f16, hi: half::f16| {
+        f32::from_bits(u32::from(lo.to_bits()) | u32::from(hi.to_bits()) << 16)
+    };
+    [
+        pack(colour[0], colour[1]),
+        pack(colour[2], colour[3]),
+        depth[0],
+        depth[1],
+    ]
+}
+
+/// The colour and depth of a [`vdi_slot`].
+pub fn vdi_slot_parts(slot: &[f32; 4]) -> ([half::f16; 4], [f32; 2]) {
+    let halves = |word: f32| {
+        let bits = word.to_bits();
+        [
+            half::f16::from_bits(bits as u16),
+            half::f16::from_bits((bits >> 16) as u16),
+        ]
+    };
+    let ([r, g], [b, a]) = (halves(slot[0]), halves(slot[1]));
+    ([r, g, b, a], [slot[2], slot[3]])
+}
+
 gpu_struct! {
     /// One pyramid level in the scene uniforms.
     pub struct LevelEntry {

@@ -13,7 +13,9 @@ use residency_schemas::vdi::{
 use super::buffers::{
     check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
 };
-use super::contract::{VDI_STATE_SLOTS, VdiCompactParams, vdi_compact_binding, vdi_compact_source};
+use super::contract::{
+    VDI_STATE_SLOTS, VdiCompactParams, vdi_compact_binding, vdi_compact_source, vdi_slot_parts,
+};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::buffer_entry;
@@ -249,23 +251,21 @@ async fn read_back(
     Ok(())
 }
 
-/// The packed slots as the VDI holds them: each slot's colour (four half floats in its first
-/// two words) as `f32`, and its front and back depths. Native builds unpack on rayon's
-/// threads.
-fn unpack_slots(slots: &[[f32; 4]], colour: &mut Vec<[f32; 4]>, depth: &mut Vec<[f32; 2]>) {
-    let unpack = |slot: &[f32; 4]| {
-        let [r, g] = unpack_half2(slot[0]);
-        let [b, a] = unpack_half2(slot[1]);
-        ([r, g, b, a], [slot[2], slot[3]])
-    };
+/// The packed slots ([`vdi_slot`](super::contract::vdi_slot)) as the VDI holds them: each
+/// slot's colour (its half floats as they are) and its front and back depths. Native builds
+/// unpack on rayon's threads.
+fn unpack_slots(slots: &[[f32; 4]], colour: &mut Vec<[half::f16; 4]>, depth: &mut Vec<[f32; 2]>) {
     #[cfg(not(target_arch = "wasm32"))]
     {
         use rayon::prelude::*;
-        slots.par_iter().map(unpack).unzip_into_vecs(colour, depth);
+        slots
+            .par_iter()
+            .map(vdi_slot_parts)
+            .unzip_into_vecs(colour, depth);
     }
     #[cfg(target_arch = "wasm32")]
     {
-        (*colour, *depth) = slots.iter().map(unpack).unzip();
+        (*colour, *depth) = slots.iter().map(vdi_slot_parts).unzip();
     }
 }
 
@@ -281,15 +281,6 @@ pub struct VdiGeneration {
     pub gamma: Vec<f32>,
     /// Marches the rays took in all (one per ray when every ray fits at the first `γ`).
     pub marches: u64,
-}
-
-/// WGSL's `unpack2x16float` of the bits of `word`.
-fn unpack_half2(word: f32) -> [f32; 2] {
-    let bits = word.to_bits();
-    [
-        half::f16::from_bits(bits as u16).to_f32(),
-        half::f16::from_bits((bits >> 16) as u16).to_f32(),
-    ]
 }
 
 /// The header of a VDI of `scene` at `width × height` with at most `supersegments` per list,

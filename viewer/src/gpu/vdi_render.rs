@@ -18,7 +18,9 @@ use super::buffers::{
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use super::contract::{VDI_DEPTH_BINS, VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source};
+use super::contract::{
+    VDI_DEPTH_BINS, VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source, vdi_slot,
+};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
@@ -217,16 +219,10 @@ pub fn grid_bins(header: &VdiHeader) -> (f32, f32) {
 }
 
 /// The supersegments of `vdi`, lists one after the other as the file holds them, each as the
-/// generator's pass writes a slot: `vec4(pack2x16float(r, g), pack2x16float(b, a), front,
-/// back)`; one zero slot for a VDI without any (a binding is never empty). Native builds pack
-/// on rayon's threads.
+/// generator's pass writes a slot ([`vdi_slot`]); one zero slot for a VDI without any (a
+/// binding is never empty). Native builds pack on rayon's threads.
 fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
-    let pack = |a: f32, b: f32| {
-        let lo = u32::from(half::f16::from_f32(a).to_bits());
-        let hi = u32::from(half::f16::from_f32(b).to_bits());
-        f32::from_bits(lo | hi << 16)
-    };
-    let slot = |(c, d): (&[f32; 4], &[f32; 2])| [pack(c[0], c[1]), pack(c[2], c[3]), d[0], d[1]];
+    let slot = |(&c, &d): (&[half::f16; 4], &[f32; 2])| vdi_slot(c, d);
     if vdi.colour.is_empty() {
         return vec![[0.0; 4]];
     }

@@ -235,3 +235,17 @@ fn the_present_pass_uniforms_match_their_wgsl_twin() {
         Vec::<String>::new()
     );
 }
+
+/// A VDI slot's colour as WGSL's `pack2x16float` lays it out: two half floats a word, the
+/// first in the low 16 bits; read back to the same half floats and depths.
+#[test]
+fn a_vdi_slot_packs_its_half_floats_as_pack2x16float_does() {
+    use half::f16;
+    let colour = [1.0, 2.0, 0.5, 0.25].map(f16::from_f32);
+    let slot = contract::vdi_slot(colour, [3.0, 4.5]);
+    assert_eq!(
+        slot.map(f32::to_bits),
+        [0x4000_3c00, 0x3400_3800, 3.0f32.to_bits(), 4.5f32.to_bits()]
+    );
+    assert_eq!(contract::vdi_slot_parts(&slot), (colour, [3.0, 4.5]));
+}

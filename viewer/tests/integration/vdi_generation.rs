@@ -416,7 +416,7 @@ fn the_linear_filter_keeps_thin_shells() {
     let mut shells = generation.image.clone();
     for (depth, colour) in shells.depth.iter_mut().zip(&mut shells.colour) {
         *depth = [depth[0], depth[0] + 0.01];
-        *colour = [0.9, 0.45, 0.0, 0.9];
+        *colour = [0.9, 0.45, 0.0, 0.9].map(half::f16::from_f32);
     }
     let mut renderer = VdiRenderer::new(gpu(), &shells, w, h).expect("vdi renderer");
     for degrees in [10.0, 30.0] {
