@@ -57,10 +57,12 @@
 //! `far` (so that every level reads back as an f32 that quantises to it again); every plane's stored
 //! length within the rest of the input, and its raw length (for LZ4 the announced one, checked
 //! before decompressing) exactly what the header and counts imply; counts at most N_S; no
-//! trailing bytes; and in every used slot finite values (the colour as the image holds it,
-//! in half floats: an `f32` colour past 65504 is infinite there), a colour of at least 0, an opacity in
+//! trailing bytes; and in every used slot finite values, a colour of at least 0, an opacity in
 //! `[0, 1]`, `0 ≤ front ≤ back`, and a front at or past the back of the slot before it in
-//! its list (renderers find where a ray is by that order).
+//! its list (renderers find where a ray is by that order). The colour checks apply to the
+//! colour as the image holds it, in half floats: from an `f32` colour plane, a value of 65520
+//! or more is infinite there and refused, an opacity up to 2⁻¹¹ above 1 rounds to 1 and a
+//! value down to −2⁻²⁵ rounds to −0, both accepted, and errors show the rounded values.
 //! [`VolumetricDepthImage::encode`] checks the same, so that what it writes always reads back.
 
 use half::f16;
@@ -411,7 +413,8 @@ fn check_slot(
     previous_back: Option<f32>,
 ) -> Result<(), VdiError> {
     // The same checks as `slot_error`'s, as one expression, for the common case; the half
-    // floats compared as they are (no conversion: `half` orders them by their bits).
+    // floats compared as they are (no conversion: `half` compares sign and magnitude, ±0
+    // equal, NaN unordered, as f32 does).
     let [front, back] = depth;
     let valid = colour.iter().all(|c| c.is_finite())
         && depth.iter().all(|v| v.is_finite())

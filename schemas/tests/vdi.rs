@@ -472,18 +472,32 @@ fn non_finite_and_out_of_range_values_are_refused() {
         refusal(&bad),
         "a.vdi: list (0, 0) supersegment 0 has a non-finite colour"
     );
-    // An f32 colour is held as the nearest half float: one past f16's range (65504) is
-    // infinite there, and refused; one within it is rounded.
-    let mut bad = bytes.clone();
-    bad[colour + 4..colour + 8].copy_from_slice(&70000f32.to_le_bytes());
+    // An f32 colour is held as the nearest half float and checked there: from 65520 on it is
+    // infinite, and refused; below, it is rounded (65519 to f16's largest, 65504); an opacity
+    // up to 2⁻¹¹ above 1 rounds to 1, and a colour down to −2⁻²⁵ to −0, both accepted.
+    let at = |bytes: &[u8], offset: usize, value: f32| {
+        let mut edited = bytes.to_vec();
+        edited[colour + offset..colour + offset + 4].copy_from_slice(&value.to_le_bytes());
+        edited
+    };
     assert_eq!(
-        refusal(&bad),
+        refusal(&at(&bytes, 4, 65520.0)),
         "a.vdi: list (0, 0) supersegment 0 has a non-finite colour"
     );
-    let mut rounded = bytes.clone();
-    rounded[colour + 4..colour + 8].copy_from_slice(&1000.3f32.to_le_bytes());
-    let image = VolumetricDepthImage::decode(&rounded, FILE).unwrap();
+    let image = VolumetricDepthImage::decode(&at(&bytes, 4, 65519.0), FILE).unwrap();
+    assert_eq!(image.colour[0][1], f16::MAX);
+    let image = VolumetricDepthImage::decode(&at(&bytes, 4, 1000.3), FILE).unwrap();
     assert_eq!(image.colour[0][1], f16::from_f32(1000.5));
+    let edited = at(&at(&bytes, 12, 1.0 + 2f32.powi(-11)), 0, -(2f32.powi(-25)));
+    let image = VolumetricDepthImage::decode(&edited, FILE).unwrap();
+    assert_eq!(
+        (image.colour[0][3], image.colour[0][0].to_bits()),
+        (f16::ONE, 0x8000)
+    );
+    assert!(
+        refusal(&at(&bytes, 12, 1.0 + 2f32.powi(-10)))
+            .ends_with(", 1.0009766]: a colour below 0 or an opacity outside [0, 1]")
+    );
     let mut bad = bytes.clone();
     bad[colour + 16 + 12..colour + 32].copy_from_slice(&1.5f32.to_le_bytes());
     let message = refusal(&bad);

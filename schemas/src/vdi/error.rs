@@ -195,7 +195,8 @@ pub enum VdiError {
         /// How many.
         extra: u64,
     },
-    /// A used slot holds NaN or an infinity.
+    /// A used slot holds NaN or an infinity (its colour as a half float: an `f32` colour of
+    /// 65520 or more is infinite there).
     #[error("{file}: list ({x}, {y}) supersegment {slot} has a non-finite {what}")]
     NonFinite {
         /// The file.
