@@ -8,7 +8,8 @@
 # Installs what is missing, idempotently: the wasm32-unknown-unknown target (rustup) and
 # wasm-bindgen-cli at exactly the version of the `wasm-bindgen` crate in Cargo.lock (built from
 # crates.io into ~/.cargo/bin, about 6 minutes once). Writes to OUT_DIR.tmp, then renames, so a
-# failed build never leaves a half-written viewer.
+# failed build never leaves a half-written viewer. Needs clang (scripts/setup.sh installs it):
+# the viewer reads zstd-compressed VDIs with zstd's C library, compiled to WebAssembly.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT="${1:-target/release/web}"
@@ -31,6 +32,12 @@ if ! wasm-bindgen --version 2>/dev/null | grep -qx "wasm-bindgen $WB_VERSION"; t
     echo "== installing wasm-bindgen-cli $WB_VERSION (once; about 6 minutes on 2 cores)"
     # Not --locked: its lock file names a crate version this registry lacks.
     cargo install wasm-bindgen-cli --version "$WB_VERSION"
+fi
+
+if ! command -v clang >/dev/null 2>&1; then
+    echo "clang not found: the web viewer compiles zstd's C to WebAssembly with it" \
+        "(run scripts/setup.sh, or apt-get install clang)" >&2
+    exit 1
 fi
 
 echo "== building the viewer for wasm32-unknown-unknown"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Installs what building and testing Residency needs on a fresh Debian machine, idempotently:
-# Debian packages (compiler, Python venv, Mesa's lavapipe Vulkan driver, Xvfb, Chromium, Node.js), a Python virtual environment in
+# Debian packages (compiler, clang for the web build's C, Python venv, Mesa's lavapipe Vulkan driver, Xvfb, Chromium, Node.js), a Python virtual environment in
 # .venv with the external clients the tests use (zarr-python, ome-zarr-models, tifffile, neuroglancer, ...), and the browser tests'
 # npm packages in tests/browser/node_modules.
 # Source it or run it; it does nothing that is already done.
@@ -12,6 +12,8 @@ command -v cc >/dev/null 2>&1 || need_apt+=(build-essential)
 # libFuzzer (cargo fuzz, scripts/fuzz.sh) is C++.
 command -v g++ >/dev/null 2>&1 || need_apt+=(g++)
 command -v pkg-config >/dev/null 2>&1 || need_apt+=(pkg-config)
+# The web build compiles zstd's C (zstd-sys, the VDIs' `shuffled_zstd`) to WebAssembly: clang.
+command -v clang >/dev/null 2>&1 || need_apt+=(clang)
 python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || need_apt+=(python3-venv)
 # Vulkan on the CPU (Mesa lavapipe) for the viewer where there is no GPU, Xvfb for the window test.
 ls /usr/share/vulkan/icd.d/lvp_icd*.json >/dev/null 2>&1 || need_apt+=(mesa-vulkan-drivers libvulkan1)

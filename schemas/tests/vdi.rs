@@ -82,6 +82,7 @@ fn every_format() -> impl Iterator<Item = (ColourFormat, DepthFormat, Compressio
                         Compression::Lz4,
                         Compression::None,
                         Compression::ShuffledLz4,
+                        Compression::ShuffledZstd,
                     ]
                     .map(|compression| (colour, depth, compression))
                 })
@@ -290,6 +291,13 @@ fn every_truncation_is_refused() {
         sample(ColourFormat::F16, DepthFormat::U16, Compression::Lz4)
             .encode()
             .unwrap(),
+        sample(
+            ColourFormat::F16,
+            DepthFormat::F32,
+            Compression::ShuffledZstd,
+        )
+        .encode()
+        .unwrap(),
     ] {
         for end in 0..bytes.len() {
             assert!(VolumetricDepthImage::decode(&bytes[..end], FILE).is_err());
@@ -348,6 +356,98 @@ fn an_lz4_size_other_than_implied_is_refused_before_decompressing() {
         matches!(
             error,
             VdiError::Lz4 {
+                plane: "counts",
+                ..
+            }
+        ),
+        "{error:?}"
+    );
+    assert_eq!(
+        error.to_string(),
+        "a.vdi: the counts plane does not decompress"
+    );
+    assert!(std::error::Error::source(&error).is_some());
+}
+
+/// `bytes` with its counts plane (length and stored bytes) replaced by `stored`.
+fn with_counts_plane(bytes: &[u8], stored: &[u8]) -> Vec<u8> {
+    let start = planes_start(bytes);
+    let old = u64::from_le_bytes(bytes[start..start + 8].try_into().unwrap()) as usize;
+    let mut out = bytes[..start].to_vec();
+    out.extend_from_slice(&(stored.len() as u64).to_le_bytes());
+    out.extend_from_slice(stored);
+    out.extend_from_slice(&bytes[start + 8 + old..]);
+    out
+}
+
+/// A `shuffled_zstd` plane is one zstd frame of level 3 whose header announces the raw length:
+/// checked before decompressing, as is that nothing follows the frame.
+#[test]
+fn a_zstd_plane_is_one_frame_that_announces_the_implied_size() {
+    let image = sample(
+        ColourFormat::F16,
+        DepthFormat::F32,
+        Compression::ShuffledZstd,
+    );
+    let bytes = image.encode().unwrap();
+    let start = planes_start(&bytes);
+    let stored = u64::from_le_bytes(bytes[start..start + 8].try_into().unwrap()) as usize;
+    let frame = &bytes[start + 8..start + 8 + stored];
+    // The six counts of the sample, each one byte (so the shuffle keeps them as they are).
+    assert_eq!(frame, zstd::bulk::compress(&image.counts, 3).unwrap());
+    assert_eq!(frame[..4], [0x28, 0xb5, 0x2f, 0xfd]);
+    assert_eq!(
+        zstd::zstd_safe::get_frame_content_size(frame).ok(),
+        Some(Some(6))
+    );
+    assert_eq!(VolumetricDepthImage::decode(&bytes, FILE).unwrap(), image);
+
+    let seven = zstd::bulk::compress(&[0; 7], 3).unwrap();
+    assert_eq!(
+        refusal(&with_counts_plane(&bytes, &seven)),
+        "a.vdi: the counts plane announces 7 bytes decompressed, the header and counts imply 6"
+    );
+    let sizeless = zstd::stream::encode_all(&image.counts[..], 3).unwrap();
+    assert_eq!(
+        zstd::bulk::decompress(&sizeless, 6).unwrap(),
+        image.counts,
+        "a valid frame but for its size"
+    );
+    assert_eq!(
+        refusal(&with_counts_plane(&bytes, &sizeless)),
+        "a.vdi: the counts plane is not a zstd frame of known size: its frame header does not \
+         announce its size"
+    );
+    assert_eq!(
+        refusal(&with_counts_plane(
+            &bytes,
+            &lz4_flex::block::compress_prepend_size(&image.counts)
+        )),
+        "a.vdi: the counts plane is not a zstd frame of known size: its frame header is not a \
+         zstd frame header"
+    );
+    let mut two = frame.to_vec();
+    two.extend_from_slice(&zstd::bulk::compress(&[], 3).unwrap());
+    assert_eq!(
+        refusal(&with_counts_plane(&bytes, &two)),
+        "a.vdi: the counts plane is not a zstd frame of known size: it is not exactly one whole \
+         zstd frame"
+    );
+    // The frame's header (magic, a descriptor of a single segment, one byte of size: 6), then
+    // one last raw block of 5 bytes: a whole frame, whose content falls short of its header.
+    // The decoder's error is kept as the source.
+    assert_eq!(frame[4..6], [0x20, 6]);
+    let mut bad = frame[..6].to_vec();
+    bad.extend_from_slice(&[1 | 5 << 3, 0, 0, 1, 2, 3, 4, 5]);
+    assert_eq!(
+        zstd::zstd_safe::find_frame_compressed_size(&bad).ok(),
+        Some(bad.len())
+    );
+    let error = VolumetricDepthImage::decode(&with_counts_plane(&bytes, &bad), FILE).unwrap_err();
+    assert!(
+        matches!(
+            error,
+            VdiError::Zstd {
                 plane: "counts",
                 ..
             }
@@ -667,19 +767,21 @@ fn reference_encoding(image: &VolumetricDepthImage) -> Vec<u8> {
             }
         }
     }
+    let shuffled = |raw: &[u8], width: usize| {
+        let n = raw.len() / width;
+        let mut shuffled = vec![0; raw.len()];
+        for (i, value) in raw.chunks_exact(width).enumerate() {
+            for (b, &byte) in value.iter().enumerate() {
+                shuffled[b * n + i] = byte;
+            }
+        }
+        shuffled
+    };
     let plane = |raw: &[u8], width: usize| match h.compression {
         Compression::None => raw.to_vec(),
         Compression::Lz4 => lz4_flex::block::compress_prepend_size(raw),
-        Compression::ShuffledLz4 => {
-            let n = raw.len() / width;
-            let mut shuffled = vec![0; raw.len()];
-            for (i, value) in raw.chunks_exact(width).enumerate() {
-                for (b, &byte) in value.iter().enumerate() {
-                    shuffled[b * n + i] = byte;
-                }
-            }
-            lz4_flex::block::compress_prepend_size(&shuffled)
-        }
+        Compression::ShuffledLz4 => lz4_flex::block::compress_prepend_size(&shuffled(raw, width)),
+        Compression::ShuffledZstd => zstd::bulk::compress(&shuffled(raw, width), 3).unwrap(),
     };
     let json = serde_json::to_vec(h).unwrap();
     let mut out = VDI_MAGIC.to_vec();
@@ -770,7 +872,11 @@ fn bands_encode_and_decode_the_files_bytes_and_name_the_first_bad_slot() {
         image.encode().unwrap_err().to_string(),
         "VDI to encode: list (2, 15) supersegment 1 has a non-finite depth"
     );
-    for compression in [Compression::None, Compression::ShuffledLz4] {
+    for compression in [
+        Compression::None,
+        Compression::ShuffledLz4,
+        Compression::ShuffledZstd,
+    ] {
         let mut file_of = image.clone();
         file_of.header.compression = compression;
         let decoded = VolumetricDepthImage::decode(&reference_encoding(&file_of), FILE);

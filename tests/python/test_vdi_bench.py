@@ -47,6 +47,7 @@ def test_short_mode_measures_every_dataset_and_validates(tmp_path):
         for s in r["sizes"]:
             assert s["gpu_bytes"] == pixels * 20 * 16 and s["paper_raw_bytes"] == pixels * 20 * 24
             assert 0 < s["file_bytes"] < s["gpu_bytes"], (f.name, s)
+            assert 0 < s["zstd_file_bytes"] < s["gpu_bytes"], (f.name, s)
             assert 0 < s["mean_supersegments"] <= 20 and s["marches_per_ray"] >= 1
         assert [(v["supersegments"], v["deviation_degrees"]) for v in r["views"]] == [(20, 0.0), (20, 10.0)]
         for v in r["views"]:

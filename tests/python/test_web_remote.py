@@ -8,6 +8,7 @@ Needs the release binaries and the web build (scripts/build-web.sh)."""
 
 import json
 import subprocess
+import sys
 import threading
 import urllib.parse
 import urllib.request
@@ -19,6 +20,9 @@ from support.binaries import run_ingest, start_server, stop_server
 from support.browser import read_png, require_browser, run_pausing
 from support.paths import BIN, ROOT
 from support.service_proxy import INJECTED_ERROR, ServiceProxy
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from throttle_proxy import ThrottleProxy  # noqa: E402
 
 pytestmark = pytest.mark.browser
 
@@ -165,6 +169,8 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
     # `auto` by default: at rest the linear filter, whose pipeline is compiled while the view
     # rests (from the VDI's own camera the nearest pipeline draws it: the two coincide there).
     assert remote["d_i"] == 1.0 and remote["vdi_filter"] == "auto" and remote["frame_filter"] == "linear", remote
+    # `auto` compression: the first request knows nothing of the link, so it asks for LZ4.
+    assert (remote["vdi_compression"], remote["answer_compression"]) == ("auto", "shuffled_lz4"), remote
     assert remote["linear_compiled"], remote
     # The page's share of the answer's latency: the VDI read, then set up for the ray caster.
     for took in ("vdi_decode_ms", "vdi_setup_ms"):
@@ -508,3 +514,63 @@ def test_auto_moves_with_the_linear_filter_where_its_frames_hold_the_target(serv
             assert dragged["moving_frames_linear"] == 0, dragged
             assert dragged["frames_subsampled"] > rested["frames_subsampled"], (rested, dragged)
         assert errors(console, ["status of 503"]) == []
+
+
+def test_the_page_draws_zstd_vdis_as_the_dvr_image_and_refuses_an_unknown_compression(servers, stores, tmp_path):
+    """Opened with `?vdi_compression=shuffled_zstd`, the page asks for zstd (every request),
+    reads the service's zstd answer (zstd's C library compiled to WebAssembly) and draws it as
+    DVR draws the view. An unknown compression is refused with its name."""
+    base, service = servers
+    results, console = drive(
+        page(base, "u16x3", service, extra="&vdi_compression=shuffled_zstd"),
+        [{"do": "converge"}, {"do": "hash"}, {"do": "snapshot", "path": str(tmp_path / "zstd.png")}],
+    )
+    state, fragment = results[0], results[1]
+    assert state["error"] is None and state["converged"], state
+    remote = state["remote"]
+    assert (remote["vdi_compression"], remote["answer_compression"]) == ("shuffled_zstd", "shuffled_zstd"), remote
+    assert remote["vdis_received"] == 1 and remote["last_error"] is None, remote
+    assert_matches(tmp_path / "zstd.png", dvr(stores["u16x3"], scene_of(fragment), tmp_path / "dvr.png"))
+    assert errors(console) == []
+
+    results, _ = drive(page(base, "u16x3", service, extra="&vdi_compression=brotli"), [{"do": "waitMessage"}])
+    assert results[0] == "?vdi_compression: unknown VDI compression 'brotli' (auto, shuffled_lz4 or shuffled_zstd)"
+
+
+def test_auto_asks_for_zstd_once_an_answer_crossed_a_slow_link(servers, stores, tmp_path):
+    """Under `auto` (the default) the first request asks for LZ4 (nothing is known of the
+    link); its answer (about 340 KB here, over the 256 KiB that weigh the link) crosses a
+    20 Mbit/s link (benchmarks/throttle_proxy.py), far below the 300 Mbit/s where zstd pays,
+    so the request after an orbit asks for zstd, and its VDI is drawn as DVR draws the view.
+    (The rate is measured from the answer's headers, which arrive with its first bytes, so it
+    reads somewhat above the link's.)"""
+    base, service = servers
+    host, port = urllib.parse.urlsplit(service).netloc.split(":")
+    with ThrottleProxy((host, int(port)), mbit=20, rtt_ms=10) as proxy:
+        results, _ = drive(page(base, "u16x3", f"http://127.0.0.1:{proxy.port}"), [{"do": "converge"}, {"do": "hash"}])
+        first = results[0]
+        moved = orbited(scene_of(results[1]), 20.0)
+        results, console = drive(
+            page(base, "u16x3", f"http://127.0.0.1:{proxy.port}"),
+            [
+                {"do": "converge"},
+                {"do": "state"},
+                {"do": "setScene", "scene": moved},
+                {"do": "waitState", "when": "s.remote.requests_sent >= 2"},
+                {"do": "converge"},
+                {"do": "snapshot", "path": str(tmp_path / "zstd.png")},
+            ],
+        )
+    before, after = results[1], results[4]
+    for state in (first, before):
+        remote = state["remote"]
+        assert state["converged"] and remote["vdi_compression"] == "auto", state
+        assert remote["answer_compression"] == "shuffled_lz4", remote
+        assert remote["vdi_bytes_received"] >= 256 * 1024, remote
+        assert 5 < remote["link_mbit_per_s"] < 60, remote
+    remote = after["remote"]
+    assert after["converged"] and remote["drawn_request"] == 2, after
+    assert remote["answer_compression"] == "shuffled_zstd", remote
+    assert remote["vdi_camera"] == moved["camera"], remote
+    assert_matches(tmp_path / "zstd.png", dvr(stores["u16x3"], moved, tmp_path / "dvr.png"))
+    assert errors(console) == []

@@ -17,6 +17,8 @@
 //! - [`vdi_filter_choice`]: which filter a VDI's frames use, as the user picks it (by default
 //!   the linear filter at rest, and while the camera moves where the device has time for it);
 //! - [`vdi_frame_plan`]: each VDI frame's filter and image-space sampling, moving or at rest;
+//! - [`vdi_compression_choice`]: which compression the page asks the render service for (by
+//!   default zstd over a link slower than the time it costs, else LZ4);
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
 //! - [`bench`](mod@bench): the renderer benchmark suite (`viewer bench`);
 //! - [`names`]: the enums named on the command line and in files, and the one error for an
@@ -52,6 +54,7 @@ pub mod scene;
 #[cfg(all(feature = "serve", not(target_arch = "wasm32")))]
 pub mod service;
 pub mod source;
+pub mod vdi_compression_choice;
 pub mod vdi_filter_choice;
 pub mod vdi_frame_plan;
 pub mod vdi_service;

@@ -18,7 +18,11 @@
 // bilinear mix of the four around each point (closer to DVR away from the VDI's camera, at
 // several times the cost), or `auto` (the default): the linear filter once the camera rests,
 // and while it moves where the last linear frame at full resolution held the target frame
-// rate, else the nearest list.
+// rate, else the nearest list. `?vdi_compression=auto|shuffled_lz4|shuffled_zstd` is how the
+// service compresses the VDIs it sends: zstd is 1.4 to 1.7 times smaller than LZ4 and slower
+// to write and read; `auto` (the default) asks for zstd while the last answer of at least
+// 256 KiB crossed the link slower than 300 Mbit/s (its bytes over the time from its headers to
+// its last byte), else for LZ4.
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
@@ -85,7 +89,7 @@ function presentWanted() {
 }
 
 /** The render service of the remote mode: {url, token, frameMs (NaN: the default), vdiFilter
- * (null: the default)}, or null. */
+ * and vdiCompression (null: the default)}, or null. */
 function renderService() {
   const params = new URLSearchParams(location.search);
   const url = params.get("render");
@@ -96,6 +100,7 @@ function renderService() {
     token: params.get("render_token"),
     frameMs: fps > 0 ? 1000 / fps : NaN,
     vdiFilter: params.get("vdi_filter"),
+    vdiCompression: params.get("vdi_compression"),
   };
 }
 
@@ -175,8 +180,10 @@ function remoteTick() {
   const send = () => fetch(`${service.url}/vdi`, { method: "POST", headers: serviceHeaders(true), body, signal: mine.abort.signal });
   const answered = async (r) => {
     if (r.ok) {
+      // fetch resolves on the headers: from then to the last byte is the body's time on the link.
+      const headersAt = performance.now();
       const bytes = new Uint8Array(await r.arrayBuffer());
-      if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes);
+      if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes, performance.now() - headersAt);
       return;
     }
     const message = await serviceError(r);
@@ -232,6 +239,7 @@ function showStats() {
       `remote: ${r.mode}${r.converged ? " (converged)" : ""}\n` +
       (r.service_adapter ? `service GPU ${r.service_adapter.name} (${r.service_adapter.backend})\n` : "") +
       `VDIs received ${r.vdis_received} (${(r.vdi_bytes_received / (1 << 20)).toFixed(1)} MiB) · requests ${r.requests_sent} · retried ${r.requests_retried} · aborted ${r.requests_aborted} · dropped ${r.answers_dropped}\n` +
+      `compression ${r.vdi_compression}` + (r.answer_compression ? ` (last VDI ${r.answer_compression})` : "") + (r.link_mbit_per_s != null ? ` · link ${r.link_mbit_per_s.toFixed(0)} Mbit/s` : "") + "\n" +
       `D_I ${r.d_i.toFixed(2)} · ${r.vdi_filter} filter` + (r.vdi_filter === "auto" && r.frame_filter ? ` (${r.frame_filter})` : "") + (r.frame_ms != null ? ` · ${r.frame_ms.toFixed(1)} ms/frame` : "") +
       // What decides auto's filter while the camera moves: the last linear frame's time.
       (r.vdi_filter === "auto" && r.linear_frame_ms != null ? ` · linear ${r.linear_frame_ms.toFixed(1)} ms` : "") +
@@ -615,7 +623,8 @@ window.residency = {
   },
   /** {frame, converged, bricks_fetched, bytes_fetched, error, controls_built, ..., remote:
    * {mode, service_adapter: {name, backend}, requests_sent, requests_retried,
-   * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, last_error, d_i,
+   * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, vdi_compression, link_mbit_per_s,
+   * answer_compression, last_error, d_i,
    * vdi_filter, frame_filter, linear_frame_ms, moving_frames_linear, vdi_decode_ms,
    * vdi_setup_ms, vdi_camera, converged,
    * ...} with a render service, else null}. */
@@ -702,11 +711,15 @@ async function main() {
   listen();
   if (service) {
     viewer.remote_begin(service.url, service.frameMs);
-    if (service.vdiFilter != null) {
+    for (const [value, set, name] of [
+      [service.vdiFilter, (v) => viewer.set_vdi_filter(v), "vdi_filter"],
+      [service.vdiCompression, (v) => viewer.set_vdi_compression(v), "vdi_compression"],
+    ]) {
+      if (value == null) continue;
       try {
-        viewer.set_vdi_filter(service.vdiFilter);
+        set(value);
       } catch (e) {
-        failure = `?vdi_filter: ${e}`;
+        failure = `?${name}: ${e}`;
         show(failure);
         return;
       }

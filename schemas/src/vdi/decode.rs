@@ -230,23 +230,51 @@ impl<'a> Reader<'a> {
                 }
                 Ok(Cow::Borrowed(data))
             }
-            Compression::Lz4 | Compression::ShuffledLz4 => {
-                let lz4 = |source| VdiError::Lz4 {
-                    file: file.to_owned(),
-                    plane,
-                    source,
+            Compression::Lz4 | Compression::ShuffledLz4 | Compression::ShuffledZstd => {
+                let announced_size = |announced: u64| {
+                    if announced == expected as u64 {
+                        Ok(())
+                    } else {
+                        Err(VdiError::AnnouncedSize {
+                            file: file.to_owned(),
+                            plane,
+                            announced,
+                            expected: expected as u64,
+                        })
+                    }
                 };
-                let (announced, block) = lz4_flex::block::uncompressed_size(data).map_err(lz4)?;
-                if announced != expected {
-                    return Err(VdiError::AnnouncedSize {
+                let mut raw = vec![0; expected];
+                let actual = if compression == Compression::ShuffledZstd {
+                    let frame = |problem| VdiError::ZstdFrame {
                         file: file.to_owned(),
                         plane,
-                        announced: announced as u64,
-                        expected: expected as u64,
-                    });
-                }
-                let mut raw = vec![0; expected];
-                let actual = lz4_flex::block::decompress_into(block, &mut raw).map_err(lz4)?;
+                        problem,
+                    };
+                    let announced = zstd::zstd_safe::get_frame_content_size(data)
+                        .map_err(|_| frame("its frame header is not a zstd frame header"))?
+                        .ok_or_else(|| frame("its frame header does not announce its size"))?;
+                    announced_size(announced)?;
+                    if zstd::zstd_safe::find_frame_compressed_size(data).ok() != Some(data.len()) {
+                        return Err(frame("it is not exactly one whole zstd frame"));
+                    }
+                    zstd::bulk::decompress_to_buffer(data, &mut raw).map_err(|source| {
+                        VdiError::Zstd {
+                            file: file.to_owned(),
+                            plane,
+                            source,
+                        }
+                    })?
+                } else {
+                    let lz4 = |source| VdiError::Lz4 {
+                        file: file.to_owned(),
+                        plane,
+                        source,
+                    };
+                    let (announced, block) =
+                        lz4_flex::block::uncompressed_size(data).map_err(lz4)?;
+                    announced_size(announced as u64)?;
+                    lz4_flex::block::decompress_into(block, &mut raw).map_err(lz4)?
+                };
                 if actual != expected {
                     return Err(VdiError::ShortPlane {
                         file: file.to_owned(),
@@ -255,7 +283,7 @@ impl<'a> Reader<'a> {
                         expected: expected as u64,
                     });
                 }
-                if compression == Compression::ShuffledLz4 {
+                if compression.shuffles() {
                     raw = unshuffle(&raw, width);
                 }
                 Ok(Cow::Owned(raw))

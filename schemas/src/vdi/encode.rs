@@ -7,8 +7,8 @@ use std::borrow::Cow;
 
 use super::{
     Band, ColourFormat, Compression, DepthFormat, ENCODING, MAX_HEADER_BYTES, VDI_MAGIC, VdiError,
-    VolumetricDepthImage, bands, check_header, check_slot, join, quantise, try_in_order,
-    used_slots,
+    VolumetricDepthImage, ZSTD_LEVEL, bands, check_header, check_slot, join, quantise,
+    try_in_order, used_slots,
 };
 
 impl VolumetricDepthImage {
@@ -158,11 +158,18 @@ fn stored_plane(raw: &[u8], compression: Compression, width: usize) -> Cow<'_, [
         Compression::ShuffledLz4 => {
             Cow::Owned(lz4_flex::block::compress_prepend_size(&shuffle(raw, width)))
         }
+        // One frame, its header announcing the raw length (zstd's default for a single call).
+        // The call fails only where its output buffer, sized by `ZSTD_compressBound`, is too
+        // small, or the level out of range: neither can happen.
+        Compression::ShuffledZstd => Cow::Owned(
+            zstd::bulk::compress(&shuffle(raw, width), ZSTD_LEVEL)
+                .expect("zstd compresses any bytes at a valid level into its bound"),
+        ),
     }
 }
 
 /// `raw`'s bytes regrouped by their place in a value of `width` bytes (the shuffle of
-/// [`Compression::ShuffledLz4`]); `raw` holds whole values.
+/// [`Compression::ShuffledLz4`] and [`Compression::ShuffledZstd`]); `raw` holds whole values.
 pub(super) fn shuffle(raw: &[u8], width: usize) -> Vec<u8> {
     let n = raw.len() / width;
     let mut out = vec![0; raw.len()];

@@ -130,8 +130,8 @@ pub enum VdiError {
         /// Bytes implied.
         expected: u64,
     },
-    /// An LZ4 plane's announced raw length differs from what the header and counts imply
-    /// (checked before decompressing).
+    /// An LZ4 or zstd plane's announced raw length differs from what the header and counts
+    /// imply (checked before decompressing).
     #[error(
         "{file}: the {plane} plane announces {announced} bytes decompressed, the header and \
          counts imply {expected}"
@@ -141,7 +141,7 @@ pub enum VdiError {
         file: String,
         /// `counts`, `colour` or `depth`.
         plane: &'static str,
-        /// Raw length the LZ4 prefix announces.
+        /// Raw length the LZ4 prefix or the zstd frame header announces.
         announced: u64,
         /// Bytes implied.
         expected: u64,
@@ -157,7 +157,29 @@ pub enum VdiError {
         #[source]
         source: lz4_flex::block::DecompressError,
     },
-    /// An LZ4 plane decompresses to fewer bytes than it announces.
+    /// A zstd plane is not exactly one zstd frame that announces its decompressed size
+    /// (checked before decompressing).
+    #[error("{file}: the {plane} plane is not a zstd frame of known size: {problem}")]
+    ZstdFrame {
+        /// The file.
+        file: String,
+        /// `counts`, `colour` or `depth`.
+        plane: &'static str,
+        /// What is wrong with the frame.
+        problem: &'static str,
+    },
+    /// A zstd plane's frame does not decompress.
+    #[error("{file}: the {plane} plane does not decompress")]
+    Zstd {
+        /// The file.
+        file: String,
+        /// `counts`, `colour` or `depth`.
+        plane: &'static str,
+        /// What the zstd decoder said.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An LZ4 or zstd plane decompresses to fewer bytes than it announces.
     #[error(
         "{file}: the {plane} plane decompresses to {actual} bytes, not the {expected} it announces"
     )]

@@ -1,6 +1,6 @@
 //! VDI files (`schemas/src/vdi.rs`): `VolumetricDepthImage::decode` on any bytes, under the
-//! allocation limit (no header, count or LZ4 size prefix may make it allocate past the format's
-//! bounds). An image that decodes is read as a renderer does (every list's supersegments and
+//! allocation limit (no header, count, LZ4 size prefix or zstd frame header may make it
+//! allocate past the format's bounds). An image that decodes is read as a renderer does (every list's supersegments and
 //! its composite, which must be finite), and must encode and decode back to itself.
 #![no_main]
 

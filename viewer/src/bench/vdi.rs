@@ -15,6 +15,7 @@ use std::fmt::Write;
 use std::sync::Arc;
 use std::time::Instant;
 
+use residency_schemas::vdi::Compression;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
@@ -98,8 +99,13 @@ pub struct VdiSizeRecord {
     pub gpu_bytes: u64,
     /// Bytes of the same VDI in the paper's raw layout (24 a slot).
     pub paper_raw_bytes: u64,
-    /// Bytes of the `.vdi` file.
+    /// Bytes of the `.vdi` file (compression `shuffled_lz4`, what `viewer serve` sends by
+    /// default).
     pub file_bytes: u64,
+    /// Bytes of the same file with compression `shuffled_zstd` (absent in results written
+    /// before 2026-12-07).
+    #[serde(default)]
+    pub zstd_file_bytes: Option<u64>,
 }
 
 /// One deviation of one VDI: its image against DVR there, and the frame times.
@@ -261,6 +267,8 @@ pub fn run(
         let (generation, out) = renderer.generate_vdi(gpu, n)?;
         let generation_ms = start.elapsed().as_secs_f64() * 1e3;
         let vdi = &generation.image;
+        let mut zstd = vdi.clone();
+        zstd.header.compression = Compression::ShuffledZstd;
         let pixels = vdi.counts.len() as u64;
         let used: u64 = vdi.counts.iter().map(|&c| u64::from(c)).sum();
         sizes.push(VdiSizeRecord {
@@ -272,6 +280,7 @@ pub fn run(
             gpu_bytes: pixels * u64::from(n) * 16,
             paper_raw_bytes: pixels * u64::from(n) * PAPER_SLOT_BYTES,
             file_bytes: vdi.encode()?.len() as u64,
+            zstd_file_bytes: Some(zstd.encode()?.len() as u64),
         });
         let mut vdi_renderer =
             pollster::block_on(VdiRenderer::create(gpu, &pipelines, vdi, width, height))?;
@@ -361,13 +370,13 @@ pub fn markdown(r: &VdiBenchResults) -> String {
         out,
         "| N_S | supersegments / pixel | marches / ray | generation ms | of which GPU ms | GPU B/px | \
          paper raw B/px | file B/px (paper: {PAPER_COMPRESSED_BYTES_PER_PIXEL:.1} at N_S 20) | \
-         file / volume |\n|---|---|---|---|---|---|---|---|---|\n",
+         file / volume | zstd file B/px | LZ4 / zstd |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     )
     .expect("writing to a String cannot fail");
     for s in &r.sizes {
         writeln!(
             out,
-            "| {} | {:.2} | {:.2} | {:.1} | {} | {:.1} | {:.1} | {:.1} | {:.3} |",
+            "| {} | {:.2} | {:.2} | {:.1} | {} | {:.1} | {:.1} | {:.1} | {:.3} | {} | {} |",
             s.supersegments,
             s.mean_supersegments,
             s.marches_per_ray,
@@ -378,6 +387,12 @@ pub fn markdown(r: &VdiBenchResults) -> String {
             s.paper_raw_bytes as f64 / pixels,
             s.file_bytes as f64 / pixels,
             s.file_bytes as f64 / r.volume_bytes.max(1) as f64,
+            s.zstd_file_bytes
+                .map_or_else(|| "–".to_owned(), |b| format!("{:.1}", b as f64 / pixels)),
+            s.zstd_file_bytes.map_or_else(
+                || "–".to_owned(),
+                |b| format!("{:.2}×", s.file_bytes as f64 / b.max(1) as f64)
+            ),
         )
         .expect("writing to a String cannot fail");
     }

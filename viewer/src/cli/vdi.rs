@@ -10,6 +10,7 @@ use anyhow::{Context, Result, bail};
 
 use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
+use residency_schemas::vdi::Compression;
 use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::streaming::generate_vdi;
 use residency_viewer::gpu::vdi::VdiGeneration;
@@ -35,6 +36,11 @@ pub struct Args {
     /// Output file (`.vdi`).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// How the file's planes are compressed: `shuffled_zstd` is 1.4 to 1.7 times smaller than
+    /// `shuffled_lz4`, and slower to write and read.
+    #[arg(long, value_name = "COMPRESSION", default_value = "shuffled_lz4",
+          value_parser = super::names_parser::<Compression>())]
+    pub compression: Compression,
     /// How long the view may take to converge.
     #[command(flatten)]
     pub converge: ConvergeArgs,
@@ -58,7 +64,7 @@ pub fn run(args: Args) -> Result<()> {
     let budget = args.converge.budget(args.renderer.workers)?;
     let start = Instant::now();
     let gpu = Gpu::new()?;
-    let (generation, progressive) = generate_vdi(
+    let (mut generation, progressive) = generate_vdi(
         &gpu,
         Arc::clone(&source),
         &scene,
@@ -67,6 +73,7 @@ pub fn run(args: Args) -> Result<()> {
         args.supersegments,
     )?;
     let generated_s = start.elapsed().as_secs_f64();
+    generation.image.header.compression = args.compression;
     let bytes = generation
         .image
         .encode()

@@ -4,7 +4,10 @@
 use crate::defaults::{SceneError, check_channel};
 use crate::scene::{Camera, RenderMode, Scene};
 use crate::source::VolumeInfo;
-pub use crate::vdi_service::{DEFAULT_SUPERSEGMENTS, Limits, ServiceInfo, VdiRequest};
+pub use crate::vdi_service::{
+    DEFAULT_COMPRESSION, DEFAULT_SUPERSEGMENTS, Limits, ServiceInfo, VdiRequest,
+};
+use residency_schemas::vdi::Compression;
 
 /// A request that passed [`check`]: the scene to draw and the size of the image.
 #[derive(Clone, Debug, PartialEq)]
@@ -17,6 +20,8 @@ pub struct CheckedRequest {
     pub height: u32,
     /// Most supersegments per pixel (N_S).
     pub supersegments: u32,
+    /// How the answer's planes are compressed.
+    pub compression: Compression,
 }
 
 /// A request the service refuses before it reaches the GPU: answered 400, or 413 when over a
@@ -122,6 +127,7 @@ pub fn check(
         height,
         supersegments,
         request: _,
+        compression,
     } = request;
     if width == 0 || height == 0 {
         return Err(RequestError::EmptyImage { width, height });
@@ -170,6 +176,7 @@ pub fn check(
         width,
         height,
         supersegments,
+        compression: compression.unwrap_or(DEFAULT_COMPRESSION),
     })
 }
 

@@ -218,6 +218,7 @@ impl Worker {
             }
         };
         generation.image.header.dataset = Some(self.source.info().name.clone());
+        generation.image.header.compression = request.compression;
         let bytes = generation.image.encode().map_err(ServiceError::Encode)?;
         Ok(Generated {
             bytes,

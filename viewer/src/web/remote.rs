@@ -10,6 +10,9 @@
 //!   threshold from the camera of the latest request ([`ORBIT_DEGREES`], [`ZOOM_FRACTION`],
 //!   [`PAN_FRACTION`]) and none is in flight, or when the camera has rested for [`REST_MS`]
 //!   away from it. A new request supersedes the one in flight (the page aborts its fetch).
+//!   It asks for the planes compressed as [`Viewer::set_vdi_compression`] chose: under
+//!   `auto`, zstd where the last answer crossed the link slower than
+//!   [`ZSTD_BELOW_MBIT_PER_S`](crate::vdi_compression_choice::ZSTD_BELOW_MBIT_PER_S).
 //! - [`Viewer::remote_answer`] files an answer: only the answer to the latest request is kept,
 //!   and never one older than the VDI drawn; [`Viewer::remote_failed`] files the service's
 //!   error, which the page shows. A request answered 429 or 503 (the service busy or its GPU
@@ -27,7 +30,7 @@
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use residency_schemas::vdi::{VdiError, VolumetricDepthImage};
+use residency_schemas::vdi::{Compression, VdiError, VolumetricDepthImage};
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
@@ -36,6 +39,7 @@ use crate::error_chain;
 use crate::gpu::GpuError;
 use crate::gpu::vdi_render::{VdiFilter, VdiFrame, VdiPipelines, VdiRenderer};
 use crate::scene::{Camera, RenderMode, Scene};
+use crate::vdi_compression_choice::{LinkRate, VdiCompressionChoice};
 use crate::vdi_filter_choice::VdiFilterChoice;
 use crate::vdi_frame_plan::{VdiFramePlan, VdiFramePlanner};
 use crate::vdi_service::{Adapter, DEFAULT_SUPERSEGMENTS, ServiceInfo, VdiRequest};
@@ -178,6 +182,13 @@ pub struct RemoteReport {
     vdis_received: u64,
     /// Bytes of the VDI answers received (their bodies, as encoded), drawn or dropped.
     vdi_bytes_received: u64,
+    /// The compression the user chose for the VDIs ([`Viewer::set_vdi_compression`]).
+    vdi_compression: VdiCompressionChoice,
+    /// The link's rate as the last answer large enough to weigh it crossed it, Mbit/s (what
+    /// `auto` weighs).
+    link_mbit_per_s: Option<f64>,
+    /// The compression of the last VDI answer read.
+    answer_compression: Option<Compression>,
     /// Frames ray cast from VDIs.
     frames: u64,
     /// Of those, the frames cast at `D_I` below 1 (while the camera moved).
@@ -543,6 +554,22 @@ impl Viewer {
         Ok(())
     }
 
+    /// Asks for the VDIs compressed as `name` says from the next request on: `auto`,
+    /// `shuffled_lz4` or `shuffled_zstd` ([`VdiCompressionChoice`]).
+    ///
+    /// # Errors
+    /// Another name (the message lists the known ones); or without
+    /// [`Viewer::remote_begin`].
+    pub fn set_vdi_compression(&self, name: &str) -> Result<(), JsValue> {
+        let choice: VdiCompressionChoice = name.parse().map_err(|e| super::js_error(&e))?;
+        let mut inner = self.inner.borrow_mut();
+        let Some(remote) = inner.remote.as_mut() else {
+            return Err(JsValue::from_str("no render service given"));
+        };
+        remote.report.vdi_compression = choice;
+        Ok(())
+    }
+
     /// The body of the `POST /vdi` request to send now (JSON, its `request` the sequence
     /// number to answer with), or nothing to ask. A request in flight is superseded: the page
     /// aborts its fetch.
@@ -563,6 +590,10 @@ impl Viewer {
         remote.abort();
         remote.next_sequence += 1;
         let sequence = remote.next_sequence;
+        let link = remote
+            .report
+            .link_mbit_per_s
+            .map(|mbit_per_s| LinkRate { mbit_per_s });
         let body = VdiRequest {
             scene: Some(scene.clone()),
             camera: None,
@@ -570,6 +601,7 @@ impl Viewer {
             height,
             supersegments: Some(remote.supersegments),
             request: Some(u64::from(sequence)),
+            compression: Some(remote.report.vdi_compression.compression(link)),
         };
         let json = serde_json::to_string(&body).expect("requests serialize");
         remote.in_flight = Some(Flight {
@@ -582,10 +614,13 @@ impl Viewer {
         Some(json)
     }
 
-    /// Files the VDI answering request `sequence` (the encoded bytes): kept when it answers
-    /// the request in flight, uploaded and drawn at the next step; else dropped. An answer
-    /// that is no VDI, or a VDI of another size or dataset, becomes the remote mode's error.
-    pub fn remote_answer(&self, sequence: u32, bytes: &[u8]) {
+    /// Files the VDI answering request `sequence` (the encoded bytes, whose body took
+    /// `transfer_ms` from the answer's headers to its last byte): kept when it answers the
+    /// request in flight, uploaded and drawn at the next step; else dropped. An answer that
+    /// is no VDI, or a VDI of another size or dataset, becomes the remote mode's error. Any
+    /// answer of at least [`crate::vdi_compression_choice::MIN_MEASURED_BYTES`] measures the
+    /// link.
+    pub fn remote_answer(&self, sequence: u32, bytes: &[u8], transfer_ms: f64) {
         let mut inner = self.inner.borrow_mut();
         let (width, height) = (inner.options.width, inner.options.height);
         let page = inner.info.name.clone();
@@ -593,13 +628,17 @@ impl Viewer {
             return;
         };
         remote.report.vdi_bytes_received += bytes.len() as u64;
+        if let Some(rate) = LinkRate::measured(bytes.len() as u64, transfer_ms) {
+            remote.report.link_mbit_per_s = Some(rate.mbit_per_s);
+        }
         let Some(flight) = remote.settle(sequence) else {
             return;
         };
         let started = now_ms();
         let decoded = VolumetricDepthImage::decode(bytes, "the render service's answer");
-        if decoded.is_ok() {
+        if let Ok(vdi) = &decoded {
             remote.report.vdi_decode_ms = Some(now_ms() - started);
+            remote.report.answer_compression = Some(vdi.header.compression);
         }
         let checked = decoded.map_err(RemoteError::Decode).and_then(|vdi| {
             let h = &vdi.header;

@@ -9,7 +9,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::{Arc, Mutex};
 
 use crate::render_cli::{s, store, viewer, viewer_ok};
-use residency_schemas::vdi::VolumetricDepthImage;
+use residency_schemas::vdi::{Compression, VolumetricDepthImage};
 use serde_json::{Value, json};
 
 const TOKEN: &str = "s3cret-token";
@@ -160,7 +160,9 @@ fn header<'a>(headers: &'a ureq::http::HeaderMap, name: &str) -> &'a str {
 /// The VDI `viewer serve` answers is byte for byte the file `viewer vdi` writes for the same
 /// store, scene, size, N_S and renderer flags: both converge a fresh renderer over every brick
 /// of level 0 and encode its VDI. A second request for the same view is answered from the live
-/// renderer, its bricks still resident, with the same bytes.
+/// renderer, its bricks still resident, with the same bytes; one that asks for `shuffled_zstd`
+/// with the bytes `viewer vdi --compression shuffled_zstd` writes, the same image in fewer
+/// bytes.
 #[test]
 fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
     let dir = tempfile::tempdir().unwrap();
@@ -170,23 +172,28 @@ fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
     let scene_file = dir.path().join("scene.json");
     std::fs::write(&scene_file, scene().to_string()).unwrap();
     let vdi_file = dir.path().join("blob.vdi");
-    viewer_ok(&[
-        "vdi",
-        "--store",
-        &store,
-        "--scene",
-        &s(&scene_file),
-        "--width",
-        "40",
-        "--height",
-        "32",
-        "--supersegments",
-        "12",
-        "--max-level",
-        "0",
-        "--out",
-        &s(&vdi_file),
-    ]);
+    let zstd_file = dir.path().join("zstd.vdi");
+    for (file, compression) in [(&vdi_file, "shuffled_lz4"), (&zstd_file, "shuffled_zstd")] {
+        viewer_ok(&[
+            "vdi",
+            "--store",
+            &store,
+            "--scene",
+            &s(&scene_file),
+            "--width",
+            "40",
+            "--height",
+            "32",
+            "--supersegments",
+            "12",
+            "--max-level",
+            "0",
+            "--compression",
+            compression,
+            "--out",
+            &s(file),
+        ]);
+    }
     let server = Server::start(&[
         "--store",
         &store,
@@ -229,6 +236,24 @@ fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
     let (status, _, again) = server.vdi(&request);
     assert_eq!(status, 200);
     assert!(again == bytes, "the live renderer's second answer differs");
+    let mut zstd_request = request.clone();
+    zstd_request["compression"] = json!("shuffled_zstd");
+    let (status, _, zstd_bytes) = server.vdi(&zstd_request);
+    assert_eq!(status, 200);
+    assert!(
+        zstd_bytes == std::fs::read(&zstd_file).unwrap(),
+        "differs from viewer vdi --compression shuffled_zstd's file"
+    );
+    let mut zstd_image = VolumetricDepthImage::decode(&zstd_bytes, "zstd answer").unwrap();
+    assert_eq!(zstd_image.header.compression, Compression::ShuffledZstd);
+    zstd_image.header.compression = Compression::ShuffledLz4;
+    assert!(zstd_image == image, "the zstd answer holds another image");
+    assert!(
+        zstd_bytes.len() < bytes.len(),
+        "{} {}",
+        zstd_bytes.len(),
+        bytes.len()
+    );
 
     // A camera alone views the default scene (both channels, store colours).
     let camera = json!({"eye": [100.0, 16.0, 24.0], "target": [20.0, 16.0, 24.0]});
@@ -307,8 +332,14 @@ fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
             json!({"width": 4, "height": 4, "colour": 1}),
             400,
             "request body is not a VDI request: unknown field `colour`, expected one of \
-             `scene`, `camera`, `width`, `height`, `supersegments`, `request` at line 1 \
-             column 30",
+             `scene`, `camera`, `width`, `height`, `supersegments`, `request`, `compression` at \
+             line 1 column 30",
+        ),
+        (
+            json!({"width": 4, "height": 4, "compression": "brotli"}),
+            400,
+            "request body is not a VDI request: unknown variant `brotli`, expected one of `lz4`, \
+             `none`, `shuffled_lz4`, `shuffled_zstd` at line 1 column 44",
         ),
     ];
     for (body, status, message) in cases {

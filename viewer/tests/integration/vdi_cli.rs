@@ -211,4 +211,18 @@ fn bad_vdi_input_fails_with_a_clear_error() {
             && err.contains("[possible values: auto, nearest, linear]"),
         "{err}"
     );
+    let err = fails(&[
+        "vdi",
+        "--store",
+        &store,
+        "--compression",
+        "brotli",
+        "--out",
+        &vdi,
+    ]);
+    assert!(
+        err.contains("invalid value 'brotli' for '--compression <COMPRESSION>'")
+            && err.contains("[possible values: lz4, none, shuffled_lz4, shuffled_zstd]"),
+        "{err}"
+    );
 }
