@@ -29,8 +29,8 @@
 //! with `shuffled_lz4` the same of the raw plane's bytes regrouped by their place in a value
 //! (all first bytes of the plane's values, then all second bytes, ...; a value is one `f16`,
 //! `u16` or `f32`, and a count is one byte), as blosc's byte shuffle does; with
-//! `shuffled_zstd` the same regrouped bytes as one zstd frame whose header announces the raw
-//! plane's length.
+//! `shuffled_zstd` the same regrouped bytes as one standard zstd frame (RFC 8878, its magic
+//! first) whose header announces the raw plane's length.
 //! The raw planes, lists in row-major order from the top-left pixel (`x` right, `y` down):
 //!
 //! - **counts**: one `u8` per list, its number of supersegments, at most N_S
@@ -246,14 +246,19 @@ pub enum Compression {
     /// neighbouring floats repeat, so LZ4 finds them (a third smaller than `lz4` on rendered
     /// VDIs).
     ShuffledLz4,
-    /// The same shuffled bytes as one zstd frame that announces its decompressed size (zstd's
-    /// level 3): 1.4 to 1.7 times smaller than `shuffled_lz4` on rendered VDIs, and slower to
-    /// write and read, so for links slower than the time it costs.
+    /// The same shuffled bytes as one standard zstd frame that announces its decompressed
+    /// size (written at level [`ZSTD_LEVEL`]): 1.4 to 1.7 times smaller than `shuffled_lz4` on
+    /// rendered VDIs, and slower to write and read, so for links slower than the time it
+    /// costs.
     ShuffledZstd,
 }
 
 /// The zstd level [`Compression::ShuffledZstd`] writes at.
 pub const ZSTD_LEVEL: i32 = 3;
+
+/// The first four bytes of a standard zstd frame (RFC 8878), as a `shuffled_zstd` plane
+/// begins.
+const ZSTD_MAGIC: [u8; 4] = [0x28, 0xb5, 0x2f, 0xfd];
 
 impl Compression {
     /// Whether each plane's bytes are regrouped by their place in a value before compressing.

@@ -423,6 +423,37 @@ fn a_zstd_plane_is_one_frame_that_announces_the_implied_size() {
             &bytes,
             &lz4_flex::block::compress_prepend_size(&image.counts)
         )),
+        "a.vdi: the counts plane is not a zstd frame of known size: it does not begin with \
+         zstd's magic number"
+    );
+    // A skippable frame (magic 0x184D2A50, 4 bytes of length, then that many bytes) reads as
+    // content size 0 in zstd: refused by its magic even where the plane is empty.
+    let mut empty = VolumetricDepthImage::new(image.header.clone());
+    empty.header.width = 1;
+    empty.header.height = 1;
+    empty.counts = vec![0];
+    let empty_bytes = empty.encode().unwrap();
+    let mut skippable = vec![0x50, 0x2a, 0x4d, 0x18, 3, 0, 0, 0, 1, 2, 3];
+    assert_eq!(
+        zstd::zstd_safe::get_frame_content_size(&skippable).ok(),
+        Some(Some(0))
+    );
+    let start = planes_start(&empty_bytes);
+    let counts = u64::from_le_bytes(empty_bytes[start..start + 8].try_into().unwrap()) as usize;
+    let colour_at = start + 8 + counts;
+    let colour = u64::from_le_bytes(empty_bytes[colour_at..colour_at + 8].try_into().unwrap());
+    let mut bad = empty_bytes[..colour_at].to_vec();
+    bad.extend_from_slice(&(skippable.len() as u64).to_le_bytes());
+    bad.append(&mut skippable);
+    bad.extend_from_slice(&empty_bytes[colour_at + 8 + colour as usize..]);
+    assert_eq!(
+        refusal(&bad),
+        "a.vdi: the colour plane is not a zstd frame of known size: it does not begin with \
+         zstd's magic number"
+    );
+    // A standard frame whose header is cut short.
+    assert_eq!(
+        refusal(&with_counts_plane(&bytes, &frame[..5])),
         "a.vdi: the counts plane is not a zstd frame of known size: its frame header is not a \
          zstd frame header"
     );

@@ -3,7 +3,9 @@
 //! [`VdiCompressionChoice::Auto`], which weighs the link. `shuffled_zstd` makes a VDI 1.4 to
 //! 1.7 times smaller than `shuffled_lz4`, and costs the service more time to write it and the
 //! page more time to read it: worth it where the bytes it saves take longer to cross the link
-//! than that. [`LinkRate`] is how fast the last answer crossed it.
+//! than that. [`LinkRate`] is how fast the last answer crossed it, as the browser's network
+//! stack timed its body (Resource Timing: from its first byte to its last, whatever the page's
+//! main thread was doing meanwhile).
 
 use residency_schemas::vdi::Compression;
 use serde::{Deserialize, Serialize};
@@ -20,9 +22,14 @@ use crate::names::{Named, UnknownName};
 /// pays for itself below 8000 · 0.29 / 6.5 ≈ 360 Mbit/s for CyCIF, about 500 for the others.
 pub const ZSTD_BELOW_MBIT_PER_S: f64 = 300.0;
 
-/// Answers smaller than this (bytes) say too little of the link to weigh it: their time is
-/// mostly the round trip's.
-pub const MIN_MEASURED_BYTES: u64 = 256 * 1024;
+/// Answers smaller than this (bytes) say too little of the link to weigh it: they may arrive
+/// in one burst. Below it the last measurement stands; for an answer that small either
+/// compression crosses a 100 Mbit/s link within 6 ms.
+pub const MIN_MEASURED_BYTES: u64 = 64 * 1024;
+
+/// The finest time a page is given (ms): Chromium rounds Resource Timing to 0.1 ms. A body
+/// timed at less took at most this.
+pub const TIMER_RESOLUTION_MS: f64 = 0.1;
 
 /// The compression the user picked for the VDIs the page asks for.
 #[derive(
@@ -47,8 +54,11 @@ pub const MIN_MEASURED_BYTES: u64 = 256 * 1024;
     parse_err_fn = UnknownName::new
 )]
 pub enum VdiCompressionChoice {
-    /// `shuffled_zstd` while the last answer large enough to weigh the link crossed it slower
-    /// than [`ZSTD_BELOW_MBIT_PER_S`], else `shuffled_lz4` (also before any such answer).
+    /// `shuffled_zstd` while the last answer large enough to weigh the link
+    /// ([`MIN_MEASURED_BYTES`]) crossed it slower than [`ZSTD_BELOW_MBIT_PER_S`], else
+    /// `shuffled_lz4` (also before any such answer). Every answer of that size measures again,
+    /// zstd's too, so a link that speeds up brings LZ4 back. There is no hysteresis: near the
+    /// threshold both cost about the same.
     #[default]
     Auto,
     /// [`Compression::ShuffledLz4`] for every request.
@@ -63,8 +73,8 @@ impl Named for VdiCompressionChoice {
     const NOUN: &'static str = "VDI compression";
 }
 
-/// How fast an answer crossed the link: its bytes over the time from its headers to its last
-/// byte.
+/// How fast an answer crossed the link: its body's bytes over the time from its first byte to
+/// its last.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinkRate {
     /// Megabits a second.
@@ -72,15 +82,16 @@ pub struct LinkRate {
 }
 
 impl LinkRate {
-    /// The rate of an answer of `bytes` whose body took `transfer_ms` to arrive, or `None`
-    /// where it says too little: under [`MIN_MEASURED_BYTES`], or a time that is not positive
-    /// and finite.
+    /// The rate of an answer of `bytes` whose body took `transfer_ms` to arrive (at least
+    /// [`TIMER_RESOLUTION_MS`]), or `None` where it says too little: under
+    /// [`MIN_MEASURED_BYTES`], or a time that is negative or not finite (the browser kept no
+    /// timing).
     pub fn measured(bytes: u64, transfer_ms: f64) -> Option<Self> {
-        if bytes < MIN_MEASURED_BYTES || !(transfer_ms.is_finite() && transfer_ms > 0.0) {
+        if bytes < MIN_MEASURED_BYTES || !(transfer_ms.is_finite() && transfer_ms >= 0.0) {
             return None;
         }
         Some(Self {
-            mbit_per_s: bytes as f64 * 8.0 / (transfer_ms * 1e3),
+            mbit_per_s: bytes as f64 * 8.0 / (transfer_ms.max(TIMER_RESOLUTION_MS) * 1e3),
         })
     }
 }
@@ -153,11 +164,21 @@ mod tests {
     }
 
     #[test]
-    fn small_answers_and_bad_times_do_not_measure_the_link() {
+    fn small_answers_and_missing_times_do_not_measure_the_link() {
         assert_eq!(LinkRate::measured(MIN_MEASURED_BYTES - 1, 100.0), None);
         assert!(LinkRate::measured(MIN_MEASURED_BYTES, 100.0).is_some());
-        for ms in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        for ms in [-0.5, f64::NAN, f64::INFINITY] {
             assert_eq!(LinkRate::measured(1 << 20, ms), None, "{ms}");
+        }
+        // A body timed within the timer's resolution arrived at least that fast: 1 MiB in
+        // 0.1 ms is 83,886 Mbit/s, LZ4's side.
+        for ms in [0.0, 0.05, 0.1] {
+            let rate = LinkRate::measured(1 << 20, ms).unwrap();
+            assert_eq!(rate.mbit_per_s.round(), 83886.0, "{ms}");
+            assert_eq!(
+                VdiCompressionChoice::Auto.compression(Some(rate)),
+                Compression::ShuffledLz4
+            );
         }
     }
 }

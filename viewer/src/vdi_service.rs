@@ -46,8 +46,8 @@ pub struct VdiRequest {
     #[serde(default)]
     pub request: Option<u64>,
     /// How the answer's planes are compressed [default: `shuffled_lz4`]: `shuffled_zstd` is
-    /// 1.4 to 1.7 times smaller and costs more time to write and read, worth it over links
-    /// slower than about 200 Mbit/s.
+    /// smaller and costs more time to write and read, worth it over slow links (the page's
+    /// `auto` asks for it below 300 Mbit/s).
     #[serde(default)]
     pub compression: Option<Compression>,
 }

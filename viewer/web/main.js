@@ -20,9 +20,10 @@
 // and while it moves where the last linear frame at full resolution held the target frame
 // rate, else the nearest list. `?vdi_compression=auto|shuffled_lz4|shuffled_zstd` is how the
 // service compresses the VDIs it sends: zstd is 1.4 to 1.7 times smaller than LZ4 and slower
-// to write and read; `auto` (the default) asks for zstd while the last answer of at least
-// 256 KiB crossed the link slower than 300 Mbit/s (its bytes over the time from its headers to
-// its last byte), else for LZ4.
+// to write and read; `auto` (the default) asks for zstd while the last answer large enough to
+// weigh the link crossed it slower than the threshold (viewer/src/vdi_compression_choice.rs:
+// its body's bytes over the time from its first byte to its last, as Resource Timing gives
+// them), else for LZ4.
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
@@ -167,6 +168,20 @@ function sleep(ms, signal) {
   });
 }
 
+/** How long the body of the newest answer from `url` took on the link, ms: from its first byte
+ * to its last as the browser's network stack timed them (Resource Timing, which the service
+ * allows with `Timing-Allow-Origin`), whatever the main thread did meanwhile; NaN where the
+ * browser kept no timing. Clears the page's resource timings, so that their buffer never
+ * fills. */
+function bodyMs(url) {
+  const entries = performance.getEntriesByName(url, "resource");
+  performance.clearResourceTimings();
+  let newest = null;
+  for (const e of entries) if (!newest || e.responseEnd > newest.responseEnd) newest = e;
+  if (!newest || !(newest.responseStart > 0) || !(newest.responseEnd >= newest.responseStart)) return NaN;
+  return newest.responseEnd - newest.responseStart;
+}
+
 /** Sends the request the viewer wants now, if any, superseding the one in flight. An answer
  * 429 or 503 is retried after its Retry-After while the viewer allows (remote_retry: the
  * request is still the latest, and retried fewer than MAX_RETRIES times). */
@@ -180,10 +195,8 @@ function remoteTick() {
   const send = () => fetch(`${service.url}/vdi`, { method: "POST", headers: serviceHeaders(true), body, signal: mine.abort.signal });
   const answered = async (r) => {
     if (r.ok) {
-      // fetch resolves on the headers: from then to the last byte is the body's time on the link.
-      const headersAt = performance.now();
       const bytes = new Uint8Array(await r.arrayBuffer());
-      if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes, performance.now() - headersAt);
+      if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes, bodyMs(`${service.url}/vdi`));
       return;
     }
     const message = await serviceError(r);

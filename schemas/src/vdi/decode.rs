@@ -9,7 +9,8 @@ use half::f16;
 
 use super::{
     Band, ColourFormat, Compression, DepthFormat, MAX_HEADER_BYTES, VDI_MAGIC, VdiError, VdiHeader,
-    VolumetricDepthImage, bands, check_header, check_slot, dequantise, try_in_order, used_slots,
+    VolumetricDepthImage, ZSTD_MAGIC, bands, check_header, check_slot, dequantise, try_in_order,
+    used_slots,
 };
 
 impl VolumetricDepthImage {
@@ -243,13 +244,18 @@ impl<'a> Reader<'a> {
                         })
                     }
                 };
-                let mut raw = vec![0; expected];
+                let mut raw = Vec::new();
                 let actual = if compression == Compression::ShuffledZstd {
                     let frame = |problem| VdiError::ZstdFrame {
                         file: file.to_owned(),
                         plane,
                         problem,
                     };
+                    // Only a standard frame: not a skippable one (whose size reads as 0), nor
+                    // the legacy formats the library may be built to read.
+                    if !data.starts_with(&ZSTD_MAGIC) {
+                        return Err(frame("it does not begin with zstd's magic number"));
+                    }
                     let announced = zstd::zstd_safe::get_frame_content_size(data)
                         .map_err(|_| frame("its frame header is not a zstd frame header"))?
                         .ok_or_else(|| frame("its frame header does not announce its size"))?;
@@ -257,6 +263,7 @@ impl<'a> Reader<'a> {
                     if zstd::zstd_safe::find_frame_compressed_size(data).ok() != Some(data.len()) {
                         return Err(frame("it is not exactly one whole zstd frame"));
                     }
+                    raw.resize(expected, 0);
                     zstd::bulk::decompress_to_buffer(data, &mut raw).map_err(|source| {
                         VdiError::Zstd {
                             file: file.to_owned(),
@@ -273,6 +280,7 @@ impl<'a> Reader<'a> {
                     let (announced, block) =
                         lz4_flex::block::uncompressed_size(data).map_err(lz4)?;
                     announced_size(announced as u64)?;
+                    raw.resize(expected, 0);
                     lz4_flex::block::decompress_into(block, &mut raw).map_err(lz4)?
                 };
                 if actual != expected {

@@ -1,6 +1,7 @@
 //! VDI files (`schemas/src/vdi.rs`): `VolumetricDepthImage::decode` on any bytes, under the
 //! allocation limit (no header, count, LZ4 size prefix or zstd frame header may make it
-//! allocate past the format's bounds). An image that decodes is read as a renderer does (every list's supersegments and
+//! allocate past the format's bounds; zstd decodes into a buffer of the size the header
+//! implies, its own context of fixed size coming from C's malloc, outside the limit). An image that decodes is read as a renderer does (every list's supersegments and
 //! its composite, which must be finite), and must encode and decode back to itself.
 #![no_main]
 

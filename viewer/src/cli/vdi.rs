@@ -36,8 +36,8 @@ pub struct Args {
     /// Output file (`.vdi`).
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
-    /// How the file's planes are compressed: `shuffled_zstd` is 1.4 to 1.7 times smaller than
-    /// `shuffled_lz4`, and slower to write and read.
+    /// How the file's planes are compressed: `shuffled_zstd` is smaller than `shuffled_lz4`,
+    /// and slower to write and read.
     #[arg(long, value_name = "COMPRESSION", default_value = "shuffled_lz4",
           value_parser = super::names_parser::<Compression>())]
     pub compression: Compression,

@@ -12,6 +12,7 @@ use axum::response::{IntoResponse, Json};
 use axum::routing::{get, post};
 use residency_schemas::server::{ApiError, bearer_token_matches};
 use tower_http::cors::{Any, CorsLayer};
+use tower_http::set_header::SetResponseHeaderLayer;
 
 use super::rate::Bucket;
 use super::request::{RequestError, ServiceInfo, VdiRequest, check};
@@ -29,6 +30,9 @@ const VDI_MEDIA_TYPE: &str = "application/x-residency-vdi";
 const REQUEST_HEADER: HeaderName = HeaderName::from_static("x-residency-request");
 /// The header giving a VDI's generation time in milliseconds.
 const GENERATION_HEADER: HeaderName = HeaderName::from_static("x-residency-generation-ms");
+/// The header that lets pages on any origin see the network timing of the answers (Resource
+/// Timing's `responseStart` and `responseEnd`).
+const TIMING_ALLOW_ORIGIN: HeaderName = HeaderName::from_static("timing-allow-origin");
 
 /// What every handler shares: the dataset, the limits, the rate bucket and the worker's queue.
 pub(crate) struct AppState {
@@ -204,8 +208,11 @@ async fn require_token(
     }
 }
 
-/// The service's router: its routes, the token check when `token` is set, and CORS from any
-/// origin (exposing the `x-residency-*` headers and `Retry-After`).
+/// The service's router: its routes, the token check when `token` is set, CORS from any
+/// origin (exposing the `x-residency-*` headers and `Retry-After`), and `Timing-Allow-Origin:
+/// *`, so that a page on another origin sees its answers' network timing (when each body's
+/// first and last bytes arrived: how fast the link is, which the page's `auto` compression
+/// weighs).
 pub(crate) fn router(state: Arc<AppState>, token: Option<String>) -> Router {
     let cors = CorsLayer::new()
         .allow_origin(Any)
@@ -230,5 +237,8 @@ pub(crate) fn router(state: Arc<AppState>, token: Option<String>) -> Router {
         )),
         None => router,
     };
-    router.layer(cors)
+    router.layer(cors).layer(SetResponseHeaderLayer::overriding(
+        TIMING_ALLOW_ORIGIN,
+        HeaderValue::from_static("*"),
+    ))
 }

@@ -615,7 +615,7 @@ impl Viewer {
     }
 
     /// Files the VDI answering request `sequence` (the encoded bytes, whose body took
-    /// `transfer_ms` from the answer's headers to its last byte): kept when it answers the
+    /// `transfer_ms` on the link from its first byte to its last; NaN: not timed): kept when it answers the
     /// request in flight, uploaded and drawn at the next step; else dropped. An answer that
     /// is no VDI, or a VDI of another size or dataset, becomes the remote mode's error. Any
     /// answer of at least [`crate::vdi_compression_choice::MIN_MEASURED_BYTES`] measures the

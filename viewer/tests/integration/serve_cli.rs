@@ -216,6 +216,7 @@ fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
         .parse::<u64>()
         .unwrap();
     assert_eq!(header(&headers, "access-control-allow-origin"), "*");
+    assert_eq!(header(&headers, "timing-allow-origin"), "*");
     let exposed = header(&headers, "access-control-expose-headers");
     assert!(
         exposed.contains("x-residency-request") && exposed.contains("x-residency-generation-ms"),
