@@ -1,12 +1,16 @@
 //! The GPU worker of the service: one thread owning the device, a fetcher and a live renderer,
-//! fed through a one-deep queue where only the latest request waits ([`Latest`]).
+//! fed through a one-deep queue where only the latest request waits ([`Latest`]). It hands
+//! each VDI it generates to rayon's threads to encode (and compress: zstd takes tens of ms at
+//! 640×360) and goes on to the next request, so the GPU never waits for the CPU's encoding.
 
+use std::any::Any;
 use std::collections::BTreeSet;
 use std::panic::AssertUnwindSafe;
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use futures_channel::oneshot;
+use residency_schemas::vdi::VolumetricDepthImage;
 
 use super::ServiceError;
 use super::request::CheckedRequest;
@@ -109,6 +113,15 @@ pub(crate) struct Worker {
     session: Option<Session>,
 }
 
+/// What a caught panic said (its `&str` or `String` payload).
+fn panic_message(panic: &(dyn Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "no message".to_string())
+}
+
 /// The channels a scene draws.
 fn drawn(scene: &Scene) -> BTreeSet<usize> {
     scene
@@ -137,27 +150,39 @@ impl Worker {
     }
 
     /// Answers the jobs of `queue` one at a time until it closes, skipping those whose client
-    /// has gone.
+    /// has gone: generates each VDI here, then encodes it on rayon's threads while the next
+    /// job is generated.
     pub(crate) fn run(mut self, queue: &Latest<Job>) {
         while let Some(job) = queue.take() {
             if job.reply.is_canceled() {
                 // The client went away (a page aborts a request it no longer needs).
                 continue;
             }
+            let start = Instant::now();
             let generated =
                 std::panic::catch_unwind(AssertUnwindSafe(|| self.generate(&job.request)))
                     .unwrap_or_else(|panic| {
                         // The renderer may be half-updated: the next request builds a new one.
                         self.session = None;
-                        let message = panic
-                            .downcast_ref::<&str>()
-                            .map(|s| (*s).to_string())
-                            .or_else(|| panic.downcast_ref::<String>().cloned())
-                            .unwrap_or_else(|| "no message".to_string());
-                        Err(ServiceError::Panicked(message))
+                        Err(ServiceError::Panicked(panic_message(panic.as_ref())))
                     });
-            // The client may be gone: its answer is dropped.
-            let _ = job.reply.send(generated);
+            match generated {
+                Ok(image) => rayon::spawn(move || {
+                    let answer = match std::panic::catch_unwind(|| image.encode()) {
+                        Ok(Ok(bytes)) => Ok(Generated {
+                            bytes,
+                            elapsed: start.elapsed(),
+                        }),
+                        Ok(Err(e)) => Err(ServiceError::Encode(e)),
+                        Err(panic) => Err(ServiceError::Panicked(panic_message(panic.as_ref()))),
+                    };
+                    // The client may be gone: its answer is dropped.
+                    let _ = job.reply.send(answer);
+                }),
+                Err(e) => {
+                    let _ = job.reply.send(Err(e));
+                }
+            }
         }
     }
 
@@ -178,11 +203,11 @@ impl Worker {
         }
     }
 
-    /// Generates and encodes the VDI of `request`, on the live renderer when it draws the
-    /// same channels with the same filter at the same size (restyled to the request's scene:
-    /// its resident bricks carry over), else on a new one.
-    fn generate(&mut self, request: &CheckedRequest) -> Result<Generated, ServiceError> {
-        let start = Instant::now();
+    /// Generates the VDI of `request`, its header naming the dataset and the compression to
+    /// encode it with, on the live renderer when it draws the same channels with the same
+    /// filter at the same size (restyled to the request's scene: its resident bricks carry
+    /// over), else on a new one.
+    fn generate(&mut self, request: &CheckedRequest) -> Result<VolumetricDepthImage, ServiceError> {
         let gpu = &self.gpu;
         let reusable = self.session.as_mut().is_some_and(|s| {
             let options = s.renderer.options();
@@ -219,11 +244,7 @@ impl Worker {
         };
         generation.image.header.dataset = Some(self.source.info().name.clone());
         generation.image.header.compression = request.compression;
-        let bytes = generation.image.encode().map_err(ServiceError::Encode)?;
-        Ok(Generated {
-            bytes,
-            elapsed: start.elapsed(),
-        })
+        Ok(generation.image)
     }
 }
 
