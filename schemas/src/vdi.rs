@@ -222,6 +222,7 @@ pub enum DepthFormat {
     Clone,
     Copy,
     Debug,
+    Default,
     PartialEq,
     Eq,
     Hash,
@@ -244,7 +245,9 @@ pub enum Compression {
     /// first (all first bytes, then all second bytes, ...; values of 2 bytes for `f16` and
     /// `u16`, 4 for `f32`, 1 for the counts), as blosc's shuffle does: the high bytes of
     /// neighbouring floats repeat, so LZ4 finds them (a third smaller than `lz4` on rendered
-    /// VDIs).
+    /// VDIs). The default: what the generator writes and `viewer serve` answers unless asked
+    /// otherwise.
+    #[default]
     ShuffledLz4,
     /// The same shuffled bytes as one standard zstd frame that announces its decompressed
     /// size (written at level [`ZSTD_LEVEL`]): 1.4 to 1.7 times smaller than `shuffled_lz4` on

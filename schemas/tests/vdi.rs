@@ -369,10 +369,15 @@ fn an_lz4_size_other_than_implied_is_refused_before_decompressing() {
     assert!(std::error::Error::source(&error).is_some());
 }
 
-/// `bytes` with its counts plane (length and stored bytes) replaced by `stored`.
-fn with_counts_plane(bytes: &[u8], stored: &[u8]) -> Vec<u8> {
-    let start = planes_start(bytes);
-    let old = u64::from_le_bytes(bytes[start..start + 8].try_into().unwrap()) as usize;
+/// `bytes` with plane `index` (0 counts, 1 colour, 2 depth; its length and stored bytes)
+/// replaced by `stored`.
+fn with_plane(bytes: &[u8], index: usize, stored: &[u8]) -> Vec<u8> {
+    let length = |at: usize| u64::from_le_bytes(bytes[at..at + 8].try_into().unwrap()) as usize;
+    let mut start = planes_start(bytes);
+    for _ in 0..index {
+        start += 8 + length(start);
+    }
+    let old = length(start);
     let mut out = bytes[..start].to_vec();
     out.extend_from_slice(&(stored.len() as u64).to_le_bytes());
     out.extend_from_slice(stored);
@@ -404,7 +409,7 @@ fn a_zstd_plane_is_one_frame_that_announces_the_implied_size() {
 
     let seven = zstd::bulk::compress(&[0; 7], 3).unwrap();
     assert_eq!(
-        refusal(&with_counts_plane(&bytes, &seven)),
+        refusal(&with_plane(&bytes, 0, &seven)),
         "a.vdi: the counts plane announces 7 bytes decompressed, the header and counts imply 6"
     );
     let sizeless = zstd::stream::encode_all(&image.counts[..], 3).unwrap();
@@ -414,13 +419,14 @@ fn a_zstd_plane_is_one_frame_that_announces_the_implied_size() {
         "a valid frame but for its size"
     );
     assert_eq!(
-        refusal(&with_counts_plane(&bytes, &sizeless)),
+        refusal(&with_plane(&bytes, 0, &sizeless)),
         "a.vdi: the counts plane is not a zstd frame of known size: its frame header does not \
          announce its size"
     );
     assert_eq!(
-        refusal(&with_counts_plane(
+        refusal(&with_plane(
             &bytes,
+            0,
             &lz4_flex::block::compress_prepend_size(&image.counts)
         )),
         "a.vdi: the counts plane is not a zstd frame of known size: it does not begin with \
@@ -433,34 +439,26 @@ fn a_zstd_plane_is_one_frame_that_announces_the_implied_size() {
     empty.header.height = 1;
     empty.counts = vec![0];
     let empty_bytes = empty.encode().unwrap();
-    let mut skippable = vec![0x50, 0x2a, 0x4d, 0x18, 3, 0, 0, 0, 1, 2, 3];
+    let skippable = [0x50, 0x2a, 0x4d, 0x18, 3, 0, 0, 0, 1, 2, 3];
     assert_eq!(
         zstd::zstd_safe::get_frame_content_size(&skippable).ok(),
         Some(Some(0))
     );
-    let start = planes_start(&empty_bytes);
-    let counts = u64::from_le_bytes(empty_bytes[start..start + 8].try_into().unwrap()) as usize;
-    let colour_at = start + 8 + counts;
-    let colour = u64::from_le_bytes(empty_bytes[colour_at..colour_at + 8].try_into().unwrap());
-    let mut bad = empty_bytes[..colour_at].to_vec();
-    bad.extend_from_slice(&(skippable.len() as u64).to_le_bytes());
-    bad.append(&mut skippable);
-    bad.extend_from_slice(&empty_bytes[colour_at + 8 + colour as usize..]);
     assert_eq!(
-        refusal(&bad),
+        refusal(&with_plane(&empty_bytes, 1, &skippable)),
         "a.vdi: the colour plane is not a zstd frame of known size: it does not begin with \
          zstd's magic number"
     );
     // A standard frame whose header is cut short.
     assert_eq!(
-        refusal(&with_counts_plane(&bytes, &frame[..5])),
+        refusal(&with_plane(&bytes, 0, &frame[..5])),
         "a.vdi: the counts plane is not a zstd frame of known size: its frame header is not a \
          zstd frame header"
     );
     let mut two = frame.to_vec();
     two.extend_from_slice(&zstd::bulk::compress(&[], 3).unwrap());
     assert_eq!(
-        refusal(&with_counts_plane(&bytes, &two)),
+        refusal(&with_plane(&bytes, 0, &two)),
         "a.vdi: the counts plane is not a zstd frame of known size: it is not exactly one whole \
          zstd frame"
     );
@@ -474,7 +472,7 @@ fn a_zstd_plane_is_one_frame_that_announces_the_implied_size() {
         zstd::zstd_safe::find_frame_compressed_size(&bad).ok(),
         Some(bad.len())
     );
-    let error = VolumetricDepthImage::decode(&with_counts_plane(&bytes, &bad), FILE).unwrap_err();
+    let error = VolumetricDepthImage::decode(&with_plane(&bytes, 0, &bad), FILE).unwrap_err();
     assert!(
         matches!(
             error,

@@ -74,8 +74,9 @@ impl Named for VdiCompressionChoice {
 }
 
 /// How fast an answer crossed the link: its body's bytes over the time from its first byte to
-/// its last.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// its last (serialized as its Mbit/s alone).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+#[serde(transparent)]
 pub struct LinkRate {
     /// Megabits a second.
     pub mbit_per_s: f64,

@@ -13,9 +13,6 @@ use crate::scene::{Camera, Scene};
 /// Supersegments per pixel (N_S) when a request names none.
 pub const DEFAULT_SUPERSEGMENTS: u32 = 20;
 
-/// How the planes of an answer are compressed when its request names no compression.
-pub const DEFAULT_COMPRESSION: Compression = Compression::ShuffledLz4;
-
 /// The body of `POST /vdi`: the view to generate a volumetric depth image of.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]

@@ -38,7 +38,7 @@ pub struct Args {
     pub out: PathBuf,
     /// How the file's planes are compressed: `shuffled_zstd` is smaller than `shuffled_lz4`,
     /// and slower to write and read.
-    #[arg(long, value_name = "COMPRESSION", default_value = "shuffled_lz4",
+    #[arg(long, value_name = "COMPRESSION", default_value = <&str>::from(Compression::default()),
           value_parser = super::names_parser::<Compression>())]
     pub compression: Compression,
     /// How long the view may take to converge.

@@ -336,7 +336,7 @@ pub(crate) fn header(
         channels,
         colour: ColourFormat::F16,
         depth: DepthFormat::F32,
-        compression: Compression::ShuffledLz4,
+        compression: Compression::default(),
         scene_hash: scene_hash(scene),
         dataset: None,
     }

@@ -4,9 +4,7 @@
 use crate::defaults::{SceneError, check_channel};
 use crate::scene::{Camera, RenderMode, Scene};
 use crate::source::VolumeInfo;
-pub use crate::vdi_service::{
-    DEFAULT_COMPRESSION, DEFAULT_SUPERSEGMENTS, Limits, ServiceInfo, VdiRequest,
-};
+pub use crate::vdi_service::{DEFAULT_SUPERSEGMENTS, Limits, ServiceInfo, VdiRequest};
 use residency_schemas::vdi::Compression;
 
 /// A request that passed [`check`]: the scene to draw and the size of the image.
@@ -176,7 +174,7 @@ pub fn check(
         width,
         height,
         supersegments,
-        compression: compression.unwrap_or(DEFAULT_COMPRESSION),
+        compression: compression.unwrap_or_default(),
     })
 }
 

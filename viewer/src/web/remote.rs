@@ -186,7 +186,7 @@ pub struct RemoteReport {
     vdi_compression: VdiCompressionChoice,
     /// The link's rate as the last answer large enough to weigh it crossed it, Mbit/s (what
     /// `auto` weighs).
-    link_mbit_per_s: Option<f64>,
+    link_mbit_per_s: Option<LinkRate>,
     /// The compression of the last VDI answer read.
     answer_compression: Option<Compression>,
     /// Frames ray cast from VDIs.
@@ -590,10 +590,7 @@ impl Viewer {
         remote.abort();
         remote.next_sequence += 1;
         let sequence = remote.next_sequence;
-        let link = remote
-            .report
-            .link_mbit_per_s
-            .map(|mbit_per_s| LinkRate { mbit_per_s });
+        let report = &remote.report;
         let body = VdiRequest {
             scene: Some(scene.clone()),
             camera: None,
@@ -601,7 +598,7 @@ impl Viewer {
             height,
             supersegments: Some(remote.supersegments),
             request: Some(u64::from(sequence)),
-            compression: Some(remote.report.vdi_compression.compression(link)),
+            compression: Some(report.vdi_compression.compression(report.link_mbit_per_s)),
         };
         let json = serde_json::to_string(&body).expect("requests serialize");
         remote.in_flight = Some(Flight {
@@ -615,8 +612,8 @@ impl Viewer {
     }
 
     /// Files the VDI answering request `sequence` (the encoded bytes, whose body took
-    /// `transfer_ms` on the link from its first byte to its last; NaN: not timed): kept when it answers the
-    /// request in flight, uploaded and drawn at the next step; else dropped. An answer that
+    /// `transfer_ms` on the link from its first byte to its last; NaN: not timed): kept when
+    /// it answers the request in flight, uploaded and drawn at the next step; else dropped. An answer that
     /// is no VDI, or a VDI of another size or dataset, becomes the remote mode's error. Any
     /// answer of at least [`crate::vdi_compression_choice::MIN_MEASURED_BYTES`] measures the
     /// link.
@@ -629,7 +626,7 @@ impl Viewer {
         };
         remote.report.vdi_bytes_received += bytes.len() as u64;
         if let Some(rate) = LinkRate::measured(bytes.len() as u64, transfer_ms) {
-            remote.report.link_mbit_per_s = Some(rate.mbit_per_s);
+            remote.report.link_mbit_per_s = Some(rate);
         }
         let Some(flight) = remote.settle(sequence) else {
             return;
