@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Builds the web viewer: the viewer library compiled to WebAssembly (wgpu on WebGPU), its
-# JavaScript glue (wasm-bindgen) and the page (viewer/web), into target/release/web/ where
+# JavaScript glue (wasm-bindgen) and the page (viewer/web: the page, and the worker that reads
+# VDIs off its main thread), into target/release/web/ where
 # `brickserver serve` finds it (its --viewer-dir default: the folder `web` beside the binary).
 #
 #   scripts/build-web.sh [OUT_DIR]
@@ -48,7 +49,7 @@ WASM=target/wasm32-unknown-unknown/release/residency_viewer.wasm
 rm -rf "$OUT.tmp"
 mkdir -p "$OUT.tmp"
 wasm-bindgen --target web --no-typescript --out-dir "$OUT.tmp" "$WASM"
-cp viewer/web/index.html viewer/web/main.js viewer/web/style.css "$OUT.tmp/"
+cp viewer/web/index.html viewer/web/main.js viewer/web/vdi_worker.js viewer/web/style.css "$OUT.tmp/"
 rm -rf "$OUT"
 mv "$OUT.tmp" "$OUT"
 echo "== web viewer in $OUT ($(du -sh "$OUT" | cut -f1))"

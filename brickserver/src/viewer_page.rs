@@ -1,5 +1,5 @@
 //! The Residency web viewer's files (built by `scripts/build-web.sh`: `index.html`, `main.js`,
-//! `style.css`, the wasm-bindgen glue and the `.wasm`), served at `GET /NAME/view` (the page
+//! `vdi_worker.js`, `style.css`, the wasm-bindgen glue and the `.wasm`), served at `GET /NAME/view` (the page
 //! for dataset NAME) and `GET /viewer/FILE` (through tower-http's `ServeDir`: content types by
 //! extension, `.wasm` as `application/wasm`, `Last-Modified` and `If-Modified-Since`, ranges).
 //!

@@ -30,6 +30,7 @@
 //   {"do": "message"}                  the on-page message (null when hidden)
 //   {"do": "waitMessage"}              wait until the on-page message shows, then return it
 //   {"do": "sleep", "ms": MS}          wait MS milliseconds (what the page does meanwhile)
+//   {"do": "workers"}                  the URLs of the page's workers
 //   {"do": "pause"}                    print {"paused": STEP_INDEX} and wait for a line on stdin
 //                                      (the test does something to the server meanwhile)
 // It prints {"results": [one per step], "console": ["type: text", ...]} as JSON.
@@ -152,6 +153,9 @@ try {
         results.push(null);
         break;
       }
+      case "workers":
+        results.push(page.workers().map((w) => w.url()));
+        break;
       case "location":
         results.push(await page.evaluate(() => location.pathname + location.search));
         break;

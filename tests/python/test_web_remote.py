@@ -7,6 +7,7 @@ service for VDIs and ray casts them itself (viewer/src/web/remote.rs).
 Needs the release binaries and the web build (scripts/build-web.sh)."""
 
 import json
+import shutil
 import subprocess
 import sys
 import threading
@@ -157,9 +158,12 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
             {"do": "converge"},
             {"do": "hash", "not": None},
             {"do": "snapshot", "path": str(tmp_path / "orbited.png")},
+            {"do": "workers"},
         ],
     )
     first, first_hash, orbited, orbited_hash = results[0], results[1], results[5], results[6]
+    # The page reads the answers in its worker, off its main thread (the only worker it runs).
+    assert results[8] == [f"{base}/viewer/vdi_worker.js"], results[8]
     assert first["error"] is None and first["converged"], first
     remote = first["remote"]
     assert remote["mode"] == "on" and remote["converged"] and remote["last_error"] is None, remote
@@ -172,7 +176,8 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
     # `auto` compression: the first request knows nothing of the link, so it asks for LZ4.
     assert (remote["vdi_compression"], remote["answer_compression"]) == ("auto", "shuffled_lz4"), remote
     assert remote["linear_compiled"], remote
-    # The page's share of the answer's latency: the VDI read, then set up for the ray caster.
+    # The page's share of the answer's latency: the VDI read (in the worker), then its buffers
+    # copied in and uploaded for the ray caster (on the main thread).
     for took in ("vdi_decode_ms", "vdi_setup_ms"):
         assert remote[took] is not None and 0 <= remote[took] < 60_000, remote
     scene = scene_of(first_hash)
@@ -580,3 +585,57 @@ def test_auto_asks_for_zstd_once_an_answer_crossed_a_slow_link(servers, stores, 
     assert remote["vdi_camera"] == moved["camera"], remote
     assert_matches(tmp_path / "zstd.png", dvr(stores["u16x3"], moved, tmp_path / "dvr.png"))
     assert errors(console) == []
+
+
+def test_an_answer_that_is_no_vdi_shows_the_decoders_message_and_the_next_one_is_drawn(servers):
+    """Through a proxy that garbles the first VDI's magic, the page shows the message the
+    decoder gave in the page's worker; the view moved (`setScene`, as the message box covers
+    this small canvas), the next answer is read and drawn, and the message goes."""
+    base, service = servers
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    moved = scene_of(results[1])
+    moved["camera"]["eye"][0] += 0.5 * (moved["camera"]["eye"][0] - moved["camera"]["target"][0]) + 1.0
+    with ServiceProxy(service, garble=1) as proxy:
+        results, console = drive(
+            page(base, "u16x3", proxy.url),
+            [{"do": "waitMessage"}, {"do": "state"}, {"do": "setScene", "scene": moved},
+             {"do": "converge"}, {"do": "message"}],
+        )
+        posts = proxy.posts()
+    message, failed, _, drawn, after = results
+    error = "its answer is not a VDI: the render service's answer: not a VDI (bad magic)"
+    assert message == f"Render service {proxy.url}: {error}"
+    remote = failed["remote"]
+    assert (remote["last_error"], remote["vdis_received"], remote["vdi_decode_ms"]) == (error, 0, None), remote
+    assert drawn["error"] is None and drawn["converged"], drawn
+    remote = drawn["remote"]
+    assert remote["last_error"] is None and remote["vdis_received"] >= 1, remote
+    assert remote["vdi_decode_ms"] is not None and remote["drawn_request"] == remote["requests_sent"] == 2, remote
+    assert remote["vdi_camera"] == moved["camera"], remote
+    assert after is None
+    assert [p.status for p in posts] == [200, 200], posts
+    assert errors(console) == []
+
+
+def test_a_page_without_its_vdi_reader_says_so(stores, servers, tmp_path):
+    """A viewer folder without vdi_worker.js (a deployment missing a file): the remote mode's
+    error names the reader, and the page still draws from bricks with *Remote* off."""
+    _, service = servers
+    web = tmp_path / "web"
+    shutil.copytree(BIN / "web", web)
+    (web / "vdi_worker.js").unlink()
+    brick, base = start_server(stores["u16x3"], "--viewer-dir", web)
+    try:
+        results, console = drive(
+            page(base, "u16x3", service),
+            [{"do": "waitMessage"}, {"do": "state"}, {"do": "click", "selector": "#remote"},
+             {"do": "converge"}],
+        )
+    finally:
+        stop_server(brick)
+    message, failed, _, local = results
+    error = "the page's VDI reader (vdi_worker.js) failed: it did not load"
+    assert message == f"Render service {service}: {error}"
+    assert (failed["remote"]["last_error"], failed["remote"]["vdis_received"]) == (error, 0), failed
+    assert local["error"] is None and local["converged"] and local["bricks_fetched"] > 0, local
+    assert errors(console, ["vdi_worker.js", "404"]) == []

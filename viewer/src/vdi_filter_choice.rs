@@ -9,7 +9,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::gpu::vdi_render::VdiFilter;
+use crate::gpu::vdi_filter::VdiFilter;
 use crate::names::{Named, UnknownName};
 
 /// The filter the user picked for the frames of a VDI.

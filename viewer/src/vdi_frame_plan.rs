@@ -20,7 +20,7 @@
 //! frame to find out.
 
 use crate::frame_rate::FrameRateController;
-use crate::gpu::vdi_render::VdiFilter;
+use crate::gpu::vdi_filter::VdiFilter;
 use crate::vdi_filter_choice::VdiFilterChoice;
 
 /// The smallest `D_I` the controller may choose.

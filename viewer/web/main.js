@@ -23,7 +23,8 @@
 // to write and read; `auto` (the default) asks for zstd while the last answer large enough to
 // weigh the link crossed it slower than the threshold (viewer/src/vdi_compression_choice.rs:
 // its body's bytes over the time from its first byte to its last, as Resource Timing gives
-// them), else for LZ4.
+// them), else for LZ4. The page reads each VDI answer in a worker (vdi_worker.js, the same
+// WebAssembly), off its main thread: it only uploads the buffers the worker sends back.
 //
 // Frames reach the screen on the GPU: the canvas holds a WebGPU context, and the viewer draws
 // each frame into it from the frame's image on the GPU (an sRGB encode in a small pass, no
@@ -111,6 +112,39 @@ let inFlight = null;
 /** The remote mode's error is on show (hidden again once a VDI is drawn). */
 let remoteShown = false;
 
+/** The page's VDI reader (vdi_worker.js), made with the remote mode: `read(sequence, bytes)`
+ * transfers an answer's bytes to the worker and resolves to its message, {read} or {failed}. */
+class VdiReader {
+  constructor() {
+    this.pending = new Map();
+    this.broken = null;
+    this.worker = new Worker(new URL("./vdi_worker.js", import.meta.url), { type: "module" });
+    this.worker.onmessage = ({ data }) => this.settle(data.sequence, data);
+    // The worker's script or its imports did not load: every read fails with why.
+    this.worker.onerror = (e) => {
+      e.preventDefault();
+      this.broken = `the page's VDI reader (vdi_worker.js) failed: ${e.message || "it did not load"}`;
+      for (const sequence of [...this.pending.keys()]) this.settle(sequence, { failed: this.broken });
+    };
+  }
+
+  settle(sequence, answer) {
+    const resolve = this.pending.get(sequence);
+    this.pending.delete(sequence);
+    if (resolve) resolve(answer);
+  }
+
+  read(sequence, bytes) {
+    if (this.broken) return Promise.resolve({ failed: this.broken });
+    return new Promise((resolve) => {
+      this.pending.set(sequence, resolve);
+      this.worker.postMessage({ sequence, bytes }, [bytes]);
+    });
+  }
+}
+
+const vdiReader = service ? new VdiReader() : null;
+
 function serviceHeaders(json) {
   const headers = {};
   if (service.token) headers.authorization = `Bearer ${service.token}`;
@@ -195,8 +229,13 @@ function remoteTick() {
   const send = () => fetch(`${service.url}/vdi`, { method: "POST", headers: serviceHeaders(true), body, signal: mine.abort.signal });
   const answered = async (r) => {
     if (r.ok) {
-      const bytes = new Uint8Array(await r.arrayBuffer());
-      if (!mine.abort.signal.aborted) viewer.remote_answer(sequence, bytes, bodyMs(`${service.url}/vdi`));
+      const bytes = await r.arrayBuffer();
+      if (mine.abort.signal.aborted) return;
+      const [length, transferMs] = [bytes.byteLength, bodyMs(`${service.url}/vdi`)];
+      const answer = await vdiReader.read(sequence, bytes);
+      if (mine.abort.signal.aborted) return;
+      if (answer.failed) viewer.remote_failed(sequence, 0, answer.failed);
+      else viewer.remote_answer(sequence, answer.read, length, transferMs);
       return;
     }
     const message = await serviceError(r);

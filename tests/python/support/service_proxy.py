@@ -2,8 +2,9 @@
 a render service (`viewer serve`), for the page's remote-mode tests
 (tests/python/test_web_remote.py): it answers the first `POST /vdi` requests with the failures
 it is given (a status and an optional `Retry-After`, with a JSON `{"error": ...}` body and the
-CORS headers a page on another origin needs to read them), forwards everything else, and
-records every `POST /vdi` it receives: when, the status answered and the bytes of the body.
+CORS headers a page on another origin needs to read them), forwards everything else (the first
+`garble` VDIs it forwards with their first four bytes replaced by `JUNK`: no VDI), and records
+every `POST /vdi` it receives: when, the status answered and the bytes of the body.
 
     from support.service_proxy import ServiceProxy
     with ServiceProxy("http://127.0.0.1:8123", failures=[(503, "2"), (429, None)]) as proxy:
@@ -43,14 +44,16 @@ class ServiceProxy(BackgroundServer):
     """The proxy, on `127.0.0.1` (a free port) in front of `target` (`http://host:port`), from
     `start()` (or `with`) until `stop()`. `failures`: `(status, retry_after)` answers of the
     first `POST /vdi` requests, in order (`retry_after` the `Retry-After` header's text, or
-    None for none); an entry None forwards that request."""
+    None for none); an entry None forwards that request. `garble`: how many of the first VDIs
+    answered 200 reach the page with `JUNK` for their magic."""
 
-    def __init__(self, target: str, failures=()):
+    def __init__(self, target: str, failures=(), garble=0):
         parsed = urllib.parse.urlsplit(target)
         if parsed.scheme != "http" or not parsed.hostname or not parsed.port:
             raise ValueError(f"{target}: the target is http://HOST:PORT")
         self.target = (parsed.hostname, parsed.port)
         self._failures = list(failures)
+        self._garble = garble
         self._posts = []
         self._lock = threading.Lock()
         self._start = time.monotonic()
@@ -68,6 +71,14 @@ class ServiceProxy(BackgroundServer):
         """The injected failure for the `POST /vdi` arriving now, if any."""
         with self._lock:
             return self._failures.pop(0) if self._failures else None
+
+    def _garbled(self, answer):
+        """`answer` (a VDI answered 200) as the page gets it: garbled while `garble` lasts."""
+        with self._lock:
+            if self._garble <= 0:
+                return answer
+            self._garble -= 1
+        return b"JUNK" + answer[4:]
 
     def _record(self, at_s, status, body_bytes):
         with self._lock:
@@ -114,6 +125,8 @@ def _handler_for(proxy: ServiceProxy):
                 r = conn.getresponse()
                 answer = r.read()
                 if vdi:
+                    if r.status == 200:
+                        answer = proxy._garbled(answer)
                     proxy._record(at_s, r.status, len(answer))
                 self._answer(r.status, r.getheaders(), answer)
             finally:

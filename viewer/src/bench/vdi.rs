@@ -26,7 +26,9 @@ use crate::gpu::device::Gpu;
 use crate::gpu::error::GpuError;
 use crate::gpu::renderer::{RenderOptions, Renderer};
 use crate::gpu::streaming::{Budget, Fetcher, converge};
-use crate::gpu::vdi_render::{VdiFilter, VdiPipelines, VdiRenderer, VdiWork};
+use crate::gpu::vdi_buffers::VdiBuffers;
+use crate::gpu::vdi_filter::VdiFilter;
+use crate::gpu::vdi_render::{VdiPipelines, VdiRenderer, VdiWork};
 use crate::metrics::{self, MetricsError};
 use crate::scene::{Camera, Scene};
 use crate::source::BrickSource;
@@ -284,8 +286,13 @@ pub fn run(
             file_bytes,
             zstd_file_bytes: Some(zstd_file_bytes),
         });
-        let mut vdi_renderer =
-            pollster::block_on(VdiRenderer::create(gpu, &pipelines, vdi, width, height))?;
+        let mut vdi_renderer = pollster::block_on(VdiRenderer::create(
+            gpu,
+            &pipelines,
+            &VdiBuffers::of(vdi),
+            width,
+            height,
+        ))?;
         for (&degrees, (camera, truth, dvr_ms, dvr_gpu_ms)) in plan.deviations.iter().zip(&truths) {
             let mut cast = |filter: VdiFilter, skipping: bool, scale: f64| {
                 vdi_renderer.set_filter(gpu, filter);

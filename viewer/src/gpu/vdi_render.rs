@@ -1,7 +1,7 @@
 //! Rendering a volumetric depth image from any nearby viewpoint on the GPU
-//! (`shaders/vdi_render.wgsl`, the VDI paper's Sec. 4): the VDI uploaded once (its counts, its
-//! supersegments as the generator packs them, and the skipping grid derived from them),
-//! then one compute pass per frame for a camera; for preview rendering (the paper's Sec. 4.4)
+//! (`shaders/vdi_render.wgsl`, the VDI paper's Sec. 4): the VDI uploaded once (its
+//! [`VdiBuffers`]: its list starts, its supersegments as the generator packs them, and the
+//! skipping grid derived from them), then one compute pass per frame for a camera; for preview rendering (the paper's Sec. 4.4)
 //! rays are cast for a fraction `D_I` of the width and height and a second pass upsamples
 //! them (`crate::frame_rate` picks `D_I` to hold a frame time). Between lists it reads the
 //! nearest one (the paper's) or, with [`VdiFilter::Linear`], the bilinear mix of the four
@@ -10,67 +10,24 @@
 use std::cell::OnceCell;
 use std::rc::Rc;
 
-use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
+use residency_schemas::vdi::VdiHeader;
+#[cfg(not(target_arch = "wasm32"))]
+use residency_schemas::vdi::VolumetricDepthImage;
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
 
 use super::buffers::{
     check_binding, map_for_reading, readback_buffer, storage_buffer, uniform_buffer,
 };
-use schemars::JsonSchema;
-use serde::{Deserialize, Serialize};
-
-use super::contract::{
-    VDI_DEPTH_BINS, VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source, vdi_slot,
-};
+use super::contract::{VDI_FLAG_SKIPPING, VdiView, vdi_binding, vdi_render_source};
 use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
 use super::timer::PassTimer;
-use crate::names::{Named, UnknownName};
+use super::vdi_buffers::{SKIP_TILE, VdiBuffers, grid_bins};
+use super::vdi_filter::VdiFilter;
 use crate::scene::Camera;
-
-/// Lists per tile edge of the skipping grid.
-pub const SKIP_TILE: u32 = 8;
-
-/// How a ray reads a VDI between the centres of its lists (`V_O`'s pixels).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    Default,
-    PartialEq,
-    Eq,
-    Serialize,
-    Deserialize,
-    JsonSchema,
-    strum::EnumCount,
-    strum::EnumString,
-    strum::IntoStaticStr,
-    strum::VariantArray,
-    strum::VariantNames,
-)]
-#[serde(rename_all = "kebab-case")]
-#[strum(
-    serialize_all = "kebab-case",
-    parse_err_ty = UnknownName<VdiFilter>,
-    parse_err_fn = UnknownName::new
-)]
-pub enum VdiFilter {
-    /// The list whose cell holds the point (the paper's): the fastest. A surface `V_O` sees
-    /// edge-on is as wide as whole lists, and shows as stripes from the side.
-    #[default]
-    Nearest,
-    /// The bilinear mix of the four lists whose centres surround the point, each
-    /// supersegment a homogeneous medium (its extinction and colour per opacity), composited
-    /// exactly between the four lists' supersegment ends: closer to DVR away from `V_O`
-    /// (`viewer bench vdi` measures both), at several times the nearest filter's cost.
-    Linear,
-}
-
-crate::names::strum_names!(VdiFilter, all);
-
-impl Named for VdiFilter {
-    const NOUN: &'static str = "VDI filter";
-}
 
 /// What the rays of a VDI frame did, on average per pixel ([`VdiRenderer::work`]): the same
 /// counts on any device, so that a device without a GPU's clock can still compare the work of
@@ -99,88 +56,6 @@ pub struct VdiFrame {
     pub gpu_time_ms: Option<f64>,
 }
 
-/// The skipping grid of `vdi` for `filter` (the paper's Sec. 4.3): per `SKIP_TILE × SKIP_TILE`
-/// tile of the cells a ray walks, row-major, a mask whose bit `b` is set where a supersegment
-/// of a list those cells read reaches depth bin `b` of [`grid_bins`]; and the tiles per row.
-/// See [`tile_masks`] for the cells of each filter.
-pub fn skipping_grid(vdi: &VolumetricDepthImage, filter: VdiFilter) -> (Vec<u32>, u32) {
-    tile_masks(&list_masks(vdi, &vdi.starts()), vdi.header.width, filter)
-}
-
-/// Per list of `vdi` (row-major from the top; `starts` its [`VolumetricDepthImage::starts`]),
-/// the mask of the depth bins of [`grid_bins`] its supersegments reach.
-///
-/// A supersegment's depth is its distance along its list's ray times the cosine of that ray
-/// off `V_O`'s forward, as the shader computes it; each reaches the bins of its depth span
-/// widened by a hundredth of a bin, so that rounding in the shader never skips it.
-fn list_masks(vdi: &VolumetricDepthImage, starts: &[usize]) -> Vec<u32> {
-    let h = &vdi.header;
-    let (w, rows) = (h.width, h.height);
-    let (near, bin) = grid_bins(h);
-    let tan_x = glam::Vec3::from(h.rays.right).length();
-    let tan_y = glam::Vec3::from(h.rays.up).length();
-    let last = VDI_DEPTH_BINS as f32 - 1.0;
-    let bin_of = |z: f32| ((z - near) / bin).floor().clamp(0.0, last) as u32;
-    let mut masks = vec![0u32; (w * rows) as usize];
-    let fill_row = |(y, row): (usize, &mut [u32])| {
-        let oy = (1.0 - (y as f32 + 0.5) / rows as f32 * 2.0) * tan_y;
-        for (x, mask) in row.iter_mut().enumerate() {
-            let list = y * w as usize + x;
-            let ox = ((x as f32 + 0.5) / w as f32 * 2.0 - 1.0) * tan_x;
-            let cos = (1.0 + ox * ox + oy * oy).sqrt().recip();
-            for [front, back] in &vdi.depth[starts[list]..starts[list + 1]] {
-                let lo = bin_of(front * cos - 0.01 * bin);
-                let hi = bin_of(back * cos + 0.01 * bin).max(lo);
-                *mask |= (u32::MAX >> (31 - (hi - lo))) << lo;
-            }
-        }
-    };
-    // Rows on rayon's threads natively, one after the other in the page.
-    #[cfg(not(target_arch = "wasm32"))]
-    {
-        use rayon::prelude::*;
-        masks
-            .par_chunks_mut(w as usize)
-            .enumerate()
-            .for_each(fill_row);
-    }
-    #[cfg(target_arch = "wasm32")]
-    masks.chunks_mut(w as usize).enumerate().for_each(fill_row);
-    masks
-}
-
-/// The skipping grid from per-list masks (`width` lists a row): per tile of `SKIP_TILE ×
-/// SKIP_TILE` cells of the grid a ray walks with `filter`, the OR of the masks of the lists
-/// those cells read; and the tiles per row.
-///
-/// With the nearest filter a cell is a list. With the linear filter cell `c` (in x or y) lies
-/// between the centres of lists `c − 1` and `c`, clamped to the image, and cell `width` goes
-/// with the tile of cell `width − 1` (as `vdi_render.wgsl`'s `tile_mask` looks it up): so a
-/// tile of cells reads its own lists and the one before its first, and list `x` is read by
-/// the tiles of cells `x` and `x + 1`.
-pub fn tile_masks(masks: &[u32], width: u32, filter: VdiFilter) -> (Vec<u32>, u32) {
-    let rows = masks.len() as u32 / width.max(1);
-    let tiles_x = width.div_ceil(SKIP_TILE);
-    let mut tiles = vec![0u32; (tiles_x * rows.div_ceil(SKIP_TILE)) as usize];
-    let reach = u32::from(filter == VdiFilter::Linear);
-    // The tiles whose cells read list `i` of `n`.
-    let tiles_of = |i: u32, n: u32| i / SKIP_TILE..=(i + reach).min(n - 1) / SKIP_TILE;
-    for y in 0..rows {
-        for x in 0..width {
-            let mask = masks[(y * width + x) as usize];
-            if mask == 0 {
-                continue;
-            }
-            for ty in tiles_of(y, rows) {
-                for tx in tiles_of(x, width) {
-                    tiles[(ty * tiles_x + tx) as usize] |= mask;
-                }
-            }
-        }
-    }
-    (tiles, tiles_x)
-}
-
 /// `vdi_render.wgsl`'s entry point `name` compiled with the pipeline constants `LINEAR`
 /// (the linear filter across lists) set to `linear` and `COUNT_WORK` (a frame's counts
 /// instead of its colours: [`VdiRenderer::work`]) to `count_work`.
@@ -207,32 +82,6 @@ fn compile(
             },
             cache: None,
         })
-}
-
-/// The skipping grid's depth bins for a VDI of `header`: the nearest depth and the depth per
-/// bin, [`VDI_DEPTH_BINS`] bins from the header's `near` to its `far`.
-pub fn grid_bins(header: &VdiHeader) -> (f32, f32) {
-    let span = (header.far - header.near)
-        .max(header.far * 1e-6)
-        .max(f32::MIN_POSITIVE);
-    (header.near, span / VDI_DEPTH_BINS as f32)
-}
-
-/// The supersegments of `vdi`, lists one after the other as the file holds them, each as the
-/// generator's pass writes a slot ([`vdi_slot`]); one zero slot for a VDI without any (a
-/// binding is never empty). Native builds pack on rayon's threads.
-fn packed_slots(vdi: &VolumetricDepthImage) -> Vec<[f32; 4]> {
-    let slot = |(&c, &d): (&[half::f16; 4], &[f32; 2])| vdi_slot(c, d);
-    if vdi.colour.is_empty() {
-        return vec![[0.0; 4]];
-    }
-    #[cfg(not(target_arch = "wasm32"))]
-    return {
-        use rayon::prelude::*;
-        vdi.colour.par_iter().zip(&vdi.depth).map(slot).collect()
-    };
-    #[cfg(target_arch = "wasm32")]
-    return vdi.colour.iter().zip(&vdi.depth).map(slot).collect();
 }
 
 /// The VDI ray caster's shader, layouts and pipelines: made once per device and shared by
@@ -350,8 +199,7 @@ pub struct VdiRenderer {
     filter: VdiFilter,
     pipelines: Rc<VdiPipelines>,
     view: wgpu::Buffer,
-    /// The VDI's list starts, slots and skipping grids (the nearest filter's masks, then the
-    /// linear filter's: [`tile_masks`]), uploaded once.
+    /// The VDI's list starts, slots and skipping grids ([`VdiBuffers`]), uploaded once.
     vdi: [wgpu::Buffer; 3],
     image: wgpu::Buffer,
     display: wgpu::Buffer,
@@ -369,8 +217,8 @@ struct Sized {
 }
 
 impl VdiRenderer {
-    /// Uploads `vdi` and builds the pass for `width × height` images, with pipelines of its
-    /// own ([`VdiRenderer::create`] shares them between VDIs).
+    /// Builds the buffers of `vdi`, uploads them and builds the pass for `width × height`
+    /// images, with pipelines of its own ([`VdiRenderer::create`] shares them between VDIs).
     ///
     /// # Errors
     /// [`GpuError::EmptyImage`] for an empty image, a [`GpuError`] naming the buffer over the
@@ -384,24 +232,25 @@ impl VdiRenderer {
     ) -> Result<Self, GpuError> {
         nonempty(width, height)?;
         let pipelines = pollster::block_on(VdiPipelines::create(gpu))?;
-        pollster::block_on(Self::create(gpu, &pipelines, vdi, width, height))
+        let buffers = VdiBuffers::of(vdi);
+        pollster::block_on(Self::create(gpu, &pipelines, &buffers, width, height))
     }
 
-    /// Uploads `vdi` and builds the pass for `width × height` images with `pipelines`,
-    /// awaited (the browser).
+    /// Uploads a VDI's `buffers` and builds the pass for `width × height` images with
+    /// `pipelines`, awaited (the browser).
     ///
     /// # Errors
     /// As [`VdiRenderer::new`].
     pub async fn create(
         gpu: &Gpu,
         pipelines: &Rc<VdiPipelines>,
-        vdi: &VolumetricDepthImage,
+        buffers: &VdiBuffers,
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
         nonempty(width, height)?;
         gpu.checked_async("setting up the VDI renderer", async {
-            Self::build(gpu, pipelines, vdi, width, height)
+            Self::build(gpu, pipelines, buffers, width, height)
         })
         .await
     }
@@ -409,12 +258,11 @@ impl VdiRenderer {
     fn build(
         gpu: &Gpu,
         pipelines: &Rc<VdiPipelines>,
-        vdi: &VolumetricDepthImage,
+        buffers: &VdiBuffers,
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
-        let slots = packed_slots(vdi);
-        let slot_bytes = (slots.len() * 16) as u64;
+        let slot_bytes = (buffers.slots.len() * 16) as u64;
         check_binding(
             gpu,
             "the VDI's supersegments",
@@ -427,23 +275,17 @@ impl VdiRenderer {
             gpu.queue.write_buffer(&buffer, 0, bytes);
             buffer
         };
-        let list_starts = vdi.starts();
-        // Σ counts ≤ MAX_VDI_SLOTS fits a u32.
-        let starts: Vec<u32> = list_starts.iter().map(|&s| s as u32).collect();
-        let starts = upload("vdi list starts", bytemuck::cast_slice(&starts));
-        let slots = upload("vdi slots", bytemuck::cast_slice(&slots));
-        let masks = list_masks(vdi, &list_starts);
-        let (mut tiles, tiles_x) = tile_masks(&masks, vdi.header.width, VdiFilter::Nearest);
-        tiles.extend(tile_masks(&masks, vdi.header.width, VdiFilter::Linear).0);
-        let tiles = upload("vdi tiles", bytemuck::cast_slice(&tiles));
+        let starts = upload("vdi list starts", bytemuck::cast_slice(&buffers.starts));
+        let slots = upload("vdi slots", bytemuck::cast_slice(&buffers.slots));
+        let tiles = upload("vdi tiles", bytemuck::cast_slice(&buffers.tiles));
         let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let vdi_buffers = [starts, slots, tiles];
         let sized = Self::sized(gpu, &pipelines.layout, &view, &vdi_buffers, width, height)?;
         Ok(Self {
-            vdi_header: vdi.header.clone(),
+            vdi_header: buffers.header.clone(),
             width,
             height,
-            tiles_x,
+            tiles_x: buffers.tiles_x(),
             filter: VdiFilter::default(),
             pipelines: Rc::clone(pipelines),
             view,

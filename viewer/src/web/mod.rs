@@ -13,11 +13,14 @@
 //! - [`present`]: frames onto the page's canvas, on the GPU (WebGPU canvas context) or by
 //!   the CPU path;
 //! - [`remote`]: the remote mode, VDIs of a render service (`viewer serve`) ray cast for the
-//!   page's camera instead of bricks streamed.
+//!   page's camera instead of bricks streamed;
+//! - [`vdi_reader`]: the render service's answers read in the page's worker
+//!   (`vdi_worker.js`), off the main thread.
 
 pub mod fetch;
 pub mod present;
 pub mod remote;
+pub mod vdi_reader;
 
 use std::cell::RefCell;
 use std::collections::HashSet;
@@ -81,6 +84,15 @@ impl From<SourceError> for WebError {
     fn from(e: SourceError) -> Self {
         Self::Source(Box::new(e))
     }
+}
+
+/// The page's clock (`performance.now()`, ms), on its main thread and in its workers alike; 0
+/// where there is none.
+fn now_ms() -> f64 {
+    js_sys::Reflect::get(&js_sys::global(), &JsValue::from_str("performance"))
+        .ok()
+        .and_then(|p| p.dyn_into::<web_sys::Performance>().ok())
+        .map_or(0.0, |p| p.now())
 }
 
 /// An error as the text JavaScript sees: its whole chain.

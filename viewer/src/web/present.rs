@@ -14,7 +14,8 @@ use crate::gpu::GpuError;
 use crate::gpu::buffers::{map_for_reading, readback_buffer};
 use crate::gpu::device::Gpu;
 use crate::gpu::present::{PresentError, Presenter, surface_format};
-use crate::gpu::vdi_render::{VdiFilter, VdiRenderer};
+use crate::gpu::vdi_filter::VdiFilter;
+use crate::gpu::vdi_render::VdiRenderer;
 use crate::image::linear_to_srgb8;
 use crate::scene::Camera;
 

@@ -13,8 +13,9 @@
 //!   It asks for the planes compressed as [`Viewer::set_vdi_compression`] chose: under
 //!   `auto`, zstd where the last answer crossed the link slower than
 //!   [`ZSTD_BELOW_MBIT_PER_S`](crate::vdi_compression_choice::ZSTD_BELOW_MBIT_PER_S).
-//! - [`Viewer::remote_answer`] files an answer: only the answer to the latest request is kept,
-//!   and never one older than the VDI drawn; [`Viewer::remote_failed`] files the service's
+//! - [`Viewer::remote_answer`] files an answer, as the page's VDI reader read it off the main
+//!   thread (`super::vdi_reader`): only the answer to the latest request is kept, and never
+//!   one older than the VDI drawn; [`Viewer::remote_failed`] files the service's
 //!   error, which the page shows. A request answered 429 or 503 (the service busy or its GPU
 //!   unavailable for a while) is sent again after the answer's `Retry-After` while
 //!   [`Viewer::remote_retry`] allows, at most [`MAX_RETRIES`] times, and never once a newer
@@ -30,14 +31,17 @@
 use std::cell::RefCell;
 use std::rc::Rc;
 
-use residency_schemas::vdi::{Compression, VdiError, VolumetricDepthImage};
+use residency_schemas::vdi::Compression;
 use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
-use super::{Inner, Viewer, present};
+use super::vdi_reader::{ReadAnswer, ReaderError, take_answer};
+use super::{Inner, Viewer, now_ms, present};
 use crate::error_chain;
 use crate::gpu::GpuError;
-use crate::gpu::vdi_render::{VdiFilter, VdiFrame, VdiPipelines, VdiRenderer};
+use crate::gpu::vdi_buffers::VdiBuffers;
+use crate::gpu::vdi_filter::VdiFilter;
+use crate::gpu::vdi_render::{VdiFrame, VdiPipelines, VdiRenderer};
 use crate::scene::{Camera, RenderMode, Scene};
 use crate::vdi_compression_choice::{LinkRate, VdiCompressionChoice};
 use crate::vdi_filter_choice::VdiFilterChoice;
@@ -99,9 +103,12 @@ pub enum RemoteError {
         /// The service's limit.
         limit: u64,
     },
-    /// The answer is not a VDI.
-    #[error("its answer is not a VDI")]
-    Decode(#[source] VdiError),
+    /// The answer is not a VDI: the decoder's message, from the page's VDI reader.
+    #[error("its answer is not a VDI: {0}")]
+    Decode(String),
+    /// The page's VDI reader sent a message this side cannot take (a reader of another build).
+    #[error("the page's VDI reader (vdi_worker.js) failed")]
+    Reader(#[source] ReaderError),
     /// The VDI answered has another size than the page's image.
     #[error("its VDI is {vdi_width} × {vdi_height}, the page draws {width} × {height}")]
     WrongSize {
@@ -128,11 +135,13 @@ struct Flight {
     retries: u32,
 }
 
-/// An answer decoded, waiting for the next step to upload it.
+/// An answer read, waiting for the next step to upload it.
 struct Arrived {
     sequence: u32,
     scene: Scene,
-    vdi: VolumetricDepthImage,
+    buffers: VdiBuffers,
+    /// The main thread's time taking the reader's message (its buffers copied in), ms.
+    taken_ms: f64,
 }
 
 /// The VDI drawn.
@@ -214,12 +223,13 @@ pub struct RemoteReport {
     linear_frame_ms: Option<f64>,
     /// Time of the last frame (ray cast, then presented and the GPU done, or read back), ms.
     frame_ms: Option<f64>,
-    /// Time the page took to read the last VDI answer it could read (decompressed, converted,
-    /// its values checked; its size and dataset are checked after), ms: this side's share of
-    /// each answer's latency, with `vdi_setup_ms`.
+    /// Time the page's VDI reader (a worker, off the main thread) took on the last VDI answer
+    /// it could read: decompressed, converted, its values checked, its slots packed and its
+    /// skipping grids built (its size and dataset are checked after), ms. This side's share
+    /// of each answer's latency, with `vdi_setup_ms`.
     vdi_decode_ms: Option<f64>,
-    /// Time the page took to set up the ray caster for the last VDI it drew (its slots packed
-    /// and uploaded, its skipping grid built), ms.
+    /// Time the page's main thread took on the last VDI it drew: the reader's buffers copied
+    /// in and uploaded, ms.
     vdi_setup_ms: Option<f64>,
     /// The linear filter's pipeline is compiled (the page compiles it while the view rests).
     linear_compiled: bool,
@@ -259,13 +269,6 @@ pub(super) struct Remote {
     /// The camera, `D_I` and filter of the last frame.
     frame: Option<(Camera, f64, VdiFilter)>,
     pub(super) need_frame: bool,
-}
-
-/// The page's clock, ms.
-fn now_ms() -> f64 {
-    web_sys::window()
-        .and_then(|w| w.performance())
-        .map_or(0.0, |p| p.now())
 }
 
 /// The angle between `a` and `b` in degrees (0 for a zero vector).
@@ -611,34 +614,42 @@ impl Viewer {
         Some(json)
     }
 
-    /// Files the VDI answering request `sequence` (the encoded bytes, whose body took
-    /// `transfer_ms` on the link from its first byte to its last; NaN: not timed): kept when
-    /// it answers the request in flight, uploaded and drawn at the next step; else dropped. An answer that
-    /// is no VDI, or a VDI of another size or dataset, becomes the remote mode's error. Any
-    /// answer of at least [`crate::vdi_compression_choice::MIN_MEASURED_BYTES`] measures the
-    /// link.
-    pub fn remote_answer(&self, sequence: u32, bytes: &[u8], transfer_ms: f64) {
+    /// Files the VDI answering request `sequence`: `read`, the message of the page's VDI
+    /// reader (`read_vdi_answer`, in `vdi_worker.js`) for the answer's body of `body_bytes`
+    /// bytes, which took `transfer_ms` on the link from its first byte to its last (NaN: not
+    /// timed). Kept when it answers the request in flight, uploaded and drawn at the next
+    /// step; else dropped. An answer that is no VDI, or a VDI of another size or dataset,
+    /// becomes the remote mode's error. Any answer of at least
+    /// [`crate::vdi_compression_choice::MIN_MEASURED_BYTES`] measures the link.
+    pub fn remote_answer(&self, sequence: u32, read: &JsValue, body_bytes: f64, transfer_ms: f64) {
         let mut inner = self.inner.borrow_mut();
         let (width, height) = (inner.options.width, inner.options.height);
         let page = inner.info.name.clone();
         let Some(remote) = inner.remote.as_mut() else {
             return;
         };
-        remote.report.vdi_bytes_received += bytes.len() as u64;
-        if let Some(rate) = LinkRate::measured(bytes.len() as u64, transfer_ms) {
+        // A body's length, as JavaScript counts it: a whole number below 2⁵³.
+        let body_bytes = body_bytes as u64;
+        remote.report.vdi_bytes_received += body_bytes;
+        if let Some(rate) = LinkRate::measured(body_bytes, transfer_ms) {
             remote.report.link_mbit_per_s = Some(rate);
         }
         let Some(flight) = remote.settle(sequence) else {
             return;
         };
         let started = now_ms();
-        let decoded = VolumetricDepthImage::decode(bytes, "the render service's answer");
-        if let Ok(vdi) = &decoded {
-            remote.report.vdi_decode_ms = Some(now_ms() - started);
-            remote.report.answer_compression = Some(vdi.header.compression);
-        }
-        let checked = decoded.map_err(RemoteError::Decode).and_then(|vdi| {
-            let h = &vdi.header;
+        let taken = match take_answer(read) {
+            Ok(ReadAnswer::Vdi { buffers, read_ms }) => {
+                remote.report.vdi_decode_ms = Some(read_ms);
+                remote.report.answer_compression = Some(buffers.header.compression);
+                Ok(*buffers)
+            }
+            Ok(ReadAnswer::NotVdi(message)) => Err(RemoteError::Decode(message)),
+            Err(e) => Err(RemoteError::Reader(e)),
+        };
+        let taken_ms = now_ms() - started;
+        let checked = taken.and_then(|buffers| {
+            let h = &buffers.header;
             if (h.width, h.height) != (width, height) {
                 return Err(RemoteError::WrongSize {
                     vdi_width: h.width,
@@ -652,11 +663,11 @@ impl Viewer {
                     served: served.clone(),
                     page,
                 }),
-                _ => Ok(vdi),
+                _ => Ok(buffers),
             }
         });
         match checked {
-            Ok(vdi) => {
+            Ok(buffers) => {
                 if remote.arrived.is_some() {
                     // An earlier answer not yet uploaded: this newer one takes its place.
                     remote.report.answers_dropped += 1;
@@ -664,7 +675,8 @@ impl Viewer {
                 remote.arrived = Some(Arrived {
                     sequence,
                     scene: flight.scene,
-                    vdi,
+                    buffers,
+                    taken_ms,
                 });
             }
             Err(e) => remote.fail(&e),
@@ -914,8 +926,8 @@ async fn upload(inner: &Rc<RefCell<Inner>>) {
         }
     };
     let started = now_ms();
-    let created = VdiRenderer::create(&gpu, &pipelines, &arrived.vdi, width, height).await;
-    let setup_ms = now_ms() - started;
+    let created = VdiRenderer::create(&gpu, &pipelines, &arrived.buffers, width, height).await;
+    let setup_ms = arrived.taken_ms + (now_ms() - started);
     let mut i = inner.borrow_mut();
     let Some(remote) = i.remote.as_mut() else {
         return;

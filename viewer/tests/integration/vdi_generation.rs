@@ -11,14 +11,16 @@ use std::sync::Arc;
 use crate::render_common::*;
 use residency_schemas::vdi::VolumetricDepthImage;
 use residency_viewer::bench::vdi::turned;
-use residency_viewer::gpu::contract::VDI_DEPTH_BINS;
+use residency_viewer::gpu::contract::{VDI_DEPTH_BINS, vdi_slot};
 use residency_viewer::gpu::renderer::{RenderOptions, Renderer};
 use residency_viewer::gpu::streaming::{Budget, Fetcher, converge};
 use residency_viewer::gpu::synthetic::SyntheticSource;
 use residency_viewer::gpu::vdi::VdiGeneration;
-use residency_viewer::gpu::vdi_render::{
-    SKIP_TILE, VdiFilter, VdiPipelines, VdiRenderer, grid_bins, skipping_grid, tile_masks,
+use residency_viewer::gpu::vdi_buffers::{
+    SKIP_TILE, VdiBuffers, grid_bins, skipping_grid, tile_masks,
 };
+use residency_viewer::gpu::vdi_filter::VdiFilter;
+use residency_viewer::gpu::vdi_render::{VdiPipelines, VdiRenderer};
 use residency_viewer::image::RgbImage;
 use residency_viewer::metrics;
 use residency_viewer::scene::{Camera, Filter, Scene};
@@ -459,6 +461,103 @@ fn the_linear_filter_keeps_thin_shells() {
 }
 
 #[test]
+fn a_vdis_buffers_are_its_slots_and_skipping_grids_and_parts_that_do_not_fit_are_refused() {
+    let scene = scene(2);
+    let (w, h) = (48, 40);
+    let (_, generation) = generate(&scene, full_res(w, h), 20);
+    let vdi = &generation.image;
+    let buffers = VdiBuffers::of(vdi);
+    // What the page's worker builds and its main thread uploads: the list starts, the slots
+    // the generator's pass wrote, the nearest filter's grid and then the linear filter's.
+    let starts = vdi.starts();
+    assert_eq!(buffers.starts.len(), (w * h + 1) as usize);
+    assert!(
+        buffers
+            .starts
+            .iter()
+            .zip(&starts)
+            .all(|(&a, &b)| a as usize == b)
+    );
+    assert_eq!(buffers.slots.len(), vdi.colour.len());
+    assert_eq!(buffers.slots[7], vdi_slot(vdi.colour[7], vdi.depth[7]));
+    let (nearest, tiles_x) = skipping_grid(vdi, VdiFilter::Nearest);
+    let (linear, _) = skipping_grid(vdi, VdiFilter::Linear);
+    assert_eq!((buffers.tiles_x(), tiles_x), (6, 6));
+    assert_eq!(buffers.tiles, [nearest, linear].concat());
+    let parts = |b: &VdiBuffers| {
+        (
+            b.header.clone(),
+            b.starts.clone(),
+            b.slots.clone(),
+            b.tiles.clone(),
+        )
+    };
+    let refusal = |(header, starts, slots, tiles)| {
+        VdiBuffers::from_parts(header, starts, slots, tiles)
+            .expect_err("refused")
+            .to_string()
+    };
+    let (header, starts, slots, tiles) = parts(&buffers);
+    assert_eq!(
+        VdiBuffers::from_parts(header.clone(), starts.clone(), slots.clone(), tiles.clone()),
+        Ok(buffers.clone())
+    );
+    let used = slots.len();
+    assert_eq!(
+        refusal((
+            header.clone(),
+            starts[1..].to_vec(),
+            slots.clone(),
+            tiles.clone()
+        )),
+        "its list starts hold 1920 values; a 48 × 40 VDI's hold 1921"
+    );
+    assert_eq!(
+        refusal((
+            header.clone(),
+            starts.clone(),
+            slots.clone(),
+            tiles[1..].to_vec()
+        )),
+        "its skipping tiles hold 59 values; a 48 × 40 VDI's hold 60"
+    );
+    assert_eq!(
+        refusal((
+            header.clone(),
+            starts.clone(),
+            slots[1..].to_vec(),
+            tiles.clone()
+        )),
+        format!(
+            "its slots hold {} values; a 48 × 40 VDI's hold {used}",
+            used - 1
+        )
+    );
+    // A list that starts before the one above it; a first list that does not start at 0.
+    let mut falling = starts.clone();
+    let list = falling.iter().position(|&s| s > 0).expect("a supersegment");
+    falling[list + 1] = falling[list] - 1;
+    assert_eq!(
+        refusal((header.clone(), falling, slots.clone(), tiles.clone())),
+        format!(
+            "its list starts are not a running count from 0 to its {used} supersegments \
+             (list {} starts at {})",
+            list + 1,
+            starts[list] - 1
+        )
+    );
+    let mut late = starts.clone();
+    late[0] = 1;
+    assert_eq!(
+        refusal((header, late, slots, tiles)),
+        format!(
+            "its list starts are not a running count from 0 to its {used} supersegments \
+             (list 0 starts at 1)"
+        )
+    );
+}
+
+#[test]
 fn the_skipping_grid_covers_every_supersegment_and_changes_no_pixel_from_any_side() {
     let scene = scene(2);
     let (w, h) = (48, 40);
@@ -666,7 +765,7 @@ fn a_frame_along_the_vdis_own_rays_is_drawn_by_the_nearest_pipeline() {
         let renderer = pollster::block_on(VdiRenderer::create(
             gpu(),
             &pipelines,
-            &generation.image,
+            &VdiBuffers::of(&generation.image),
             size.0,
             size.1,
         ))
@@ -701,7 +800,9 @@ fn vdis_drawn_by_shared_pipelines_look_as_with_pipelines_of_their_own() {
     let (_, b) = generate_from(walls(), &scene, full_res(w, h), 6);
     let pipelines = Rc::new(VdiPipelines::new(gpu()));
     let shared = |vdi| {
-        pollster::block_on(VdiRenderer::create(gpu(), &pipelines, vdi, w, h)).expect("renderer")
+        let buffers = VdiBuffers::of(vdi);
+        pollster::block_on(VdiRenderer::create(gpu(), &pipelines, &buffers, w, h))
+            .expect("renderer")
     };
     let (mut first, mut second) = (shared(&a.image), shared(&b.image));
     assert!(Rc::ptr_eq(first.pipelines(), second.pipelines()));

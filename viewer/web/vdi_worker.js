@@ -1,0 +1,24 @@
+// The page's VDI reader: a module worker that reads the render service's answers off the
+// page's main thread, so that frames keep coming while a VDI is read. It runs the viewer's own
+// WebAssembly (viewer/src/web/vdi_reader.rs): each answer's bytes are decoded and turned into
+// the ray caster's buffers there, and the buffers come back to the page transferred, not
+// copied.
+//
+// Messages in: {sequence, bytes (an ArrayBuffer, transferred)}. Messages out, one each, in
+// order: {sequence, read} (read_vdi_answer's message: the buffers, or the decoder's error), or
+// {sequence, failed} where the reader itself could not start.
+
+import init, { read_vdi_answer } from "./residency_viewer.js";
+
+const ready = init();
+
+onmessage = async ({ data: { sequence, bytes } }) => {
+  try {
+    await ready;
+  } catch (e) {
+    postMessage({ sequence, failed: `the page's VDI reader (vdi_worker.js) could not start its WebAssembly: ${e}` });
+    return;
+  }
+  const read = read_vdi_answer(new Uint8Array(bytes));
+  postMessage({ sequence, read }, read.transfer ?? []);
+};
