@@ -617,6 +617,15 @@ def test_an_answer_that_is_no_vdi_shows_the_decoders_message_and_the_next_one_is
     assert errors(console) == []
 
 
+def drive_with_web(web, store, url, steps):
+    """`drive` on a brickserver of `store` serving the viewer folder `web`."""
+    brick, base = start_server(store, "--viewer-dir", web)
+    try:
+        return base, *drive(url(base), steps)
+    finally:
+        stop_server(brick)
+
+
 def test_a_page_without_its_vdi_reader_says_so(stores, servers, tmp_path):
     """A viewer folder without vdi_worker.js (a deployment missing a file): the remote mode's
     error names the reader, and the page still draws from bricks with *Remote* off."""
@@ -624,18 +633,50 @@ def test_a_page_without_its_vdi_reader_says_so(stores, servers, tmp_path):
     web = tmp_path / "web"
     shutil.copytree(BIN / "web", web)
     (web / "vdi_worker.js").unlink()
-    brick, base = start_server(stores["u16x3"], "--viewer-dir", web)
-    try:
-        results, console = drive(
-            page(base, "u16x3", service),
-            [{"do": "waitMessage"}, {"do": "state"}, {"do": "click", "selector": "#remote"},
-             {"do": "converge"}],
-        )
-    finally:
-        stop_server(brick)
+    _, results, console = drive_with_web(
+        web, stores["u16x3"], lambda base: page(base, "u16x3", service),
+        [{"do": "waitMessage"}, {"do": "state"}, {"do": "click", "selector": "#remote"},
+         {"do": "converge"}],
+    )
     message, failed, _, local = results
     error = "the page's VDI reader (vdi_worker.js) failed: it did not load"
     assert message == f"Render service {service}: {error}"
     assert (failed["remote"]["last_error"], failed["remote"]["vdis_received"]) == (error, 0), failed
     assert local["error"] is None and local["converged"] and local["bricks_fetched"] > 0, local
     assert errors(console, ["vdi_worker.js", "404"]) == []
+
+
+def test_a_reader_that_traps_is_replaced_and_the_next_answer_drawn(stores, servers, tmp_path):
+    """A trap in the worker's WebAssembly while it reads (simulated: the worker's call throws
+    a RuntimeError for request 1, as a panic or running out of memory would): the page shows
+    the reader's failure, makes a new worker, and reads and draws the next view's answer."""
+    base, service = servers
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    moved = scene_of(results[1])
+    moved["camera"]["eye"][0] += 0.5 * (moved["camera"]["eye"][0] - moved["camera"]["target"][0]) + 1.0
+    web = tmp_path / "web"
+    shutil.copytree(BIN / "web", web)
+    worker = (web / "vdi_worker.js").read_text()
+    call = "    read = read_vdi_answer(new Uint8Array(bytes));\n"
+    assert call in worker
+    (web / "vdi_worker.js").write_text(worker.replace(
+        call, '    if (sequence === 1) throw new WebAssembly.RuntimeError("unreachable");\n' + call))
+    base, results, console = drive_with_web(
+        web, stores["u16x3"], lambda base: page(base, "u16x3", service),
+        [{"do": "waitMessage"}, {"do": "state"}, {"do": "setScene", "scene": moved},
+         {"do": "converge"}, {"do": "message"}, {"do": "workers"}],
+    )
+    message, failed, _, drawn, after, workers = results
+    error = "the page's VDI reader (vdi_worker.js) failed: RuntimeError: unreachable"
+    assert message == f"Render service {service}: {error}"
+    remote = failed["remote"]
+    assert (remote["last_error"], remote["vdis_received"]) == (error, 0), remote
+    # The trapped answer's body was received whole: counted, and it measured the link.
+    assert remote["vdi_bytes_received"] > 0 and remote["link_mbit_per_s"] is not None, remote
+    assert drawn["error"] is None and drawn["converged"], drawn
+    remote = drawn["remote"]
+    assert (remote["last_error"], remote["vdis_received"], remote["drawn_request"]) == (None, 1, 2), remote
+    assert remote["vdi_camera"] == moved["camera"], remote
+    assert after is None
+    assert workers == [f"{base}/viewer/vdi_worker.js"], workers
+    assert errors(console) == []

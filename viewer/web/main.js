@@ -113,19 +113,40 @@ let inFlight = null;
 let remoteShown = false;
 
 /** The page's VDI reader (vdi_worker.js), made with the remote mode: `read(sequence, bytes)`
- * transfers an answer's bytes to the worker and resolves to its message, {read} or {failed}. */
+ * transfers an answer's bytes to the worker and resolves to its message, {read} or {failed}.
+ * A worker whose WebAssembly trapped is replaced by a new one (the reads it held fail); one
+ * whose script did not load fails every read from then on, saying so. */
 class VdiReader {
   constructor() {
     this.pending = new Map();
     this.broken = null;
+    this.start();
+  }
+
+  start() {
     this.worker = new Worker(new URL("./vdi_worker.js", import.meta.url), { type: "module" });
-    this.worker.onmessage = ({ data }) => this.settle(data.sequence, data);
-    // The worker's script or its imports did not load: every read fails with why.
+    this.worker.onmessage = ({ data }) => {
+      this.settle(data.sequence, data);
+      if (data.spent) this.restart(data.failed);
+    };
+    this.worker.onmessageerror = () => this.restart("the page's VDI reader (vdi_worker.js) sent a message the page cannot read");
+    // The worker's script or its imports did not load (or it failed outside a read).
     this.worker.onerror = (e) => {
       e.preventDefault();
       this.broken = `the page's VDI reader (vdi_worker.js) failed: ${e.message || "it did not load"}`;
-      for (const sequence of [...this.pending.keys()]) this.settle(sequence, { failed: this.broken });
+      this.failAll(this.broken);
     };
+  }
+
+  /** A new worker in place of a spent one; the reads the old one held fail with `why`. */
+  restart(why) {
+    this.worker.terminate();
+    this.failAll(why);
+    this.start();
+  }
+
+  failAll(why) {
+    for (const sequence of [...this.pending.keys()]) this.settle(sequence, { failed: why });
   }
 
   settle(sequence, answer) {
@@ -231,11 +252,12 @@ function remoteTick() {
     if (r.ok) {
       const bytes = await r.arrayBuffer();
       if (mine.abort.signal.aborted) return;
-      const [length, transferMs] = [bytes.byteLength, bodyMs(`${service.url}/vdi`)];
+      // Counted and timed now, whatever becomes of it while the worker reads it.
+      viewer.remote_received(bytes.byteLength, bodyMs(`${service.url}/vdi`));
       const answer = await vdiReader.read(sequence, bytes);
       if (mine.abort.signal.aborted) return;
       if (answer.failed) viewer.remote_failed(sequence, 0, answer.failed);
-      else viewer.remote_answer(sequence, answer.read, length, transferMs);
+      else viewer.remote_answer(sequence, answer.read);
       return;
     }
     const message = await serviceError(r);

@@ -6,7 +6,9 @@
 //
 // Messages in: {sequence, bytes (an ArrayBuffer, transferred)}. Messages out, one each, in
 // order: {sequence, read} (read_vdi_answer's message: the buffers, or the decoder's error), or
-// {sequence, failed} where the reader itself could not start.
+// {sequence, failed} where the reader itself failed: its WebAssembly did not start, or it
+// trapped (a panic, out of memory), after which this worker is spent and the page makes a new
+// one.
 
 import init, { read_vdi_answer } from "./residency_viewer.js";
 
@@ -19,6 +21,12 @@ onmessage = async ({ data: { sequence, bytes } }) => {
     postMessage({ sequence, failed: `the page's VDI reader (vdi_worker.js) could not start its WebAssembly: ${e}` });
     return;
   }
-  const read = read_vdi_answer(new Uint8Array(bytes));
+  let read;
+  try {
+    read = read_vdi_answer(new Uint8Array(bytes));
+  } catch (e) {
+    postMessage({ sequence, failed: `the page's VDI reader (vdi_worker.js) failed: ${e}`, spent: true });
+    return;
+  }
   postMessage({ sequence, read }, read.transfer ?? []);
 };

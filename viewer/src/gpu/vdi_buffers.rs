@@ -35,9 +35,9 @@ pub enum VdiBuffersError {
         /// Which buffer.
         buffer: &'static str,
         /// The values it holds.
-        got: usize,
+        got: u64,
         /// The values it should hold.
-        want: usize,
+        want: u64,
         /// The header's width.
         width: u32,
         /// The header's height.
@@ -90,7 +90,9 @@ impl VdiBuffers {
         tiles: Vec<u32>,
     ) -> Result<Self, VdiBuffersError> {
         let (width, height) = (header.width, header.height);
-        let length = |buffer, got, want| {
+        // In u64: a header's width × height overflows a wasm32 usize.
+        let length = |buffer, got: usize, want: u64| {
+            let got = got as u64;
             if got == want {
                 Ok(())
             } else {
@@ -103,14 +105,14 @@ impl VdiBuffers {
                 })
             }
         };
-        let lists = width as usize * height as usize;
+        let lists = u64::from(width) * u64::from(height);
         length("list starts", starts.len(), lists + 1)?;
-        let tiles_y = height.div_ceil(SKIP_TILE) as usize;
-        let want_tiles = 2 * width.div_ceil(SKIP_TILE) as usize * tiles_y;
+        let tiles_y = u64::from(height.div_ceil(SKIP_TILE));
+        let want_tiles = 2 * u64::from(width.div_ceil(SKIP_TILE)) * tiles_y;
         length("skipping tiles", tiles.len(), want_tiles)?;
         let used = starts.last().map_or(0, |&s| s as usize);
         // A VDI without supersegments holds one zero slot.
-        length("slots", slots.len(), used.max(1))?;
+        length("slots", slots.len(), used.max(1) as u64)?;
         let mut previous = 0;
         for (list, &start) in starts.iter().enumerate() {
             if start < previous || (list == 0 && start != 0) {

@@ -13,7 +13,8 @@
 //!   It asks for the planes compressed as [`Viewer::set_vdi_compression`] chose: under
 //!   `auto`, zstd where the last answer crossed the link slower than
 //!   [`ZSTD_BELOW_MBIT_PER_S`](crate::vdi_compression_choice::ZSTD_BELOW_MBIT_PER_S).
-//! - [`Viewer::remote_answer`] files an answer, as the page's VDI reader read it off the main
+//! - [`Viewer::remote_received`] counts an answer's body and measures the link with it;
+//!   [`Viewer::remote_answer`] files the answer, as the page's VDI reader read it off the main
 //!   thread (`super::vdi_reader`): only the answer to the latest request is kept, and never
 //!   one older than the VDI drawn; [`Viewer::remote_failed`] files the service's
 //!   error, which the page shows. A request answered 429 or 503 (the service busy or its GPU
@@ -614,17 +615,12 @@ impl Viewer {
         Some(json)
     }
 
-    /// Files the VDI answering request `sequence`: `read`, the message of the page's VDI
-    /// reader (`read_vdi_answer`, in `vdi_worker.js`) for the answer's body of `body_bytes`
-    /// bytes, which took `transfer_ms` on the link from its first byte to its last (NaN: not
-    /// timed). Kept when it answers the request in flight, uploaded and drawn at the next
-    /// step; else dropped. An answer that is no VDI, or a VDI of another size or dataset,
-    /// becomes the remote mode's error. Any answer of at least
+    /// Counts a VDI answer's body of `body_bytes` bytes, received whole, which took
+    /// `transfer_ms` on the link from its first byte to its last (NaN: not timed), before the
+    /// page's VDI reader reads it: any answer of at least
     /// [`crate::vdi_compression_choice::MIN_MEASURED_BYTES`] measures the link.
-    pub fn remote_answer(&self, sequence: u32, read: &JsValue, body_bytes: f64, transfer_ms: f64) {
+    pub fn remote_received(&self, body_bytes: f64, transfer_ms: f64) {
         let mut inner = self.inner.borrow_mut();
-        let (width, height) = (inner.options.width, inner.options.height);
-        let page = inner.info.name.clone();
         let Some(remote) = inner.remote.as_mut() else {
             return;
         };
@@ -634,6 +630,20 @@ impl Viewer {
         if let Some(rate) = LinkRate::measured(body_bytes, transfer_ms) {
             remote.report.link_mbit_per_s = Some(rate);
         }
+    }
+
+    /// Files the VDI answering request `sequence`: `read`, the message of the page's VDI
+    /// reader (`read_vdi_answer`, in `vdi_worker.js`) for the answer's body. Kept when it
+    /// answers the request in flight, uploaded and drawn at the next step; else dropped. An
+    /// answer that is no VDI, or a VDI of another size or dataset, becomes the remote mode's
+    /// error.
+    pub fn remote_answer(&self, sequence: u32, read: &JsValue) {
+        let mut inner = self.inner.borrow_mut();
+        let (width, height) = (inner.options.width, inner.options.height);
+        let page = inner.info.name.clone();
+        let Some(remote) = inner.remote.as_mut() else {
+            return;
+        };
         let Some(flight) = remote.settle(sequence) else {
             return;
         };

@@ -9,8 +9,8 @@
 //! its own memory and uploads them. A 7 MB VDI used to hold the main thread (and with it the
 //! frames and the page's input) for the whole decode and setup.
 //!
-//! The message's fields are named here only. The page's JavaScript passes it on whole, with
-//! its `transfer` list.
+//! The message's fields are named here only. The page's JavaScript passes it on whole; the
+//! worker reads only its `transfer` list, for `postMessage`.
 
 use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
 use wasm_bindgen::prelude::*;
