@@ -1,7 +1,8 @@
 //! The Residency web viewer's files (built by `scripts/build-web.sh`: `index.html`, `main.js`,
-//! `vdi_worker.js`, `style.css`, the wasm-bindgen glue and the `.wasm`), served at `GET /NAME/view` (the page
-//! for dataset NAME) and `GET /viewer/FILE` (through tower-http's `ServeDir`: content types by
-//! extension, `.wasm` as `application/wasm`, `Last-Modified` and `If-Modified-Since`, ranges).
+//! `vdi_worker.js`, `style.css`, the wasm-bindgen glue and the `.wasm`), served at `GET
+//! /NAME/view` (the page for dataset NAME) and `GET /viewer/FILE` (through tower-http's
+//! `ServeDir`: content types by extension, `.wasm` as `application/wasm`, `Last-Modified` and
+//! `If-Modified-Since`, ranges).
 //!
 //! The page refers to its files through the placeholder [`VIEWER_BASE`], which the server
 //! replaces with the relative path from the page's URL to the files (`../viewer/` for

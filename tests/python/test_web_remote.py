@@ -587,14 +587,27 @@ def test_auto_asks_for_zstd_once_an_answer_crossed_a_slow_link(servers, stores, 
     assert errors(console) == []
 
 
+def moved_scene(base, service):
+    """The page's default scene of u16x3 (as its link holds it) with the eye moved aside."""
+    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
+    moved = scene_of(results[1])
+    moved["camera"]["eye"][0] += 0.5 * (moved["camera"]["eye"][0] - moved["camera"]["target"][0]) + 1.0
+    return moved
+
+
+def copy_of_web(tmp_path):
+    """A copy of the web build in `tmp_path`, to change a file of."""
+    web = tmp_path / "web"
+    shutil.copytree(BIN / "web", web)
+    return web
+
+
 def test_an_answer_that_is_no_vdi_shows_the_decoders_message_and_the_next_one_is_drawn(servers):
     """Through a proxy that garbles the first VDI's magic, the page shows the message the
     decoder gave in the page's worker; the view moved (`setScene`, as the message box covers
     this small canvas), the next answer is read and drawn, and the message goes."""
     base, service = servers
-    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
-    moved = scene_of(results[1])
-    moved["camera"]["eye"][0] += 0.5 * (moved["camera"]["eye"][0] - moved["camera"]["target"][0]) + 1.0
+    moved = moved_scene(base, service)
     with ServiceProxy(service, garble=1) as proxy:
         results, console = drive(
             page(base, "u16x3", proxy.url),
@@ -630,8 +643,7 @@ def test_a_page_without_its_vdi_reader_says_so(stores, servers, tmp_path):
     """A viewer folder without vdi_worker.js (a deployment missing a file): the remote mode's
     error names the reader, and the page still draws from bricks with *Remote* off."""
     _, service = servers
-    web = tmp_path / "web"
-    shutil.copytree(BIN / "web", web)
+    web = copy_of_web(tmp_path)
     (web / "vdi_worker.js").unlink()
     _, results, console = drive_with_web(
         web, stores["u16x3"], lambda base: page(base, "u16x3", service),
@@ -651,11 +663,8 @@ def test_a_reader_that_traps_is_replaced_and_the_next_answer_drawn(stores, serve
     a RuntimeError for request 1, as a panic or running out of memory would): the page shows
     the reader's failure, makes a new worker, and reads and draws the next view's answer."""
     base, service = servers
-    results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
-    moved = scene_of(results[1])
-    moved["camera"]["eye"][0] += 0.5 * (moved["camera"]["eye"][0] - moved["camera"]["target"][0]) + 1.0
-    web = tmp_path / "web"
-    shutil.copytree(BIN / "web", web)
+    moved = moved_scene(base, service)
+    web = copy_of_web(tmp_path)
     worker = (web / "vdi_worker.js").read_text()
     call = "    read = read_vdi_answer(new Uint8Array(bytes));\n"
     assert call in worker

@@ -117,6 +117,8 @@ let remoteShown = false;
  * A worker whose WebAssembly trapped is replaced by a new one (the reads it held fail); one
  * whose script did not load fails every read from then on, saying so. */
 class VdiReader {
+  static NAME = "the page's VDI reader (vdi_worker.js)";
+
   constructor() {
     this.pending = new Map();
     this.broken = null;
@@ -129,11 +131,11 @@ class VdiReader {
       this.settle(data.sequence, data);
       if (data.spent) this.restart(data.failed);
     };
-    this.worker.onmessageerror = () => this.restart("the page's VDI reader (vdi_worker.js) sent a message the page cannot read");
+    this.worker.onmessageerror = () => this.restart(`${VdiReader.NAME} sent a message the page cannot read`);
     // The worker's script or its imports did not load (or it failed outside a read).
     this.worker.onerror = (e) => {
       e.preventDefault();
-      this.broken = `the page's VDI reader (vdi_worker.js) failed: ${e.message || "it did not load"}`;
+      this.broken = `${VdiReader.NAME} failed: ${e.message || "it did not load"}`;
       this.failAll(this.broken);
     };
   }

@@ -13,19 +13,21 @@
 import init, { read_vdi_answer } from "./residency_viewer.js";
 
 const ready = init();
+/** How the page names this worker in its messages. */
+const READER = "the page's VDI reader (vdi_worker.js)";
 
 onmessage = async ({ data: { sequence, bytes } }) => {
   try {
     await ready;
   } catch (e) {
-    postMessage({ sequence, failed: `the page's VDI reader (vdi_worker.js) could not start its WebAssembly: ${e}` });
+    postMessage({ sequence, failed: `${READER} could not start its WebAssembly: ${e}` });
     return;
   }
   let read;
   try {
     read = read_vdi_answer(new Uint8Array(bytes));
   } catch (e) {
-    postMessage({ sequence, failed: `the page's VDI reader (vdi_worker.js) failed: ${e}`, spent: true });
+    postMessage({ sequence, failed: `${READER} failed: ${e}`, spent: true });
     return;
   }
   postMessage({ sequence, read }, read.transfer ?? []);

@@ -107,9 +107,12 @@ impl VdiBuffers {
         };
         let lists = u64::from(width) * u64::from(height);
         length("list starts", starts.len(), lists + 1)?;
-        let tiles_y = u64::from(height.div_ceil(SKIP_TILE));
-        let want_tiles = 2 * u64::from(width.div_ceil(SKIP_TILE)) * tiles_y;
-        length("skipping tiles", tiles.len(), want_tiles)?;
+        let (tiles_x, tiles_y) = tile_grid(width, height);
+        length(
+            "skipping tiles",
+            tiles.len(),
+            2 * u64::from(tiles_x) * u64::from(tiles_y),
+        )?;
         let used = starts.last().map_or(0, |&s| s as usize);
         // A VDI without supersegments holds one zero slot.
         length("slots", slots.len(), used.max(1) as u64)?;
@@ -134,12 +137,17 @@ impl VdiBuffers {
 
     /// Tiles per row of each skipping grid.
     pub fn tiles_x(&self) -> u32 {
-        self.header.width.div_ceil(SKIP_TILE)
+        tile_grid(self.header.width, self.header.height).0
     }
 }
 
 /// Lists per tile edge of the skipping grid.
 pub const SKIP_TILE: u32 = 8;
+
+/// The tiles a row and the rows of tiles of the skipping grid over `width × height` cells.
+pub fn tile_grid(width: u32, height: u32) -> (u32, u32) {
+    (width.div_ceil(SKIP_TILE), height.div_ceil(SKIP_TILE))
+}
 
 /// The skipping grid of `vdi` for `filter` (the paper's Sec. 4.3): per `SKIP_TILE × SKIP_TILE`
 /// tile of the cells a ray walks, row-major, a mask whose bit `b` is set where a supersegment
@@ -202,8 +210,8 @@ fn list_masks(vdi: &VolumetricDepthImage, starts: &[usize]) -> Vec<u32> {
 /// the tiles of cells `x` and `x + 1`.
 pub fn tile_masks(masks: &[u32], width: u32, filter: VdiFilter) -> (Vec<u32>, u32) {
     let rows = masks.len() as u32 / width.max(1);
-    let tiles_x = width.div_ceil(SKIP_TILE);
-    let mut tiles = vec![0u32; (tiles_x * rows.div_ceil(SKIP_TILE)) as usize];
+    let (tiles_x, tiles_y) = tile_grid(width, rows);
+    let mut tiles = vec![0u32; (tiles_x * tiles_y) as usize];
     let reach = u32::from(filter == VdiFilter::Linear);
     // The tiles whose cells read list `i` of `n`.
     let tiles_of = |i: u32, n: u32| i / SKIP_TILE..=(i + reach).min(n - 1) / SKIP_TILE;

@@ -1,11 +1,11 @@
 //! Rendering a volumetric depth image from any nearby viewpoint on the GPU
 //! (`shaders/vdi_render.wgsl`, the VDI paper's Sec. 4): the VDI uploaded once (its
 //! [`VdiBuffers`]: its list starts, its supersegments as the generator packs them, and the
-//! skipping grid derived from them), then one compute pass per frame for a camera; for preview rendering (the paper's Sec. 4.4)
-//! rays are cast for a fraction `D_I` of the width and height and a second pass upsamples
-//! them (`crate::frame_rate` picks `D_I` to hold a frame time). Between lists it reads the
-//! nearest one (the paper's) or, with [`VdiFilter::Linear`], the bilinear mix of the four
-//! around each point.
+//! skipping grid derived from them), then one compute pass per frame for a camera; for
+//! preview rendering (the paper's Sec. 4.4) rays are cast for a fraction `D_I` of the width
+//! and height and a second pass upsamples them (`crate::frame_rate` picks `D_I` to hold a
+//! frame time). Between lists it reads the nearest one (the paper's) or, with
+//! [`VdiFilter::Linear`], the bilinear mix of the four around each point.
 
 use std::cell::OnceCell;
 use std::rc::Rc;
