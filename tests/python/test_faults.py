@@ -207,17 +207,18 @@ def test_brickserver_answers_502_or_503_naming_the_key_while_the_store_is_down_t
 
 def test_a_dataset_that_cannot_be_loaded_answers_502_or_503_then_loads(s3, served):
     # A server of its own, whose image (for its region metadata and arrays) is first needed
-    # while the store is down; failed loads are tried again after 1 s.
+    # while the store is down; failed loads are tried again after 3 s (a loaded machine's next
+    # request comes well within them).
     proxy, _, local_base = served
     server, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
-                                "--cache-bytes", "0", "--load-retry", "1",
+                                "--cache-bytes", "0", "--load-retry", "3",
                                 env=env(AWS_TIMEOUT="1s"))
     try:
         proxy.set_mode("fail", "503")
         answered = requests.get(f"{base}/{NAME}/{REGIONS}", timeout=60)
-        # The region index and the bricks share the image: its failure is kept for 1 s.
+        # The region index and the bricks share the image: its failure is kept for 3 s.
         kept = requests.get(f"{base}/{NAME}/{BRICKS}", timeout=60)
-        time.sleep(1.2)
+        time.sleep(3.2)
         proxy.set_mode("fail", "reset")
         gone = requests.get(f"{base}/{NAME}/{BRICKS}", timeout=60)
         proxy.set_mode("healthy")
@@ -229,7 +230,7 @@ def test_a_dataset_that_cannot_be_loaded_answers_502_or_503_then_loads(s3, serve
         assert gone.status_code == 503, gone.text
         assert "the object store did not answer (" in gone.json()["error"], gone.text
         assert gone.headers["Retry-After"] == "5"
-        time.sleep(1.2)
+        time.sleep(3.2)
         for path in [REGIONS, BRICKS]:
             remote = requests.get(f"{base}/{NAME}/{path}", timeout=60)
             local = requests.get(f"{local_base}/{NAME}/{path}", timeout=60)
@@ -295,10 +296,11 @@ def test_the_proxy_is_seeded_and_counts_what_it_does(s3):
 
 
 def test_a_batch_of_bricks_is_fetched_from_the_store_concurrently(s3):
-    """Every request to the store held 0.4 s: the 8 level-0 bricks of a batch are all in
+    """Every request to the store held 1 s (long enough for a loaded machine to start all of a
+    batch's requests within it): the 8 level-0 bricks of a batch are all in
     flight at once (brickserver reads an object store's bricks 32 at a time, not one per
     core), and the batch answers the local copy's bytes."""
-    proxy = FaultProxy(s3["endpoint"], stall_rate=1.0, stall_s=0.4, seed=1).start()
+    proxy = FaultProxy(s3["endpoint"], stall_rate=1.0, stall_s=1.0, seed=1).start()
     faulty, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
                                 "--cache-bytes", "0", env=env())
     local, local_base = start_server(s3["local"])
@@ -319,10 +321,11 @@ def test_a_batch_of_bricks_is_fetched_from_the_store_concurrently(s3):
 
 
 def test_the_region_index_is_read_from_the_store_side_by_side(s3):
-    """Every request to the store held 0.3 s: brickserver's one-time load of the region index
+    """Every request to the store held 1 s (long enough for a loaded machine to start 16
+    requests within it): brickserver's one-time load of the region index
     reads its 21 arrays 16 at a time (not one after another), each key once, and answers a
     region query with the local copy's bytes."""
-    proxy = FaultProxy(s3["endpoint"], stall_rate=1.0, stall_s=0.3, seed=1).start()
+    proxy = FaultProxy(s3["endpoint"], stall_rate=1.0, stall_s=1.0, seed=1).start()
     faulty, base = start_server("s3://bucket/sample.ome.zarr", "--s3-endpoint", proxy.url,
                                 env=env())
     local, local_base = start_server(s3["local"])

@@ -84,6 +84,8 @@ def test_the_tour_runs_as_written(tmp_path):
     assert shape.strip() == "(3, 96, 256, 256)", shape
 
     [serve] = blocks[2]
+    # A port free now, not minutes ago before the conversion (`run` reads it when called).
+    port = free_port()
     server = subprocess.Popen(["bash", "-c", f"exec {serve} --bind 127.0.0.1:{port}"], cwd=tmp_path, env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:

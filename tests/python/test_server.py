@@ -270,11 +270,14 @@ def test_metrics_count_requests_bytes_and_latency(served):
     base, store, _ = served
     chunk = next(p for p in (store / "0" / "c").rglob("*") if p.is_file())
     key = chunk.relative_to(store).as_posix()
-    first = requests.get(base + "/metrics")
-    assert first.headers["Content-Type"].startswith("application/openmetrics-text")
-    requests.get(f"{base}/cells/{key}")
-    requests.get(f"{base}/cells/no/such/key")
-    second = requests.get(base + "/metrics").text
+    # One keep-alive connection, whose requests the server answers (and counts) in order: a
+    # request on a new connection could be answered before the last one's answer is counted.
+    with requests.Session() as session:
+        first = session.get(base + "/metrics")
+        assert first.headers["Content-Type"].startswith("application/openmetrics-text")
+        session.get(f"{base}/cells/{key}")
+        session.get(f"{base}/cells/no/such/key")
+        second = session.get(base + "/metrics").text
     t1 = first.text
     assert metric(second, 'brickserver_requests_total{class="2xx"}') - metric(t1, 'brickserver_requests_total{class="2xx"}') == 2
     assert metric(second, 'brickserver_requests_total{class="4xx"}') - metric(t1, 'brickserver_requests_total{class="4xx"}') == 1
@@ -397,8 +400,9 @@ def test_chunk_files_held_open_are_let_go_when_replaced_changed_or_deleted(tmp_p
     try:
         assert requests.get(f"{base}/a/{key}").content == old
         assert requests.get(f"{base}/a/{key}").content == old
-        # Each answer closes its file once sent, a moment after the client has it.
-        for _ in range(50):
+        # Each answer closes its file once sent, a moment after the client has it (up to 10 s
+        # on a loaded machine).
+        for _ in range(500):
             if not store_files_held(proc.pid, store):
                 break
             time.sleep(0.02)

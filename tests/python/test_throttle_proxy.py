@@ -54,42 +54,61 @@ def recv_exactly(sock, n):
     return got
 
 
+ROUNDS = 3
+
+
+def assert_rate(transfer, ideal: float):
+    """Runs `transfer` (it returns its seconds) `ROUNDS` times: every round takes at least 90 %
+    of `ideal` (the link never runs fast), and the fastest at most 15 % (and 0.1 s) more. A
+    busy machine can stall the proxy's thread in one round and leave the link idle; it rarely
+    does in all three, while a link set too slow is slow in every round."""
+    times = [transfer() for _ in range(ROUNDS)]
+    assert min(times) >= 0.9 * ideal and min(times) <= 1.15 * ideal + 0.1, (times, ideal)
+
+
 def test_downstream_rate_is_the_configured_one(echo):
-    """4 MB at 50 Mbit/s take 0.64 s plus the 10 ms round trip: never under 90 % of that, and
-    at most 15 % (and 0.1 s of a busy machine's scheduling) slower; every byte counted."""
+    """4 MB at 50 Mbit/s take 0.64 s plus the 10 ms round trip (`assert_rate`'s bounds);
+    every byte counted."""
     n = 4_000_000
-    with ThrottleProxy(echo, mbit=50, rtt_ms=10) as proxy:
-        with socket.create_connection(("127.0.0.1", proxy.port)) as s:
-            t = time.perf_counter()
-            s.sendall(f"send {n}\n".encode())
-            recv_exactly(s, n)
-            elapsed = time.perf_counter() - t
-        stats = proxy.stats()
-    ideal = n * 8 / 50e6 + 0.010
-    assert 0.9 * ideal <= elapsed <= 1.15 * ideal + 0.1, (elapsed, ideal)
-    assert stats == {"up_bytes": len(f"send {n}\n"), "down_bytes": n, "connections": 1}
+
+    def transfer():
+        with ThrottleProxy(echo, mbit=50, rtt_ms=10) as proxy:
+            with socket.create_connection(("127.0.0.1", proxy.port)) as s:
+                t = time.perf_counter()
+                s.sendall(f"send {n}\n".encode())
+                recv_exactly(s, n)
+                elapsed = time.perf_counter() - t
+            stats = proxy.stats()
+        assert stats == {"up_bytes": len(f"send {n}\n"), "down_bytes": n, "connections": 1}
+        return elapsed
+
+    assert_rate(transfer, n * 8 / 50e6 + 0.010)
 
 
 def test_upstream_rate_is_the_configured_one(echo):
-    """3 MB uploaded at 40 Mbit/s take 0.6 s: within the same bounds; the target got every
+    """3 MB uploaded at 40 Mbit/s take 0.6 s (`assert_rate`'s bounds); the target got every
     byte."""
     n = 3_000_000
-    with ThrottleProxy(echo, mbit=40, rtt_ms=10) as proxy:
-        with socket.create_connection(("127.0.0.1", proxy.port)) as s:
-            t = time.perf_counter()
-            s.sendall(b"sink\n" + b"y" * n)
-            s.shutdown(socket.SHUT_WR)
-            answer = s.makefile("rb").readline()
-            elapsed = time.perf_counter() - t
-        stats = proxy.stats()
-    assert answer == f"{n}\n".encode()
-    ideal = (n + 5) * 8 / 40e6 + 0.010
-    assert 0.9 * ideal <= elapsed <= 1.15 * ideal + 0.1, (elapsed, ideal)
-    assert stats["up_bytes"] == n + 5 and stats["down_bytes"] == len(answer)
+
+    def transfer():
+        with ThrottleProxy(echo, mbit=40, rtt_ms=10) as proxy:
+            with socket.create_connection(("127.0.0.1", proxy.port)) as s:
+                t = time.perf_counter()
+                s.sendall(b"sink\n" + b"y" * n)
+                s.shutdown(socket.SHUT_WR)
+                answer = s.makefile("rb").readline()
+                elapsed = time.perf_counter() - t
+            stats = proxy.stats()
+        assert answer == f"{n}\n".encode()
+        assert stats["up_bytes"] == n + 5 and stats["down_bytes"] == len(answer)
+        return elapsed
+
+    assert_rate(transfer, (n + 5) * 8 / 40e6 + 0.010)
 
 
 def test_a_small_round_trip_takes_at_least_the_rtt(echo):
-    """A 5-byte ping and its answer: at least 40 ms with --rtt-ms 40, and not much more."""
+    """A 5-byte ping and its answer: every one at least 40 ms with --rtt-ms 40, and the
+    fastest of 5 at most 60 ms (a proxy that delayed each twice would take 80)."""
     with ThrottleProxy(echo, mbit=100, rtt_ms=40) as proxy:
         with socket.create_connection(("127.0.0.1", proxy.port)) as s:
             f = s.makefile("rb")
@@ -99,30 +118,32 @@ def test_a_small_round_trip_takes_at_least_the_rtt(echo):
                 s.sendall(b"ping\n")
                 assert f.readline() == b"pong\n"
                 times.append(time.perf_counter() - t)
-    assert min(times) >= 0.040, times
-    assert sorted(times)[2] <= 0.060, times
+    assert 0.040 <= min(times) <= 0.060, times
 
 
 def test_two_connections_share_the_link(echo):
     """Two 2 MB downloads at once over 50 Mbit/s take as long as one of 4 MB: the link is
     shared, not given to each connection."""
     n = 2_000_000
-    with ThrottleProxy(echo, mbit=50, rtt_ms=4) as proxy:
-        def fetch():
-            with socket.create_connection(("127.0.0.1", proxy.port)) as s:
-                s.sendall(f"send {n}\n".encode())
-                recv_exactly(s, n)
 
-        t = time.perf_counter()
-        threads = [threading.Thread(target=fetch) for _ in range(2)]
-        for th in threads:
-            th.start()
-        for th in threads:
-            th.join()
-        elapsed = time.perf_counter() - t
-        assert proxy.stats()["down_bytes"] == 2 * n and proxy.stats()["connections"] == 2
-    ideal = 2 * n * 8 / 50e6
-    assert 0.9 * ideal <= elapsed <= 1.15 * ideal + 0.1, (elapsed, ideal)
+    def transfer():
+        with ThrottleProxy(echo, mbit=50, rtt_ms=4) as proxy:
+            def fetch():
+                with socket.create_connection(("127.0.0.1", proxy.port)) as s:
+                    s.sendall(f"send {n}\n".encode())
+                    recv_exactly(s, n)
+
+            t = time.perf_counter()
+            threads = [threading.Thread(target=fetch) for _ in range(2)]
+            for th in threads:
+                th.start()
+            for th in threads:
+                th.join()
+            elapsed = time.perf_counter() - t
+            assert proxy.stats()["down_bytes"] == 2 * n and proxy.stats()["connections"] == 2
+        return elapsed
+
+    assert_rate(transfer, 2 * n * 8 / 50e6)
 
 
 def test_the_link_refuses_nonsense_settings():

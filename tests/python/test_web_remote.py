@@ -202,8 +202,8 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
 
 
 def test_a_newer_request_aborts_the_one_in_flight_and_service_errors_show(servers, stores, tmp_path):
-    """Hiding a channel makes the service build a new renderer and fetch its bricks (seconds on
-    lavapipe); a colour change sent meanwhile supersedes that request: its fetch is aborted and
+    """Hiding a channel asks for a new VDI, which a proxy holds (as a service busy for seconds
+    would); a colour change sent meanwhile supersedes that request: its fetch is aborted and
     only the newer VDI is drawn. Then a scene the service refuses shows its message."""
     base, service = servers
     results, _ = drive(page(base, "u16x3", service), [{"do": "converge"}, {"do": "hash"}])
@@ -215,21 +215,24 @@ def test_a_newer_request_aborts_the_one_in_flight_and_service_errors_show(server
     nothing = json.loads(json.dumps(recoloured))
     for c in nothing["channels"]:
         c["visible"] = False
-    results, console = drive(
-        page(base, "u16x3", service),
-        [
-            {"do": "converge"},
-            {"do": "setScene", "scene": hidden},
-            {"do": "waitState", "when": "s.remote.in_flight === 2"},
-            {"do": "setScene", "scene": recoloured},
-            {"do": "converge"},
-            {"do": "hash"},
-            {"do": "snapshot", "path": str(tmp_path / "recoloured.png")},
-            {"do": "setScene", "scene": nothing},
-            {"do": "waitMessage"},
-            {"do": "state"},
-        ],
-    )
+    with ServiceProxy(service, hold=[2]) as proxy:
+        results, console = drive(
+            page(base, "u16x3", proxy.url),
+            [
+                {"do": "converge"},
+                {"do": "setScene", "scene": hidden},
+                {"do": "waitState", "when": "s.remote.in_flight === 2"},
+                {"do": "setScene", "scene": recoloured},
+                {"do": "converge"},
+                {"do": "hash"},
+                {"do": "snapshot", "path": str(tmp_path / "recoloured.png")},
+                {"do": "setScene", "scene": nothing},
+                {"do": "waitMessage"},
+                {"do": "state"},
+            ],
+        )
+        posts = proxy.posts()
+    assert [p.status for p in posts] == [200, 0, 200, 400], posts
     state, fragment, message, failed = results[4], results[5], results[8], results[9]
     assert state["error"] is None and state["converged"], state
     remote = state["remote"]
@@ -237,7 +240,7 @@ def test_a_newer_request_aborts_the_one_in_flight_and_service_errors_show(server
     assert remote["drawn_request"] == 3 and remote["scene_current"], remote
     assert scene_of(fragment) == recoloured
     assert_matches(tmp_path / "recoloured.png", dvr(stores["u16x3"], recoloured, tmp_path / "dvr.png"))
-    assert message == f"Render service {service}: scene: no channel is visible"
+    assert message == f"Render service {proxy.url}: scene: no channel is visible"
     assert failed["remote"]["last_error"] == "scene: no channel is visible"
     # The VDI of the last good scene stays drawn, no longer current.
     assert failed["remote"]["drawn_request"] == 3 and not failed["remote"]["scene_current"]
@@ -273,8 +276,8 @@ def service_info(service):
 
 
 def test_info_names_the_gpu_and_a_busy_service_is_asked_again_after_retry_after(servers):
-    """Through a proxy that answers the first POST /vdi 503 with `Retry-After: 2` and the
-    second 429 without one, the page sends the same request again 2 s, then 1 s later, draws
+    """Through a proxy that answers the first POST /vdi 503 with `Retry-After: 4` and the
+    second 429 without one, the page sends the same request again 4 s, then 1 s later, draws
     the third answer's VDI and counts its bytes; its report names the service's GPU adapter as
     /info does."""
     base, service = servers
@@ -282,7 +285,7 @@ def test_info_names_the_gpu_and_a_busy_service_is_asked_again_after_retry_after(
     assert set(info["adapter"]) == {"name", "backend"}, info["adapter"]
     assert info["adapter"]["backend"] in ("vulkan", "metal", "dx12", "gl"), info["adapter"]
     assert info["adapter"]["name"] != ""
-    with ServiceProxy(service, failures=[(503, "2"), (429, None)]) as proxy:
+    with ServiceProxy(service, failures=[(503, "4"), (429, None)]) as proxy:
         results, console = drive(page(base, "u16x3", proxy.url), [{"do": "converge"}, {"do": "message"}])
         posts = proxy.posts()
     state, message = results
@@ -293,8 +296,8 @@ def test_info_names_the_gpu_and_a_busy_service_is_asked_again_after_retry_after(
             remote["last_error"]) == (1, 2, 1, None), remote
     assert message is None
     assert [p.status for p in posts] == [503, 429, 200], posts
-    assert posts[1].at_s - posts[0].at_s >= 2.0, posts
-    assert 1.0 <= posts[2].at_s - posts[1].at_s < 2.0, posts
+    assert posts[1].at_s - posts[0].at_s >= 4.0, posts
+    assert 1.0 <= posts[2].at_s - posts[1].at_s < 4.0, posts
     assert remote["vdi_bytes_received"] == posts[2].body_bytes > 0, (remote, posts)
     assert errors(console, ["status of 503", "status of 429"]) == []
 
@@ -317,9 +320,9 @@ def test_a_request_refused_more_than_three_times_shows_the_last_refusal(servers)
 
 
 def test_a_request_waiting_to_be_retried_is_superseded_by_a_newer_view(servers):
-    """The first POST /vdi is answered 503 with `Retry-After: 4`; while the page waits to send
+    """The first POST /vdi is answered 503 with `Retry-After: 6`; while the page waits to send
     it again, the camera moves: the newer request is sent as soon as the view rests, the old
-    one is not sent again (not in the 4 s nor in the 8 s after the newer VDI is drawn; the
+    one is not sent again (not in the 6 s nor in the 8 s after the newer VDI is drawn; the
     proxy records a request once it is answered, and the service would answer a stale one at
     once with 409), and the page draws the newer view's VDI."""
     base, service = servers
@@ -328,7 +331,7 @@ def test_a_request_waiting_to_be_retried_is_superseded_by_a_newer_view(servers):
     closer = json.loads(json.dumps(scene))
     cam = closer["camera"]
     cam["eye"] = [t + 0.75 * (e - t) for e, t in zip(cam["eye"], cam["target"])]
-    with ServiceProxy(service, failures=[(503, "4")]) as proxy:
+    with ServiceProxy(service, failures=[(503, "6")]) as proxy:
         results, console = drive(
             page(base, "u16x3", proxy.url),
             [
@@ -351,7 +354,7 @@ def test_a_request_waiting_to_be_retried_is_superseded_by_a_newer_view(servers):
     assert remote["vdi_camera"] == closer["camera"]
     assert later["remote"] == remote, later
     assert [p.status for p in posts] == [503, 200], posts
-    assert posts[1].at_s - posts[0].at_s < 4.0, posts
+    assert posts[1].at_s - posts[0].at_s < 6.0, posts
     assert errors(console, ["status of 503"]) == []
 
 
@@ -575,13 +578,13 @@ def test_auto_asks_for_zstd_once_an_answer_crossed_a_slow_link(servers, stores, 
         assert state["converged"] and remote["vdi_compression"] == "auto", state
         assert remote["answer_compression"] == "shuffled_lz4", remote
         assert remote["vdi_bytes_received"] >= 64 * 1024, remote
-        assert 5 < remote["link_mbit_per_s"] < 60, remote
+        assert 2 < remote["link_mbit_per_s"] < 150, remote
     remote = after["remote"]
     assert after["converged"] and remote["drawn_request"] == 2, after
     assert remote["answer_compression"] == "shuffled_zstd", remote
     zstd_bytes = remote["vdi_bytes_received"] - before["remote"]["vdi_bytes_received"]
     assert 64 * 1024 <= zstd_bytes < before["remote"]["vdi_bytes_received"], remote
-    assert 5 < remote["link_mbit_per_s"] < 60 and remote["link_mbit_per_s"] != before["remote"]["link_mbit_per_s"], remote
+    assert 2 < remote["link_mbit_per_s"] < 150 and remote["link_mbit_per_s"] != before["remote"]["link_mbit_per_s"], remote
     assert remote["vdi_camera"] == moved["camera"], remote
     assert_matches(tmp_path / "zstd.png", dvr(stores["u16x3"], moved, tmp_path / "dvr.png"))
     assert errors(console) == []

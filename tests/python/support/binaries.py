@@ -1,7 +1,9 @@
 """Running the built binaries: `ingest` (whole or as partitions) and `brickserver serve`."""
 
+import os
 import signal
 import subprocess
+import tempfile
 
 from support.paths import BIN
 
@@ -31,15 +33,20 @@ def run_partitions(inputs, output, n, *flags, only=None):
 def start_server(*args, env=None, preexec_fn=None):
     """Starts `brickserver serve ARGS --bind 127.0.0.1:0` (in `env`, default this process's
     environment; `preexec_fn` runs in the child before it starts); returns (process, base URL)
-    once it announces that it listens."""
-    proc = subprocess.Popen(
-        [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=env,
-        preexec_fn=preexec_fn,
-    )
+    once it announces that it listens. Its log goes to an unnamed file that `proc.stderr`
+    reads from the start: a pipe nobody reads would fill and block a server that logs a lot
+    (an object store's retries)."""
+    with tempfile.NamedTemporaryFile("w", prefix="brickserver-log-", delete=False) as log:
+        proc = subprocess.Popen(
+            [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
+            stdout=subprocess.PIPE,
+            stderr=log,
+            text=True,
+            env=env,
+            preexec_fn=preexec_fn,
+        )
+    proc.stderr = open(log.name)
+    os.unlink(log.name)
     for line in proc.stdout:
         if line.startswith("listening on "):
             return proc, line.split("listening on ")[1].strip()

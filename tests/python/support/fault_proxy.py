@@ -147,8 +147,8 @@ class FaultProxy(BackgroundServer):
 
     def stats(self) -> dict:
         """The counters (see `COUNTERS`), with `faults`: all requests the proxy failed or
-        stalled, the mode, and `max_in_flight`: the most requests it held at once (a client
-        that fetches concurrently shows here)."""
+        stalled, the mode, and `max_in_flight`: the most requests it held at once, each from
+        its arrival until its answer starts (a client that fetches concurrently shows here)."""
         with self._lock:
             counts = dict(self._counts)
             mode = self._mode
@@ -252,7 +252,16 @@ def _handler_for(proxy: FaultProxy):
             else:
                 self._send(404, b"no such control path\n", "text/plain")
 
+        def _answering(self):
+            """Marks this request no longer held, before its first byte of answer (or its reset)
+            goes out: a client that sends its next request as soon as this one's answer arrives
+            must not find it still counted in flight."""
+            if not self._answered:
+                self._answered = True
+                proxy._leave()
+
         def _send(self, status: int, body: bytes, content_type: str, extra=()):
+            self._answering()
             self.send_response(status)
             self.send_header("Content-Type", content_type)
             self.send_header("Content-Length", str(len(body)))
@@ -298,6 +307,7 @@ def _handler_for(proxy: FaultProxy):
                 return
             if fate == "reset_headers":
                 proxy._count("resets_before_headers")
+                self._answering()
                 _reset(self.connection)
                 self.close_connection = True
                 return
@@ -313,10 +323,12 @@ def _handler_for(proxy: FaultProxy):
             cut = fate == "reset_body"
             if cut and (self.command == "HEAD" or len(data) < 2):
                 proxy._count("resets_before_headers")
+                self._answering()
                 _reset(self.connection)
                 self.close_connection = True
                 return
             proxy._count("resets_mid_body" if cut else "forwarded")
+            self._answering()
             self.send_response(status, reason)
             for name, value in headers:
                 if name.lower() not in ("transfer-encoding", "content-length", "connection",
@@ -340,12 +352,13 @@ def _handler_for(proxy: FaultProxy):
 
         def _serve(self):
             proxy._enter()
+            self._answered = False
             try:
                 self._handle()
             except (BrokenPipeError, ConnectionResetError):
                 self.close_connection = True
             finally:
-                proxy._leave()
+                self._answering()
 
         do_GET = do_HEAD = do_PUT = do_POST = do_DELETE = _serve
 

@@ -3,8 +3,10 @@ a render service (`viewer serve`), for the page's remote-mode tests
 (tests/python/test_web_remote.py): it answers the first `POST /vdi` requests with the failures
 it is given (a status and an optional `Retry-After`, with a JSON `{"error": ...}` body and the
 CORS headers a page on another origin needs to read them), forwards everything else (the first
-`garble` VDIs it forwards with their first four bytes replaced by `JUNK`: no VDI), and records
-every `POST /vdi` it receives: when, the status answered and the bytes of the body.
+`garble` VDIs it forwards with their first four bytes replaced by `JUNK`: no VDI), holds the
+`POST /vdi` requests named in `hold` until a later one arrives and then drops them (the page
+has superseded them), and records every `POST /vdi` it receives: when, the status answered
+and the bytes of the body.
 
     from support.service_proxy import ServiceProxy
     with ServiceProxy("http://127.0.0.1:8123", failures=[(503, "2"), (429, None)]) as proxy:
@@ -33,7 +35,7 @@ INJECTED_ERROR = "injected by the test proxy: HTTP {status}"
 @dataclass(frozen=True)
 class Post:
     """One `POST /vdi` the proxy received: seconds since the proxy started when it arrived,
-    the status answered, and the bytes of the answer's body."""
+    the status answered (0 for one held and dropped), and the bytes of the answer's body."""
 
     at_s: float
     status: int
@@ -45,17 +47,22 @@ class ServiceProxy(BackgroundServer):
     `start()` (or `with`) until `stop()`. `failures`: `(status, retry_after)` answers of the
     first `POST /vdi` requests, in order (`retry_after` the `Retry-After` header's text, or
     None for none); an entry None forwards that request. `garble`: how many of the first VDIs
-    answered 200 reach the page with `JUNK` for their magic."""
+    answered 200 reach the page with `JUNK` for their magic. `hold`: the ordinals (from 1) of
+    `POST /vdi` requests held, unanswered, until a later one arrives, then dropped: a request
+    still in flight when the page sends the next, however fast the service."""
 
-    def __init__(self, target: str, failures=(), garble=0):
+    def __init__(self, target: str, failures=(), garble=0, hold=()):
         parsed = urllib.parse.urlsplit(target)
         if parsed.scheme != "http" or not parsed.hostname or not parsed.port:
             raise ValueError(f"{target}: the target is http://HOST:PORT")
         self.target = (parsed.hostname, parsed.port)
         self._failures = list(failures)
         self._garble = garble
+        self._hold = set(hold)
+        self._arrived = 0
         self._posts = []
         self._lock = threading.Lock()
+        self._later = threading.Condition(self._lock)
         self._start = time.monotonic()
         self._server = ThreadingHTTPServer(("127.0.0.1", 0), _handler_for(self))
         self._server.daemon_threads = True
@@ -65,7 +72,20 @@ class ServiceProxy(BackgroundServer):
     def posts(self) -> list:
         """The `POST /vdi` requests received so far ([`Post`]), in order of arrival."""
         with self._lock:
-            return list(self._posts)
+            return sorted(self._posts, key=lambda p: p.at_s)
+
+    def _arrive(self) -> bool:
+        """Counts a `POST /vdi` arriving; if it is one to hold, waits (at most 60 s) until a
+        later one arrives and returns True: drop it."""
+        with self._later:
+            self._arrived += 1
+            ordinal = self._arrived
+            self._later.notify_all()
+            if ordinal not in self._hold:
+                return False
+            if not self._later.wait_for(lambda: self._arrived > ordinal, timeout=60):
+                raise AssertionError(f"no POST /vdi came after the held request {ordinal}")
+            return True
 
     def _failure(self):
         """The injected failure for the `POST /vdi` arriving now, if any."""
@@ -106,6 +126,10 @@ def _handler_for(proxy: ServiceProxy):
             length = int(self.headers.get("Content-Length") or 0)
             body = self.rfile.read(length) if length else b""
             vdi = self.command == "POST" and self.path == "/vdi"
+            if vdi and proxy._arrive():
+                proxy._record(at_s, 0, 0)
+                self.close_connection = True
+                return
             failure = proxy._failure() if vdi else None
             if failure is not None:
                 status, retry_after = failure
