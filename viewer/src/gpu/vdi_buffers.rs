@@ -10,9 +10,10 @@ use super::contract::{VDI_DEPTH_BINS, vdi_slot};
 use super::vdi_filter::VdiFilter;
 
 /// A VDI's buffers for the ray caster, built by [`VdiBuffers::of`] (or taken back from their
-/// parts, checked, by [`VdiBuffers::from_parts`]).
+/// parts, checked, by [`VdiBuffers::from_parts`]). Its slots are held as `S` ([`VdiSlots`]):
+/// a `Vec`, or on the page the array its VDI reader transferred.
 #[derive(Clone, Debug, PartialEq)]
-pub struct VdiBuffers {
+pub struct VdiBuffers<S = Vec<[f32; 4]>> {
     /// The VDI's header.
     pub header: VdiHeader,
     /// Per list, row-major from the top, the index of its first slot; then the number of
@@ -20,7 +21,7 @@ pub struct VdiBuffers {
     pub starts: Vec<u32>,
     /// The supersegments, lists one after the other, each packed as [`vdi_slot`]; one zero
     /// slot for a VDI without any (a binding is never empty).
-    pub slots: Vec<[f32; 4]>,
+    pub slots: S,
     /// The skipping grid of the nearest filter, then the linear filter's ([`tile_masks`]):
     /// [`VdiBuffers::tiles_x`] tiles a row each.
     pub tiles: Vec<u32>,
@@ -58,6 +59,29 @@ pub enum VdiBuffersError {
     },
 }
 
+/// Where a VDI's supersegment slots are held until the ray caster uploads them, as they are.
+pub trait VdiSlots {
+    /// The slots held.
+    fn count(&self) -> u64;
+
+    /// Writes the slots to the start of `buffer` (at least 16 bytes a slot) on `queue`.
+    ///
+    /// # Errors
+    /// A message where the write is refused.
+    fn write_to(&self, queue: &wgpu::Queue, buffer: &wgpu::Buffer) -> Result<(), String>;
+}
+
+impl VdiSlots for Vec<[f32; 4]> {
+    fn count(&self) -> u64 {
+        self.len() as u64
+    }
+
+    fn write_to(&self, queue: &wgpu::Queue, buffer: &wgpu::Buffer) -> Result<(), String> {
+        queue.write_buffer(buffer, 0, bytemuck::cast_slice(self));
+        Ok(())
+    }
+}
+
 impl VdiBuffers {
     /// The buffers of `vdi`: its slots packed, its skipping grids built (native builds on
     /// rayon's threads).
@@ -75,7 +99,9 @@ impl VdiBuffers {
             tiles,
         }
     }
+}
 
+impl<S: VdiSlots> VdiBuffers<S> {
     /// The buffers from their parts, as [`VdiBuffers::of`] built them (the page's worker
     /// sends them to its main thread as typed arrays).
     ///
@@ -86,13 +112,12 @@ impl VdiBuffers {
     pub fn from_parts(
         header: VdiHeader,
         starts: Vec<u32>,
-        slots: Vec<[f32; 4]>,
+        slots: S,
         tiles: Vec<u32>,
     ) -> Result<Self, VdiBuffersError> {
         let (width, height) = (header.width, header.height);
         // In u64: a header's width × height overflows a wasm32 usize.
-        let length = |buffer, got: usize, want: u64| {
-            let got = got as u64;
+        let length = |buffer, got: u64, want: u64| {
             if got == want {
                 Ok(())
             } else {
@@ -106,16 +131,16 @@ impl VdiBuffers {
             }
         };
         let lists = u64::from(width) * u64::from(height);
-        length("list starts", starts.len(), lists + 1)?;
+        length("list starts", starts.len() as u64, lists + 1)?;
         let (tiles_x, tiles_y) = tile_grid(width, height);
         length(
             "skipping tiles",
-            tiles.len(),
+            tiles.len() as u64,
             2 * u64::from(tiles_x) * u64::from(tiles_y),
         )?;
         let used = starts.last().map_or(0, |&s| s as usize);
         // A VDI without supersegments holds one zero slot.
-        length("slots", slots.len(), used.max(1) as u64)?;
+        length("slots", slots.count(), used.max(1) as u64)?;
         let mut previous = 0;
         for (list, &start) in starts.iter().enumerate() {
             if start < previous || (list == 0 && start != 0) {

@@ -25,7 +25,7 @@ use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::{buffer_entry, storage_layout, uniform_layout};
 use super::timer::PassTimer;
-use super::vdi_buffers::{SKIP_TILE, VdiBuffers, grid_bins};
+use super::vdi_buffers::{SKIP_TILE, VdiBuffers, VdiSlots, grid_bins};
 use super::vdi_filter::VdiFilter;
 use crate::scene::Camera;
 
@@ -241,10 +241,10 @@ impl VdiRenderer {
     ///
     /// # Errors
     /// As [`VdiRenderer::new`].
-    pub async fn create(
+    pub async fn create<S: VdiSlots>(
         gpu: &Gpu,
         pipelines: &Rc<VdiPipelines>,
-        buffers: &VdiBuffers,
+        buffers: &VdiBuffers<S>,
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
@@ -255,14 +255,14 @@ impl VdiRenderer {
         .await
     }
 
-    fn build(
+    fn build<S: VdiSlots>(
         gpu: &Gpu,
         pipelines: &Rc<VdiPipelines>,
-        buffers: &VdiBuffers,
+        buffers: &VdiBuffers<S>,
         width: u32,
         height: u32,
     ) -> Result<Self, GpuError> {
-        let slot_bytes = (buffers.slots.len() * 16) as u64;
+        let slot_bytes = buffers.slots.count() * 16;
         check_binding(
             gpu,
             "the VDI's supersegments",
@@ -276,7 +276,14 @@ impl VdiRenderer {
             buffer
         };
         let starts = upload("vdi list starts", bytemuck::cast_slice(&buffers.starts));
-        let slots = upload("vdi slots", bytemuck::cast_slice(&buffers.slots));
+        let slots = storage_buffer(gpu, "vdi slots", slot_bytes, wgpu::BufferUsages::empty());
+        buffers
+            .slots
+            .write_to(&gpu.queue, &slots)
+            .map_err(|message| GpuError::Validation {
+                what: "uploading the VDI's supersegments".to_string(),
+                message,
+            })?;
         let tiles = upload("vdi tiles", bytemuck::cast_slice(&buffers.tiles));
         let view = uniform_buffer(gpu, "vdi view", size_of::<VdiView>() as u64);
         let vdi_buffers = [starts, slots, tiles];

@@ -140,8 +140,9 @@ struct Flight {
 struct Arrived {
     sequence: u32,
     scene: Scene,
-    buffers: VdiBuffers,
-    /// The main thread's time taking the reader's message (its buffers copied in), ms.
+    buffers: VdiBuffers<js_sys::Float32Array>,
+    /// The main thread's time taking the reader's message (its starts and skipping grids
+    /// copied in, checked), ms.
     taken_ms: f64,
 }
 
@@ -229,8 +230,8 @@ pub struct RemoteReport {
     /// skipping grids built (its size and dataset are checked after), ms. This side's share
     /// of each answer's latency, with `vdi_setup_ms`.
     vdi_decode_ms: Option<f64>,
-    /// Time the page's main thread took on the last VDI it drew: the reader's buffers copied
-    /// in and uploaded, ms.
+    /// Time from the page's main thread taking the last VDI it drew from the reader to its
+    /// buffers uploaded and checked (the browser's GPU process answering for them), ms.
     vdi_setup_ms: Option<f64>,
     /// The linear filter's pipeline is compiled (the page compiles it while the view rests).
     linear_compiled: bool,

@@ -5,9 +5,11 @@
 //! its values checked) and builds the ray caster's [`VdiBuffers`] (slots packed, skipping
 //! grids): the CPU's whole share of a new VDI. It answers a message of typed arrays, whose
 //! buffers the worker transfers to the main thread without a copy. There, [`take_answer`]
-//! takes the buffers back, checked against their header, and the page only copies them into
-//! its own memory and uploads them. A 7 MB VDI used to hold the main thread (and with it the
-//! frames and the page's input) for the whole decode and setup.
+//! takes the buffers back, checked against their header, and the page uploads them: the list
+//! starts and skipping grids copied into its own memory (a few hundred KB), the slots (most of
+//! a VDI's bytes) written to the GPU straight from the transferred array ([`VdiSlots`] for
+//! `Float32Array`). A 7 MB VDI used to hold the main thread (and with it the frames and the
+//! page's input) for the whole decode and setup.
 //!
 //! The message's fields are named here only. The page's JavaScript passes it on whole; the
 //! worker reads only its `transfer` list, for `postMessage`.
@@ -15,9 +17,10 @@
 use residency_schemas::vdi::{VdiHeader, VolumetricDepthImage};
 use wasm_bindgen::prelude::*;
 
+use super::fetch::js_text;
 use super::now_ms;
 use crate::error_chain;
-use crate::gpu::vdi_buffers::{VdiBuffers, VdiBuffersError};
+use crate::gpu::vdi_buffers::{VdiBuffers, VdiBuffersError, VdiSlots};
 
 /// The VDI's header, as JSON.
 const HEADER: &str = "header";
@@ -55,8 +58,9 @@ pub enum ReaderError {
 pub enum ReadAnswer {
     /// A VDI's buffers, and the reader's time on it (ms).
     Vdi {
-        /// The buffers, checked against their header.
-        buffers: Box<VdiBuffers>,
+        /// The buffers, checked against their header; the slots as the reader transferred
+        /// them.
+        buffers: Box<VdiBuffers<js_sys::Float32Array>>,
         /// The reader's time, off the main thread: decode and buffers built.
         read_ms: f64,
     },
@@ -99,7 +103,8 @@ pub fn read_vdi_answer(bytes: &[u8]) -> js_sys::Object {
 }
 
 /// The reader's message for one answer ([`read_vdi_answer`]), taken back on the main thread:
-/// its typed arrays copied into this side's memory, the buffers checked against their header.
+/// the list starts and skipping grids copied into this side's memory, the slots kept as the
+/// transferred array, the buffers checked against their header.
 ///
 /// # Errors
 /// A [`ReaderError`] for a message [`read_vdi_answer`] would not write.
@@ -131,11 +136,6 @@ pub fn take_answer(message: &JsValue) -> Result<ReadAnswer, ReaderError> {
     let slots = field(SLOTS)
         .and_then(|v| v.dyn_into::<js_sys::Float32Array>().ok())
         .filter(|a| a.length() % 4 == 0)
-        .map(|a| {
-            let mut slots = vec![[0.0f32; 4]; a.length() as usize / 4];
-            a.copy_to(bytemuck::cast_slice_mut(&mut slots));
-            slots
-        })
         .ok_or(missing(SLOTS))?;
     let read_ms = field(READ_MS)
         .and_then(|v| v.as_f64())
@@ -146,4 +146,24 @@ pub fn take_answer(message: &JsValue) -> Result<ReadAnswer, ReaderError> {
         buffers: Box::new(buffers),
         read_ms,
     })
+}
+
+/// The slots as the page's VDI reader transferred them, four values a slot: written to the
+/// GPU straight from the array (WebGPU's `writeBuffer` with the array as its source), never
+/// copied into WebAssembly memory. On another backend (none the page uses today) they are
+/// copied in and written as wgpu writes a slice.
+impl VdiSlots for js_sys::Float32Array {
+    fn count(&self) -> u64 {
+        u64::from(self.length() / 4)
+    }
+
+    fn write_to(&self, queue: &wgpu::Queue, buffer: &wgpu::Buffer) -> Result<(), String> {
+        if let (Some(queue), Some(buffer)) = (queue.as_webgpu(), buffer.as_webgpu()) {
+            return queue
+                .write_buffer_with_u32_and_buffer_source(buffer, 0, self)
+                .map_err(|e| js_text(&e));
+        }
+        queue.write_buffer(buffer, 0, bytemuck::cast_slice(&self.to_vec()));
+        Ok(())
+    }
 }
