@@ -177,7 +177,7 @@ def test_remote_mode_converges_to_the_dvr_image_and_asks_again_after_an_orbit(se
     assert (remote["vdi_compression"], remote["answer_compression"]) == ("auto", "shuffled_lz4"), remote
     assert remote["linear_compiled"], remote
     # The page's share of the answer's latency: the VDI read (in the worker), then its buffers
-    # copied in and uploaded for the ray caster (on the main thread).
+    # taken in and uploaded for the ray caster (on the main thread).
     for took in ("vdi_decode_ms", "vdi_setup_ms"):
         assert remote[took] is not None and 0 <= remote[took] < 60_000, remote
     scene = scene_of(first_hash)
@@ -578,13 +578,13 @@ def test_auto_asks_for_zstd_once_an_answer_crossed_a_slow_link(servers, stores, 
         assert state["converged"] and remote["vdi_compression"] == "auto", state
         assert remote["answer_compression"] == "shuffled_lz4", remote
         assert remote["vdi_bytes_received"] >= 64 * 1024, remote
-        assert 2 < remote["link_mbit_per_s"] < 150, remote
+        assert 4 < remote["link_mbit_per_s"] < 150, remote
     remote = after["remote"]
     assert after["converged"] and remote["drawn_request"] == 2, after
     assert remote["answer_compression"] == "shuffled_zstd", remote
     zstd_bytes = remote["vdi_bytes_received"] - before["remote"]["vdi_bytes_received"]
     assert 64 * 1024 <= zstd_bytes < before["remote"]["vdi_bytes_received"], remote
-    assert 2 < remote["link_mbit_per_s"] < 150 and remote["link_mbit_per_s"] != before["remote"]["link_mbit_per_s"], remote
+    assert 4 < remote["link_mbit_per_s"] < 150 and remote["link_mbit_per_s"] != before["remote"]["link_mbit_per_s"], remote
     assert remote["vdi_camera"] == moved["camera"], remote
     assert_matches(tmp_path / "zstd.png", dvr(stores["u16x3"], moved, tmp_path / "dvr.png"))
     assert errors(console) == []

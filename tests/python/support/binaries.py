@@ -37,16 +37,18 @@ def start_server(*args, env=None, preexec_fn=None):
     reads from the start: a pipe nobody reads would fill and block a server that logs a lot
     (an object store's retries)."""
     with tempfile.NamedTemporaryFile("w", prefix="brickserver-log-", delete=False) as log:
-        proc = subprocess.Popen(
-            [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
-            stdout=subprocess.PIPE,
-            stderr=log,
-            text=True,
-            env=env,
-            preexec_fn=preexec_fn,
-        )
-    proc.stderr = open(log.name)
-    os.unlink(log.name)
+        try:
+            proc = subprocess.Popen(
+                [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
+                stdout=subprocess.PIPE,
+                stderr=log,
+                text=True,
+                env=env,
+                preexec_fn=preexec_fn,
+            )
+            proc.stderr = open(log.name)
+        finally:
+            os.unlink(log.name)
     for line in proc.stdout:
         if line.startswith("listening on "):
             return proc, line.split("listening on ")[1].strip()

@@ -5,8 +5,8 @@ it is given (a status and an optional `Retry-After`, with a JSON `{"error": ...}
 CORS headers a page on another origin needs to read them), forwards everything else (the first
 `garble` VDIs it forwards with their first four bytes replaced by `JUNK`: no VDI), holds the
 `POST /vdi` requests named in `hold` until a later one arrives and then drops them (the page
-has superseded them), and records every `POST /vdi` it receives: when, the status answered
-and the bytes of the body.
+has superseded them, and should have closed their connections), and records every `POST /vdi`
+it receives: when, the status answered and the bytes of the body.
 
     from support.service_proxy import ServiceProxy
     with ServiceProxy("http://127.0.0.1:8123", failures=[(503, "2"), (429, None)]) as proxy:
@@ -16,6 +16,7 @@ and the bytes of the body.
 
 import http.client
 import json
+import socket
 import threading
 import time
 import urllib.parse
@@ -35,7 +36,8 @@ INJECTED_ERROR = "injected by the test proxy: HTTP {status}"
 @dataclass(frozen=True)
 class Post:
     """One `POST /vdi` the proxy received: seconds since the proxy started when it arrived,
-    the status answered (0 for one held and dropped), and the bytes of the answer's body."""
+    the status answered (for one held and dropped, 0 where the page closed its connection, -1
+    where it kept it open), and the bytes of the answer's body."""
 
     at_s: float
     status: int
@@ -49,7 +51,8 @@ class ServiceProxy(BackgroundServer):
     None for none); an entry None forwards that request. `garble`: how many of the first VDIs
     answered 200 reach the page with `JUNK` for their magic. `hold`: the ordinals (from 1) of
     `POST /vdi` requests held, unanswered, until a later one arrives, then dropped: a request
-    still in flight when the page sends the next, however fast the service."""
+    still in flight when the page sends the next, however fast the service (held requests
+    take no entry of `failures`)."""
 
     def __init__(self, target: str, failures=(), garble=0, hold=()):
         parsed = urllib.parse.urlsplit(target)
@@ -105,6 +108,18 @@ class ServiceProxy(BackgroundServer):
             self._posts.append(Post(at_s, status, body_bytes))
 
 
+def _closed_by_peer(sock, wait_s=10.0) -> bool:
+    """Whether the client closes `sock` within `wait_s` seconds, sending nothing more (a page
+    that aborted its request closes the connection)."""
+    sock.settimeout(wait_s)
+    try:
+        return sock.recv(1, socket.MSG_PEEK) == b""
+    except ConnectionResetError:
+        return True
+    except TimeoutError:
+        return False
+
+
 def _handler_for(proxy: ServiceProxy):
     class Handler(BaseHTTPRequestHandler):
         protocol_version = "HTTP/1.1"
@@ -127,7 +142,7 @@ def _handler_for(proxy: ServiceProxy):
             body = self.rfile.read(length) if length else b""
             vdi = self.command == "POST" and self.path == "/vdi"
             if vdi and proxy._arrive():
-                proxy._record(at_s, 0, 0)
+                proxy._record(at_s, 0 if _closed_by_peer(self.connection) else -1, 0)
                 self.close_connection = True
                 return
             failure = proxy._failure() if vdi else None

@@ -6,10 +6,10 @@
 //! grids): the CPU's whole share of a new VDI. It answers a message of typed arrays, whose
 //! buffers the worker transfers to the main thread without a copy. There, [`take_answer`]
 //! takes the buffers back, checked against their header, and the page uploads them: the list
-//! starts and skipping grids copied into its own memory (a few hundred KB), the slots (most of
-//! a VDI's bytes) written to the GPU straight from the transferred array ([`VdiSlots`] for
-//! `Float32Array`). A 7 MB VDI used to hold the main thread (and with it the frames and the
-//! page's input) for the whole decode and setup.
+//! starts and skipping grids copied into its own memory (about 1 MB at 640×360, nearly all of
+//! it the list starts), the slots (most of a VDI's bytes) written to the GPU straight from the
+//! transferred array ([`VdiSlots`] for `Float32Array`). A 7 MB VDI used to hold the main thread
+//! (and with it the frames and the page's input) for the whole decode and setup.
 //!
 //! The message's fields are named here only. The page's JavaScript passes it on whole; the
 //! worker reads only its `transfer` list, for `postMessage`.

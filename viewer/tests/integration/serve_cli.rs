@@ -448,11 +448,19 @@ fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
     // request refused before that with 400.
     let limited = "over the limit of 20 requests per second (--max-requests-per-second)";
     let mut statuses: Vec<(u16, String)> = Vec::new();
+    let started = std::time::Instant::now();
     while statuses.len() < 1000 && !statuses.iter().any(|(s, _)| *s == 429) {
         statuses.push(server.refused(&json!({"width": 0, "height": 1})));
     }
+    let elapsed = started.elapsed().as_secs_f64();
     let (last, before) = statuses.split_last().unwrap();
     assert_eq!((last.0, last.1.as_str()), (429, limited), "{statuses:?}");
+    // No more let in than the burst and the rate allow in the time taken.
+    assert!(
+        before.len() as f64 <= 20.0 + 20.0 * elapsed + 1.0,
+        "{} requests let in over {elapsed:.2} s",
+        before.len()
+    );
     assert!(before.iter().all(|(s, _)| *s == 400), "{statuses:?}");
 }
 
