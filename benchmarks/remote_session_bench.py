@@ -257,6 +257,22 @@ def machine(page_adapter, service_adapter):
             "service_adapter": service_adapter, "browser": chromium}
 
 
+def page_costs(samples):
+    """The page's own cost of each VDI it drew, as its samples saw them: per VDI (by the count
+    received), the worker's read (`vdi_decode_ms`) and the main thread's setup
+    (`vdi_setup_ms`), ms; None for the streaming mode."""
+    seen = {}
+    for s in samples:
+        remote = s["state"].get("remote") or {}
+        if remote.get("vdis_received") and remote.get("vdi_setup_ms") is not None:
+            seen[remote["vdis_received"]] = (remote["vdi_decode_ms"], remote["vdi_setup_ms"])
+    if not seen:
+        return None
+    reads, setups = zip(*seen.values())
+    return {"vdis_seen": len(seen), "read_ms_median": median(list(reads)),
+            "setup_ms_median": median(list(setups)), "setup_ms_max": round(max(setups), 1)}
+
+
 def summarize(mode, run, segments):
     """Per segment and overall: frame intervals, SSIM/PSNR, bytes, time to the rested image."""
     out, marks, origins = run["out"], run["marks"], run["origins"]
@@ -329,6 +345,7 @@ def summarize(mode, run, segments):
         "remote_mode": remote_end.get("mode", "off"),
         "vdi_filter": remote_end.get("vdi_filter"),
         "remote_end": remote_end or None,
+        "page_costs": page_costs(samples),
         "last_sample": {"ssim": samples[-1]["ssim"], "psnr_db": samples[-1]["psnr_db"], "converged": samples[-1]["state"]["converged"]},
         "final": {"ssim": out["final"]["ssim"], "psnr_db": out["final"]["psnr_db"],
                   "converged": out["final"]["state"]["converged"], "waited_s": round(out["final"]["waited_s"], 2)},
@@ -420,6 +437,13 @@ def report(result, stamp):
             f"converged {str(r['last_sample']['converged']).lower()}; converged on its last camera "
             f"{r['final']['waited_s']:g} s later: SSIM {r['final']['ssim']:.4f}, PSNR {fmt(r['final']['psnr_db'], '{:.1f}')} dB.",
         ]
+        if r["page_costs"] is not None:
+            c = r["page_costs"]
+            lines[-1] += (
+                f" The page's own cost of the {c['vdis_seen']} VDIs its samples saw drawn: read in its worker in a "
+                f"median {fmt(c['read_ms_median'], '{:.1f}')} ms, set up from the main thread in a median "
+                f"{fmt(c['setup_ms_median'], '{:.1f}')} ms (at most {c['setup_ms_max']:.1f} ms; `remote.vdi_decode_ms` "
+                "and `vdi_setup_ms`).")
     rm, st = result["modes"]["remote"], result["modes"]["streaming"]
     lines += ["", "## Remote against streaming", "", "| segment | frame time remote / streaming | SSIM median remote − streaming | rested remote / streaming (s) |", "|---|---|---|---|"]
     for a, b in zip(rm["segments"], st["segments"]):

@@ -81,6 +81,12 @@ def test_the_remote_modes_fetch_no_brick_and_the_streaming_mode_no_vdi(bench):
         assert remote["link_bytes"]["brick"] == {"up": 0, "down": 0}
         assert remote["vdis_received"] >= 1 and remote["requests_sent"] >= remote["vdis_received"]
         assert all(s["bricks_fetched"] == 0 for s in remote["samples"])
+        # The page's own cost of the VDIs its samples saw drawn: the worker's read, the main
+        # thread's setup.
+        costs = remote["page_costs"]
+        assert 1 <= costs["vdis_seen"] <= remote["vdis_received"], (mode, costs)
+        assert costs["read_ms_median"] > 0 and 0 <= costs["setup_ms_median"] <= costs["setup_ms_max"], (mode, costs)
+    assert streaming["page_costs"] is None
     assert streaming["remote_mode"] == "off" and streaming["vdi_filter"] is None and streaming["requests_sent"] == 0 and streaming["vdis_received"] == 0
     assert streaming["link_bytes"]["service"] == {"up": 0, "down": 0}
     assert streaming["page_bytes"]["service"] == 0
@@ -129,3 +135,8 @@ def test_the_report_has_a_table_per_mode_and_the_link(bench):
         assert title in report
     for name in SEGMENTS:
         assert report.count(f"| {name} |") == 6, name
+    for mode in ("remote", "remote-linear"):
+        c = r["modes"][mode]["page_costs"]
+        assert (f"The page's own cost of the {c['vdis_seen']} VDIs its samples saw drawn: read in its worker "
+                f"in a median {c['read_ms_median']:.1f} ms") in report, mode
+    assert report.count("The page's own cost of the") == 2
