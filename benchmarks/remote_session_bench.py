@@ -257,14 +257,15 @@ def machine(page_adapter, service_adapter):
             "service_adapter": service_adapter, "browser": chromium}
 
 
-def page_costs(samples):
-    """The page's own cost of each VDI it drew, as its samples saw them: per VDI (by the count
-    received), the worker's read (`vdi_decode_ms`) and the main thread's setup
-    (`vdi_setup_ms`), ms; None for the streaming mode."""
+def page_costs(samples, before):
+    """The page's own cost of each VDI it drew on the path, as its samples saw them: per VDI
+    (by the count received, past the `before` received before the path), the worker's read
+    (`vdi_decode_ms`) and the main thread's setup (`vdi_setup_ms`), ms; None where they saw
+    none (the streaming mode)."""
     seen = {}
     for s in samples:
         remote = s["state"].get("remote") or {}
-        if remote.get("vdis_received") and remote.get("vdi_setup_ms") is not None:
+        if remote.get("vdis_received", 0) > before and remote.get("vdi_setup_ms") is not None:
             seen[remote["vdis_received"]] = (remote["vdi_decode_ms"], remote["vdi_setup_ms"])
     if not seen:
         return None
@@ -345,7 +346,7 @@ def summarize(mode, run, segments):
         "remote_mode": remote_end.get("mode", "off"),
         "vdi_filter": remote_end.get("vdi_filter"),
         "remote_end": remote_end or None,
-        "page_costs": page_costs(samples),
+        "page_costs": page_costs(samples, remote_start.get("vdis_received", 0)),
         "last_sample": {"ssim": samples[-1]["ssim"], "psnr_db": samples[-1]["psnr_db"], "converged": samples[-1]["state"]["converged"]},
         "final": {"ssim": out["final"]["ssim"], "psnr_db": out["final"]["psnr_db"],
                   "converged": out["final"]["state"]["converged"], "waited_s": round(out["final"]["waited_s"], 2)},
