@@ -260,8 +260,18 @@ def _handler_for(proxy: FaultProxy):
                 self._answered = True
                 proxy._leave()
 
-        def _send(self, status: int, body: bytes, content_type: str, extra=()):
+        def send_response(self, code, message=None):
+            """Every answer starts here: the request stops being held first."""
             self._answering()
+            super().send_response(code, message)
+
+        def _reset_connection(self):
+            """Ends the request with a TCP reset, after it stops being held."""
+            self._answering()
+            _reset(self.connection)
+            self.close_connection = True
+
+        def _send(self, status: int, body: bytes, content_type: str, extra=()):
             self.send_response(status)
             self.send_header("Content-Type", content_type)
             self.send_header("Content-Length", str(len(body)))
@@ -307,9 +317,7 @@ def _handler_for(proxy: FaultProxy):
                 return
             if fate == "reset_headers":
                 proxy._count("resets_before_headers")
-                self._answering()
-                _reset(self.connection)
-                self.close_connection = True
+                self._reset_connection()
                 return
             if fate == "stall":
                 proxy._count("stalls")
@@ -323,12 +331,9 @@ def _handler_for(proxy: FaultProxy):
             cut = fate == "reset_body"
             if cut and (self.command == "HEAD" or len(data) < 2):
                 proxy._count("resets_before_headers")
-                self._answering()
-                _reset(self.connection)
-                self.close_connection = True
+                self._reset_connection()
                 return
             proxy._count("resets_mid_body" if cut else "forwarded")
-            self._answering()
             self.send_response(status, reason)
             for name, value in headers:
                 if name.lower() not in ("transfer-encoding", "content-length", "connection",
@@ -345,8 +350,7 @@ def _handler_for(proxy: FaultProxy):
             if cut:
                 self.wfile.write(data[:len(data) // 2])
                 self.wfile.flush()
-                _reset(self.connection)
-                self.close_connection = True
+                self._reset_connection()
                 return
             self.wfile.write(data)
 
