@@ -49,6 +49,7 @@ import platform
 import shutil
 import signal
 import subprocess
+import sys
 import tempfile
 import threading
 import time
@@ -58,6 +59,9 @@ import numpy as np
 from docs_page import point_page_at, write_result
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "python"))
+from support.s3 import start_s3  # noqa: E402
+
 BIN = pathlib.Path(os.environ.get("RESIDENCY_BIN", ROOT / "target" / "release"))
 GRID = (20, 25, 40)  # 20,000 chunks, z, y, x
 OHA = shutil.which("oha") or str(pathlib.Path.home() / ".cargo" / "bin" / "oha")
@@ -485,22 +489,9 @@ S3_KEY, S3_SECRET = "AKRESIDENCYBENCH", "residency-bench-secret-0123456789"
 
 
 def start_s3s_fs(root: pathlib.Path):
-    """s3s-fs on a free loopback port serving `root` (its subfolders are buckets)."""
-    import socket
-
-    exe = shutil.which("s3s-fs") or str(pathlib.Path.home() / ".cargo" / "bin" / "s3s-fs")
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    p = subprocess.Popen([exe, "--host", "127.0.0.1", "--port", str(port), "--access-key", S3_KEY, "--secret-key", S3_SECRET, str(root)],
-                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    for _ in range(300):
-        try:
-            socket.create_connection(("127.0.0.1", port), timeout=1).close()
-            return p, f"http://127.0.0.1:{port}"
-        except OSError:
-            time.sleep(0.1)
-    raise RuntimeError("s3s-fs did not listen")
+    """s3s-fs on a loopback port of its own serving `root` (its subfolders are buckets), with
+    the bench's credentials: the tests' `start_s3`."""
+    return start_s3(root, key=S3_KEY, secret=S3_SECRET)
 
 
 def run_s3_loads(a, work, store, region_store):

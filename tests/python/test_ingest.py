@@ -316,8 +316,30 @@ def test_inspect_reports_levels_codecs_and_statistics(tmp_path):
     assert "OME-Zarr 0.5" in text
     assert "axes: c, z (micrometer), y (micrometer), x (micrometer)" in text
     assert "level 0: shape [1, 9, 20, 20] uint16" in text and "blosc(lz4" in text
+    # Each level's chunking and voxel size (c, z, y, x): x and y halve first, to 1 µm.
+    lines = text.splitlines()
+    level = {n: next(l for l in lines if l.startswith(f"level {n}: shape")) for n in (0, 1)}
+    assert level[0].startswith("level 0: shape [1, 9, 20, 20] uint16 chunks [1,8,8,8] "), level
+    assert level[0].endswith(" scale [1.0,2.0,0.5,0.5]"), level
+    assert level[1].startswith("level 1: shape [1, 9, 10, 10] uint16 chunks [1,8,8,8] "), level
+    assert level[1].endswith(" scale [1.0,2.0,1.0,1.0]"), level
     assert f"min {int(vol.min())} max {int(vol.max())}" in text
     assert "region metadata: " in text
+
+
+def test_bricks_are_64_voxels_a_side_by_default(tmp_path):
+    """Without `--chunk`, every level is chunked in bricks of 64³ (one channel each), as the
+    README says, and the region metadata records that brick."""
+    vol = np.zeros((70, 70, 70), np.uint8)
+    vol[10:60, 10:60, 10:60] = 7
+    src = tmp_path / "b.tif"
+    tifffile.imwrite(src, vol)
+    out = tmp_path / "b.ome.zarr"
+    run_ingest("convert", src, "-o", out, "--quiet")
+    for level in ("0", "1"):
+        meta = json.loads((out / level / "zarr.json").read_text())
+        assert meta["chunk_grid"]["configuration"]["chunk_shape"] == [1, 64, 64, 64], meta
+    assert root_attributes(out)["residency"]["brick_shape"] == [64, 64, 64]
 
 
 # --- bad input and faults -------------------------------------------------------------

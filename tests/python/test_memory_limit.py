@@ -7,17 +7,15 @@ writes is byte for byte the one written in whole planes (which peaks above the l
 
 import os
 import re
-import shutil
-import socket
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 import tifffile
 
 from support.paths import BIN
+from support.s3 import env as s3_env, start_s3
 from support.stores import files
 
 pytestmark = pytest.mark.slow
@@ -175,39 +173,14 @@ def test_each_partition_peaks_within_the_limit(inputs, tmp_path):
     assert files(out) == files(whole)
 
 
-KEY = "AKRESIDENCYTEST"
-SECRET = "residency-test-secret-0123456789"
-
-
 @pytest.mark.s3
 def test_a_store_written_to_s3_peaks_within_the_limit(inputs, tmp_path):
-    exe = shutil.which("s3s-fs")
-    assert exe, "s3s-fs not installed: run scripts/test.sh (it installs it)"
     root = tmp_path / "root"
     (root / "bucket").mkdir(parents=True)
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    server = subprocess.Popen(
-        [exe, "--host", "127.0.0.1", "--port", str(port), "--access-key", KEY,
-         "--secret-key", SECRET, str(root)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    server, endpoint = start_s3(root)
     try:
-        deadline = time.time() + 30
-        while True:
-            try:
-                socket.create_connection(("127.0.0.1", port), timeout=1).close()
-                break
-            except OSError:
-                assert server.poll() is None, "s3s-fs exited"
-                assert time.time() < deadline, "s3s-fs did not listen within 30 s"
-                time.sleep(0.1)
-        env = {k: v for k, v in os.environ.items() if not k.startswith("AWS_")}
-        env.update(AWS_ACCESS_KEY_ID=KEY, AWS_SECRET_ACCESS_KEY=SECRET)
-        env.setdefault("XDG_RUNTIME_DIR", "/tmp")
         assert_within_limit(tmp_path, inputs["raw"], "-o", "s3://bucket/x.ome.zarr",
-                            "--s3-endpoint", f"http://127.0.0.1:{port}", *FLAGS, "--quiet",
-                            env=env)
+                            "--s3-endpoint", endpoint, *FLAGS, "--quiet", env=s3_env())
         local = tmp_path / "local" / "x.ome.zarr"
         code, _, err, _ = run_measured(tmp_path, "convert", inputs["raw"], "-o", local, *FLAGS,
                                        "--quiet")

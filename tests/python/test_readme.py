@@ -7,12 +7,15 @@ test. They run in a scratch folder with the built binaries first on the PATH; th
 2 gets a free port in place of the README's 8000. Step 3 (`scripts/build-web.sh`) is left to
 test_web_viewer.py, which builds and opens the page."""
 
+import json
 import os
 import re
 import shutil
 import socket
 import subprocess
 import sys
+import time
+import urllib.request
 
 import pytest
 
@@ -102,6 +105,46 @@ def test_the_tour_runs_as_written(tmp_path):
         stop_server(server)
     for name in ("served.png", "served-stats.json", "direct.png", "reference.png"):
         assert (tmp_path / "demo/tour" / name).stat().st_size > 0, name
+
+
+@pytest.mark.slow
+def test_the_demo_writes_its_store_and_render_and_serves_them(tmp_path):
+    """The README's first command, `scripts/demo.sh`, with `--serve` and `BIND`: it writes
+    OUT/sample.ome.zarr and OUT/sample.png (the render through brickserver, converged), prints
+    the link, and keeps serving the sample where `BIND` says. It builds what it runs (a no-op
+    after scripts/test.sh's builds)."""
+    assert BIN == ROOT / "target" / "release", "the demo runs the workspace's own build"
+    out = tmp_path / "demo"
+    port = free_port()
+    env = dict(os.environ, BIND=f"127.0.0.1:{port}")
+    demo = subprocess.Popen(["bash", str(ROOT / "scripts" / "demo.sh"), "--serve", str(out)], cwd=ROOT, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        said = []
+        serving = f"Serving on http://127.0.0.1:{port}: open http://127.0.0.1:{port}/sample/view"
+        for line in demo.stdout:
+            said.append(line)
+            if line.startswith("Serving on "):
+                break
+        assert said and said[-1].startswith(serving), "".join(said)
+        text = "".join(said)
+        assert f"The OME-Zarr store is {out}/sample.ome.zarr\n" in text, text
+        assert "then open http://127.0.0.1:8000/sample/view" in text, text
+        stats = json.loads((out / "sample-stats.json").read_text())
+        assert stats["converged"] is True and (stats["width"], stats["height"]) == (384, 384), stats
+        png = (out / "sample.png").read_bytes()
+        assert png[:8] == b"\x89PNG\r\n\x1a\n" and png[16:24] == (384).to_bytes(4, "big") * 2
+        assert json.loads((out / "sample.ome.zarr" / "zarr.json").read_text())["attributes"]["residency"]["levels"]
+        # The server it keeps running answers as soon as it listens.
+        for _ in range(100):
+            try:
+                datasets = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/datasets", timeout=5).read())
+                break
+            except OSError:
+                time.sleep(0.1)
+        assert [d["name"] for d in datasets["datasets"]] == ["sample"], datasets
+    finally:
+        stop_server(demo)
 
 
 def flags_by_command():

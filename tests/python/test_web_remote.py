@@ -14,12 +14,13 @@ import threading
 import urllib.parse
 import urllib.request
 
+import jsonschema
 import numpy as np
 import pytest
 
 from support.binaries import run_ingest, start_server, stop_server
 from support.browser import read_png, require_browser, run_pausing
-from support.paths import BIN, ROOT
+from support.paths import BIN, ROOT, schema
 from support.service_proxy import INJECTED_ERROR, ServiceProxy
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -269,10 +270,12 @@ def test_a_wrong_token_and_another_dataset_show_the_service_message(servers):
 
 
 def service_info(service):
-    """The service's `GET /info`, with the token."""
+    """The service's `GET /info`, with the token, checked against its JSON Schema."""
     request = urllib.request.Request(f"{service}/info", headers={"authorization": f"Bearer {TOKEN}"})
     with urllib.request.urlopen(request, timeout=30) as r:
-        return json.loads(r.read())
+        info = json.loads(r.read())
+    jsonschema.validate(info, schema("vdi-service-info.schema.json"))
+    return info
 
 
 def test_info_names_the_gpu_and_a_busy_service_is_asked_again_after_retry_after(servers):

@@ -17,7 +17,7 @@ import urllib.request
 import numpy as np
 import pytest
 
-from support.binaries import run_ingest, start_server
+from support.binaries import run_ingest, start_server, stop_server
 from support.browser import read_png as read_png_channels
 from support.browser import require_browser, run_pausing
 from support.paths import BIN, ROOT
@@ -407,6 +407,32 @@ def test_missing_dataset_and_no_webgpu_show_their_messages(served):
     assert "Cannot open dataset 'nope'" in msg and "no such dataset on the server" in msg
     (msg,), _ = drive(view_url(served, "u8"), [{"do": "waitMessage"}], noWebGPU=True)
     assert msg.startswith("This browser has no WebGPU, which the Residency viewer needs.")
+
+
+def test_the_page_opens_a_dataset_on_another_server(served, stores, tmp_path):
+    """`/viewer/?server=URL&dataset=NAME` on one brickserver draws NAME from another one
+    (another origin: the bricks cross it under brickserver's CORS), converged, as `viewer
+    reference` draws it; without a dataset the page says how to name one. The other server
+    serves the store as `elsewhere`, a name the page's own server does not have."""
+    proc, other = start_server("--name", f"elsewhere={stores['u8']}")
+    try:
+        url = (f"{served}/viewer/?server={urllib.parse.quote(other, safe='')}&dataset=elsewhere"
+               f"&width={SIZE}&height={SIZE}")
+        results, console = drive(
+            url, [{"do": "converge"}, {"do": "hash"}, {"do": "snapshot", "path": str(tmp_path / "page.png")}]
+        )
+        answered_by_other = metric(other, 'brickserver_requests_total{class="2xx"}')
+    finally:
+        stop_server(proc)
+    state, fragment, png = results
+    assert state["error"] is None and state["converged"], state
+    assert state["bricks_fetched"] > 0, state
+    assert answered_by_other > 0
+    assert errors(console) == []
+    psnr, ssim = compare(png, reference(stores["u8"], scene_of(fragment), tmp_path / "ref.exr"))
+    assert psnr >= 40.0 and ssim >= 0.99, (psnr, ssim)
+    (msg,), _ = drive(f"{served}/viewer/", [{"do": "waitMessage"}])
+    assert msg == "no dataset: open /NAME/view on a brickserver, or add ?server=URL&dataset=NAME", msg
 
 
 def test_a_server_that_goes_away_shows_a_message(stores):

@@ -30,7 +30,7 @@ from support.paths import BIN, ROOT
 WHEELS = ROOT / "target" / "wheels"
 DRIVER = ROOT / "tests" / "browser" / "web_viewer.mjs"
 # The README's bound on the wheel's size (it says "under 50 MB").
-MAX_WHEEL_BYTES = 50 * 1024 * 1024
+MAX_WHEEL_BYTES = 50_000_000
 
 
 @pytest.fixture(scope="module")
@@ -434,3 +434,20 @@ except residency.ResidencyError as e:
 """)
     assert p.stdout == cli_err.stderr.removeprefix("error: "), (p.stdout, cli_err.stderr)
     assert not (tmp_path / "x.ome.zarr").exists()
+
+
+def test_the_readmes_wheel_commands_run_as_written(installed, tmp_path):
+    """The commands of the README's "Install without Rust" block after the install, run as
+    written (with `env/` the installed environment) in a fresh folder: the sample converts and
+    `residency.regions` prints the shape of the finest min/max grid of level 0, channel 0."""
+    readme = (ROOT / "README.md").read_text()
+    block = readme.split("## Install without Rust", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
+    commands = [line for line in block.splitlines() if line.startswith("env/bin/")]
+    assert len(commands) == 2, block
+    (tmp_path / "env").symlink_to(installed.root)
+    p = subprocess.run(["bash", "-euo", "pipefail", "-c", "\n".join(commands)], cwd=tmp_path,
+                       env=installed.env, capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0, p.stderr
+    group = zarr.open_group(str(tmp_path / "sample.ome.zarr"), mode="r")
+    finest = group.attrs["residency"]["levels"][0]["minmax"][0]["path"]
+    assert p.stdout.splitlines()[-1] == str(tuple(group[finest][0].shape[1:])), p.stdout

@@ -1,8 +1,8 @@
 //! The documents of the VDI render service (`viewer serve`), as the service and its clients
 //! (the page's remote mode, `crate::web`) both read and write them: the request for a VDI of a
 //! view ([`VdiRequest`], `schemas/json/vdi-request.schema.json`), the description of the
-//! dataset served ([`ServiceInfo`]), the GPU adapter rendering it ([`Adapter`]) and the bounds
-//! of a request ([`Limits`]).
+//! dataset served ([`ServiceInfo`], `schemas/json/vdi-service-info.schema.json`), the GPU
+//! adapter rendering it ([`Adapter`]) and the bounds of a request ([`Limits`]).
 
 use residency_schemas::vdi::{Compression, MAX_SUPERSEGMENTS};
 use schemars::JsonSchema;

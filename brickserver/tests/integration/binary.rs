@@ -165,3 +165,22 @@ fn bad_flags_and_names_are_clear_errors() {
     let err = run(&["--name", &pair]);
     assert!(err.contains("dataset name 'viewer' is not usable"), "{err}");
 }
+
+/// Without `--bind` the server listens on loopback port 8000, as the README says: only this
+/// machine reaches it unless told otherwise.
+#[test]
+fn the_default_address_is_loopback_port_8000() {
+    let out = Command::new(env!("CARGO_BIN_EXE_brickserver"))
+        .args(["serve", "--help"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let help = String::from_utf8(out.stdout).unwrap();
+    let bind = help
+        .lines()
+        .skip_while(|l| !l.trim_start().starts_with("--bind"))
+        .take_while(|l| !l.trim_start().starts_with("--name"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    assert!(bind.contains("[default: 127.0.0.1:8000]"), "{help}");
+}

@@ -73,3 +73,17 @@ impl ConvertOptions {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The README's default: half the machine's memory.
+    #[test]
+    fn the_default_memory_limit_is_half_the_physical_memory() {
+        let physical = crate::memory::physical_memory().expect("sysconf gives the memory");
+        assert_eq!(default_memory_limit(), physical / 2);
+        let options = ConvertOptions::new(vec!["a.tif".into()], "a.ome.zarr".into());
+        assert_eq!(options.memory_limit, None);
+    }
+}

@@ -3,9 +3,10 @@ scripts/test.sh), serving a folder whose subfolders are buckets and whose files 
 objects, and the environment and runner that give the binaries its credentials."""
 
 import os
+import re
 import shutil
-import socket
 import subprocess
+import tempfile
 import time
 
 from support.paths import BIN
@@ -14,32 +15,35 @@ KEY = "AKRESIDENCYTEST"
 SECRET = "residency-test-secret-0123456789"
 
 
-def free_port() -> int:
-    """A TCP port free on 127.0.0.1 right now."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def start_s3(root) -> tuple[subprocess.Popen, str]:
-    """Starts s3s-fs serving `root` (its subfolders are the buckets) with the test
-    credentials; returns (process, endpoint URL) once it listens."""
-    exe = shutil.which("s3s-fs")
+def start_s3(root, key=KEY, secret=SECRET) -> tuple[subprocess.Popen, str]:
+    """Starts s3s-fs serving `root` (its subfolders are the buckets) with the credentials
+    `key` and `secret` (the tests' by default) on a port the kernel picks; returns (process,
+    endpoint URL) once it says it listens. The port is its own from the start (`--port 0`,
+    read back from the log it writes to stdout), so no other process can take it between
+    choosing and binding. The log goes to an unnamed file that `server.stdout` reads, as
+    `start_server`'s does, so that a pipe nobody reads can never fill and block it."""
+    exe = shutil.which("s3s-fs") or shutil.which("s3s-fs", path=os.path.expanduser("~/.cargo/bin"))
     assert exe, "s3s-fs not installed: run scripts/test.sh (it installs it)"
-    port = free_port()
-    server = subprocess.Popen(
-        [exe, "--host", "127.0.0.1", "--port", str(port), "--access-key", KEY,
-         "--secret-key", SECRET, str(root)],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    deadline = time.time() + 30
-    while True:
+    with tempfile.NamedTemporaryFile("w", prefix="s3s-fs-log-", delete=False) as log:
         try:
-            socket.create_connection(("127.0.0.1", port), timeout=1).close()
-            return server, f"http://127.0.0.1:{port}"
-        except OSError:
-            assert server.poll() is None, "s3s-fs exited"
-            assert time.time() < deadline, "s3s-fs did not listen within 30 s"
-            time.sleep(0.1)
+            server = subprocess.Popen(
+                [exe, "--host", "127.0.0.1", "--port", "0", "--access-key", key,
+                 "--secret-key", secret, str(root)],
+                stdout=log, stderr=subprocess.STDOUT,
+                env={**os.environ, "RUST_LOG": "s3s_fs=info", "NO_COLOR": "1"})
+            server.stdout = open(log.name, errors="replace")
+        finally:
+            os.unlink(log.name)
+    deadline = time.time() + 30
+    seen = ""
+    while True:
+        seen += server.stdout.read()
+        listening = re.search(r"server is running at (http://127\.0\.0\.1:\d+)", seen)
+        if listening:
+            return server, listening.group(1)
+        assert server.poll() is None, f"s3s-fs exited:\n{seen}"
+        assert time.time() < deadline, f"s3s-fs did not say it listens within 30 s:\n{seen}"
+        time.sleep(0.05)
 
 
 def env(secret=SECRET, **extra) -> dict:

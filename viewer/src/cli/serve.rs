@@ -18,10 +18,11 @@ use residency_viewer::source::read_token_file;
 #[derive(clap::Args, Debug)]
 #[command(after_help = "\
 POST /vdi takes a JSON VDI request (schemas/json/vdi-request.schema.json) and answers the \
-encoded VDI (application/x-residency-vdi); GET /info describes the dataset; GET /healthz \
-answers ok. At most one generation runs at a time (the bound on concurrent generations): a \
-request waiting for the GPU is answered 409 when a newer one arrives, as only the latest \
-view matters. Errors are JSON {\"error\": \"...\"} answers. See docs/viewer.md, \"Remote \
+encoded VDI (application/x-residency-vdi); GET /info describes the dataset \
+(schemas/json/vdi-service-info.schema.json); GET /healthz answers ok. At most one generation \
+runs at a time (the bound on concurrent generations): a request waiting for the GPU is \
+answered 409 when a newer one arrives, as only the latest view matters. Errors are JSON \
+{\"error\": \"...\"} answers. See docs/viewer.md, \"Remote \
 rendering\".")]
 pub struct Args {
     /// Where the volume comes from.

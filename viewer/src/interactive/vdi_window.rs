@@ -392,13 +392,15 @@ impl ApplicationHandler for App {
                 // A status line: nobody reading it (a closed pipe) is no error.
                 let _ = writeln!(
                     std::io::stdout(),
-                    "view: {} VDI frames shown, last {:.1} ms at D_I {:.2} ({}x{} rays, {} filter)",
+                    "view: {} VDI frames shown, last {:.1} ms at D_I {:.2} ({}x{} rays, {} filter), \
+                     target {:.1} ms",
                     self.frames,
                     self.shown.ms,
                     self.shown.scale,
                     self.shown.rays.0,
                     self.shown.rays.1,
-                    self.shown.filter.name()
+                    self.shown.filter.name(),
+                    self.config.target_ms
                 );
                 let _ = std::io::stdout().flush();
                 self.settled_at = Some(Instant::now());

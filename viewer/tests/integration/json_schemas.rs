@@ -9,7 +9,7 @@ use residency_viewer::bench::vdi::VdiBenchResults;
 use residency_viewer::gpu::streaming::RenderStats;
 use residency_viewer::metrics::Metrics;
 use residency_viewer::scene::Scene;
-use residency_viewer::service::VdiRequest;
+use residency_viewer::service::{ServiceInfo, VdiRequest};
 use serde_json::{Value, json};
 
 /// The command regenerating the viewer's schema files.
@@ -17,11 +17,13 @@ const REGENERATE: &str =
     "RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas";
 
 /// Every viewer document's schema file. Scenes and `viewer serve`'s VDI requests are documents
-/// the viewer reads; the others it writes.
+/// the viewer reads; the others it writes (`viewer serve`'s `GET /info` answers the service
+/// info).
 fn documents() -> Vec<SchemaFile> {
     vec![
         SchemaFile::read::<Scene>("scene.schema.json"),
         SchemaFile::read::<VdiRequest>("vdi-request.schema.json"),
+        SchemaFile::written::<ServiceInfo>("vdi-service-info.schema.json"),
         SchemaFile::written::<RenderStats>("render-stats.schema.json"),
         SchemaFile::written::<Metrics>("compare.schema.json"),
         SchemaFile::written::<BenchResults>("render-bench.schema.json"),

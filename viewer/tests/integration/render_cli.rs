@@ -219,3 +219,54 @@ fn bad_input_fails_with_a_clear_error() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("unknown image format"));
 }
+
+/// `--max-frames` and `--time-budget-s` stop the progressive render before it converges: the
+/// image is written, the run succeeds, and the statistics say which budget ended it.
+#[test]
+fn a_frame_or_time_budget_stops_the_render_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = s(&store(dir.path()));
+    let stats_of = |budget: &[&str], name: &str| {
+        let (out, stats) = (
+            dir.path().join(format!("{name}.png")),
+            dir.path().join(format!("{name}.json")),
+        );
+        let (o, st) = (s(&out), s(&stats));
+        let mut args = vec![
+            "render", "--store", &store, "--width", "32", "--height", "24",
+        ];
+        args.extend(VIEW);
+        args.extend(["--out", &o, "--stats", &st]);
+        args.extend(budget);
+        viewer_ok(&args);
+        assert!(RgbImage::read(&out).is_ok(), "{name}: no image written");
+        serde_json::from_slice::<serde_json::Value>(&std::fs::read(&stats).unwrap()).unwrap()
+    };
+    // Unbudgeted, this view takes more than one frame: its first frame asks for bricks.
+    let free = stats_of(&[], "free");
+    assert_eq!(free["converged"], true);
+    assert_eq!(free["stop_reason"], "converged: no brick requested");
+    assert!(free["frames"].as_array().unwrap().len() >= 2, "{free}");
+
+    let frames = stats_of(&["--max-frames", "1"], "frames");
+    assert_eq!(frames["converged"], false);
+    assert_eq!(frames["stop_reason"], "frame budget of 1 frames spent");
+    assert_eq!(frames["frames"].as_array().unwrap().len(), 1);
+
+    // A microsecond is spent before the first frame's bricks are asked for.
+    let time = stats_of(&["--time-budget-s", "0.000001"], "time");
+    assert_eq!(time["converged"], false);
+    assert_eq!(time["stop_reason"], "time budget spent");
+    assert_eq!(time["frames"].as_array().unwrap().len(), 1);
+
+    let err = fails(&[
+        "render",
+        "--store",
+        &store,
+        "--out",
+        &s(&dir.path().join("never.png")),
+        "--time-budget-s",
+        "0",
+    ]);
+    assert!(err.contains("--time-budget-s 0 must be positive"), "{err}");
+}

@@ -494,3 +494,58 @@ fn serve_refuses_bad_limits() {
         format!("error: {}: token file is empty\n", empty.display())
     );
 }
+
+/// `viewer serve --server URL --dataset NAME` renders from the bricks brickserver serves: it
+/// describes that dataset and answers the VDI `viewer vdi --store` writes for the same view,
+/// byte for byte.
+#[test]
+fn serve_over_brickserver_answers_the_vdi_of_the_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let store_path = store(dir.path());
+    let bricks = crate::source_common::Server::start(&[&store_path]);
+    let store = s(&store_path);
+    let scene_file = dir.path().join("scene.json");
+    std::fs::write(&scene_file, scene().to_string()).unwrap();
+    let vdi_file = dir.path().join("blob.vdi");
+    viewer_ok(&[
+        "vdi",
+        "--store",
+        &store,
+        "--scene",
+        &s(&scene_file),
+        "--width",
+        "24",
+        "--height",
+        "20",
+        "--supersegments",
+        "12",
+        "--max-level",
+        "0",
+        "--out",
+        &s(&vdi_file),
+    ]);
+    let token_file = dir.path().join("token");
+    std::fs::write(&token_file, TOKEN).unwrap();
+    let server = Server::start(&[
+        "--server",
+        &bricks.url,
+        "--dataset",
+        "blob",
+        "--max-level",
+        "0",
+        "--serve-token-file",
+        &s(&token_file),
+    ]);
+    let (status, _, body) = server.call("GET", "/info", None, Some(TOKEN));
+    assert_eq!(status, 200);
+    let info: Value = serde_json::from_slice(&body).unwrap();
+    assert_eq!(info["dataset"], "blob");
+    assert_eq!(info["extent"], json!([40.0, 32.0, 48.0]));
+    let request = json!({"scene": scene(), "width": 24, "height": 20, "supersegments": 12});
+    let (status, _, bytes) = server.vdi(&request);
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&bytes));
+    assert!(
+        bytes == std::fs::read(&vdi_file).unwrap(),
+        "differs from viewer vdi --store's file"
+    );
+}

@@ -226,3 +226,41 @@ fn bad_vdi_input_fails_with_a_clear_error() {
         "{err}"
     );
 }
+
+/// `viewer vdi --server URL --dataset NAME` generates, from the bricks brickserver serves, the
+/// VDI that `--store` generates from the files, byte for byte; with no `--supersegments` a
+/// pixel holds up to 20 of them.
+#[test]
+fn a_vdi_over_the_server_is_the_vdi_of_the_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let store_path = store(dir.path());
+    let server = crate::source_common::Server::start(&[&store_path]);
+    let store = s(&store_path);
+    let (local, served) = (
+        s(&dir.path().join("local.vdi")),
+        s(&dir.path().join("served.vdi")),
+    );
+    let size = ["--width", "40", "--height", "32", "--max-level", "0"];
+    let mut args = vec!["vdi", "--store", &store, "--out", &local];
+    args.extend(VIEW);
+    args.extend(size);
+    viewer_ok(&args);
+    let mut args = vec![
+        "vdi",
+        "--server",
+        &server.url,
+        "--dataset",
+        "blob",
+        "--out",
+        &served,
+    ];
+    args.extend(VIEW);
+    args.extend(size);
+    viewer_ok(&args);
+    let bytes = std::fs::read(&local).unwrap();
+    assert!(bytes == std::fs::read(&served).unwrap(), "the VDIs differ");
+    let image = VolumetricDepthImage::decode(&bytes, &local).unwrap();
+    assert_eq!(image.header.supersegments, 20);
+    assert_eq!(image.header.dataset.as_deref(), Some("blob"));
+    assert!(image.counts.iter().any(|&c| c > 1));
+}

@@ -99,7 +99,11 @@ fn view_presents_the_same_pixels_on_the_gpu_as_by_the_cpu_blit_under_xvfb() {
     args.extend(["--width", "64", "--height", "48", "--max-level", "0"]);
     viewer_ok(&args);
     let line = same_on_both_paths(&display, &["--vdi", &vdi, "--render-scale", "0.5"]);
-    assert!(line.ends_with(" (160x120 rays, linear filter)"), "{line}");
+    // `--target-fps` is 60 by default: 16.7 ms a frame.
+    assert!(
+        line.ends_with(" (160x120 rays, linear filter), target 16.7 ms"),
+        "{line}"
+    );
     // From a camera turned away from the VDI's, at rest: the linear filter by default.
     let line = same_on_both_paths(
         &display,
@@ -110,9 +114,14 @@ fn view_presents_the_same_pixels_on_the_gpu_as_by_the_cpu_blit_under_xvfb() {
             "0.5",
             "--camera",
             "-13.8,-51.0,70:20,16,24",
+            "--target-fps",
+            "30",
         ],
     );
-    assert!(line.ends_with(" (160x120 rays, linear filter)"), "{line}");
+    assert!(
+        line.ends_with(" (160x120 rays, linear filter), target 33.3 ms"),
+        "{line}"
+    );
 }
 
 #[test]

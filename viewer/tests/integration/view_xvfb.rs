@@ -523,6 +523,13 @@ fn view_help_lists_the_controls() {
         "cycle the selected channel's colour",
         "[  ]",
         "{  }",
+        // The keys the README names.
+        "m                             switch the mode: dvr, mip, iso",
+        "h                             hide/show the statistics panel and the orientation",
+        "q, Esc                        quit",
+        "r                             reset the camera",
+        "f                             switch the filter: trilinear, tricubic",
+        "Tab, shift + Tab              select the next/previous channel",
         "--exit-after-frames",
         "--server",
         "--store",
