@@ -1,6 +1,7 @@
 """The README's promises about itself: it stays short (at most 400 lines, with the two commands
-first), its ten-minute tour runs as written, and every flag its usage blocks name is one the
-program accepts.
+first), the first of them (`scripts/demo.sh`) and its ten-minute tour run as written, every
+flag its usage blocks name is one the program accepts, and its links and the docs' lead to
+files and headings that exist.
 
 The tour's commands are read from README.md, not copied here, so editing the README edits the
 test. They run in a scratch folder with the built binaries first on the PATH; the server of step
@@ -173,3 +174,39 @@ def test_every_flag_in_the_usage_blocks_is_accepted():
         assert p.returncode == 0, p.stderr
         missing = sorted(f for f in flags if not re.search(rf"(?<![\w-]){re.escape(f)}\b", p.stdout))
         assert missing == [], f"{program} {' '.join(sub)} --help does not list {missing}"
+
+
+def heading_anchors(md):
+    """The anchors GitHub gives the headings of the Markdown file `md`: lower case, punctuation
+    but `-` and `_` dropped, spaces as `-`, and `-1`, `-2`, ... after a repeated one."""
+    anchors, seen = set(), {}
+    text = re.sub(r"^```.*?^```", "", md.read_text(), flags=re.S | re.M)
+    for m in re.finditer(r"^#{1,6} (.*)$", text, flags=re.M):
+        slug = re.sub(r"[^\w\- ]", "", m.group(1).replace("`", "").strip().lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        anchors.add(slug if n == 0 else f"{slug}-{n}")
+    return anchors
+
+
+def test_every_relative_link_in_the_readme_and_docs_resolves():
+    """Each link of README.md and docs/ to a file of the repository names one that exists, and
+    a link to a heading (`FILE.md#anchor`) one that the file has."""
+    broken = []
+    pages = [README, *sorted((ROOT / "docs").rglob("*.md"))]
+    for page in pages:
+        text = re.sub(r"^```.*?^```", "", page.read_text(), flags=re.S | re.M)
+        for target in re.findall(r"\]\(([^)\s]+)\)", text):
+            if re.match(r"[a-z]+:", target):
+                continue
+            path, _, anchor = target.partition("#")
+            linked = (page.parent / path).resolve() if path else page
+            if not linked.exists():
+                broken.append(f"{page.relative_to(ROOT)}: {target} (no such file)")
+            elif anchor and linked.suffix == ".md" and anchor not in heading_anchors(linked):
+                broken.append(f"{page.relative_to(ROOT)}: {target} (no such heading)")
+    assert len(pages) > 10
+    assert broken == [], "\n".join(broken)
+    # The check itself finds the anchors of headings that links elsewhere use.
+    assert {"volumetric-depth-images", "standard-zarr-access-any-viewer"} <= (
+        heading_anchors(ROOT / "docs" / "viewer.md") | heading_anchors(ROOT / "docs" / "server.md"))
