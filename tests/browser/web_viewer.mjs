@@ -15,9 +15,10 @@
 //   {"do": "presented", "path": P}     window.residency.presented() (what the canvas shows)
 //                                      written to P as PNG
 //   {"do": "setScene", "scene": S}     window.residency.setScene(S)
-//   {"do": "drag", "dx": X, "dy": Y, "moves": N, "delay_ms": D}
-//                                      a left-button mouse drag across the canvas in N moves
-//                                      (default 5), D ms apart (default 0)
+//   {"do": "drag", "dx": X, "dy": Y, "moves": N, "delay_ms": D, "button": B, "shift": true}
+//                                      a mouse drag across the canvas from its centre in N
+//                                      moves (default 5), D ms apart (default 0), with button B
+//                                      (left, the default; right or middle), Shift held if asked
 //   {"do": "pinch", "scale": S}        a two-finger touch pinch on the canvas (pointer events
 //                                      of type touch), the fingers' distance times S
 //   {"do": "clickLink", "row": NAME, "text": T}
@@ -106,14 +107,17 @@ try {
       case "drag": {
         const box = await page.locator("#canvas").boundingBox();
         const x = box.x + box.width / 2, y = box.y + box.height / 2;
+        const button = step.button ?? "left";
         await page.mouse.move(x, y);
-        await page.mouse.down();
+        if (step.shift) await page.keyboard.down("Shift");
+        await page.mouse.down({ button });
         const moves = step.moves ?? 5;
         for (let i = 1; i <= moves; i++) {
           await page.mouse.move(x + (step.dx * i) / moves, y + (step.dy * i) / moves);
           if (step.delay_ms) await page.waitForTimeout(step.delay_ms);
         }
-        await page.mouse.up();
+        await page.mouse.up({ button });
+        if (step.shift) await page.keyboard.up("Shift");
         results.push(null);
         break;
       }

@@ -105,6 +105,43 @@ def test_region_answers_equal_brute_force(stores, name):
                     assert h["exact"] == ([hlo, hhi] == [lo, hi])
 
 
+def test_region_answers_need_no_brick(stores, tmp_path):
+    """The server answers region queries from the region metadata alone: a copy of the store
+    without any image chunk (every level's bricks deleted) gives every answer the whole
+    store gives, byte for byte."""
+    base, paths = stores
+    bare = tmp_path / "u16.ome.zarr"
+    shutil.copytree(paths["u16"], bare)
+    meta = root_attributes(bare)["residency"]
+    for level in meta["levels"]:
+        chunks = bare / level["image"] / "c"
+        assert chunks.is_dir(), chunks
+        shutil.rmtree(chunks)
+    proc, bare_base = start_server(bare)
+    try:
+        rng = np.random.default_rng(11)
+        asked = 0
+        with requests.Session() as s:
+            for level, lvl in enumerate(meta["levels"]):
+                for c in range(len(meta["channels"])):
+                    for lo, hi in boxes(lvl["shape"], rng, 4):
+                        params = {"level": level, "channel": c, "min": ",".join(map(str, lo)),
+                                  "max": ",".join(map(str, hi))}
+                        whole = s.get(f"{base}/u16/regions", params=params)
+                        without = s.get(f"{bare_base}/u16/regions", params=params)
+                        assert whole.status_code == without.status_code == 200, without.text
+                        assert without.content == whole.content, params
+                        asked += 1
+        assert asked >= 8
+        # The bricks are gone indeed: a brick of level 0 the whole store serves.
+        key = next(f for f in sorted((paths["u16"] / "0" / "c").rglob("*")) if f.is_file())
+        key = key.relative_to(paths["u16"]).as_posix()
+        assert requests.get(f"{base}/u16/{key}").status_code == 200, key
+        assert requests.get(f"{bare_base}/u16/{key}").status_code == 404, key
+    finally:
+        stop_server(proc)
+
+
 def test_aligned_boxes_are_exact(stores):
     base, paths = stores
     data = zarr.open_group(str(paths["u16"]), mode="r")["0"][...]

@@ -180,6 +180,33 @@ def test_a_drag_moves_the_camera_and_the_link_reopens_the_view(served, tmp_path)
     assert np.array_equal(a, b)
 
 
+def test_shift_or_right_drag_pans_and_a_drag_orbits(served):
+    """A left drag orbits: the target stays, and so does the eye's distance to it. A drag with
+    Shift held, or with the right button, pans: eye and target move together, across the view,
+    by the pixels dragged at the target's distance (`camera_control::pan`)."""
+    steps = [{"do": "converge"}, {"do": "hash"}]
+    for drag in ({"dx": 40, "dy": 0, "shift": True}, {"dx": 0, "dy": 30, "button": "right"},
+                 {"dx": 30, "dy": 20}):
+        # Converged, the fragment holds the view after the whole drag.
+        steps += [{"do": "drag", **drag}, {"do": "converge"}, {"do": "hash"}]
+    results, console = drive(view_url(served, "u8"), steps)
+    cams = [scene_of(results[i])["camera"] for i in (1, 4, 7, 10)]
+    vec = lambda c, k: np.array(c[k], dtype=np.float64)
+    offset = lambda c: vec(c, "eye") - vec(c, "target")
+    for before, after, pixels in ((cams[0], cams[1], 40), (cams[1], cams[2], 30)):
+        np.testing.assert_allclose(offset(after), offset(before), atol=1e-9)
+        moved = vec(after, "target") - vec(before, "target")
+        d = np.linalg.norm(offset(before))
+        per_pixel = 2 * d * np.tan(np.radians(before["fov_y_degrees"]) / 2) / SIZE
+        assert np.linalg.norm(moved) == pytest.approx(pixels * per_pixel, rel=1e-9), (before, after)
+        assert abs(np.dot(moved, offset(before))) < 1e-9 * d * np.linalg.norm(moved)
+    orbit_before, orbit_after = cams[2], cams[3]
+    assert orbit_after["target"] == pytest.approx(orbit_before["target"], abs=1e-9)
+    assert np.linalg.norm(offset(orbit_after)) == pytest.approx(np.linalg.norm(offset(orbit_before)), rel=1e-9)
+    assert not np.allclose(offset(orbit_after), offset(orbit_before))
+    assert errors(console) == []
+
+
 def test_a_two_finger_pinch_zooms(served):
     """Touch: two fingers moving twice as far apart halve the camera's distance to its target
     and, pinching about the canvas centre, keep the target."""
