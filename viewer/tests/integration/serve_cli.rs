@@ -157,6 +157,36 @@ fn header<'a>(headers: &'a ureq::http::HeaderMap, name: &str) -> &'a str {
         .unwrap()
 }
 
+/// Writes `viewer vdi`'s VDI of `store` with the scene in `scene_file`, `size` (width, height),
+/// N_S 12, level 0 only and `compression` to `out`.
+fn write_vdi(
+    store: &str,
+    scene_file: &std::path::Path,
+    size: (&str, &str),
+    compression: &str,
+    out: &std::path::Path,
+) {
+    viewer_ok(&[
+        "vdi",
+        "--store",
+        store,
+        "--scene",
+        &s(scene_file),
+        "--width",
+        size.0,
+        "--height",
+        size.1,
+        "--supersegments",
+        "12",
+        "--max-level",
+        "0",
+        "--compression",
+        compression,
+        "--out",
+        &s(out),
+    ]);
+}
+
 /// The VDI `viewer serve` answers is byte for byte the file `viewer vdi` writes for the same
 /// store, scene, size, N_S and renderer flags: both converge a fresh renderer over every brick
 /// of level 0 and encode its VDI. A second request for the same view is answered from the live
@@ -174,25 +204,7 @@ fn serve_answers_the_vdi_viewer_vdi_writes_and_refuses_bad_requests() {
     let vdi_file = dir.path().join("blob.vdi");
     let zstd_file = dir.path().join("zstd.vdi");
     for (file, compression) in [(&vdi_file, "shuffled_lz4"), (&zstd_file, "shuffled_zstd")] {
-        viewer_ok(&[
-            "vdi",
-            "--store",
-            &store,
-            "--scene",
-            &s(&scene_file),
-            "--width",
-            "40",
-            "--height",
-            "32",
-            "--supersegments",
-            "12",
-            "--max-level",
-            "0",
-            "--compression",
-            compression,
-            "--out",
-            &s(file),
-        ]);
+        write_vdi(&store, &scene_file, ("40", "32"), compression, file);
     }
     let server = Server::start(&[
         "--store",
@@ -507,23 +519,7 @@ fn serve_over_brickserver_answers_the_vdi_of_the_store() {
     let scene_file = dir.path().join("scene.json");
     std::fs::write(&scene_file, scene().to_string()).unwrap();
     let vdi_file = dir.path().join("blob.vdi");
-    viewer_ok(&[
-        "vdi",
-        "--store",
-        &store,
-        "--scene",
-        &s(&scene_file),
-        "--width",
-        "24",
-        "--height",
-        "20",
-        "--supersegments",
-        "12",
-        "--max-level",
-        "0",
-        "--out",
-        &s(&vdi_file),
-    ]);
+    write_vdi(&store, &scene_file, ("24", "20"), "shuffled_lz4", &vdi_file);
     let token_file = dir.path().join("token");
     std::fs::write(&token_file, TOKEN).unwrap();
     let server = Server::start(&[
