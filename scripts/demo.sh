@@ -32,9 +32,10 @@ log=$(mktemp)
 server=$!
 trap 'kill "$server" 2>/dev/null || true; rm -f "$log"' EXIT
 url=""
-for _ in $(seq 100); do
+for _ in $(seq 300); do
   url=$(sed -n 's/^listening on //p' "$log")
   [ -n "$url" ] && break
+  kill -0 "$server" 2>/dev/null || break
   sleep 0.1
 done
 [ -n "$url" ] || { cat "$log" >&2; echo "brickserver did not start" >&2; exit 1; }
@@ -59,5 +60,8 @@ if [ -n "$serve" ]; then
   bind=${BIND:-127.0.0.1:8000}
   echo
   echo "Serving on http://$bind: open http://$bind/sample/view in a WebGPU browser (Ctrl-C stops)."
+  # exec skips the EXIT trap: its log is removed here (the first server has stopped).
+  trap - EXIT
+  rm -f "$log"
   exec "$bin/brickserver" serve "$out/sample.ome.zarr" --bind "$bind"
 fi

@@ -12,10 +12,12 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
-import time
+import tempfile
+import threading
 import urllib.request
 
 import pytest
@@ -112,40 +114,62 @@ def test_the_tour_runs_as_written(tmp_path):
 def test_the_demo_writes_its_store_and_render_and_serves_them(tmp_path):
     """The README's first command, `scripts/demo.sh`, with `--serve` and `BIND`: it writes
     OUT/sample.ome.zarr and OUT/sample.png (the render through brickserver, converged), prints
-    the link, and keeps serving the sample where `BIND` says. It builds what it runs (a no-op
-    after scripts/test.sh's builds)."""
-    assert BIN == ROOT / "target" / "release", "the demo runs the workspace's own build"
+    the link, and keeps serving the sample and its page where `BIND` says. It builds what it
+    runs (a no-op after scripts/test.sh's builds), so it runs only on the workspace's own build.
+    The demo runs in a process group of its own, ended whatever happens, and is killed if it
+    takes over 15 minutes."""
+    if BIN.resolve() != (ROOT / "target" / "release").resolve():
+        pytest.skip("the demo builds and runs target/release, not $RESIDENCY_BIN")
     out = tmp_path / "demo"
     port = free_port()
     env = dict(os.environ, BIND=f"127.0.0.1:{port}")
-    demo = subprocess.Popen(["bash", str(ROOT / "scripts" / "demo.sh"), "--serve", str(out)], cwd=ROOT, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    try:
-        said = []
-        serving = f"Serving on http://127.0.0.1:{port}: open http://127.0.0.1:{port}/sample/view"
-        for line in demo.stdout:
-            said.append(line)
-            if line.startswith("Serving on "):
-                break
-        assert said and said[-1].startswith(serving), "".join(said)
-        text = "".join(said)
-        assert f"The OME-Zarr store is {out}/sample.ome.zarr\n" in text, text
-        assert "then open http://127.0.0.1:8000/sample/view" in text, text
-        stats = json.loads((out / "sample-stats.json").read_text())
-        assert stats["converged"] is True and (stats["width"], stats["height"]) == (384, 384), stats
-        png = (out / "sample.png").read_bytes()
-        assert png[:8] == b"\x89PNG\r\n\x1a\n" and png[16:24] == (384).to_bytes(4, "big") * 2
-        assert json.loads((out / "sample.ome.zarr" / "zarr.json").read_text())["attributes"]["residency"]["levels"]
-        # The server it keeps running answers as soon as it listens.
-        for _ in range(100):
-            try:
-                datasets = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/datasets", timeout=5).read())
-                break
-            except OSError:
-                time.sleep(0.1)
-        assert [d["name"] for d in datasets["datasets"]] == ["sample"], datasets
-    finally:
-        stop_server(demo)
+    with tempfile.TemporaryFile("w+") as log:
+        demo = subprocess.Popen(["bash", str(ROOT / "scripts" / "demo.sh"), "--serve", str(out)], cwd=ROOT,
+                                env=env, stdout=subprocess.PIPE, stderr=log, text=True, start_new_session=True)
+        watchdog = threading.Timer(900, os.killpg, (demo.pid, signal.SIGKILL))
+        watchdog.start()
+
+        def said_and_log(said):
+            log.seek(0)
+            return "".join(said) + "\n--- stderr (end) ---\n" + log.read()[-4000:]
+
+        try:
+            said = []
+            for line in demo.stdout:
+                said.append(line)
+                # brickserver's second line, once it listens (after the demo's own lines).
+                if line.startswith("listening on "):
+                    break
+            assert said and said[-1] == f"listening on http://127.0.0.1:{port}\n", said_and_log(said)
+            text = "".join(said)
+            serving = f"Serving on http://127.0.0.1:{port}: open http://127.0.0.1:{port}/sample/view"
+            assert serving in text, said_and_log(said)
+            assert f"The OME-Zarr store is {out}/sample.ome.zarr\n" in text, text
+            assert "then open http://127.0.0.1:8000/sample/view" in text, text
+            stats = json.loads((out / "sample-stats.json").read_text())
+            assert stats["converged"] is True and (stats["width"], stats["height"]) == (384, 384), stats
+            png = (out / "sample.png").read_bytes()
+            assert png[:8] == b"\x89PNG\r\n\x1a\n" and png[16:24] == (384).to_bytes(4, "big") * 2
+            assert json.loads((out / "sample.ome.zarr" / "zarr.json").read_text())["attributes"]["residency"]["levels"]
+            base = f"http://127.0.0.1:{port}"
+            with urllib.request.urlopen(f"{base}/datasets", timeout=30) as r:
+                datasets = json.loads(r.read())
+            assert [d["name"] for d in datasets["datasets"]] == ["sample"], datasets
+            # The printed link: the page, from the web build the demo made.
+            with urllib.request.urlopen(f"{base}/sample/view", timeout=30) as r:
+                assert r.status == 200 and r.headers["content-type"].startswith("text/html"), r.headers
+        finally:
+            watchdog.cancel()
+            for sig in (signal.SIGTERM, signal.SIGKILL):
+                try:
+                    os.killpg(demo.pid, sig)
+                except ProcessLookupError:
+                    pass
+                try:
+                    demo.wait(timeout=10)
+                    break
+                except subprocess.TimeoutExpired:
+                    continue
 
 
 def flags_by_command():

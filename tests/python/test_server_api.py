@@ -127,8 +127,8 @@ def test_region_answers_need_no_brick(stores, tmp_path):
                     for lo, hi in boxes(lvl["shape"], rng, 4):
                         params = {"level": level, "channel": c, "min": ",".join(map(str, lo)),
                                   "max": ",".join(map(str, hi))}
-                        whole = s.get(f"{base}/u16/regions", params=params)
-                        without = s.get(f"{bare_base}/u16/regions", params=params)
+                        whole = s.get(f"{base}/u16/regions", params=params, timeout=30)
+                        without = s.get(f"{bare_base}/u16/regions", params=params, timeout=30)
                         assert whole.status_code == without.status_code == 200, without.text
                         assert without.content == whole.content, params
                         asked += 1
@@ -136,8 +136,8 @@ def test_region_answers_need_no_brick(stores, tmp_path):
         # The bricks are gone indeed: a brick of level 0 the whole store serves.
         key = next(f for f in sorted((paths["u16"] / "0" / "c").rglob("*")) if f.is_file())
         key = key.relative_to(paths["u16"]).as_posix()
-        assert requests.get(f"{base}/u16/{key}").status_code == 200, key
-        assert requests.get(f"{bare_base}/u16/{key}").status_code == 404, key
+        assert requests.get(f"{base}/u16/{key}", timeout=30).status_code == 200, key
+        assert requests.get(f"{bare_base}/u16/{key}", timeout=30).status_code == 404, key
     finally:
         stop_server(proc)
 

@@ -52,6 +52,12 @@ pub fn default_memory_limit() -> u64 {
 }
 
 impl ConvertOptions {
+    /// The memory this conversion keeps within: [`Self::memory_limit`], else
+    /// [`default_memory_limit`].
+    pub fn memory_limit_or_default(&self) -> u64 {
+        self.memory_limit.unwrap_or_else(default_memory_limit)
+    }
+
     /// Options with defaults for everything but inputs and output.
     pub fn new(inputs: Vec<String>, output: PathBuf) -> Self {
         Self {
@@ -78,12 +84,14 @@ impl ConvertOptions {
 mod tests {
     use super::*;
 
-    /// The README's default: half the machine's memory.
+    /// The README's default: half the machine's memory, what a conversion plans its
+    /// columns within (`plan_pass`) unless `--memory-limit` says otherwise.
     #[test]
     fn the_default_memory_limit_is_half_the_physical_memory() {
         let physical = crate::memory::physical_memory().expect("sysconf gives the memory");
-        assert_eq!(default_memory_limit(), physical / 2);
-        let options = ConvertOptions::new(vec!["a.tif".into()], "a.ome.zarr".into());
-        assert_eq!(options.memory_limit, None);
+        let mut options = ConvertOptions::new(vec!["a.tif".into()], "a.ome.zarr".into());
+        assert_eq!(options.memory_limit_or_default(), physical / 2);
+        options.memory_limit = Some(1 << 30);
+        assert_eq!(options.memory_limit_or_default(), 1 << 30);
     }
 }

@@ -4,7 +4,7 @@
 
 use super::error::ConvertError;
 use super::inputs::Inputs;
-use super::options::{ConvertOptions, default_memory_limit};
+use super::options::ConvertOptions;
 use super::pyramid_sums::sum_bytes;
 use crate::columns::{ColumnPlan, Pass};
 use crate::partition::plan::{Cuts, PartitionPlan};
@@ -98,7 +98,7 @@ pub(crate) fn plan_pass<T: Sample>(
         planes: planes.end - planes.start,
         threads: rayon::current_num_threads() as u64,
     };
-    let limit = options.memory_limit.unwrap_or_else(default_memory_limit);
+    let limit = options.memory_limit_or_default();
     pass.plan_columns(limit)
         .map_err(|estimate| ConvertError::MemoryLimit {
             output: options.output.display().to_string(),

@@ -30,20 +30,32 @@ def start_s3(root, key=KEY, secret=SECRET) -> tuple[subprocess.Popen, str]:
                 [exe, "--host", "127.0.0.1", "--port", "0", "--access-key", key,
                  "--secret-key", secret, str(root)],
                 stdout=log, stderr=subprocess.STDOUT,
-                env={**os.environ, "RUST_LOG": "s3s_fs=info", "NO_COLOR": "1"})
+                # Its start-up line, and not the request spans of `s3s_fs::s3` (logged at
+                # info, formatted for every request even when nothing is printed).
+                env={**os.environ, "RUST_LOG": "s3s_fs=info,s3s_fs::s3=warn"})
             server.stdout = open(log.name, errors="replace")
         finally:
             os.unlink(log.name)
-    deadline = time.time() + 30
+    deadline = time.monotonic() + 30
     seen = ""
-    while True:
-        seen += server.stdout.read()
-        listening = re.search(r"server is running at (http://127\.0\.0\.1:\d+)", seen)
-        if listening:
-            return server, listening.group(1)
-        assert server.poll() is None, f"s3s-fs exited:\n{seen}"
-        assert time.time() < deadline, f"s3s-fs did not say it listens within 30 s:\n{seen}"
-        time.sleep(0.05)
+    try:
+        while True:
+            seen += server.stdout.read()
+            # Whole lines only: a line caught half-written could name part of the port.
+            complete = seen[: seen.rfind("\n") + 1]
+            listening = re.search(r"server is running at (http://127\.0\.0\.1:\d+)\s*$", complete, re.M)
+            if listening:
+                return server, listening.group(1)
+            if server.poll() is not None:
+                raise RuntimeError(f"s3s-fs exited:\n{seen}")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"s3s-fs ({exe}; scripts/test.sh installs 0.14.1) did not say it "
+                                   f"listens within 30 s:\n{seen}")
+            time.sleep(0.05)
+    except BaseException:
+        server.kill()
+        server.wait()
+        raise
 
 
 def env(secret=SECRET, **extra) -> dict:
