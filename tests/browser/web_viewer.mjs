@@ -32,6 +32,10 @@
 //   {"do": "waitMessage"}              wait until the on-page message shows, then return it
 //   {"do": "sleep", "ms": MS}          wait MS milliseconds (what the page does meanwhile)
 //   {"do": "workers"}                  the URLs of the page's workers
+//   {"do": "histograms"}               once every channel's histogram canvas has a bar: per
+//                                      canvas {width, height, bars}, bars[x] the pixels of
+//                                      column x, counted up from the bottom, that are exactly
+//                                      the bars' colour (#9ab)
 //   {"do": "pause"}                    print {"paused": STEP_INDEX} and wait for a line on stdin
 //                                      (the test does something to the server meanwhile)
 // It prints {"results": [one per step], "console": ["type: text", ...]} as JSON.
@@ -159,6 +163,26 @@ try {
       }
       case "workers":
         results.push(page.workers().map((w) => w.url()));
+        break;
+      case "histograms":
+        results.push(await until(() => page.evaluate(() => {
+          const canvases = [...document.querySelectorAll(".channel .histogram")];
+          const out = canvases.map((c) => {
+            const { data } = c.getContext("2d").getImageData(0, 0, c.width, c.height);
+            const bar = (x, y) => {
+              const i = 4 * (y * c.width + x);
+              return data[i] === 0x99 && data[i + 1] === 0xaa && data[i + 2] === 0xbb && data[i + 3] === 255;
+            };
+            const bars = [];
+            for (let x = 0; x < c.width; x++) {
+              let n = 0;
+              while (n < c.height && bar(x, c.height - 1 - n)) n++;
+              bars.push(n);
+            }
+            return { width: c.width, height: c.height, bars };
+          });
+          return out.length && out.every((h) => h.bars.some((n) => n > 0)) ? out : null;
+        })));
         break;
       case "location":
         results.push(await page.evaluate(() => location.pathname + location.search));

@@ -207,6 +207,40 @@ def test_shift_or_right_drag_pans_and_a_drag_orbits(served):
     assert errors(console) == []
 
 
+def test_each_channel_shows_its_histogram_in_log_counts(served):
+    """Each channel's panel draws its histogram over the whole volume (the server's region
+    metadata for the coarsest level): bin i a bar log(1 + count) / log(1 + largest count) of
+    the canvas high, checked to the pixel at the middle of every bin at least 3 pixels wide."""
+    results, console = drive(view_url(served, "u16x3"), [{"do": "opened"}, {"do": "histograms"}])
+    info, canvases = results
+    assert len(canvases) == len(info["channels"]) == 3, info["channels"]
+    level = len(info["levels"]) - 1
+    z, y, x = info["levels"][level]
+    checked = 0
+    for c, canvas in enumerate(canvases):
+        q = urllib.parse.urlencode({"level": level, "channel": c, "min": "0,0,0", "max": f"{x},{y},{z}"})
+        with urllib.request.urlopen(f"{served}/u16x3/regions?{q}", timeout=30) as r:
+            hist = json.loads(r.read())["histogram"]
+        edges, counts = hist["edges"], hist["counts"]
+        finite = [e for e in edges if e is not None]
+        x0, x1 = finite[0], finite[-1]
+        w, h = canvas["width"], canvas["height"]
+        at = lambda v: (min(x1, max(x0, v)) - x0) / (x1 - x0) * w
+        top = np.log1p(max(max(counts), 1))
+        for i, n in enumerate(counts):
+            a = at(x0 if edges[i] is None else edges[i])
+            b = at(x1 if edges[i + 1] is None else edges[i + 1])
+            if b - a < 3:
+                continue
+            column = int((a + b) / 2)
+            # Rows the bar covers whole (its top row is blended).
+            assert canvas["bars"][column] == int(np.log1p(n) / top * h + 1e-9), (c, i, n, canvas["bars"][column])
+            checked += 1
+        assert max(canvas["bars"]) == h
+    assert checked >= 30, checked
+    assert errors(console) == []
+
+
 def test_a_two_finger_pinch_zooms(served):
     """Touch: two fingers moving twice as far apart halve the camera's distance to its target
     and, pinching about the canvas centre, keep the target."""
