@@ -8,6 +8,7 @@ test. They run in a scratch folder with the built binaries first on the PATH; th
 2 gets a free port in place of the README's 8000. Step 3 (`scripts/build-web.sh`) is left to
 test_web_viewer.py, which builds and opens the page."""
 
+import functools
 import json
 import os
 import re
@@ -24,34 +25,7 @@ import pytest
 
 from support.binaries import stop_server
 from support.paths import BIN, ROOT
-
-README = ROOT / "README.md"
-
-
-def sections():
-    """README.md as {heading: text} for its `##` and `###` headings."""
-    out, heading = {}, ""
-    for line in README.read_text().splitlines(keepends=True):
-        m = re.match(r"#{2,3} (.*)", line)
-        if m:
-            heading = m.group(1).strip()
-        out[heading] = out.get(heading, "") + line
-    return out
-
-
-def sh_blocks(text):
-    """The ```sh blocks of `text`, each as a list of commands (continuation lines joined,
-    comments dropped)."""
-    blocks = []
-    for body in re.findall(r"```sh\n(.*?)```", text, flags=re.S):
-        commands = []
-        for command in body.replace("\\\n", " ").splitlines():
-            command = re.sub(r"\s+#.*$", "", command).strip()
-            if command:
-                commands.append(command)
-        blocks.append(commands)
-    return blocks
-
+from support.readme import README, sections, sh_blocks
 
 def free_port():
     with socket.socket() as s:
@@ -200,9 +174,11 @@ def test_every_flag_in_the_usage_blocks_is_accepted():
         assert missing == [], f"{program} {' '.join(sub)} --help does not list {missing}"
 
 
+@functools.cache
 def heading_anchors(md):
     """The anchors GitHub gives the headings of the Markdown file `md`: lower case, punctuation
-    but `-` and `_` dropped, spaces as `-`, and `-1`, `-2`, ... after a repeated one."""
+    but `-` and `_` dropped, spaces as `-`, and `-1`, `-2`, ... after a repeated one. Read once
+    per file, however many links lead to it."""
     anchors, seen = set(), {}
     text = re.sub(r"^```.*?^```", "", md.read_text(), flags=re.S | re.M)
     for m in re.finditer(r"^#{1,6} (.*)$", text, flags=re.M):

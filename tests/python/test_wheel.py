@@ -26,6 +26,7 @@ import zarr
 
 from support.browser import require_browser, run_pausing
 from support.paths import BIN, ROOT
+from support.readme import sections, sh_blocks
 
 WHEELS = ROOT / "target" / "wheels"
 DRIVER = ROOT / "tests" / "browser" / "web_viewer.mjs"
@@ -440,9 +441,8 @@ def test_the_readmes_wheel_commands_run_as_written(installed, tmp_path):
     """The commands of the README's "Install without Rust" block after the install, run as
     written (with `env/` the installed environment) in a fresh folder: the sample converts and
     `residency.regions` prints the shape of the finest min/max grid of level 0, channel 0."""
-    readme = (ROOT / "README.md").read_text()
-    block = readme.split("## Install without Rust", 1)[1].split("```sh\n", 1)[1].split("```", 1)[0]
-    commands = [line for line in block.splitlines() if line.startswith("env/bin/")]
+    [block] = sh_blocks(sections()["Install without Rust: the Python wheel"])
+    commands = [c for c in block if c.startswith("env/bin/")]
     assert len(commands) == 2, block
     (tmp_path / "env").symlink_to(installed.root)
     p = subprocess.run(["bash", "-euo", "pipefail", "-c", "\n".join(commands)], cwd=tmp_path,

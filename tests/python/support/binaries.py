@@ -30,25 +30,29 @@ def run_partitions(inputs, output, n, *flags, only=None):
         assert out.startswith("wrote partition "), out
 
 
+def spawn_logging_to_a_file(args, log_stream, **popen_kwargs):
+    """Starts `args` with its `log_stream` ("stdout" or "stderr"; the other one as
+    `popen_kwargs` say) written to an unnamed file, which the returned process's attribute of
+    that name reads from the start. A pipe nobody reads would fill and block a program that
+    logs a lot (an object store's retries, a server's requests); the file never does, and the
+    log stays readable after the process ends."""
+    with tempfile.NamedTemporaryFile("w", prefix="residency-log-", delete=False) as log:
+        try:
+            proc = subprocess.Popen(args, **{log_stream: log}, **popen_kwargs)
+            setattr(proc, log_stream, open(log.name, errors="replace"))
+        finally:
+            os.unlink(log.name)
+    return proc
+
+
 def start_server(*args, env=None, preexec_fn=None):
     """Starts `brickserver serve ARGS --bind 127.0.0.1:0` (in `env`, default this process's
     environment; `preexec_fn` runs in the child before it starts); returns (process, base URL)
     once it announces that it listens. Its log goes to an unnamed file that `proc.stderr`
-    reads from the start: a pipe nobody reads would fill and block a server that logs a lot
-    (an object store's retries)."""
-    with tempfile.NamedTemporaryFile("w", prefix="brickserver-log-", delete=False) as log:
-        try:
-            proc = subprocess.Popen(
-                [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"],
-                stdout=subprocess.PIPE,
-                stderr=log,
-                text=True,
-                env=env,
-                preexec_fn=preexec_fn,
-            )
-            proc.stderr = open(log.name)
-        finally:
-            os.unlink(log.name)
+    reads (`spawn_logging_to_a_file`)."""
+    proc = spawn_logging_to_a_file(
+        [str(BIN / "brickserver"), "serve", *map(str, args), "--bind", "127.0.0.1:0"], "stderr",
+        stdout=subprocess.PIPE, text=True, env=env, preexec_fn=preexec_fn)
     for line in proc.stdout:
         if line.startswith("listening on "):
             return proc, line.split("listening on ")[1].strip()

@@ -6,9 +6,9 @@ import os
 import re
 import shutil
 import subprocess
-import tempfile
 import time
 
+from support.binaries import spawn_logging_to_a_file
 from support.paths import BIN
 
 KEY = "AKRESIDENCYTEST"
@@ -20,22 +20,16 @@ def start_s3(root, key=KEY, secret=SECRET) -> tuple[subprocess.Popen, str]:
     `key` and `secret` (the tests' by default) on a port the kernel picks; returns (process,
     endpoint URL) once it says it listens. The port is its own from the start (`--port 0`,
     read back from the log it writes to stdout), so no other process can take it between
-    choosing and binding. The log goes to an unnamed file that `server.stdout` reads, as
-    `start_server`'s does, so that a pipe nobody reads can never fill and block it."""
+    choosing and binding. The log goes to an unnamed file that `server.stdout` reads
+    (`spawn_logging_to_a_file`)."""
     exe = shutil.which("s3s-fs") or shutil.which("s3s-fs", path=os.path.expanduser("~/.cargo/bin"))
     assert exe, "s3s-fs not installed: run scripts/test.sh (it installs it)"
-    with tempfile.NamedTemporaryFile("w", prefix="s3s-fs-log-", delete=False) as log:
-        try:
-            server = subprocess.Popen(
-                [exe, "--host", "127.0.0.1", "--port", "0", "--access-key", key,
-                 "--secret-key", secret, str(root)],
-                stdout=log, stderr=subprocess.STDOUT,
-                # Its start-up line, and not the request spans of `s3s_fs::s3` (logged at
-                # info, formatted for every request even when nothing is printed).
-                env={**os.environ, "RUST_LOG": "s3s_fs=info,s3s_fs::s3=warn"})
-            server.stdout = open(log.name, errors="replace")
-        finally:
-            os.unlink(log.name)
+    server = spawn_logging_to_a_file(
+        [exe, "--host", "127.0.0.1", "--port", "0", "--access-key", key, "--secret-key", secret,
+         str(root)], "stdout", stderr=subprocess.STDOUT,
+        # Its start-up line, and not the request spans of `s3s_fs::s3` (logged at info,
+        # formatted for every request even when nothing is printed).
+        env={**os.environ, "RUST_LOG": "s3s_fs=info,s3s_fs::s3=warn"})
     deadline = time.monotonic() + 30
     seen = ""
     try:

@@ -240,23 +240,15 @@ fn a_vdi_over_the_server_is_the_vdi_of_the_store() {
         s(&dir.path().join("local.vdi")),
         s(&dir.path().join("served.vdi")),
     );
-    let size = ["--width", "40", "--height", "32", "--max-level", "0"];
-    let mut args = vec!["vdi", "--store", &store, "--out", &local];
-    args.extend(VIEW);
-    args.extend(size);
-    viewer_ok(&args);
-    let mut args = vec![
-        "vdi",
-        "--server",
-        &server.url,
-        "--dataset",
-        "blob",
-        "--out",
-        &served,
-    ];
-    args.extend(VIEW);
-    args.extend(size);
-    viewer_ok(&args);
+    let write = |source: &[&str], out: &str| {
+        let mut args = vec!["vdi", "--out", out];
+        args.extend(source);
+        args.extend(VIEW);
+        args.extend(["--width", "40", "--height", "32", "--max-level", "0"]);
+        viewer_ok(&args);
+    };
+    write(&["--store", &store], &local);
+    write(&["--server", &server.url, "--dataset", "blob"], &served);
     let bytes = std::fs::read(&local).unwrap();
     assert!(bytes == std::fs::read(&served).unwrap(), "the VDIs differ");
     let image = VolumetricDepthImage::decode(&bytes, &local).unwrap();
