@@ -4,12 +4,13 @@
 use std::sync::Arc;
 
 use residency_store::location::{LocationError, ObjectStoreOptions, StoreLocation};
-use residency_viewer::defaults::{SceneError, check_channel, default_scene, parse_scene};
+use residency_viewer::defaults::{SceneError, check_channel, default_scene};
 use residency_viewer::gpu::GpuError;
 use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::renderer::RenderOptions;
 use residency_viewer::gpu::streaming::{Budget, render_progressive};
 use residency_viewer::image::linear_to_srgb8;
+use residency_viewer::scene::Scene;
 use residency_viewer::source::{BrickSource, HttpSource, LocalSource, SourceError};
 
 /// Where the volume comes from.
@@ -68,7 +69,7 @@ pub fn render(
     };
     let info = source.info();
     let scene = match scene {
-        Some(json) => parse_scene(json.as_bytes(), "scene")?,
+        Some(json) => Scene::from_json(json.as_bytes(), "scene").map_err(SceneError::from)?,
         None => default_scene(info),
     };
     for s in &scene.channels {

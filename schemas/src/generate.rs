@@ -20,6 +20,7 @@ use schemars::generate::SchemaSettings;
 use serde_json::Value;
 
 use crate::RegionMetadata;
+use crate::scene::Scene;
 use crate::server::{ApiError, DatasetList, RegionAnswer};
 use crate::vdi::VdiHeader;
 use crate::wire::{BrickBatchHeader, MinMaxHierarchyHeader};
@@ -84,7 +85,7 @@ impl SchemaFile {
 }
 
 /// The schema files of this crate's documents: the server's JSON answers, the headers of its
-/// binary documents, and the region metadata of a store.
+/// binary documents, the region metadata of a store, and the scene file the viewer reads.
 #[must_use]
 pub fn documents() -> Vec<SchemaFile> {
     vec![
@@ -94,8 +95,23 @@ pub fn documents() -> Vec<SchemaFile> {
         SchemaFile::written::<MinMaxHierarchyHeader>("minmax-hierarchy.schema.json"),
         SchemaFile::written::<RegionAnswer>("region-answer.schema.json"),
         SchemaFile::written::<RegionMetadata>("region-metadata.schema.json"),
+        SchemaFile::read::<Scene>("scene.schema.json"),
         SchemaFile::written::<VdiHeader>("vdi-header.schema.json"),
     ]
+}
+
+/// The names a schema object lists as `required`, sorted (none where it lists none): what a
+/// test compares with the fields serde always writes, or cannot default.
+#[must_use]
+pub fn required(schema: &Value) -> Vec<&str> {
+    let mut names: Vec<&str> = schema["required"]
+        .as_array()
+        .map_or(&[][..], Vec::as_slice)
+        .iter()
+        .filter_map(Value::as_str)
+        .collect();
+    names.sort_unstable();
+    names
 }
 
 /// A committed schema file that does not match its generated text.

@@ -10,16 +10,23 @@
 //! [`server`] holds the JSON answers of `brickserver`'s API, and [`wire`] its binary
 //! documents (the min/max hierarchy and brick batches). [`vdi`] is the file format of volumetric
 //! depth images (a JSON header and compressed planes), which the viewer generates and renders.
+//! [`scene`] is the scene file the viewer reads: the camera, each channel's transfer function
+//! and the compositing rule that every renderer of ours follows; [`names`] the enums named on
+//! command lines and in files, with the one error for an unknown name. [`volume`] is a
+//! volume as a renderer sees it before fetching a brick, made from a store's OME-Zarr metadata.
 
 pub mod dataset;
 pub mod error_chain;
 pub mod float;
 pub mod generate;
+pub mod names;
 pub mod ome;
 pub mod sample_kind;
 pub mod sample_type;
+pub mod scene;
 pub mod server;
 pub mod vdi;
+pub mod volume;
 pub mod wire;
 pub mod zarr;
 

@@ -74,6 +74,8 @@ use rayon::prelude::*;
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::scene::Camera;
+
 mod decode;
 mod encode;
 mod error;
@@ -179,6 +181,28 @@ pub struct VdiCamera {
     /// Vertical field of view, degrees.
     #[schemars(extend("exclusiveMinimum" = 0, "exclusiveMaximum" = 180))]
     pub fov_y_degrees: f64,
+}
+
+impl From<&Camera> for VdiCamera {
+    fn from(c: &Camera) -> Self {
+        Self {
+            eye: c.eye,
+            target: c.target,
+            up: c.up,
+            fov_y_degrees: c.fov_y_degrees,
+        }
+    }
+}
+
+impl From<&VdiCamera> for Camera {
+    fn from(c: &VdiCamera) -> Self {
+        Self {
+            eye: c.eye,
+            target: c.target,
+            up: c.up,
+            fov_y_degrees: c.fov_y_degrees,
+        }
+    }
 }
 
 /// How the generator cast rays: pixel `(x, y)` (`x` right, `y` down, from the top-left) has

@@ -6,8 +6,9 @@
 //! viewer's documents are checked the same way in its own tests.
 
 use residency_schemas::generate::{
-    REGENERATE, SchemaFile, SnapshotError, documents, snapshot, stale, write,
+    REGENERATE, SchemaFile, SnapshotError, documents, required, snapshot, stale, write,
 };
+use residency_schemas::scene::Scene;
 use residency_schemas::server::RegionAnswer;
 use residency_schemas::wire::BrickBatchHeader;
 use serde_json::{Value, json};
@@ -106,24 +107,13 @@ fn listed(schema: &Value) -> Vec<&str> {
 #[test]
 fn schemas_describe_what_is_written() {
     let batch = generated::<BrickBatchHeader>("brick-batch.schema.json");
-    let mut required: Vec<&str> = batch["required"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
-    required.sort_unstable();
-    assert_eq!(required, ["brick_shape", "bricks", "data_type", "encoding"]);
-    let entry = &batch["properties"]["bricks"]["items"];
-    let mut entry_required: Vec<&str> = entry["required"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
-    entry_required.sort_unstable();
     assert_eq!(
-        entry_required,
+        required(&batch),
+        ["brick_shape", "bricks", "data_type", "encoding"]
+    );
+    let entry = &batch["properties"]["bricks"]["items"];
+    assert_eq!(
+        required(entry),
         ["brick", "channel", "length", "level", "offset", "status"]
     );
     assert_eq!(entry["properties"]["error"]["type"], json!("string"));
@@ -149,8 +139,11 @@ fn schemas_describe_what_is_written() {
 #[test]
 fn custom_serde_fields_are_described_as_written() {
     let answer = generated::<RegionAnswer>("region-answer.schema.json");
-    let required = answer["required"].as_array().unwrap();
-    assert!(required.contains(&json!("min")) && required.contains(&json!("max")));
+    let names = required(&answer);
+    assert!(
+        names.contains(&"min") && names.contains(&"max"),
+        "{names:?}"
+    );
     assert_eq!(
         answer["properties"]["min"]["oneOf"],
         json!([
@@ -161,4 +154,26 @@ fn custom_serde_fields_are_described_as_written() {
     );
     let edges = &answer["properties"]["histogram"]["properties"]["edges"];
     assert_eq!(edges["items"]["type"], json!(["number", "null"]));
+}
+
+/// Scenes are described as the viewer reads them: what the schema requires is exactly what
+/// serde cannot default, where the schema of the scene as written would require every field.
+#[test]
+fn scene_schema_is_generated_as_read() {
+    let read: Value =
+        serde_json::from_str(&SchemaFile::read::<Scene>("scene.schema.json").text).unwrap();
+    assert_eq!(required(&read), ["camera", "channels"]);
+    assert_eq!(required(&read["properties"]["camera"]), ["eye", "target"]);
+    assert_eq!(
+        required(&read["properties"]["channels"]["items"]),
+        ["channel", "color", "opacity"]
+    );
+    assert_eq!(read["additionalProperties"], json!(false));
+
+    let written: Value =
+        serde_json::from_str(&SchemaFile::written::<Scene>("scene.schema.json").text).unwrap();
+    assert_eq!(
+        required(&written["properties"]["camera"]),
+        ["eye", "fov_y_degrees", "target", "up"]
+    );
 }

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use std::str::FromStr;
 
 use crate::gpu::renderer::MAX_CHANNELS;
-use crate::scene::{Camera, ChannelStyle, ClipError, OpacityPoint, Scene, box_diagonal};
+use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, SceneDocumentError, box_diagonal};
 use crate::source::{SampleType, VolumeInfo};
 
 /// Default vertical field of view, degrees.
@@ -42,24 +42,9 @@ pub enum SceneError {
         #[source]
         source: std::io::Error,
     },
-    /// A document that is not a valid scene.
-    #[error("{document}: not a valid scene file")]
-    Parse {
-        /// The document (a file name, or what the page calls it).
-        document: String,
-        /// What serde said.
-        #[source]
-        source: serde_json::Error,
-    },
-    /// A scene whose clipping cannot be drawn.
-    #[error("{document}: clipping that cannot be drawn")]
-    Clip {
-        /// The document.
-        document: String,
-        /// What is wrong with it.
-        #[source]
-        source: ClipError,
-    },
+    /// A document that is not a scene that can be drawn.
+    #[error(transparent)]
+    Document(#[from] SceneDocumentError),
     /// A channel the volume does not have.
     #[error("{what}: channel {channel} does not exist ({volume} has {channels} channels)")]
     NoChannel {
@@ -340,32 +325,14 @@ pub fn check_channel(info: &VolumeInfo, channel: usize, what: &str) -> Result<()
     }
 }
 
-/// Parses a JSON scene (`schemas/json/scene.schema.json`); `source` names the document in the
-/// error.
-///
-/// # Errors
-/// [`SceneError::Parse`], naming `source`, with serde's message; [`SceneError::Clip`] for
-/// clipping that cannot be drawn.
-pub fn parse_scene(json: &[u8], source: &str) -> Result<Scene, SceneError> {
-    let scene: Scene = serde_json::from_slice(json).map_err(|e| SceneError::Parse {
-        document: source.to_string(),
-        source: e,
-    })?;
-    scene.clip.check().map_err(|e| SceneError::Clip {
-        document: source.to_string(),
-        source: e,
-    })?;
-    Ok(scene)
-}
-
 /// Reads a JSON scene file.
 ///
 /// # Errors
-/// [`SceneError::Read`] or [`SceneError::Parse`], naming the file.
+/// [`SceneError::Read`] or [`SceneError::Document`], naming the file.
 pub fn read_scene(path: &std::path::Path) -> Result<Scene, SceneError> {
     let bytes = std::fs::read(path).map_err(|source| SceneError::Read {
         path: path.to_path_buf(),
         source,
     })?;
-    parse_scene(&bytes, &path.display().to_string())
+    Ok(Scene::from_json(&bytes, &path.display().to_string())?)
 }

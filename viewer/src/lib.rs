@@ -5,7 +5,7 @@
 //! its command line, `docs/architecture.md` where it sits among the crates.
 //!
 //! - [`scene`]: camera, per-channel transfer functions and the compositing rule shared by the
-//!   GPU renderer and the reference;
+//!   GPU renderer and the reference (in `residency_schemas`, re-exported here);
 //! - [`source`]: where volume metadata and bricks come from (HTTP brick server or local store);
 //! - [`reference`](mod@reference): the f64 CPU reference ray caster;
 //! - [`image`]: linear-RGB images, PNG and EXR; [`metrics`]: PSNR, SSIM, max abs error;
@@ -21,8 +21,6 @@
 //!   default zstd over a link slower than the time it costs, else LZ4);
 //! - [`interactive`]: the `viewer view` window (orbit, pan, zoom, channel controls, statistics);
 //! - [`bench`](mod@bench): the renderer benchmark suite (`viewer bench`);
-//! - [`names`]: the enums named on the command line and in files, and the one error for an
-//!   unknown name;
 //! - `service` (native, `serve` feature): the render service of `viewer serve`, VDIs of a
 //!   dataset's views over HTTP for a page far away;
 //! - `web` (WebAssembly only): the browser driver, `fetch` and `requestAnimationFrame` over
@@ -46,11 +44,12 @@ pub mod gpu;
 pub mod image;
 pub mod interactive;
 pub mod metrics;
-pub mod names;
 pub mod octree;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod reference;
-pub mod scene;
+/// The scene (camera, transfer functions, compositing rule), in `residency-schemas` since its
+/// file is a document the viewer reads.
+pub use residency_schemas::scene;
 #[cfg(all(feature = "serve", not(target_arch = "wasm32")))]
 pub mod service;
 pub mod source;

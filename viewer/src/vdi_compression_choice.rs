@@ -10,7 +10,7 @@
 use residency_schemas::vdi::Compression;
 use serde::{Deserialize, Serialize};
 
-use crate::names::{Named, UnknownName};
+use residency_schemas::names::{Named, UnknownName};
 
 /// Below this link rate (Mbit/s) [`VdiCompressionChoice::Auto`] asks for `shuffled_zstd`.
 ///
@@ -67,7 +67,7 @@ pub enum VdiCompressionChoice {
     ShuffledZstd,
 }
 
-crate::names::strum_names!(VdiCompressionChoice, all);
+residency_schemas::strum_names!(VdiCompressionChoice, all);
 
 impl Named for VdiCompressionChoice {
     const NOUN: &'static str = "VDI compression";

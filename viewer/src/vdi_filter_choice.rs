@@ -10,7 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::gpu::vdi_filter::VdiFilter;
-use crate::names::{Named, UnknownName};
+use residency_schemas::names::{Named, UnknownName};
 
 /// The filter the user picked for the frames of a VDI.
 #[derive(
@@ -48,7 +48,7 @@ pub enum VdiFilterChoice {
     Linear,
 }
 
-crate::names::strum_names!(VdiFilterChoice, all);
+residency_schemas::strum_names!(VdiFilterChoice, all);
 
 impl Named for VdiFilterChoice {
     const NOUN: &'static str = "VDI filter";

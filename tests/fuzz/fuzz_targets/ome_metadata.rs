@@ -2,9 +2,10 @@
 //! over HTTP): the image group's attributes (`ImageAttributes::parse`), its pyramid
 //! (`PyramidLayout::of`) and each level's array metadata (`ArrayDescription::parse`), all in
 //! `residency-schemas` (`schemas/src/ome.rs`, `schemas/src/zarr.rs`; they were
-//! `viewer/src/source/ome.rs` `parse_group` / `parse_array` before the move), then the
-//! viewer's `volume_info` that checks them against each other and the region metadata, and
-//! `minmax_grid` on each region grid the metadata describes.
+//! `viewer/src/source/ome.rs` `parse_group` / `parse_array` before the move), then
+//! `VolumeInfo::from_ome` (`schemas/src/volume/from_ome.rs`) that checks them against each
+//! other and the region metadata, and `MinMaxGrid::from_values` on each region grid the
+//! metadata describes.
 //!
 //! Input: one byte choosing Zarr v2 (even) or v3 (odd), then the group document and the array
 //! documents separated by NUL bytes; level `i` reads array document `i` (the last one repeats).
@@ -13,7 +14,7 @@
 use libfuzzer_sys::fuzz_target;
 use residency_schemas::ome::{ImageAttributes, PyramidLayout, ZarrFormat};
 use residency_schemas::zarr::ArrayDescription;
-use residency_viewer::source::ome::{minmax_grid, volume_info};
+use residency_schemas::volume::{MinMaxGrid, VolumeInfo};
 
 fuzz_target!(|data: &[u8]| {
     let Some((&first, rest)) = data.split_first() else {
@@ -44,7 +45,7 @@ fuzz_target!(|data: &[u8]| {
             Err(_) => return,
         }
     }
-    if let Ok(info) = volume_info("v", &group, &layout, &arrays, "s") {
+    if let Ok(info) = VolumeInfo::from_ome("v", &group, &layout, &arrays, "s") {
         assert_eq!(info.levels.len(), layout.level_paths.len());
         assert_eq!(info.channels.len(), info.display.len());
     }
@@ -59,7 +60,7 @@ fuzz_target!(|data: &[u8]| {
                 Some(c) if c <= 1 << 12 => vec![0.5; 2 * c as usize],
                 _ => Vec::new(),
             };
-            let _ = minmax_grid(grid.cell_shape, grid.grid_shape, &values, "m");
+            let _ = MinMaxGrid::from_values(grid.cell_shape, grid.grid_shape, &values, "m");
         }
     }
 });

@@ -1,18 +1,15 @@
-//! Scene files (`viewer/src/scene.rs`, read by `viewer::cli::scene_args::read_scene`) on any
-//! bytes, then what the renderer asks of a scene: the camera frame and some rays, every
+//! Scene files (`schemas/src/scene.rs`: `Scene::from_json`, which the viewer's `read_scene`,
+//! the page and the Python module call) on any bytes, then what the renderer asks of a scene: the camera frame and some rays, every
 //! channel's opacity at a few values and over a few ranges (and what each mode hides there,
 //! MIP's scale and saturation), and the clipped span of those rays. A scene must serialise and
 //! parse back to itself.
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use residency_fuzz::scratch;
-use residency_viewer::defaults::read_scene;
-use residency_viewer::scene::{RenderMode, Scene, box_diagonal, corrected_opacity};
+use residency_schemas::scene::{RenderMode, Scene, box_diagonal, corrected_opacity};
 
 fuzz_target!(|data: &[u8]| {
-    let path = scratch::file("scene.json", data);
-    let Ok(scene) = read_scene(&path) else {
+    let Ok(scene) = Scene::from_json(data, "scene.json") else {
         return;
     };
     let cam = &scene.camera;

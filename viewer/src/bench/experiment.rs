@@ -4,7 +4,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::names::{Named, UnknownName};
+use residency_schemas::names::{Named, UnknownName};
 
 /// An experiment of `viewer bench run`, named `table1`, `sweep`, `skipped` or `scaling` on the
 /// command line and in results files.
@@ -43,7 +43,7 @@ pub enum Experiment {
 }
 
 // `Experiment::ALL` is the order `viewer bench run` lists them in: that of the variants.
-crate::names::strum_names!(Experiment, all);
+residency_schemas::strum_names!(Experiment, all);
 
 impl Named for Experiment {
     const NOUN: &'static str = "experiment";

@@ -4,7 +4,7 @@
 
 use super::experiment::Experiment;
 use crate::gpu::renderer::{Method, UnknownMethod};
-use crate::names::{Named, UnknownName};
+use residency_schemas::names::{Named, UnknownName};
 
 /// A Table-1 configuration: a method with or without empty-space skipping, named as the
 /// method (with skipping) or `no-skipping` (ours without it).

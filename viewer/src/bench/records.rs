@@ -265,7 +265,7 @@ impl SweptParameter {
     ];
 }
 
-crate::names::strum_names!(SweptParameter);
+residency_schemas::strum_names!(SweptParameter);
 
 /// A swept parameter and its value.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]

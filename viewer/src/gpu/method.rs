@@ -5,7 +5,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::names::{Named, UnknownName};
+use residency_schemas::names::{Named, UnknownName};
 
 /// How the ray caster finds data and skips empty space: the residency octree, or one of the
 /// paper's two baselines (Table 1), built on the same ray caster, data path and transfer
@@ -63,7 +63,7 @@ pub enum Method {
 }
 
 // `Method::ALL` lists ours first: the order of the variants.
-crate::names::strum_names!(Method, all);
+residency_schemas::strum_names!(Method, all);
 
 impl Method {
     /// Whether the method rasterises boxes into ray segment lists before ray casting.

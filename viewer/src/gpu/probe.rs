@@ -40,7 +40,7 @@ pub enum ProbeFilter {
     Hardware,
 }
 
-crate::names::strum_names!(ProbeFilter);
+residency_schemas::strum_names!(ProbeFilter);
 
 /// One probe frame, read back.
 #[derive(Clone, Debug)]

@@ -6,8 +6,7 @@
 //! from a converged view; [`super::renderer::Renderer::generate_vdi`] runs it.
 
 use residency_schemas::vdi::{
-    ColourFormat, Compression, DepthFormat, RayBasis, VDI_VERSION, VdiCamera, VdiHeader,
-    VolumetricDepthImage,
+    ColourFormat, Compression, DepthFormat, RayBasis, VDI_VERSION, VdiHeader, VolumetricDepthImage,
 };
 
 use super::buffers::{
@@ -19,7 +18,7 @@ use super::contract::{
 use super::device::Gpu;
 use super::error::GpuError;
 use super::pipeline::buffer_entry;
-use crate::scene::{Camera, Scene};
+use crate::scene::Scene;
 
 /// Bytes of one slot of the VDI target (a `vec4<f32>`).
 const SLOT_BYTES: u64 = 16;
@@ -339,28 +338,6 @@ pub(crate) fn header(
         compression: Compression::default(),
         scene_hash: scene_hash(scene),
         dataset: None,
-    }
-}
-
-impl From<&Camera> for VdiCamera {
-    fn from(c: &Camera) -> Self {
-        Self {
-            eye: c.eye,
-            target: c.target,
-            up: c.up,
-            fov_y_degrees: c.fov_y_degrees,
-        }
-    }
-}
-
-impl From<&VdiCamera> for Camera {
-    fn from(c: &VdiCamera) -> Self {
-        Self {
-            eye: c.eye,
-            target: c.target,
-            up: c.up,
-            fov_y_degrees: c.fov_y_degrees,
-        }
     }
 }
 

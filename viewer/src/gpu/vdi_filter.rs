@@ -3,7 +3,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
-use crate::names::{Named, UnknownName};
+use residency_schemas::names::{Named, UnknownName};
 
 /// How a ray reads a VDI between the centres of its lists (`V_O`'s pixels).
 #[derive(
@@ -40,7 +40,7 @@ pub enum VdiFilter {
     Linear,
 }
 
-crate::names::strum_names!(VdiFilter, all);
+residency_schemas::strum_names!(VdiFilter, all);
 
 impl Named for VdiFilter {
     const NOUN: &'static str = "VDI filter";

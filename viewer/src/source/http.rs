@@ -124,7 +124,7 @@ impl BrickSource for HttpSource {
         // Invalid keys are answered here; the rest go to the server in batches.
         let mut results: Vec<Option<Result<BrickVoxels, SourceError>>> = keys
             .iter()
-            .map(|k| self.info.check_key(k).err().map(Err))
+            .map(|k| self.info.check_key(k).err().map(|e| Err(e.into())))
             .collect();
         let valid: Vec<(usize, BrickKey)> = keys
             .iter()

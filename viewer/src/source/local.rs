@@ -90,7 +90,7 @@ impl LocalSource {
             .iter()
             .map(|l| l.description.clone())
             .collect();
-        let mut info = ome::volume_info(
+        let mut info = VolumeInfo::from_ome(
             &dataset_name(Path::new(&location.file_name())),
             &pyramid.attributes,
             &pyramid.layout,
@@ -259,7 +259,10 @@ fn read_minmax_grid(
     let per = 2 * (gz * gy * gx) as usize;
     values
         .chunks_exact(per)
-        .map(|chunk| ome::minmax_grid(grid.cell_shape, grid.grid_shape, chunk, &source))
+        .map(|chunk| {
+            MinMaxGrid::from_values(grid.cell_shape, grid.grid_shape, chunk, &source)
+                .map_err(SourceError::from)
+        })
         .collect()
 }
 

@@ -134,7 +134,7 @@ pub async fn open<G: Get>(http: &G, base: &str, dataset: &str) -> Result<VolumeI
         let body = http.get(&array_url).await?.ok(&array_url)?;
         arrays.push(ArrayDescription::parse(format, &body, &array_url)?);
     }
-    let mut info = ome::volume_info(dataset, &group, &layout, &arrays, base)?;
+    let mut info = VolumeInfo::from_ome(dataset, &group, &layout, &arrays, base)?;
     if ome::usable_region_metadata(group.regions.as_ref(), base) {
         info.minmax = load_minmax(http, base, &info).await?;
     }
@@ -233,7 +233,12 @@ pub fn parse_minmax(
                             source,
                         }
                     })?;
-                    ome::minmax_grid(g.cell_shape, g.grid_shape, &values, url)
+                    Ok(MinMaxGrid::from_values(
+                        g.cell_shape,
+                        g.grid_shape,
+                        &values,
+                        url,
+                    )?)
                 })
                 .collect()
         })

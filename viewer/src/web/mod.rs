@@ -30,7 +30,7 @@ use serde::Serialize;
 use wasm_bindgen::prelude::*;
 
 use self::fetch::BrowserFetch;
-use crate::defaults::{check_channel, default_scene, parse_scene, volume_extent};
+use crate::defaults::{check_channel, default_scene, volume_extent};
 use crate::error_chain;
 use crate::gpu::GpuError;
 use crate::gpu::device::Gpu;
@@ -293,10 +293,11 @@ impl Viewer {
     /// Replaces the scene with scene-file JSON (`schemas/json/scene.schema.json`).
     ///
     /// # Errors
-    /// The [`SceneError`](crate::defaults::SceneError)'s message, scene unchanged, for JSON
+    /// The [`SceneDocumentError`](crate::scene::SceneDocumentError) or
+    /// [`SceneError`](crate::defaults::SceneError) message, scene unchanged, for JSON
     /// that is not a scene or draws a channel the dataset does not have.
     pub fn set_scene_json(&self, json: &str) -> Result<(), JsValue> {
-        let scene = parse_scene(json.as_bytes(), "scene").map_err(|e| js_error(&e))?;
+        let scene = Scene::from_json(json.as_bytes(), "scene").map_err(|e| js_error(&e))?;
         let mut inner = self.inner.borrow_mut();
         for s in &scene.channels {
             check_channel(&inner.info, s.channel, "scene").map_err(|e| js_error(&e))?;

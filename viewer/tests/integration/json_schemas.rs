@@ -1,14 +1,13 @@
 //! The viewer's JSON Schemas in `schemas/json/` are generated from the Rust types that write
-//! (or, for scenes, read) the documents (`residency_schemas::generate`): the committed files
+//! (or, for VDI requests, read) the documents (`residency_schemas::generate`): the committed files
 //! must equal the generated text byte for byte. After a type change, regenerate them with
 //! `RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas`.
 
-use residency_schemas::generate::{SchemaFile, snapshot};
+use residency_schemas::generate::{SchemaFile, required, snapshot};
 use residency_viewer::bench::BenchResults;
 use residency_viewer::bench::vdi::VdiBenchResults;
 use residency_viewer::gpu::streaming::RenderStats;
 use residency_viewer::metrics::Metrics;
-use residency_viewer::scene::Scene;
 use residency_viewer::service::{ServiceInfo, VdiRequest};
 use serde_json::{Value, json};
 
@@ -16,12 +15,11 @@ use serde_json::{Value, json};
 const REGENERATE: &str =
     "RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas";
 
-/// Every viewer document's schema file. Scenes and `viewer serve`'s VDI requests are documents
-/// the viewer reads; the others it writes (`viewer serve`'s `GET /info` answers the service
+/// Every viewer document's schema file (scene files are `residency-schemas`'). `viewer serve`'s
+/// VDI requests are documents the viewer reads; the others it writes (`viewer serve`'s `GET /info` answers the service
 /// info).
 fn documents() -> Vec<SchemaFile> {
     vec![
-        SchemaFile::read::<Scene>("scene.schema.json"),
         SchemaFile::read::<VdiRequest>("vdi-request.schema.json"),
         SchemaFile::written::<ServiceInfo>("vdi-service-info.schema.json"),
         SchemaFile::written::<RenderStats>("render-stats.schema.json"),
@@ -34,39 +32,6 @@ fn documents() -> Vec<SchemaFile> {
 #[test]
 fn viewer_schema_files_are_generated_from_the_rust_types() {
     snapshot(&documents(), REGENERATE);
-}
-
-fn required(schema: &Value) -> Vec<&str> {
-    let mut names: Vec<&str> = schema["required"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|v| v.as_str().unwrap())
-        .collect();
-    names.sort_unstable();
-    names
-}
-
-/// Scenes are described as the viewer reads them: what the schema requires is exactly what
-/// serde cannot default, where the schema of the scene as written would require every field.
-#[test]
-fn scene_schema_is_generated_as_read() {
-    let read: Value =
-        serde_json::from_str(&SchemaFile::read::<Scene>("scene.schema.json").text).unwrap();
-    assert_eq!(required(&read), ["camera", "channels"]);
-    assert_eq!(required(&read["properties"]["camera"]), ["eye", "target"]);
-    assert_eq!(
-        required(&read["properties"]["channels"]["items"]),
-        ["channel", "color", "opacity"]
-    );
-    assert_eq!(read["additionalProperties"], json!(false));
-
-    let written: Value =
-        serde_json::from_str(&SchemaFile::written::<Scene>("scene.schema.json").text).unwrap();
-    assert_eq!(
-        required(&written["properties"]["camera"]),
-        ["eye", "fov_y_degrees", "target", "up"]
-    );
 }
 
 /// A VDI request needs only its size: the view defaults to the service's scene.

@@ -41,7 +41,8 @@ impl<E: Named> UnknownName<E> {
 /// Writes the inherent `name()` of an enum that derives `strum::IntoStaticStr` (the name on
 /// the command line, in scene and results files) and, with `all`, its `ALL` (every variant in
 /// the order of declaration, from `strum::VariantArray` and `strum::EnumCount`), so that no
-/// enum writes them out by hand: `strum_names!(Method, all);`.
+/// enum writes them out by hand: `residency_schemas::strum_names!(Method, all);`.
+#[macro_export]
 macro_rules! strum_names {
     ($ty:ty) => {
         impl $ty {
@@ -52,7 +53,7 @@ macro_rules! strum_names {
         }
     };
     ($ty:ty, all) => {
-        $crate::names::strum_names!($ty);
+        $crate::strum_names!($ty);
         impl $ty {
             /// Every variant, in the order of declaration.
             pub const ALL: [Self; <Self as strum::EnumCount>::COUNT] =
@@ -62,7 +63,6 @@ macro_rules! strum_names {
         }
     };
 }
-pub(crate) use strum_names;
 
 /// `names` as a list to pick one from: `a, b or c`.
 fn one_of(names: &[&str]) -> String {

@@ -327,7 +327,7 @@ pub enum Filter {
     Tricubic,
 }
 
-crate::names::strum_names!(Filter, all);
+crate::strum_names!(Filter, all);
 
 impl Filter {
     /// Voxels a sample reads beyond the trilinear footprint on each side: 0, or 1 for the
@@ -384,7 +384,7 @@ pub enum RenderMode {
     Iso,
 }
 
-crate::names::strum_names!(RenderMode, all);
+crate::strum_names!(RenderMode, all);
 
 impl Named for RenderMode {
     const NOUN: &'static str = "mode";
@@ -432,7 +432,51 @@ pub struct Scene {
     pub clip: Clip,
 }
 
+/// A document that is not a scene that can be drawn. Messages name the document.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneDocumentError {
+    /// A document that is not a valid scene.
+    #[error("{document}: not a valid scene file")]
+    Parse {
+        /// The document (a file name, or what the page calls it).
+        document: String,
+        /// What serde said.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// A scene whose clipping cannot be drawn.
+    #[error("{document}: clipping that cannot be drawn")]
+    Clip {
+        /// The document.
+        document: String,
+        /// What is wrong with it.
+        #[source]
+        source: ClipError,
+    },
+}
+
 impl Scene {
+    /// Parses a scene file's JSON; `document` names it in the error.
+    ///
+    /// # Errors
+    /// [`SceneDocumentError::Parse`], naming `document`, with serde's message;
+    /// [`SceneDocumentError::Clip`] for clipping that cannot be drawn.
+    pub fn from_json(json: &[u8], document: &str) -> Result<Scene, SceneDocumentError> {
+        let scene: Scene =
+            serde_json::from_slice(json).map_err(|source| SceneDocumentError::Parse {
+                document: document.to_string(),
+                source,
+            })?;
+        scene
+            .clip
+            .check()
+            .map_err(|source| SceneDocumentError::Clip {
+                document: document.to_string(),
+                source,
+            })?;
+        Ok(scene)
+    }
+
     /// Whether `other` draws alike but for the camera: the same channel styles, background,
     /// filter, mode and clipping.
     pub fn same_style(&self, other: &Scene) -> bool {
@@ -506,12 +550,38 @@ mod tests {
     use super::*;
     use serde_json::Value;
 
-    const SCHEMA: &str = include_str!("../../schemas/json/scene.schema.json");
+    const SCHEMA: &str = include_str!("../json/scene.schema.json");
 
     fn keys(v: &Value) -> Vec<String> {
         let mut k: Vec<String> = v.as_object().unwrap().keys().cloned().collect();
         k.sort();
         k
+    }
+
+    /// A document that is not a scene, or whose clipping cannot be drawn, is named with the
+    /// cause after it; a drawable one parses.
+    #[test]
+    fn a_document_that_is_no_drawable_scene_is_named() {
+        let e = Scene::from_json(b"{\"camera\": 1}", "a.json").unwrap_err();
+        assert!(matches!(e, SceneDocumentError::Parse { .. }));
+        assert_eq!(
+            crate::error_chain(&e),
+            "a.json: not a valid scene file: invalid type: integer `1`, expected struct Camera \
+             at line 1 column 12"
+        );
+        let clipped = br#"{"camera": {"eye": [0, 0, 5], "target": [0, 0, 0]}, "channels": [],
+            "clip": {"near": -1}}"#;
+        let e = Scene::from_json(clipped, "page scene").unwrap_err();
+        assert!(matches!(e, SceneDocumentError::Clip { .. }));
+        assert_eq!(
+            crate::error_chain(&e),
+            "page scene: clipping that cannot be drawn: clip near -1: must be finite and at least 0"
+        );
+        let ok = br#"{"camera": {"eye": [0, 0, 5], "target": [0, 0, 0]}, "channels": []}"#;
+        assert_eq!(
+            Scene::from_json(ok, "b").unwrap().camera.fov_y_degrees,
+            30.0
+        );
     }
 
     /// The schema's example is a valid scene, and the schema and the serde types name the
