@@ -700,7 +700,7 @@ window.residency = {
   /** {frame, converged, bricks_fetched, bytes_fetched, error, controls_built, ..., remote:
    * {mode, service_adapter: {name, backend}, requests_sent, requests_retried,
    * requests_aborted, answers_dropped, vdis_received, vdi_bytes_received, vdi_compression, link_mbit_per_s,
-   * answer_compression, last_error, d_i,
+   * request_link_mbit_per_s, answer_compression, last_error, d_i,
    * vdi_filter, frame_filter, linear_frame_ms, moving_frames_linear, vdi_decode_ms,
    * vdi_setup_ms, vdi_camera, converged,
    * ...} with a render service, else null}. */

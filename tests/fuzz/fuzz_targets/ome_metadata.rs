@@ -13,8 +13,8 @@
 
 use libfuzzer_sys::fuzz_target;
 use residency_schemas::ome::{ImageAttributes, PyramidLayout, ZarrFormat};
-use residency_schemas::zarr::ArrayDescription;
 use residency_schemas::volume::{MinMaxGrid, VolumeInfo};
+use residency_schemas::zarr::ArrayDescription;
 
 fuzz_target!(|data: &[u8]| {
     let Some((&first, rest)) = data.split_first() else {

@@ -198,6 +198,9 @@ pub struct RemoteReport {
     /// The link's rate as the last answer large enough to weigh it crossed it, Mbit/s (what
     /// `auto` weighs).
     link_mbit_per_s: Option<LinkRate>,
+    /// The link's rate that `auto` weighed when the latest request was sent (what
+    /// `link_mbit_per_s` was then; none before an answer measured it).
+    request_link_mbit_per_s: Option<LinkRate>,
     /// The compression of the last VDI answer read.
     answer_compression: Option<Compression>,
     /// Frames ray cast from VDIs.
@@ -605,6 +608,7 @@ impl Viewer {
             request: Some(u64::from(sequence)),
             compression: Some(report.vdi_compression.compression(report.link_mbit_per_s)),
         };
+        remote.report.request_link_mbit_per_s = remote.report.link_mbit_per_s;
         let json = serde_json::to_string(&body).expect("requests serialize");
         remote.in_flight = Some(Flight {
             sequence,
