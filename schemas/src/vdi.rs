@@ -133,7 +133,7 @@ pub struct VdiHeader {
     #[schemars(range(min = 1, max = MAX_SUPERSEGMENTS))]
     pub supersegments: u32,
     /// The camera of generation, as the scene file writes it.
-    pub camera: VdiCamera,
+    pub camera: Camera,
     /// How the generator cast the rays of the lists.
     pub rays: RayBasis,
     /// World-to-view matrix of the camera of generation, column-major, right-handed.
@@ -166,43 +166,6 @@ pub struct VdiHeader {
     /// Name of the dataset rendered, when known.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dataset: Option<String>,
-}
-
-/// The pinhole camera a VDI was generated from, in world space.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct VdiCamera {
-    /// Eye position.
-    pub eye: [f64; 3],
-    /// Point looked at.
-    pub target: [f64; 3],
-    /// Up direction (need not be orthogonal to the view direction).
-    pub up: [f64; 3],
-    /// Vertical field of view, degrees.
-    #[schemars(extend("exclusiveMinimum" = 0, "exclusiveMaximum" = 180))]
-    pub fov_y_degrees: f64,
-}
-
-impl From<&Camera> for VdiCamera {
-    fn from(c: &Camera) -> Self {
-        Self {
-            eye: c.eye,
-            target: c.target,
-            up: c.up,
-            fov_y_degrees: c.fov_y_degrees,
-        }
-    }
-}
-
-impl From<&VdiCamera> for Camera {
-    fn from(c: &VdiCamera) -> Self {
-        Self {
-            eye: c.eye,
-            target: c.target,
-            up: c.up,
-            fov_y_degrees: c.fov_y_degrees,
-        }
-    }
 }
 
 /// How the generator cast rays: pixel `(x, y)` (`x` right, `y` down, from the top-left) has

@@ -2,9 +2,10 @@
 //! byte for byte, compositing, and every refusal of `decode` and `encode` with its message.
 
 use half::f16;
+use residency_schemas::scene::Camera;
 use residency_schemas::vdi::{
-    ColourFormat, Compression, DepthFormat, MAX_VDI_SLOTS, RayBasis, VDI_MAGIC, VdiCamera,
-    VdiError, VdiHeader, VolumetricDepthImage,
+    ColourFormat, Compression, DepthFormat, MAX_VDI_SLOTS, RayBasis, VDI_MAGIC, VdiError,
+    VdiHeader, VolumetricDepthImage,
 };
 
 const FILE: &str = "a.vdi";
@@ -20,7 +21,7 @@ fn header(colour: ColourFormat, depth: DepthFormat, compression: Compression) ->
         width: 3,
         height: 2,
         supersegments: 4,
-        camera: VdiCamera {
+        camera: Camera {
             eye: [0.5, -2.0, 10.0],
             target: [0.5, 0.5, 0.5],
             up: [0.0, -1.0, 0.0],

@@ -319,7 +319,7 @@ impl SceneArgs {
             );
         }
         let extent = std::array::from_fn(|a| h.volume_max[a] - h.volume_min[a]);
-        let camera = self.camera_for_vdi((&h.camera).into(), extent)?;
+        let camera = self.camera_for_vdi(h.camera.clone(), extent)?;
         Ok((vdi, camera))
     }
 

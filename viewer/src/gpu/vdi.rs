@@ -319,7 +319,7 @@ pub(crate) fn header(
         width,
         height,
         supersegments,
-        camera: cam.into(),
+        camera: cam.clone(),
         rays: RayBasis {
             forward: f3(forward),
             right: f3(right.map(|x| x * tan_half * aspect)),
