@@ -2,8 +2,10 @@
 reading only the strips, tiles or rows each column spans. The store must be byte for byte the
 one a whole-plane conversion writes, for strip and tiled TIFFs (compressed, float, RGB), slice
 folders, raw files, shards, anisotropic pyramids and partitions; a limit nothing fits is
-refused before anything is written."""
+refused before anything is written, and without the flag the limit is half the machine's
+memory."""
 
+import os
 import re
 
 import numpy as np
@@ -133,6 +135,28 @@ def test_a_limit_nothing_fits_is_refused_before_anything_is_written(inputs, tmp_
         "bytes; allow more memory, or a smaller z edge of --chunk (and --shard) needs less\n")
     assert not out.exists()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_without_a_memory_limit_the_limit_is_half_the_machines_memory(tmp_path):
+    """The README's default of `--memory-limit`: half the machine's physical memory, read here
+    from the kernel (`SC_PHYS_PAGES`) and named in the refusal of a conversion that needs more
+    (a sparse raw file of 2⁴² voxels, 4 TiB that take no disk, whose region metadata alone
+    needs about 92 GB)."""
+    half = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE") // 2
+    if half >= 80 << 30:
+        pytest.skip(f"this machine's default limit ({half} bytes) may let the conversion start")
+    raw = tmp_path / "huge.raw"
+    with open(raw, "wb") as f:
+        f.truncate(1 << 42)
+    out = tmp_path / "x.ome.zarr"
+    p = run_ingest("convert", raw, "--dims", f"{1 << 19},{1 << 19},16", "--dtype", "uint8",
+                   "-o", out, "--quiet", check=False)
+    assert p.returncode == 1, p.stderr
+    assert p.stderr.startswith(f"error: {out}: converting needs about "), p.stderr
+    assert p.stderr.endswith(
+        f"for the region metadata), more than --memory-limit {half} bytes; allow more memory, "
+        "or a smaller z edge of --chunk (and --shard) needs less\n"), p.stderr
+    assert sorted(q.name for q in tmp_path.iterdir()) == ["huge.raw"]
 
 
 @pytest.mark.parametrize("value", ["0", "lots", "4X", "-1G"])

@@ -1,7 +1,8 @@
 //! `viewer view` starts under Xvfb (lavapipe when there is no GPU) on a store written by
 //! `ingest`, streams until converged, and puts a non-blank frame with the statistics panel on
 //! the X screen: checked on a real screenshot of the root window (`GetImage`), and on the
-//! window title. Also: `view --help` lists the controls.
+//! window title; then follows the keys and the mouse (a channel hidden, an orbit, a zoom, the
+//! statistics hidden, another mode, quit). Also: `view --help` lists the controls.
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
@@ -433,7 +434,15 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
     x.click(4);
     x.click(4);
     settle("after zooming");
-    let (zoomed, _) = shoot("zoomed");
+    let (zoomed, zoomed_pixels) = shoot("zoomed");
+    // Hide the statistics and the orientation (h): the same frame without them.
+    x.type_char('h');
+    settle("after hiding the statistics");
+    let (bare, bare_pixels) = shoot("bare");
+    // Switch from DVR to the next mode, maximum intensity projection (m).
+    x.type_char('m');
+    settle("after switching the mode");
+    let (mip, mip_pixels) = shoot("mip");
     // Quit with q, well before the 12 s the settled window would wait.
     let quit = Instant::now();
     x.type_char('q');
@@ -483,6 +492,38 @@ fn view_shows_a_rendered_frame_and_statistics_under_xvfb_and_follows_input() {
         zoomed.coloured * 4 > orbited.coloured * 5,
         "{zoomed:?} {orbited:?}"
     );
+    // Without the statistics and the orientation (h), the rows between them show the same
+    // frame, pixel for pixel; the panel's text, the scale bar and the axes are gone.
+    let band = |pixels: &[[u8; 3]]| -> Vec<[u8; 3]> {
+        let (sw, ww) = (SCREEN.0 as usize, WINDOW.0 as usize);
+        (PANEL_ROWS..WINDOW.1 as usize - ORIENTATION_ROWS)
+            .flat_map(|y| pixels[y * sw..y * sw + ww].to_vec())
+            .collect()
+    };
+    assert!(
+        band(&bare_pixels) == band(&zoomed_pixels),
+        "hiding the statistics changed the frame"
+    );
+    assert!(
+        bare.text * 10 < first.text,
+        "the panel still shows: {bare:?}"
+    );
+    assert!(
+        bare.bar < 20 && bare.axes.iter().all(|&n| n < 8),
+        "{bare:?}"
+    );
+    // Another mode (m) draws the same view otherwise, still without the overlays.
+    let changed = band(&mip_pixels)
+        .iter()
+        .zip(band(&bare_pixels))
+        .filter(|(a, b)| **a != *b)
+        .count();
+    assert!(
+        changed >= area / 50,
+        "switching the mode changed {changed} pixels"
+    );
+    assert!(mip.coloured >= area / 100, "{mip:?}");
+    assert!(mip.text * 10 < first.text && mip.bar < 20, "{mip:?}");
     assert!(quit_took < Duration::from_secs(5), "q took {quit_took:?}");
 
     // The title carries the statistics too.
