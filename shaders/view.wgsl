@@ -67,7 +67,7 @@ struct PixelRay {
     t_plane: f32,
 }
 
-// The ray through the centre of pixel (px, py) (scene.rs: the projection).
+// The ray through the centre of pixel (px, py) (schemas/src/scene.rs: the projection).
 fn pixel_ray(px: u32, py: u32) -> PixelRay {
     let ndc = vec2<f32>(
         (f32(px) + 0.5) / f32(P.width) * 2.0 - 1.0,
@@ -98,7 +98,8 @@ fn box_span(r: PixelRay, lo: vec3<f32>, hi: vec3<f32>) -> vec2<f32> {
 
 // Where ray r is inside the part of the volume the scene keeps (its clip box, within the
 // volume, and the kept side of every clip plane): (t_enter, t_exit), starting no nearer than
-// the eye; empty when t_exit <= t_enter. crate::scene::Clip::clip_span is the f64 rule.
+// the eye; empty when t_exit <= t_enter. residency_schemas::scene::Clip::clip_span is the f64
+// rule.
 fn volume_span(r: PixelRay) -> vec2<f32> {
     let span = box_span(r, P.clip_lo, P.clip_hi);
     var t0 = max(span.x, -r.t_plane);

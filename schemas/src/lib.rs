@@ -1,4 +1,6 @@
-//! Serde types for the JSON documents Residency writes or serves.
+//! The format model every Residency crate shares, with no I/O: serde types for the JSON
+//! documents Residency writes, serves or reads, the binary formats beside them, and the
+//! descriptions the programs make of them.
 //!
 //! Each document type here is described by a JSON Schema in `schemas/json/`, generated from
 //! the type by `schemars` ([`generate`]); the tests check that documents produced by the real
@@ -33,6 +35,9 @@ pub mod zarr;
 pub use error_chain::error_chain;
 pub use sample_kind::SampleKind;
 pub use sample_type::SampleType;
+/// `strum`, for [`strum_names!`]'s expansion in other crates.
+#[doc(hidden)]
+pub use strum;
 
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};

@@ -3,7 +3,7 @@
 //! lists the known names from the variants themselves (`strum::VariantNames`). Each such enum
 //! derives `strum::EnumString` with `parse_err_ty = UnknownName<Self>` and
 //! `parse_err_fn = UnknownName::new`, so that `str::parse` gives this error, and gets its
-//! inherent `name()` (and `ALL`) from this module's `strum_names!` macro.
+//! inherent `name()` (and `ALL`) from the [`strum_names!`](crate::strum_names) macro.
 
 use std::marker::PhantomData;
 
@@ -56,8 +56,8 @@ macro_rules! strum_names {
         $crate::strum_names!($ty);
         impl $ty {
             /// Every variant, in the order of declaration.
-            pub const ALL: [Self; <Self as strum::EnumCount>::COUNT] =
-                *<Self as strum::VariantArray>::VARIANTS
+            pub const ALL: [Self; <Self as $crate::strum::EnumCount>::COUNT] =
+                *<Self as $crate::strum::VariantArray>::VARIANTS
                     .first_chunk()
                     .expect("one entry per variant");
         }

@@ -82,8 +82,11 @@ fn default_up() -> [f64; 3] {
     [0.0, -1.0, 0.0]
 }
 
+/// The vertical field of view of a scene that names none, degrees.
+pub const DEFAULT_FOV_DEGREES: f64 = 30.0;
+
 fn default_fov() -> f64 {
-    30.0
+    DEFAULT_FOV_DEGREES
 }
 
 fn default_true() -> bool {

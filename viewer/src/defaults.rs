@@ -9,8 +9,8 @@ use crate::gpu::renderer::MAX_CHANNELS;
 use crate::scene::{Camera, ChannelStyle, OpacityPoint, Scene, SceneDocumentError, box_diagonal};
 use crate::source::{SampleType, VolumeInfo};
 
-/// Default vertical field of view, degrees.
-pub const DEFAULT_FOV_DEGREES: f64 = 30.0;
+/// Default vertical field of view, degrees: a scene file's.
+pub use crate::scene::DEFAULT_FOV_DEGREES;
 /// Default opacity (at the reference step) at the top of a default transfer-function ramp.
 pub const DEFAULT_OPACITY: f64 = 0.05;
 /// Default camera: azimuth 30°, elevation 20°, 1.5 volume diagonals from the centre.

@@ -11,7 +11,7 @@ use residency_store::pyramid::{AsyncBricks, BrickIndex, Pyramid, PyramidError, R
 use zarrs::array::{Array, ArrayError, CodecOptions, ElementOwned};
 use zarrs::storage::ReadableListableStorageTraits;
 
-use super::ome;
+use super::regions;
 use super::{BrickKey, BrickSource, BrickVoxels, MinMaxGrid, SampleType, SourceError, VolumeInfo};
 
 pub use residency_schemas::dataset::dataset_name;
@@ -97,11 +97,12 @@ impl LocalSource {
             &descriptions,
             &shown,
         )?;
-        info.minmax = if ome::usable_region_metadata(pyramid.attributes.regions.as_ref(), &shown) {
-            Some(read_minmax(&pyramid, &info, &shown)?)
-        } else {
-            None
-        };
+        info.minmax =
+            if regions::usable_region_metadata(pyramid.attributes.regions.as_ref(), &shown) {
+                Some(read_minmax(&pyramid, &info, &shown)?)
+            } else {
+                None
+            };
         Ok(Self {
             location: location.clone(),
             info,

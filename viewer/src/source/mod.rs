@@ -6,7 +6,7 @@
 //!   with no I/O of its own;
 //! - [`http`]: [`HttpSource`], that protocol over blocking HTTP (native; the web viewer
 //!   speaks it through the browser's `fetch`);
-//! - [`ome`]: whether a store's region metadata can drive culling.
+//! - [`regions`]: whether a store's region metadata can drive culling.
 //!
 //! The volume's description itself ([`VolumeInfo`]) and its making from the OME-Zarr metadata
 //! are `residency_schemas::volume`'s, re-exported here.
@@ -25,7 +25,7 @@ use residency_store::pyramid::PyramidError;
 pub mod http;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod local;
-pub mod ome;
+pub mod regions;
 pub mod server;
 
 #[cfg(not(target_arch = "wasm32"))]

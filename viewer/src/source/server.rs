@@ -20,7 +20,7 @@ use residency_schemas::wire::{
 };
 use residency_schemas::zarr::ArrayDescription;
 
-use super::ome;
+use super::regions;
 use super::{BrickKey, BrickVoxels, MinMaxGrid, SourceError, VolumeInfo};
 
 /// Most bricks asked for in one `/bricks` request; larger fetches are split.
@@ -135,7 +135,7 @@ pub async fn open<G: Get>(http: &G, base: &str, dataset: &str) -> Result<VolumeI
         arrays.push(ArrayDescription::parse(format, &body, &array_url)?);
     }
     let mut info = VolumeInfo::from_ome(dataset, &group, &layout, &arrays, base)?;
-    if ome::usable_region_metadata(group.regions.as_ref(), base) {
+    if regions::usable_region_metadata(group.regions.as_ref(), base) {
         info.minmax = load_minmax(http, base, &info).await?;
     }
     Ok(info)
@@ -151,7 +151,7 @@ async fn load_minmax<G: Get>(
     for c in 0..info.channels.len() {
         let url = format!("{base}/minmax?channel={c}");
         let Some(body) = http.get(&url).await?.found(&url)? else {
-            ome::warn_no_region_metadata(base);
+            regions::warn_no_region_metadata(base);
             return Ok(None);
         };
         all.push(parse_minmax(info, c, &body, &url)?);

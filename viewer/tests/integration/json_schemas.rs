@@ -15,9 +15,9 @@ use serde_json::{Value, json};
 const REGENERATE: &str =
     "RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas";
 
-/// Every viewer document's schema file (scene files are `residency-schemas`'). `viewer serve`'s
-/// VDI requests are documents the viewer reads; the others it writes (`viewer serve`'s `GET /info` answers the service
-/// info).
+/// Every viewer document's schema file (scene files are `residency-schemas`'). `viewer
+/// serve`'s VDI requests are documents the viewer reads; the others it writes (`viewer serve`'s
+/// `GET /info` answers the service info).
 fn documents() -> Vec<SchemaFile> {
     vec![
         SchemaFile::read::<VdiRequest>("vdi-request.schema.json"),

@@ -223,7 +223,7 @@ fn a_store_without_region_metadata_has_no_minmax() {
     let (src, text) = open_logged(&store);
     assert!(
         text.contains(&format!(
-            "WARN residency_viewer::source::ome: {}: no region metadata; culling falls back to \
+            "WARN residency_viewer::source::regions: {}: no region metadata; culling falls back to \
              computing min/max from bricks",
             store.display()
         )),
@@ -255,7 +255,7 @@ fn region_metadata_without_a_halo_is_not_used_for_culling() {
     let (src, text) = open_logged(&store);
     assert!(
         text.contains(&format!(
-            "WARN residency_viewer::source::ome: {}: the region metadata's min/max cells have no \
+            "WARN residency_viewer::source::regions: {}: the region metadata's min/max cells have no \
              halo, so they do not bound trilinear samples; culling falls back to computing \
              min/max from bricks",
             store.display()
