@@ -48,4 +48,5 @@ timed "cargo test" cargo test --release --workspace
 # A short run (10 s) of every fuzz target: the corpora and seeds must still run clean.
 timed fuzz bash scripts/fuzz.sh 10
 disk "before the external-client tests"
-timed pytest env RESIDENCY_BIN="$PWD/target/release" .venv/bin/python -m pytest -q tests/python
+# The slowest tests are listed at the end, for whoever trims the suite's time.
+timed pytest env RESIDENCY_BIN="$PWD/target/release" .venv/bin/python -m pytest -q --durations=25 tests/python
