@@ -628,10 +628,12 @@ impl PyramidLayout {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    const GROUP_V2: &str = r#"{
+    /// A two-level OME-Zarr 0.4 image group of two channels (one named in `omero`), also the
+    /// fixture of `volume::from_ome`'s tests.
+    pub(crate) const GROUP_V2: &str = r#"{
         "multiscales": [{"version": "0.4", "axes": [
             {"name": "c", "type": "channel"}, {"name": "z", "type": "space"},
             {"name": "y", "type": "space"}, {"name": "x", "type": "space", "unit": "micrometer"}],

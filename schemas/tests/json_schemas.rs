@@ -1,7 +1,8 @@
 //! The JSON Schemas in `schemas/json/` of the server's and the store's documents (also the
 //! component schemas of the server's OpenAPI document, which embeds them) and of scene files
-//! are generated from the Rust types that write (or, for scenes, read) the documents (`residency_schemas::generate`): the committed
-//! files must equal the generated text byte for byte. After a type change, regenerate them
+//! are generated from the Rust types that write (or, for scenes, read) the documents
+//! (`residency_schemas::generate`): the committed files must equal the generated text byte
+//! for byte. After a type change, regenerate them
 //! with `RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-schemas --test json_schemas`. The
 //! viewer's documents are checked the same way in its own tests.
 

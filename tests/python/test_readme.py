@@ -27,6 +27,7 @@ from support.binaries import stop_server
 from support.paths import BIN, ROOT
 from support.readme import README, sections, sh_blocks
 
+
 def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -447,7 +447,8 @@ def render(base, name, tmp_path, *extra):
 
 
 def ray_lengths(eye, target, up, fov, extent, w, h):
-    """Length of each pixel's ray inside the box [0, extent] (schemas/src/scene.rs's projection)."""
+    """Length of each pixel's ray inside the box [0, extent] (the projection of
+    schemas/src/scene.rs)."""
     eye, target, up = map(np.asarray, (eye, target, up))
     f = (target - eye) / np.linalg.norm(target - eye)
     r = np.cross(f, up)
@@ -621,9 +622,9 @@ def ray_image(extent, camera, w, h):
     ],
 )
 def test_constant_and_empty_volumes_render_the_exact_compositing_rule(tmp_path, name, opacity):
-    """schemas/src/scene.rs's rule for a homogeneous medium: with opacity `a` per reference step Δ₀ (one
-    voxel here), a ray crossing length L gets T = (1 − a)^(L/Δ₀) whatever the step, and the
-    pixel is colour·(1 − T) + T·background."""
+    """The rule of schemas/src/scene.rs for a homogeneous medium: with opacity `a` per
+    reference step Δ₀ (one voxel here), a ray crossing length L gets T = (1 − a)^(L/Δ₀)
+    whatever the step, and the pixel is colour·(1 − T) + T·background."""
     store, level0 = convert(tmp_path, name)
     nz, ny, nx = level0.shape[1:]
     extent = (nx, ny, nz)

@@ -3,7 +3,7 @@
 //! level's array metadata ([`ArrayDescription`]), whatever the transport; and
 //! [`MinMaxGrid::from_values`], one min/max grid of the region metadata from its values.
 
-use crate::ome::{ImageAttributes, PyramidLayout};
+use crate::ome::{ImageAttributes, OmeroChannel, PyramidLayout};
 use crate::zarr::ArrayDescription;
 
 use super::{ChannelDisplay, LevelInfo, MinMaxGrid, VolumeError, VolumeInfo};
@@ -32,10 +32,10 @@ fn srgb_to_linear(v: f64) -> f64 {
 }
 
 impl VolumeInfo {
-    /// The description of a volume named `name` from its group attributes, its pyramid layout and
-    /// the array metadata of each level (in `layout.level_paths` order), with `minmax` left `None`
-    /// for the source to fill. Checks that the levels agree with each other and with the region
-    /// metadata, and that every leading axis but `c` has one entry.
+    /// The description of a volume named `name` from its group attributes, its pyramid layout
+    /// and the array metadata of each level (in `layout.level_paths` order), with `minmax` left
+    /// `None` for the source to fill. Checks that the levels agree with each other and with the
+    /// region metadata, and that every leading axis but `c` has one entry.
     ///
     /// # Errors
     /// A [`VolumeError`] whose message starts with `source` and names the first disagreement.
@@ -142,7 +142,7 @@ impl VolumeInfo {
                 l.factor = rl.factor;
             }
         }
-        let omero: &[crate::ome::OmeroChannel] = attributes
+        let omero: &[OmeroChannel] = attributes
             .omero
             .as_ref()
             .map_or(&[], |o| o.channels.as_slice());
@@ -187,7 +187,7 @@ impl VolumeInfo {
 
 /// The display hints of one `omero` channel: its colour, and its window's `start`/`end` and
 /// `min`/`max` where both of a pair are given.
-fn channel_display(c: &crate::ome::OmeroChannel) -> ChannelDisplay {
+fn channel_display(c: &OmeroChannel) -> ChannelDisplay {
     let w = c.window.clone().unwrap_or_default();
     let pair = |a: Option<f64>, b: Option<f64>| Some([a?, b?]);
     ChannelDisplay {
@@ -199,8 +199,8 @@ fn channel_display(c: &crate::ome::OmeroChannel) -> ChannelDisplay {
 }
 
 impl MinMaxGrid {
-    /// One channel's min/max grid from the region metadata's description and its values: `gz·gy·gx`
-    /// minima followed by as many maxima.
+    /// One channel's min/max grid from the region metadata's description and its values:
+    /// `gz·gy·gx` minima followed by as many maxima.
     ///
     /// # Errors
     /// [`VolumeError::MinMaxValues`], naming `source`, when `values` are not two per cell.
@@ -232,20 +232,9 @@ impl MinMaxGrid {
 mod tests {
     use crate::SampleType;
     use crate::ome::ZarrFormat;
+    use crate::ome::tests::GROUP_V2;
 
     use super::*;
-
-    const GROUP_V2: &str = r#"{
-        "multiscales": [{"version": "0.4", "axes": [
-            {"name": "c", "type": "channel"}, {"name": "z", "type": "space"},
-            {"name": "y", "type": "space"}, {"name": "x", "type": "space"}],
-          "datasets": [
-            {"path": "0", "coordinateTransformations": [{"type": "scale", "scale": [1, 2.0, 0.5, 0.5]}]},
-            {"path": "1", "coordinateTransformations": [{"type": "scale", "scale": [1, 2.0, 1.0, 1.0]},
-                                                        {"type": "translation", "translation": [0, 0, 0.25, 0.25]}]}]}],
-        "omero": {"channels": [{"label": "dapi", "color": "FF8000",
-                                "window": {"min": 0, "max": 100, "start": 5, "end": 90}}]}
-    }"#;
 
     fn array_v2(shape: [u64; 4]) -> ArrayDescription {
         let doc = format!(

@@ -1,7 +1,8 @@
 //! Scene files (`schemas/src/scene.rs`: `Scene::from_json`, which the viewer's `read_scene`,
 //! the page and the Python module call) on any bytes, then what the renderer asks of a scene:
-//! the camera frame and some rays, every channel's opacity at a few values and over a few ranges (and what each mode hides there,
-//! MIP's scale and saturation), and the clipped span of those rays. A scene must serialise and
+//! the camera frame and some rays, every channel's opacity at a few values and over a few
+//! ranges (and what each mode hides there, MIP's scale and saturation), and the clipped span
+//! of those rays. A scene must serialise and
 //! parse back to itself.
 #![no_main]
 

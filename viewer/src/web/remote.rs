@@ -540,7 +540,8 @@ impl Viewer {
     /// page's, not the VDI's).
     ///
     /// # Errors
-    /// The [`UnknownName`](residency_schemas::names::UnknownName) message, the filter unchanged; or
+    /// The [`UnknownName`](residency_schemas::names::UnknownName) message, the filter
+    /// unchanged; or
     /// without [`Viewer::remote_begin`].
     pub fn set_vdi_filter(&self, name: &str) -> Result<(), JsValue> {
         let filter: VdiFilterChoice = name.parse().map_err(|e| super::js_error(&e))?;

@@ -1,6 +1,6 @@
 //! The viewer's JSON Schemas in `schemas/json/` are generated from the Rust types that write
-//! (or, for VDI requests, read) the documents (`residency_schemas::generate`): the committed files
-//! must equal the generated text byte for byte. After a type change, regenerate them with
+//! (or, for VDI requests, read) the documents (`residency_schemas::generate`): the committed
+//! files must equal the generated text byte for byte. After a type change, regenerate them with
 //! `RESIDENCY_UPDATE_SCHEMAS=1 cargo test -p residency-viewer --test integration json_schemas`.
 
 use residency_schemas::generate::{SchemaFile, required, snapshot};

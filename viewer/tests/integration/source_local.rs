@@ -255,8 +255,8 @@ fn region_metadata_without_a_halo_is_not_used_for_culling() {
     let (src, text) = open_logged(&store);
     assert!(
         text.contains(&format!(
-            "WARN residency_viewer::source::regions: {}: the region metadata's min/max cells have no \
-             halo, so they do not bound trilinear samples; culling falls back to computing \
+            "WARN residency_viewer::source::regions: {}: the region metadata's min/max cells have \
+             no halo, so they do not bound trilinear samples; culling falls back to computing \
              min/max from bricks",
             store.display()
         )),
