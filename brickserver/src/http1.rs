@@ -268,6 +268,7 @@ async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<
     match filled.await {
         Ok(Ok(())) => {
             metrics.chunks_read_from_disk.inc();
+            answer.open.saw_cached(start, end, Instant::now());
             Some(answer)
         }
         Ok(Err(e)) => {

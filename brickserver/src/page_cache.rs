@@ -106,13 +106,13 @@ pub(crate) fn fill(file: &File, start: u64, end: u64) -> io::Result<()> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::io::Write;
 
     use super::*;
 
     /// Drops `file`'s pages from the page cache.
-    fn drop_pages(file: &File) {
+    pub(crate) fn drop_pages(file: &File) {
         // SAFETY: an open descriptor.
         let dropped =
             unsafe { libc::posix_fadvise(file.as_raw_fd(), 0, 0, libc::POSIX_FADV_DONTNEED) };

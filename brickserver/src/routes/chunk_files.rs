@@ -14,7 +14,6 @@ use residency_schemas::server::bearer_token_matches;
 use super::state::AppState;
 use crate::dataset_store::Keys;
 use crate::open_files::OpenFile;
-use crate::page_cache;
 use crate::responses::{FileHead, RangeRequest, if_none_match, is_metadata, range_of};
 use crate::store_keys::{KeyError, RootDir};
 
@@ -81,8 +80,8 @@ pub(crate) struct ChunkAnswer {
     pub(crate) open: Arc<OpenFile>,
     /// `None` for a `304`, else the range answered (`Whole` for a `200`).
     range: Option<RangeRequest>,
-    /// Whether the page cache holds all the bytes to send (`crate::page_cache::holds`; always
-    /// for a `HEAD`): if not, they are read into it on a blocking thread before they are sent,
+    /// Whether the page cache holds all the bytes to send ([`OpenFile::cached`]; always for a
+    /// `HEAD`): if not, they are read into it on a blocking thread before they are sent,
     /// so that `sendfile` never waits for the disk on a thread that serves other connections.
     pub(crate) cached: bool,
 }
@@ -192,7 +191,7 @@ impl FolderChunks {
         if *method != Method::HEAD
             && let Some((start, end)) = answer.body()
         {
-            answer.cached = page_cache::holds(&answer.open.file, start, end);
+            answer.cached = answer.open.cached(start, end, now);
         }
         Some(answer)
     }
