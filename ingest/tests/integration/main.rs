@@ -8,4 +8,5 @@ mod common;
 mod fuzz_regressions;
 
 mod sample_kinds;
+mod store_bytes;
 mod tiff_claims;
