@@ -53,6 +53,7 @@ import sys
 import tempfile
 import threading
 import time
+import urllib.request
 
 import numpy as np
 
@@ -230,7 +231,25 @@ def start_brickserver(store, name, *extra, env=None):
     raise RuntimeError("brickserver did not start")
 
 
-def start_nginx(root: pathlib.Path, work: pathlib.Path, port: int):
+# The fields of brickserver's chunk answers that nginx adds only when told to (`add_header`):
+# the caching and CORS fields that let browsers cache chunks and read them from pages of other
+# origins, as every host of OME-Zarr for web viewers configures. nginx is given the values of
+# brickserver's own answer (`mirrored_fields`), so that both servers send the same answers.
+MIRRORED = ("cache-control", "access-control-allow-origin", "access-control-expose-headers")
+
+
+def mirrored_fields(chunk_url):
+    """The `MIRRORED` fields of the answer to a GET of `chunk_url`, as nginx `add_header` lines."""
+    headers = urllib.request.urlopen(chunk_url).headers
+    missing = [name for name in MIRRORED if headers[name] is None]
+    if missing:
+        raise RuntimeError(f"{chunk_url}: no {', '.join(missing)} in the answer")
+    return "".join(f'  add_header {name} "{headers[name]}";\n' for name in MIRRORED)
+
+
+def start_nginx(root: pathlib.Path, work: pathlib.Path, port: int, fields: str = ""):
+    """nginx serving `root` on `port` (its files in `work`), adding `fields` (`add_header`
+    lines) to its answers."""
     conf = work / "nginx.conf"
     conf.write_text(f"""
 worker_processes auto;
@@ -246,7 +265,7 @@ http {{
   keepalive_requests 1000000;
   keepalive_timeout 65;
   default_type application/octet-stream;
-  client_body_temp_path {work}/tmp; proxy_temp_path {work}/tmp; fastcgi_temp_path {work}/tmp;
+{fields}  client_body_temp_path {work}/tmp; proxy_temp_path {work}/tmp; fastcgi_temp_path {work}/tmp;
   uwsgi_temp_path {work}/tmp; scgi_temp_path {work}/tmp;
   server {{ listen 127.0.0.1:{port}; root {root}; }}
 }}
@@ -255,8 +274,6 @@ http {{
     p = subprocess.Popen(["nginx", "-c", str(conf), "-p", str(work)], stderr=subprocess.DEVNULL)
     for _ in range(100):
         try:
-            import urllib.request
-
             urllib.request.urlopen(f"http://127.0.0.1:{port}/bench/zarr.json", timeout=1)
             break
         except Exception:
@@ -273,13 +290,15 @@ def stop(p, sig=signal.SIGTERM, timeout=20):
 
 @contextlib.contextmanager
 def chunk_servers(work: pathlib.Path, store: pathlib.Path):
-    """nginx (its root `work`/www) and brickserver serving `store` as the dataset `bench`, both
-    stopped on leaving, whatever happened: name -> (the dataset's base URL, the processes)."""
+    """nginx (its root `work`/www, with brickserver's caching and CORS fields: `MIRRORED`) and
+    brickserver serving `store` as the dataset `bench`, both stopped on leaving, whatever
+    happened: name -> (the dataset's base URL, the processes)."""
     with tempfile.TemporaryDirectory(prefix="nginx-") as ng_work, contextlib.ExitStack() as stops:
-        ng, ng_pids, ng_base = start_nginx(work / "www", pathlib.Path(ng_work), 18080)
-        stops.callback(stop, ng, signal.SIGQUIT, 10)
         bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
         stops.callback(stop, bs)
+        fields = mirrored_fields(f"{bs_base}/bench/0/c/0/0/0/0")
+        ng, ng_pids, ng_base = start_nginx(work / "www", pathlib.Path(ng_work), 18080, fields)
+        stops.callback(stop, ng, signal.SIGQUIT, 10)
         yield {"nginx": (f"{ng_base}/bench", ng_pids), "brickserver": (f"{bs_base}/bench", bs_pids)}
 
 
@@ -290,8 +309,6 @@ def turn_order(names, i):
 
 
 def etag_of(url):
-    import urllib.request
-
     return urllib.request.urlopen(url).headers["ETag"]
 
 
@@ -438,26 +455,26 @@ def main():
         if a.docs:
             point_page_at("server-s3-bench", result, report)
         return
-    results = {}
+    # Each part's report is written as soon as it is measured, so a later part that fails
+    # loses only its own.
     if not a.soak_only:
         results = run_loads(a, work, store, region_store)
-    soak = run_soak(a, store) if a.soak else None
-    sections = []
-    if results:
         # One result per client: wrk's is the default, oha's sits beside it.
         suffix = "" if a.client == "wrk" else f"-{a.client}"
-        sections.append((f"server-bench{suffix}", render(results, a), f"server{suffix}"))
-    if soak:
-        sections.append(("server-soak", render_soak(soak, a), "server-soak"))
-    for marker, report, name in sections:
-        result = write_result(f"{name}.md", report)
-        print(report)
-        if a.docs:
-            point_page_at(marker, result, report)
-    if results:
-        write_result(f"server{'' if a.client == 'wrk' else '-' + a.client}.json", json.dumps(results, indent=1))
-    if soak:
-        write_result("server-soak.json", json.dumps(soak, indent=1))
+        publish(a, f"server-bench{suffix}", render(results, a), f"server{suffix}", results)
+    if a.soak:
+        soak = run_soak(a, store)
+        publish(a, "server-soak", render_soak(soak, a), "server-soak", soak)
+
+
+def publish(a, marker, report, name, results):
+    """Writes `report` to docs/benchmarks/`name`.md and `results` to `name`.json, prints the
+    report, and with --docs points docs/benchmarks.md's `marker` at it."""
+    result = write_result(f"{name}.md", report)
+    write_result(f"{name}.json", json.dumps(results, indent=1))
+    print(report)
+    if a.docs:
+        point_page_at(marker, result, report)
 
 
 def run_loads(a, work, store, region_store):
@@ -593,46 +610,43 @@ def evict_chunks(store: pathlib.Path, per_second: int, stop: threading.Event):
 def run_soak(a, store):
     """Random chunk GETs at 256 connections for `a.soak` seconds, sampling the server's RSS,
     open descriptors and threads every 5 s."""
-    soak = None
-    if a.soak:
-        bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
-        samples = []
+    bs, bs_pids, bs_base = start_brickserver(store, "bench", f"--open-files={OPEN_FILES}")
+    samples = []
+    try:
+        if CLIENT == "wrk":
+            cmd = wrk_command(f"{bs_base}/bench", 256, a.soak)
+        else:
+            cmd = [OHA, "-z", f"{a.soak}s", "-c", "256", "--no-tui", "--output-format", "json", "--rand-regex-url", key_regex(f"{bs_base}/bench")]
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+        stopping = threading.Event()
+        evictor = threading.Thread(target=evict_chunks, args=(store, a.soak_evict, stopping))
+        evictor.start()
+        t0 = time.time()
         try:
-            if CLIENT == "wrk":
-                cmd = wrk_command(f"{bs_base}/bench", 256, a.soak)
-            else:
-                cmd = [OHA, "-z", f"{a.soak}s", "-c", "256", "--no-tui", "--output-format", "json", "--rand-regex-url", key_regex(f"{bs_base}/bench")]
-            proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
-            stop = threading.Event()
-            evictor = threading.Thread(target=evict_chunks, args=(store, a.soak_evict, stop))
-            evictor.start()
-            t0 = time.time()
-            try:
-                while proc.poll() is None:
-                    samples.append((round(time.time() - t0), current_rss_mb(bs_pids), proc_entries(bs.pid, "fd"), proc_entries(bs.pid, "task")))
-                    time.sleep(5)
-            finally:
-                stop.set()
-                evictor.join()
-            if CLIENT == "wrk":
-                r = wrk_result(proc.stdout.read())
-                soak = {"seconds": a.soak, "requests": sum(r["codes"].values()), "non_200": r["codes"].get(0, 0),
-                        "errors": 0, "rps": r["rps"], "rss_samples": samples}
-            else:
-                r = json.loads(proc.stdout.read())
-                codes = {int(k): v for k, v in r.get("statusCodeDistribution", {}).items()}
-                soak = {
-                    "seconds": a.soak,
-                    "requests": sum(codes.values()),
-                    "non_200": sum(v for k, v in codes.items() if k != 200),
-                    "errors": sum(v for k, v in r.get("errorDistribution", {}).items() if "deadline" not in k),
-                    "rps": r["summary"]["requestsPerSec"],
-                    "rss_samples": samples,
-                }
+            while proc.poll() is None:
+                samples.append((round(time.time() - t0), current_rss_mb(bs_pids), proc_entries(bs.pid, "fd"), proc_entries(bs.pid, "task")))
+                time.sleep(5)
         finally:
-            stop(bs)
-    if soak:
-        soak["evicted_per_second"] = a.soak_evict
+            stopping.set()
+            evictor.join()
+        if CLIENT == "wrk":
+            r = wrk_result(proc.stdout.read())
+            soak = {"seconds": a.soak, "requests": sum(r["codes"].values()), "non_200": r["codes"].get(0, 0),
+                    "errors": 0, "rps": r["rps"], "rss_samples": samples}
+        else:
+            r = json.loads(proc.stdout.read())
+            codes = {int(k): v for k, v in r.get("statusCodeDistribution", {}).items()}
+            soak = {
+                "seconds": a.soak,
+                "requests": sum(codes.values()),
+                "non_200": sum(v for k, v in codes.items() if k != 200),
+                "errors": sum(v for k, v in r.get("errorDistribution", {}).items() if "deadline" not in k),
+                "rps": r["summary"]["requestsPerSec"],
+                "rss_samples": samples,
+            }
+    finally:
+        stop(bs)
+    soak["evicted_per_second"] = a.soak_evict
     return soak
 
 
@@ -663,6 +677,8 @@ def render(results, a):
         f"by `benchmarks/server_bench.py --client {a.client} --duration {a.duration} --repeat {a.repeat}`: {client_version(a.client)}"
         f"{f' ({WRK_THREADS} threads)' if a.client == 'wrk' else ''} on the same machine as the servers ({placement}), 20,000 chunks of random bytes (median 40 KiB), keys uniform at random; "
         f"each server holds up to {OPEN_FILES:,} chunk files open (nginx's `open_file_cache`, per worker; brickserver's `--open-files`, shared); "
+        "nginx adds brickserver's caching and CORS fields to its answers (`add_header` of brickserver's own `cache-control`, "
+        "`access-control-allow-origin` and `access-control-expose-headers`), so both send the fields web viewers need; "
         "each load ran on nginx and brickserver in turn, repeatedly (which ran first turning round each time), and the median run of each is shown, "
         "with the median and range of the rounds' ratios (each round's brickserver run against its nginx run). "
         "Ratios are brickserver / nginx: above 1 is better for requests/s and MB/s, below 1 is better for latency.",

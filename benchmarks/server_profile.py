@@ -2,7 +2,8 @@
 server bench's store and servers (`benchmarks/server_bench.py`), each loaded in turn by wrk for
 `--seconds` at `--connections`, for `--rounds` rounds (which server goes first turning round
 each round), while `perf record -g -e cpu-clock` samples the server's threads and `perf stat`
-counts its system calls, packets sent, context switches and CPU migrations. Each sample's time
+counts its system calls, packets sent, context switches and CPU migrations (`--revalidate`: the
+server bench's 304 load instead, one chunk's `ETag` sent back as `If-None-Match`). Each sample's time
 (its period, in ns of CPU) goes to one bucket by the kernel functions on its call stack (the
 first bucket that matches, by name prefix):
 
@@ -24,7 +25,7 @@ It prints, per server, the medians over rounds of requests/s, CPU µs per reques
 counters per request; `--markdown F` writes the same as a table.
 
     .venv/bin/python benchmarks/server_profile.py [--connections 1] [--seconds 6] [--rounds 3]
-                                                  [--work DIR] [--markdown F]
+                                                  [--revalidate] [--work DIR] [--markdown F]
 
 Needs what the server bench needs (wrk, nginx, a release build, numpy) and `perf` (Debian's
 `linux-perf`), run as root or with `kernel.perf_event_paranoid` at most 1.
@@ -116,8 +117,9 @@ def counters(path: pathlib.Path):
     return found
 
 
-def profile(name, base, pids, connections, seconds, scratch: pathlib.Path):
-    """One load of `base` by wrk, sampled and counted: requests/s and per-request figures."""
+def profile(name, base, pids, connections, seconds, scratch: pathlib.Path, etag=None):
+    """One load of `base` by wrk (with `etag`, its revalidations answered 304), sampled and
+    counted: requests/s and per-request figures."""
     data, stat = scratch / f"{name}.data", scratch / f"{name}.stat"
     targets = ",".join(map(str, pids))
     record = subprocess.Popen(["perf", "record", "-q", "-e", "cpu-clock", "-F", str(FREQUENCY), "-g", "-p", targets, "-o", str(data)],
@@ -126,7 +128,7 @@ def profile(name, base, pids, connections, seconds, scratch: pathlib.Path):
     try:
         time.sleep(0.5)  # both attached before the load begins (the server idles meanwhile)
         cpu = sb.cpu_seconds(pids)
-        result = sb.wrk(base, connections, seconds)
+        result = sb.wrk(base, connections, seconds, etag)
         cpu = sb.cpu_seconds(pids) - cpu
     finally:
         for p in (record, count):
@@ -171,9 +173,11 @@ def table(results, a):
         row(f"— {b}", lambda r: r["buckets"][b], ".1f")
     for c in COUNTERS.values():
         row(f"{c} a request", lambda r: r["counters"][c], ".3f")
+    load = "one chunk's revalidations answered 304" if a.revalidate else "random chunk GETs"
+    flag = " --revalidate" if a.revalidate else ""
     head = (f"Measured {datetime.date.today().isoformat()} on {sb.cpu_name()} ({os.cpu_count()} CPUs) by "
-            f"`benchmarks/server_profile.py --connections {a.connections} --seconds {a.seconds} --rounds {a.rounds}`: "
-            f"wrk, random chunk GETs, servers and client sharing the CPUs; medians of {a.rounds} rounds.")
+            f"`benchmarks/server_profile.py --connections {a.connections} --seconds {a.seconds} --rounds {a.rounds}{flag}`: "
+            f"wrk, {load}, servers and client sharing the CPUs; medians of {a.rounds} rounds.")
     return head + "\n\n" + "\n".join(rows) + "\n"
 
 
@@ -182,6 +186,7 @@ def main():
     ap.add_argument("--connections", type=int, default=1, help="wrk's connections [1]")
     ap.add_argument("--seconds", type=int, default=6, help="seconds per load [6]")
     ap.add_argument("--rounds", type=int, default=3, help="loads per server, alternating [3]")
+    ap.add_argument("--revalidate", action="store_true", help="the 304 load: one chunk revalidated with its ETag")
     ap.add_argument("--work", default=str(sb.ROOT / "bench-data" / "server"), help="the server bench's work folder (its store is made there if missing)")
     ap.add_argument("--markdown", type=pathlib.Path, help="write the table here too")
     a = ap.parse_args()
@@ -191,10 +196,13 @@ def main():
     with sb.chunk_servers(work, store) as servers, tempfile.TemporaryDirectory(prefix="server-profile-") as scratch:
         for base, _ in servers.values():
             sb.wrk(base, 16, 3)  # the page cache and both servers' open files warm
+        etags = {name: sb.etag_of(f"{base}/0/c/0/0/0/0") if a.revalidate else None
+                 for name, (base, _) in servers.items()}
         for i in range(a.rounds):
             for name in sb.turn_order(runs, i):
                 base, pids = servers[name]
-                runs[name].append(profile(name, base, pids, a.connections, a.seconds, pathlib.Path(scratch)))
+                runs[name].append(profile(name, base, pids, a.connections, a.seconds, pathlib.Path(scratch),
+                                          etags[name]))
     report = table({n: medians(r) for n, r in runs.items()}, a)
     print(report)
     if a.markdown:
