@@ -86,10 +86,15 @@ def main():
     ap.add_argument("--docs", action="store_true", help="point docs/benchmarks.md at this run")
     a = ap.parse_args()
     rows = []
-    for edge in map(int, a.planes.split(",")):
-        depth, kind, runs = RUNS[edge]
-        work = pathlib.Path(tempfile.mkdtemp(prefix=f"columns-{edge}-", dir=a.work))
-        try:
+    # Every run writes a store of its own, and the stores are removed at the end: no run pays
+    # for the deletes of the one before (`benchmarks/ingest_bench.py` says why). Each size's
+    # inputs (a few large files) go as soon as it is done.
+    works = []
+    try:
+        for edge in map(int, a.planes.split(",")):
+            depth, kind, runs = RUNS[edge]
+            work = pathlib.Path(tempfile.mkdtemp(prefix=f"columns-{edge}-", dir=a.work))
+            works.append(work)
             size = f"{depth},{edge},{edge}"
             if kind == "sample":
                 subprocess.run([BIN / "ingest", "sample", "-o", work / "in", "--kind", "sparse",
@@ -107,8 +112,8 @@ def main():
                 for label, limit, repeats in these:
                     times, rss, line = [], [], ""
                     for _ in range(repeats):
-                        out = work / "out" / "x.ome.zarr"
-                        cmd = [exe, "convert", *inputs, "-o", out, "--quiet", "--overwrite"]
+                        out = work / f"out-{len(list(work.glob('out-*')))}" / "x.ome.zarr"
+                        cmd = [exe, "convert", *inputs, "-o", out, "--quiet"]
                         if limit:
                             cmd += ["--memory-limit", limit]
                         s, r, stdout = run(cmd)
@@ -126,7 +131,6 @@ def main():
                                              if not k.startswith("residency/")}
                         same = ("identical but for the region arrays' chunking"
                                 if images(d) == images(first) else "DIFFERENT")
-                    shutil.rmtree(out.parent)
                     s = statistics.median(times)
                     peak = max(rss)
                     cap = limit_bytes(limit) / 2**20
@@ -137,7 +141,9 @@ def main():
                                  ("yes" if peak <= cap else "NO") if ours else "",
                                  re.sub(r" to stay within.*", "", line), same))
                     print(rows[-1], flush=True)
-        finally:
+            shutil.rmtree(work / "in")
+    finally:
+        for work in works:
             shutil.rmtree(work, ignore_errors=True)
     report = (
         f"Measured {datetime.date.today()} on {machine()}, by "

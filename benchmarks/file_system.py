@@ -2,18 +2,19 @@
 write to where the machine's own lacks a journal.
 
     python3 benchmarks/file_system.py describe DIR
-    sudo python3 benchmarks/file_system.py journaled-ext4 IMAGE MOUNTPOINT [--size 8G]
+    sudo python3 benchmarks/file_system.py journaled-ext4 IMAGE MOUNTPOINT [--size 24G]
 
 Why it matters: ext4 without a journal (this development machine's root) checks every inode
-it is about to hand out against the inode table for one deleted in the last minute
-(`recently_deleted` in fs/ext4/ialloc.c), so a benchmark that removes one run's output before
+it is about to hand out against the inode table for one deleted in the last minute, or the last
+six minutes where that block of the table is dirty (`recently_deleted` in fs/ext4/ialloc.c), so a benchmark that removes one run's output before
 the next pays a scan per file and folder it creates; a journaled ext4 (what `mkfs.ext4` makes
 by default) skips that check, and instead pays a journal commit for each `fsync`. Both costs
 fall on every tool in proportion to the files it makes and syncs, so the report names the file
 system it measured on.
 
 `journaled-ext4` makes (once) an ext4 image file with mkfs.ext4's defaults and loop-mounts it
-at MOUNTPOINT; run again, it leaves a mounted one as it is.
+at MOUNTPOINT; run again, it leaves a mounted one as it is. The image is sparse; 24G holds
+`ingest_bench.py --sizes 512,2048 --rounds 5 --flame` with every run's output kept to the end.
 """
 
 import argparse
@@ -71,7 +72,7 @@ def main():
     j = sub.add_parser("journaled-ext4", help="make and mount a journaled ext4 image")
     j.add_argument("image", type=pathlib.Path)
     j.add_argument("mountpoint", type=pathlib.Path)
-    j.add_argument("--size", default="8G", help="the image's size (truncate's syntax)")
+    j.add_argument("--size", default="24G", help="the image's size (truncate's syntax)")
     args = ap.parse_args()
     if args.command == "describe":
         print(describe(args.dir))

@@ -13,12 +13,15 @@ the same order, so the tools alternate; a row gives the median of the rounds, an
 `ingest` are the median (and range) of the rounds' own ratios. zarrs_ome reads a Zarr array, so
 it gets the stack pre-converted to a plain Zarr v3 array (that conversion is not timed).
 
-No output is deleted while a size is measured: every run writes a folder of its own, and they
-are all removed when the size is done, followed (on ext4 without a journal) by a wait of a
-minute. ext4 without a journal checks each inode it hands out against the inodes deleted in the
-last 60 seconds (`recently_deleted` in fs/ext4/ialloc.c), so a run that follows the deletion of
-the previous run's thousands of files pays a scan per file it makes, and the bench would measure
-its own deletes.
+No output is deleted while the bench runs: every run writes a folder of its own (the flame
+graphs' runs too), and they are all removed at the end. ext4 without a journal checks each inode
+it hands out against the inodes deleted in the last 60 seconds, and in the last 360 seconds
+when the block of the inode table holding it is dirty (`recently_deleted` in
+fs/ext4/ialloc.c), as the blocks a conversion is filling with new inodes are: so a run that
+follows the deletion of thousands of files within six minutes pays a scan per file it makes,
+and the bench would measure its own deletes (run it six minutes after deleting many files on
+the same file system, for the same reason). Leftovers of an earlier run are removed first, and
+there the bench waits those six minutes out.
 
 Beside each size, the limit probes of benchmarks/ingest_limits.py (reading the input, encoding
 level 0 with the same codec on all cores, writing the store's files and syncing them to disk,
@@ -57,13 +60,14 @@ ZARRS_OME = shutil.which("zarrs_ome") or "/tmp/zarrs_tools/bin/zarrs_ome"
 
 
 # ext4 without a journal checks each inode it hands out against those deleted within this many
-# seconds (RECENTCY_MIN in fs/ext4/ialloc.c).
-RECENT_DELETES_S = 60
+# seconds: RECENTCY_MIN, plus RECENTCY_DIRTY when the inode table's block is dirty, as it is while
+# files are made in it (fs/ext4/ialloc.c).
+RECENT_DELETES_S = 60 + 300
 
 
 def clear(folder):
-    """Removes `folder` (a size's outputs) and, where the file system is ext4 without a journal,
-    waits until its inodes no longer count as recently deleted."""
+    """Removes `folder` (an earlier run's leftovers) and, where the file system is ext4 without a
+    journal, waits until its inodes no longer count as recently deleted."""
     if not folder.exists():
         return
     shutil.rmtree(folder)
@@ -103,7 +107,6 @@ def bench(size_mib, work, rounds):
     ours = runs / "first.ome.zarr"
     first = timed([INGEST, "convert", src, "-o", ours, "--voxel-size", "1,1,1", "--quiet"], ours)
     if isinstance(first, str):
-        clear(runs)
         return input_mb, 0, {"ingest": [first]}, None
     levels = levels_of(ours)
     probes = limits(src, ours, keep=runs)
@@ -125,7 +128,6 @@ def bench(size_mib, work, rounds):
         for tool, command in commands.items():
             out = runs / f"{tool}-{i}.zarr"
             rows[tool].append(timed(command(out), out))
-    clear(runs)
     rows.update({tool: [why] for tool, why in missing.items()})
     return input_mb, levels, rows, probes
 
@@ -172,8 +174,7 @@ def flame(size_mib, work, report):
     if not (shutil.which("perf") and collapse and draw):
         return None, "no flame graph: needs perf and inferno (cargo install inferno)"
     d = work / f"{size_mib}MiB"
-    out, data = d / "flame.ome.zarr", d / "perf.data"
-    clear(out)
+    out, data = d / "runs" / "flame.ome.zarr", d / "perf.data"
     subprocess.run(["sync"], check=True)
     subprocess.run(["perf", "record", "-F", "999", "--call-graph", "dwarf,32768", "-o", data, "--",
                     INGEST, "convert", d / "nuclei.ome.tif", "-o", out, "--voxel-size", "1,1,1", "--quiet"],
@@ -185,7 +186,6 @@ def flame(size_mib, work, report):
                           "--minwidth", "0.5"], input=folded, check=True, capture_output=True).stdout
     (ROOT / "docs" / "benchmarks" / name).write_bytes(svg)
     data.unlink()
-    clear(out)
     return name, None
 
 
@@ -219,6 +219,8 @@ def main():
     work = pathlib.Path(args.work)
     results = {int(s): bench(int(s), work, args.rounds) for s in args.sizes.split(",")}
     flames = {size: flame(size, work, args.report) for size in results} if args.flame else {}
+    for size in results:
+        shutil.rmtree(work / f"{size}MiB" / "runs")
     cpu = re.sub(r"\s+", " ", next((l.split(":", 1)[1] for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")).strip()
     header = (
         f"Measured {datetime.date.today()} on {os.cpu_count()} cores ({cpu}), "

@@ -159,19 +159,20 @@ def main():
         finish([timed([BIN / "ingest", "convert", *inputs, "-o", ref, "--quiet"])])
         reference = files(ref)
 
-        def once(target, n):
+        def once(target, n, r):
+            """Run `r` of `target` in `n` partitions (0: one process), into a folder of its own:
+            nothing is deleted while the bench runs, so that no run pays for the deletes of the
+            one before (`benchmarks/ingest_bench.py` says why)."""
             if n == 0:
-                out = work / "one" / "x.ome.zarr"
-                shutil.rmtree(out.parent, ignore_errors=True)
+                out = work / f"one-{r}" / "x.ome.zarr"
                 t0 = time.time()
                 rss = finish([timed([BIN / "ingest", "convert", *inputs, "-o", out, "--quiet"])])
                 return time.time() - t0, None, rss, files(out)
             if target == "folder":
-                out, extra, where = work / f"f{n}" / "x.ome.zarr", [], work / f"f{n}"
+                out, extra, where = work / f"f{n}-{r}" / "x.ome.zarr", [], work / f"f{n}-{r}"
             else:
-                out, extra = f"s3://bucket/p{n}/x.ome.zarr", ["--s3-endpoint", endpoint]
-                where = s3root / "bucket" / f"p{n}"
-            shutil.rmtree(where, ignore_errors=True)
+                out, extra = f"s3://bucket/p{n}-{r}/x.ome.zarr", ["--s3-endpoint", endpoint]
+                where = s3root / "bucket" / f"p{n}-{r}"
             t0 = time.time()
             rss = finish([timed([BIN / "ingest", "convert", *inputs, "-o", out, "--quiet", *extra, "--partition", f"{i}/{n}"], env)
                           for i in range(n)])
@@ -183,8 +184,8 @@ def main():
         plan = [("folder", 0)] + [(t, n) for t in ["folder", "S3"] for n in counts]
         for target, n in plan:
             runs = []
-            for _ in range(a.repeat):
-                tp, tf, rss, got = once(target, n)
+            for r in range(a.repeat):
+                tp, tf, rss, got = once(target, n, r)
                 if got != reference:
                     raise RuntimeError(f"{target} N={n}: not the single-process store")
                 runs.append((tp + (tf or 0), tp, tf, rss))
