@@ -20,6 +20,7 @@ Results go to docs/benchmarks/columns.md (docs/benchmarks.md markers `columns-be
 
 import argparse
 import datetime
+import itertools
 import os
 import pathlib
 import re
@@ -95,6 +96,7 @@ def main():
             depth, kind, runs = RUNS[edge]
             work = pathlib.Path(tempfile.mkdtemp(prefix=f"columns-{edge}-", dir=a.work))
             works.append(work)
+            run_number = itertools.count()
             size = f"{depth},{edge},{edge}"
             if kind == "sample":
                 subprocess.run([BIN / "ingest", "sample", "-o", work / "in", "--kind", "sparse",
@@ -112,7 +114,7 @@ def main():
                 for label, limit, repeats in these:
                     times, rss, line = [], [], ""
                     for _ in range(repeats):
-                        out = work / f"out-{len(list(work.glob('out-*')))}" / "x.ome.zarr"
+                        out = work / f"out-{next(run_number)}" / "x.ome.zarr"
                         cmd = [exe, "convert", *inputs, "-o", out, "--quiet"]
                         if limit:
                             cmd += ["--memory-limit", limit]
