@@ -1,7 +1,8 @@
 //! HTTP/1.1 connections, served here rather than by hyper so that chunk files can go to the
 //! socket with `sendfile` (hyper only writes bytes it holds): request heads are parsed with
 //! `httparse`; a GET or HEAD of a chunk of a folder store is answered by `routes::chunk_files`
-//! without reading the file into memory; every other request goes to the router, and its
+//! without reading the file into memory, as is a revalidation of an object store's chunk whose
+//! `ETag` it knows (a `304`); every other request goes to the router, and its
 //! response is written back here. Keep-alive, pipelined requests, HTTP/1.0 clients, a
 //! header-read timeout (a slow or idle client cannot hold a connection forever) and graceful
 //! shutdown (a request being answered is finished) are handled here.
@@ -27,7 +28,7 @@ use tokio::sync::watch;
 
 use crate::metrics::Metrics;
 use crate::page_cache;
-use crate::routes::{self, AppState, ChunkAnswer, FolderChunks, ServerOptions};
+use crate::routes::{self, AppState, ChunkAnswer, DirectChunks, ServerOptions};
 
 /// The longest request head (request line and header fields) read: longer ones get a `431`.
 const MAX_HEAD: usize = 64 << 10;
@@ -44,8 +45,9 @@ const COALESCE: usize = 64 << 10;
 pub struct App {
     /// Every request the direct path does not answer.
     pub(crate) router: Router,
-    /// Chunk keys of folder stores, answered with `sendfile`.
-    pub(crate) chunks: FolderChunks,
+    /// Chunk keys answered without the router: a folder store's with `sendfile`, an object
+    /// store's revalidations.
+    pub(crate) chunks: DirectChunks,
     /// Where both record what they answer.
     pub(crate) metrics: Arc<Metrics>,
 }
@@ -77,7 +79,7 @@ impl App {
         }
         Self {
             router,
-            chunks: FolderChunks::new(state.clone(), options.token.as_deref(), cors),
+            chunks: DirectChunks::new(state.clone(), options.token.as_deref(), cors),
             metrics: state.metrics.clone(),
         }
     }
@@ -212,10 +214,10 @@ pub(crate) async fn connection(
                 },
             );
             let sent = match answer.body() {
-                Some((start, end)) if head.method != Method::HEAD => {
+                Some((open, start, end)) if head.method != Method::HEAD => {
                     // The head waits for the file's first bytes (unless there are none).
                     send_head(&stream, &out, end > start).await?;
-                    send_file(&stream, &answer.open.file, start, end).await?;
+                    send_file(&stream, &open.file, start, end).await?;
                     Some(end - start)
                 }
                 _ => {
@@ -262,13 +264,14 @@ pub(crate) async fn connection(
 /// (`page_cache::fill`, counted in `metrics`); `None` when they cannot be read: the router
 /// then reads the key and answers its error.
 async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<ChunkAnswer> {
-    let (start, end) = answer.body()?;
-    let open = answer.open.clone();
-    let filled = tokio::task::spawn_blocking(move || page_cache::fill(&open.file, start, end));
+    let (open, start, end) = answer.body()?;
+    let open = open.clone();
+    let file = open.clone();
+    let filled = tokio::task::spawn_blocking(move || page_cache::fill(&file.file, start, end));
     match filled.await {
         Ok(Ok(())) => {
             metrics.chunks_read_from_disk.inc();
-            answer.open.saw_cached(start, end, Instant::now());
+            open.saw_cached(start, end, Instant::now());
             Some(answer)
         }
         Ok(Err(e)) => {

@@ -1,9 +1,11 @@
-//! Chunk keys of folder stores: the requests a viewer makes most, answered straight from the
-//! connection (`crate::http1`) without the router, the file sent with `sendfile` from the
-//! page cache, never copied through this process, as nginx does. The answer (status and
-//! header fields) is the one the router's `GET /NAME/KEY` gives, built by the same functions;
-//! this module also holds what both share: opening a key (or finding it among the files held
-//! open, `crate::open_files`) with its `304`.
+//! Chunk keys: the requests a viewer makes most, answered straight from the connection
+//! (`crate::http1`) without the router. A chunk of a folder store is sent with `sendfile` from
+//! the page cache, never copied through this process, as nginx does; a revalidation of an
+//! object store's chunk whose `ETag` was seen within [`REVALIDATE`] gets its `304` without a
+//! request to the store. The answer (status and header fields) is the one the router's
+//! `GET /NAME/KEY` gives, built by the same functions; this module also holds what both share:
+//! opening a key (or finding it among the files held open, `crate::open_files`) with its
+//! `304`, and an object's `ETag` as last seen ([`known_object_etag`]).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -11,9 +13,9 @@ use std::time::Instant;
 use axum::http::{HeaderMap, Method, header};
 use residency_schemas::server::bearer_token_matches;
 
-use super::state::AppState;
+use super::state::{AppState, REVALIDATE};
 use crate::dataset_store::Keys;
-use crate::open_files::OpenFile;
+use crate::open_files::{BorrowedKey, OpenFile};
 use crate::responses::{FileHead, RangeRequest, if_none_match, is_metadata, range_of};
 use crate::store_keys::{KeyError, RootDir};
 
@@ -73,16 +75,43 @@ pub(crate) fn open_folder_key(
     })
 }
 
-/// A direct answer: a chunk file, what is answered of it, and whether the page cache holds
-/// the bytes to send.
+/// The `ETag` of chunk `raw_key` of dataset `index`, an object store's, when the request's
+/// `If-None-Match` matches it and it was seen within [`REVALIDATE`] of `now`: the request is
+/// answered `304` without asking the store (as a file held open is, `open_folder_key`).
+/// Metadata documents are always asked for.
+pub(crate) fn known_object_etag(
+    state: &AppState,
+    index: usize,
+    raw_key: &str,
+    headers: &HeaderMap,
+    now: Instant,
+) -> Option<Arc<str>> {
+    if is_metadata(raw_key) || !headers.contains_key(header::IF_NONE_MATCH) {
+        return None;
+    }
+    let (etag, seen) = state.etags.get(&BorrowedKey(index, raw_key))?;
+    (now.saturating_duration_since(seen) < REVALIDATE && if_none_match(headers, &etag))
+        .then_some(etag)
+}
+
+/// What a direct answer is of.
+enum Answered {
+    /// A chunk file of a folder store, and the range answered (`Whole` for a `200`), or
+    /// `None` for a `304`.
+    File(Arc<OpenFile>, Option<RangeRequest>),
+    /// A chunk of an object store revalidated ([`known_object_etag`]): a `304` with this
+    /// `ETag`.
+    Revalidated(Arc<str>),
+}
+
+/// A direct answer: what it is of, and whether the page cache holds the bytes to send.
 pub(crate) struct ChunkAnswer {
-    /// The chunk file.
-    pub(crate) open: Arc<OpenFile>,
-    /// `None` for a `304`, else the range answered (`Whole` for a `200`).
-    range: Option<RangeRequest>,
+    /// The file and range, or the object store's `ETag`.
+    answered: Answered,
     /// Whether the page cache holds all the bytes to send ([`OpenFile::cached`]; always for a
-    /// `HEAD`): if not, they are read into it on a blocking thread before they are sent,
-    /// so that `sendfile` never waits for the disk on a thread that serves other connections.
+    /// `HEAD` and a `304`): if not, they are read into it on a blocking thread before they are
+    /// sent, so that `sendfile` never waits for the disk on a thread that serves other
+    /// connections.
     pub(crate) cached: bool,
 }
 
@@ -91,26 +120,32 @@ impl ChunkAnswer {
     /// request (`routes::zarr`), from the same [`FileHead`].
     pub(crate) fn head(&self) -> FileHead<'_> {
         // The direct path answers chunk keys only, never a metadata document.
-        match self.range {
-            None => FileHead::not_modified(&self.open.etag, false),
-            Some(range) => FileHead::part(self.open.len, range, &self.open.etag, false),
+        match &self.answered {
+            Answered::File(open, None) => FileHead::not_modified(&open.etag, false),
+            Answered::File(open, Some(range)) => {
+                FileHead::part(open.len, *range, &open.etag, false)
+            }
+            Answered::Revalidated(etag) => FileHead::not_modified(etag, false),
         }
     }
 
-    /// The bytes of the file to send after the head, `start..end`; `None` for a `304` and a
+    /// The file to send after the head, and its bytes `start..end`; `None` for a `304` and a
     /// `416`.
-    pub(crate) fn body(&self) -> Option<(u64, u64)> {
-        match self.range? {
-            RangeRequest::Whole => Some((0, self.open.len)),
-            RangeRequest::Part(start, end) => Some((start, end)),
+    pub(crate) fn body(&self) -> Option<(&Arc<OpenFile>, u64, u64)> {
+        let Answered::File(open, Some(range)) = &self.answered else {
+            return None;
+        };
+        match *range {
+            RangeRequest::Whole => Some((open, 0, open.len)),
+            RangeRequest::Part(start, end) => Some((open, start, end)),
             RangeRequest::Unsatisfiable => None,
         }
     }
 }
 
-/// The direct path for chunk keys of folder stores.
+/// The direct path for chunk keys: a folder store's, and an object store's revalidations.
 #[derive(Clone)]
-pub(crate) struct FolderChunks {
+pub(crate) struct DirectChunks {
     state: Arc<AppState>,
     /// The bearer token the router's layer asks for, if any.
     token: Option<Arc<str>>,
@@ -119,8 +154,8 @@ pub(crate) struct FolderChunks {
     cors: Arc<[u8]>,
 }
 
-impl FolderChunks {
-    /// The direct path for `state`'s folder datasets, with the router's `token` and the
+impl DirectChunks {
+    /// The direct path for `state`'s datasets, with the router's `token` and the
     /// `cors` fields it adds.
     pub(crate) fn new(state: Arc<AppState>, token: Option<&str>, cors: Vec<u8>) -> Self {
         Self {
@@ -137,8 +172,9 @@ impl FolderChunks {
 
     /// The answer to a request (without a body) with `method`, `target` (path and query as
     /// sent) and `headers`, if it is a `GET` or `HEAD` of an existing chunk key of a folder
-    /// store, with the token if one is needed; `None` for every other request (and for errors,
-    /// which the router answers with its messages).
+    /// store, or a revalidation of an object store's chunk [`known_object_etag`] answers, with
+    /// the token if one is needed; `None` for every other request (and for errors, which the
+    /// router answers with its messages).
     pub(crate) fn answer(
         &self,
         method: &Method,
@@ -169,14 +205,20 @@ impl FolderChunks {
         let state = &*self.state;
         let index = state.index_of(name)?;
         let served = state.served_at(index, now);
-        let Keys::Folder(root) = &served.store.keys else {
-            return None;
+        let root = match &served.store.keys {
+            Keys::Folder(root) => root,
+            Keys::Object(_) => {
+                let etag = known_object_etag(state, index, raw_key, headers, now)?;
+                return Some(ChunkAnswer {
+                    answered: Answered::Revalidated(etag),
+                    cached: true,
+                });
+            }
         };
         let open = match open_folder_key(state, index, root, raw_key, headers, now).ok()? {
             OpenedKey::NotModified(open) => {
                 return Some(ChunkAnswer {
-                    open,
-                    range: None,
+                    answered: Answered::File(open, None),
                     cached: true,
                 });
             }
@@ -184,15 +226,221 @@ impl FolderChunks {
         };
         let range = range_of(headers, open.len);
         let mut answer = ChunkAnswer {
-            open,
-            range: Some(range),
+            answered: Answered::File(open, Some(range)),
             cached: true,
         };
         if *method != Method::HEAD
-            && let Some((start, end)) = answer.body()
+            && let Some((open, start, end)) = answer.body()
         {
-            answer.cached = answer.open.cached(start, end, now);
+            answer.cached = open.cached(start, end, now);
         }
         Some(answer)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use axum::body::Body;
+    use axum::http::{HeaderValue, Request};
+    use hyper::service::Service as _;
+    use hyper_util::service::TowerToHyperService;
+    use residency_store::location::StoreLocation;
+    use residency_store::location::object_store::memory::InMemory;
+    use residency_store::location::object_store::path::Path as ObjectPath;
+    use residency_store::location::object_store::{ObjectStore, ObjectStoreExt};
+
+    use super::*;
+    use crate::datasets::{Dataset, Datasets};
+    use crate::routes::{ServerOptions, router};
+
+    /// Dataset `cells`, an object store holding one chunk, served with `token`: the state,
+    /// the router over it and the direct path.
+    async fn object_dataset(token: Option<&str>) -> (Arc<AppState>, axum::Router, DirectChunks) {
+        let objects = InMemory::new();
+        objects
+            .put(
+                &ObjectPath::from("cells/0/c/0/0/0"),
+                b"chunk".to_vec().into(),
+            )
+            .await
+            .unwrap();
+        let datasets = Datasets(vec![Dataset {
+            name: "cells".into(),
+            location: StoreLocation::S3 {
+                bucket: "bucket".into(),
+                prefix: "cells".into(),
+            },
+            object_store: Some((
+                Arc::new(objects) as Arc<dyn ObjectStore>,
+                ObjectPath::from("cells"),
+            )),
+        }]);
+        let options = ServerOptions {
+            token: token.map(str::to_string),
+            ..ServerOptions::default()
+        };
+        let state = Arc::new(AppState::new(datasets, &options).unwrap());
+        let direct = DirectChunks::new(state.clone(), token, Vec::new());
+        (state.clone(), router(state, &options), direct)
+    }
+
+    /// The router's answer to `GET path` with `headers`: status and `ETag`.
+    async fn routed(router: &axum::Router, path: &str, headers: &[(&str, &str)]) -> (u16, String) {
+        let mut request = Request::get(path);
+        for (name, value) in headers {
+            request = request.header(*name, *value);
+        }
+        let request = request.body(Body::empty()).unwrap();
+        let service = TowerToHyperService::new(router.clone());
+        let answer = match service.call(request).await {
+            Ok(answer) => answer,
+            Err(never) => match never {},
+        };
+        let etag = answer
+            .headers()
+            .get(header::ETAG)
+            .map_or("", |v| v.to_str().unwrap());
+        (answer.status().as_u16(), etag.to_string())
+    }
+
+    fn fields(pairs: &[(&str, &str)]) -> HeaderMap {
+        let mut headers = HeaderMap::new();
+        for (name, value) in pairs {
+            headers.append(
+                header::HeaderName::from_bytes(name.as_bytes()).unwrap(),
+                HeaderValue::from_str(value).unwrap(),
+            );
+        }
+        headers
+    }
+
+    /// The status and `ETag` of the direct answer, if there is one.
+    fn direct_answer(
+        direct: &DirectChunks,
+        method: &Method,
+        target: &str,
+        pairs: &[(&str, &str)],
+        now: Instant,
+    ) -> Option<(u16, String)> {
+        let answer = direct.answer(method, target, &fields(pairs), now)?;
+        assert!(answer.body().is_none() && answer.cached);
+        let mut etag = String::new();
+        answer.head().fields(|name, value| {
+            if name == header::ETAG {
+                etag = String::from_utf8(value.as_bytes().to_vec()).unwrap();
+            }
+        });
+        Some((answer.head().status().as_u16(), etag))
+    }
+
+    #[tokio::test]
+    async fn an_object_stores_chunk_is_revalidated_directly_while_its_etag_is_fresh() {
+        let (state, router, direct) = object_dataset(None).await;
+        let key = "/cells/0/c/0/0/0";
+        let now = Instant::now();
+        // Nothing is known of the chunk before the store has been asked for it.
+        assert_eq!(
+            direct_answer(
+                &direct,
+                &Method::GET,
+                key,
+                &[("if-none-match", "\"x\"")],
+                now
+            ),
+            None
+        );
+        let (status, etag) = routed(&router, key, &[]).await;
+        assert_eq!(status, 200);
+        assert!(etag.starts_with('"'), "{etag}");
+        let matching = [("if-none-match", etag.as_str())];
+        let now = Instant::now();
+        let not_modified = Some((304, etag.clone()));
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, key, &matching, now),
+            not_modified
+        );
+        assert_eq!(
+            direct_answer(&direct, &Method::HEAD, key, &matching, now),
+            not_modified
+        );
+        // A list of tags that holds it, and `*`.
+        let listed = format!("\"other\", {etag}");
+        let listed = [("if-none-match", listed.as_str())];
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, key, &listed, now),
+            not_modified
+        );
+        let any = [("if-none-match", "*")];
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, key, &any, now),
+            not_modified
+        );
+        // The router gives the same answer.
+        assert_eq!(routed(&router, key, &matching).await, (304, etag.clone()));
+        // Everything else is the router's: another tag, no tag, another method, a query, a
+        // metadata document, a key not read yet, another dataset's name, and the same
+        // revalidation once REVALIDATE has passed since the tag was seen.
+        let other = [("if-none-match", "\"other\"")];
+        assert_eq!(direct_answer(&direct, &Method::GET, key, &other, now), None);
+        assert_eq!(direct_answer(&direct, &Method::GET, key, &[], now), None);
+        assert_eq!(
+            direct_answer(&direct, &Method::POST, key, &matching, now),
+            None
+        );
+        let queried = format!("{key}?v=1");
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, &queried, &matching, now),
+            None
+        );
+        state.etags.insert(
+            (0, "zarr.json".to_string()),
+            (etag.as_str().into(), Instant::now()),
+        );
+        let metadata = "/cells/zarr.json";
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, metadata, &matching, now),
+            None
+        );
+        let unread = "/cells/0/c/0/0/1";
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, unread, &matching, now),
+            None
+        );
+        let renamed = "/tissue/0/c/0/0/0";
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, renamed, &matching, now),
+            None
+        );
+        let later = now + REVALIDATE;
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, key, &matching, later),
+            None
+        );
+    }
+
+    #[tokio::test]
+    async fn an_object_stores_revalidation_needs_the_token_on_the_direct_path_too() {
+        let (_, router, direct) = object_dataset(Some("secret")).await;
+        let key = "/cells/0/c/0/0/0";
+        let bearer = [("authorization", "Bearer secret")];
+        let (status, etag) = routed(&router, key, &bearer).await;
+        assert_eq!(status, 200);
+        let now = Instant::now();
+        let without = [("if-none-match", etag.as_str())];
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, key, &without, now),
+            None
+        );
+        assert_eq!(routed(&router, key, &without).await.0, 401);
+        let wrong = [
+            ("if-none-match", etag.as_str()),
+            ("authorization", "Bearer guess"),
+        ];
+        assert_eq!(direct_answer(&direct, &Method::GET, key, &wrong, now), None);
+        let with = [("if-none-match", etag.as_str()), bearer[0]];
+        assert_eq!(
+            direct_answer(&direct, &Method::GET, key, &with, now),
+            Some((304, etag))
+        );
     }
 }

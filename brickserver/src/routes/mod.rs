@@ -2,8 +2,8 @@
 //! (`/NAME/regions`, `/NAME/minmax`: [`region_api`]; `/NAME/bricks`: [`bricks`]), the Residency
 //! web viewer (`/NAME/view`, `/viewer/FILE`: [`viewer`]), the dataset listing ([`listing`]),
 //! and health, metrics and the OpenAPI document ([`service`]); the bearer token check is
-//! [`auth`]; chunk keys of folder stores answered straight from the connection with
-//! `sendfile` ([`chunk_files`]). Here the router is assembled, and with it the OpenAPI document, from the same
+//! [`auth`]; chunk keys answered straight from the connection ([`chunk_files`]: a folder
+//! store's with `sendfile`, an object store's revalidations without asking the store). Here the router is assembled, and with it the OpenAPI document, from the same
 //! route list.
 //!
 //! The three API paths and `view` never collide with a Zarr key: a Zarr node at a store's
@@ -38,7 +38,7 @@ use tower_http::cors::{Any, CorsLayer};
 use crate::metrics::track;
 use crate::openapi;
 
-pub(crate) use chunk_files::{ChunkAnswer, FolderChunks};
+pub(crate) use chunk_files::{ChunkAnswer, DirectChunks};
 pub use state::{AppState, OPEN_FILES, ServerOptions};
 
 /// Every route, with its documentation.

@@ -15,12 +15,11 @@ use axum::response::IntoResponse;
 use residency_store::location::object_store::GetRange;
 use schemars::json_schema;
 
-use super::chunk_files::{OpenedKey, open_folder_key};
+use super::chunk_files::{OpenedKey, known_object_etag, open_folder_key};
 use super::params::KeyPath;
 use super::state::{AppState, REVALIDATE, blocking};
 use crate::cache::{CacheKey, Cached};
 use crate::dataset_store::{Keys, ObjectKeys, requested_range};
-use crate::open_files::BorrowedKey;
 use crate::openapi::{answer, binary, responses, with_content};
 use crate::responses::{
     FileHead, RangeRequest, file_response, is_metadata, not_modified, parse_range, part_response,
@@ -194,13 +193,8 @@ async fn object_key(
 ) -> Result<Response<Body>, KeyError> {
     let key = checked_key(raw_key)?;
     let chunk = !is_metadata(raw_key);
-    if chunk
-        && headers.contains_key(header::IF_NONE_MATCH)
-        && let Some((etag, seen)) = state.etags.get(&BorrowedKey(index, raw_key))
-        && seen.elapsed() < REVALIDATE
-        && let Some(answer) = not_modified(raw_key, &etag, headers)
-    {
-        return Ok(answer);
+    if let Some(etag) = known_object_etag(state, index, raw_key, headers, Instant::now()) {
+        return Ok(FileHead::not_modified(&etag, false).response(Body::empty()));
     }
     let cache_key = CacheKey::Object {
         dataset: index,

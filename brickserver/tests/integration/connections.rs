@@ -1,6 +1,6 @@
 //! Connections as clients make them, over TCP to `serve` in process: chunk keys of a folder
-//! store answered directly (with `sendfile`) give the router's answer field for field and byte
-//! for byte; keep-alive, pipelining, HTTP/1.0, refused heads, the header timeout, metrics and
+//! store answered directly (with `sendfile`), and revalidations of an object store's chunks,
+//! give the router's answer field for field and byte for byte; keep-alive, pipelining, HTTP/1.0, refused heads, the header timeout, metrics and
 //! graceful shutdown; and the binary's way of serving, one thread per listener on one port.
 
 use std::io::{BufRead, BufReader, Read, Write};
@@ -10,10 +10,13 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use residency_brickserver::{
-    App, AppState, ConnectionLimits, Datasets, ServerOptions, serve, serve_on_threads,
+    App, AppState, ConnectionLimits, Dataset, Datasets, ServerOptions, serve, serve_on_threads,
     shared_port_listeners,
 };
-use residency_store::location::ObjectStoreOptions;
+use residency_store::location::object_store::memory::InMemory;
+use residency_store::location::object_store::path::Path as ObjectPath;
+use residency_store::location::object_store::ObjectStoreExt as _;
+use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use tokio::sync::oneshot;
 
 use crate::common::{self, CHUNK, v3_store};
@@ -77,10 +80,23 @@ fn start_with(
         .iter()
         .map(|(n, p)| format!("{n}={}", p.display()))
         .collect();
-    let (app, router) = runtime.block_on(async {
-        let datasets = Datasets::from_args(&[], &named, &ObjectStoreOptions::default())
+    let datasets = runtime.block_on(async {
+        Datasets::from_args(&[], &named, &ObjectStoreOptions::default())
             .await
-            .unwrap();
+            .unwrap()
+    });
+    start_datasets(runtime, datasets, options, limits, threads)
+}
+
+/// Serves `datasets` on `runtime` as [`start_with`] does.
+fn start_datasets(
+    runtime: Arc<tokio::runtime::Runtime>,
+    datasets: Datasets,
+    options: ServerOptions,
+    limits: ConnectionLimits,
+    threads: Option<usize>,
+) -> Served {
+    let (app, router) = runtime.block_on(async {
         let state = Arc::new(AppState::new(datasets, &options).unwrap());
         let router = residency_brickserver::router(state.clone(), &options);
         let app = App::new(state, &options).await;
@@ -336,6 +352,76 @@ fn chunks_sent_directly_are_the_routers_answers_field_for_field() {
     );
     assert!(empty.body.is_empty());
     assert_eq!(read_reply(&mut reader, "GET").body, CHUNK);
+}
+
+#[test]
+fn an_object_stores_revalidations_are_the_routers_answers_field_for_field() {
+    // Dataset `cells` from an object store (in memory: the code path of an `s3://` dataset).
+    let runtime = Arc::new(
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap(),
+    );
+    let objects = InMemory::new();
+    runtime
+        .block_on(objects.put(&ObjectPath::from("cells/0/c/0/0/0"), CHUNK.to_vec().into()))
+        .unwrap();
+    let datasets = Datasets(vec![Dataset {
+        name: "cells".into(),
+        location: StoreLocation::S3 {
+            bucket: "bucket".into(),
+            prefix: "cells".into(),
+        },
+        object_store: Some((Arc::new(objects), ObjectPath::from("cells"))),
+    }]);
+    let served = start_datasets(
+        runtime,
+        datasets,
+        ServerOptions::default(),
+        ConnectionLimits::default(),
+        None,
+    );
+    let whole = exchange(&served, "GET", "GET /cells/0/c/0/0/0 HTTP/1.1\r\n\r\n");
+    assert_eq!((whole.status, whole.body.as_slice()), (200, CHUNK));
+    let etag = whole.field("etag").unwrap().to_string();
+    // Within REVALIDATE of that read, a revalidation is answered on the connection (the
+    // direct path, `routes::chunk_files`), with the router's fields.
+    let request = format!("GET /cells/0/c/0/0/0 HTTP/1.1\r\nIf-None-Match: {etag}\r\n\r\n");
+    let direct = exchange(&served, "GET", &request);
+    let routed = served.router_get("/cells/0/c/0/0/0", &[("if-none-match", etag.as_str())]);
+    assert_eq!((direct.status, routed.status.as_u16()), (304, 304));
+    let mut expected: Vec<(String, String)> = routed
+        .headers
+        .iter()
+        .filter(|(n, _)| *n != "content-length")
+        .map(|(n, v)| (n.to_string(), v.to_str().unwrap().to_string()))
+        .collect();
+    let mut wire = router_fields(&direct);
+    wire.sort();
+    expected.sort();
+    assert_eq!(wire, expected);
+    let names: Vec<&str> = direct.fields.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "etag",
+            "cache-control",
+            "date",
+            "access-control-expose-headers",
+            "access-control-allow-origin",
+        ]
+    );
+    assert_eq!(direct.field("etag"), Some(etag.as_str()));
+    assert!(direct.body.is_empty());
+    // Another tag is answered by the router, with the bytes.
+    let other = exchange(
+        &served,
+        "GET",
+        "GET /cells/0/c/0/0/0 HTTP/1.1\r\nIf-None-Match: \"other\"\r\n\r\n",
+    );
+    assert_eq!((other.status, other.body.as_slice()), (200, CHUNK));
 }
 
 #[test]
