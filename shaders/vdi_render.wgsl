@@ -17,6 +17,14 @@
 // it in one step, to the first face of its tile or of that run it meets. The ray stops once
 // transmittance falls below 1/255.
 //
+// Subsampling along the ray (the paper's D_R, Sec. 4.4, for preview rendering; the nearest
+// filter only): with V.ray_sampling = D_R < 1, where the grid's next crossing is closer than
+// 1/D_R lists' worth of the ray, the ray takes one step of that length instead and composites
+// it exactly as if it all lay in the list that holds the step's middle, so it reads about D_R
+// of the lists it crosses. A ray that stays in its list (the camera of generation) is drawn as
+// without it. Unlike the paper's point samples, each step keeps every supersegment boundary
+// of its list along the depth it spans.
+//
 // That is the paper's nearest-list filter: each point takes the list whose cell holds it, so a
 // surface that V_O sees edge-on (a cell wall along its rays) is as wide as whole lists, and from
 // the side its lists show as stripes. With the linear filter (the pipeline constant LINEAR)
@@ -39,7 +47,7 @@ struct VdiView {
     lists_x: u32, // the VDI's lists (V_O's pixels)
     lists_y: u32,
     eye: vec3<f32>, // the new camera's eye
-    pad0: u32, // padding: lists are indexed by their starts
+    ray_sampling: f32, // D_R: 1 reads every list a ray crosses, less reads one every 1/D_R
     forward: vec3<f32>, // the new camera: forward (unit)
     tile: u32, // lists per tile edge of the skipping grid
     right: vec3<f32>, // right · tan(fov/2) · aspect
@@ -162,6 +170,17 @@ fn list_cos(x: i32, y: i32) -> f32 {
     );
     let off = centre * vec2<f32>(V.o_tan_x, V.o_tan_y);
     return inverseSqrt(1.0 + dot(off, off));
+}
+
+// How many list edges the ray crosses per unit of length at distance `t` (columns and rows
+// together): the derivative of its position in lists (`in_lists` of `ndc_at`).
+fn lists_per_length(r: OriginRay, t: f32) -> f32 {
+    let p = r.o + t * r.d;
+    let z = dot(p, V.o_forward);
+    let dz = dot(r.d, V.o_forward);
+    let dx = (dot(r.d, V.o_right) * z - dot(p, V.o_right) * dz) / (V.o_tan_x * z * z);
+    let dy = (dot(r.d, V.o_up) * z - dot(p, V.o_up) * dz) / (V.o_tan_y * z * z);
+    return abs(dx) * 0.5 * f32(V.lists_x) + abs(dy) * 0.5 * f32(V.lists_y);
 }
 
 // V_O's normalised device coordinates `m` in lists from the top left: list (x, y) spans
@@ -532,7 +551,22 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             let tie = t - 1e-5 * max(abs(t), 1.0);
             tx = select(3.0e38, max(tx, t), tx > tie);
             ty = select(3.0e38, max(ty, t), ty > tie);
-            let t_next = min(min(min(tx, ty), tz), span.y);
+            var t_next = min(min(min(tx, ty), tz), span.y);
+            // Subsampling along the ray (D_R): one step of 1/D_R lists' worth, read in the list
+            // at its middle, where the grid's next crossing is closer than that.
+            var list_at = vec2<i32>(ix, iy);
+            var sampled = false;
+            if !linear && !empty_tile && V.ray_sampling < 1.0 {
+                let rate = lists_per_length(r, t);
+                let far = select(3.0e38, t + 1.0 / (V.ray_sampling * rate),
+                    rate * V.ray_sampling > 1e-30);
+                if far > t_next && t_next < span.y {
+                    t_next = min(far, span.y);
+                    sampled = true;
+                    let middle = in_lists(ndc_at(r, 0.5 * (t + t_next)));
+                    list_at = clamp(vec2<i32>(floor(middle)), vec2<i32>(0), vec2<i32>(w - 1, h - 1));
+                }
+            }
             steps++;
             cells += select(0u, 1u, !empty_tile);
             if !empty_tile && linear {
@@ -541,11 +575,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 color = acc.xyz;
                 trans = acc.w;
             } else if !empty_tile {
-                let list = u32(iy) * V.lists_x + u32(ix);
+                let list = u32(list_at.y) * V.lists_x + u32(list_at.x);
                 let base = starts[list];
                 let count = starts[list + 1u] - base;
                 if count > 0u {
-                    let cos_list = list_cos(ix, iy);
+                    let cos_list = list_cos(list_at.x, list_at.y);
                     let za = depth_at(r, t);
                     let zb = depth_at(r, t_next);
                     let z_lo = min(za, zb);
@@ -625,6 +659,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
                 break;
             }
             t = t_next;
+            if sampled {
+                // On from the list that holds the step's end (inside V_O's frustum, which
+                // bounds the span, but for rounding), in its bin of depth.
+                let reached = vec2<i32>(floor(in_lists(ndc_at(r, t))));
+                ix = clamp(reached.x, 0, w - 1);
+                iy = clamp(reached.y, 0, h - 1);
+                iz = depth_bin(depth_at(r, t));
+                continue;
+            }
             // Across a skipped cell the ray moved over several lists: the list it reached,
             // found a little past the face it left by, so that rounding never puts it in a
             // list it has already left.

@@ -42,6 +42,14 @@ pub struct VdiFramePlan {
     held: bool,
 }
 
+impl VdiFramePlan {
+    /// Whether this is a preview: a frame drawn while the camera moves at the controller's
+    /// `D_I`, which may also sample along its rays (`D_R`).
+    pub fn preview(&self) -> bool {
+        self.held
+    }
+}
+
 /// Plans each VDI frame and learns from the time it took ([`VdiFramePlanner::record`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct VdiFramePlanner {

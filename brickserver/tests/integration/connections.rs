@@ -13,9 +13,9 @@ use residency_brickserver::{
     App, AppState, ConnectionLimits, Dataset, Datasets, ServerOptions, serve, serve_on_threads,
     shared_port_listeners,
 };
+use residency_store::location::object_store::ObjectStoreExt as _;
 use residency_store::location::object_store::memory::InMemory;
 use residency_store::location::object_store::path::Path as ObjectPath;
-use residency_store::location::object_store::ObjectStoreExt as _;
 use residency_store::location::{ObjectStoreOptions, StoreLocation};
 use tokio::sync::oneshot;
 

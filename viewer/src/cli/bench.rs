@@ -67,6 +67,10 @@ pub struct VdiArgs {
     /// Most frames to converge one view.
     #[arg(long, default_value_t = 64)]
     pub max_frames: u32,
+    /// The sampling along the ray `D_R` measured beside the full walk (the paper's Sec. 4.4:
+    /// the share of the lists a ray crosses that it reads), in (0, 1].
+    #[arg(long, default_value_t = bench::vdi::RAY_SAMPLING, value_parser = super::ray_sampling)]
+    pub ray_sampling: f64,
     /// Dataset label in the tables [default: the dataset name].
     #[arg(long)]
     pub label: Option<String>,
@@ -305,6 +309,7 @@ pub fn run_vdi(args: VdiArgs) -> Result<()> {
         timed_frames: args.timed_frames,
         max_frames: args.max_frames,
         workers: args.renderer.workers,
+        ray_sampling: args.ray_sampling,
     };
     let label = args.label.clone().unwrap_or_else(|| info.name.clone());
     let gpu = residency_viewer::gpu::device::Gpu::new()?;

@@ -36,3 +36,21 @@ where
     clap::builder::PossibleValuesParser::new(E::VARIANTS)
         .map(|s| s.parse::<E>().expect("one of the possible values"))
 }
+
+/// Parses a sampling along the ray `D_R` (`--ray-sampling`, `--vdi-ray-sampling`): a number in
+/// [`MIN_RAY_SAMPLING`, 1].
+///
+/// # Errors
+/// A message naming the value and the range.
+///
+/// [`MIN_RAY_SAMPLING`]: residency_viewer::gpu::vdi_render::MIN_RAY_SAMPLING
+pub fn ray_sampling(text: &str) -> Result<f64, String> {
+    use residency_viewer::gpu::vdi_render::MIN_RAY_SAMPLING;
+    match text.trim().parse::<f64>() {
+        Ok(d) if (MIN_RAY_SAMPLING..=1.0).contains(&d) => Ok(d),
+        _ => Err(format!(
+            "'{text}' is not a sampling along the ray: a number from {MIN_RAY_SAMPLING} to 1 \
+             (the share of the lists a ray crosses that it reads)"
+        )),
+    }
+}

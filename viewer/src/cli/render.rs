@@ -13,6 +13,7 @@ use super::renderer_args::{ConvergeArgs, RendererArgs, open_scene};
 use super::scene_args::{SceneArgs, SourceArgs};
 use residency_viewer::gpu::device::Gpu;
 use residency_viewer::gpu::streaming::{RenderStats, render_progressive};
+use residency_viewer::gpu::vdi_filter::VdiFilter;
 use residency_viewer::gpu::vdi_render::VdiRenderer;
 use residency_viewer::image::{ImageFormat, RgbImage};
 use residency_viewer::vdi_filter_choice::VdiFilterChoice;
@@ -58,6 +59,11 @@ pub struct Args {
     /// point: closer to DVR away from the VDI's camera, several times slower).
     #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilterChoice>())]
     pub vdi_filter: Option<VdiFilterChoice>,
+    /// With `--vdi --vdi-filter nearest`: sample along the rays, reading about this share `D_R`
+    /// of the lists each crosses (the paper's preview sampling, Sec. 4.4: faster, coarser
+    /// across the VDI's lists), in [0.01, 1]; 1 (the default) reads every list.
+    #[arg(long, value_name = "D_R", value_parser = super::ray_sampling)]
+    pub vdi_ray_sampling: Option<f64>,
 }
 
 /// Runs `viewer render`.
@@ -74,6 +80,10 @@ pub fn run(args: Args) -> Result<()> {
     anyhow::ensure!(
         args.vdi_filter.is_none(),
         "--vdi-filter applies to a VDI only (with --vdi)"
+    );
+    anyhow::ensure!(
+        args.vdi_ray_sampling.is_none(),
+        "--vdi-ray-sampling applies to a VDI only (with --vdi)"
     );
     let (source, scene, options) = open_scene(
         &args.source,
@@ -121,6 +131,15 @@ fn render_vdi(args: &Args, path: &std::path::Path) -> Result<()> {
     let mut renderer = VdiRenderer::new(&gpu, &vdi, args.width, args.height)?;
     // A single image is a frame at rest.
     let filter = args.vdi_filter.unwrap_or_default().filter(false);
+    if let Some(d_r) = args.vdi_ray_sampling {
+        anyhow::ensure!(
+            filter == VdiFilter::Nearest,
+            "--vdi-ray-sampling samples the nearest filter's lists: add --vdi-filter nearest \
+             (this image would be drawn with the {} filter)",
+            filter.name()
+        );
+        renderer.set_ray_sampling(d_r);
+    }
     renderer.set_filter(&gpu, filter);
     let frame = renderer.render(&gpu, &camera, !args.vdi_no_skipping)?;
     let image = RgbImage::from_rgba(args.width, args.height, &frame.pixels);

@@ -106,6 +106,11 @@ pub struct Args {
     /// around each point: closer to DVR away from the VDI's camera, several times slower).
     #[arg(long, value_name = "FILTER", value_parser = super::names_parser::<VdiFilterChoice>())]
     pub vdi_filter: Option<VdiFilterChoice>,
+    /// With `--vdi`: sample along the rays of the frames drawn while the camera moves at a
+    /// reduced `D_I` (the nearest filter's), reading about this share `D_R` of the lists each
+    /// crosses (the paper's preview sampling, Sec. 4.4), in [0.01, 1]. Default: 1, every list.
+    #[arg(long, value_name = "D_R", value_parser = super::ray_sampling)]
+    pub vdi_ray_sampling: Option<f64>,
 }
 
 /// Runs `viewer view`.
@@ -128,6 +133,7 @@ pub fn run(args: Args) -> Result<()> {
         (args.target_fps.is_some(), "--target-fps"),
         (args.vdi_no_skipping, "--vdi-no-skipping"),
         (args.vdi_filter.is_some(), "--vdi-filter"),
+        (args.vdi_ray_sampling.is_some(), "--vdi-ray-sampling"),
     ];
     if let Some((_, flag)) = vdi_only.iter().find(|(given, _)| *given) {
         bail!("{flag} applies to a VDI only (with --vdi)");
@@ -195,6 +201,7 @@ fn view_vdi(args: &Args, path: &Path) -> Result<()> {
             target_ms: 1000.0 / fps,
             skipping: !args.vdi_no_skipping,
             filter: args.vdi_filter.unwrap_or_default(),
+            ray_sampling: args.vdi_ray_sampling.unwrap_or(1.0),
             exit_after_frames: args.exit_after_frames,
             exit_delay: Duration::from_millis(args.exit_delay_ms),
             present: args.present,

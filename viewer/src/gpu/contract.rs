@@ -716,8 +716,9 @@ gpu_struct! {
         pub lists_y: u32,
         /// The new camera's eye.
         pub eye: [f32; 3],
-        /// Padding (lists are indexed by their starts, not by `N_S` slots each).
-        pub pad0: u32,
+        /// Subsampling along the ray (the paper's `D_R`, in `(0, 1]`): the share of the lists
+        /// a ray crosses that it reads; 1 reads each one.
+        pub ray_sampling: f32,
         /// The new camera's forward (unit).
         pub forward: [f32; 3],
         /// Lists per tile edge of the skipping grid.

@@ -181,6 +181,9 @@ impl VdiPipelines {
     }
 }
 
+/// The least `D_R` ([`VdiRenderer::set_ray_sampling`]): one list in a hundred.
+pub const MIN_RAY_SAMPLING: f64 = 0.01;
+
 /// [`GpuError::EmptyImage`] for an image without pixels.
 fn nonempty(width: u32, height: u32) -> Result<(), GpuError> {
     if width == 0 || height == 0 {
@@ -197,6 +200,8 @@ pub struct VdiRenderer {
     tiles_x: u32,
     /// The filter of `render` and `render_preview`.
     filter: VdiFilter,
+    /// `D_R` of every frame ([`VdiRenderer::set_ray_sampling`]).
+    ray_sampling: f64,
     pipelines: Rc<VdiPipelines>,
     view: wgpu::Buffer,
     /// The VDI's list starts, slots and skipping grids ([`VdiBuffers`]), uploaded once.
@@ -294,6 +299,7 @@ impl VdiRenderer {
             height,
             tiles_x: buffers.tiles_x(),
             filter: VdiFilter::default(),
+            ray_sampling: 1.0,
             pipelines: Rc::clone(pipelines),
             view,
             vdi: vdi_buffers,
@@ -397,7 +403,7 @@ impl VdiRenderer {
             lists_x: h.width,
             lists_y: h.height,
             eye: rel(camera.eye),
-            pad0: 0,
+            ray_sampling: self.ray_sampling as f32,
             forward: f3(forward),
             tile: SKIP_TILE,
             right: f3(right.map(|x| x * tan_half * aspect)),
@@ -652,6 +658,21 @@ impl VdiRenderer {
     /// The filter of [`VdiRenderer::render`] and [`VdiRenderer::render_preview`].
     pub fn filter(&self) -> VdiFilter {
         self.filter
+    }
+
+    /// Makes every frame drawn with the nearest filter subsample along its rays (the paper's
+    /// `D_R`, Sec. 4.4, for preview rendering): a ray reads about `d_r` of the lists it crosses,
+    /// each for the part of the ray around it (`shaders/vdi_render.wgsl`). `d_r` is clamped to
+    /// [[`MIN_RAY_SAMPLING`], 1]; 1 (until this is called) reads every list, and rays that stay
+    /// in their list (the camera of generation) are drawn the same whatever `d_r`. The linear
+    /// filter reads every list.
+    pub fn set_ray_sampling(&mut self, d_r: f64) {
+        self.ray_sampling = d_r.clamp(MIN_RAY_SAMPLING, 1.0);
+    }
+
+    /// `D_R` ([`VdiRenderer::set_ray_sampling`]).
+    pub fn ray_sampling(&self) -> f64 {
+        self.ray_sampling
     }
 
     /// The pipelines this renderer draws with.

@@ -44,6 +44,9 @@ pub struct VdiViewConfig {
     pub skipping: bool,
     /// How rays read the VDI between its lists, moving and at rest.
     pub filter: VdiFilterChoice,
+    /// The sampling along the ray `D_R` of previews (frames at the controller's `D_I` while the
+    /// camera moves: `VdiRenderer::set_ray_sampling`); 1 reads every list.
+    pub ray_sampling: f64,
     /// Print a summary line on standard output whenever the view settles (at rest with a
     /// frame at full resolution, or this many frames shown since the last input), and quit
     /// when no input follows within `exit_delay`.
@@ -236,6 +239,11 @@ impl App {
         };
         let gpu = &self.gpu;
         let skipping = self.config.skipping;
+        renderer.set_ray_sampling(if plan.preview() {
+            self.config.ray_sampling
+        } else {
+            1.0
+        });
         let start = Instant::now();
         let (shown, rays) = if display.on_gpu() {
             let mut encoder = gpu

@@ -131,6 +131,92 @@ fn render_reads_a_vdi_with_the_linear_filter_by_default() {
     assert!(m.max_abs_error > 1e-3, "the filters agree: {m:?}");
 }
 
+/// `--vdi-ray-sampling` samples along the nearest filter's rays: close to its image, the same
+/// at 1, and refused with another filter, out of range, or without a VDI.
+#[test]
+fn render_samples_along_the_rays_of_the_nearest_filter_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = s(&store(dir.path()));
+    let vdi = s(&dir.path().join("blob.vdi"));
+    let size = ["--width", "40", "--height", "32"];
+    let mut args = vec!["vdi", "--store", &store, "--max-level", "0", "--out", &vdi];
+    args.extend(VIEW);
+    args.extend(size);
+    viewer_ok(&args);
+    let moved = "-13.8,-51.0,70:20,16,24";
+    let out = |name: &str| s(&dir.path().join(format!("{name}.exr")));
+    let cast = |extra: &[&str], name: &str| {
+        let out = out(name);
+        let mut args = vec!["render", "--vdi", &vdi, "--camera", moved, "--out", &out];
+        args.extend(size);
+        args.extend(extra);
+        viewer_ok(&args);
+        RgbImage::read(Path::new(&out)).unwrap()
+    };
+    let nearest = cast(&["--vdi-filter", "nearest"], "nearest");
+    let every = cast(
+        &["--vdi-filter", "nearest", "--vdi-ray-sampling", "1"],
+        "every",
+    );
+    let half = cast(
+        &["--vdi-filter", "nearest", "--vdi-ray-sampling", "0.5"],
+        "half",
+    );
+    assert_eq!(every.pixels, nearest.pixels);
+    let m = metrics::compare(&half, &nearest).unwrap();
+    assert!(m.max_abs_error > 0.0 && m.ssim > 0.9, "{m:?}");
+    let png = s(&dir.path().join("x.png"));
+    let err = fails(&[
+        "render",
+        "--vdi",
+        &vdi,
+        "--vdi-ray-sampling",
+        "0.5",
+        "--out",
+        &png,
+    ]);
+    assert!(
+        err.contains(
+            "error: --vdi-ray-sampling samples the nearest filter's lists: add --vdi-filter \
+             nearest (this image would be drawn with the linear filter)"
+        ),
+        "{err}"
+    );
+    for bad in ["0", "1.5", "half"] {
+        let err = fails(&[
+            "render",
+            "--vdi",
+            &vdi,
+            "--vdi-ray-sampling",
+            bad,
+            "--out",
+            &png,
+        ]);
+        assert!(
+            err.contains(&format!(
+                "invalid value '{bad}' for '--vdi-ray-sampling <D_R>': '{bad}' is not a sampling \
+                 along the ray: a number from 0.01 to 1 (the share of the lists a ray crosses \
+                 that it reads)"
+            )),
+            "{err}"
+        );
+    }
+    let err = fails(&[
+        "render",
+        "--store",
+        &store,
+        "--vdi-ray-sampling",
+        "0.5",
+        "--out",
+        &png,
+    ]);
+    assert!(
+        err.contains("error: --vdi-ray-sampling applies to a VDI only (with --vdi)"),
+        "{err}"
+    );
+    assert!(!Path::new(&png).exists());
+}
+
 #[test]
 fn bad_vdi_input_fails_with_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
