@@ -56,6 +56,17 @@ impl Drop for Served {
     }
 }
 
+/// A runtime of two worker threads for a server.
+fn runtime() -> Arc<tokio::runtime::Runtime> {
+    Arc::new(
+        tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap(),
+    )
+}
+
 /// Serves `stores` (NAME, path) on a loopback port with `limits`, on one runtime (`serve`).
 fn start(stores: &[(&str, &Path)], options: ServerOptions, limits: ConnectionLimits) -> Served {
     start_with(stores, options, limits, None)
@@ -69,13 +80,7 @@ fn start_with(
     limits: ConnectionLimits,
     threads: Option<usize>,
 ) -> Served {
-    let runtime = Arc::new(
-        tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .unwrap(),
-    );
+    let runtime = runtime();
     let named: Vec<String> = stores
         .iter()
         .map(|(n, p)| format!("{n}={}", p.display()))
@@ -357,13 +362,7 @@ fn chunks_sent_directly_are_the_routers_answers_field_for_field() {
 #[test]
 fn an_object_stores_revalidations_are_the_routers_answers_field_for_field() {
     // Dataset `cells` from an object store (in memory: the code path of an `s3://` dataset).
-    let runtime = Arc::new(
-        tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .unwrap(),
-    );
+    let runtime = runtime();
     let objects = InMemory::new();
     runtime
         .block_on(objects.put(&ObjectPath::from("cells/0/c/0/0/0"), CHUNK.to_vec().into()))

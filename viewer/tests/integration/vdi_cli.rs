@@ -97,34 +97,46 @@ fn a_vdi_file_gives_back_the_image_of_its_view() {
     );
 }
 
+/// The image size of [`small_vdi`] and [`render_moved`].
+const SMALL: [&str; 4] = ["--width", "40", "--height", "32"];
+
+/// The store under `dir` and a VDI of it from [`VIEW`]'s camera at [`SMALL`]'s size: their
+/// paths.
+fn small_vdi(dir: &Path) -> (String, String) {
+    let store = s(&store(dir));
+    let vdi = s(&dir.join("blob.vdi"));
+    let mut args = vec!["vdi", "--store", &store, "--max-level", "0", "--out", &vdi];
+    args.extend(VIEW);
+    args.extend(SMALL);
+    viewer_ok(&args);
+    (store, vdi)
+}
+
+/// `viewer render --vdi VDI` with `extra` flags from [`VIEW`]'s camera turned about 15° about
+/// its target, at [`SMALL`]'s size, written to `dir/NAME.exr` and read back.
+fn render_moved(dir: &Path, vdi: &str, extra: &[&str], name: &str) -> RgbImage {
+    let out = s(&dir.join(format!("{name}.exr")));
+    let moved = "-13.8,-51.0,70:20,16,24";
+    let mut args = vec!["render", "--vdi", vdi, "--camera", moved, "--out", &out];
+    args.extend(SMALL);
+    args.extend(extra);
+    viewer_ok(&args);
+    RgbImage::read(Path::new(&out)).unwrap()
+}
+
 /// A single image from away from the VDI's camera is a frame at rest: `auto`, the default,
 /// draws it with the linear filter, pixel for pixel, and the nearest list draws it otherwise.
 #[test]
 fn render_reads_a_vdi_with_the_linear_filter_by_default() {
     let dir = tempfile::tempdir().unwrap();
-    let store = s(&store(dir.path()));
-    let vdi = s(&dir.path().join("blob.vdi"));
-    let size = ["--width", "40", "--height", "32"];
-    let mut args = vec!["vdi", "--store", &store, "--max-level", "0", "--out", &vdi];
-    args.extend(VIEW);
-    args.extend(size);
-    viewer_ok(&args);
-    // VIEW's camera turned about 15° about its target.
-    let moved = "-13.8,-51.0,70:20,16,24";
-    let cast = |filter: Option<&str>| {
-        let out = s(&dir
-            .path()
-            .join(format!("{}.exr", filter.unwrap_or("default"))));
-        let mut args = vec!["render", "--vdi", &vdi, "--camera", moved, "--out", &out];
-        args.extend(size);
-        if let Some(f) = filter {
-            args.extend(["--vdi-filter", f]);
-        }
-        viewer_ok(&args);
-        RgbImage::read(Path::new(&out)).unwrap()
+    let (_, vdi) = small_vdi(dir.path());
+    let cast = |filter: &str| {
+        let flags = ["--vdi-filter", filter];
+        let extra: &[&str] = if filter == "default" { &[] } else { &flags };
+        render_moved(dir.path(), &vdi, extra, filter)
     };
-    let (default, auto) = (cast(None), cast(Some("auto")));
-    let (linear, nearest) = (cast(Some("linear")), cast(Some("nearest")));
+    let (default, auto) = (cast("default"), cast("auto"));
+    let (linear, nearest) = (cast("linear"), cast("nearest"));
     assert_eq!(default.pixels, linear.pixels);
     assert_eq!(auto.pixels, linear.pixels);
     let m = metrics::compare(&nearest, &linear).unwrap();
@@ -136,34 +148,16 @@ fn render_reads_a_vdi_with_the_linear_filter_by_default() {
 #[test]
 fn render_samples_along_the_rays_of_the_nearest_filter_only() {
     let dir = tempfile::tempdir().unwrap();
-    let store = s(&store(dir.path()));
-    let vdi = s(&dir.path().join("blob.vdi"));
-    let size = ["--width", "40", "--height", "32"];
-    let mut args = vec!["vdi", "--store", &store, "--max-level", "0", "--out", &vdi];
-    args.extend(VIEW);
-    args.extend(size);
-    viewer_ok(&args);
-    let moved = "-13.8,-51.0,70:20,16,24";
-    let out = |name: &str| s(&dir.path().join(format!("{name}.exr")));
-    let cast = |extra: &[&str], name: &str| {
-        let out = out(name);
-        let mut args = vec!["render", "--vdi", &vdi, "--camera", moved, "--out", &out];
-        args.extend(size);
-        args.extend(extra);
-        viewer_ok(&args);
-        RgbImage::read(Path::new(&out)).unwrap()
+    let (store, vdi) = small_vdi(dir.path());
+    let cast = |d_r: Option<&str>, name: &str| {
+        let mut flags = vec!["--vdi-filter", "nearest"];
+        flags.extend(d_r.map(|d| ["--vdi-ray-sampling", d]).into_iter().flatten());
+        render_moved(dir.path(), &vdi, &flags, name)
     };
-    let nearest = cast(&["--vdi-filter", "nearest"], "nearest");
-    let every = cast(
-        &["--vdi-filter", "nearest", "--vdi-ray-sampling", "1"],
-        "every",
-    );
-    let half = cast(
-        &["--vdi-filter", "nearest", "--vdi-ray-sampling", "0.5"],
-        "half",
-    );
-    assert_eq!(every.pixels, nearest.pixels);
-    let m = metrics::compare(&half, &nearest).unwrap();
+    let (every_list, every) = (cast(None, "nearest"), cast(Some("1"), "every"));
+    let half = cast(Some("0.5"), "half");
+    assert_eq!(every.pixels, every_list.pixels);
+    let m = metrics::compare(&half, &every_list).unwrap();
     assert!(m.max_abs_error > 0.0 && m.ssim > 0.9, "{m:?}");
     let png = s(&dir.path().join("x.png"));
     let err = fails(&[
