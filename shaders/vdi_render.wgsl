@@ -19,9 +19,10 @@
 //
 // Subsampling along the ray (the paper's D_R, Sec. 4.4, for preview rendering; the nearest
 // filter only): with V.ray_sampling = D_R < 1, where the grid's next crossing is closer than
-// 1/D_R lists' worth of the ray, the ray takes one step of that length instead and composites
-// it exactly as if it all lay in the list that holds the step's middle, so it reads about D_R
-// of the lists it crosses. A ray that stays in its list (the camera of generation) is drawn as
+// the ray's length over which it crosses 1/D_R lists (columns and rows together, found exactly:
+// a projection keeps lines straight), the ray takes one step of that length instead and
+// composites it exactly as if it all lay in the list that holds the step's middle, so it reads
+// one list in 1/D_R of those it crosses. A ray that stays in its list (the camera of generation) is drawn as
 // without it. Unlike the paper's point samples, each step keeps every supersegment boundary
 // of its list along the depth it spans.
 //
@@ -557,9 +558,15 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             var list_at = vec2<i32>(ix, iy);
             var sampled = false;
             if !linear && !empty_tile && V.ray_sampling < 1.0 {
-                let rate = lists_per_length(r, t);
-                let far = select(3.0e38, t + 1.0 / (V.ray_sampling * rate),
-                    rate * V.ray_sampling > 1e-30);
+                // The length s over which the ray crosses k = 1/D_R lists' worth: both list
+                // coordinates move by (their rate at t)·s·z / (z + dz·s) along a line, so
+                // s = k·z / (rate·z − k·dz); none (the rest of the ray) where the ray never
+                // crosses that many (forward in depth, towards the vanishing point).
+                let k = 1.0 / V.ray_sampling;
+                let z = depth_at(r, t);
+                let rate_z = lists_per_length(r, t) * z;
+                let den = rate_z - k * dz;
+                let far = select(3.0e38, t + k * z / den, den > 1e-30 * max(rate_z, 1.0));
                 if far > t_next && t_next < span.y {
                     t_next = min(far, span.y);
                     sampled = true;
@@ -658,11 +665,14 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             if trans < T_MIN || t_next >= span.y {
                 break;
             }
+            // A thousandth of the step past its end (after a sampled step).
+            let past = t_next + 1e-3 * (t_next - t);
             t = t_next;
             if sampled {
-                // On from the list that holds the step's end (inside V_O's frustum, which
-                // bounds the span, but for rounding), in its bin of depth.
-                let reached = vec2<i32>(floor(in_lists(ndc_at(r, t))));
+                // On from the list that holds the step's end, found a little past it so that
+                // rounding never puts the ray back in a list it has left (inside V_O's
+                // frustum, which bounds the span, but for rounding), in its bin of depth.
+                let reached = vec2<i32>(floor(in_lists(ndc_at(r, past))));
                 ix = clamp(reached.x, 0, w - 1);
                 iy = clamp(reached.y, 0, h - 1);
                 iz = depth_bin(depth_at(r, t));

@@ -500,8 +500,8 @@ pub fn markdown(r: &VdiBenchResults) -> String {
          any device: steps through the grid of lists (a skipped tile or run of empty depth bins \
          is one), supersegments read. The linear filter reads the bilinear mix of the four lists \
          around each point instead of the nearest list (the paper's). The D_R columns sample \
-         along the ray: each step covers 1/D_R lists' worth of the ray, read in the list at its \
-         middle (nearest filter, full resolution, with skipping). The paper (RTX 3090, \
+         along the ray: each step covers the part of the ray that crosses 1/D_R lists, read in \
+         the list at its middle (nearest filter, full resolution, with skipping). The paper (RTX 3090, \
          1920×1080, N_S = 20): SSIM 0.97 near the viewpoint of generation, a minor loss up to \
          40°, about 45 fps.\n"
     )

@@ -661,8 +661,8 @@ impl VdiRenderer {
     }
 
     /// Makes every frame drawn with the nearest filter subsample along its rays (the paper's
-    /// `D_R`, Sec. 4.4, for preview rendering): a ray reads about `d_r` of the lists it crosses,
-    /// each for the part of the ray around it (`shaders/vdi_render.wgsl`). `d_r` is clamped to
+    /// `D_R`, Sec. 4.4, for preview rendering): a ray reads one list in `1/d_r` of those it
+    /// crosses, each for the part of the ray around it (`shaders/vdi_render.wgsl`). `d_r` is clamped to
     /// [[`MIN_RAY_SAMPLING`], 1]; 1 (until this is called) reads every list, and rays that stay
     /// in their list (the camera of generation) are drawn the same whatever `d_r`. The linear
     /// filter reads every list.
