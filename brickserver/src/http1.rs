@@ -265,8 +265,7 @@ pub(crate) async fn connection(
 /// then reads the key and answers its error.
 async fn read_into_page_cache(answer: ChunkAnswer, metrics: &Metrics) -> Option<ChunkAnswer> {
     let (open, start, end) = answer.body()?;
-    let open = open.clone();
-    let file = open.clone();
+    let file = Arc::clone(open);
     let filled = tokio::task::spawn_blocking(move || page_cache::fill(&file.file, start, end));
     match filled.await {
         Ok(Ok(())) => {
